@@ -1,0 +1,25 @@
+# Quick start: `make mission` (the cube-mission comparison) and `make test` (all tests).
+PY ?= python3
+VENV := .venv
+STAMP := $(VENV)/.installed
+
+$(STAMP): pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(VENV)/bin/pip install --quiet --upgrade pip
+	$(VENV)/bin/pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+.PHONY: venv mission test lint bench
+venv: $(STAMP)
+
+mission: $(STAMP)
+	$(VENV)/bin/gcs mission compare scenarios/cube8.toml --out runs/compare
+
+test: $(STAMP)
+	$(VENV)/bin/python -m pytest -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
+bench: $(STAMP)
+	$(VENV)/bin/python bench/bench_dynamics.py

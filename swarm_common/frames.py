@@ -1,0 +1,158 @@
+"""Frames, quaternions and the thrust/attitude mapping: the one conversion boundary.
+
+Inside the control math and the dynamics everything is the paper's world frame:
+ENU-style, z up, body FLU (x forward, y left, z up), Euler ZYX ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
+On the MAVLink wire everything is NED / FRD, quaternions ``[w, x, y, z]``.
+Only this module converts between the two (see docs/conventions.md).
+
+    v_ned = T v_enu,   T = [[0,1,0],[1,0,0],[0,0,-1]]
+    R_ned_frd = T R_enu_flu D,   D = diag(1, -1, -1)   (FRD -> FLU)
+
+Thrust on the wire is normalised: ``thrust_norm = F / F_max`` (linear), so hover is
+``m g / F_max`` (= 0.3337 for the 1.8 kg, 52.92 N vehicle of the paper).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+D_FRD_FLU = np.diag([1.0, -1.0, -1.0])
+
+
+def enu_to_ned(v: np.ndarray) -> np.ndarray:
+    """Vector(s) (..., 3) from ENU to NED (the map is its own inverse)."""
+    v = np.asarray(v, dtype=float)
+    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+
+
+def ned_to_enu(v: np.ndarray) -> np.ndarray:
+    """Vector(s) (..., 3) from NED to ENU."""
+    return enu_to_ned(v)
+
+
+def rotm_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """ZYX Euler angles -> rotation matrix (body to world)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def euler_from_rotm(r: np.ndarray) -> tuple[float, float, float]:
+    """Rotation matrix -> ZYX Euler (roll, pitch, yaw)."""
+    pitch = math.asin(max(-1.0, min(1.0, -float(r[2, 0]))))
+    roll = math.atan2(float(r[2, 1]), float(r[2, 2]))
+    yaw = math.atan2(float(r[1, 0]), float(r[0, 0]))
+    return roll, pitch, yaw
+
+
+def quat_from_rotm(r: np.ndarray) -> np.ndarray:
+    """Rotation matrix -> unit quaternion [w, x, y, z] with w >= 0."""
+    m = r
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    qa = np.array(q, dtype=float)
+    qa /= np.linalg.norm(qa)
+    return qa if qa[0] >= 0 else -qa
+
+
+def rotm_from_quat(q: np.ndarray) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] -> rotation matrix."""
+    w, x, y, z = (float(c) for c in q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """ENU/FLU Euler attitude -> NED/FRD quaternion [w, x, y, z] (what MAVLink carries)."""
+    r_ned = T_ENU_NED @ rotm_from_euler(roll, pitch, yaw) @ D_FRD_FLU
+    return quat_from_rotm(r_ned)
+
+
+def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
+    """NED/FRD quaternion [w, x, y, z] -> ENU/FLU Euler (roll, pitch, yaw)."""
+    qa = np.asarray(q, dtype=float)
+    qa = qa / np.linalg.norm(qa)
+    r_enu = T_ENU_NED @ rotm_from_quat(qa) @ D_FRD_FLU
+    return euler_from_rotm(r_enu)
+
+
+def valid_quaternion(q: np.ndarray, tol: float = 0.05) -> bool:
+    """Finite and within ``tol`` of unit norm (MAVLink setpoints are rejected otherwise)."""
+    qa = np.asarray(q, dtype=float)
+    return bool(qa.shape == (4,) and np.all(np.isfinite(qa)) and abs(np.linalg.norm(qa) - 1) < tol)
+
+
+def accel_to_attitude(
+    u: np.ndarray,
+    yaw: float,
+    gravity: float,
+    mass: float,
+    tilt_max_rad: float,
+    thrust_max_n: float,
+    min_vertical_frac: float = 0.1,
+) -> tuple[float, float, float, float]:
+    """Virtual control u (paper 2.2: ``u = R[0,0,F]/m - g e_z``) -> (roll, pitch, yaw, F).
+
+    Limits, in order: the thrust's vertical part is at least ``min_vertical_frac * g``
+    (no inverted flight); the tilt is at most ``tilt_max_rad`` (horizontal part scaled,
+    vertical part kept); ``F <= thrust_max_n`` (the whole vector scaled).
+    """
+    a = np.asarray(u, dtype=float) + np.array([0.0, 0.0, gravity])
+    az = max(float(a[2]), min_vertical_frac * gravity)
+    ah = a[:2].copy()
+    h = float(np.hypot(ah[0], ah[1]))
+    hmax = az * math.tan(tilt_max_rad)
+    if h > hmax:
+        ah *= hmax / h
+    a = np.array([ah[0], ah[1], az])
+    f = mass * float(np.linalg.norm(a))
+    if f > thrust_max_n:
+        a *= thrust_max_n / f
+        f = thrust_max_n
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    ax = cy * a[0] + sy * a[1]  # rotate into the yaw frame
+    ay = -sy * a[0] + cy * a[1]
+    pitch = math.atan2(ax, a[2])
+    roll = math.atan2(-ay, math.hypot(ax, a[2]))
+    return roll, pitch, yaw, f
+
+
+def thrust_accel(roll: float, pitch: float, yaw: float, thrust_n: float, mass: float) -> np.ndarray:
+    """Acceleration produced by thrust alone: ``R e3 F / m`` (ENU)."""
+    return rotm_from_euler(roll, pitch, yaw)[:, 2] * (thrust_n / mass)
+
+
+def thrust_to_norm(thrust_n: float, thrust_max_n: float) -> float:
+    """Newtons -> MAVLink normalised thrust in [0, 1] (linear map)."""
+    return min(1.0, max(0.0, thrust_n / thrust_max_n))
+
+
+def norm_to_thrust(thrust_norm: float, thrust_max_n: float) -> float:
+    """MAVLink normalised thrust in [0, 1] -> newtons."""
+    return float(thrust_norm) * thrust_max_n
