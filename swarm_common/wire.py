@@ -1,0 +1,291 @@
+"""Zenoh key expressions and payloads: defined once, here (docs/architecture.md §Zenoh).
+
+Keys, under one root and a swarm name (``swarm/<name>/...``):
+
+=====================================  ==========================================  ==========
+key                                    payload                                     publisher
+=====================================  ==========================================  ==========
+``<root>/<swarm>/truth``               :class:`Truth` (all vehicles, one message)  vehicle-sim
+``<root>/<swarm>/agent/<id>/estimate`` :class:`Estimate` (post-update, for t_k+1)  offboard
+``<root>/<swarm>/agent/<id>/status``   :class:`Status`                             offboard
+``<root>/<swarm>/cmd/method``          :class:`Command` kind="method"              gcs
+``<root>/<swarm>/cmd/outage``          :class:`Command` kind="outage"              gcs
+=====================================  ==========================================  ==========
+
+Payloads are msgpack maps with a version field ``"v": 1``; every float vector is
+packed as little-endian float32 bytes, so both ends (and the in-process runner, which
+pushes its values through the same :func:`encode` / :func:`decode`) see identical
+float32-rounded numbers. A payload that fails to decode raises :class:`WireError`
+(receivers count and drop it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgpack
+import numpy as np
+
+VERSION = 1
+DEFAULT_ROOT = "swarm"
+
+
+class WireError(ValueError):
+    """A payload is malformed, of another version or of another kind."""
+
+
+# -- key expressions -----------------------------------------------------------------
+def key_truth(swarm: str, root: str = DEFAULT_ROOT) -> str:
+    return f"{root}/{swarm}/truth"
+
+
+def key_estimate(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> str:
+    return f"{root}/{swarm}/agent/{agent_id}/estimate"
+
+
+def key_status(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> str:
+    return f"{root}/{swarm}/agent/{agent_id}/status"
+
+
+def key_cmd(swarm: str, kind: str, root: str = DEFAULT_ROOT) -> str:
+    return f"{root}/{swarm}/cmd/{kind}"
+
+
+def agent_id_from_key(key: str) -> int:
+    """``.../agent/<id>/...`` -> id."""
+    parts = str(key).split("/")
+    try:
+        return int(parts[parts.index("agent") + 1])
+    except (ValueError, IndexError) as exc:
+        raise WireError(f"no agent id in key {key!r}") from exc
+
+
+# -- float32 helpers -----------------------------------------------------------------
+def f32(a: Any) -> np.ndarray:
+    """Round to float32 and return float64 (what a receiver sees)."""
+    return np.asarray(a, dtype=np.float32).astype(np.float64)
+
+
+def _pack_vec(a: Any) -> bytes:
+    return np.asarray(a, dtype="<f4").tobytes()
+
+
+def _unpack_vec(b: Any, shape: tuple[int, ...]) -> np.ndarray:
+    if not isinstance(b, bytes | bytearray):
+        raise WireError("vector field is not bytes")
+    n = int(np.prod(shape))
+    if len(b) != 4 * n:
+        raise WireError(f"vector field has {len(b)} bytes, expected {4 * n}")
+    return np.frombuffer(b, dtype="<f4").astype(np.float64).reshape(shape)
+
+
+# -- payloads ------------------------------------------------------------------------
+@dataclass
+class Truth:
+    """Ground truth of every vehicle at control step ``step`` (time ``t``), ENU."""
+
+    step: int
+    t: float
+    ids: list[int]
+    p: np.ndarray  # (N,3) m
+    v: np.ndarray  # (N,3) m/s
+    att: np.ndarray  # (N,3) roll, pitch, yaw (ENU/FLU, rad)
+    thrust: np.ndarray  # (N,) N
+    lumped: np.ndarray  # (N,3) true lumped disturbance, m/s² (for metrics only)
+    armed: list[bool] = field(default_factory=list)
+    mode: list[str] = field(default_factory=list)
+    collisions: int = 0
+
+
+@dataclass
+class Estimate:
+    """An agent's post-update estimate, valid at time ``t`` (= t_k+1 for step k)."""
+
+    id: int
+    step: int
+    t: float
+    role: str  # "leader" | "follower"
+    z1: np.ndarray  # (3,) position
+    z2: np.ndarray  # (3,) velocity
+    z3: np.ndarray  # (3,) lumped disturbance (zeros for leaders)
+    xi: np.ndarray  # (12,) desired state [p*, ṗ*, p̈*, p⃛*]
+    zeta: np.ndarray = field(default_factory=lambda: np.zeros(6))  # (6,) ζ̂
+
+
+@dataclass
+class Status:
+    """An agent's status record for the ground station (sent every control step)."""
+
+    id: int
+    step: int
+    t: float
+    mode: str
+    method: str
+    qp_status: str
+    qp_solve_us: float
+    h_min: float
+    lyap_v: float
+    est_health: str
+    fallbacks: int
+    u: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    z1: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    p_des: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    comm_ok: bool = True
+
+
+@dataclass
+class Command:
+    """A ground-station command to the swarm: ``kind`` = "method" or "outage"."""
+
+    kind: str
+    agent: int = 0  # 0 = all
+    method: str = ""
+    duration_s: float = 0.0
+
+
+Payload = Truth | Estimate | Status | Command
+
+
+def encode(obj: Payload) -> bytes:
+    """Payload -> bytes (msgpack map, float32 vectors)."""
+    if isinstance(obj, Truth):
+        n = len(obj.ids)
+        d: dict[str, Any] = {
+            "v": VERSION,
+            "k": "truth",
+            "step": int(obj.step),
+            "t": float(obj.t),
+            "ids": [int(i) for i in obj.ids],
+            "p": _pack_vec(np.reshape(obj.p, (n, 3))),
+            "vel": _pack_vec(np.reshape(obj.v, (n, 3))),
+            "att": _pack_vec(np.reshape(obj.att, (n, 3))),
+            "F": _pack_vec(np.reshape(obj.thrust, (n,))),
+            "lump": _pack_vec(np.reshape(obj.lumped, (n, 3))),
+            "armed": [bool(a) for a in obj.armed],
+            "mode": [str(m) for m in obj.mode],
+            "coll": int(obj.collisions),
+        }
+    elif isinstance(obj, Estimate):
+        d = {
+            "v": VERSION,
+            "k": "est",
+            "id": int(obj.id),
+            "step": int(obj.step),
+            "t": float(obj.t),
+            "role": obj.role,
+            "z1": _pack_vec(obj.z1),
+            "z2": _pack_vec(obj.z2),
+            "z3": _pack_vec(obj.z3),
+            "xi": _pack_vec(obj.xi),
+            "zeta": _pack_vec(obj.zeta),
+        }
+    elif isinstance(obj, Status):
+        d = {
+            "v": VERSION,
+            "k": "status",
+            "id": int(obj.id),
+            "step": int(obj.step),
+            "t": float(obj.t),
+            "mode": obj.mode,
+            "method": obj.method,
+            "qp": obj.qp_status,
+            "qp_us": float(obj.qp_solve_us),
+            "h_min": float(obj.h_min),
+            "V": float(obj.lyap_v),
+            "est": obj.est_health,
+            "fb": int(obj.fallbacks),
+            "u": _pack_vec(obj.u),
+            "z1": _pack_vec(obj.z1),
+            "p_des": _pack_vec(obj.p_des),
+            "comm": bool(obj.comm_ok),
+        }
+    elif isinstance(obj, Command):
+        d = {
+            "v": VERSION,
+            "k": "cmd",
+            "kind": obj.kind,
+            "agent": int(obj.agent),
+            "method": obj.method,
+            "dur": float(obj.duration_s),
+        }
+    else:
+        raise TypeError(f"cannot encode {type(obj).__name__}")
+    return msgpack.packb(d, use_bin_type=True)
+
+
+def decode(data: bytes | bytearray | memoryview) -> Payload:
+    """Bytes -> payload. Raises :class:`WireError` on anything malformed."""
+    try:
+        d = msgpack.unpackb(bytes(data), raw=False)
+    except Exception as exc:  # msgpack raises several exception types
+        raise WireError(f"not msgpack: {exc}") from None
+    if not isinstance(d, dict):
+        raise WireError("payload is not a map")
+    if d.get("v") != VERSION:
+        raise WireError(f"payload version {d.get('v')!r}, expected {VERSION}")
+    try:
+        kind = d["k"]
+        if kind == "truth":
+            ids = [int(i) for i in d["ids"]]
+            n = len(ids)
+            return Truth(
+                step=int(d["step"]),
+                t=float(d["t"]),
+                ids=ids,
+                p=_unpack_vec(d["p"], (n, 3)),
+                v=_unpack_vec(d["vel"], (n, 3)),
+                att=_unpack_vec(d["att"], (n, 3)),
+                thrust=_unpack_vec(d["F"], (n,)),
+                lumped=_unpack_vec(d["lump"], (n, 3)),
+                armed=[bool(a) for a in d["armed"]],
+                mode=[str(m) for m in d["mode"]],
+                collisions=int(d["coll"]),
+            )
+        if kind == "est":
+            return Estimate(
+                id=int(d["id"]),
+                step=int(d["step"]),
+                t=float(d["t"]),
+                role=str(d["role"]),
+                z1=_unpack_vec(d["z1"], (3,)),
+                z2=_unpack_vec(d["z2"], (3,)),
+                z3=_unpack_vec(d["z3"], (3,)),
+                xi=_unpack_vec(d["xi"], (12,)),
+                zeta=_unpack_vec(d["zeta"], (6,)),
+            )
+        if kind == "status":
+            return Status(
+                id=int(d["id"]),
+                step=int(d["step"]),
+                t=float(d["t"]),
+                mode=str(d["mode"]),
+                method=str(d["method"]),
+                qp_status=str(d["qp"]),
+                qp_solve_us=float(d["qp_us"]),
+                h_min=float(d["h_min"]),
+                lyap_v=float(d["V"]),
+                est_health=str(d["est"]),
+                fallbacks=int(d["fb"]),
+                u=_unpack_vec(d["u"], (3,)),
+                z1=_unpack_vec(d["z1"], (3,)),
+                p_des=_unpack_vec(d["p_des"], (3,)),
+                comm_ok=bool(d["comm"]),
+            )
+        if kind == "cmd":
+            return Command(
+                kind=str(d["kind"]),
+                agent=int(d["agent"]),
+                method=str(d["method"]),
+                duration_s=float(d["dur"]),
+            )
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, WireError):
+            raise
+        raise WireError(f"bad field: {exc!r}") from None
+    raise WireError(f"unknown payload kind {d.get('k')!r}")
+
+
+def roundtrip(obj: Payload) -> Payload:
+    """encode + decode: what a receiver would see (used by the in-process runner)."""
+    return decode(encode(obj))

@@ -1,0 +1,187 @@
+"""Quadrotor swarm dynamics (paper §2.2, §5.1): pure, vectorised over N vehicles, no I/O.
+
+World frame ENU-style, z up (the paper's frame); body FLU; Euler ZYX. Per vehicle::
+
+    m p̈ = R(φ,θ,ψ) [0,0,F]ᵀ − m g e_z + m Φ(p, v) ζ + d(t)
+
+* First-order attitude inner loop: φ̇ = (φ_c − φ)/τ_rp, θ̇ likewise, ψ̇ = (ψ_c − ψ)/τ_ψ,
+  Ḟ = (F_c − F)/τ_F. Commanded tilt clamped to ``tilt_max``, thrust to [0, F_max].
+  The lags are integrated exactly (zero-order hold of the command over one physics step).
+* External disturbance d(t) = A [cos ωt, sin ωt, sin ωt] newtons (§5.1).
+* Unmodeled dynamics f̃ = Φ(p, v) ζ in m/s² with the six regressor columns of
+  :func:`regressor`; ζ per vehicle = nominal ⊙ (1 + spread·U(−1, 1)), seeded.
+* Ground contact: nothing falls through z = 0 (position clamped, downward velocity zeroed).
+* Collision event: a pair entering distance < ``collision_radius_m`` (counted on entry).
+* With ``held=True`` vehicles stay at their spawn state until released (``release``):
+  a spawn fixture, used by the MAVLink simulator until a vehicle is first armed.
+
+Translational state uses semi-implicit Euler at the physics rate (default 200 Hz).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_common.scenario import Scenario
+
+N_ZETA = 6
+
+
+def regressor(p: np.ndarray, v: np.ndarray, ground_effect_height: float) -> np.ndarray:
+    """Φ(p, v): (..., 3, 6) regressor of the unmodeled dynamics f̃ = Φ ζ (paper §2.2).
+
+    Columns: constant bias (1,1,1); linear drag −v; quadratic drag −‖v‖v;
+    nonlinear (cubic) damping −v∘v∘v; ground effect exp(−z/h) e_z; cross-coupling e_z × v.
+    """
+    p = np.asarray(p, dtype=float)
+    v = np.asarray(v, dtype=float)
+    shape = np.broadcast_shapes(p.shape, v.shape)
+    out = np.zeros((*shape[:-1], 3, N_ZETA))
+    out[..., :, 0] = 1.0
+    out[..., :, 1] = -v
+    out[..., :, 2] = -np.linalg.norm(v, axis=-1, keepdims=True) * v
+    out[..., :, 3] = -(v**3)
+    out[..., 2, 4] = np.exp(-np.maximum(p[..., 2], 0.0) / ground_effect_height)
+    out[..., 0, 5] = -v[..., 1]
+    out[..., 1, 5] = v[..., 0]
+    return out
+
+
+def external_disturbance(t: float, amplitude_n: float, omega: float) -> np.ndarray:
+    """d(t) = A [cos ωt, sin ωt, sin ωt] in newtons (paper §5.1)."""
+    return amplitude_n * np.array([math.cos(omega * t), math.sin(omega * t), math.sin(omega * t)])
+
+
+class SwarmDynamics:
+    """N quadrotors integrated together at a fixed physics step."""
+
+    def __init__(self, sc: Scenario, seed: int | None = None, held: bool = False) -> None:
+        veh = sc["vehicle"]
+        self.n = sc.n
+        self.ids = sc.ids
+        self.dt = sc.physics_dt
+        self.mass = veh["mass_kg"]
+        self.g = veh["gravity_mps2"]
+        self.f_max = veh["thrust_max_n"]
+        self.tilt_max = math.radians(veh["tilt_max_deg"])
+        self.tau = np.array([veh["tau_rollpitch_s"], veh["tau_rollpitch_s"], veh["tau_yaw_s"]])
+        self.tau_f = veh["tau_thrust_s"]
+        self.collision_radius = veh["collision_radius_m"]
+        self.dist_amp = sc["disturbance"]["amplitude_n"]
+        self.dist_omega = sc["disturbance"]["omega_rad_s"]
+        self.ge_height = sc["unmodeled"]["ground_effect_height_m"]
+        rng = np.random.default_rng([sc.seed if seed is None else seed, 0xD1])
+        nominal = np.array(sc["unmodeled"]["zeta_nominal"], dtype=float)
+        spread = sc["unmodeled"]["zeta_spread"]
+        self.zeta = nominal * (1.0 + spread * rng.uniform(-1.0, 1.0, size=(self.n, N_ZETA)))
+        # exact discretisation of the first-order lags over one physics step
+        self._a_att = np.exp(-self.dt / self.tau)
+        self._a_f = math.exp(-self.dt / self.tau_f)
+
+        self.t = 0.0
+        self.step_count = 0
+        self.p = sc.initial_positions()
+        self.v = sc.initial_velocities()
+        self.att = np.zeros((self.n, 3))
+        hover = self.mass * self.g
+        self.thrust = np.full(self.n, hover)
+        self.cmd_att = np.zeros((self.n, 3))
+        self.cmd_thrust = np.full(self.n, hover)
+        self.held = np.full(self.n, held, dtype=bool)
+        self.collisions = 0
+        self.collision_pairs: list[tuple[float, int, int]] = []
+        self._in_contact = np.zeros((self.n, self.n), dtype=bool)
+        self._iu = np.triu_indices(self.n, 1)
+
+    # -- commands ---------------------------------------------------------------
+    def set_command(self, idx: int, roll: float, pitch: float, yaw: float, thrust_n: float) -> None:
+        """Commanded attitude (ENU/FLU Euler, rad) and thrust (N) of vehicle ``idx``.
+
+        Non-finite values are ignored (the previous command is kept). Tilt is clamped
+        to ``tilt_max`` per axis, thrust to [0, F_max].
+        """
+        vals = (roll, pitch, yaw, thrust_n)
+        if not all(math.isfinite(x) for x in vals):
+            return
+        lim = self.tilt_max
+        self.cmd_att[idx] = (min(lim, max(-lim, roll)), min(lim, max(-lim, pitch)), yaw)
+        self.cmd_thrust[idx] = min(self.f_max, max(0.0, thrust_n))
+
+    def release(self, idx: int | None = None) -> None:
+        """Let vehicle ``idx`` (or all) leave the spawn fixture with its spawn velocity."""
+        if idx is None:
+            self.held[:] = False
+        else:
+            self.held[idx] = False
+
+    def hold_thrust(self) -> float:
+        """Thrust (N) that balances gravity."""
+        return self.mass * self.g
+
+    # -- integration --------------------------------------------------------------
+    def thrust_accel(self) -> np.ndarray:
+        """(N,3) acceleration from thrust alone, R e3 F / m."""
+        r, p, y = self.att[:, 0], self.att[:, 1], self.att[:, 2]
+        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+        b3 = np.stack([cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr], axis=1)
+        return b3 * (self.thrust / self.mass)[:, None]
+
+    def virtual_control(self) -> np.ndarray:
+        """(N,3) the paper's u = R[0,0,F]/m − g e_z realised by the vehicles."""
+        a = self.thrust_accel()
+        a[:, 2] -= self.g
+        return a
+
+    def lumped_accel(self, t: float | None = None) -> np.ndarray:
+        """(N,3) true lumped disturbance Φ(p,v)ζ + d(t)/m (m/s²), what the DESO estimates."""
+        tt = self.t if t is None else t
+        phi = regressor(self.p, self.v, self.ge_height)
+        f = np.einsum("nij,nj->ni", phi, self.zeta)
+        return f + external_disturbance(tt, self.dist_amp, self.dist_omega)[None, :] / self.mass
+
+    def step(self) -> None:
+        """Advance one physics step of ``dt``."""
+        dt = self.dt
+        self.att = self.cmd_att + (self.att - self.cmd_att) * self._a_att
+        self.thrust = self.cmd_thrust + (self.thrust - self.cmd_thrust) * self._a_f
+        acc = self.virtual_control() + self.lumped_accel()
+        free = ~self.held
+        v_new = self.v + acc * dt
+        p_new = self.p + v_new * dt
+        ground = p_new[:, 2] < 0.0
+        if np.any(ground):
+            p_new[ground, 2] = 0.0
+            v_new[ground, 2] = np.maximum(v_new[ground, 2], 0.0)
+            v_new[ground, :2] *= 0.0  # friction: a landed vehicle stops
+        self.v = np.where(free[:, None], v_new, self.v)
+        self.p = np.where(free[:, None], p_new, self.p)
+        self.t = (self.step_count + 1) * dt
+        self.step_count += 1
+        self._update_collisions()
+
+    def advance(self, n_steps: int) -> None:
+        for _ in range(n_steps):
+            self.step()
+
+    # -- geometry -----------------------------------------------------------------
+    def pair_distances(self) -> np.ndarray:
+        """(N,N) distance matrix of true positions."""
+        d = self.p[:, None, :] - self.p[None, :, :]
+        return np.linalg.norm(d, axis=-1)
+
+    def min_pair_distance(self) -> float:
+        return float(self.pair_distances()[self._iu].min())
+
+    def _update_collisions(self) -> None:
+        contact = self.pair_distances() < self.collision_radius
+        np.fill_diagonal(contact, False)
+        new = contact & ~self._in_contact
+        for i, j in zip(*np.nonzero(np.triu(new, 1)), strict=True):
+            self.collisions += 1
+            self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
+        self._in_contact = contact
+
+    def on_ground(self) -> np.ndarray:
+        return self.p[:, 2] <= 1e-6
