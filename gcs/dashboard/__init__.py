@@ -1,0 +1,12 @@
+"""``gcs dashboard``: a terminal ground-control station (Textual) for the swarm.
+
+Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
+
+* :mod:`.px4modes` - PX4 custom-mode decoding and the COMMAND_LONG recipes.
+* :mod:`.mavlink_gcs` - the MAVLink GCS link (UDP 14550+offset), per-system tracking,
+  commands with COMMAND_ACK, timeout and retry.
+* :mod:`.zenoh_feed` - truth / status / estimate subscriber, command publisher.
+* :mod:`.state` - the plain snapshot the UI draws (:class:`SwarmView`), built from the
+  two feeds or from a recorded fixture.
+* :mod:`.app`, :mod:`.widgets` - the Textual UI; :mod:`.cli` - argument parsing, launch.
+"""
