@@ -1,0 +1,81 @@
+"""Child processes of a mission run: start, watch, stop (also on Ctrl-C or a death)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO
+
+
+@dataclass
+class Child:
+    name: str
+    proc: subprocess.Popen[bytes]
+    log_path: Path
+    log_file: IO[bytes]
+
+
+class ProcessGroup:
+    """Processes started by one run. ``dead()`` names any that exited unexpectedly."""
+
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        self.children: list[Child] = []
+
+    def start(self, name: str, argv: list[str], env: dict[str, str] | None = None) -> Child:
+        log_path = self.log_dir / f"{name}.log"
+        f = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
+        full_env = dict(os.environ)
+        full_env.setdefault("PYTHONUNBUFFERED", "1")
+        if env:
+            full_env.update(env)
+        proc = subprocess.Popen(
+            argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=full_env
+        )
+        child = Child(name, proc, log_path, f)
+        self.children.append(child)
+        return child
+
+    def dead(self) -> list[Child]:
+        return [c for c in self.children if c.proc.poll() is not None]
+
+    def kill(self, name: str) -> None:
+        for c in self.children:
+            if c.name == name and c.proc.poll() is None:
+                c.proc.kill()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """SIGTERM everyone, wait, SIGKILL the rest, close logs."""
+        for c in self.children:
+            if c.proc.poll() is None:
+                try:
+                    c.proc.send_signal(signal.SIGTERM)
+                except OSError:
+                    pass
+        deadline = time.monotonic() + timeout
+        for c in self.children:
+            remaining = max(0.0, deadline - time.monotonic())
+            try:
+                c.proc.wait(remaining)
+            except subprocess.TimeoutExpired:
+                c.proc.kill()
+                c.proc.wait(2.0)
+        for c in self.children:
+            c.log_file.close()
+
+    def tail(self, child: Child, lines: int = 15) -> str:
+        try:
+            text = child.log_path.read_text(errors="replace").splitlines()
+        except OSError:
+            return ""
+        return "\n".join(text[-lines:])
+
+
+def python_entry(module: str) -> list[str]:
+    """argv prefix running ``module`` with this interpreter (no reliance on PATH)."""
+    return [sys.executable, "-m", module]

@@ -1,0 +1,90 @@
+"""``offboard --scenario S --agent ID [--mavlink URL] [--zenoh-connect EP ...]``.
+
+One daemon per agent (deployable on each vehicle's companion computer). Defaults
+match the simulator's port scheme (swarm_common/ports.py) and a local Zenoh router
+started by ``gcs mission run`` or ``gcs router`` on tcp/127.0.0.1:7447+offset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from offboard.daemon import DaemonConfig, OffboardDaemon
+from swarm_common.ports import vehicle_ports
+from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.zenoh_session import open_session
+
+ZENOH_BASE_PORT = 7447
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="offboard", description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", required=True, help="scenario TOML file")
+    ap.add_argument("--agent", type=int, required=True, help="agent id (= MAVLink system id)")
+    ap.add_argument("--mavlink", default=None, help="MAVLink URL (default udpin on the API port)")
+    ap.add_argument("--port-offset", type=int, default=0, help="shift every port by N")
+    ap.add_argument("--swarm", default=None, help="swarm name in Zenoh keys (default: scenario)")
+    ap.add_argument("--method", choices=("rcbf", "apf", "none"), default=None)
+    ap.add_argument("--seed", type=int, default=None, help="override scenario.seed")
+    ap.add_argument("--realtime", action="store_true", help="wall-clock mode (default lockstep)")
+    ap.add_argument("--zenoh-connect", nargs="*", default=None, metavar="EP")
+    ap.add_argument("--zenoh-listen", nargs="*", default=None, metavar="EP")
+    ap.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
+    ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
+    ap.add_argument("--log-level", default="INFO")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s"
+    )
+    try:
+        sc = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        print(f"offboard: {exc}", file=sys.stderr)
+        return 2
+    if args.agent not in sc.ids:
+        print(f"offboard: --agent {args.agent}: not an agent of {sc.path} {sc.ids}", file=sys.stderr)
+        return 2
+    ports = vehicle_ports(args.agent, args.port_offset)
+    url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
+    connect = args.zenoh_connect
+    if connect is None:
+        connect = [f"tcp/127.0.0.1:{ZENOH_BASE_PORT + args.port_offset}"]
+    method = args.method or sc["controller"]["method"]
+    cfg = DaemonConfig(
+        scenario=sc,
+        agent_id=args.agent,
+        mavlink_url=url,
+        swarm=args.swarm or sc.name,
+        method=method,
+        seed=args.seed,
+        lockstep=not args.realtime,
+        tlog=args.tlog,
+        zenoh_connect=connect,
+        zenoh_listen=args.zenoh_listen or [],
+        zenoh_mode=args.zenoh_mode,
+    )
+    try:
+        session = open_session(mode=cfg.zenoh_mode, connect=connect, listen=cfg.zenoh_listen)
+    except Exception as exc:  # noqa: BLE001 - zenoh raises its own error type
+        print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
+        return 2
+    try:
+        daemon = OffboardDaemon(cfg, session)
+    except OSError as exc:
+        print(f"offboard: cannot open MAVLink {url}: {exc}", file=sys.stderr)
+        session.close()
+        return 2
+    try:
+        return daemon.run()
+    finally:
+        session.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

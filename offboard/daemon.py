@@ -1,0 +1,247 @@
+"""The per-agent offboard daemon: MAVLink to its own vehicle, Zenoh to the swarm.
+
+It drives the same :mod:`offboard.agent` object the in-process runner drives, in the
+same order (docs/architecture.md, "Lockstep, step by step"):
+
+1. the vehicle's ODOMETRY stamped t_k tells the step k (the clock; a follower never
+   uses the position in it);
+2. wait for the simulator's ``Truth`` of step k (synthetic sensing) and for every
+   live neighbour's post-update ``Estimate`` of step k-1 (skipped inside the
+   scenario's communication outages, which are deterministic);
+3. ``agent.step(...)`` -> SET_ATTITUDE_TARGET with ``time_boot_ms`` = t_k, then publish
+   the estimate for t_{k+1} and a status record.
+
+Start-up like a real offboard application: wait for the heartbeat, stream setpoints,
+switch to OFFBOARD (retried until acknowledged), arm (retried). A neighbour that stays
+silent for ``neighbour_timeout`` seconds is declared lost and no longer waited for
+(its data is then predicted by the agent, then dropped); it rejoins when it speaks.
+In real-time mode (no ``--lockstep``) the daemon ticks on the wall clock and uses the
+latest data it holds.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from offboard.agent import make_agent
+from offboard.mavlink_link import VehicleLink
+from offboard.zenoh_link import SwarmBus
+from swarm_common import wire
+from swarm_common.scenario import Scenario
+
+log = logging.getLogger("offboard")
+
+MAV_RESULT_ACCEPTED = 0
+
+
+@dataclass
+class DaemonConfig:
+    scenario: Scenario
+    agent_id: int
+    mavlink_url: str
+    swarm: str = "cube8"
+    method: str = "rcbf"
+    seed: int | None = None
+    lockstep: bool = True
+    tlog: str | None = None
+    heartbeat_timeout: float = 30.0
+    truth_timeout: float = 2.0
+    neighbour_timeout: float = 1.0
+    vehicle_lost_timeout: float = 5.0
+    stream_before_offboard: float = 0.6
+    zenoh_connect: list[str] = field(default_factory=list)
+    zenoh_listen: list[str] = field(default_factory=list)
+    zenoh_mode: str = "client"
+
+
+class OffboardDaemon:
+    """One agent's offboard process."""
+
+    def __init__(self, cfg: DaemonConfig, session: Any) -> None:
+        self.cfg = cfg
+        sc = cfg.scenario
+        self.sc = sc
+        self.id = cfg.agent_id
+        self.is_leader = cfg.agent_id in sc.leader_ids
+        self.others = [i for i in sc.ids if i != cfg.agent_id]
+        self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed)
+        self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, tlog=cfg.tlog)
+        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)
+        self.control_hz = int(sc["scenario"]["control_hz"])
+        self.lost: set[int] = set()
+        self.extra_outages: list[tuple[float, float]] = []
+        self.last_step = -1
+        self.answer: tuple[int, Any, float] | None = None  # (time_boot_ms, q, thrust)
+        self.last_send = 0.0
+        self.first_send = 0.0
+        self.last_estimate: wire.Estimate | None = None
+        self.last_est_pub = 0.0
+        self.stop = False
+        self.late_steps = 0
+        self.steps_done = 0
+        self.offboard_state = "init"
+
+    # -- helpers ----------------------------------------------------------------------
+    def comm_ok(self, t: float) -> bool:
+        for a, b in (*self.sc.outages, *self.extra_outages):
+            if a <= t < b:
+                return False
+        return True
+
+    def _mode_name(self) -> str:
+        main = (self.link.custom_mode >> 16) & 0xFF
+        sub = (self.link.custom_mode >> 24) & 0xFF
+        names = {6: "OFFBOARD", 3: "POSCTL", 2: "ALTCTL", 1: "MANUAL"}
+        if main == 4:
+            return {3: "HOLD", 6: "LAND"}.get(sub, "AUTO")
+        return names.get(main, f"MODE{main}")
+
+    def _apply_commands(self, t: float) -> None:
+        for cmd in self.bus.pop_commands():
+            if cmd.kind == "method" and cmd.method in ("rcbf", "apf", "none"):
+                self.agent.set_method(cmd.method)
+                log.info("agent %d: method -> %s", self.id, cmd.method)
+            elif cmd.kind == "outage" and cmd.duration_s > 0:
+                self.extra_outages.append((t, t + cmd.duration_s))
+                log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
+
+    def _publish_estimate(self, est: wire.Estimate) -> None:
+        self.last_estimate = est
+        self.last_est_pub = time.monotonic()
+        self.bus.publish_estimate(est)
+
+    def _send_answer(self) -> None:
+        if self.answer is None:
+            return
+        ms, q, thrust = self.answer
+        self.link.send_attitude_target(ms, q, thrust)
+        now = time.monotonic()
+        if self.first_send == 0.0:
+            self.first_send = now
+        self.last_send = now
+
+    # -- the control step ---------------------------------------------------------------
+    def _neighbours_for(self, k: int, t: float) -> tuple[dict[int, wire.Estimate], bool]:
+        """Neighbour estimates of step k-1 (lockstep: wait for every live one)."""
+        ok = self.comm_ok(t)
+        if not ok:
+            return {}, False
+        if not self.cfg.lockstep:
+            latest = dict(self.bus.latest_estimate)
+            return latest, True
+        want = [j for j in self.others if j not in self.lost]
+
+        def have_all() -> bool:
+            got = self.bus.estimates.get(k - 1, {})
+            return all(j in got for j in want)
+
+        if not self.bus.wait(have_all, self.cfg.neighbour_timeout):
+            got = self.bus.estimates_at(k - 1)
+            missing = [j for j in want if j not in got]
+            for j in missing:
+                if j not in self.lost:
+                    log.warning("agent %d: neighbour %d silent at step %d: lost", self.id, j, k)
+                self.lost.add(j)
+        got = self.bus.estimates_at(k - 1)
+        for j in list(self.lost):
+            if j in got:
+                self.lost.discard(j)
+                log.info("agent %d: neighbour %d back", self.id, j)
+        return got, True
+
+    def control_step(self, k: int, t: float, time_boot_ms: int) -> bool:
+        if self.cfg.lockstep:
+            if not self.bus.wait(lambda: k in self.bus.truth, self.cfg.truth_timeout):
+                log.warning("agent %d: no truth for step %d", self.id, k)
+                return False
+            truth = self.bus.truth[k]
+        else:
+            truth = self.bus.latest_truth
+            if truth is None:
+                return False
+        self._apply_commands(t)
+        neighbours, comm_ok = self._neighbours_for(k, t)
+        out = self.agent.step(k, t, truth.p, truth.v, neighbours, comm_ok)
+        self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
+        self._send_answer()
+        self._publish_estimate(out.estimate)
+        status = out.status
+        status.mode = self._mode_name()
+        status.comm_ok = comm_ok
+        self.bus.publish_status(status)
+        self.steps_done += 1
+        return True
+
+    # -- main loop ----------------------------------------------------------------------
+    def _startup_transitions(self) -> None:
+        """Switch to OFFBOARD and arm once setpoints have streamed for a while."""
+        if self.answer is None or self.offboard_state == "done":
+            return
+        if time.monotonic() - self.first_send < self.cfg.stream_before_offboard:
+            return
+        if not self.link.in_offboard:
+            res = self.link.set_offboard()
+            if res != MAV_RESULT_ACCEPTED:
+                log.warning("agent %d: OFFBOARD not accepted (result %s), retrying", self.id, res)
+                return
+            log.info("agent %d: OFFBOARD accepted", self.id)
+        if not self.link.armed:
+            res = self.link.arm()
+            if res != MAV_RESULT_ACCEPTED:
+                log.warning("agent %d: ARM not accepted (result %s), retrying", self.id, res)
+                return
+            log.info("agent %d: armed", self.id)
+        self.offboard_state = "done"
+
+    def run(self) -> int:
+        signal.signal(signal.SIGTERM, self._on_signal)
+        signal.signal(signal.SIGINT, self._on_signal)
+        cfg = self.cfg
+        if not self.link.wait_heartbeat(cfg.heartbeat_timeout):
+            log.error("agent %d: no heartbeat from vehicle on %s", self.id, cfg.mavlink_url)
+            return 2
+        log.info("agent %d: vehicle heartbeat received (%s)", self.id, self.cfg.mavlink_url)
+        init = self.agent.initial_estimate()
+        self._publish_estimate(init)
+        period = 1.0 / self.control_hz
+        next_tick = time.monotonic()
+        try:
+            while not self.stop:
+                self.link.poll(0.002)
+                now = time.monotonic()
+                if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:
+                    log.error("agent %d: vehicle heartbeat lost", self.id)
+                    return 3
+                odo = self.link.odometry
+                if cfg.lockstep:
+                    if odo is not None:
+                        k = int(round(odo.time_usec * 1e-6 * self.control_hz))
+                        if k > self.last_step:
+                            t = k / self.control_hz
+                            if self.control_step(k, t, int(round(t * 1000))):
+                                self.last_step = k
+                elif odo is not None and now >= next_tick:
+                    next_tick += period
+                    if now - next_tick > period:
+                        self.late_steps += 1
+                        next_tick = now + period
+                    t = odo.time_usec * 1e-6
+                    self.last_step += 1
+                    self.control_step(self.last_step, t, int(odo.time_usec // 1000))
+                now = time.monotonic()
+                if self.answer is not None and now - self.last_send > 0.05:
+                    self._send_answer()  # keep streaming while the vehicle waits
+                if self.last_estimate is not None and now - self.last_est_pub > 0.1:
+                    self._publish_estimate(self.last_estimate)  # for late joiners
+                self._startup_transitions()
+        finally:
+            self.link.close()
+            self.bus.close()
+        return 0
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.stop = True
