@@ -1,0 +1,92 @@
+"""Zenoh payload codecs and the port scheme (swarm_common)."""
+
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+
+from swarm_common import wire
+from swarm_common.ports import GCS_PORT, vehicle_ports
+
+
+def _truth(n: int = 3) -> wire.Truth:
+    rng = np.random.default_rng(0)
+    return wire.Truth(
+        step=7,
+        t=0.14,
+        ids=list(range(1, n + 1)),
+        p=rng.normal(size=(n, 3)) * 5,
+        v=rng.normal(size=(n, 3)),
+        att=rng.normal(size=(n, 3)) * 0.1,
+        thrust=np.full(n, 17.658),
+        lumped=rng.normal(size=(n, 3)) * 0.1,
+        armed=[True] * n,
+        mode=["OFFBOARD"] * n,
+        collisions=2,
+    )
+
+
+def test_truth_roundtrip_is_float32_rounding() -> None:
+    t = _truth()
+    r = wire.roundtrip(t)
+    assert isinstance(r, wire.Truth)
+    assert r.step == 7 and r.ids == [1, 2, 3] and r.collisions == 2
+    # exactly what float32 rounding gives, no more, no less
+    np.testing.assert_array_equal(r.p, t.p.astype(np.float32).astype(np.float64))
+    assert np.max(np.abs(r.p - t.p)) < 1e-6 * np.max(np.abs(t.p)) + 1e-12
+    # a second trip changes nothing (idempotent: in-process == distributed)
+    np.testing.assert_array_equal(wire.roundtrip(r).p, r.p)
+
+
+def test_estimate_status_command_roundtrip() -> None:
+    e = wire.Estimate(4, 10, 0.22, "follower", np.ones(3), np.zeros(3), np.ones(3) * 0.5,
+                      np.arange(12.0))
+    r = wire.roundtrip(e)
+    assert isinstance(r, wire.Estimate) and r.id == 4 and r.xi.shape == (12,)
+    s = wire.Status(3, 1, 0.02, "OFFBOARD", "rcbf", "solved", 55.0, 1.2, 0.3, "ok", 0)
+    rs = wire.roundtrip(s)
+    assert isinstance(rs, wire.Status) and rs.qp_status == "solved" and rs.h_min == 1.2
+    c = wire.roundtrip(wire.Command("outage", agent=0, duration_s=0.5))
+    assert isinstance(c, wire.Command) and c.duration_s == 0.5
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"",
+        b"\x00\x01garbage",
+        msgpack.packb([1, 2, 3]),
+        msgpack.packb({"v": 99, "k": "truth"}),
+        msgpack.packb({"v": 1, "k": "nope"}),
+        msgpack.packb({"v": 1, "k": "est", "id": 3}),
+        msgpack.packb({"v": 1, "k": "est", "id": 3, "step": 1, "t": 0.0, "role": "f",
+                       "z1": b"\x00" * 5, "z2": b"", "z3": b"", "xi": b"", "zeta": b""}),
+    ],
+)
+def test_malformed_payloads_raise_wire_error(payload: bytes) -> None:
+    with pytest.raises(wire.WireError):
+        wire.decode(payload)
+
+
+def test_keys() -> None:
+    assert wire.key_truth("cube8") == "swarm/cube8/truth"
+    assert wire.key_estimate("cube8", 3) == "swarm/cube8/agent/3/estimate"
+    assert wire.agent_id_from_key("swarm/cube8/agent/12/status") == 12
+    with pytest.raises(wire.WireError):
+        wire.agent_id_from_key("swarm/cube8/truth")
+
+
+def test_port_scheme_px4_compatible_and_collision_free_to_255() -> None:
+    v1 = vehicle_ports(1)
+    assert (v1.api_local, v1.api_remote, v1.gcs_local, v1.gcs_remote) == (14580, 14540, 18570, 14550)
+    assert vehicle_ports(10).api_remote == 14549
+    used: set[int] = set()
+    for i in range(1, 256):
+        vp = vehicle_ports(i)
+        mine = {vp.api_local, vp.api_remote, vp.gcs_local}
+        assert len(mine) == 3 and not (mine & used) and GCS_PORT not in mine
+        used |= mine
+    assert vehicle_ports(5, offset=1000).api_local == 14584 + 1000
+    with pytest.raises(ValueError):
+        vehicle_ports(0)
