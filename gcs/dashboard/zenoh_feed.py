@@ -1,0 +1,249 @@
+"""The ground station's Zenoh side: truth, every agent's status and estimate; commands.
+
+Subscribes to ``key_truth(swarm)``, ``key_status(swarm, "*")`` and
+``key_estimate(swarm, "*")`` (``swarm_common.wire``); keeps the latest payload of
+each with its receive time, counts payloads that fail to decode, and turns status
+transitions into operator events (method switch, QP fallback, communication loss,
+estimator health, status gone stale / back). Publishes :class:`Command` payloads on
+``key_cmd(swarm, kind)``.
+
+By default it opens its own peer session that dials the simulator's listening
+endpoint (``swarm_common.zenoh_session.default_endpoint(offset)``); a session can be
+passed in instead (tests, or a process that already has one). No Textual here.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from swarm_common.wire import (
+    Command,
+    Estimate,
+    Status,
+    Truth,
+    WireError,
+    agent_id_from_key,
+    decode,
+    encode,
+    key_cmd,
+    key_estimate,
+    key_status,
+    key_truth,
+)
+from swarm_common.zenoh_session import open_session
+
+METHODS = ("rcbf", "apf", "none")
+
+
+@dataclass(frozen=True)
+class FeedEvent:
+    t: float  # clock() time
+    agent: int  # 0 = swarm-wide
+    kind: str  # method | fallback | comm | estimator | status | mode | outage
+    text: str
+    severity: int = 6  # MAV_SEVERITY scale: 0..7, lower is worse
+
+
+@dataclass
+class FeedSnapshot:
+    """A consistent copy of what the feed holds, with receive times (clock() based)."""
+
+    now: float
+    truth: Truth | None
+    truth_time: float | None
+    status: dict[int, tuple[Status, float]]
+    estimate: dict[int, tuple[Estimate, float]]
+    bad_payloads: int
+    missing: list[int]  # expected ids with no status yet, or a stale one
+    connected: bool
+
+
+class ZenohFeed:
+    """Zenoh subscriber/publisher for the dashboard. ``start()`` opens and subscribes."""
+
+    def __init__(
+        self,
+        swarm: str,
+        ids: Sequence[int],
+        session: Any = None,
+        connect: Sequence[str] = (),
+        listen: Sequence[str] = (),
+        mode: str = "peer",
+        stale_s: float = 1.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.swarm = swarm
+        self.ids = list(ids)
+        self._session = session
+        self._own_session = session is None
+        self.connect = list(connect)
+        self.listen = list(listen)
+        self.mode = mode
+        self.stale_s = stale_s
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._subs: list[Any] = []
+        self.truth: Truth | None = None
+        self.truth_time: float | None = None
+        self.status: dict[int, tuple[Status, float]] = {}
+        self.estimate: dict[int, tuple[Estimate, float]] = {}
+        self.bad_payloads = 0
+        self._events: deque[FeedEvent] = deque(maxlen=2000)
+        self._stale_flag: dict[int, bool] = {}
+        self.started_at = clock()
+
+    # -- lifecycle ---------------------------------------------------------------
+    def start(self) -> ZenohFeed:
+        if self._session is None:
+            self._session = open_session(self.mode, listen=self.listen, connect=self.connect)
+        s = self._session
+        self._subs = [
+            s.declare_subscriber(key_truth(self.swarm), self._on_sample),
+            s.declare_subscriber(key_status(self.swarm, "*"), self._on_sample),
+            s.declare_subscriber(key_estimate(self.swarm, "*"), self._on_sample),
+        ]
+        self.started_at = self.clock()
+        return self
+
+    def close(self) -> None:
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except Exception:
+                pass
+        self._subs = []
+        if self._own_session and self._session is not None:
+            try:
+                self._session.close()
+            except Exception:
+                pass
+            self._session = None
+
+    # -- receive -----------------------------------------------------------------
+    def _on_sample(self, sample: Any) -> None:
+        try:
+            data = sample.payload.to_bytes()
+            key = str(sample.key_expr)
+        except Exception:
+            self.bad_payloads += 1
+            return
+        self.ingest(key, data)
+
+    def ingest(self, key: str, data: bytes) -> None:
+        """Decode one payload received on ``key`` (Zenoh callback thread, or tests)."""
+        now = self.clock()
+        try:
+            obj = decode(data)
+            if isinstance(obj, Status | Estimate) and agent_id_from_key(key) != obj.id:
+                raise WireError(f"id {obj.id} on key {key}")
+        except WireError:
+            with self._lock:
+                self.bad_payloads += 1
+            return
+        with self._lock:
+            if isinstance(obj, Truth):
+                self.truth, self.truth_time = obj, now
+            elif isinstance(obj, Status):
+                prev = self.status.get(obj.id)
+                self._status_events(prev[0] if prev else None, obj, now)
+                self.status[obj.id] = (obj, now)
+                if self._stale_flag.get(obj.id):
+                    self._stale_flag[obj.id] = False
+                    self._events.append(FeedEvent(now, obj.id, "status", "status back", 5))
+            elif isinstance(obj, Estimate):
+                self.estimate[obj.id] = (obj, now)
+            else:
+                self.bad_payloads += 1  # a Command on a data key
+
+    def _status_events(self, prev: Status | None, s: Status, now: float) -> None:
+        ev = self._events
+        if prev is None:
+            ev.append(FeedEvent(now, s.id, "status", f"status up ({s.mode}, {s.method})", 6))
+            return
+        if s.method != prev.method:
+            ev.append(FeedEvent(now, s.id, "method", f"method {prev.method} -> {s.method}", 5))
+        if s.mode != prev.mode:
+            ev.append(FeedEvent(now, s.id, "mode", f"offboard {prev.mode} -> {s.mode}", 5))
+        if s.fallbacks > prev.fallbacks:
+            ev.append(
+                FeedEvent(
+                    now, s.id, "fallback", f"QP fallback ({s.qp_status}), total {s.fallbacks}", 4
+                )
+            )
+        if s.comm_ok != prev.comm_ok:
+            text, sev = ("comm restored", 5) if s.comm_ok else ("comm outage", 3)
+            ev.append(FeedEvent(now, s.id, "comm", text, sev))
+        if s.est_health != prev.est_health:
+            sev = 6 if s.est_health == "ok" else 3
+            ev.append(FeedEvent(now, s.id, "estimator", f"estimator {s.est_health}", sev))
+
+    # -- snapshots ---------------------------------------------------------------
+    def missing(self, now: float | None = None) -> list[int]:
+        """Expected ids with no status yet, or one older than ``stale_s``."""
+        now = self.clock() if now is None else now
+        with self._lock:
+            return self._missing(now)
+
+    def _missing(self, now: float) -> list[int]:
+        out = []
+        for i in self.ids:
+            rec = self.status.get(i)
+            if rec is None or now - rec[1] > self.stale_s:
+                out.append(i)
+        return out
+
+    def check(self, now: float | None = None) -> None:
+        """Raise "status stale" events once per silence (call periodically)."""
+        now = self.clock() if now is None else now
+        with self._lock:
+            for i in self.ids:
+                rec = self.status.get(i)
+                if rec is not None and now - rec[1] > self.stale_s and not self._stale_flag.get(i):
+                    self._stale_flag[i] = True
+                    self._events.append(
+                        FeedEvent(now, i, "status", f"status stale ({now - rec[1]:.1f}s)", 3)
+                    )
+
+    def snapshot(self) -> FeedSnapshot:
+        now = self.clock()
+        with self._lock:
+            return FeedSnapshot(
+                now=now,
+                truth=self.truth,
+                truth_time=self.truth_time,
+                status=dict(self.status),
+                estimate=dict(self.estimate),
+                bad_payloads=self.bad_payloads,
+                missing=self._missing(now),
+                connected=self._session is not None,
+            )
+
+    def drain_events(self) -> list[FeedEvent]:
+        with self._lock:
+            out = list(self._events)
+            self._events.clear()
+        return out
+
+    # -- commands ----------------------------------------------------------------
+    def publish(self, cmd: Command) -> str:
+        """Publish ``cmd`` on ``key_cmd(swarm, cmd.kind)``; returns the key."""
+        if cmd.kind == "method" and cmd.method not in METHODS:
+            raise ValueError(f"method {cmd.method!r}: must be one of {', '.join(METHODS)}")
+        if cmd.kind not in ("method", "outage"):
+            raise ValueError(f"command kind {cmd.kind!r}: must be 'method' or 'outage'")
+        if self._session is None:
+            raise RuntimeError("zenoh feed is not started")
+        key = key_cmd(self.swarm, cmd.kind)
+        self._session.put(key, encode(cmd))
+        return key
+
+    def switch_method(self, method: str, agent: int = 0) -> str:
+        return self.publish(Command(kind="method", agent=agent, method=method))
+
+    def inject_outage(self, duration_s: float, agent: int = 0) -> str:
+        return self.publish(Command(kind="outage", agent=agent, duration_s=float(duration_s)))

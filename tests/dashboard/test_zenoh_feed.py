@@ -1,0 +1,154 @@
+"""The Zenoh feed against a second session on loopback (peer that listens)."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from gcs.dashboard.zenoh_feed import ZenohFeed
+from swarm_common.wire import (
+    Command,
+    Estimate,
+    Status,
+    Truth,
+    decode,
+    encode,
+    key_cmd,
+    key_estimate,
+    key_status,
+    key_truth,
+)
+from swarm_common.zenoh_session import open_session
+
+
+def wait_for(pred, timeout=8.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return pred()
+
+
+def free_tcp_port() -> int:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def status(i: int, **kw) -> Status:
+    base = dict(
+        id=i,
+        step=1,
+        t=0.02,
+        mode="formation",
+        method="rcbf",
+        qp_status="solved",
+        qp_solve_us=80.0,
+        h_min=0.4,
+        lyap_v=0.1,
+        est_health="ok",
+        fallbacks=0,
+    )
+    base.update(kw)
+    return Status(**base)
+
+
+@pytest.fixture
+def sessions():
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    sim = open_session(listen=[ep])
+    feed = ZenohFeed("t1", ids=[1, 2, 3], connect=[ep], stale_s=0.5).start()
+    yield sim, feed
+    feed.close()
+    sim.close()
+
+
+def test_feed_receives_and_marks_missing(sessions):
+    sim, feed = sessions
+    truth = Truth(
+        step=3,
+        t=0.06,
+        ids=[1, 2, 3],
+        p=np.arange(9.0).reshape(3, 3),
+        v=np.zeros((3, 3)),
+        att=np.zeros((3, 3)),
+        thrust=np.ones(3),
+        lumped=np.zeros((3, 3)),
+        armed=[True] * 3,
+        mode=["OFFBOARD"] * 3,
+    )
+    est = Estimate(
+        id=2,
+        step=3,
+        t=0.08,
+        role="follower",
+        z1=np.ones(3),
+        z2=np.zeros(3),
+        z3=np.zeros(3),
+        xi=np.zeros(12),
+    )
+
+    def pump():  # the dialling peer may need a moment: keep publishing
+        sim.put(key_truth("t1"), encode(truth))
+        sim.put(key_status("t1", 1), encode(status(1)))
+        sim.put(key_status("t1", 2), encode(status(2)))
+        sim.put(key_estimate("t1", 2), encode(est))
+        return feed.truth is not None and 2 in feed.estimate and {1, 2} <= set(feed.status)
+
+    assert wait_for(pump)
+    snap = feed.snapshot()
+    assert snap.truth.step == 3 and np.allclose(snap.truth.p[2], [6, 7, 8])
+    assert snap.missing == [3]
+    assert np.allclose(snap.estimate[2][0].z1, 1.0)
+
+    # transitions become events
+    feed.drain_events()
+    sim.put(key_status("t1", 1), encode(status(1, method="apf", fallbacks=2, comm_ok=False)))
+    assert wait_for(lambda: feed.status[1][0].method == "apf")
+    kinds = {e.kind for e in feed.drain_events()}
+    assert {"method", "fallback", "comm"} <= kinds
+
+    # garbage, wrong version, id/key mismatch: counted, not fatal
+    sim.put(key_status("t1", 2), b"\x00\x01garbage")
+    sim.put(key_status("t1", 3), encode(status(2)))
+    assert wait_for(lambda: feed.bad_payloads >= 2)
+    assert 3 not in feed.status
+
+    # status going stale
+    time.sleep(0.6)
+    feed.check()
+    assert set(feed.missing()) == {1, 2, 3}
+    assert any(e.kind == "status" and "stale" in e.text for e in feed.drain_events())
+
+
+def test_feed_publishes_commands(sessions):
+    sim, feed = sessions
+    got: list[tuple[str, Command]] = []
+    sub = sim.declare_subscriber(
+        key_cmd("t1", "*"),
+        lambda s: got.append((str(s.key_expr), decode(s.payload.to_bytes()))),
+    )
+    try:
+
+        def send():
+            feed.switch_method("apf", agent=0)
+            return bool(got)
+
+        assert wait_for(send)
+        key, cmd = got[-1]
+        assert key == key_cmd("t1", "method") and cmd.method == "apf" and cmd.agent == 0
+        n = len(got)
+        feed.inject_outage(1.5, agent=4)
+        assert wait_for(lambda: len(got) > n)
+        key, cmd = got[-1]
+        assert key == key_cmd("t1", "outage") and cmd.duration_s == 1.5 and cmd.agent == 4
+        with pytest.raises(ValueError):
+            feed.switch_method("magic")
+    finally:
+        sub.undeclare()
