@@ -103,6 +103,9 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "apf_radius_m": ("float", 0.0, 100.0, True, False),
         "leader_kp": ("float", 0.0, 1e3, True, False),
         "leader_kd": ("float", 0.0, 1e3, True, False),
+        "ks": ("float", 0.0, 1e3, True, False),
+        "deadlock_gain": ("float", 0.0, 100.0, False, False),
+        "deadlock_h_m2": ("float", 0.0, 1e3, True, False),
     },
 }
 
