@@ -1,0 +1,107 @@
+"""Virtual control → attitude/thrust setpoint, and a model of the inner loop (paper §2.2, §5.1).
+
+``u = R[0,0,F]ᵀ/m − g e_z`` (§2.2) is turned into roll/pitch (yaw held) and thrust with
+:func:`swarm_common.frames.accel_to_attitude` inside the tilt and thrust limits, then into
+the MAVLink SET_ATTITUDE_TARGET payload: NED/FRD quaternion [w,x,y,z] and normalised
+thrust, rounded to float32 as on the wire. :func:`decode_wire` reproduces what the
+simulator makes of that payload (``euler_enu_from_quat_ned`` of the float32 quaternion,
+``norm_to_thrust`` of the float32 thrust).
+
+:class:`InnerLoopModel` predicts the virtual control the vehicle actually realises
+(first-order attitude and thrust lags, §5.1, time constants from ``[vehicle]``); the DESO
+uses it as its input u so that z3 estimates the disturbance, not the inner-loop lag.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarm_common.frames import (
+    accel_to_attitude,
+    euler_enu_from_quat_ned,
+    norm_to_thrust,
+    quat_ned_from_euler_enu,
+    thrust_to_norm,
+)
+
+
+@dataclass
+class Setpoint:
+    """Attitude/thrust setpoint: as commanded and as decoded from the float32 wire form."""
+
+    roll: float
+    pitch: float
+    yaw: float
+    thrust_n: float
+    q_ned: np.ndarray  # (4,) float32 [w, x, y, z]
+    thrust_norm: np.float32
+
+
+def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> tuple[float, ...]:
+    """(roll, pitch, yaw, F) the simulator derives from a float32 wire setpoint."""
+    q = np.asarray(q_ned, dtype=np.float32)
+    roll, pitch, yaw = euler_enu_from_quat_ned(q)
+    return roll, pitch, yaw, norm_to_thrust(np.float32(thrust_norm), thrust_max_n)
+
+
+def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict) -> Setpoint:
+    """u (ENU) → setpoint within ``[vehicle]`` tilt/thrust limits; angles/thrust as decoded."""
+    f_max = veh["thrust_max_n"]
+    roll, pitch, yaw_c, f = accel_to_attitude(
+        u, yaw, veh["gravity_mps2"], veh["mass_kg"], math.radians(veh["tilt_max_deg"]), f_max
+    )
+    q = quat_ned_from_euler_enu(roll, pitch, yaw_c).astype(np.float32)
+    tn = np.float32(thrust_to_norm(f, f_max))
+    r, p, y, fd = decode_wire(q, tn, f_max)
+    return Setpoint(r, p, y, fd, q, tn)
+
+
+def accel_from_attitude(
+    roll: float, pitch: float, yaw: float, thrust_n: float, mass: float, g: float
+) -> np.ndarray:
+    """Virtual control realised by an attitude/thrust: R e3 F/m − g e_z (ENU)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    k = thrust_n / mass
+    return np.array(
+        [(cy * sp * cr + sy * sr) * k, (sy * sp * cr - cy * sr) * k, cp * cr * k - g]
+    )
+
+
+class InnerLoopModel:
+    """First-order attitude (τ_rp, τ_ψ) and thrust (τ_F) lags, exact per sub-step."""
+
+    def __init__(self, veh: dict, dt_sub: float) -> None:
+        self.m = veh["mass_kg"]
+        self.g = veh["gravity_mps2"]
+        self.tilt = math.radians(veh["tilt_max_deg"])
+        self.f_max = veh["thrust_max_n"]
+        self.a_rp = math.exp(-dt_sub / veh["tau_rollpitch_s"])
+        self.a_y = math.exp(-dt_sub / veh["tau_yaw_s"])
+        self.a_f = math.exp(-dt_sub / veh["tau_thrust_s"])
+        self.att = [0.0, 0.0, 0.0]
+        self.f = self.m * self.g
+
+    def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
+        """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u at each sub-step end."""
+        lim = self.tilt
+        rc = min(lim, max(-lim, sp.roll))
+        pc = min(lim, max(-lim, sp.pitch))
+        yc = sp.yaw
+        fc = min(self.f_max, max(0.0, sp.thrust_n))
+        out = np.empty((n_sub, 3))
+        r, p, y = self.att
+        f = self.f
+        for k in range(n_sub):
+            r = rc + (r - rc) * self.a_rp
+            p = pc + (p - pc) * self.a_rp
+            y = yc + (y - yc) * self.a_y
+            f = fc + (f - fc) * self.a_f
+            out[k] = accel_from_attitude(r, p, y, f, self.m, self.g)
+        self.att = [r, p, y]
+        self.f = f
+        return out

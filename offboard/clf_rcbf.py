@@ -1,0 +1,241 @@
+"""CLF–RCBF quadratic program (paper §4.2–4.4; errata 10–14).
+
+CLF (errata 10): with ``e1 = z1 − p̂*``, ``e2 = z2 − v̂*`` and the sliding variable
+``s = e2 + λ e1``::
+
+    V = k_p ‖e1‖² + k_d ‖s‖²
+    V̇ = 2k_p e1ᵀe2 + 2k_d sᵀ(u + w − â* + λ e2),   w = z3 + Φ(z1,z2)ζ̂
+
+``L_gV = 2k_d sᵀ`` vanishes only on s = 0 where ``V̇ = −2k_pλ‖e1‖² ≤ −cV`` for c ≤ 2λ, so V
+is a valid CLF. The nominal formation controller (shared by all methods)::
+
+    u_nom = â* − w − λ e2 − k_s s − (k_p/k_d) e1     ⇒  V̇ = −2k_pλ‖e1‖² − 2k_d k_s‖s‖²
+
+RCBF (errata 12): ``h = ‖Δp‖² + 2τ Δvᵀ Δp − D²`` (§2.3, Δ = i − j) and the reciprocal
+condition ``L_fB + L_gB u − γ/B ≤ 0`` with B = 1/h, which equals ``ḣ ≥ −γ h³``::
+
+    ḣ = 2Δpᵀ Δv + 2τ (‖Δv‖² + Δpᵀ(a_i − a_j))
+
+Pairs (errata 13): every agent in sensing range; follower–follower pairs take half of
+the budget each (``2τΔpᵀ a_i ≥ −½(2ΔpᵀΔv + 2τ‖Δv‖² + γh³)``), against a leader the
+follower takes all of it with the leader's broadcast acceleration. Δp, Δv come from the
+onboard relative sensing (available for non-neighbours, unlike estimates).
+
+QP (§4.4), variables x = [u (3), δ, σ]::
+
+    min ½‖u − u_nom‖² + ρ δ² + ρ_σ σ² + M σ
+    s.t.  L_gV u − δ ≤ −L_fV − cV                (soft CLF, slack δ)
+          n̂_jᵀ u + σ ≥ r_j      for every sensed pair (rows normalised, n̂ = Δp/‖Δp‖)
+          u_lo ≤ u ≤ u_hi,  σ ≥ 0
+
+σ is an exact-penalty relaxation (M ≫ the constraints' multipliers): σ = 0 whenever the
+hard RCBF rows and the box are jointly feasible; otherwise the QP returns the
+least-violating input and the step is counted as a fallback (errata 14). If OSQP itself
+fails, the fallback is braking ``u = clip(−w − k_b z2)``. u is never NaN.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import osqp
+from scipy import sparse
+
+SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+
+
+@dataclass
+class ClfTerms:
+    """V, L_fV, L_gV of the sliding-variable CLF and the nominal control."""
+
+    V: float
+    lfv: float
+    lgv: np.ndarray
+    u_nom: np.ndarray
+
+
+def clf_terms(
+    e1: np.ndarray,
+    e2: np.ndarray,
+    w: np.ndarray,
+    a_ref: np.ndarray,
+    kp: float,
+    kd: float,
+    lam: float,
+    ks: float,
+) -> ClfTerms:
+    """CLF of errata 10 and the nominal formation controller (see module docstring)."""
+    s = e2 + lam * e1
+    v = kp * float(e1 @ e1) + kd * float(s @ s)
+    drift = w - a_ref + lam * e2
+    lfv = 2.0 * kp * float(e1 @ e2) + 2.0 * kd * float(s @ drift)
+    lgv = 2.0 * kd * s
+    u_nom = a_ref - w - lam * e2 - ks * s - (kp / kd) * e1
+    return ClfTerms(V=v, lfv=lfv, lgv=lgv, u_nom=u_nom)
+
+
+def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
+    """h_ij for rows of Δp = p_i − p_j, Δv = v_i − v_j (§2.3, §4.3)."""
+    return (
+        np.einsum("ij,ij->i", dp, dp) + 2.0 * tau * np.einsum("ij,ij->i", dv, dp) - d_safe**2
+    )
+
+
+def rcbf_rows(
+    dp: np.ndarray,
+    dv: np.ndarray,
+    w_i: np.ndarray,
+    a_other: np.ndarray,
+    share: np.ndarray,
+    tau: float,
+    d_safe: float,
+    gamma: float,
+    margin: float = 1e-3,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """RCBF rows ``n̂ᵀu ≥ r`` for agent i (errata 12–13) and h per pair.
+
+    dp, dv (M,3): Δp = p_i − p_j, Δv = v_i − v_j; w_i (3,): own lumped disturbance
+    estimate; a_other (M,3): other agent's acceleration taken as known (leaders'
+    broadcast, zeros for followers); share (M,): 0.5 follower–follower, 1.0 vs leader.
+    ``margin`` (m/s²) tightens the rows against solver tolerance.
+    """
+    h = barrier(dp, dv, tau, d_safe)
+    base = 2.0 * np.einsum("ij,ij->i", dp, dv) + 2.0 * tau * np.einsum("ij,ij->i", dv, dv)
+    base += gamma * h**3
+    nrm = np.sqrt(np.einsum("ij,ij->i", dp, dp))
+    nrm = np.maximum(nrm, 1e-6)
+    n_hat = dp / nrm[:, None]
+    # 2τΔpᵀ(u + w_i − a_j) ≥ −share·base   →   n̂ᵀu ≥ −share·base/(2τ‖Δp‖) − n̂ᵀ(w_i − a_j)
+    rhs = -share * base / (2.0 * tau * nrm) - np.einsum("ij,ij->i", n_hat, w_i[None, :] - a_other)
+    return n_hat, rhs + margin, h
+
+
+def tangential_term(dp: np.ndarray, h: np.ndarray, gain: float, h_on: float) -> np.ndarray:
+    """Deadlock breaker: a sideways push ``gain·max(0, 1 − h/h_on)·t̂`` per close pair.
+
+    ``t̂ = n̂ × a / ‖·‖`` with a = e_z (e_x when Δp is nearly vertical); for the other agent
+    of the pair Δp changes sign and so does t̂, so the two sidestep in opposite directions.
+    """
+    out = np.zeros(3)
+    if gain <= 0.0:
+        return out
+    for k in range(len(h)):
+        wgt = 1.0 - h[k] / h_on
+        if wgt <= 0.0:
+            continue
+        n = dp[k] / max(float(np.linalg.norm(dp[k])), 1e-6)
+        ax = np.array([1.0, 0.0, 0.0]) if abs(n[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
+        t = np.cross(n, ax)
+        t /= max(float(np.linalg.norm(t)), 1e-9)
+        out += gain * min(wgt, 1.0) * t
+    return out
+
+
+@dataclass
+class QPResult:
+    """Outcome of one control QP."""
+
+    u: np.ndarray
+    status: str  # "solved" | "relaxed" | "fallback" | "inactive"
+    status_val: int
+    solve_us: float
+    h_min: float
+    V: float
+    slack: float  # CLF slack δ
+    violation: float  # RCBF relaxation σ (0 when the hard problem is feasible)
+    fallback: bool
+
+
+class SafetyQP:
+    """One agent's OSQP problem, set up once with room for ``max_pairs`` RCBF rows."""
+
+    def __init__(
+        self,
+        max_pairs: int,
+        u_lo: np.ndarray,
+        u_hi: np.ndarray,
+        rho: float,
+        clf_c: float,
+        violation_weight: float = 1e4,
+        violation_linear: float = 1e3,
+        eps: float = 1e-4,
+        brake_gain: float = 2.0,
+    ) -> None:
+        self.m = int(max_pairs)
+        self.u_lo = np.asarray(u_lo, dtype=float)
+        self.u_hi = np.asarray(u_hi, dtype=float)
+        self.c = float(clf_c)
+        self.brake_gain = brake_gain
+        self.lin_sigma = float(violation_linear)
+        m = self.m
+        nrow = 1 + m + 3 + 1
+        self.nrow = nrow
+        pat = np.zeros((nrow, 5))
+        pat[0, 0:4] = 1.0
+        pat[1 : 1 + m, 0:3] = 1.0
+        pat[1 : 1 + m, 4] = 1.0
+        for k in range(3):
+            pat[1 + m + k, k] = 1.0
+        pat[nrow - 1, 4] = 1.0
+        self._mask_t = (pat != 0).T
+        self._a = pat.copy()
+        pmat = sparse.diags([1.0, 1.0, 1.0, 2.0 * rho, 2.0 * violation_weight]).tocsc()
+        amat = sparse.csc_matrix(pat)
+        self.l = np.full(nrow, -np.inf)
+        self.u = np.full(nrow, np.inf)
+        self.l[1 + m : 4 + m] = self.u_lo
+        self.u[1 + m : 4 + m] = self.u_hi
+        self.l[nrow - 1] = 0.0
+        self.q = np.zeros(5)
+        self.q[4] = self.lin_sigma
+        self.solver = osqp.OSQP()
+        self.solver.setup(
+            pmat, self.q, amat, self.l, self.u,
+            eps_abs=eps, eps_rel=eps, warm_starting=True, polishing=True,
+            verbose=False, max_iter=4000,
+        )
+
+    def solve(
+        self,
+        u_nom: np.ndarray,
+        clf: ClfTerms,
+        n_hat: np.ndarray,
+        rhs: np.ndarray,
+        h: np.ndarray,
+        brake: np.ndarray,
+    ) -> QPResult:
+        """Solve for u; ``brake`` (3,) is the fallback if OSQP fails (then clipped)."""
+        t0 = time.perf_counter()
+        m = self.m
+        k = min(len(rhs), m)
+        a = self._a
+        nrm = 1.0 + float(np.linalg.norm(clf.lgv))
+        a[0, 0:3] = clf.lgv / nrm
+        a[0, 3] = -1.0 / nrm
+        self.u[0] = (-clf.lfv - self.c * clf.V) / nrm
+        a[1 : 1 + k, 0:3] = n_hat[:k]
+        a[1 + k : 1 + m, 0:3] = 0.0
+        self.l[1 : 1 + k] = rhs[:k]
+        self.l[1 + k : 1 + m] = -np.inf
+        self.q[0:3] = -u_nom
+        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
+        res = self.solver.solve(raise_error=False)
+        sv = res.info.status_val
+        x = res.x
+        h_min = float(h.min()) if len(h) else float("inf")
+        ok = sv in SOLVED and x is not None and np.all(np.isfinite(x))
+        if ok:
+            u = np.clip(np.asarray(x[0:3], dtype=float), self.u_lo, self.u_hi)
+            sigma = max(0.0, float(x[4]))
+            relaxed = sigma > 1e-3
+            status = "relaxed" if relaxed else "solved"
+            out = QPResult(u, status, int(sv), 0.0, h_min, clf.V, float(x[3]), sigma, relaxed)
+        else:
+            u = np.clip(np.nan_to_num(brake), self.u_lo, self.u_hi)
+            out = QPResult(u, "fallback", int(sv), 0.0, h_min, clf.V, 0.0, 0.0, True)
+            self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
+        out.solve_us = (time.perf_counter() - t0) * 1e6
+        return out
+

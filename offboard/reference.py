@@ -1,0 +1,124 @@
+"""Leader trajectory and the desired-state observer (paper §4.1; errata 4, 9).
+
+Leader trajectory (errata 4): every leader moves by the same smooth offset
+``p_L(t) = p_L(0) + A (1 − cos ωt)``, ω = 2π f (``[leader_trajectory]``), so the
+bearings between leaders stay constant and the desired formation is a rigid translation.
+
+Exosystem (errata 9): per axis ``x'''' = −ω² x''`` i.e. ``ξ̇ = (S ⊗ I₃) ξ`` with
+``ξ = [p, ṗ, p̈, p⃛]`` (12,) and ``S = [[0,1,0,0],[0,0,1,0],[0,0,0,1],[0,0,−ω²,0]]``;
+it generates constant + ramp + sinusoid, hence the trajectory above exactly.
+
+Desired-state observer of follower i (§4.1, coupling over bearing-graph neighbours,
+leaders' states as known inputs)::
+
+    ξ̂̇_i = (S⊗I₃) ξ̂_i − L Σ_j (I₄⊗P*_ij)(ξ̂_i − ξ̂_j)
+
+Per eigen-channel λ of L_ff the error matrix is S − Lλ I (S commutes with I), so every
+channel decays at rate Lλ ≥ L λ_min. Over one period the neighbours' ξ̂_j are propagated
+by the exosystem; with ``c = Σ_j (I₄⊗P*_ij) ξ̂_j`` (ċ = (S⊗I₃) c) the pair (ξ̂_i, c) is
+linear time-invariant and is advanced exactly by one 24×24 matrix exponential.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import expm
+
+from offboard.bearing import Formation
+
+
+def exo_matrix(omega: float) -> np.ndarray:
+    """4×4 exosystem matrix S of x'''' = −ω² x'' (errata 9)."""
+    s = np.zeros((4, 4))
+    s[0, 1] = s[1, 2] = s[2, 3] = 1.0
+    s[3, 2] = -omega * omega
+    return s
+
+
+class LeaderTrajectory:
+    """p_L(t) = p_L(0) + A(1 − cos ωt) and its derivatives up to order 3."""
+
+    def __init__(self, p0: np.ndarray, amplitude: np.ndarray, frequency_hz: float) -> None:
+        self.p0 = np.asarray(p0, dtype=float)
+        self.amp = np.asarray(amplitude, dtype=float)
+        self.omega = 2.0 * math.pi * float(frequency_hz)
+
+    def state(self, t: float) -> np.ndarray:
+        """ξ(t) = [p, ṗ, p̈, p⃛] (12,)."""
+        w = self.omega
+        c, s = math.cos(w * t), math.sin(w * t)
+        a = self.amp
+        return np.concatenate(
+            [self.p0 + a * (1.0 - c), a * w * s, a * w * w * c, -a * w**3 * s]
+        )
+
+
+def exo_propagator(omega: float, dt: float) -> np.ndarray:
+    """12×12 exact propagator expm((S⊗I₃) dt) of ξ."""
+    return expm(np.kron(exo_matrix(omega), np.eye(3)) * dt)
+
+
+class DesiredStateObserver:
+    """Estimate ξ̂_i of follower ``index``'s desired state (§4.1)."""
+
+    def __init__(
+        self,
+        form: Formation,
+        index: int,
+        omega: float,
+        gain: float,
+        dt: float,
+        xi0: np.ndarray,
+    ) -> None:
+        self.form = form
+        self.index = index
+        self.omega = float(omega)
+        self.gain = float(gain)
+        self.dt = float(dt)
+        self.nbrs = list(form.neighbours[index])
+        self.xi = np.array(xi0, dtype=float)
+        self.exo = exo_propagator(self.omega, self.dt)
+        self._cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
+
+    def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+        m = self._cache.get(used)
+        if m is None:
+            dmat = np.zeros((3, 3))
+            for j in used:
+                dmat += self.form.p_star[self.index, j]
+            sk = np.kron(exo_matrix(self.omega), np.eye(3))
+            a = np.zeros((24, 24))
+            a[:12, :12] = sk - self.gain * np.kron(np.eye(4), dmat)
+            a[:12, 12:] = self.gain * np.eye(12)
+            a[12:, 12:] = sk
+            full = expm(a * self.dt)
+            m = (full[:12, :12].copy(), full[:12, 12:].copy())
+            self._cache[used] = m
+        return m
+
+    def update(self, nbr_xi: dict[int, np.ndarray]) -> None:
+        """Advance ξ̂ from t_k to t_k+1 given neighbours' ξ̂_j (leaders' ξ) for t_k."""
+        used = tuple(j for j in self.nbrs if j in nbr_xi)
+        if not used:
+            self.xi = self.exo @ self.xi
+            return
+        mx, mc = self._matrices(used)
+        c = np.zeros(12)
+        ps = self.form.p_star[self.index]
+        for j in used:
+            c += (nbr_xi[j].reshape(4, 3) @ ps[j]).reshape(12)  # (I4 ⊗ P) ξ_j, P symmetric
+        self.xi = mx @ self.xi + mc @ c
+
+    @property
+    def p(self) -> np.ndarray:
+        return self.xi[0:3]
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.xi[3:6]
+
+    @property
+    def a(self) -> np.ndarray:
+        return self.xi[6:9]
