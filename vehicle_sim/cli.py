@@ -1,0 +1,115 @@
+"""``vehicle-sim``: SITL-style multi-vehicle MAVLink simulator (docs/conventions.md).
+
+Exit codes: 0 on SIGINT/SIGTERM or when ``--duration`` is reached; 2 on a bad scenario,
+a bad option or a busy port (one line on stderr naming it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+
+from swarm_common.scenario import ScenarioError, load_scenario
+
+
+def _pos_float(name: str):
+    def conv(s: str) -> float:
+        try:
+            x = float(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} {s!r}: must be a number") from None
+        if not (math.isfinite(x) and x > 0):
+            raise argparse.ArgumentTypeError(f"{name} {s!r}: must be a positive number")
+        return x
+
+    return conv
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="vehicle-sim",
+        description="SITL-style multi-vehicle MAVLink 2 simulator (PX4 conventions).",
+    )
+    ap.add_argument("--scenario", required=True, help="scenario TOML file (scenarios/cube8.toml)")
+    ap.add_argument("--lockstep", action="store_true", help="advance only when controllers answer")
+    ap.add_argument("--seed", type=int, default=None, help="dynamics seed (default: scenario)")
+    ap.add_argument("--port-offset", type=int, default=0, help="shift every UDP/TCP port")
+    ap.add_argument("--bind", default="127.0.0.1", help="address the vehicle sockets bind")
+    ap.add_argument("--remote-host", default="127.0.0.1", help="where default streams go")
+    ap.add_argument("--swarm", default="default", help="swarm name in the Zenoh keys")
+    ap.add_argument("--zenoh-listen", nargs="+", default=[], metavar="EP")
+    ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
+    ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
+    ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
+    ap.add_argument("--failsafe", choices=("hold", "land"), default="hold")
+    ap.add_argument("--offboard-timeout", type=_pos_float("--offboard-timeout"), default=0.5)
+    ap.add_argument("--odometry-hz", type=_pos_float("--odometry-hz"), default=50.0)
+    ap.add_argument("--step-timeout", type=_pos_float("--step-timeout"), default=0.5)
+    ap.add_argument("--duration", type=_pos_float("--duration"), default=None,
+                    help="exit 0 after this much simulated time (s)")  # fmt: skip
+    ap.add_argument("--vehicles", type=int, default=None, metavar="K",
+                    help="simulate only the first K agents of the scenario")  # fmt: skip
+    ap.add_argument("--quiet", action="store_true", help="no event log on stderr")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        sc = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        print(f"vehicle-sim: {exc}", file=sys.stderr)
+        return 2
+    if args.vehicles is not None and not 1 <= args.vehicles <= sc.n:
+        print(f"vehicle-sim: --vehicles {args.vehicles}: must be in [1, {sc.n}]", file=sys.stderr)
+        return 2
+    if not 0 <= args.port_offset <= 65535 - 18570 - 255:
+        print(f"vehicle-sim: --port-offset {args.port_offset}: out of range", file=sys.stderr)
+        return 2
+
+    from vehicle_sim.mavlink_link import LinkError
+    from vehicle_sim.server import SimOptions, SimServer
+
+    opts = SimOptions(
+        lockstep=args.lockstep,
+        seed=args.seed,
+        port_offset=args.port_offset,
+        bind_host=args.bind,
+        remote_host=args.remote_host,
+        swarm=args.swarm,
+        zenoh=not args.no_zenoh,
+        zenoh_mode=args.zenoh_mode,
+        zenoh_listen=args.zenoh_listen,
+        zenoh_connect=args.zenoh_connect,
+        failsafe=args.failsafe,
+        offboard_timeout=args.offboard_timeout,
+        odometry_hz=args.odometry_hz,
+        step_timeout=args.step_timeout,
+        duration=args.duration,
+        vehicles=args.vehicles,
+        verbose=not args.quiet,
+    )
+    try:
+        server = SimServer(sc, opts)
+    except LinkError as exc:
+        print(f"vehicle-sim: {exc.strerror}", file=sys.stderr)
+        return 2
+    except (RuntimeError, ValueError) as exc:
+        print(f"vehicle-sim: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+
+    def on_signal(signum, _frame):
+        server.stop_requested = True
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    try:
+        return server.run()
+    finally:
+        server.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

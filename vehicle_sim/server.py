@@ -1,0 +1,370 @@
+"""The ``vehicle-sim`` process: dynamics + N vehicles + clock + Zenoh truth, one select loop.
+
+Per control step k (t_k = k / control_hz), in both clock modes:
+
+1. every vehicle updates its state machine (offboard loss, auto-disarm) and gives its
+   attitude/thrust command; the dynamics integrate physics_hz / control_hz steps;
+2. ``wire.Truth`` of the new step is published on ``wire.key_truth(swarm)``;
+3. lockstep: every vehicle's ODOMETRY stamped t_k is sent; then the loop waits for the
+   answers (SET_ATTITUDE_TARGET with ``time_boot_ms == round(t_k·1000)``) of every active
+   vehicle, or ``step_timeout`` wall seconds. Real time: the loop waits for the wall clock.
+
+Telemetry streams (HEARTBEAT 1 Hz etc.) run on the wall clock in both modes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import selectors
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from swarm_common import wire
+from swarm_common.ports import vehicle_ports
+from swarm_common.scenario import Scenario
+from vehicle_sim.clock import LockstepClock, RealTimeClock
+from vehicle_sim.dynamics import SwarmDynamics
+from vehicle_sim.mavlink_link import MavlinkLink
+from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle, VehicleConfig
+
+LOCKSTEP_SUSPEND_AFTER = 5  # consecutive step timeouts before we stop waiting for a vehicle
+LOCKSTEP_RESEND_S = 0.1  # re-send ODOMETRY t_k to a vehicle that has not answered yet
+
+
+@dataclass
+class SimOptions:
+    lockstep: bool = False
+    seed: int | None = None
+    port_offset: int = 0
+    bind_host: str = "127.0.0.1"
+    remote_host: str = "127.0.0.1"
+    swarm: str = "default"
+    zenoh: bool = True
+    zenoh_mode: str = "peer"
+    zenoh_listen: list[str] = field(default_factory=list)
+    zenoh_connect: list[str] = field(default_factory=list)
+    failsafe: str = "hold"
+    offboard_timeout: float = 0.5
+    odometry_hz: float = 50.0
+    step_timeout: float = 0.5
+    duration: float | None = None
+    vehicles: int | None = None
+    verbose: bool = True
+
+
+def restrict(sc: Scenario, k: int | None) -> Scenario:
+    """The scenario with only its first ``k`` agents (``--vehicles K``)."""
+    if k is None or k >= sc.n:
+        return sc
+    if k < 1:
+        raise ValueError(f"--vehicles {k}: must be in [1, {sc.n}]")
+    return dataclasses.replace(sc, agents=sc.agents[:k])
+
+
+class SimServer:
+    def __init__(self, sc: Scenario, opts: SimOptions) -> None:
+        self.opts = opts
+        self.sc = restrict(sc, opts.vehicles)
+        self.dyn = SwarmDynamics(self.sc, seed=opts.seed, held=True)
+        self.substeps = self.sc.substeps_per_control
+        self.dt = self.sc.control_dt
+        if opts.lockstep:
+            self.clock: LockstepClock | RealTimeClock = LockstepClock(self.dt, opts.step_timeout)
+        else:
+            self.clock = RealTimeClock(self.dt)
+        self.stop_requested = False
+        self.lockstep_timeouts = 0
+        self.truth_published = 0
+        self.zsession = None
+        self.zpub = None
+        self.links: list[MavlinkLink] = []
+        self.vehicles: list[Vehicle] = []
+        self.vlinks: dict[int, dict[str, MavlinkLink]] = {}
+        self.sel = selectors.DefaultSelector()
+        self._collisions_seen = 0
+        self._last_resend: dict[int, float] = {}
+        self._prestart_next = 0.0
+        try:
+            self._open_links()
+            if opts.zenoh:
+                self._open_zenoh()
+        except Exception:
+            self.close()
+            raise
+
+    # -- setup ------------------------------------------------------------------------
+    def _open_links(self) -> None:
+        o = self.opts
+        for idx, aid in enumerate(self.sc.ids):
+            cfg = VehicleConfig(
+                offboard_timeout=o.offboard_timeout,
+                failsafe=o.failsafe,
+                odometry_hz=o.odometry_hz,
+                lockstep=o.lockstep,
+                port_offset=o.port_offset,
+            )
+            v = Vehicle(aid, idx, self.dyn, cfg)
+            self.vehicles.append(v)
+            ports = vehicle_ports(aid, o.port_offset)
+            api = MavlinkLink(
+                "api", aid, ports.api_local, (o.remote_host, ports.api_remote), o.bind_host
+            )
+            self.links.append(api)
+            gcs = MavlinkLink(
+                "gcs", aid, ports.gcs_local, (o.remote_host, ports.gcs_remote), o.bind_host
+            )
+            self.links.append(gcs)
+            self.vlinks[aid] = {"api": api, "gcs": gcs}
+            self.sel.register(api.sock, selectors.EVENT_READ, (v, api))
+            self.sel.register(gcs.sock, selectors.EVENT_READ, (v, gcs))
+
+    def _open_zenoh(self) -> None:
+        from swarm_common.zenoh_session import default_endpoint, open_session
+
+        o = self.opts
+        listen = list(o.zenoh_listen)
+        if not listen and not o.zenoh_connect and o.zenoh_mode != "client":
+            listen = [default_endpoint(o.port_offset)]
+        self.zsession = open_session(o.zenoh_mode, listen=listen, connect=o.zenoh_connect)
+        self.zpub = self.zsession.declare_publisher(wire.key_truth(o.swarm))
+        self.log(f"zenoh {o.zenoh_mode} listen={listen} connect={o.zenoh_connect}")
+
+    def log(self, text: str) -> None:
+        if self.opts.verbose:
+            print(f"[vehicle-sim t={self.clock.t():.2f}] {text}", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        for link in self.links:
+            try:
+                self.sel.unregister(link.sock)
+            except (KeyError, ValueError, OSError):
+                pass
+            link.close()
+        self.links = []
+        try:
+            self.sel.close()
+        except OSError:
+            pass
+        if self.zpub is not None:
+            try:
+                self.zpub.undeclare()
+            except Exception:
+                pass
+            self.zpub = None
+        if self.zsession is not None:
+            try:
+                self.zsession.close()
+            except Exception:
+                pass
+            self.zsession = None
+
+    # -- per step ---------------------------------------------------------------------
+    def truth(self) -> wire.Truth:
+        d = self.dyn
+        return wire.Truth(
+            step=self.clock.k,
+            t=self.clock.t(),
+            ids=list(self.sc.ids),
+            p=d.p.copy(),
+            v=d.v.copy(),
+            att=d.att.copy(),
+            thrust=d.thrust.copy(),
+            lumped=d.lumped_accel(),
+            armed=[v.armed for v in self.vehicles],
+            mode=[v.mode for v in self.vehicles],
+            collisions=d.collisions,
+        )
+
+    def publish_truth(self) -> None:
+        if self.zpub is not None:
+            try:
+                self.zpub.put(wire.encode(self.truth()))
+                self.truth_published += 1
+            except Exception as exc:  # never let Zenoh kill the simulation
+                self.log(f"zenoh put failed: {exc}")
+
+    def send_odometry(self, v: Vehicle) -> None:
+        v.outbox.append((v.odometry(self.clock.t()), None))
+
+    def integrate(self) -> None:
+        """Step k -> k+1: state machines, commands, physics, then announce step k+1."""
+        t = self.clock.t()
+        lockstep_prestart = self.clock.lockstep and not self.clock.started
+        for v in self.vehicles:
+            v.update(t)
+            if v.release_requested and not lockstep_prestart:
+                self.dyn.release(v.idx)
+                v.release_requested = False
+            self.dyn.set_command(v.idx, *v.command(self.dt))
+        self.dyn.advance(self.substeps)
+        self.clock.advance(time.monotonic())
+        self._check_collisions()
+        self.announce_step()
+
+    def announce_step(self) -> None:
+        """Publish truth for the current step; in lockstep send every vehicle ODOMETRY t_k."""
+        self.publish_truth()
+        ms = self.clock.t_ms()
+        now = time.monotonic()
+        for v in self.vehicles:
+            v.expect_ms = ms
+            if self.clock.lockstep:
+                self.send_odometry(v)
+                self._last_resend[v.id] = now
+
+    def _check_collisions(self) -> None:
+        pairs = self.dyn.collision_pairs
+        while self._collisions_seen < len(pairs):
+            t, a, b = pairs[self._collisions_seen]
+            self._collisions_seen += 1
+            for v in self.vehicles:
+                if v.id in (a, b):
+                    other = b if v.id == a else a
+                    v.event(f"collision with vehicle {other}", 2)
+
+    # -- lockstep ---------------------------------------------------------------------
+    def barrier_ready(self) -> bool:
+        return all(v.active and v.answered_ms == 0 for v in self.vehicles)
+
+    def lockstep_waiting(self) -> list[Vehicle]:
+        ms = self.clock.t_ms()
+        return [v for v in self.vehicles if v.lockstep_should_wait() and v.answered_ms != ms]
+
+    def lockstep_poll(self, now: float) -> None:
+        clk = self.clock
+        assert isinstance(clk, LockstepClock)
+        if not clk.started:
+            if self.barrier_ready():
+                clk.started = True
+                for v in self.vehicles:
+                    self.dyn.release(v.idx)
+                    v.release_requested = False
+                self.log("lockstep: start barrier passed, all vehicles released at t_0")
+                self.integrate()
+                return
+            if now >= self._prestart_next:  # keep offering t_0 until everyone is ready
+                self._prestart_next = now + (
+                    1.0 / self.opts.odometry_hz if self.opts.odometry_hz else 0.1
+                )
+                self.publish_truth()
+                for v in self.vehicles:
+                    v.expect_ms = 0
+                    self.send_odometry(v)
+            return
+        waiting = self.lockstep_waiting()
+        if not waiting:
+            self.integrate()
+            return
+        if now >= clk.deadline():
+            for v in waiting:
+                v.ctr.lockstep_timeouts += 1
+                v.consecutive_timeouts += 1
+                self.lockstep_timeouts += 1
+                if v.consecutive_timeouts >= LOCKSTEP_SUSPEND_AFTER and not v.wait_suspended:
+                    v.wait_suspended = True
+                    v.event(f"lockstep: no answer for {v.consecutive_timeouts} steps, not waiting")
+            self.integrate()
+            return
+        for v in waiting:  # a lost datagram must not cost a whole step timeout
+            if now - self._last_resend.get(v.id, 0.0) >= LOCKSTEP_RESEND_S:
+                self._last_resend[v.id] = now
+                self.send_odometry(v)
+
+    # -- I/O --------------------------------------------------------------------------
+    def flush(self, now: float) -> None:
+        for v in self.vehicles:
+            if not v.outbox:
+                continue
+            links = self.vlinks[v.id]
+            dests = {name: ln.destinations(now) for name, ln in links.items()}
+            out, v.outbox = v.outbox, []
+            for msg, dest in out:
+                buf = v.pack(msg)
+                if dest is None:
+                    for name, ln in links.items():
+                        ln.send_bytes(buf, dests[name])
+                else:
+                    links[dest[0]].send_bytes(buf, [], dest[1])
+            for line in v.events:
+                self.log(line)
+            v.events.clear()
+
+    def receive(self, timeout: float) -> None:
+        now = time.monotonic()
+        t = self.clock.t()
+        for key, _ in self.sel.select(max(0.0, timeout)):
+            v, link = key.data
+            for m in link.receive(now):
+                v.handle(m, (link.name, m._peer), now, t)
+
+    def next_wakeup(self, now: float) -> float:
+        if isinstance(self.clock, RealTimeClock):
+            t = self.clock.next_deadline()
+        elif not self.clock.started:
+            t = min(self._prestart_next, now + 0.02)
+        else:
+            t = min(self.clock.deadline(), now + LOCKSTEP_RESEND_S)
+        return max(0.0, min(t - now, 0.01))
+
+    def run(self) -> int:
+        """Run until SIGINT/SIGTERM (``stop_requested``) or ``duration``. Returns exit code."""
+        o = self.opts
+        self.log(
+            f"{len(self.vehicles)} vehicles, {'lockstep' if o.lockstep else 'real-time'}, "
+            f"control {1 / self.dt:.0f} Hz, physics {self.substeps}x, port offset {o.port_offset}"
+        )
+        if isinstance(self.clock, RealTimeClock):
+            self.clock.t0 = time.monotonic()
+        else:
+            self.clock.begin_step()
+        self.announce_step()
+        skip = (MSG_ODOMETRY,) if o.lockstep else ()
+        try:
+            while not self.stop_requested:
+                now = time.monotonic()
+                self.receive(self.next_wakeup(now))
+                now = time.monotonic()
+                if isinstance(self.clock, RealTimeClock):
+                    n = 0
+                    while self.clock.due(now) and n < 5:
+                        self.integrate()
+                        n += 1
+                    if n == 5 and self.clock.due(now):
+                        self.clock.t0 = now - self.clock.k * self.dt
+                        self.clock.relocks += 1
+                else:
+                    self.lockstep_poll(now)
+                t = self.clock.t()
+                for v in self.vehicles:
+                    v.periodic(now, t, skip)
+                self.flush(now)
+                if o.duration is not None and t >= o.duration - 1e-9:
+                    self.log(f"duration {o.duration} s reached")
+                    break
+        finally:
+            self.log(self.summary())
+        return 0
+
+    def summary(self) -> str:
+        tot: dict[str, int] = {}
+        for link in self.links:
+            for k, val in link.stats.as_dict().items():
+                tot[k] = tot.get(k, 0) + val
+        for v in self.vehicles:
+            for k, val in v.ctr.as_dict().items():
+                tot[k] = tot.get(k, 0) + val
+        keys = ("messages", "bad", "garbage", "truncated", "foreign", "setpoints",
+                "setpoints_rejected", "setpoints_stale", "commands", "commands_unsupported",
+                "commands_foreign", "failsafes")  # fmt: skip
+        body = " ".join(f"{k}={tot.get(k, 0)}" for k in keys)
+        return (
+            f"stats: steps={self.clock.k} collisions={self.dyn.collisions} "
+            f"lockstep_timeouts={self.lockstep_timeouts} truth={self.truth_published} {body}"
+        )
+
+    def states_finite(self) -> bool:
+        d = self.dyn
+        return bool(all(np.all(np.isfinite(a)) for a in (d.p, d.v, d.att, d.thrust)))
