@@ -1,0 +1,296 @@
+"""The Textual dashboard: vehicle table, formation views, min-distance plot, event log.
+
+The app draws whatever its *source* returns (``poll() -> (SwarmView, [DashEvent])``,
+see :mod:`.state`) and sends commands through a *commander* (:mod:`.commands`).
+
+Keys (also in the command palette, ctrl+p, for the selected vehicle or for all):
+
+=====  =====================================================  =========================
+key    action                                                 goes out as
+=====  =====================================================  =========================
+a      arm                                                    COMMAND_LONG 400 p1=1
+d      disarm                                                 COMMAND_LONG 400 p1=0
+f      start formation (OFFBOARD)                             DO_SET_MODE 176 129,6
+h      hold (AUTO.LOITER)                                     DO_SET_MODE 176 129,4,3
+l      land                                                   NAV_LAND 21
+x      emergency stop (asks first)                            DO_FLIGHTTERMINATION 185
+m      collision-avoidance method rcbf / apf / none           Zenoh Command "method"
+o      inject a communication outage                          Zenoh Command "outage"
+t      target: the selected vehicle <-> all vehicles
+q      quit
+=====  =====================================================  =========================
+
+Every MAVLink command waits for its COMMAND_ACK; each result goes to the event log.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from textual.app import App, ComposeResult, SystemCommand
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.reactive import reactive
+from textual.screen import Screen
+from textual.widgets import Footer, Header
+
+from swarm_common.wire import Command
+
+from .mavlink_gcs import CommandResult
+from .px4modes import COMMANDS
+from .state import DashEvent, SwarmView
+from .widgets import (
+    ChoiceScreen,
+    ConfirmScreen,
+    EventLog,
+    FormationView,
+    MinDistancePlot,
+    StatusBar,
+    VehicleTable,
+)
+from .zenoh_feed import METHODS
+
+OUTAGES_S = (0.5, 1.0, 2.0, 5.0)
+MAV_ACTIONS = ("arm", "disarm", "offboard", "hold", "land")
+WIDE_TABLE_COLUMNS = 150
+
+
+class DashboardApp(App[int]):
+    CSS_PATH = Path(__file__).with_name("dashboard.tcss")
+    TITLE = "swarm GCS"
+    HORIZONTAL_BREAKPOINTS = [(0, "-narrow"), (120, "-wide")]
+    VERTICAL_BREAKPOINTS = [(0, "-short"), (40, "-tall")]
+    BINDINGS = [
+        Binding("a", "mav('arm')", "Arm"),
+        Binding("d", "mav('disarm')", "Disarm"),
+        Binding("f", "mav('offboard')", "Formation"),
+        Binding("h", "mav('hold')", "Hold"),
+        Binding("l", "mav('land')", "Land"),
+        Binding("x", "estop", "E-STOP"),
+        Binding("m", "method", "Method"),
+        Binding("o", "outage", "Outage"),
+        Binding("t", "toggle_target", "One/All"),
+        Binding("q", "quit", "Quit"),
+    ]
+
+    target_all: reactive[bool] = reactive(False)
+
+    def __init__(
+        self,
+        source: Any,
+        commander: Any = None,
+        poll_s: float = 0.25,
+        title: str | None = None,
+    ) -> None:
+        super().__init__()
+        self.source = source
+        self.commander = commander
+        self.poll_s = poll_s
+        self.view: SwarmView | None = None
+        self.results: list[CommandResult] = []
+        self.published: list[str] = []
+        if title:
+            self.sub_title = title
+
+    # -- layout --------------------------------------------------------------------
+    def compose(self) -> ComposeResult:
+        yield Header()
+        yield StatusBar(id="status")
+        yield VehicleTable(id="vehicles")
+        with Horizontal(id="bottom"):
+            with Horizontal(id="views"):
+                yield FormationView("xy", id="top")
+                yield FormationView("xz", id="side-view")
+            with Vertical(id="side"):
+                yield MinDistancePlot(id="dmin")
+                yield EventLog(id="events")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.refresh_data()
+        self.query_one(VehicleTable).focus()
+        if getattr(self.source, "live", True):
+            self.set_interval(self.poll_s, self.refresh_data)
+
+    def on_resize(self) -> None:
+        if self.view is not None:
+            self._draw(self.view)
+
+    # -- data ----------------------------------------------------------------------
+    def refresh_data(self) -> None:
+        try:
+            view, events = self.source.poll()
+        except Exception as exc:  # a feed hiccup must not take the ground station down
+            self.log_event(0, "error", f"source: {exc!r}", 3)
+            return
+        self.view = view
+        for ev in events:
+            self.query_one(EventLog).add(ev)
+        self._draw(view)
+
+    def _draw(self, view: SwarmView) -> None:
+        compact = self.size.width < WIDE_TABLE_COLUMNS
+        self.query_one(VehicleTable).show(view, compact)
+        for fv in self.query(FormationView):
+            fv.show(view)
+        self.query_one(MinDistancePlot).show(view)
+        self.query_one(StatusBar).show(view, self.target_label())
+
+    def watch_target_all(self) -> None:
+        if self.view is not None:
+            self.query_one(StatusBar).show(self.view, self.target_label())
+
+    def log_event(self, agent: int, kind: str, text: str, severity: int = 6) -> None:
+        t = self.view.t if self.view is not None else 0.0
+        self.query_one(EventLog).add(DashEvent(t, agent, kind, text, severity))
+
+    # -- targets -------------------------------------------------------------------
+    def all_ids(self) -> list[int]:
+        return [r.id for r in self.view.rows] if self.view is not None else []
+
+    def selected_id(self) -> int | None:
+        return self.query_one(VehicleTable).selected_id
+
+    def targets(self) -> list[int]:
+        if self.target_all:
+            return self.all_ids()
+        sel = self.selected_id()
+        return [] if sel is None else [sel]
+
+    def target_label(self, ids: list[int] | None = None) -> str:
+        if ids is None:
+            if self.target_all:
+                return "ALL"
+            sel = self.selected_id()
+            return "-" if sel is None else f"#{sel}"
+        if len(ids) > 1 and ids == self.all_ids():
+            return "ALL"
+        return ",".join(f"#{i}" for i in ids) or "-"
+
+    # -- actions -------------------------------------------------------------------
+    def action_toggle_target(self) -> None:
+        self.target_all = not self.target_all
+        self.notify(f"command target: {self.target_label()}", timeout=2)
+
+    def action_mav(self, key: str) -> None:
+        self.send_mav(key, self.targets())
+
+    def send_mav(self, key: str, ids: list[int]) -> None:
+        spec = COMMANDS[key]
+        if not ids:
+            self.log_event(0, "cmd", f"{spec.label}: no vehicle selected", 4)
+            return
+        if self.commander is None:
+            self.log_event(0, "cmd", f"{spec.label}: read-only (no command link)", 4)
+            return
+        self.log_event(0, "cmd", f"{spec.label} -> {self.target_label(ids)}", 5)
+        self.run_worker(self._mav_worker(key, ids), group="mav", exit_on_error=False)
+
+    async def _mav_worker(self, key: str, ids: list[int]) -> None:
+        results = await asyncio.gather(*(self.commander.mav(i, key) for i in ids))
+        for r in results:
+            self.results.append(r)
+            self.log_event(r.sysid, "ack", r.describe(), 6 if r.ok else 3)
+
+    def action_estop(self) -> None:
+        ids = self.targets()
+        if not ids:
+            self.log_event(0, "cmd", "emergency stop: no vehicle selected", 4)
+            return
+        label = self.target_label(ids)
+
+        def done(yes: bool | None) -> None:
+            if yes:
+                self.send_mav("terminate", ids)
+            else:
+                self.log_event(0, "cmd", f"emergency stop {label} cancelled", 6)
+
+        self.push_screen(
+            ConfirmScreen(f"EMERGENCY STOP {label}?\nFlight termination: motors stop at once."),
+            done,
+        )
+
+    def action_method(self) -> None:
+        ids = self.targets()
+        agent = 0 if self.target_all or not ids else ids[0]
+        who = "all" if agent == 0 else f"#{agent}"
+
+        def done(choice: str | None) -> None:
+            if choice:
+                self.send_zenoh(Command(kind="method", agent=agent, method=choice))
+
+        self.push_screen(
+            ChoiceScreen(f"Collision avoidance for {who}:", [(m, m) for m in METHODS]),
+            done,
+        )
+
+    def action_outage(self) -> None:
+        ids = self.targets()
+        agent = 0 if self.target_all or not ids else ids[0]
+        who = "all" if agent == 0 else f"#{agent}"
+
+        def done(choice: str | None) -> None:
+            if choice:
+                self.send_zenoh(Command(kind="outage", agent=agent, duration_s=float(choice)))
+
+        self.push_screen(
+            ChoiceScreen(
+                f"Inject a communication outage on {who}:",
+                [(f"{d:g}", f"{d:g} s") for d in OUTAGES_S],
+            ),
+            done,
+        )
+
+    def send_zenoh(self, cmd: Command) -> None:
+        who = "all" if cmd.agent == 0 else f"#{cmd.agent}"
+        what = f"method {cmd.method}" if cmd.kind == "method" else f"outage {cmd.duration_s:g} s"
+        if self.commander is None:
+            self.log_event(0, "cmd", f"{what} ({who}): read-only (no command link)", 4)
+            return
+        try:
+            key = self.commander.zenoh(cmd)
+        except Exception as exc:
+            self.log_event(cmd.agent, "cmd", f"{what} ({who}) failed: {exc}", 3)
+            return
+        self.published.append(key)
+        self.log_event(
+            cmd.agent,
+            "outage" if cmd.kind == "outage" else "method",
+            f"{what} ({who}) published",
+            5,
+        )
+
+    # -- command palette ---------------------------------------------------------------
+    def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
+        yield from super().get_system_commands(screen)
+        for key in MAV_ACTIONS:
+            label = COMMANDS[key].label
+            yield SystemCommand(
+                f"{label.capitalize()}: selected vehicle",
+                "COMMAND_LONG to the selected vehicle, waits for the ACK",
+                lambda k=key: self.send_mav(k, [i for i in [self.selected_id()] if i]),
+            )
+            yield SystemCommand(
+                f"{label.capitalize()}: all vehicles",
+                "COMMAND_LONG to every vehicle, waits for each ACK",
+                lambda k=key: self.send_mav(k, self.all_ids()),
+            )
+        yield SystemCommand(
+            "Emergency stop (asks first)", "Flight termination of the target", self.action_estop
+        )
+        for m in METHODS:
+            yield SystemCommand(
+                f"Method {m}: all vehicles",
+                "Switch collision avoidance at run time (Zenoh)",
+                lambda m=m: self.send_zenoh(Command(kind="method", agent=0, method=m)),
+            )
+        for d in OUTAGES_S:
+            yield SystemCommand(
+                f"Outage {d:g} s: all vehicles",
+                "Inject a communication outage (Zenoh)",
+                lambda d=d: self.send_zenoh(Command(kind="outage", agent=0, duration_s=d)),
+            )
+        yield SystemCommand("Toggle command target (selected / all)", "", self.action_toggle_target)

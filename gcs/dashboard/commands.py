@@ -1,0 +1,41 @@
+"""What the UI's commands go through: MAVLink COMMAND_LONG (with ACK) and Zenoh Command.
+
+:class:`LiveCommander` wraps a :class:`MavlinkGcs` and a :class:`ZenohFeed` (either may
+be None); tests pass their own object with the same two methods.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+from swarm_common.wire import Command
+
+from .mavlink_gcs import CommandResult
+from .px4modes import COMMANDS
+
+
+class Commander(Protocol):
+    async def mav(self, sysid: int, key: str) -> CommandResult: ...
+
+    def zenoh(self, cmd: Command) -> str: ...
+
+
+class LiveCommander:
+    def __init__(
+        self, link: Any = None, feed: Any = None, timeout_s: float = 1.0, retries: int = 2
+    ):
+        self.link = link
+        self.feed = feed
+        self.timeout_s = timeout_s
+        self.retries = retries
+
+    async def mav(self, sysid: int, key: str) -> CommandResult:
+        spec = COMMANDS[key]
+        if self.link is None:
+            return CommandResult(sysid, spec.command, spec.label, None, 0, 0.0, "NO-MAVLINK")
+        return await self.link.command(sysid, spec, timeout_s=self.timeout_s, retries=self.retries)
+
+    def zenoh(self, cmd: Command) -> str:
+        if self.feed is None:
+            raise RuntimeError("zenoh is off (started with --no-zenoh?)")
+        return self.feed.publish(cmd)

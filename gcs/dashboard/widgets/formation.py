@@ -1,0 +1,121 @@
+"""The formation seen from above (x-y) or from the side (x-z), drawn with characters.
+
+The desired cube (edges ``·``, vertices ``+``) is drawn under the vehicles (their id,
+yellow for leaders, cyan for followers, red on white when their link is silent).
+One character cell is taken as twice as tall as wide, so the picture keeps its aspect.
+"""
+
+from __future__ import annotations
+
+import math
+
+from rich.text import Text
+from textual.widget import Widget
+
+from ..state import SwarmView
+
+AXES = {"xy": (0, 1, "E", "N"), "xz": (0, 2, "E", "U"), "yz": (1, 2, "N", "U")}
+
+
+def glyph(agent_id: int) -> str:
+    if agent_id < 10:
+        return str(agent_id)
+    if agent_id < 36:
+        return chr(ord("a") + agent_id - 10)
+    return "*"
+
+
+class FormationView(Widget):
+    DEFAULT_CSS = """
+    FormationView { border: round $primary 60%; height: 1fr; min-height: 5; }
+    """
+
+    def __init__(self, plane: str = "xy", **kw) -> None:
+        super().__init__(**kw)
+        self.plane = plane
+        self.view: SwarmView | None = None
+        ia, ib, la, lb = AXES[plane]
+        self.border_title = ("Top " if plane == "xy" else "Side ") + f"{la}-{lb}"
+
+    def show(self, view: SwarmView) -> None:
+        self.view = view
+        fit = self._fit()
+        self.border_subtitle = f"{fit[0]:.2g} m/col" if fit else ""
+        self.refresh()
+
+    def on_resize(self) -> None:
+        fit = self._fit()
+        self.border_subtitle = f"{fit[0]:.2g} m/col" if fit else ""
+
+    def _fit(self) -> tuple[float, float, float] | None:
+        """(metres per column, centre a, centre b) fitting every point, or None."""
+        w, h = self.content_size.width, self.content_size.height
+        if w < 3 or h < 2 or self.view is None:
+            return None
+        ia, ib, _, _ = AXES[self.plane]
+        v = self.view
+        pts = [p for p in v.desired.values()] + [r.pos for r in v.rows if r.pos is not None]
+        if not pts:
+            return None
+        amin = min(p[ia] for p in pts)
+        amax = max(p[ia] for p in pts)
+        bmin = min(p[ib] for p in pts)
+        bmax = max(p[ib] for p in pts)
+        ra = max(amax - amin, 1.0) * 1.15
+        rb = max(bmax - bmin, 1.0) * 1.15
+        cx = max(ra / max(w - 1, 1), rb / (2 * max(h - 1, 1)))
+        if not math.isfinite(cx):
+            return None
+        return cx, (amin + amax) / 2, (bmin + bmax) / 2
+
+    def render(self) -> Text:
+        w, h = self.content_size.width, self.content_size.height
+        if w < 3 or h < 2 or self.view is None:
+            return Text("")
+        fit = self._fit()
+        if fit is None:
+            return Text("no positions", "dim")
+        ia, ib, _, _ = AXES[self.plane]
+        v = self.view
+        cx, am, bm = fit
+        cy = 2 * cx
+
+        def cell(p: tuple[float, float, float]) -> tuple[int, int]:
+            col = round((p[ia] - am) / cx + (w - 1) / 2)
+            row = round((h - 1) / 2 - (p[ib] - bm) / cy)
+            return col, row
+
+        grid = [[" "] * w for _ in range(h)]
+        style = [[""] * w for _ in range(h)]
+
+        def put(c: int, r: int, ch: str, st: str) -> None:
+            if 0 <= c < w and 0 <= r < h:
+                grid[r][c] = ch
+                style[r][c] = st
+
+        for i, j in v.cube_edges:
+            if i in v.desired and j in v.desired:
+                (c0, r0), (c1, r1) = cell(v.desired[i]), cell(v.desired[j])
+                n = max(abs(c1 - c0), abs(r1 - r0), 1)
+                for k in range(n + 1):
+                    put(round(c0 + (c1 - c0) * k / n), round(r0 + (r1 - r0) * k / n), "·", "green")
+        for p in v.desired.values():
+            put(*cell(p), "+", "bold green")
+        # vehicles, far ones first (so the nearer one is on top)
+        depth = 3 - ia - ib
+        rows = sorted((r for r in v.rows if r.pos is not None), key=lambda r: r.pos[depth])
+        for r in rows:
+            if r.link_lost:
+                st = "bold white on red"
+            elif r.is_leader:
+                st = "bold yellow"
+            else:
+                st = "bold cyan"
+            put(*cell(r.pos), glyph(r.id), st)
+        text = Text(no_wrap=True)
+        for rr in range(h):
+            for c in range(w):
+                text.append(grid[rr][c], style[rr][c] or None)
+            if rr < h - 1:
+                text.append("\n")
+        return text
