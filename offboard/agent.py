@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import expm
 
 from offboard.apf import apf_control, none_control
 from offboard.attitude import InnerLoopModel, Setpoint, accel_from_attitude, setpoint_from_accel
@@ -48,6 +49,7 @@ from offboard.reference import DesiredStateObserver, LeaderTrajectory, exo_propa
 from offboard.sensing import Sensor
 
 METHODS = ("rcbf", "apf", "none")
+W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 
 
 @dataclass
@@ -109,20 +111,40 @@ def control_box(sc) -> tuple[np.ndarray, np.ndarray]:
     return np.array([-uh, -uh, -uz_lo]), np.array([uh, uh, uz_hi])
 
 
-class _Predictor:
-    """Last received estimate per agent, predicted to a requested time (errata 16)."""
+_EXO_CACHE: dict[tuple[float, float, int], np.ndarray] = {}
+_ERR_CACHE: dict[tuple[float, float, float, int], np.ndarray] = {}
 
-    def __init__(self, omega: float, dt: float) -> None:
+
+class _Predictor:
+    """Last received estimate per agent, predicted to a requested time (errata 16).
+
+    The desired state ξ is propagated by the exosystem; the agent's offset from it
+    (e1 = z1 − p*, e2 = z2 − v*) by the closed-loop error dynamics every agent shares,
+    ``ë1 = −k_v ė1 − k_p' e1`` (the nominal controller's; the leaders' PD for leaders).
+    """
+
+    def __init__(self, omega: float, dt: float, fol_gains: tuple[float, float],
+                 lead_gains: tuple[float, float]) -> None:
         self.omega = omega
         self.dt = dt
+        self.gains = {False: fol_gains, True: lead_gains}
         self.last: dict[int, NeighbourEstimate] = {}
-        self._exo: dict[int, np.ndarray] = {0: np.eye(12)}
 
     def exo(self, n: int) -> np.ndarray:
-        m = self._exo.get(n)
+        key = (self.omega, self.dt, n)
+        m = _EXO_CACHE.get(key)
         if m is None:
             m = exo_propagator(self.omega, n * self.dt)
-            self._exo[n] = m
+            _EXO_CACHE[key] = m
+        return m
+
+    def err(self, leader: bool, n: int) -> np.ndarray:
+        kp, kv = self.gains[leader]
+        key = (kp, kv, self.dt, n)
+        m = _ERR_CACHE.get(key)
+        if m is None:
+            m = expm(np.array([[0.0, 1.0], [-kp, -kv]]) * n * self.dt)
+            _ERR_CACHE[key] = m
         return m
 
     def ingest(self, neighbours: dict[int, NeighbourEstimate], comm_ok: bool) -> None:
@@ -137,12 +159,11 @@ class _Predictor:
         n = int(round((t - e.t) / self.dt))
         if n <= 0:
             return e.z1, e.z2, e.xi
-        exo = self.exo(n)
-        xi = exo @ e.xi
-        age = t - e.t
-        if e.is_leader:  # leaders fly their trajectory: shift by the exosystem's motion
-            return e.z1 + (xi[0:3] - e.xi[0:3]), e.z2 + (xi[3:6] - e.xi[3:6]), xi
-        return e.z1 + age * e.z2, e.z2, xi
+        xi = self.exo(n) @ e.xi
+        m = self.err(e.is_leader, n)
+        e1 = e.z1 - e.xi[0:3]
+        e2 = e.z2 - e.xi[3:6]
+        return xi[0:3] + m[0, 0] * e1 + m[0, 1] * e2, xi[3:6] + m[1, 0] * e1 + m[1, 1] * e2, xi
 
 
 class FollowerAgent:
@@ -182,7 +203,11 @@ class FollowerAgent:
         self.ref = DesiredStateObserver(
             self.form, self.index, omega, obs["reference_gain"], self.dt, xi0
         )
-        self.pred = _Predictor(omega, self.dt)
+        lam, ks = ctl["clf_lambda"], ctl["ks"]
+        self.pred = _Predictor(
+            omega, self.dt, (ks * lam + ctl["kp"] / ctl["kd"], lam + ks),
+            (ctl["leader_kp"], ctl["leader_kd"]),
+        )
         self.inner = InnerLoopModel(veh, self.dt / self.substeps)
         self.u_lo, self.u_hi = control_box(sc)
         self.qp = SafetyQP(
@@ -244,7 +269,10 @@ class FollowerAgent:
                 lead_acc[j] = got[2][6:9]
         # --- controller at t_k --------------------------------------------------------
         z1, z2 = self.deso.z1, self.deso.z2
-        w = self.deso.lumped()
+        w_raw = self.deso.lumped()
+        # peaking of the high-gain observer: saturate the disturbance estimate used in control
+        wn = float(np.linalg.norm(w_raw))
+        w = w_raw * (W_MAX / wn) if wn > W_MAX else w_raw
         e1 = z1 - self.ref.p
         e2 = z2 - self.ref.v
         clf = clf_terms(
@@ -301,7 +329,7 @@ class FollowerAgent:
         )
         return AgentOutput(
             sp.roll, sp.pitch, sp.yaw, sp.thrust_n, sp.q_ned, sp.thrust_norm, u, est, status,
-            lumped=w,
+            lumped=w_raw,
         )
 
 

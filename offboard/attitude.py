@@ -47,16 +47,21 @@ def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> t
     return roll, pitch, yaw, norm_to_thrust(np.float32(thrust_norm), thrust_max_n)
 
 
-def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict) -> Setpoint:
-    """u (ENU) → setpoint within ``[vehicle]`` tilt/thrust limits; angles/thrust as decoded."""
+def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict, decode: bool = False) -> Setpoint:
+    """u (ENU) → setpoint within ``[vehicle]`` tilt/thrust limits.
+
+    Angles/thrust are the commanded values, or (``decode=True``) the values decoded from the
+    float32 wire form (differ by ~1e-7; the agent's inner-loop model does not need them).
+    """
     f_max = veh["thrust_max_n"]
     roll, pitch, yaw_c, f = accel_to_attitude(
         u, yaw, veh["gravity_mps2"], veh["mass_kg"], math.radians(veh["tilt_max_deg"]), f_max
     )
     q = quat_ned_from_euler_enu(roll, pitch, yaw_c).astype(np.float32)
     tn = np.float32(thrust_to_norm(f, f_max))
-    r, p, y, fd = decode_wire(q, tn, f_max)
-    return Setpoint(r, p, y, fd, q, tn)
+    if decode:
+        roll, pitch, yaw_c, f = decode_wire(q, tn, f_max)
+    return Setpoint(roll, pitch, yaw_c, f, q, tn)
 
 
 def accel_from_attitude(

@@ -208,8 +208,23 @@ class SafetyQP:
     ) -> QPResult:
         """Solve for u; ``brake`` (3,) is the fallback if OSQP fails (then clipped)."""
         t0 = time.perf_counter()
+        h_min = float(h.min()) if len(h) else float("inf")
+        # Shortcut (exact): if the box-projected nominal input already satisfies every
+        # RCBF row and the CLF row with δ = 0, it is the QP's optimum.
+        u_c = np.minimum(np.maximum(u_nom, self.u_lo), self.u_hi)
+        if (len(rhs) == 0 or bool(np.all(n_hat @ u_c >= rhs))) and (
+            float(clf.lgv @ u_c) <= -clf.lfv - self.c * clf.V
+        ):
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u_c, "inactive", 0, us, h_min, clf.V, 0.0, 0.0, False)
         m = self.m
         k = min(len(rhs), m)
+        finite = np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k])) and np.all(
+            np.isfinite(clf.lgv)) and np.isfinite(clf.lfv) and np.isfinite(clf.V)
+        if not finite:
+            u = np.clip(np.nan_to_num(brake, posinf=0.0, neginf=0.0), self.u_lo, self.u_hi)
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u, "fallback", -1, us, h_min, clf.V, 0.0, 0.0, True)
         a = self._a
         nrm = 1.0 + float(np.linalg.norm(clf.lgv))
         a[0, 0:3] = clf.lgv / nrm
@@ -224,7 +239,6 @@ class SafetyQP:
         res = self.solver.solve(raise_error=False)
         sv = res.info.status_val
         x = res.x
-        h_min = float(h.min()) if len(h) else float("inf")
         ok = sv in SOLVED and x is not None and np.all(np.isfinite(x))
         if ok:
             u = np.clip(np.asarray(x[0:3], dtype=float), self.u_lo, self.u_hi)

@@ -17,7 +17,10 @@ Rewriting ``e1 = D z1 − b1(τ)``, ``D = Σ_j P*_ij`` and ``b1 = Σ_j P*_ij (�
 data enter through b1 only. Over one control period [t_k, t_k+1] b1 is a first-order hold
 ``b1(τ) = b1 + τ ḃ1`` (neighbours' estimates extrapolated with their ẑ_j2, the relative
 position with the measured relative velocity). The linear part is integrated exactly
-(matrix exponential) over each of ``substeps`` sub-steps; Φ ζ̂ and u are held per sub-step.
+(matrix exponential); the input u is resolved at ``substeps`` sub-steps (the realised
+virtual control predicted by the inner-loop model, a first-order hold of the command),
+Φ(z1,z2)ζ̂ is held over the period and ζ̂ is advanced once per period (μ is small).
+The whole period is then one affine map ``X⁺ = A_S X + Σ_s G_s (u_s + f̂)``.
 
 :func:`gain_report` checks the gains per eigen-channel (``s³ + β1λ s² + β2λ s + β3λ``
 Hurwitz ⇔ β1β2λ > β3) and the *sampled* network loop by the spectral radius of its
@@ -35,6 +38,8 @@ from scipy.linalg import expm
 from offboard.bearing import Formation
 
 N_ZETA = 6
+ZETA_BOUND = 5.0  # ‖ζ̂‖ ≤ ζ̄ (§2.2 bound), enforced by projection
+V_EVAL_MAX = 20.0  # m/s, velocity at which f̂ is evaluated is clipped (overflow guard)
 
 
 def regressor(p: np.ndarray, v: np.ndarray, ground_effect_height: float) -> np.ndarray:
@@ -58,8 +63,8 @@ def regressor(p: np.ndarray, v: np.ndarray, ground_effect_height: float) -> np.n
 
 
 def model_accel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
-    """f̂ = Φ(z1, z2) ζ̂ without building Φ (fast path of :func:`regressor`)."""
-    vx, vy, vz = float(z2[0]), float(z2[1]), float(z2[2])
+    """f̂ = Φ(z1, z2) ζ̂ without building Φ (fast path of :func:`regressor`; |v| clipped)."""
+    vx, vy, vz = (min(V_EVAL_MAX, max(-V_EVAL_MAX, float(c))) for c in z2)
     z0, z1_, z2_, z3_, z4, z5 = (float(c) for c in zeta)
     nv = math.sqrt(vx * vx + vy * vy + vz * vz)
     ge = math.exp(-max(float(z1[2]), 0.0) / h)
@@ -74,8 +79,8 @@ def model_accel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> n
 
 
 def regressor_t_times(z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float) -> np.ndarray:
-    """Φ(z1, z2)ᵀ e (6,) without building Φ."""
-    vx, vy, vz = float(z2[0]), float(z2[1]), float(z2[2])
+    """Φ(z1, z2)ᵀ e (6,) without building Φ (|v| clipped like :func:`model_accel`)."""
+    vx, vy, vz = (min(V_EVAL_MAX, max(-V_EVAL_MAX, float(c))) for c in z2)
     ex, ey, ez = float(e[0]), float(e[1]), float(e[2])
     nv = math.sqrt(vx * vx + vy * vy + vz * vz)
     ve = vx * ex + vy * ey + vz * ez
@@ -253,13 +258,18 @@ class DESO:
         self.n_used = 0
 
     def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A_S (15×15), G (15×3S), D) for this neighbour set (cached)."""
         m = self._cache.get(used)
         if m is None:
             dmat = np.zeros((3, 3))
             for j in used:
                 dmat += self.form.p_star[self.index, j]
             full = expm(_cont_matrix(dmat, self.beta) * self.delta)
-            m = (full[:15, :15].copy(), full[:15, 15:18].copy(), dmat)
+            mx, mw = full[:15, :15], full[:15, 15:18]
+            s_ = self.substeps
+            a_s = np.linalg.matrix_power(mx, s_)
+            g = np.hstack([np.linalg.matrix_power(mx, s_ - 1 - k) @ mw for k in range(s_)])
+            m = (a_s, g, dmat)
             self._cache[used] = m
         return m
 
@@ -290,25 +300,25 @@ class DESO:
                 self.z1 = self.z1 + self.delta * self.z2 + 0.5 * self.delta**2 * acc
                 self.z2 = self.z2 + self.delta * acc
             return
-        mx, mw, dmat = self._matrices(used)
-        ps = self.form.p_star[self.index]
-        b1 = np.zeros(3)
-        b1d = np.zeros(3)
-        for j in used:
-            b1 += ps[j] @ (nbr_p[j] - rel_pos[j])
-            b1d += ps[j] @ (nbr_v[j] - rel_vel[j])
-        b2 = b1d  # Σ P*(ẑ_j2 − ṙ_ij), held over the period
-        x = np.concatenate([self.z1, self.z2, self.z3, b1, b1d])
-        mu, sig, dl, h = self.mu, self.sigma, self.delta, self.h
-        for s in range(self.substeps):
-            z1, z2 = x[0:3], x[3:6]
-            w = model_accel(z1, z2, self.zeta, h) + u_sub[s]
-            if mu > 0.0:
-                e2 = dmat @ z2 - b2
-                self.zeta = self.zeta + dl * mu * (-regressor_t_times(z1, z2, e2, h) - sig * self.zeta)
-            x = mx @ x + mw @ w
-        self.last_e1 = dmat @ self.z1 - b1
-        self.last_e2 = dmat @ self.z2 - b2
+        a_s, g, dmat = self._matrices(used)
+        idx = list(used)
+        pu = self.form.p_star[self.index, idx]  # (k,3,3)
+        zp = np.array([nbr_p[j] for j in idx])
+        zv = np.array([nbr_v[j] for j in idx])
+        b1 = np.einsum("kij,kj->i", pu, zp - rel_pos[idx])
+        b1d = np.einsum("kij,kj->i", pu, zv - rel_vel[idx])
+        b2 = b1d  # Σ P*(ẑ_j2 − ṙ_ij)
+        z1, z2 = self.z1, self.z2
+        f_hat = model_accel(z1, z2, self.zeta, self.h)
+        self.last_e1 = dmat @ z1 - b1
+        self.last_e2 = dmat @ z2 - b2
+        if self.mu > 0.0:
+            phie = regressor_t_times(z1, z2, self.last_e2, self.h)
+            zeta = self.zeta + self.dt * self.mu * (-phie - self.sigma * self.zeta)
+            nz = float(np.linalg.norm(zeta))
+            self.zeta = zeta * (ZETA_BOUND / nz) if nz > ZETA_BOUND else zeta  # projection
+        x = np.concatenate([z1, z2, self.z3, b1, b1d])
+        x = a_s @ x + g @ (np.asarray(u_sub, dtype=float) + f_hat).reshape(-1)
         self.z1 = x[0:3].copy()
         self.z2 = x[3:6].copy()
         self.z3 = x[6:9].copy()

@@ -105,10 +105,10 @@ class DesiredStateObserver:
             self.xi = self.exo @ self.xi
             return
         mx, mc = self._matrices(used)
-        c = np.zeros(12)
-        ps = self.form.p_star[self.index]
-        for j in used:
-            c += (nbr_xi[j].reshape(4, 3) @ ps[j]).reshape(12)  # (I4 ⊗ P) ξ_j, P symmetric
+        idx = list(used)
+        pu = self.form.p_star[self.index, idx]  # (k,3,3), symmetric
+        xs = np.array([nbr_xi[j] for j in idx]).reshape(len(idx), 4, 3)
+        c = np.einsum("kij,kdj->di", pu, xs).reshape(12)  # Σ (I4 ⊗ P_ij) ξ_j
         self.xi = mx @ self.xi + mc @ c
 
     @property

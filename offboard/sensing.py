@@ -77,13 +77,10 @@ class Sensor:
         noise = self.rng.standard_normal((self.n, 8))
         drop = self.rng.random(self.n)
         sb, sr, sd, sdd = self.sig
-        # bearing noise: small rotation (perpendicular perturbation, renormalised)
-        nb = noise[:, 0:3] * sb
-        nb -= g * np.einsum("ij,ij->i", nb, g)[:, None]
-        gm = g + nb
-        gm /= np.linalg.norm(gm, axis=1)[:, None]
+        # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
+        gm = g + noise[:, 0:3] * sb
+        gm /= np.sqrt(np.einsum("ij,ij->i", gm, gm))[:, None]
         gdm = g_dot + noise[:, 3:6] * sr
-        gdm -= gm * np.einsum("ij,ij->i", gdm, gm)[:, None]  # a bearing rate is ⟂ g
         dm = d + noise[:, 6] * sd
         ddm = gd + noise[:, 7] * sdd
         valid = (d <= self.range) & (drop >= self.dropout)
