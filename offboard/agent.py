@@ -218,6 +218,11 @@ class FollowerAgent:
         self.leader_mask = np.zeros(sc.n, dtype=bool)
         self.leader_mask[self.form.leader_idx] = True
         self.ids = sc.ids
+        nb = set(self.form.neighbours[self.index])
+        self._peers = [
+            (j, j in nb, bool(self.leader_mask[j]))
+            for j in sorted(nb | set(self.form.leader_idx))
+        ]
         self.yaw = 0.0
         self.fallbacks = 0
         self._gains: GainReport | None = None
@@ -259,13 +264,13 @@ class FollowerAgent:
         nbr_v: dict[int, np.ndarray] = {}
         nbr_xi: dict[int, np.ndarray] = {}
         lead_acc: dict[int, np.ndarray] = {}
-        for j in set(self.form.neighbours[self.index]) | set(self.form.leader_idx):
+        for j, is_nbr, is_lead in self._peers:
             got = self.pred.get(self.ids[j], t)
             if got is None:
                 continue
-            if j in self.form.neighbours[self.index]:
+            if is_nbr:
                 nbr_p[j], nbr_v[j], nbr_xi[j] = got
-            if self.leader_mask[j]:
+            if is_lead:
                 lead_acc[j] = got[2][6:9]
         # --- controller at t_k --------------------------------------------------------
         z1, z2 = self.deso.z1, self.deso.z2
@@ -297,12 +302,15 @@ class FollowerAgent:
                 )
                 status.h_min = float(h.min()) if len(h) else float("inf")
             else:
-                share = np.where(self.leader_mask[sel], 1.0, 0.5)
+                lm = self.leader_mask[sel]
+                share = np.where(lm, 1.0, 0.5)
                 a_other = np.zeros((len(sel), 3))
-                for r, j in enumerate(sel):
-                    if j in lead_acc:
-                        a_other[r] = lead_acc[j]
-                n_hat, rhs, h = rcbf_rows(dp, dv, w, a_other, share, tau, dsafe, ctl["gamma"])
+                if lead_acc and np.any(lm):
+                    for r in np.nonzero(lm)[0]:
+                        a_other[r] = lead_acc.get(int(sel[r]), 0.0)
+                n_hat, rhs, h = rcbf_rows(
+                    dp, dv, w, a_other, share, tau, dsafe, ctl["gamma"], h=h
+                )
                 brake = -w - self.qp.brake_gain * z2
                 res: QPResult = self.qp.solve(clf.u_nom + side, clf, n_hat, rhs, h, brake)
                 u = res.u

@@ -50,7 +50,8 @@ def build_edges(vertices: np.ndarray, kind: str, tol: float = 1e-6) -> list[tupl
     else:
         raise ValueError(f"unknown formation graph {kind!r}; use cube_face_diagonals or complete")
     edge = min(dist.values())
-    return [pr for pr in pairs if any(abs(dist[pr] - a * edge) <= tol * max(1.0, edge) for a in allowed)]
+    tol_abs = tol * max(1.0, edge)
+    return [pr for pr in pairs if any(abs(dist[pr] - a * edge) <= tol_abs for a in allowed)]
 
 
 def bearing_laplacian(vertices: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray:
@@ -88,6 +89,7 @@ class Formation:
     l_fl: np.ndarray
     rank: int
     lambda_ff: np.ndarray  # eigenvalues of L_ff, ascending
+    _kfl: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -109,8 +111,9 @@ class Formation:
         lp = np.asarray(leader_pos, dtype=float)
         out = np.zeros((self.n, 3))
         out[self.leader_idx] = lp
-        pf = -np.linalg.solve(self.l_ff, self.l_fl @ lp.reshape(-1))
-        out[self.follower_idx] = pf.reshape(-1, 3)
+        if self._kfl is None:
+            self._kfl = -np.linalg.solve(self.l_ff, self.l_fl)
+        out[self.follower_idx] = (self._kfl @ lp.reshape(-1)).reshape(-1, 3)
         return out
 
 

@@ -93,6 +93,7 @@ def rcbf_rows(
     d_safe: float,
     gamma: float,
     margin: float = 1e-3,
+    h: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """RCBF rows ``n̂ᵀu ≥ r`` for agent i (errata 12–13) and h per pair.
 
@@ -101,7 +102,8 @@ def rcbf_rows(
     broadcast, zeros for followers); share (M,): 0.5 follower–follower, 1.0 vs leader.
     ``margin`` (m/s²) tightens the rows against solver tolerance.
     """
-    h = barrier(dp, dv, tau, d_safe)
+    if h is None:
+        h = barrier(dp, dv, tau, d_safe)
     base = 2.0 * np.einsum("ij,ij->i", dp, dv) + 2.0 * tau * np.einsum("ij,ij->i", dv, dv)
     base += gamma * h**3
     nrm = np.sqrt(np.einsum("ij,ij->i", dp, dp))

@@ -144,7 +144,8 @@ class GainReport:
             f"  paper condition b2 > b1 + b3/lam_min: {self.paper_condition}",
             f"  fastest channel b1*lam_max = {self.fastest_bandwidth:.1f} rad/s; "
             f"dt_sub*b1*lam_max = {self.euler_number:.2f} (< 2 for explicit Euler)",
-            f"  sampled loop spectral radius: exact sub-steps post-update {self.rho_post_update:.4f}, "
+            f"  sampled loop spectral radius: exact sub-steps post-update "
+            f"{self.rho_post_update:.4f}, "
             f"one-step stale {self.rho_stale:.4f}; Euler sub-steps {self.rho_euler_post:.4f}; "
             f"single Euler step + stale {self.rho_single_euler_stale:.4f}",
             f"  => {'OK' if self.ok else 'UNSTABLE'}",

@@ -1,0 +1,157 @@
+"""``gcs`` command line: ``gcs mission run|compare SCENARIO ...``.
+
+Subcommands are registered in :data:`COMMANDS` as ``name -> add_parser(subparsers)``;
+each ``add_parser`` sets ``func`` on its parser (``func(args) -> int``). To add a command
+(e.g. ``router``, ``dashboard``) append ``COMMANDS["router"] = add_router_parser``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+METHODS = ("rcbf", "apf", "none")
+# Set by the distributed-run module: ``runner(args, scenario) -> exit code``.
+DISTRIBUTED_RUNNER: Callable[[argparse.Namespace, object], int] | None = None
+
+
+def _load(path: str):
+    from swarm_common.scenario import ScenarioError, load_scenario
+
+    try:
+        return load_scenario(path)
+    except ScenarioError as exc:
+        print(f"gcs: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def _json_default(x):
+    import numpy as np
+
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(type(x))
+
+
+def cmd_mission_run(args: argparse.Namespace) -> int:
+    sc = _load(args.scenario)
+    if not args.inproc:
+        runner = DISTRIBUTED_RUNNER
+        if runner is None:
+            print("gcs mission run: distributed runs: not yet available (use --inproc)",
+                  file=sys.stderr)
+            return 2
+        return runner(args, sc)
+    from gcs.inproc import run_inproc
+
+    res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True)
+    if args.out:
+        res.save(args.out)
+        print(f"wrote {args.out}/metrics.json, series.npz", file=sys.stderr)
+    doc = {"scenario": sc.name, "method": res.method, "seed": res.seed, "metrics": res.metrics}
+    if args.json:
+        print(json.dumps(doc, default=_json_default))
+    else:
+        for k, v in res.metrics.items():
+            print(f"{k:24s} {v}")
+    return 0
+
+
+def _run_one(job: tuple[str, str, int, float | None]) -> dict:
+    from gcs.inproc import run_inproc
+    from swarm_common.scenario import load_scenario
+
+    path, method, seed, duration = job
+    return run_inproc(load_scenario(path), method, seed=seed, duration=duration).metrics
+
+
+def cmd_mission_compare(args: argparse.Namespace) -> int:
+    sc = _load(args.scenario)
+    if not args.inproc:
+        print("gcs mission compare: distributed runs: not yet available (use --inproc)",
+              file=sys.stderr)
+        return 2
+    from gcs.inproc import run_inproc
+    from gcs.report import compare_table, seeds_table, write_report
+    from offboard.bearing import formation_from_scenario
+
+    out = Path(args.out or "runs/compare")
+    metrics: dict[str, dict] = {}
+    series: dict[str, dict] = {}
+    gains: list[str] = []
+    for m in METHODS:
+        print(f"running {m} ...", file=sys.stderr)
+        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
+        res.save(out / m)
+        metrics[m] = res.metrics
+        series[m] = res.series.as_dict()
+        gains = res.gains
+    seeds = None
+    if args.seeds and args.seeds > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        base = sc.seed if args.seed is None else args.seed
+        jobs = [(args.scenario, m, base + s, args.duration) for m in METHODS
+                for s in range(args.seeds)]
+        print(f"seed sweep: {len(jobs)} runs ...", file=sys.stderr)
+        with ProcessPoolExecutor(max_workers=args.jobs) as ex:
+            res_all = list(ex.map(_run_one, jobs))
+        seeds = {m: [r for (_, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
+                 for m in METHODS}
+    form = formation_from_scenario(sc)
+    d_safe = sc["controller"]["d_safe_m"]
+    path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
+                        gains, seeds)
+    print(compare_table(metrics, d_safe))
+    if seeds:
+        print(seeds_table(seeds, d_safe))
+    print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
+def add_mission_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("mission", help="run or compare missions")
+    msub = p.add_subparsers(dest="mission_cmd", required=True)
+    r = msub.add_parser("run", help="run one mission")
+    r.add_argument("scenario")
+    r.add_argument("--inproc", action="store_true", help="all in one process (no MAVLink)")
+    r.add_argument("--method", choices=METHODS, default=None)
+    r.add_argument("--seed", type=int, default=None)
+    r.add_argument("--duration", type=float, default=None, help="seconds (default: scenario)")
+    r.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
+    r.set_defaults(func=cmd_mission_run)
+    c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")
+    c.add_argument("scenario")
+    c.add_argument("--inproc", action="store_true")
+    c.add_argument("--seed", type=int, default=None)
+    c.add_argument("--duration", type=float, default=None)
+    c.add_argument("--seeds", type=int, default=0, help="also sweep N seeds per method")
+    c.add_argument("--jobs", type=int, default=2, help="parallel processes for the sweep")
+    c.add_argument("--out", default=None, help="report directory (default runs/compare)")
+    c.set_defaults(func=cmd_mission_compare)
+
+
+COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
+    "mission": add_mission_parser,
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="gcs", description="bearing-swarm ground station")
+    sub = ap.add_subparsers(dest="command", required=True)
+    for add in COMMANDS.values():
+        add(sub)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
