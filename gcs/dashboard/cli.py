@@ -1,0 +1,165 @@
+"""``gcs dashboard``: argument parsing and wiring (hooks for ``gcs/cli.py``).
+
+    gcs dashboard [--scenario S] [--port-offset N] [--swarm NAME] [--zenoh-connect EP ...]
+    gcs dashboard --launch scenarios/cube8.toml [--no-daemons] [--method rcbf]
+    gcs dashboard --demo            # the recorded state, no network (docs, trying keys)
+
+``gcs/cli.py`` wires it with::
+
+    from gcs.dashboard.cli import add_dashboard_parser, run_dashboard
+    add_dashboard_parser(subparsers)   # sets defaults func=run_dashboard
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from swarm_common.scenario import ScenarioError, load_scenario
+
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+
+
+def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    p.add_argument("--scenario", default=None, help="scenario TOML (default scenarios/cube8.toml)")
+    p.add_argument("--port-offset", type=int, default=0, help="shift every port by N")
+    p.add_argument(
+        "--swarm",
+        default=None,
+        help="swarm name in the Zenoh keys (default: 'default'; with --launch the scenario name)",
+    )
+    p.add_argument(
+        "--zenoh-connect",
+        nargs="+",
+        default=None,
+        metavar="EP",
+        help="Zenoh endpoints to dial (default tcp/127.0.0.1:7447+offset)",
+    )
+    p.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
+    p.add_argument("--no-zenoh", action="store_true", help="MAVLink only")
+    p.add_argument(
+        "--launch",
+        metavar="SCENARIO",
+        default=None,
+        help="start vehicle-sim (real time) and the offboard daemons; stop on exit",
+    )
+    p.add_argument("--no-daemons", action="store_true", help="with --launch: simulator only")
+    p.add_argument(
+        "--method",
+        choices=("rcbf", "apf", "none"),
+        default=None,
+        help="with --launch: the daemons' initial method",
+    )
+    p.add_argument("--log-dir", default=None, help="with --launch: child logs (default: temp)")
+    p.add_argument("--ack-timeout", type=float, default=1.0, help="COMMAND_ACK wait per try (s)")
+    p.add_argument("--retries", type=int, default=2, help="COMMAND_LONG retries")
+    p.add_argument("--demo", action="store_true", help="show the recorded state, no network")
+    return p
+
+
+def add_dashboard_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register ``dashboard`` on ``gcs``'s subparsers; sets ``func=run_dashboard``."""
+    p = subparsers.add_parser(
+        "dashboard",
+        help="terminal ground station (Textual)",
+        description="Terminal ground station: attach to a running swarm, or --launch one.",
+    )
+    configure_parser(p)
+    p.set_defaults(func=run_dashboard)
+    return p
+
+
+def _err(msg: str) -> int:
+    print(f"gcs dashboard: {msg}", file=sys.stderr)
+    return 2
+
+
+def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
+    """(app, source, launch, title) from parsed args; raises ValueError/OSError/RuntimeError."""
+    from .app import DashboardApp
+    from .commands import LiveCommander
+    from .launch import Launch, busy_ports, router_endpoint
+    from .mavlink_gcs import MavlinkGcs
+    from .recorded import recorded_source
+    from .state import LiveSource
+    from .zenoh_feed import ZenohFeed
+
+    if args.demo:
+        return DashboardApp(recorded_source(), None, title="demo (recorded)"), None, None, None
+    path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
+    sc = load_scenario(path)
+    offset = args.port_offset
+    launch = None
+    link = feed = None
+    try:
+        if args.launch:
+            busy = busy_ports(sc, offset)
+            if busy:
+                raise OSError(f"ports in use: {', '.join(busy)} (another swarm? try --port-offset)")
+            swarm = args.swarm or sc.name
+            log_dir = Path(args.log_dir or tempfile.mkdtemp(prefix="gcs-dashboard-"))
+            launch = Launch(
+                sc,
+                offset,
+                swarm,
+                log_dir,
+                zenoh=not args.no_zenoh,
+                daemons=not args.no_daemons,
+                method=args.method,
+            ).start()
+            why = launch.wait_sim_up()
+            if why:
+                raise RuntimeError(why)
+        else:
+            swarm = args.swarm or "default"
+        link = MavlinkGcs(port_offset=offset).start()
+        if not args.no_zenoh:
+            if launch is not None:
+                feed = ZenohFeed(swarm, sc.ids, session=launch.router).start()
+            else:
+                connect = args.zenoh_connect or [router_endpoint(offset)]
+                feed = ZenohFeed(swarm, sc.ids, connect=connect, mode=args.zenoh_mode).start()
+    except BaseException:
+        if link is not None:
+            link.close()
+        if launch is not None:
+            launch.stop()
+        raise
+    source = LiveSource(sc, link, feed, swarm=swarm)
+    commander = LiveCommander(link, feed, timeout_s=args.ack_timeout, retries=args.retries)
+    title = f"{sc.name} · offset {offset}" + (" · launched" if launch else "")
+    return DashboardApp(source, commander, title=title), source, launch, title
+
+
+def run_dashboard(args: argparse.Namespace) -> int:
+    """Entry point of ``gcs dashboard``: returns the process exit code."""
+    try:
+        app, source, launch, _ = build(args)
+    except ScenarioError as exc:
+        return _err(str(exc))
+    except (OSError, RuntimeError, ValueError) as exc:
+        return _err(str(exc).strip())
+    try:
+        app.run()
+    finally:
+        if source is not None:
+            source.close()
+        if launch is not None:
+            t0 = time.monotonic()
+            launch.stop()
+            print(
+                f"gcs dashboard: stopped launched processes in {time.monotonic() - t0:.1f} s "
+                f"(logs in {launch.log_dir})",
+                file=sys.stderr,
+            )
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m gcs.dashboard`` (until gcs/cli.py wires the subcommand)."""
+    p = configure_parser(argparse.ArgumentParser(prog="gcs dashboard"))
+    return run_dashboard(p.parse_args(argv))
