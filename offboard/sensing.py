@@ -72,6 +72,7 @@ class Sensor:
         d = np.sqrt(np.einsum("ij,ij->i", rel, rel))
         d[i] = 1.0
         g = rel / d[:, None]
+        g[i, 0] = 1.0  # placeholder row for itself (marked invalid)
         gd = np.einsum("ij,ij->i", g, relv)
         g_dot = (relv - g * gd[:, None]) / d[:, None]
         noise = self.rng.standard_normal((self.n, 8))

@@ -1,0 +1,53 @@
+"""Leader trajectory, exosystem and desired-state observer (paper §4.1; errata 9)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from offboard.bearing import formation_from_scenario
+from offboard.reference import DesiredStateObserver, LeaderTrajectory, exo_propagator
+from swarm_common.scenario import load_scenario
+
+CUBE8 = Path(__file__).resolve().parents[1] / "scenarios" / "cube8.toml"
+
+
+@pytest.fixture(scope="module")
+def sc():
+    return load_scenario(CUBE8)
+
+
+def test_trajectory_derivatives_and_exosystem():
+    tr = LeaderTrajectory(np.array([4.0, 0, 6]), np.array([0.8, 0.4, 0.2]), 0.2)
+    h = 1e-5
+    for t in (0.3, 2.0, 7.7):
+        x, xp, xm = tr.state(t), tr.state(t + h), tr.state(t - h)
+        assert np.allclose((xp[:9] - xm[:9]) / (2 * h), x[3:], atol=1e-6)
+        # the exosystem reproduces the trajectory exactly
+        assert np.allclose(exo_propagator(tr.omega, 1.234) @ x, tr.state(t + 1.234), atol=1e-9)
+    assert np.allclose(tr.state(0.0)[:3], [4.0, 0, 6])
+
+
+def test_desired_state_observer_converges(sc):
+    f = formation_from_scenario(sc)
+    dt = 0.02
+    lt = sc["leader_trajectory"]
+    amp = np.array(lt["amplitude_m"])
+    trs = {i: LeaderTrajectory(sc.agents[i].position, amp, lt["frequency_hz"])
+           for i in f.leader_idx}
+    omega = 2 * np.pi * lt["frequency_hz"]
+    obs = {i: DesiredStateObserver(f, i, omega, 4.0, dt,
+                                   np.concatenate([sc.agents[i].position, np.zeros(9)]))
+           for i in f.follower_idx}
+    for k in range(int(15 / dt)):
+        t = k * dt
+        pub = {i: o.xi.copy() for i, o in obs.items()}
+        pub.update({i: trs[i].state(t) for i in f.leader_idx})
+        for i, o in obs.items():
+            o.update({j: pub[j] for j in f.neighbours[i]})
+    t = int(15 / dt) * dt
+    lead = np.array([trs[i].state(t) for i in f.leader_idx])  # (2, 12)
+    for d in range(4):
+        want = f.desired_positions(lead[:, 3 * d : 3 * d + 3])
+        for i, o in obs.items():
+            assert np.allclose(o.xi[3 * d : 3 * d + 3], want[i], atol=2e-3), (i, d)
