@@ -77,6 +77,7 @@ class SimServer:
             self.clock = RealTimeClock(self.dt)
         self.stop_requested = False
         self.lockstep_timeouts = 0
+        self.handler_errors = 0
         self.truth_published = 0
         self.zsession = None
         self.zpub = None
@@ -298,7 +299,12 @@ class SimServer:
         for key, _ in self.sel.select(max(0.0, timeout)):
             v, link = key.data
             for m in link.receive(now):
-                v.handle(m, (link.name, m._peer), now, t)
+                try:
+                    v.handle(m, (link.name, m._peer), now, t)
+                except Exception as exc:  # a message must never take the simulator down
+                    self.handler_errors += 1
+                    if self.handler_errors <= 10:
+                        self.log(f"vehicle {v.id}: error handling {m.get_type()}: {exc!r}")
 
     def next_wakeup(self, now: float) -> float:
         if isinstance(self.clock, RealTimeClock):
@@ -362,7 +368,8 @@ class SimServer:
         body = " ".join(f"{k}={tot.get(k, 0)}" for k in keys)
         return (
             f"stats: steps={self.clock.k} collisions={self.dyn.collisions} "
-            f"lockstep_timeouts={self.lockstep_timeouts} truth={self.truth_published} {body}"
+            f"lockstep_timeouts={self.lockstep_timeouts} handler_errors={self.handler_errors} "
+            f"truth={self.truth_published} {body}"
         )
 
     def states_finite(self) -> bool:

@@ -338,12 +338,7 @@ class Vehicle:
         elif mid == M.MAVLINK_MSG_ID_TIMESYNC:
             if m.tc1 == 0:
                 now_ns = int(round(sim_t * 1e9))
-                self._reply(
-                    M.MAVLink_timesync_message(
-                        now_ns, m.ts1, m.get_srcSystem(), m.get_srcComponent()
-                    ),
-                    src,
-                )
+                self._reply(M.MAVLink_timesync_message(now_ns, m.ts1), src)
         # HEARTBEAT and everything else from a GCS: nothing to do
 
     def _on_setpoint(self, m, sim_t: float) -> None:
@@ -494,7 +489,7 @@ class Vehicle:
         i = self.idx
         if not self.armed:
             # motors off once it has flown; before that, hover thrust on the spawn fixture
-            thrust = 0.0 if self.ever_armed else float(self.dyn.hold_thrust())
+            thrust = 0.0 if (self.ever_armed or self.terminated) else float(self.dyn.hold_thrust())
             return 0.0, 0.0, float(self.dyn.att[i, 2]), thrust
         if self.mode == "OFFBOARD" and not self.failsafe:
             r, pch, y = self.sp_att

@@ -1,0 +1,223 @@
+"""Shared fixtures: a real ``vehicle-sim`` subprocess on a free port offset, and a small
+pymavlink (mavutil) client that plays the "standard MAVLink client"."""
+
+from __future__ import annotations
+
+import os
+import random
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from swarm_common.ports import vehicle_ports  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CUBE8 = str(ROOT / "scenarios" / "cube8.toml")
+SIM_CMD = [sys.executable, "-m", "vehicle_sim.cli"]
+HOVER_NORM = 1.8 * 9.81 / 52.92
+
+
+def _udp_free(port: int) -> bool:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.bind(("127.0.0.1", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+def _tcp_free(port: int) -> bool:
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        s.bind(("127.0.0.1", port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+_used_offsets: set[int] = set()
+
+
+def free_port_offset(n_vehicles: int = 8) -> int:
+    """A port offset (multiple of 1000, never 0) whose ports are all free right now.
+
+    Multiples of 1000 keep every port of one offset away from every port of another
+    (vehicle ports end in 540-835, 000-244, 570-824; Zenoh's in 447)."""
+    rng = random.SystemRandom()
+    for _ in range(200):
+        off = rng.randrange(1, 46) * 1000 + rng.choice([0, 300])
+        if off in _used_offsets:
+            continue
+        ports = []
+        for i in range(1, n_vehicles + 1):
+            vp = vehicle_ports(i, off)
+            ports += [vp.api_local, vp.api_remote, vp.gcs_local]
+        ports.append(vehicle_ports(1, off).gcs_remote)
+        if all(_udp_free(p) for p in ports) and _tcp_free(7447 + off):
+            _used_offsets.add(off)
+            return off
+    raise RuntimeError("no free port offset found")
+
+
+class SimProcess:
+    """``vehicle-sim`` as a subprocess; stderr is collected in :attr:`lines`."""
+
+    def __init__(self, args: list[str], offset: int) -> None:
+        self.offset = offset
+        self.args = args
+        self.proc = subprocess.Popen(
+            [*SIM_CMD, *args],
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self.lines: list[str] = []
+        self._cv = threading.Condition()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            with self._cv:
+                self.lines.append(line.rstrip("\n"))
+                self._cv.notify_all()
+        with self._cv:
+            self._cv.notify_all()
+
+    def wait_log(self, pattern: str, timeout: float = 10.0) -> str | None:
+        rx = re.compile(pattern)
+        deadline = time.monotonic() + timeout
+        with self._cv:
+            while True:
+                for ln in self.lines:
+                    if rx.search(ln):
+                        return ln
+                left = deadline - time.monotonic()
+                if left <= 0 or (self.proc.poll() is not None and not self._reader.is_alive()):
+                    return None
+                self._cv.wait(min(left, 0.2))
+
+    def wait_ready(self, timeout: float = 15.0) -> None:
+        if self.wait_log(r"vehicles, (real-time|lockstep)", timeout) is None:
+            raise RuntimeError("vehicle-sim did not start:\n" + "\n".join(self.lines[-20:]))
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self._reader.join(2)
+        return self.proc.returncode
+
+    def text(self) -> str:
+        with self._cv:
+            return "\n".join(self.lines)
+
+
+@pytest.fixture
+def sim_factory():
+    """``start(extra_args, offset=None, n=8, lockstep=False) -> SimProcess`` (killed after)."""
+    procs: list[SimProcess] = []
+
+    def start(extra: list[str] | None = None, offset: int | None = None, ready=True, **kw):
+        off = free_port_offset() if offset is None else offset
+        args = ["--scenario", kw.get("scenario", CUBE8), "--port-offset", str(off)]
+        args += extra or []
+        sp = SimProcess(args, off)
+        procs.append(sp)
+        if ready:
+            sp.wait_ready()
+        return sp
+
+    yield start
+    for sp in procs:
+        sp.stop()
+        print(f"--- vehicle-sim {' '.join(sp.args)} (rc={sp.proc.returncode})\n{sp.text()}")
+
+
+class MavClient:
+    """A pymavlink ``mavutil`` udpin client (the way QGC/MAVSDK listen on 14540/14550)."""
+
+    def __init__(self, port: int, sysid: int = 255, compid: int = 190) -> None:
+        self.conn = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{port}", source_system=sysid, source_component=compid
+        )
+        self.mav = self.conn.mav
+
+    def recv(self, types=None, timeout: float = 5.0, sysid: int | None = None, cond=None):
+        """First message of ``types`` (from ``sysid``) satisfying ``cond``, or None."""
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            m = self.conn.recv_match(type=types, blocking=True, timeout=min(left, 0.25))
+            if m is None:
+                continue
+            if sysid is not None and m.get_srcSystem() != sysid:
+                continue
+            if cond is None or cond(m):
+                return m
+
+    def drain(self) -> None:
+        while self.conn.recv_match(blocking=False) is not None:
+            pass
+
+    def command(self, target: int, cmd: int, *params: float, timeout: float = 3.0):
+        ps = [float(x) for x in params] + [0.0] * (7 - len(params))
+        self.mav.command_long_send(target, 1, cmd, 0, *ps)
+        return self.recv("COMMAND_ACK", timeout, sysid=target, cond=lambda m: m.command == cmd)
+
+    def setpoint(self, target: int, thrust: float, q=(1.0, 0.0, 0.0, 0.0), ms=0, mask=7) -> None:
+        self.mav.set_attitude_target_send(ms, target, 1, mask, list(q), 0, 0, 0, thrust)
+
+    def stream(self, target: int, thrust: float, seconds: float, q=(1.0, 0.0, 0.0, 0.0)):
+        """Send setpoints at ~50 Hz for ``seconds``; returns the messages seen meanwhile."""
+        seen = []
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.setpoint(target, thrust, q)
+            t_next = time.monotonic() + 0.02
+            while True:
+                m = self.conn.recv_match(blocking=False)
+                if m is None:
+                    break
+                seen.append(m)
+            time.sleep(max(0.0, t_next - time.monotonic()))
+        return seen
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+@pytest.fixture
+def mav_client():
+    clients: list[MavClient] = []
+
+    def make(port: int, **kw) -> MavClient:
+        c = MavClient(port, **kw)
+        clients.append(c)
+        return c
+
+    yield make
+    for c in clients:
+        c.close()

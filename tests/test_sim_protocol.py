@@ -1,0 +1,443 @@
+"""vehicle-sim end to end over real UDP: PX4 conventions a MAVLink client relies on."""
+
+from __future__ import annotations
+
+import math
+import signal
+import socket
+import threading
+import time
+
+import pytest
+from conftest import HOVER_NORM, MavClient, free_port_offset
+from pymavlink.dialects.v20 import common as M
+
+from swarm_common import wire
+from swarm_common.ports import vehicle_ports
+from vehicle_sim.vehicle import CUSTOM_MODE
+
+pytestmark = pytest.mark.timeout(120)
+
+POSCTL, OFFBOARD, HOLD, LAND = (CUSTOM_MODE[k] for k in ("POSCTL", "OFFBOARD", "HOLD", "LAND"))
+
+
+def api_client(mav_client, sim, agent=1) -> MavClient:
+    c = mav_client(vehicle_ports(agent, sim.offset).api_remote)
+    hb = c.recv("HEARTBEAT", 10, sysid=agent)
+    assert hb is not None, sim.text()
+    return c
+
+
+def wait_mode(c: MavClient, agent: int, mode: int, timeout=3.0, armed=None):
+    def ok(m):
+        if m.custom_mode != mode:
+            return False
+        return armed is None or bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED) == armed
+
+    return c.recv("HEARTBEAT", timeout, sysid=agent, cond=ok)
+
+
+def start_offboard(c: MavClient, agent=1, thrust=HOVER_NORM):
+    assert c.command(agent, M.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == M.MAV_RESULT_ACCEPTED
+    c.stream(agent, thrust, 0.3)
+    ack = c.command(agent, M.MAV_CMD_DO_SET_MODE, 129, 6)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+
+
+def test_heartbeat_and_telemetry(sim_factory, mav_client):
+    sim = sim_factory(["--no-zenoh", "--vehicles", "2"])
+    c = api_client(mav_client, sim)
+    hb = c.recv("HEARTBEAT", 3, sysid=1)
+    assert hb.get_srcComponent() == 1
+    assert hb.type == M.MAV_TYPE_QUADROTOR and hb.autopilot == M.MAV_AUTOPILOT_PX4
+    assert hb.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    assert hb.custom_mode == POSCTL == 3 << 16
+    assert hb.system_status == M.MAV_STATE_STANDBY
+    st = c.recv("SYS_STATUS", 3, sysid=1)
+    for bit in (M.MAV_SYS_STATUS_SENSOR_3D_GYRO, M.MAV_SYS_STATUS_SENSOR_GPS):
+        assert st.onboard_control_sensors_present & bit
+        assert st.onboard_control_sensors_enabled & bit
+        assert st.onboard_control_sensors_health & bit
+    lp = c.recv("LOCAL_POSITION_NED", 3, sysid=1)
+    # agent 1 spawns at ENU (4, 0, 6) -> NED (0, 4, -6)
+    assert lp.x == pytest.approx(0.0, abs=1e-3) and lp.y == pytest.approx(4.0, abs=1e-3)
+    assert lp.z == pytest.approx(-6.0, abs=1e-3)
+    gp = c.recv("GLOBAL_POSITION_INT", 3, sysid=1)
+    assert gp.lat != 0 and gp.relative_alt == pytest.approx(6000, abs=2)
+    od = c.recv("ODOMETRY", 3, sysid=1)
+    assert od.frame_id == M.MAV_FRAME_LOCAL_NED and od.child_frame_id == M.MAV_FRAME_BODY_FRD
+    assert c.recv("ATTITUDE_QUATERNION", 3, sysid=1) is not None
+    assert c.recv("EXTENDED_SYS_STATE", 3, sysid=1).landed_state == M.MAV_LANDED_STATE_IN_AIR
+    ack = c.command(1, M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION, *[math.nan] * 6)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    assert c.recv("HOME_POSITION", 3, sysid=1) is not None
+    # TIMESYNC is answered
+    c.mav.timesync_send(0, 123456789)
+    ts = c.recv("TIMESYNC", 3, sysid=1, cond=lambda m: m.ts1 == 123456789)
+    assert ts is not None and ts.tc1 > 0
+    # GCS link: both vehicles stream to 14550 + offset
+    g = mav_client(vehicle_ports(1, sim.offset).gcs_remote)
+    assert g.recv("HEARTBEAT", 5, sysid=1) is not None
+    assert g.recv("HEARTBEAT", 5, sysid=2) is not None
+
+
+def test_arm_offboard_climb_failsafe_hold(sim_factory, mav_client):
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
+    c = api_client(mav_client, sim)
+    ack = c.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, *[math.nan] * 6)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    hb = wait_mode(c, 1, POSCTL, armed=True)
+    assert hb is not None and hb.system_status == M.MAV_STATE_ACTIVE
+    # OFFBOARD without a setpoint stream: refused
+    ack = c.command(1, M.MAV_CMD_DO_SET_MODE, 129, 6, math.nan, math.nan)
+    assert ack.result in (M.MAV_RESULT_DENIED, M.MAV_RESULT_TEMPORARILY_REJECTED)
+    # after streaming: accepted and shown in the heartbeat within 3 s
+    c.stream(1, HOVER_NORM, 0.4)
+    ack = c.command(1, M.MAV_CMD_DO_SET_MODE, 129, 6, math.nan, math.nan)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    z0 = c.recv("LOCAL_POSITION_NED", 3, sysid=1).z
+    seen = c.stream(1, 0.5, 1.5)
+    assert any(m.get_type() == "HEARTBEAT" and m.custom_mode == OFFBOARD for m in seen)
+    z1 = c.recv("LOCAL_POSITION_NED", 3, sysid=1).z
+    assert z1 < z0 - 1.0  # NED: climbing is z decreasing
+    # stop streaming: failsafe -> HOLD with a STATUSTEXT
+    st = c.recv("STATUSTEXT", 5, sysid=1, cond=lambda m: "failsafe" in m.text)
+    assert st is not None
+    assert wait_mode(c, 1, HOLD, timeout=3, armed=True) is not None
+    # holds: the climb stops (velocity brought back near zero)
+    time.sleep(3.0)
+    c.drain()
+    lp = c.recv("LOCAL_POSITION_NED", 3, sysid=1)
+    assert abs(lp.vz) < 0.5
+    # disarm in the air without force: denied; forced: accepted and it falls to the ground
+    ack = c.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+    assert ack.result == M.MAV_RESULT_DENIED
+    ack = c.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    es = c.recv(
+        "EXTENDED_SYS_STATE",
+        8,
+        sysid=1,
+        cond=lambda m: m.landed_state == M.MAV_LANDED_STATE_ON_GROUND,
+    )
+    assert es is not None
+    assert "failsafe" in sim.text()
+
+
+def test_failsafe_land_disarms(sim_factory, mav_client):
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1", "--failsafe", "land"])
+    c = api_client(mav_client, sim)
+    start_offboard(c, 1, thrust=0.2)  # sink towards the ground first
+    c.stream(1, 0.2, 1.2)
+    assert wait_mode(c, 1, LAND, timeout=3, armed=True) is not None
+    es = c.recv("EXTENDED_SYS_STATE", 3, sysid=1)
+    assert es.landed_state in (M.MAV_LANDED_STATE_LANDING, M.MAV_LANDED_STATE_ON_GROUND)
+    # lands and disarms by itself
+    assert wait_mode(c, 1, LAND, timeout=30, armed=False) is not None
+
+
+def test_command_acks(sim_factory, mav_client):
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
+    c = api_client(mav_client, sim)
+    nan = math.nan
+    cases = [
+        (M.MAV_CMD_SET_MESSAGE_INTERVAL, (M.MAVLINK_MSG_ID_ATTITUDE, 100000, nan, nan, nan, nan, 0),
+         M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_SET_MESSAGE_INTERVAL, (55555, 100000), M.MAV_RESULT_UNSUPPORTED),
+        (M.MAV_CMD_REQUEST_MESSAGE, (M.MAVLINK_MSG_ID_AUTOPILOT_VERSION, nan, nan),
+         M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_REQUEST_MESSAGE, (12345,), M.MAV_RESULT_UNSUPPORTED),
+        (M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (1,), M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_NAV_LOITER_UNLIM, (nan,) * 7, M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_DO_SET_MODE, (129, 3, nan), M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_DO_SET_MODE, (129, 4, 3), M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_DO_SET_MODE, (129, 4, 4), M.MAV_RESULT_UNSUPPORTED),  # AUTO.MISSION
+        (M.MAV_CMD_NAV_TAKEOFF, (), M.MAV_RESULT_UNSUPPORTED),
+        (M.MAV_CMD_NAV_RETURN_TO_LAUNCH, (), M.MAV_RESULT_UNSUPPORTED),
+        (31999, (), M.MAV_RESULT_UNSUPPORTED),
+        (M.MAV_CMD_NAV_LAND, (nan,) * 7, M.MAV_RESULT_ACCEPTED),
+        (M.MAV_CMD_COMPONENT_ARM_DISARM, (0,), M.MAV_RESULT_ACCEPTED),  # already disarmed
+    ]  # fmt: skip
+    for cmd, params, want in cases:
+        ack = c.command(1, cmd, *params)
+        assert ack is not None, f"no ACK for command {cmd}"
+        assert ack.result == want, f"command {cmd}: {ack.result} != {want}"
+    assert c.recv("ATTITUDE", 3, sysid=1) is not None  # the interval was honoured
+    assert wait_mode(c, 1, LAND) is not None
+    # SET_MODE message is honoured too
+    c.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, HOLD)
+    assert wait_mode(c, 1, HOLD) is not None
+    # COMMAND_INT
+    c.mav.command_int_send(1, 1, 0, M.MAV_CMD_DO_SET_MODE, 0, 0, 129, 3, 0, 0, 0, 0, 0)
+    ack = c.recv("COMMAND_ACK", 3, sysid=1, cond=lambda m: m.command == M.MAV_CMD_DO_SET_MODE)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    assert wait_mode(c, 1, POSCTL) is not None
+    # a command for another system: ignored (no ACK)
+    c.mav.command_long_send(7, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    assert c.recv("COMMAND_ACK", 1.0) is None
+    hb = c.recv("HEARTBEAT", 3, sysid=1)
+    assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    # flight termination: motors off, cannot re-arm
+    ack = c.command(1, M.MAV_CMD_DO_FLIGHTTERMINATION, 1)
+    assert ack.result == M.MAV_RESULT_ACCEPTED
+    ack = c.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack.result == M.MAV_RESULT_DENIED
+    es = c.recv(
+        "EXTENDED_SYS_STATE",
+        8,
+        sysid=1,
+        cond=lambda m: m.landed_state == M.MAV_LANDED_STATE_ON_GROUND,
+    )
+    assert es is not None
+
+
+def test_setpoint_validation(sim_factory, mav_client):
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
+    c = api_client(mav_client, sim)
+    start_offboard(c, 1)
+    c.command(1, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE_TARGET, 20000)
+    bad = [
+        dict(q=(math.nan, 0, 0, 0), thrust=0.5),
+        dict(q=(2.0, 0, 0, 0), thrust=0.5),
+        dict(q=(1, 0, 0, 0), thrust=1.5),
+        dict(q=(1, 0, 0, 0), thrust=-0.1),
+        dict(q=(1, 0, 0, 0), thrust=math.inf),
+    ]
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        c.setpoint(1, HOVER_NORM)
+        for b in bad:
+            c.setpoint(1, b["thrust"], q=b["q"])
+        time.sleep(0.02)
+    # thrust ignored: keeps the previous thrust; attitude ignored: keeps the previous attitude
+    q_roll = (math.cos(0.05), math.sin(0.05), 0.0, 0.0)  # 0.1 rad roll (FRD)
+    for _ in range(10):
+        c.setpoint(1, 0.9, q=q_roll, mask=7 | M.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE)
+        time.sleep(0.02)
+    for _ in range(10):
+        c.setpoint(1, 0.6, q=(math.nan,) * 4, mask=7 | M.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE)
+        time.sleep(0.02)
+    c.drain()
+    at = c.recv("ATTITUDE_TARGET", 3, sysid=1)
+    assert at.thrust == pytest.approx(0.6, abs=1e-5)
+    assert at.q[1] == pytest.approx(math.sin(0.05), abs=1e-4)
+    seen = c.stream(1, HOVER_NORM, 1.2)
+    od = [m for m in seen if m.get_type() == "ODOMETRY"][-1]
+    assert all(math.isfinite(x) for x in (od.x, od.y, od.z, od.vx, od.vy, od.vz, *od.q))
+    hb = [m for m in seen if m.get_type() == "HEARTBEAT"][-1]
+    assert hb.custom_mode == OFFBOARD  # the bad ones did not count as a stream loss either
+
+
+def test_autopilot_version_uids_distinct(sim_factory, mav_client):
+    sim = sim_factory(["--no-zenoh", "--vehicles", "2"])
+    uids = []
+    for agent in (1, 2):
+        c = api_client(mav_client, sim, agent)
+        ack = c.command(agent, M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        assert ack.result == M.MAV_RESULT_ACCEPTED
+        av = c.recv("AUTOPILOT_VERSION", 3, sysid=agent)
+        assert av is not None
+        uids.append(av.uid)
+    assert uids[0] != uids[1] and all(u != 0 for u in uids)
+
+
+def test_answers_any_peer(sim_factory):
+    """A client on an arbitrary port talking to the vehicle's bound port gets answers."""
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
+    port = vehicle_ports(1, sim.offset).api_local
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.settimeout(0.5)
+    mav = M.MAVLink(None, srcSystem=250, srcComponent=1)
+    s.sendto(mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav), ("127.0.0.1", port))
+    got = set()
+    end = time.monotonic() + 5
+    while time.monotonic() < end and "HEARTBEAT" not in got:
+        try:
+            data, _ = s.recvfrom(4096)
+        except TimeoutError:
+            s.sendto(mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav), ("127.0.0.1", port))
+            continue
+        for m in mav.parse_buffer(data) or []:
+            got.add(m.get_type())
+    s.close()
+    assert "HEARTBEAT" in got
+
+
+# ------------------------------------------------------------------------------------
+# lockstep
+class LockstepAgent:
+    """Answers every ODOMETRY of one vehicle with a setpoint echoing its time stamp."""
+
+    def __init__(self, c: MavClient, agent: int, thrust: float = HOVER_NORM) -> None:
+        self.c, self.agent, self.thrust = c, agent, thrust
+        self.times: list[int] = []
+        self.odo: dict[int, tuple[float, ...]] = {}
+        self.answer = True
+        self.echo_offset_ms = 0
+        self.stop = False
+        self.acks: list = []
+        self.th = threading.Thread(target=self.run, daemon=True)
+
+    def run(self) -> None:
+        while not self.stop:
+            m = self.c.conn.recv_match(type=["ODOMETRY", "COMMAND_ACK"], blocking=True, timeout=0.1)
+            if m is None or m.get_srcSystem() != self.agent:
+                continue
+            if m.get_type() == "COMMAND_ACK":
+                self.acks.append(m)
+                continue
+            self.times.append(m.time_usec)
+            self.odo[m.time_usec] = (m.x, m.y, m.z, m.vx, m.vy, m.vz, *m.q)
+            if self.answer:
+                ms = m.time_usec // 1000 + self.echo_offset_ms
+                self.c.setpoint(self.agent, self.thrust, ms=ms)
+
+
+def test_lockstep_progression_and_truth(sim_factory, mav_client):
+    from swarm_common.zenoh_session import open_session
+
+    off = free_port_offset()
+    sim = sim_factory(
+        ["--lockstep", "--vehicles", "2", "--step-timeout", "30", "--swarm", "t"], offset=off
+    )
+    truths: list[wire.Truth] = []
+    sess = open_session(connect=[f"tcp/127.0.0.1:{7447 + off}"])
+    sub = sess.declare_subscriber(
+        wire.key_truth("t"), lambda s: truths.append(wire.decode(s.payload.to_bytes()))
+    )
+    try:
+        agents = []
+        for a in (1, 2):
+            c = api_client(mav_client, sim, a)
+            ack = c.command(a, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            assert ack.result == M.MAV_RESULT_ACCEPTED
+            ag = LockstepAgent(c, a)
+            ag.th.start()
+            agents.append(ag)
+        time.sleep(0.5)  # answering t_0 = a setpoint stream
+        # before the barrier, time stays at t_0
+        assert set(agents[0].times) == {0}
+        agents[0].c.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0, 129, 6, 0, 0, 0, 0, 0)
+        time.sleep(0.5)
+        assert set(agents[0].times) == {0}  # vehicle 2 is not in OFFBOARD yet
+        agents[1].c.mav.command_long_send(2, 1, M.MAV_CMD_DO_SET_MODE, 0, 129, 6, 0, 0, 0, 0, 0)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and max(agents[0].times) < 200_000:
+            time.sleep(0.05)
+        assert max(agents[0].times) >= 200_000
+        # stop answering for vehicle 1: time must not advance (step timeout is 30 s)
+        agents[0].answer = False
+        time.sleep(0.3)
+        t_stop = max(agents[1].times)
+        time.sleep(0.7)
+        assert max(agents[1].times) == t_stop
+        assert max(agents[0].times) == t_stop  # only re-sends of the same t_k
+        # a stale answer (previous step) does not advance it either
+        agents[0].c.setpoint(1, HOVER_NORM, ms=t_stop // 1000 - 20)
+        time.sleep(0.5)
+        assert max(agents[1].times) == t_stop
+        # the right echo advances by exactly one step at a time
+        agents[0].answer = True
+        agents[0].c.setpoint(1, HOVER_NORM, ms=t_stop // 1000)
+        time.sleep(0.5)
+        assert max(agents[1].times) > t_stop
+        for ag in agents:
+            ag.stop = True
+            ag.th.join(2)
+        ts = sorted(set(agents[0].times))
+        steps = [b - a for a, b in zip(ts, ts[1:], strict=False)]
+        assert set(steps) == {20_000}
+        # Zenoh truth: one message per step, all vehicles
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and not truths:
+            time.sleep(0.05)
+        assert truths, "no Truth received on Zenoh"
+        tr = truths[-1]
+        assert tr.ids == [1, 2] and tr.p.shape == (2, 3)
+        assert tr.t == pytest.approx(tr.step * 0.02)
+        assert all(tr.armed) and tr.mode == ["OFFBOARD", "OFFBOARD"]
+        steps_seen = [t.step for t in truths if t.step > 0]
+        assert steps_seen == sorted(steps_seen)
+    finally:
+        sub.undeclare()
+        sess.close()
+
+
+def test_lockstep_deterministic(sim_factory, mav_client):
+    """Two lockstep runs with the same seed and the same answers give the same ODOMETRY."""
+
+    def run_once():
+        sim = sim_factory(["--lockstep", "--vehicles", "2", "--no-zenoh", "--duration", "1.0"])
+        agents = []
+        for a in (1, 2):
+            c = api_client(mav_client, sim, a)
+            c.command(a, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            ag = LockstepAgent(c, a, thrust=0.4)
+            ag.th.start()
+            agents.append(ag)
+        time.sleep(0.3)
+        for ag in agents:
+            ag.c.mav.command_long_send(ag.agent, 1, M.MAV_CMD_DO_SET_MODE, 0, 129, 6, 0, 0, 0, 0, 0)
+        assert sim.proc.wait(30) == 0
+        for ag in agents:
+            ag.stop = True
+            ag.th.join(2)
+        assert "duration 1.0 s reached" in sim.text()
+        assert "lockstep_timeouts=0" in sim.text()
+        return [ag.odo for ag in agents], sim.text().splitlines()[-1]
+
+    o1, s1 = run_once()
+    o2, s2 = run_once()
+    assert s1.split("stats:")[1].split()[0] == s2.split("stats:")[1].split()[0] == "steps=50"
+    for a, b in zip(o1, o2, strict=True):
+        assert 1_000_000 in a and a == b
+    assert o1[0][1_000_000][2] < o1[0][0][2] - 0.5  # it climbed (NED z decreased)
+
+
+# ------------------------------------------------------------------------------------
+# process behaviour
+def test_busy_port_exits_nonzero_naming_it(sim_factory):
+    off = free_port_offset()
+    port = vehicle_ports(1, off).api_local
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", port))
+    try:
+        sim = sim_factory(["--no-zenoh"], offset=off, ready=False)
+        rc = sim.proc.wait(20)
+        sim.stop()
+    finally:
+        s.close()
+    assert rc != 0
+    lines = [ln for ln in sim.lines if ln.strip()]
+    assert len(lines) == 1 and str(port) in lines[0], lines
+
+
+def test_busy_zenoh_port_exits_nonzero(sim_factory):
+    off = free_port_offset()
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.bind(("127.0.0.1", 7447 + off))
+    s.listen(1)
+    try:
+        sim = sim_factory([], offset=off, ready=False)
+        rc = sim.proc.wait(20)
+        sim.stop()
+    finally:
+        s.close()
+    assert rc != 0
+    lines = [ln for ln in sim.lines if ln.strip()]
+    assert len(lines) == 1 and str(7447 + off) in lines[0], lines
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_clean_exit(sim_factory, sig):
+    sim = sim_factory([])
+    time.sleep(0.3)
+    assert sim.stop(sig) == 0
+    assert "stats:" in sim.text()
+
+
+def test_duration_realtime_exits_zero(sim_factory):
+    sim = sim_factory(["--no-zenoh", "--duration", "0.5"])
+    assert sim.proc.wait(20) == 0
