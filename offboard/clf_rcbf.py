@@ -28,7 +28,8 @@ QP (§4.4), variables x = [u (3), δ, σ]::
           n̂_jᵀ u + σ ≥ r_j      for every sensed pair (rows normalised, n̂ = Δp/‖Δp‖)
           u_lo ≤ u ≤ u_hi,  σ ≥ 0
 
-σ is an exact-penalty relaxation (M ≫ the constraints' multipliers): σ = 0 whenever the
+σ is an exact-penalty relaxation (M = 10⁶ ≫ the rows' multipliers, including what the
+soft CLF row transfers, 2ρδ): σ = 0 whenever the
 hard RCBF rows and the box are jointly feasible; otherwise the QP returns the
 least-violating input and the step is counted as a fallback (errata 14). If OSQP itself
 fails, the fallback is braking ``u = clip(−w − k_b z2)``. u is never NaN.
@@ -160,8 +161,8 @@ class SafetyQP:
         u_hi: np.ndarray,
         rho: float,
         clf_c: float,
-        violation_weight: float = 1e4,
-        violation_linear: float = 1e3,
+        violation_weight: float = 1e6,
+        violation_linear: float = 1e6,
         eps: float = 1e-4,
         brake_gain: float = 2.0,
     ) -> None:
