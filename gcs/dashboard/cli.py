@@ -129,7 +129,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
         if launch is not None:
             launch.stop()
         raise
-    source = LiveSource(sc, link, feed, swarm=swarm)
+    source = LiveSource(sc, link, feed, swarm=swarm, procs=launch)
     commander = LiveCommander(link, feed, timeout_s=args.ack_timeout, retries=args.retries)
     title = f"{sc.name} · offset {offset}" + (" · launched" if launch else "")
     return DashboardApp(source, commander, title=title), source, launch, title

@@ -46,7 +46,7 @@ def recorded_history(n: int = 80, d_safe: float = 0.5) -> list[float]:
     for k in range(n):
         t = k / 4.0
         base = 3.6 - 2.7 * math.exp(-t / 6.0)
-        dip = math.exp(-((t - 5.0) ** 2) / 2.0) * (base - 0.9 * d_safe)
+        dip = math.exp(-((t - 15.5) ** 2) / 1.5) * (base - 0.9 * d_safe)
         out.append(round(base - dip, 3))
     return out
 

@@ -186,8 +186,11 @@ class LiveSource:
         swarm: str = "default",
         clock: Callable[[], float] = time.monotonic,
         history: int = 600,
+        procs: Any = None,
     ) -> None:
         self.sc = scenario
+        self.procs = procs  # optional: has dead() -> [description] (``--launch``)
+        self._dead_seen: set[str] = set()
         self.link = link
         self.feed = feed
         self.swarm = swarm
@@ -226,6 +229,11 @@ class LiveSource:
                 events.append(DashEvent(self._rel(e.t), e.sysid, e.kind, e.text, e.severity))
                 if e.kind == "statustext" and any(w in e.text.lower() for w in FAILSAFE_WORDS):
                     self._fs_text[e.sysid] = e.severity <= 4
+        if self.procs is not None:
+            for d in self.procs.dead():
+                if d not in self._dead_seen:
+                    self._dead_seen.add(d)
+                    events.append(DashEvent(self._rel(now), 0, "process", f"exited: {d}", 2))
         events.sort(key=lambda e: e.t)
 
         truth = snap.truth if snap is not None else None
