@@ -441,3 +441,48 @@ def test_signal_clean_exit(sim_factory, sig):
 def test_duration_realtime_exits_zero(sim_factory):
     sim = sim_factory(["--no-zenoh", "--duration", "0.5"])
     assert sim.proc.wait(20) == 0
+
+
+# ------------------------------------------------------------------------------------
+# an unchanged MAVSDK client (mavsdk >= 4: the native binding, no mavsdk_server needed)
+def test_mavsdk_client_unchanged(sim_factory):
+    mavsdk = pytest.importorskip("mavsdk")
+    from mavsdk.plugins.action import Action
+    from mavsdk.plugins.offboard import Attitude, Offboard
+    from mavsdk.plugins.telemetry import FlightMode, Telemetry
+
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
+    cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
+    m = mavsdk.Mavsdk(cfg)
+    try:
+        m.add_any_connection(f"udpin://127.0.0.1:{vehicle_ports(1, sim.offset).api_remote}")
+        system = m.first_autopilot(10.0)
+        assert system is not None
+        tel, act, off = Telemetry(system), Action(system), Offboard(system)
+
+        def wait(pred, timeout=5.0):
+            end = time.monotonic() + timeout
+            while time.monotonic() < end:
+                if pred():
+                    return True
+                time.sleep(0.05)
+            return False
+
+        assert wait(lambda: tel.position().relative_altitude_m > 5.0)
+        pos = tel.position()
+        assert pos.latitude_deg == pytest.approx(47.3977, abs=1e-3)
+        assert wait(lambda: tel.health().is_global_position_ok and tel.health().is_armable)
+        assert tel.flight_mode() == FlightMode.POSCTL
+        act.arm()
+        assert wait(tel.armed, 3.0)
+        off.set_attitude(Attitude(0.0, 0.0, 0.0, HOVER_NORM))
+        time.sleep(0.3)  # MAVSDK streams the setpoint at 20 Hz
+        off.start()
+        assert wait(lambda: tel.flight_mode() == FlightMode.OFFBOARD, 3.0)
+        alt0 = tel.position().relative_altitude_m
+        off.set_attitude(Attitude(0.0, 0.0, 0.0, 0.5))
+        assert wait(lambda: tel.position().relative_altitude_m > alt0 + 1.0, 5.0)
+        off.stop()  # MAVSDK switches to Hold
+        assert wait(lambda: tel.flight_mode() == FlightMode.HOLD, 3.0)
+    finally:
+        m.destroy()
