@@ -350,8 +350,12 @@ class SimServer:
                 if o.duration is not None and t >= o.duration - 1e-9:
                     self.log(f"duration {o.duration} s reached")
                     break
-        finally:
-            self.log(self.summary())
+        finally:  # the counters are printed even with --quiet
+            print(
+                f"[vehicle-sim t={self.clock.t():.2f}] {self.summary()}",
+                file=sys.stderr,
+                flush=True,
+            )
         return 0
 
     def summary(self) -> str:
