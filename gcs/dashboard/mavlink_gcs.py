@@ -113,7 +113,8 @@ class CommandResult:
         return MAV_RESULT_NAMES.get(self.result, str(self.result))
 
     def describe(self) -> str:
-        return f"#{self.sysid} {self.label}: {self.result_name} ({self.attempts} try)"
+        tries = "1 try" if self.attempts == 1 else f"{self.attempts} tries"
+        return f"#{self.sysid} {self.label}: {self.result_name} ({tries})"
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Export an SVG screenshot of the dashboard on the recorded state (docs/dashboard.svg).
 
-    python -m gcs.dashboard.screenshot docs/dashboard.svg --size 120x36
+python -m gcs.dashboard.screenshot docs/dashboard.svg --size 120x36
 """
 
 from __future__ import annotations
