@@ -48,7 +48,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: {exc}", file=sys.stderr)
         return 2
     if args.agent not in sc.ids:
-        print(f"offboard: --agent {args.agent}: not an agent of {sc.path} {sc.ids}", file=sys.stderr)
+        msg = f"offboard: --agent {args.agent}: not an agent of {sc.path} {sc.ids}"
+        print(msg, file=sys.stderr)
         return 2
     ports = vehicle_ports(args.agent, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"

@@ -27,7 +27,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from offboard.agent import make_agent
+import numpy as np
+
+from offboard.agent import AgentOutput, FollowerAgent, NeighbourEstimate, make_agent
 from offboard.mavlink_link import VehicleLink
 from offboard.zenoh_link import SwarmBus
 from swarm_common import wire
@@ -36,6 +38,56 @@ from swarm_common.scenario import Scenario
 log = logging.getLogger("offboard")
 
 MAV_RESULT_ACCEPTED = 0
+
+
+def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -> wire.Estimate:
+    """An agent's published estimate as the Zenoh payload (made at control step ``step``)."""
+    return wire.Estimate(
+        id=e.id,
+        step=step,
+        t=float(e.t),
+        role="leader" if e.is_leader else "follower",
+        z1=e.z1,
+        z2=e.z2,
+        z3=e.z3,
+        xi=e.xi,
+        zeta=np.zeros(6) if zeta is None else zeta,
+    )
+
+
+def estimate_from_wire(e: wire.Estimate) -> NeighbourEstimate:
+    """A received payload as the agent consumes it (float32-rounded vectors)."""
+    return NeighbourEstimate(e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == "leader")
+
+
+def status_to_wire(
+    agent_id: int, step: int, t: float, out: AgentOutput, mode: str, comm_ok: bool
+) -> wire.Status:
+    st = out.status
+    if not comm_ok:
+        health = "predicting"
+    elif st.fallbacks and st.qp_status in ("relaxed", "fallback"):
+        health = "qp-fallback"
+    else:
+        health = "ok"
+    return wire.Status(
+        id=agent_id,
+        step=step,
+        t=t,
+        mode=mode,
+        method=st.method,
+        qp_status=st.qp_status,
+        qp_solve_us=float(st.solve_us),
+        h_min=float(st.h_min),
+        lyap_v=float(st.V),
+        est_health=health,
+        fallbacks=int(st.fallbacks),
+        u=np.asarray(out.u, dtype=float),
+        z1=np.asarray(out.estimate.z1, dtype=float),
+        p_des=np.asarray(out.estimate.xi[0:3], dtype=float),
+        comm_ok=comm_ok,
+        lumped=np.asarray(out.lumped, dtype=float),
+    )
 
 
 @dataclass
@@ -109,6 +161,9 @@ class OffboardDaemon:
                 self.extra_outages.append((t, t + cmd.duration_s))
                 log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
 
+    def _zeta(self) -> np.ndarray | None:
+        return self.agent.deso.zeta if isinstance(self.agent, FollowerAgent) else None
+
     def _publish_estimate(self, est: wire.Estimate) -> None:
         self.last_estimate = est
         self.last_est_pub = time.monotonic()
@@ -164,15 +219,13 @@ class OffboardDaemon:
             if truth is None:
                 return False
         self._apply_commands(t)
-        neighbours, comm_ok = self._neighbours_for(k, t)
+        received, comm_ok = self._neighbours_for(k, t)
+        neighbours = {j: estimate_from_wire(e) for j, e in received.items()}
         out = self.agent.step(k, t, truth.p, truth.v, neighbours, comm_ok)
         self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
         self._send_answer()
-        self._publish_estimate(out.estimate)
-        status = out.status
-        status.mode = self._mode_name()
-        status.comm_ok = comm_ok
-        self.bus.publish_status(status)
+        self._publish_estimate(estimate_to_wire(out.estimate, k, self._zeta()))
+        self.bus.publish_status(status_to_wire(self.id, k, t, out, self._mode_name(), comm_ok))
         self.steps_done += 1
         return True
 
@@ -205,8 +258,10 @@ class OffboardDaemon:
             log.error("agent %d: no heartbeat from vehicle on %s", self.id, cfg.mavlink_url)
             return 2
         log.info("agent %d: vehicle heartbeat received (%s)", self.id, self.cfg.mavlink_url)
-        init = self.agent.initial_estimate()
-        self._publish_estimate(init)
+        if isinstance(self.agent, FollowerAgent):
+            for line in self.agent.gains.lines():
+                log.info("agent %d: %s", self.id, line)
+        self._publish_estimate(estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
         period = 1.0 / self.control_hz
         next_tick = time.monotonic()
         try:

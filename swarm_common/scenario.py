@@ -150,7 +150,8 @@ def _check(value: Any, spec: Spec) -> bool:
         ok_hi = value < hi if hi_open else value <= hi
         return ok_lo and ok_hi
     if kind == "int":
-        return isinstance(value, int) and not isinstance(value, bool) and spec[1] <= value <= spec[2]
+        is_int = isinstance(value, int) and not isinstance(value, bool)
+        return is_int and spec[1] <= value <= spec[2]
     if kind == "str":
         return isinstance(value, str) and (spec[1] is None or value in spec[1])
     if kind == "vec":
@@ -245,7 +246,8 @@ class Scenario:
 
     @property
     def steps(self) -> int:
-        return int(round(float(self.raw["scenario"]["duration_s"]) * self.raw["scenario"]["control_hz"]))
+        sc = self.raw["scenario"]
+        return int(round(float(sc["duration_s"]) * sc["control_hz"]))
 
     def index_of(self, agent_id: int) -> int:
         for k, a in enumerate(self.agents):

@@ -96,6 +96,8 @@ class Truth:
     armed: list[bool] = field(default_factory=list)
     mode: list[str] = field(default_factory=list)
     collisions: int = 0
+    # min pair distance over the physics steps of (t_k-1, t_k] (float64 on the wire)
+    min_dist: float = float("inf")
 
 
 @dataclass
@@ -132,6 +134,7 @@ class Status:
     z1: np.ndarray = field(default_factory=lambda: np.zeros(3))
     p_des: np.ndarray = field(default_factory=lambda: np.zeros(3))
     comm_ok: bool = True
+    lumped: np.ndarray = field(default_factory=lambda: np.zeros(3))  # z3 + Φζ̂ used, m/s²
 
 
 @dataclass
@@ -165,6 +168,7 @@ def encode(obj: Payload) -> bytes:
             "armed": [bool(a) for a in obj.armed],
             "mode": [str(m) for m in obj.mode],
             "coll": int(obj.collisions),
+            "md": float(obj.min_dist),
         }
     elif isinstance(obj, Estimate):
         d = {
@@ -199,6 +203,7 @@ def encode(obj: Payload) -> bytes:
             "z1": _pack_vec(obj.z1),
             "p_des": _pack_vec(obj.p_des),
             "comm": bool(obj.comm_ok),
+            "lump": _pack_vec(obj.lumped),
         }
     elif isinstance(obj, Command):
         d = {
@@ -241,6 +246,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 armed=[bool(a) for a in d["armed"]],
                 mode=[str(m) for m in d["mode"]],
                 collisions=int(d["coll"]),
+                min_dist=float(d.get("md", float("inf"))),
             )
         if kind == "est":
             return Estimate(
@@ -271,6 +277,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 z1=_unpack_vec(d["z1"], (3,)),
                 p_des=_unpack_vec(d["p_des"], (3,)),
                 comm_ok=bool(d["comm"]),
+                lumped=_unpack_vec(d["lump"], (3,)) if "lump" in d else np.zeros(3),
             )
         if kind == "cmd":
             return Command(
