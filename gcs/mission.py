@@ -23,11 +23,14 @@ from typing import Any
 
 import numpy as np
 
+from gcs.metrics import Series, compute_metrics
 from gcs.procs import ProcessGroup, python_entry
 from gcs.router import open_router
+from offboard.bearing import formation_from_scenario
 from swarm_common import wire
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import Scenario
+from vehicle_sim.dynamics import SwarmDynamics
 
 ZENOH_BASE = 7447
 
@@ -38,6 +41,8 @@ class MissionError(RuntimeError):
 
 def port_free(port: int, kind: int = socket.SOCK_DGRAM) -> bool:
     s = socket.socket(socket.AF_INET, kind)
+    if kind == socket.SOCK_STREAM:  # a TIME_WAIT left by a previous run is not "busy"
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         s.bind(("127.0.0.1", port))
         return True
@@ -71,6 +76,7 @@ class Recorder:
     last_status: dict[int, wire.Status] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
     max_step: int = -1
+    seed: int | None = None
 
     def on_truth(self, sample: Any) -> None:
         try:
@@ -133,7 +139,7 @@ def run_distributed(
     except RuntimeError as exc:
         raise MissionError(str(exc)) from None
     steps = int(round(duration * sc["scenario"]["control_hz"]))
-    rec = Recorder(sc, steps)
+    rec = Recorder(sc, steps, seed=seed)
     swarm = f"{sc.name}-{port_offset}"
     subs = [
         router.declare_subscriber(wire.key_truth(swarm), rec.on_truth),
@@ -231,37 +237,85 @@ def run_distributed(
     return rec, facts
 
 
-def recorder_series(rec: Recorder, sc: Scenario) -> dict[str, np.ndarray]:
-    """Truth/estimate/status time series as arrays (K = recorded steps)."""
-    steps = sorted(s for s in rec.truth if s <= rec.steps)
+def recorder_series(rec: Recorder, sc: Scenario) -> Series:
+    """The recorded run as the in-process runner's :class:`~gcs.metrics.Series`.
+
+    Row k holds truth(k), the estimates valid at t_k (published at step k−1), the
+    statuses of step k and the minimum pair distance over (t_k, t_k+1] (carried by
+    truth(k+1)). Rows use the float32 values that crossed the wire, as in-process.
+    """
+    form = formation_from_scenario(sc)
+    lid = form.leader_idx
+    steps = [k for k in range(rec.steps) if k in rec.truth]
+    kk = len(steps)
     n = sc.n
-    idx = {a.id: k for k, a in enumerate(sc.agents)}
-    k_n = len(steps)
-    out: dict[str, np.ndarray] = {
-        "t": np.array([rec.truth[s].t for s in steps]),
-        "p": np.stack([rec.truth[s].p for s in steps]) if steps else np.zeros((0, n, 3)),
-        "v": np.stack([rec.truth[s].v for s in steps]) if steps else np.zeros((0, n, 3)),
-        "att": np.stack([rec.truth[s].att for s in steps]) if steps else np.zeros((0, n, 3)),
-        "thrust": np.stack([rec.truth[s].thrust for s in steps]) if steps else np.zeros((0, n)),
-        "lumped": np.stack([rec.truth[s].lumped for s in steps]) if steps else np.zeros((0, n, 3)),
-    }
-    z1 = np.full((k_n, n, 3), np.nan)
-    z2 = np.full((k_n, n, 3), np.nan)
-    z3 = np.full((k_n, n, 3), np.nan)
-    u = np.full((k_n, n, 3), np.nan)
-    p_des = np.full((k_n, n, 3), np.nan)
-    for r, s in enumerate(steps):
-        for aid, st in rec.status.get(s, {}).items():
+    idx = {a.id: i for i, a in enumerate(sc.agents)}
+
+    def z(*shape: int) -> np.ndarray:
+        return np.full((kk, *shape), np.nan)
+
+    ser = Series(
+        t=np.array([rec.truth[k].t for k in steps]), p=z(n, 3), v=z(n, 3), p_des=z(n, 3),
+        v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3), lumped_est=z(n, 3), lumped_true=z(n, 3),
+        u=z(n, 3), thrust=z(n), tilt_deg=z(n), min_dist=z(), h_min=z(n), solve_us=z(n),
+        fallback=np.zeros((kk, n), bool),
+    )
+    for r, k in enumerate(steps):
+        tr = rec.truth[k]
+        ser.p[r], ser.v[r] = tr.p, tr.v
+        ser.p_des[r] = form.desired_positions(tr.p[lid])
+        ser.v_des[r] = form.desired_positions(tr.v[lid])
+        ser.lumped_true[r] = tr.lumped
+        ser.thrust[r] = tr.thrust
+        ser.tilt_deg[r] = np.degrees(
+            np.arccos(np.clip(np.cos(tr.att[:, 0]) * np.cos(tr.att[:, 1]), -1, 1))
+        )
+        nxt = rec.truth.get(k + 1)
+        ser.min_dist[r] = nxt.min_dist if nxt is not None else np.nan
+        for aid, e in rec.est.get(k - 1, {}).items():
             if aid in idx:
-                u[r, idx[aid]] = st.u
-                p_des[r, idx[aid]] = st.p_des
-                z1[r, idx[aid]] = st.z1
-        for aid, e in rec.est.get(s - 1, {}).items():  # estimate for t_s, made at step s-1
+                ser.z1[r, idx[aid]], ser.z2[r, idx[aid]] = e.z1, e.z2
+        for aid, st in rec.status.get(k, {}).items():
             if aid in idx:
-                z2[r, idx[aid]] = e.z2
-                z3[r, idx[aid]] = e.z3
-    out.update({"z1": z1, "z2": z2, "z3": z3, "u": u, "p_des": p_des})
-    return out
+                i = idx[aid]
+                ser.u[r, i] = st.u
+                ser.lumped_est[r, i] = st.lumped
+                ser.h_min[r, i] = st.h_min
+                ser.solve_us[r, i] = st.qp_solve_us
+                ser.fallback[r, i] = st.qp_status in ("relaxed", "fallback")
+    return ser
+
+
+def recorded_metrics(
+    rec: Recorder, sc: Scenario, wall_s: float, duration: float
+) -> tuple[dict[str, Any], Series]:
+    """Metrics of a distributed run, computed by the same function as in process."""
+    ser = recorder_series(rec, sc)
+    form = formation_from_scenario(sc)
+    veh = sc["vehicle"]
+    last = rec.truth[max(rec.truth)] if rec.truth else None
+    fols = form.follower_idx
+    zeta_true = _zeta_true(sc, rec)
+    zeta_est = np.zeros((sc.n, 6))
+    fallbacks = 0
+    final_est = rec.est.get(rec.steps - 1, {})
+    for a_id, e in final_est.items():
+        zeta_est[sc.index_of(a_id)] = e.zeta
+    for st in rec.last_status.values():
+        fallbacks += st.fallbacks
+    valid = ~np.isnan(ser.min_dist)
+    if not np.all(valid):  # a run cut short: drop the incomplete tail
+        ser = Series(**{k: v[valid] for k, v in ser.as_dict().items()})
+    metrics = compute_metrics(
+        ser, fols, sc.control_dt, veh["mass_kg"], veh["gravity_mps2"],
+        last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
+    )
+    return metrics, ser
+
+
+def _zeta_true(sc: Scenario, rec: Recorder) -> np.ndarray:
+    """The simulator's true ζ (same seeded draw as vehicle_sim.dynamics)."""
+    return SwarmDynamics(sc, seed=rec.seed).zeta
 
 
 def write_run(out_dir: Path, metrics: dict[str, Any], series: dict[str, np.ndarray]) -> None:

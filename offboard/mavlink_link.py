@@ -128,7 +128,6 @@ class VehicleLink:
             0.0,
             0.0,
             float(thrust_norm),
-            [0.0, 0.0, 0.0, 0.0],
         )
         self._send(msg)
 
