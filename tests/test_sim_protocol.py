@@ -486,3 +486,36 @@ def test_mavsdk_client_unchanged(sim_factory):
         assert wait(lambda: tel.flight_mode() == FlightMode.HOLD, 3.0)
     finally:
         m.destroy()
+
+
+def test_lockstep_timeouts_suspend_then_failsafe(sim_factory, mav_client):
+    """A controller that stops answering costs 5 step timeouts, then is not waited for;
+    its vehicle goes to the failsafe after the offboard timeout (simulated time)."""
+    sim = sim_factory(["--lockstep", "--vehicles", "2", "--no-zenoh", "--step-timeout", "0.2"])
+    agents = []
+    for a in (1, 2):
+        c = api_client(mav_client, sim, a)
+        assert c.command(a, M.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == M.MAV_RESULT_ACCEPTED
+        ag = LockstepAgent(c, a)
+        ag.th.start()
+        agents.append(ag)
+    try:
+        time.sleep(0.3)
+        for ag in agents:
+            ag.c.mav.command_long_send(ag.agent, 1, M.MAV_CMD_DO_SET_MODE, 0, 129, 6, 0, 0, 0, 0, 0)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and max(agents[1].times) < 100_000:
+            time.sleep(0.02)
+        agents[0].answer = False
+        assert sim.wait_log(r"vehicle 1: lockstep: no answer for 5 steps", 10) is not None
+        assert sim.wait_log(r"vehicle 1: failsafe: offboard lost", 10) is not None
+        t_a = max(agents[1].times)
+        time.sleep(0.5)
+        assert max(agents[1].times) > t_a  # vehicle 2 keeps stepping
+    finally:
+        for ag in agents:
+            ag.stop = True
+            ag.th.join(2)
+    assert sim.stop() == 0
+    summary = sim.text().splitlines()[-1]
+    assert "lockstep_timeouts=5 " in summary, summary

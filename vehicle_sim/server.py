@@ -239,6 +239,7 @@ class SimServer:
         assert isinstance(clk, LockstepClock)
         if not clk.started:
             if self.barrier_ready():
+                self.log_events()
                 clk.started = True
                 for v in self.vehicles:
                     self.dyn.release(v.idx)
@@ -254,6 +255,12 @@ class SimServer:
                 for v in self.vehicles:
                     v.expect_ms = 0
                     self.send_odometry(v)
+            return
+        if not any(v.lockstep_should_wait() for v in self.vehicles):
+            # nobody to wait for (all in failsafe, disarmed or suspended): pace on the
+            # wall clock instead of racing, so a client can still catch up
+            if now - clk.step_started_wall >= self.dt:
+                self.integrate()
             return
         waiting = self.lockstep_waiting()
         if not waiting:
@@ -289,6 +296,10 @@ class SimServer:
                         ln.send_bytes(buf, dests[name])
                 else:
                     links[dest[0]].send_bytes(buf, [], dest[1])
+        self.log_events()
+
+    def log_events(self) -> None:
+        for v in self.vehicles:
             for line in v.events:
                 self.log(line)
             v.events.clear()
