@@ -9,7 +9,7 @@ import threading
 import time
 
 import pytest
-from conftest import HOVER_NORM, MavClient, free_port_offset
+from conftest import CUBE8, HOVER_NORM, MavClient, free_port_offset
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import wire
@@ -519,3 +519,73 @@ def test_lockstep_timeouts_suspend_then_failsafe(sim_factory, mav_client):
     assert sim.stop() == 0
     summary = sim.text().splitlines()[-1]
     assert "lockstep_timeouts=5 " in summary, summary
+
+
+# ------------------------------------------------------------------------------------
+# the state machine without sockets
+def _vehicle(lockstep=False, **kw):
+    from swarm_common.scenario import load_scenario
+    from vehicle_sim.dynamics import SwarmDynamics
+    from vehicle_sim.vehicle import Vehicle, VehicleConfig
+
+    sc = load_scenario(CUBE8)
+    dyn = SwarmDynamics(sc, held=True)
+    return Vehicle(1, 0, dyn, VehicleConfig(lockstep=lockstep, **kw))
+
+
+def _sp(q=(1.0, 0.0, 0.0, 0.0), thrust=HOVER_NORM, ms=0, mask=7):
+    return M.MAVLink_set_attitude_target_message(ms, 1, 1, mask, list(q), 0, 0, 0, thrust)
+
+
+def test_unit_offboard_needs_two_setpoints_in_half_a_second():
+    v = _vehicle()
+    v.handle(_sp(), None, 0.0, 1.0)
+    assert v.request_mode(6, 0, 1.0) == M.MAV_RESULT_TEMPORARILY_REJECTED
+    v.handle(_sp(), None, 0.0, 1.2)
+    assert v.request_mode(6, 0, 1.6) == M.MAV_RESULT_TEMPORARILY_REJECTED  # 1.0 too old
+    assert v.request_mode(6, 0, 1.45) == M.MAV_RESULT_ACCEPTED
+    assert v.mode == "OFFBOARD"
+
+
+def test_unit_failsafe_after_timeout_in_sim_time():
+    v = _vehicle(offboard_timeout=0.5)
+    for t in (0.0, 0.1, 0.2):
+        v.handle(_sp(), None, 0.0, t)
+    assert v.request_mode(6, 0, 0.2) == M.MAV_RESULT_ACCEPTED
+    v.arm(0.2)
+    v.update(0.7)
+    assert v.mode == "OFFBOARD" and not v.failsafe
+    v.update(0.72)
+    assert v.mode == "HOLD" and v.failsafe and v.ctr.failsafes == 1
+    texts = [m.text for m, _ in v.outbox if m.get_type() == "STATUSTEXT"]
+    assert any("failsafe" in t for t in texts)
+    assert not v.active
+
+
+def test_unit_lockstep_only_current_step_applies():
+    v = _vehicle(lockstep=True)
+    v.expect_ms = 40
+    v.handle(_sp(thrust=0.5, ms=20), None, 0.0, 0.04)
+    assert v.ctr.setpoints_stale == 1 and v.answered_ms is None
+    v.handle(_sp(thrust=0.5, ms=40), None, 0.0, 0.04)
+    assert v.answered_ms == 40 and v.sp_thrust == pytest.approx(0.5 * 52.92)
+
+
+def test_unit_setpoint_frames_and_mask():
+    from swarm_common import frames
+
+    v = _vehicle()
+    q = frames.quat_ned_from_euler_enu(0.1, -0.05, 0.3)
+    v.handle(_sp(q=q, thrust=0.4), None, 0.0, 0.0)
+    assert v.sp_att == pytest.approx([0.1, -0.05, 0.3], abs=1e-6)
+    assert v.sp_thrust == pytest.approx(frames.norm_to_thrust(0.4, 52.92))
+    # rate-only setpoints are not supported
+    v.handle(_sp(thrust=0.2, mask=M.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE), None, 0.0, 0.0)
+    assert v.ctr.setpoints_unsupported == 1 and v.sp_thrust == pytest.approx(0.4 * 52.92)
+    # ODOMETRY body-FRD velocity rotates back to NED with q
+    v.dyn.v[0] = [1.0, 2.0, 0.5]
+    v.dyn.att[0] = [0.1, 0.2, 0.3]
+    od = v.odometry(0.0)
+    r = frames.rotm_from_quat(od.q)
+    v_ned = r @ [od.vx, od.vy, od.vz]
+    assert v_ned == pytest.approx(frames.enu_to_ned(v.dyn.v[0]), abs=1e-9)
