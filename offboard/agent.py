@@ -184,6 +184,7 @@ class FollowerAgent:
         obs, ctl, veh = sc["observer"], sc["controller"], sc["vehicle"]
         self.veh = veh
         self.ctl = ctl
+        self.tau_ff = veh["tau_rollpitch_s"]
         self.set_method(method or ctl["method"])
         self.sensor = Sensor(
             self.index, agent_id, sc.n, sc["sensing"], sc["formation"]["sensing_range_m"], seed
@@ -280,9 +281,10 @@ class FollowerAgent:
         w = w_raw * (W_MAX / wn) if wn > W_MAX else w_raw
         e1 = z1 - self.ref.p
         e2 = z2 - self.ref.v
-        clf = clf_terms(
-            e1, e2, w, self.ref.a, ctl["kp"], ctl["kd"], ctl["clf_lambda"], ctl["ks"]
-        )
+        # acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): compensates the
+        # first-order attitude lag of the inner loop on the moving reference
+        a_ff = self.ref.a + self.tau_ff * self.ref.xi[9:12]
+        clf = clf_terms(e1, e2, w, a_ff, ctl["kp"], ctl["kd"], ctl["clf_lambda"], ctl["ks"])
         sel = np.nonzero(meas.valid)[0]
         dp = -rel_p[sel]  # p_i − p_j
         dv = -rel_v[sel]
@@ -396,7 +398,8 @@ class LeaderAgent:
         p = np.asarray(truth_p[self.index], dtype=float)
         v = np.asarray(truth_v[self.index], dtype=float)
         ref = self.traj.state(t)
-        u = ref[6:9] - self.d_hat + self.kp * (ref[0:3] - p) + self.kd * (ref[3:6] - v)
+        a_ff = ref[6:9] + self.veh["tau_rollpitch_s"] * ref[9:12]  # lag compensation
+        u = a_ff - self.d_hat + self.kp * (ref[0:3] - p) + self.kd * (ref[3:6] - v)
         u = np.clip(u, self.u_lo, self.u_hi)
         sp = setpoint_from_accel(u, self.yaw, self.veh)
         u_sub = self.inner.run(sp, self.substeps)
