@@ -290,7 +290,13 @@ class SimServer:
             dests = {name: ln.destinations(now) for name, ln in links.items()}
             out, v.outbox = v.outbox, []
             for msg, dest in out:
-                buf = v.pack(msg)
+                try:
+                    buf = v.pack(msg)
+                except Exception as exc:  # a field out of its wire range: drop, count
+                    self.handler_errors += 1
+                    if self.handler_errors <= 10:
+                        self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}")
+                    continue
                 if dest is None:
                     for name, ln in links.items():
                         ln.send_bytes(buf, dests[name])

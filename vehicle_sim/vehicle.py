@@ -457,7 +457,7 @@ class Vehicle:
             hz = self.cfg.odometry_hz if mid_i == MSG_ODOMETRY else self.cfg.rates.get(mid_i, 0.0)
             self.intervals[mid_i] = 1.0 / hz if hz > 0 else 0.0
         else:
-            self.intervals[mid_i] = max(interval_us * 1e-6, 1e-3)  # at most 1 kHz
+            self.intervals[mid_i] = min(max(interval_us * 1e-6, 1e-3), 2000.0)  # fits int32 µs
         if mid_i == MSG_HEARTBEAT:  # the link's liveness: never off, at least 1 Hz
             iv = self.intervals[mid_i]
             self.intervals[mid_i] = min(1.0, max(0.02, iv if iv > 0 else 1.0))
