@@ -277,7 +277,7 @@ class FollowerAgent:
         z1, z2 = self.deso.z1, self.deso.z2
         w_raw = self.deso.lumped()
         # peaking of the high-gain observer: saturate the disturbance estimate used in control
-        wn = float(np.linalg.norm(w_raw))
+        wn = math.sqrt(float(w_raw @ w_raw))
         w = w_raw * (W_MAX / wn) if wn > W_MAX else w_raw
         e1 = z1 - self.ref.p
         e2 = z2 - self.ref.v

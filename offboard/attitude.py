@@ -23,7 +23,6 @@ from swarm_common.frames import (
     accel_to_attitude,
     euler_enu_from_quat_ned,
     norm_to_thrust,
-    quat_ned_from_euler_enu,
     thrust_to_norm,
 )
 
@@ -38,6 +37,41 @@ class Setpoint:
     thrust_n: float
     q_ned: np.ndarray  # (4,) float32 [w, x, y, z]
     thrust_norm: np.float32
+
+
+_S2 = math.sqrt(0.5)
+
+
+def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
+
+
+def quat_ned_fast(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Closed form of :func:`swarm_common.frames.quat_ned_from_euler_enu` (w ≥ 0).
+
+    ``q_ned = q_T ⊗ q_zyx(roll, pitch, yaw) ⊗ q_D`` with T (ENU→NED) a half turn about
+    (1,1,0)/√2 and D (FRD→FLU) a half turn about x; equal to the frames version to ~1e-16.
+    """
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    q = (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+    q = _qmul(_qmul((0.0, _S2, _S2, 0.0), q), (0.0, 1.0, 0.0, 0.0))
+    if q[0] < 0:
+        q = (-q[0], -q[1], -q[2], -q[3])
+    return np.array(q)
 
 
 def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> tuple[float, ...]:
@@ -57,7 +91,7 @@ def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict, decode: bool = Fal
     roll, pitch, yaw_c, f = accel_to_attitude(
         u, yaw, veh["gravity_mps2"], veh["mass_kg"], math.radians(veh["tilt_max_deg"]), f_max
     )
-    q = quat_ned_from_euler_enu(roll, pitch, yaw_c).astype(np.float32)
+    q = quat_ned_fast(roll, pitch, yaw_c).astype(np.float32)
     tn = np.float32(thrust_to_norm(f, f_max))
     if decode:
         roll, pitch, yaw_c, f = decode_wire(q, tn, f_max)

@@ -37,6 +37,7 @@ fails, the fallback is braking ``u = clip(−w − k_b z2)``. u is never NaN.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -122,17 +123,21 @@ def tangential_term(dp: np.ndarray, h: np.ndarray, gain: float, h_on: float) -> 
     of the pair Δp changes sign and so does t̂, so the two sidestep in opposite directions.
     """
     out = np.zeros(3)
-    if gain <= 0.0:
+    if gain <= 0.0 or len(h) == 0:
         return out
-    for k in range(len(h)):
-        wgt = 1.0 - h[k] / h_on
-        if wgt <= 0.0:
+    act = np.nonzero(h < h_on)[0]
+    for k in act:
+        wgt = min(1.0 - float(h[k]) / h_on, 1.0)
+        n = dp[k]
+        nx, ny, nz = float(n[0]), float(n[1]), float(n[2])
+        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn < 1e-9:
             continue
-        n = dp[k] / max(float(np.linalg.norm(dp[k])), 1e-6)
-        ax = np.array([1.0, 0.0, 0.0]) if abs(n[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
-        t = np.cross(n, ax)
-        t /= max(float(np.linalg.norm(t)), 1e-9)
-        out += gain * min(wgt, 1.0) * t
+        if abs(nz) > 0.9 * nn:  # t = n × e_x
+            t = np.array([0.0, nz, -ny])
+        else:  # t = n × e_z
+            t = np.array([ny, -nx, 0.0])
+        out += (gain * wgt / max(float(np.sqrt(t @ t)), 1e-9)) * t
     return out
 
 
@@ -215,7 +220,7 @@ class SafetyQP:
         # Shortcut (exact): if the box-projected nominal input already satisfies every
         # RCBF row and the CLF row with δ = 0, it is the QP's optimum.
         u_c = np.minimum(np.maximum(u_nom, self.u_lo), self.u_hi)
-        if (len(rhs) == 0 or bool(np.all(n_hat @ u_c >= rhs))) and (
+        if (len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all())) and (
             float(clf.lgv @ u_c) <= -clf.lfv - self.c * clf.V
         ):
             us = (time.perf_counter() - t0) * 1e6
@@ -229,7 +234,7 @@ class SafetyQP:
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, "fallback", -1, us, h_min, clf.V, 0.0, 0.0, True)
         a = self._a
-        nrm = 1.0 + float(np.linalg.norm(clf.lgv))
+        nrm = 1.0 + math.sqrt(float(clf.lgv @ clf.lgv))
         a[0, 0:3] = clf.lgv / nrm
         a[0, 3] = -1.0 / nrm
         self.u[0] = (-clf.lfv - self.c * clf.V) / nrm

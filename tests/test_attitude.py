@@ -43,3 +43,13 @@ def test_inner_loop_model_converges_to_command():
     for _ in range(200):
         out = m.run(sp, 4)
     assert np.allclose(out[-1], u, atol=1e-6)
+
+
+def test_fast_quaternion_equals_frames():
+    from offboard.attitude import quat_ned_fast
+    from swarm_common.frames import quat_ned_from_euler_enu
+
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        r, p, y = rng.uniform(-0.6, 0.6), rng.uniform(-0.6, 0.6), rng.uniform(-3.1, 3.1)
+        assert np.allclose(quat_ned_fast(r, p, y), quat_ned_from_euler_enu(r, p, y), atol=1e-12)
