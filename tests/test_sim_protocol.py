@@ -8,6 +8,7 @@ import socket
 import threading
 import time
 
+import numpy as np
 import pytest
 from conftest import CUBE8, HOVER_NORM, MavClient, free_port_offset
 from pymavlink.dialects.v20 import common as M
@@ -357,6 +358,7 @@ def test_lockstep_progression_and_truth(sim_factory, mav_client):
         tr = truths[-1]
         assert tr.ids == [1, 2] and tr.p.shape == (2, 3)
         assert tr.t == pytest.approx(tr.step * 0.02)
+        assert 0.0 < tr.min_dist <= float(np.linalg.norm(tr.p[0] - tr.p[1])) + 1e-3
         assert all(tr.armed) and tr.mode == ["OFFBOARD", "OFFBOARD"]
         steps_seen = [t.step for t in truths if t.step > 0]
         assert steps_seen == sorted(steps_seen)

@@ -86,6 +86,7 @@ class SimServer:
         self.vlinks: dict[int, dict[str, MavlinkLink]] = {}
         self.sel = selectors.DefaultSelector()
         self._collisions_seen = 0
+        self._min_dist = self.dyn.min_pair_distance() if self.dyn.n >= 2 else float("inf")
         self._last_resend: dict[int, float] = {}
         self._prestart_next = 0.0
         try:
@@ -177,6 +178,7 @@ class SimServer:
             armed=[v.armed for v in self.vehicles],
             mode=[v.mode for v in self.vehicles],
             collisions=d.collisions,
+            min_dist=self._min_dist,
         )
 
     def publish_truth(self) -> None:
@@ -200,7 +202,12 @@ class SimServer:
                 self.dyn.release(v.idx)
                 v.release_requested = False
             self.dyn.set_command(v.idx, *v.command(self.dt))
-        self.dyn.advance(self.substeps)
+        md = float("inf")
+        for _ in range(self.substeps):  # min pair distance over (t_k, t_k+1] for Truth
+            self.dyn.step()
+            if self.dyn.n >= 2:
+                md = min(md, self.dyn.min_pair_distance())
+        self._min_dist = md
         self.clock.advance(time.monotonic())
         self._check_collisions()
         self.announce_step()
