@@ -194,10 +194,11 @@ class FollowerAgent:
         z1 = spec.position + rng.standard_normal(3) * obs["init_pos_error_m"]
         z2 = spec.velocity + rng.standard_normal(3) * obs["init_vel_error_mps"]
         self.substeps = obs["substeps"]
+        self.anchor = obs["leader_anchor"] > 0.0
         beta = tuple(obs["beta"])
         self.deso = DESO(
             self.form, self.index, beta, obs["mu"], obs["sigma"], self.substeps, self.dt,
-            sc["unmodeled"]["ground_effect_height_m"], z1, z2,
+            sc["unmodeled"]["ground_effect_height_m"], z1, z2, obs["leader_anchor"],
         )
         omega = 2.0 * math.pi * sc["leader_trajectory"]["frequency_hz"]
         xi0 = np.concatenate([z1, np.zeros(9)])
@@ -233,7 +234,9 @@ class FollowerAgent:
         """DESO gain check (errata 7), computed on first use."""
         if self._gains is None:
             obs = self.sc["observer"]
-            self._gains = gain_report(self.form, tuple(obs["beta"]), self.dt, obs["substeps"])
+            self._gains = gain_report(
+                self.form, tuple(obs["beta"]), self.dt, obs["substeps"], obs["leader_anchor"]
+            )
         return self._gains
 
     def set_method(self, method: str) -> None:
@@ -270,7 +273,9 @@ class FollowerAgent:
             if got is None:
                 continue
             if is_nbr:
-                nbr_p[j], nbr_v[j], nbr_xi[j] = got
+                nbr_xi[j] = got[2]
+            if is_nbr or (is_lead and self.anchor):
+                nbr_p[j], nbr_v[j] = got[0], got[1]
             if is_lead:
                 lead_acc[j] = got[2][6:9]
         # --- controller at t_k --------------------------------------------------------

@@ -91,6 +91,18 @@ def regressor_t_times(z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float) -
     )
 
 
+def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dict[int, np.ndarray]:
+    """Innovation weights W_ij of follower i: P*_ij for bearing-graph neighbours (§3), plus
+    ``leader_anchor``·I₃ for every leader (an option, 0 = the paper's observer: the leaders'
+    broadcast position and the sensed relative position anchor the estimate directly;
+    this adds 2·leader_anchor to every eigenvalue of the observer's L_ff)."""
+    w: dict[int, np.ndarray] = {j: form.p_star[i, j].copy() for j in form.neighbours[i]}
+    if leader_anchor > 0.0:
+        for j in form.leader_idx:
+            w[j] = w.get(j, np.zeros((3, 3))) + leader_anchor * np.eye(3)
+    return w
+
+
 def _cont_matrix(dmat: np.ndarray, beta: tuple[float, float, float]) -> np.ndarray:
     """Continuous 18×18 matrix of X = [z1, z2, z3, b1, ḃ1, w] (w = Φζ̂ + u held)."""
     b1, b2, b3 = beta
@@ -153,7 +165,8 @@ class GainReport:
 
 
 def _network_transition(
-    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int, euler: bool
+    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int, euler: bool,
+    leader_anchor: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One-period error transition of all followers: E_{k+1} = T0 E_k + T1 E_nbr.
 
@@ -167,16 +180,16 @@ def _network_transition(
     t1 = np.zeros((9 * nf, 9 * nf))
     delta = dt / substeps
     for k, i in enumerate(fol):
-        dmat = sum(form.p_star[i, j] for j in form.neighbours[i])
+        wts = observer_weights(form, i, leader_anchor)
+        dmat = sum(wts.values())
         a = _cont_matrix(dmat, beta)
         m = np.eye(18) + a * delta if euler else expm(a * delta)
         mm = np.linalg.matrix_power(m, substeps)[:9, :15]
         t0[9 * k : 9 * k + 9, 9 * k : 9 * k + 9] = mm[:, :9]
-        for j in form.neighbours[i]:
+        for j, pij in wts.items():
             if j not in pos:
                 continue
             c = pos[j]
-            pij = form.p_star[i, j]
             t1[9 * k : 9 * k + 9, 9 * c : 9 * c + 3] += mm[:, 9:12] @ pij
             t1[9 * k : 9 * k + 9, 9 * c + 3 : 9 * c + 6] += mm[:, 12:15] @ pij
     return t0, t1
@@ -191,20 +204,26 @@ def _rho(t0: np.ndarray, t1: np.ndarray, stale: bool) -> float:
 
 
 def gain_report(
-    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int
+    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int,
+    leader_anchor: float = 0.0,
 ) -> GainReport:
-    """Per-channel and sampled-loop stability numbers of the DESO gains (errata 7)."""
+    """Per-channel and sampled-loop stability numbers of the DESO gains (errata 7).
+
+    The channels are the eigenvalues of the observer's Laplacian
+    ``L_ff + leader_anchor·n_leaders·I`` (= L_ff for the paper's observer).
+    """
     b1, b2, b3 = (float(x) for x in beta)
-    lam = np.asarray(form.lambda_ff, dtype=float)
+    lam = np.asarray(form.lambda_ff, dtype=float) + leader_anchor * len(form.leader_idx)
     margin = b1 * b2 * lam - b3
     poles = [np.roots([1.0, b1 * x, b2 * x, b3 * x]) for x in lam]
     max_re = float(max(np.max(p.real) for p in poles))
-    t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False)
+    la = leader_anchor
+    t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False, leader_anchor=la)
     rho_post = _rho(t0, t1, stale=False)
     rho_stale = _rho(t0, t1, stale=True)
-    e0, e1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=True)
+    e0, e1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=True, leader_anchor=la)
     rho_e = _rho(e0, e1, stale=False)
-    s0, s1 = _network_transition(form, (b1, b2, b3), dt, 1, euler=True)
+    s0, s1 = _network_transition(form, (b1, b2, b3), dt, 1, euler=True, leader_anchor=la)
     rho_s = _rho(s0, s1, stale=True)
     return GainReport(
         beta=(b1, b2, b3),
@@ -238,8 +257,10 @@ class DESO:
         ground_effect_height: float,
         z1: np.ndarray,
         z2: np.ndarray,
+        leader_anchor: float = 0.0,
     ) -> None:
         self.form = form
+        self.weights = observer_weights(form, index, leader_anchor)
         self.index = index
         self.beta = tuple(float(b) for b in beta)
         self.mu = float(mu)
@@ -248,7 +269,7 @@ class DESO:
         self.dt = float(dt)
         self.delta = self.dt / self.substeps
         self.h = float(ground_effect_height)
-        self.nbrs = list(form.neighbours[index])
+        self.nbrs = sorted(self.weights)
         self.z1 = np.array(z1, dtype=float)
         self.z2 = np.array(z2, dtype=float)
         self.z3 = np.zeros(3)
@@ -264,7 +285,7 @@ class DESO:
         if m is None:
             dmat = np.zeros((3, 3))
             for j in used:
-                dmat += self.form.p_star[self.index, j]
+                dmat += self.weights[j]
             full = expm(_cont_matrix(dmat, self.beta) * self.delta)
             mx, mw = full[:15, :15], full[:15, 15:18]
             s_ = self.substeps
@@ -303,7 +324,7 @@ class DESO:
             return
         a_s, g, dmat = self._matrices(used)
         idx = list(used)
-        pu = self.form.p_star[self.index, idx]  # (k,3,3)
+        pu = np.array([self.weights[j] for j in idx])  # (k,3,3) W_ij
         zp = np.array([nbr_p[j] for j in idx])
         zv = np.array([nbr_v[j] for j in idx])
         b1 = np.einsum("kij,kj->i", pu, zp - rel_pos[idx])

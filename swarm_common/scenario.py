@@ -86,6 +86,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "reference_gain": ("float", 0.0, 1e4, True, False),
         "init_pos_error_m": ("float", 0.0, 100.0, False, False),
         "init_vel_error_mps": ("float", 0.0, 100.0, False, False),
+        "leader_anchor": ("float", 0.0, 100.0, False, False),
     },
     "controller": {
         "method": ("str", ("rcbf", "apf", "none")),

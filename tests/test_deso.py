@@ -68,3 +68,11 @@ def test_deso_converges_known_answer(sc):
         assert np.allclose(obs[i].z1, p[i], atol=1e-3)
         assert np.allclose(obs[i].z2, 0.0, atol=1e-3)
         assert np.allclose(obs[i].lumped(), dist, atol=1e-3)
+
+
+def test_leader_anchor_shifts_channels(sc):
+    f = formation_from_scenario(sc)
+    g0 = gain_report(f, (24, 108, 108), 0.02, 4, 0.0)
+    g1 = gain_report(f, (24, 108, 108), 0.02, 4, 1.0)
+    assert np.allclose(g1.lambda_ff, g0.lambda_ff + 2.0)
+    assert g1.ok and g1.rho_post_update < g0.rho_post_update
