@@ -50,6 +50,7 @@ from offboard.sensing import Sensor
 
 METHODS = ("rcbf", "apf", "none")
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
+SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
 
 
 @dataclass
@@ -228,6 +229,9 @@ class FollowerAgent:
         self.yaw = 0.0
         self.fallbacks = 0
         self._gains: GainReport | None = None
+        self._last_seen = np.full(sc.n, -np.inf)
+        self._last_rp = np.zeros((sc.n, 3))
+        self._last_rv = np.zeros((sc.n, 3))
 
     @property
     def gains(self) -> GainReport:
@@ -290,9 +294,26 @@ class FollowerAgent:
         # first-order attitude lag of the inner loop on the moving reference
         a_ff = self.ref.a + self.tau_ff * self.ref.xi[9:12]
         clf = clf_terms(e1, e2, w, a_ff, ctl["kp"], ctl["kd"], ctl["clf_lambda"], ctl["ks"])
-        sel = np.nonzero(meas.valid)[0]
-        dp = -rel_p[sel]  # p_i − p_j
-        dv = -rel_v[sel]
+        # safety pairs: this step's measurements; a pair dropped this step but sensed within
+        # SENSE_HOLD_S is extrapolated with its last relative velocity (dropouts must not
+        # switch a barrier off)
+        valid = meas.valid
+        self._last_seen[valid] = t
+        self._last_rp[valid] = rel_p[valid]
+        self._last_rv[valid] = rel_v[valid]
+        held = ~valid & (t - self._last_seen <= SENSE_HOLD_S)
+        held[self.index] = False
+        if held.any():
+            age = (t - self._last_seen[held])[:, None]
+            rp_s, rv_s = rel_p.copy(), rel_v.copy()
+            rp_s[held] = self._last_rp[held] + age * self._last_rv[held]
+            rv_s[held] = self._last_rv[held]
+            sel = np.nonzero(valid | held)[0]
+        else:
+            rp_s, rv_s = rel_p, rel_v
+            sel = np.nonzero(valid)[0]
+        dp = -rp_s[sel]  # p_i − p_j
+        dv = -rv_s[sel]
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
         tau, dsafe = ctl["tau_safe_s"], ctl["d_safe_m"]
         if self.method == "none":
@@ -303,8 +324,11 @@ class FollowerAgent:
             h = barrier(dp, dv, tau, dsafe)
             side = tangential_term(dp, h, ctl["deadlock_gain"], ctl["deadlock_h_m2"])
             if self.method == "apf":
+                dd = np.einsum("ij,ij->i", dp, dv) / np.maximum(
+                    np.sqrt(np.einsum("ij,ij->i", dp, dp)), 1e-6
+                )  # range rate ḋ_ij (negative when closing)
                 u = apf_control(
-                    clf.u_nom, dp, meas.d_dot[sel], side, ctl["apf_gain"],
+                    clf.u_nom, dp, dd, side, ctl["apf_gain"],
                     ctl["apf_velocity_gain"], ctl["apf_radius_m"], self.u_lo, self.u_hi,
                 )
                 status.h_min = float(h.min()) if len(h) else float("inf")

@@ -89,3 +89,10 @@ def test_cli_run_json(tmp_path):
         r = subprocess.run(cmd[:6] + ["--duration", "0.1"], capture_output=True, text=True,
                            cwd=ROOT, timeout=120)
         assert r.returncode != 0 and "not yet available" in r.stderr
+
+
+def test_rcbf_safe_with_sensing_dropouts(sc):
+    s2 = sc.with_overrides(sensing={"dropout_prob": 0.1})
+    r = run_inproc(s2, "rcbf", duration=5.0)
+    assert r.metrics["min_distance_m"] >= s2["controller"]["d_safe_m"]
+    assert np.all(np.isfinite(r.series.u))
