@@ -149,7 +149,7 @@ class GainReport:
         return [
             f"DESO gains beta = {b[0]:g}/{b[1]:g}/{b[2]:g}, dt = {self.dt:g} s x "
             f"{self.substeps} sub-steps",
-            f"  lambda(L_ff) in [{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; "
+            f"  lambda(observer Laplacian) in [{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; "
             f"channel margin min(b1 b2 lam - b3) = {self.margin.min():.1f} "
             f"({'Hurwitz' if np.all(self.margin > 0) else 'NOT Hurwitz'}); "
             f"slowest pole {self.max_real_pole:.3f} 1/s",
