@@ -149,8 +149,14 @@ class _Predictor:
         return m
 
     def ingest(self, neighbours: dict[int, NeighbourEstimate], comm_ok: bool) -> None:
-        if comm_ok:
-            self.last.update(neighbours)
+        """Keep the newest estimate per agent (an out-of-order older one is ignored)."""
+        if not comm_ok:
+            return
+        last = self.last
+        for j, e in neighbours.items():
+            old = last.get(j)
+            if old is None or e.t >= old.t:
+                last[j] = e
 
     def get(self, agent_id: int, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """(p, v, ξ) of ``agent_id`` predicted to ``t``, or None if never received."""

@@ -132,15 +132,20 @@ class InnerLoopModel:
         pc = min(lim, max(-lim, sp.pitch))
         yc = sp.yaw
         fc = min(self.f_max, max(0.0, sp.thrust_n))
-        out = np.empty((n_sub, 3))
+        rows = []
         r, p, y = self.att
         f = self.f
-        for k in range(n_sub):
+        m, g = self.m, self.g
+        cos, sin = math.cos, math.sin
+        for _ in range(n_sub):
             r = rc + (r - rc) * self.a_rp
             p = pc + (p - pc) * self.a_rp
             y = yc + (y - yc) * self.a_y
             f = fc + (f - fc) * self.a_f
-            out[k] = accel_from_attitude(r, p, y, f, self.m, self.g)
+            cr, sr, cp, sp_, cy, sy = cos(r), sin(r), cos(p), sin(p), cos(y), sin(y)
+            k = f / m
+            rows.append(((cy * sp_ * cr + sy * sr) * k, (sy * sp_ * cr - cy * sr) * k,
+                         cp * cr * k - g))
         self.att = [r, p, y]
         self.f = f
-        return out
+        return np.array(rows)

@@ -278,6 +278,7 @@ class DESO:
         self.last_e1 = np.zeros(3)
         self.last_e2 = np.zeros(3)
         self.n_used = 0
+        self._f_hat: np.ndarray | None = None  # f̂ at the current state (set by lumped())
 
     def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_S (15×15), G (15×3S), D) for this neighbour set (cached)."""
@@ -297,7 +298,8 @@ class DESO:
 
     def lumped(self) -> np.ndarray:
         """Estimate of the lumped disturbance acceleration Φζ + d/m: f̂ + z3."""
-        return self.z3 + model_accel(self.z1, self.z2, self.zeta, self.h)
+        self._f_hat = model_accel(self.z1, self.z2, self.zeta, self.h)
+        return self.z3 + self._f_hat
 
     def update(
         self,
@@ -314,6 +316,7 @@ class DESO:
         nbr_p/nbr_v: neighbours' estimates (leaders' states) for t_k by index;
         u_sub (substeps, 3): applied virtual control per sub-step.
         """
+        f_cached, self._f_hat = self._f_hat, None
         used = tuple(j for j in self.nbrs if valid[j] and j in nbr_p)
         self.n_used = len(used)
         if not used:  # no relative information: dead-reckon with the model
@@ -331,7 +334,7 @@ class DESO:
         b1d = np.einsum("kij,kj->i", pu, zv - rel_vel[idx])
         b2 = b1d  # Σ P*(ẑ_j2 − ṙ_ij)
         z1, z2 = self.z1, self.z2
-        f_hat = model_accel(z1, z2, self.zeta, self.h)
+        f_hat = f_cached if f_cached is not None else model_accel(z1, z2, self.zeta, self.h)
         self.last_e1 = dmat @ z1 - b1
         self.last_e2 = dmat @ z2 - b2
         if self.mu > 0.0:
