@@ -194,11 +194,16 @@ def run_distributed(
             group.start(f"offboard-{a.id}", argv)
         last_progress = -1
         last_change = time.monotonic()
+        t_run0 = time.monotonic()
+        t_first: float | None = None
+        k_first = 0
         killed = False
         while True:
             time.sleep(0.05)
             with rec.lock:
                 k = rec.max_step
+            if k >= 1 and t_first is None:
+                t_first, k_first = time.monotonic(), k
             if k != last_progress:
                 last_change = time.monotonic()
                 last_progress = k
@@ -223,6 +228,12 @@ def run_distributed(
                 )
         if show_progress:
             sys.stderr.write("\n")
+        facts["run_wall_s"] = time.monotonic() - t_run0
+        if t_first is not None:
+            stepping = time.monotonic() - t_first
+            facts["stepping_wall_s"] = stepping
+            facts["stepping_realtime_factor"] = (steps - k_first) * sc.control_dt / stepping
+        facts["processes"] = group.usage()
     finally:
         group.stop()
         for s in subs:

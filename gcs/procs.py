@@ -41,6 +41,23 @@ class ProcessGroup:
         self.children.append(child)
         return child
 
+    def usage(self) -> dict[str, dict[str, float]]:
+        """CPU seconds (user+sys) and peak RSS (MiB) of each live child, from /proc."""
+        out: dict[str, dict[str, float]] = {}
+        tick = os.sysconf("SC_CLK_TCK")
+        for c in self.children:
+            try:
+                stat = Path(f"/proc/{c.proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+                cpu = (int(stat[11]) + int(stat[12])) / tick
+                rss = 0.0
+                for line in Path(f"/proc/{c.proc.pid}/status").read_text().splitlines():
+                    if line.startswith("VmHWM:"):
+                        rss = int(line.split()[1]) / 1024.0
+                out[c.name] = {"cpu_s": cpu, "peak_rss_mib": rss}
+            except (OSError, IndexError, ValueError):
+                continue
+        return out
+
     def dead(self) -> list[Child]:
         return [c for c in self.children if c.proc.poll() is not None]
 

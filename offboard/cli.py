@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 
 from offboard.daemon import DaemonConfig, OffboardDaemon
@@ -81,7 +82,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: cannot open MAVLink {url}: {exc}", file=sys.stderr)
         session.close()
         return 2
+    prof_path = os.environ.get("OFFBOARD_PROFILE")
     try:
+        if prof_path:  # developer aid: cProfile of the whole daemon run
+            import cProfile
+
+            prof = cProfile.Profile()
+            try:
+                return prof.runcall(daemon.run)
+            finally:
+                prof.dump_stats(f"{prof_path}.{args.agent}")
         return daemon.run()
     finally:
         session.close()

@@ -131,6 +131,7 @@ class OffboardDaemon:
         self.last_send = 0.0
         self.first_send = 0.0
         self.last_estimate: wire.Estimate | None = None
+        self.prev_estimate: wire.Estimate | None = None
         self.last_est_pub = 0.0
         self.stop = False
         self.late_steps = 0
@@ -165,9 +166,18 @@ class OffboardDaemon:
         return self.agent.deso.zeta if isinstance(self.agent, FollowerAgent) else None
 
     def _publish_estimate(self, est: wire.Estimate) -> None:
+        if self.last_estimate is not None and self.last_estimate.step != est.step:
+            self.prev_estimate = self.last_estimate
         self.last_estimate = est
         self.last_est_pub = time.monotonic()
         self.bus.publish_estimate(est)
+
+    def _republish_estimates(self) -> None:
+        """Re-send the last two estimates: a neighbour still at step k needs ours of k-1."""
+        for est in (self.prev_estimate, self.last_estimate):
+            if est is not None:
+                self.bus.publish_estimate(est)
+        self.last_est_pub = time.monotonic()
 
     def _send_answer(self) -> None:
         if self.answer is None:
@@ -194,7 +204,10 @@ class OffboardDaemon:
             got = self.bus.estimates.get(k - 1, {})
             return all(j in got for j in want)
 
-        if not self.bus.wait(have_all, self.cfg.neighbour_timeout):
+        # Step 0 waits for every agent's initial estimate as long as start-up may take
+        # (the others may still be importing); later a silent neighbour is declared lost.
+        timeout = self.cfg.heartbeat_timeout if k == 0 else self.cfg.neighbour_timeout
+        if not self.bus.wait(have_all, timeout):
             got = self.bus.estimates_at(k - 1)
             missing = [j for j in want if j not in got]
             for j in missing:
@@ -291,7 +304,7 @@ class OffboardDaemon:
                 if self.answer is not None and now - self.last_send > 0.05:
                     self._send_answer()  # keep streaming while the vehicle waits
                 if self.last_estimate is not None and now - self.last_est_pub > 0.1:
-                    self._publish_estimate(self.last_estimate)  # for late joiners
+                    self._republish_estimates()  # for late joiners / lost datagrams
                 self._startup_transitions()
         finally:
             self.link.close()
