@@ -220,9 +220,11 @@ class SafetyQP:
         # Shortcut (exact): if the box-projected nominal input already satisfies every
         # RCBF row and the CLF row with δ = 0, it is the QP's optimum.
         u_c = np.minimum(np.maximum(u_nom, self.u_lo), self.u_hi)
-        if (len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all())) and (
-            float(clf.lgv @ u_c) <= -clf.lfv - self.c * clf.V
-        ):
+        # The CLF row never demands more decrease than the box-projected nominal input
+        # achieves: otherwise, with the box active, the heavy slack weight ρ turns the QP
+        # into a bang-bang (sliding-mode) law on sign(s) that chatters between box corners.
+        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
+        if len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all()):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_c, "inactive", 0, us, h_min, clf.V, 0.0, 0.0, False)
         m = self.m
@@ -237,7 +239,7 @@ class SafetyQP:
         nrm = 1.0 + math.sqrt(float(clf.lgv @ clf.lgv))
         a[0, 0:3] = clf.lgv / nrm
         a[0, 3] = -1.0 / nrm
-        self.u[0] = (-clf.lfv - self.c * clf.V) / nrm
+        self.u[0] = clf_rhs / nrm
         a[1 : 1 + k, 0:3] = n_hat[:k]
         a[1 + k : 1 + m, 0:3] = 0.0
         self.l[1 : 1 + k] = rhs[:k]
