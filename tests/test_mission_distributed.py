@@ -1,0 +1,126 @@
+"""Distributed mission runs: real ``vehicle-sim`` + one ``offboard`` process per agent,
+MAVLink over loopback UDP, Zenoh through the mission runner's router (shortened missions).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from gcs.inproc import run_inproc  # noqa: E402
+from gcs.mission import MissionError, recorded_metrics, run_distributed  # noqa: E402
+from swarm_common.scenario import load_scenario  # noqa: E402
+from tests.conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
+
+pytestmark = pytest.mark.timeout(240)
+
+
+def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
+    """Same seed, same objects, same order: the two runs agree to float32 wire rounding.
+
+    Tolerance: positions cross the wire as float32 (|p| < 10 m -> rounding <= 5e-7 m), so
+    per-step truth may differ from the in-process float64 record by < 1e-6 m; the
+    minimum distance is carried in float64 and must agree to 1e-6 as the issue demands.
+    """
+    sc = load_scenario(CUBE8)
+    dur = 3.0
+    ref = run_inproc(sc, "rcbf", duration=dur)
+    rec, facts = run_distributed(
+        sc, tmp_path, "rcbf", None, dur, port_offset=free_port_offset(), show_progress=False
+    )
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
+    assert len(ser.t) == len(ref.series.t) == int(dur * 50)
+    assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
+    assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
+    # estimates received over Zenoh equal the in-process published ones (both float32)
+    np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)
+    # tracking error series (the basis of tracking_rms_m) agree within 1e-6 m
+    f = [sc.index_of(i) for i in sc.follower_ids]
+    e_d = np.linalg.norm(ser.p[:, f] - ser.p_des[:, f], axis=2)
+    e_i = np.linalg.norm(ref.series.p[:, f] - ref.series.p_des[:, f], axis=2)
+    assert np.sqrt(np.mean(e_d**2)) == pytest.approx(np.sqrt(np.mean(e_i**2)), abs=1e-6)
+    assert m["collisions"] == ref.metrics["collisions"] == 0
+    # every process ran and was measured
+    assert set(facts["processes"]) == {"vehicle-sim", *(f"offboard-{i}" for i in sc.ids)}
+    # the daemons' .tlog files are real MAVLink logs pymavlink reads
+    log = mavutil.mavlink_connection(str(tmp_path / "vehicle_3.tlog"))
+    kinds = set()
+    while (msg := log.recv_match()) is not None:
+        kinds.add(msg.get_type())
+    assert {"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "SET_ATTITUDE_TARGET"} <= kinds
+
+
+def test_killed_follower_enters_failsafe_and_others_stay_clear(tmp_path: Path) -> None:
+    sc = load_scenario(CUBE8)
+    victim = 5
+    rec, facts = run_distributed(
+        sc, tmp_path, "rcbf", None, 6.0, port_offset=free_port_offset(), kill_agent=victim,
+        kill_at=2.0, show_progress=False,
+    )
+    assert facts["failed_agents"] == [victim]
+    last = rec.truth[max(rec.truth)]
+    vi = sc.index_of(victim)
+    assert last.mode[vi] == "HOLD"  # the documented offboard-loss failsafe
+    assert all(m == "OFFBOARD" for i, m in enumerate(last.mode) if i != vi)
+    # after the kill, nobody comes within D_safe of the abandoned vehicle
+    d_safe = sc["controller"]["d_safe_m"]
+    after = [k for k in rec.truth if rec.truth[k].t >= 2.0]
+    dmin = min(
+        float(np.min(np.delete(np.linalg.norm(rec.truth[k].p - rec.truth[k].p[vi], axis=1), vi)))
+        for k in after
+    )
+    assert dmin >= d_safe
+    assert rec.truth[max(rec.truth)].collisions == 0
+
+
+def test_child_death_is_named_and_everything_stops(tmp_path: Path) -> None:
+    sc = load_scenario(CUBE8)
+    off = free_port_offset()
+    victim = 6
+
+    def killer() -> None:  # kill offboard 6 from outside once the run is stepping
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if (tmp_path / "offboard-6.log").exists() and "armed" in (
+                tmp_path / "offboard-6.log"
+            ).read_text():
+                subprocess.run(
+                    ["pkill", "-9", "-f", f"offboard.cli.*--agent {victim} --port-offset {off} "], check=False
+                )
+                return
+            time.sleep(0.2)
+
+    th = threading.Thread(target=killer, daemon=True)
+    th.start()
+    with pytest.raises(MissionError, match="offboard-6 exited"):
+        run_distributed(sc, tmp_path, "rcbf", None, 30.0, port_offset=off, show_progress=False)
+    th.join(5)
+    # nothing of this run is left running
+    out = subprocess.run(["pgrep", "-f", f"cli.*--port-offset {off} "], capture_output=True)
+    assert out.stdout.strip() == b""
+
+
+def test_cli_mission_run_json(tmp_path: Path) -> None:
+    off = free_port_offset()
+    out = subprocess.run(
+        [sys.executable, "-m", "gcs.cli", "mission", "run", CUBE8, "--duration", "1.0",
+         "--json", "--out", str(tmp_path), "--port-offset", str(off)],
+        cwd=ROOT, capture_output=True, text=True, timeout=180,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    doc = json.loads(out.stdout)  # exactly one JSON object on stdout
+    assert doc["mode"] == "lockstep" and doc["method"] == "rcbf"
+    assert doc["metrics"]["collisions"] == 0
+    assert (tmp_path / "metrics.json").exists() and (tmp_path / "series.npz").exists()
+    assert (tmp_path / "vehicle-sim.log").exists()
