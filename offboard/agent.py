@@ -50,6 +50,7 @@ from offboard.sensing import Sensor
 
 METHODS = ("rcbf", "apf", "none")
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
+W_SAFE = 0.5  # m/s², bound on the same estimate inside the RCBF rows
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
 
 
@@ -206,6 +207,7 @@ class FollowerAgent:
         self.deso = DESO(
             self.form, self.index, beta, obs["mu"], obs["sigma"], self.substeps, self.dt,
             sc["unmodeled"]["ground_effect_height_m"], z1, z2, obs["leader_anchor"],
+            tuple(obs["velocity_gain"]),
         )
         omega = 2.0 * math.pi * sc["leader_trajectory"]["frequency_hz"]
         xi0 = np.concatenate([z1, np.zeros(9)])
@@ -245,7 +247,8 @@ class FollowerAgent:
         if self._gains is None:
             obs = self.sc["observer"]
             self._gains = gain_report(
-                self.form, tuple(obs["beta"]), self.dt, obs["substeps"], obs["leader_anchor"]
+                self.form, tuple(obs["beta"]), self.dt, obs["substeps"], obs["leader_anchor"],
+                tuple(obs["velocity_gain"]),
             )
         return self._gains
 
@@ -345,8 +348,12 @@ class FollowerAgent:
                 if lead_acc and np.any(lm):
                     for r in np.nonzero(lm)[0]:
                         a_other[r] = lead_acc.get(int(sel[r]), 0.0)
+                # own disturbance in the barrier rows: the estimate saturated at W_SAFE, so a
+                # start-up transient of the observer cannot cancel a safety row
+                wsn = math.sqrt(float(w @ w))
+                w_safe = w * (W_SAFE / wsn) if wsn > W_SAFE else w
                 n_hat, rhs, h = rcbf_rows(
-                    dp, dv, w, a_other, share, tau, dsafe, ctl["gamma"], h=h
+                    dp, dv, w_safe, a_other, share, tau, dsafe, ctl["gamma"], h=h
                 )
                 brake = -w - self.qp.brake_gain * z2
                 res: QPResult = self.qp.solve(clf.u_nom + side, clf, n_hat, rhs, h, brake)

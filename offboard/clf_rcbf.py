@@ -236,10 +236,16 @@ class SafetyQP:
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, "fallback", -1, us, h_min, clf.V, 0.0, 0.0, True)
         a = self._a
-        nrm = 1.0 + math.sqrt(float(clf.lgv @ clf.lgv))
-        a[0, 0:3] = clf.lgv / nrm
-        a[0, 3] = -1.0 / nrm
-        self.u[0] = clf_rhs / nrm
+        # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
+        # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the RCBF rows)
+        nrm = math.sqrt(float(clf.lgv @ clf.lgv))
+        if nrm > 1e-9:
+            a[0, 0:3] = clf.lgv / nrm
+            self.u[0] = clf_rhs / nrm
+        else:
+            a[0, 0:3] = 0.0
+            self.u[0] = np.inf
+        a[0, 3] = -1.0
         a[1 : 1 + k, 0:3] = n_hat[:k]
         a[1 + k : 1 + m, 0:3] = 0.0
         self.l[1 : 1 + k] = rhs[:k]

@@ -4,15 +4,17 @@ Follower i estimates its position z1, velocity z2 and lumped residual z3 (the ex
 state x3: external disturbance and whatever the adaptive model does not explain)::
 
     ż1 = z2                      − β1 e1
-    ż2 = z3 + Φ(z1, z2) ζ̂ + u    − β2 e1          (stable sign, errata 5)
-    ż3 =                         − β3 e1
+    ż2 = z3 + Φ(z1, z2) ζ̂ + u    − β2 e1 − κ2 e2  (stable sign, errata 5)
+    ż3 =                         − β3 e1 − κ3 e2
     ζ̂̇  = −μ Φᵀ(z1, z2) e2 − μ σ ζ̂                 (σ-modification; sign as errata 5)
 
 with the innovations of errata 6 (``r_ij = p_j − p_i`` measured as ``g_ij d_ij``)::
 
     e1 = Σ_j P*_ij [(z1 − ẑ_j1) + r_ij]      e2 = Σ_j P*_ij [(z2 − ẑ_j2) + ṙ_ij]
 
-where ẑ_j is neighbour j's communicated estimate (a leader's broadcast state).
+where ẑ_j is neighbour j's communicated estimate (a leader's broadcast state). κ2 = κ3 = 0
+is the paper's observer (e2 only drives ζ̂); κ > 0 (``observer.velocity_gain``) also feeds
+the measured relative velocity back into the velocity and extended states.
 Rewriting ``e1 = D z1 − b1(τ)``, ``D = Σ_j P*_ij`` and ``b1 = Σ_j P*_ij (ẑ_j1 − r_ij)``, the
 data enter through b1 only. Over one control period [t_k, t_k+1] b1 is a first-order hold
 ``b1(τ) = b1 + τ ḃ1`` (neighbours' estimates extrapolated with their ẑ_j2, the relative
@@ -103,9 +105,16 @@ def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dic
     return w
 
 
-def _cont_matrix(dmat: np.ndarray, beta: tuple[float, float, float]) -> np.ndarray:
-    """Continuous 18×18 matrix of X = [z1, z2, z3, b1, ḃ1, w] (w = Φζ̂ + u held)."""
+def _cont_matrix(
+    dmat: np.ndarray, beta: tuple[float, float, float], kappa: tuple[float, float] = (0.0, 0.0)
+) -> np.ndarray:
+    """Continuous 18×18 matrix of X = [z1, z2, z3, b1, ḃ1, w] (w = Φζ̂ + u held).
+
+    ``e1 = D z1 − b1(τ)``; the velocity innovation is ``e2 = D z2 − ḃ1`` (ḃ1 = Σ W(ẑ_j2 −
+    ṙ_ij) is both the slope of b1 and the velocity datum), entering ż2, ż3 with κ2, κ3.
+    """
     b1, b2, b3 = beta
+    k2, k3 = kappa
     a = np.zeros((18, 18))
     i3 = np.eye(3)
     a[0:3, 0:3] = -b1 * dmat
@@ -118,6 +127,11 @@ def _cont_matrix(dmat: np.ndarray, beta: tuple[float, float, float]) -> np.ndarr
     a[6:9, 0:3] = -b3 * dmat
     a[6:9, 9:12] = b3 * i3
     a[9:12, 12:15] = i3
+    if k2 or k3:
+        a[3:6, 3:6] = -k2 * dmat
+        a[3:6, 12:15] = k2 * i3
+        a[6:9, 3:6] = -k3 * dmat
+        a[6:9, 12:15] = k3 * i3
     return a
 
 
@@ -142,7 +156,7 @@ class GainReport:
 
     @property
     def ok(self) -> bool:
-        return bool(np.all(self.margin > 0) and self.rho_post_update < 1.0)
+        return bool(self.max_real_pole < 0.0 and self.rho_post_update < 1.0)
 
     def lines(self) -> list[str]:
         b = self.beta
@@ -166,7 +180,7 @@ class GainReport:
 
 def _network_transition(
     form: Formation, beta: tuple[float, float, float], dt: float, substeps: int, euler: bool,
-    leader_anchor: float = 0.0,
+    leader_anchor: float = 0.0, kappa: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[np.ndarray, np.ndarray]:
     """One-period error transition of all followers: E_{k+1} = T0 E_k + T1 E_nbr.
 
@@ -182,7 +196,7 @@ def _network_transition(
     for k, i in enumerate(fol):
         wts = observer_weights(form, i, leader_anchor)
         dmat = sum(wts.values())
-        a = _cont_matrix(dmat, beta)
+        a = _cont_matrix(dmat, beta, kappa)
         m = np.eye(18) + a * delta if euler else expm(a * delta)
         mm = np.linalg.matrix_power(m, substeps)[:9, :15]
         t0[9 * k : 9 * k + 9, 9 * k : 9 * k + 9] = mm[:, :9]
@@ -205,7 +219,7 @@ def _rho(t0: np.ndarray, t1: np.ndarray, stale: bool) -> float:
 
 def gain_report(
     form: Formation, beta: tuple[float, float, float], dt: float, substeps: int,
-    leader_anchor: float = 0.0,
+    leader_anchor: float = 0.0, kappa: tuple[float, float] = (0.0, 0.0),
 ) -> GainReport:
     """Per-channel and sampled-loop stability numbers of the DESO gains (errata 7).
 
@@ -215,15 +229,23 @@ def gain_report(
     b1, b2, b3 = (float(x) for x in beta)
     lam = np.asarray(form.lambda_ff, dtype=float) + leader_anchor * len(form.leader_idx)
     margin = b1 * b2 * lam - b3
-    poles = [np.roots([1.0, b1 * x, b2 * x, b3 * x]) for x in lam]
+    k2, k3 = (float(k) for k in kappa)
+    poles = [
+        np.linalg.eigvals(np.array([[-b1 * x, 1.0, 0.0], [-b2 * x, -k2 * x, 1.0],
+                                    [-b3 * x, -k3 * x, 0.0]]))
+        for x in lam
+    ]
     max_re = float(max(np.max(p.real) for p in poles))
     la = leader_anchor
-    t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False, leader_anchor=la)
+    t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False, leader_anchor=la,
+                                 kappa=(k2, k3))
     rho_post = _rho(t0, t1, stale=False)
     rho_stale = _rho(t0, t1, stale=True)
-    e0, e1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=True, leader_anchor=la)
+    e0, e1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=True, leader_anchor=la,
+                                 kappa=(k2, k3))
     rho_e = _rho(e0, e1, stale=False)
-    s0, s1 = _network_transition(form, (b1, b2, b3), dt, 1, euler=True, leader_anchor=la)
+    s0, s1 = _network_transition(form, (b1, b2, b3), dt, 1, euler=True, leader_anchor=la,
+                                 kappa=(k2, k3))
     rho_s = _rho(s0, s1, stale=True)
     return GainReport(
         beta=(b1, b2, b3),
@@ -258,9 +280,11 @@ class DESO:
         z1: np.ndarray,
         z2: np.ndarray,
         leader_anchor: float = 0.0,
+        kappa: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         self.form = form
         self.weights = observer_weights(form, index, leader_anchor)
+        self.kappa = (float(kappa[0]), float(kappa[1]))
         self.index = index
         self.beta = tuple(float(b) for b in beta)
         self.mu = float(mu)
@@ -287,7 +311,7 @@ class DESO:
             dmat = np.zeros((3, 3))
             for j in used:
                 dmat += self.weights[j]
-            full = expm(_cont_matrix(dmat, self.beta) * self.delta)
+            full = expm(_cont_matrix(dmat, self.beta, self.kappa) * self.delta)
             mx, mw = full[:15, :15], full[:15, 15:18]
             s_ = self.substeps
             a_s = np.linalg.matrix_power(mx, s_)

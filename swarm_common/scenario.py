@@ -87,6 +87,7 @@ SCHEMA: dict[str, dict[str, Spec]] = {
         "init_pos_error_m": ("float", 0.0, 100.0, False, False),
         "init_vel_error_mps": ("float", 0.0, 100.0, False, False),
         "leader_anchor": ("float", 0.0, 100.0, False, False),
+        "velocity_gain": ("vec", 2, 0.0, 1e4),
     },
     "controller": {
         "method": ("str", ("rcbf", "apf", "none")),

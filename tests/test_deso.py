@@ -41,7 +41,8 @@ def test_gain_report_paper_gains_unstable_ours_ok(sc):
     assert any("Hurwitz" in line for line in ours.lines())
 
 
-def test_deso_converges_known_answer(sc):
+@pytest.mark.parametrize("anchor,kappa", [(0.0, (0.0, 0.0)), (1.0, (1.0, 4.0))])
+def test_deso_converges_known_answer(sc, anchor, kappa):
     """Static formation, exact relative measurements, constant disturbance: z → truth."""
     f = formation_from_scenario(sc)
     p = f.desired_positions(sc.initial_positions()[f.leader_idx])
@@ -51,7 +52,8 @@ def test_deso_converges_known_answer(sc):
     obs = {}
     for i in f.follower_idx:
         obs[i] = DESO(f, i, (24, 108, 108), 0.0, 0.15, sub, dt, 0.8,
-                      p[i] + np.array([0.3, -0.2, 0.25]), np.array([0.1, 0.0, -0.1]))
+                      p[i] + np.array([0.3, -0.2, 0.25]), np.array([0.1, 0.0, -0.1]),
+                      anchor, kappa)
     rel_p = {i: p - p[i] for i in f.follower_idx}
     rel_v = {i: np.zeros_like(p) for i in f.follower_idx}
     valid = np.ones(sc.n, bool)
@@ -61,8 +63,8 @@ def test_deso_converges_known_answer(sc):
         for li in f.leader_idx:
             pub[li] = (p[li], v[li])
         for i in f.follower_idx:
-            nb = {j: pub[j][0] for j in f.neighbours[i]}
-            nv = {j: pub[j][1] for j in f.neighbours[i]}
+            nb = {j: pub[j][0] for j in obs[i].nbrs}
+            nv = {j: pub[j][1] for j in obs[i].nbrs}
             obs[i].update(rel_p[i], rel_v[i], valid, nb, nv, u_sub)
     for i in f.follower_idx:
         assert np.allclose(obs[i].z1, p[i], atol=1e-3)
