@@ -152,6 +152,7 @@ class GainReport:
     rho_euler_post: float  # explicit Euler sub-steps, post-update exchange
     rho_single_euler_stale: float  # one Euler step per period, one-step stale (naive)
     paper_condition: bool  # β2 > β1 + β3/λ_min (paper §3)
+    kappa: tuple[float, float] = (0.0, 0.0)  # velocity-innovation gains κ2, κ3
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -161,11 +162,11 @@ class GainReport:
     def lines(self) -> list[str]:
         b = self.beta
         return [
-            f"DESO gains beta = {b[0]:g}/{b[1]:g}/{b[2]:g}, dt = {self.dt:g} s x "
-            f"{self.substeps} sub-steps",
+            f"DESO gains beta = {b[0]:g}/{b[1]:g}/{b[2]:g}, kappa = {self.kappa[0]:g}/"
+            f"{self.kappa[1]:g}, dt = {self.dt:g} s x {self.substeps} sub-steps",
             f"  lambda(observer Laplacian) in [{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; "
             f"channel margin min(b1 b2 lam - b3) = {self.margin.min():.1f} "
-            f"({'Hurwitz' if np.all(self.margin > 0) else 'NOT Hurwitz'}); "
+            f"({'Hurwitz' if np.all(self.margin > 0) else 'NOT Hurwitz'} without kappa); "
             f"slowest pole {self.max_real_pole:.3f} 1/s",
             f"  paper condition b2 > b1 + b3/lam_min: {self.paper_condition}",
             f"  fastest channel b1*lam_max = {self.fastest_bandwidth:.1f} rad/s; "
@@ -261,6 +262,7 @@ def gain_report(
         rho_euler_post=rho_e,
         rho_single_euler_stale=rho_s,
         paper_condition=bool(b2 > b1 + b3 / float(lam[0])),
+        kappa=(k2, k3),
     )
 
 
