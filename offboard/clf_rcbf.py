@@ -28,8 +28,8 @@ QP (§4.4), variables x = [u (3), δ, σ]::
           n̂_jᵀ u + σ ≥ r_j      for every sensed pair (rows normalised, n̂ = Δp/‖Δp‖)
           u_lo ≤ u ≤ u_hi,  σ ≥ 0
 
-σ is an exact-penalty relaxation (M = 10⁶ ≫ the rows' multipliers, including what the
-soft CLF row transfers, 2ρδ): σ = 0 whenever the
+σ is an exact-penalty relaxation (linear weight M = max(10³, 50ρ) above the rows'
+multipliers, incl. the CLF row's 2ρδ; quadratic weight 100): σ = 0 whenever the
 hard RCBF rows and the box are jointly feasible; otherwise the QP returns the
 least-violating input and the step is counted as a fallback (errata 14). If OSQP itself
 fails, the fallback is braking ``u = clip(−w − k_b z2)``. u is never NaN.
@@ -166,8 +166,8 @@ class SafetyQP:
         u_hi: np.ndarray,
         rho: float,
         clf_c: float,
-        violation_weight: float = 1e6,
-        violation_linear: float = 1e6,
+        violation_weight: float = 100.0,
+        violation_linear: float | None = None,
         eps: float = 1e-4,
         brake_gain: float = 2.0,
     ) -> None:
@@ -176,7 +176,8 @@ class SafetyQP:
         self.u_hi = np.asarray(u_hi, dtype=float)
         self.c = float(clf_c)
         self.brake_gain = brake_gain
-        self.lin_sigma = float(violation_linear)
+        # exact penalty: M must exceed every multiplier, incl. the CLF row's 2ρδ (δ ≤ ~16 m/s²)
+        self.lin_sigma = float(violation_linear or max(1e3, 50.0 * rho))
         m = self.m
         nrow = 1 + m + 3 + 1
         self.nrow = nrow
