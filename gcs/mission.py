@@ -165,6 +165,8 @@ def run_distributed(
             router_ep,
             "--duration",
             f"{duration + 1.0}",
+            "--stats-out",
+            str(out_dir / "vehicle-sim-stats.json"),
             "--step-timeout",
             "1.0",  # > the daemons' neighbour timeout (0.3 s): a dead agent costs one wait
             *seed_args,
@@ -245,6 +247,12 @@ def run_distributed(
                 pass
         router.close()
     facts["wall_s"] = time.monotonic() - t_wall0
+    stats_path = out_dir / "vehicle-sim-stats.json"
+    if stats_path.exists():
+        try:
+            facts["simulator"] = json.loads(stats_path.read_text())
+        except ValueError:
+            pass
     if killed:
         facts["failed_agents"] = list(facts["killed_agents"])
     return rec, facts

@@ -15,8 +15,9 @@ Start-up like a real offboard application: wait for the heartbeat, stream setpoi
 switch to OFFBOARD (retried until acknowledged), arm (retried). A neighbour that stays
 silent for ``neighbour_timeout`` seconds is declared lost and no longer waited for
 (its data is then predicted by the agent, then dropped); it rejoins when it speaks.
-In real-time mode (no ``--lockstep``) the daemon ticks on the wall clock and uses the
-latest data it holds.
+In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, but uses
+the latest truth and neighbour data it holds instead of waiting (stale neighbours are
+predicted by the agent); skipped stamps are counted as late steps.
 """
 
 from __future__ import annotations
@@ -275,8 +276,6 @@ class OffboardDaemon:
             for line in self.agent.gains.lines():
                 log.info("agent %d: %s", self.id, line)
         self._publish_estimate(estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
-        period = 1.0 / self.control_hz
-        next_tick = time.monotonic()
         try:
             while not self.stop:
                 self.link.poll(0.002)
@@ -285,21 +284,14 @@ class OffboardDaemon:
                     log.error("agent %d: vehicle heartbeat lost", self.id)
                     return 3
                 odo = self.link.odometry
-                if cfg.lockstep:
-                    if odo is not None:
-                        k = int(round(odo.time_usec * 1e-6 * self.control_hz))
-                        if k > self.last_step:
-                            t = k / self.control_hz
-                            if self.control_step(k, t, int(round(t * 1000))):
-                                self.last_step = k
-                elif odo is not None and now >= next_tick:
-                    next_tick += period
-                    if now - next_tick > period:
-                        self.late_steps += 1
-                        next_tick = now + period
-                    t = odo.time_usec * 1e-6
-                    self.last_step += 1
-                    self.control_step(self.last_step, t, int(odo.time_usec // 1000))
+                if odo is not None:  # one control step per new ODOMETRY stamp (both modes)
+                    k = int(round(odo.time_usec * 1e-6 * self.control_hz))
+                    if k > self.last_step:
+                        t = k / self.control_hz
+                        if self.control_step(k, t, int(round(t * 1000))):
+                            if k > self.last_step + 1 and self.last_step >= 0:
+                                self.late_steps += k - self.last_step - 1
+                            self.last_step = k
                 now = time.monotonic()
                 if self.answer is not None and now - self.last_send > 0.05:
                     self._send_answer()  # keep streaming while the vehicle waits

@@ -52,6 +52,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--vehicles", type=int, default=None, metavar="K",
                     help="simulate only the first K agents of the scenario")  # fmt: skip
     ap.add_argument("--quiet", action="store_true", help="no event log on stderr")
+    ap.add_argument("--stats-out", default=None, metavar="PATH",
+                    help="write run statistics (setpoint latency, timeouts) as JSON at exit")
     return ap
 
 
@@ -90,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         duration=args.duration,
         vehicles=args.vehicles,
         verbose=not args.quiet,
+        stats_out=args.stats_out,
     )
     try:
         server = SimServer(sc, opts)

@@ -53,6 +53,7 @@ class SimOptions:
     duration: float | None = None
     vehicles: int | None = None
     verbose: bool = True
+    stats_out: str | None = None
 
 
 def restrict(sc: Scenario, k: int | None) -> Scenario:
@@ -375,12 +376,47 @@ class SimServer:
                     self.log(f"duration {o.duration} s reached")
                     break
         finally:  # the counters are printed even with --quiet
+            if o.stats_out:
+                self.write_stats(o.stats_out)
             print(
                 f"[vehicle-sim t={self.clock.t():.2f}] {self.summary()}",
                 file=sys.stderr,
                 flush=True,
             )
         return 0
+
+    def latency_stats(self) -> dict:
+        """Setpoint-to-odometry latency over all vehicles (ms) and the late fraction."""
+        lat = np.array([x for v in self.vehicles for x in v.latency]) * 1000.0
+        if lat.size == 0:
+            return {"n": 0}
+        q = np.percentile(lat, [50, 90, 99])
+        return {
+            "n": int(lat.size),
+            "p50_ms": float(q[0]),
+            "p90_ms": float(q[1]),
+            "p99_ms": float(q[2]),
+            "max_ms": float(lat.max()),
+            "late_fraction": float(np.mean(lat > self.dt * 1000.0)),
+        }
+
+    def write_stats(self, path: str) -> None:
+        import json
+
+        doc = {
+            "mode": "lockstep" if self.opts.lockstep else "realtime",
+            "steps": self.clock.k,
+            "lockstep_timeouts": self.lockstep_timeouts,
+            "collisions": self.dyn.collisions,
+            "latency": self.latency_stats(),
+            "relocks": getattr(self.clock, "relocks", 0),
+            "summary": self.summary(),
+        }
+        try:
+            with open(path, "w") as f:
+                json.dump(doc, f, indent=2)
+        except OSError as exc:
+            self.log(f"cannot write stats to {path}: {exc}")
 
     def summary(self) -> str:
         tot: dict[str, int] = {}

@@ -19,6 +19,7 @@ landing, time stamps (``time_boot_ms`` = sim time).
 from __future__ import annotations
 
 import math
+import time
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -174,6 +175,10 @@ class Vehicle:
         # lockstep
         self.expect_ms = 0  # the step a setpoint must echo (server sets it)
         self.answered_ms: int | None = None
+        # setpoint-to-odometry latency: wall time each ODOMETRY stamp was built, and the
+        # delay until the first valid setpoint echoing that stamp arrived (seconds)
+        self.odom_wall: dict[int, float] = {}
+        self.latency: deque[float] = deque(maxlen=200_000)
         self.ever_answered = False
         self.consecutive_timeouts = 0
         self.wait_suspended = False
@@ -367,6 +372,9 @@ class Vehicle:
                 self.ctr.setpoints_rejected += 1
                 return
             thrust = frames.norm_to_thrust(th, self.dyn.f_max)
+        w = self.odom_wall.pop(int(m.time_boot_ms), None)
+        if w is not None:
+            self.latency.append(time.monotonic() - w)
         if self.cfg.lockstep:
             if int(m.time_boot_ms) != self.expect_ms:
                 self.ctr.setpoints_stale += 1
@@ -546,6 +554,11 @@ class Vehicle:
 
     def odometry(self, sim_t: float):
         i = self.idx
+        stamp = int(round(sim_t * 1000))
+        if stamp not in self.odom_wall:  # a re-send keeps the first send time
+            if len(self.odom_wall) > 256:
+                self.odom_wall.clear()
+            self.odom_wall[stamp] = time.monotonic()
         pn = frames.enu_to_ned(self.dyn.p[i])
         vn = frames.enu_to_ned(self.dyn.v[i])
         q = self._q_ned()
