@@ -237,6 +237,7 @@ class FollowerAgent:
         self.yaw = 0.0
         self.fallbacks = 0
         self._gains: GainReport | None = None
+        self._hold_dropped = sc["sensing"]["dropout_prob"] > 0.0
         self._last_seen = np.full(sc.n, -np.inf)
         self._last_rp = np.zeros((sc.n, 3))
         self._last_rv = np.zeros((sc.n, 3))
@@ -307,12 +308,14 @@ class FollowerAgent:
         # SENSE_HOLD_S is extrapolated with its last relative velocity (dropouts must not
         # switch a barrier off)
         valid = meas.valid
-        self._last_seen[valid] = t
-        self._last_rp[valid] = rel_p[valid]
-        self._last_rv[valid] = rel_v[valid]
-        held = ~valid & (t - self._last_seen <= SENSE_HOLD_S)
-        held[self.index] = False
-        if held.any():
+        held = None
+        if self._hold_dropped:
+            self._last_seen[valid] = t
+            self._last_rp[valid] = rel_p[valid]
+            self._last_rv[valid] = rel_v[valid]
+            held = ~valid & (t - self._last_seen <= SENSE_HOLD_S)
+            held[self.index] = False
+        if held is not None and held.any():
             age = (t - self._last_seen[held])[:, None]
             rp_s, rv_s = rel_p.copy(), rel_v.copy()
             rp_s[held] = self._last_rp[held] + age * self._last_rv[held]
