@@ -14,8 +14,19 @@ from collections.abc import Callable
 from pathlib import Path
 
 METHODS = ("rcbf", "apf", "none")
-# Set by the distributed-run module: ``runner(args, scenario) -> exit code``.
+# ``runner(args, scenario) -> exit code`` for ``mission run`` without ``--inproc``
+# (gcs.mission.cli_run); None = not available.
 DISTRIBUTED_RUNNER: Callable[[argparse.Namespace, object], int] | None = None
+
+
+def _distributed_runner() -> Callable[[argparse.Namespace, object], int] | None:
+    if DISTRIBUTED_RUNNER is not None:
+        return DISTRIBUTED_RUNNER
+    try:
+        from gcs.mission import cli_run
+    except ImportError:
+        return None
+    return cli_run
 
 
 def _load(path: str):
@@ -39,7 +50,7 @@ def _json_default(x):
 def cmd_mission_run(args: argparse.Namespace) -> int:
     sc = _load(args.scenario)
     if not args.inproc:
-        runner = DISTRIBUTED_RUNNER
+        runner = _distributed_runner()
         if runner is None:
             print("gcs mission run: distributed runs: not yet available (use --inproc)",
                   file=sys.stderr)
@@ -123,6 +134,11 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--duration", type=float, default=None, help="seconds (default: scenario)")
     r.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
+    d = r.add_argument_group("distributed runs (without --inproc)")
+    d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
+    d.add_argument("--port-offset", type=int, default=0, help="added to every UDP/TCP port")
+    d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
+    d.add_argument("--kill-at", type=float, default=None, help="... at this mission time (s)")
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")
     c.add_argument("scenario")

@@ -85,7 +85,7 @@ def test_cli_run_json(tmp_path):
     assert (tmp_path / "metrics.json").exists() and (tmp_path / "series.npz").exists()
     import gcs.cli
 
-    if gcs.cli.DISTRIBUTED_RUNNER is None:
+    if gcs.cli._distributed_runner() is None:
         r = subprocess.run(cmd[:6] + ["--duration", "0.1"], capture_output=True, text=True,
                            cwd=ROOT, timeout=120)
         assert r.returncode != 0 and "not yet available" in r.stderr
