@@ -1,4 +1,7 @@
-"""``gcs`` command line: ``gcs mission run|compare SCENARIO ...``.
+"""``gcs`` command line: ``gcs mission run|compare SCENARIO``, ``gcs router``, ``gcs dashboard``.
+
+``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
+``--inproc``; the seed sweep of ``compare --seeds N`` always runs in process.
 
 Subcommands are registered in :data:`COMMANDS` as ``name -> add_parser(subparsers)``;
 each ``add_parser`` sets ``func`` on its parser (``func(args) -> int``). To add a command
@@ -79,12 +82,34 @@ def _run_one(job: tuple[str, str, int, float | None]) -> dict:
     return run_inproc(load_scenario(path), method, seed=seed, duration=duration).metrics
 
 
+def _gain_lines(sc) -> list[str]:
+    from offboard.agent import FollowerAgent, make_agent
+
+    ag = make_agent(sc, sc.follower_ids[0])
+    return ag.gains.lines() if isinstance(ag, FollowerAgent) else []
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    from gcs.router import run_router
+
+    return run_router(args.listen)
+
+
+def add_router_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("router", help="run a Zenoh router (multi-machine setups)")
+    p.add_argument("--listen", nargs="+", default=["tcp/127.0.0.1:7447"], metavar="EP",
+                   help="endpoints to listen on (default tcp/127.0.0.1:7447)")
+    p.set_defaults(func=cmd_router)
+
+
+def add_dashboard(sub: argparse._SubParsersAction) -> None:
+    from gcs.dashboard.cli import add_dashboard_parser
+
+    add_dashboard_parser(sub)
+
+
 def cmd_mission_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario)
-    if not args.inproc:
-        print("gcs mission compare: distributed runs: not yet available (use --inproc)",
-              file=sys.stderr)
-        return 2
     from gcs.inproc import run_inproc
     from gcs.report import compare_table, seeds_table, write_report
     from offboard.bearing import formation_from_scenario
@@ -94,12 +119,35 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     series: dict[str, dict] = {}
     gains: list[str] = []
     for m in METHODS:
-        print(f"running {m} ...", file=sys.stderr)
-        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
-        res.save(out / m)
-        metrics[m] = res.metrics
-        series[m] = res.series.as_dict()
-        gains = res.gains
+        if args.inproc:
+            print(f"running {m} in process ...", file=sys.stderr)
+            res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
+            res.save(out / m)
+            metrics[m] = res.metrics
+            series[m] = res.series.as_dict()
+            gains = res.gains
+            continue
+        from gcs.mission import MissionError, run_and_score
+
+        duration = float(args.duration or sc["scenario"]["duration_s"])
+        print(f"running {m}: vehicle-sim + {sc.n} offboard daemons, lockstep ...",
+              file=sys.stderr)
+        try:
+            doc = run_and_score(sc, out / m, m, args.seed, duration,
+                                port_offset=args.port_offset, show_progress=True)
+        except KeyboardInterrupt:
+            print("\ngcs mission compare: interrupted; every process stopped", file=sys.stderr)
+            return 130
+        except MissionError as exc:
+            print(f"\ngcs mission compare: {exc}", file=sys.stderr)
+            return 1
+        metrics[m] = doc["metrics"]
+        import numpy as np
+
+        with np.load(out / m / "series.npz") as z:
+            series[m] = {k: z[k] for k in z.files}
+        if not gains:
+            gains = _gain_lines(sc)
     seeds = None
     if args.seeds and args.seeds > 1:
         from concurrent.futures import ProcessPoolExecutor
@@ -148,11 +196,14 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--seeds", type=int, default=0, help="also sweep N seeds per method")
     c.add_argument("--jobs", type=int, default=2, help="parallel processes for the sweep")
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
+    c.add_argument("--port-offset", type=int, default=0, help="distributed: shift every port")
     c.set_defaults(func=cmd_mission_compare)
 
 
 COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
     "mission": add_mission_parser,
+    "router": add_router_parser,
+    "dashboard": add_dashboard,
 }
 
 

@@ -140,7 +140,7 @@ def run_distributed(
         raise MissionError(str(exc)) from None
     steps = int(round(duration * sc["scenario"]["control_hz"]))
     rec = Recorder(sc, steps, seed=seed)
-    swarm = f"{sc.name}-{port_offset}"
+    swarm = sc.name
     subs = [
         router.declare_subscriber(wire.key_truth(swarm), rec.on_truth),
         router.declare_subscriber(wire.key_estimate(swarm, "*"), rec.on_estimate),

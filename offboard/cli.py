@@ -11,6 +11,7 @@ import argparse
 import logging
 import os
 import sys
+import time
 
 from offboard.daemon import DaemonConfig, OffboardDaemon
 from swarm_common.ports import vehicle_ports
@@ -87,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         if prof_path:  # developer aid: cProfile of the whole daemon run
             import cProfile
 
-            prof = cProfile.Profile()
+            prof = cProfile.Profile(time.process_time)
             try:
                 return prof.runcall(daemon.run)
             finally:

@@ -96,7 +96,8 @@ def test_child_death_is_named_and_everything_stops(tmp_path: Path) -> None:
                 tmp_path / "offboard-6.log"
             ).read_text():
                 subprocess.run(
-                    ["pkill", "-9", "-f", f"offboard.cli.*--agent {victim} --port-offset {off} "], check=False
+                    ["pkill", "-9", "-f", f"offboard.cli.*--agent {victim} --port-offset {off} "],
+                    check=False,
                 )
                 return
             time.sleep(0.2)

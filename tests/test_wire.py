@@ -79,7 +79,8 @@ def test_keys() -> None:
 
 def test_port_scheme_px4_compatible_and_collision_free_to_255() -> None:
     v1 = vehicle_ports(1)
-    assert (v1.api_local, v1.api_remote, v1.gcs_local, v1.gcs_remote) == (14580, 14540, 18570, 14550)
+    got = (v1.api_local, v1.api_remote, v1.gcs_local, v1.gcs_remote)
+    assert got == (14580, 14540, 18570, 14550)
     assert vehicle_ports(10).api_remote == 14549
     used: set[int] = set()
     for i in range(1, 256):

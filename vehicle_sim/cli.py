@@ -38,7 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--port-offset", type=int, default=0, help="shift every UDP/TCP port")
     ap.add_argument("--bind", default="127.0.0.1", help="address the vehicle sockets bind")
     ap.add_argument("--remote-host", default="127.0.0.1", help="where default streams go")
-    ap.add_argument("--swarm", default="default", help="swarm name in the Zenoh keys")
+    ap.add_argument("--swarm", default=None,
+                    help="swarm name in the Zenoh keys (default: the scenario name)")
     ap.add_argument("--zenoh-listen", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
@@ -80,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         port_offset=args.port_offset,
         bind_host=args.bind,
         remote_host=args.remote_host,
-        swarm=args.swarm,
+        swarm=args.swarm or sc.name,
         zenoh=not args.no_zenoh,
         zenoh_mode=args.zenoh_mode,
         zenoh_listen=args.zenoh_listen,

@@ -30,7 +30,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument(
         "--swarm",
         default=None,
-        help="swarm name in the Zenoh keys (default: 'default'; with --launch the scenario name)",
+        help="swarm name in the Zenoh keys (default: the scenario name)",
     )
     p.add_argument(
         "--zenoh-connect",
@@ -115,7 +115,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
             if why:
                 raise RuntimeError(why)
         else:
-            swarm = args.swarm or "default"
+            swarm = args.swarm or sc.name
         link = MavlinkGcs(port_offset=offset).start()
         if not args.no_zenoh:
             if launch is not None:
