@@ -163,7 +163,9 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     form = formation_from_scenario(sc)
     d_safe = sc["controller"]["d_safe_m"]
     path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
-                        gains, seeds)
+                        gains, seeds,
+                        mode="in-process" if args.inproc else
+                        "distributed (vehicle-sim + one offboard process per agent, lockstep)")
     print(compare_table(metrics, d_safe))
     if seeds:
         print(seeds_table(seeds, d_safe))

@@ -168,6 +168,7 @@ def write_report(
     d_safe: float,
     gains: list[str],
     seeds: dict[str, list[dict]] | None = None,
+    mode: str = "in-process",
 ) -> Path:
     """Write report.md and the PNG plots into ``out_dir``; returns the report path."""
     d = Path(out_dir)
@@ -181,7 +182,7 @@ def write_report(
     lines = [
         f"# Mission comparison: {scenario_name}",
         "",
-        "Paper Table 3 beside our in-process runs (same scenario, seed, sensing noise, ζ).",
+        f"Paper Table 3 beside our {mode} runs (same scenario, seed, sensing noise, ζ).",
         "Energy: the paper's column is compared with ∫Σ‖u_i‖²dt over the followers (errata 15).",
         "",
         compare_table(metrics, d_safe),
