@@ -34,6 +34,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zenoh-connect", nargs="*", default=None, metavar="EP")
     ap.add_argument("--zenoh-listen", nargs="*", default=None, metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
+    ap.add_argument("--manual-start", action="store_true",
+                    help="stream setpoints but leave arming and OFFBOARD to the operator (GCS)")
     ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
     ap.add_argument("--log-level", default="INFO")
     return ap
@@ -71,6 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_connect=connect,
         zenoh_listen=args.zenoh_listen or [],
         zenoh_mode=args.zenoh_mode,
+        manual_start=args.manual_start,
     )
     try:
         session = open_session(mode=cfg.zenoh_mode, connect=connect, listen=cfg.zenoh_listen)

@@ -109,6 +109,7 @@ class DaemonConfig:
     zenoh_connect: list[str] = field(default_factory=list)
     zenoh_listen: list[str] = field(default_factory=list)
     zenoh_mode: str = "client"
+    manual_start: bool = False  # leave arming / OFFBOARD to the operator
 
 
 class OffboardDaemon:
@@ -246,7 +247,7 @@ class OffboardDaemon:
     # -- main loop ----------------------------------------------------------------------
     def _startup_transitions(self) -> None:
         """Switch to OFFBOARD and arm once setpoints have streamed for a while."""
-        if self.answer is None or self.offboard_state == "done":
+        if self.answer is None or self.offboard_state == "done" or self.cfg.manual_start:
             return
         if time.monotonic() - self.first_send < self.cfg.stream_before_offboard:
             return

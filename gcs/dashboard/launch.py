@@ -82,6 +82,7 @@ def daemon_argv(
         "--swarm",
         swarm,
         "--realtime",
+        "--manual-start",  # the operator arms and starts the formation from the dashboard
         "--zenoh-connect",
         router_endpoint(offset),
     ]

@@ -150,7 +150,7 @@ def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_t
         return "NO-OFB"
     if est_health not in (None, "ok"):
         return f"EST:{est_health}"[:8]
-    if row.qp_status not in (None, "solved", "ok", "off", "none", "-"):
+    if row.qp_status in ("relaxed", "fallback"):  # offboard.clf_rcbf.QPResult.status
         return "QP-FB"
     return "ok"
 
