@@ -32,6 +32,9 @@ class ProcessGroup:
         f = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
         full_env = dict(os.environ)
         full_env.setdefault("PYTHONUNBUFFERED", "1")
+        # small-matrix numpy: BLAS worker threads only burn CPU the other processes need
+        full_env.setdefault("OPENBLAS_NUM_THREADS", "1")
+        full_env.setdefault("OMP_NUM_THREADS", "1")
         if env:
             full_env.update(env)
         proc = subprocess.Popen(

@@ -279,7 +279,8 @@ class OffboardDaemon:
         self._publish_estimate(estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
         try:
             while not self.stop:
-                self.link.poll(0.002)
+                self.link.poll(0.001)  # ODOMETRY wakes it at once
+                self.bus.pump()
                 now = time.monotonic()
                 if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:
                     log.error("agent %d: vehicle heartbeat lost", self.id)

@@ -38,7 +38,9 @@ def _drain(sub: Any, handler: Callable[[Any], None]) -> None:
 class SwarmBus:
     """Typed publish/subscribe of one agent over an open Zenoh session."""
 
-    def __init__(self, session: Any, swarm: str, agent_id: int) -> None:
+    def __init__(
+        self, session: Any, swarm: str, agent_id: int, threaded: bool = False
+    ) -> None:
         self.session = session
         self.swarm = swarm
         self.agent_id = agent_id
@@ -52,15 +54,20 @@ class SwarmBus:
         # Subscriptions deliver into Rust FIFO channels drained by Python threads, so
         # Zenoh's own threads never wait for the GIL (with Python callbacks they do, and
         # every put() of this process then stalls behind them: 1.9 ms median, measured).
+        self.threaded = threaded
         self._subs = []
+        self._polled: list[tuple[Any, Callable[[Any], None]]] = []
         for key, handler in (
             (wire.key_truth(swarm), self._on_truth),
             (wire.key_estimate(swarm, "*"), self._on_estimate),
             (wire.key_cmd(swarm, "*"), self._on_command),
         ):
             sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_DEPTH))
-            th = threading.Thread(target=_drain, args=(sub, handler), daemon=True)
-            th.start()
+            if threaded:
+                th = threading.Thread(target=_drain, args=(sub, handler), daemon=True)
+                th.start()
+            else:  # drained by the main thread in pump(): no GIL hand-offs at all
+                self._polled.append((sub, handler))
             self._subs.append(sub)
         self._pub_est = session.declare_publisher(wire.key_estimate(swarm, agent_id))
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
@@ -110,9 +117,33 @@ class SwarmBus:
             self.cond.notify_all()
 
     # -- main-thread API ---------------------------------------------------------------
+    def pump(self) -> int:
+        """Handle every sample waiting in the channels (polled mode); returns how many."""
+        n = 0
+        for sub, handler in self._polled:
+            while True:
+                try:
+                    sample = sub.try_recv()
+                except Exception:  # noqa: BLE001 - undeclared / session closed
+                    break
+                if sample is None:
+                    break
+                handler(sample)
+                n += 1
+        return n
+
     def wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
-        """Wait (holding the condition) until ``predicate()`` or ``timeout`` seconds."""
+        """Wait until ``predicate()`` or ``timeout`` seconds (polls the channels every
+        0.2 ms in polled mode, waits on the condition in threaded mode)."""
         deadline = time.monotonic() + timeout
+        if not self.threaded:
+            while True:
+                self.pump()
+                if predicate():
+                    return True
+                if time.monotonic() >= deadline:
+                    return False
+                time.sleep(0.0002)
         with self.cond:
             while not predicate():
                 remaining = deadline - time.monotonic()

@@ -74,7 +74,9 @@ def _pack_vec(a: Any) -> bytes:
 def _unpack_vec(b: Any, shape: tuple[int, ...]) -> np.ndarray:
     if not isinstance(b, bytes | bytearray):
         raise WireError("vector field is not bytes")
-    n = int(np.prod(shape))
+    n = 1
+    for dim in shape:  # not np.prod: this runs ~10 times per message (measured 20 µs each)
+        n *= dim
     if len(b) != 4 * n:
         raise WireError(f"vector field has {len(b)} bytes, expected {4 * n}")
     return np.frombuffer(b, dtype="<f4").astype(np.float64).reshape(shape)
