@@ -180,11 +180,11 @@ def encode(obj: Payload) -> bytes:
             "step": int(obj.step),
             "t": float(obj.t),
             "role": obj.role,
-            "z1": _pack_vec(obj.z1),
-            "z2": _pack_vec(obj.z2),
-            "z3": _pack_vec(obj.z3),
-            "xi": _pack_vec(obj.xi),
-            "zeta": _pack_vec(obj.zeta),
+            # z1 | z2 | z3 | xi | zeta: one float32 block (27 values), one unpack per message
+            "x": _pack_vec(np.concatenate([
+                np.ravel(obj.z1), np.ravel(obj.z2), np.ravel(obj.z3), np.ravel(obj.xi),
+                np.ravel(obj.zeta),
+            ])),
         }
     elif isinstance(obj, Status):
         d = {
@@ -251,16 +251,17 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 min_dist=float(d.get("md", float("inf"))),
             )
         if kind == "est":
+            x = _unpack_vec(d["x"], (27,))
             return Estimate(
                 id=int(d["id"]),
                 step=int(d["step"]),
                 t=float(d["t"]),
                 role=str(d["role"]),
-                z1=_unpack_vec(d["z1"], (3,)),
-                z2=_unpack_vec(d["z2"], (3,)),
-                z3=_unpack_vec(d["z3"], (3,)),
-                xi=_unpack_vec(d["xi"], (12,)),
-                zeta=_unpack_vec(d["zeta"], (6,)),
+                z1=x[0:3],
+                z2=x[3:6],
+                z3=x[6:9],
+                xi=x[9:21],
+                zeta=x[21:27],
             )
         if kind == "status":
             return Status(
