@@ -16,6 +16,7 @@ mission: $(STAMP)
 	$(VENV)/bin/gcs mission compare scenarios/cube8.toml --out runs/compare
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check .
 	$(VENV)/bin/python -m pytest -q
 
 lint: $(STAMP)
@@ -23,3 +24,6 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(VENV)/bin/python bench/bench_dynamics.py
+	$(VENV)/bin/python bench/bench_mavlink.py
+	$(VENV)/bin/python bench/bench_control.py
+	$(VENV)/bin/python bench/bench_distributed.py
