@@ -43,11 +43,9 @@ def _load(path: str):
 
 
 def _json_default(x):
-    import numpy as np
+    from gcs.mission import _json_default as jd
 
-    if isinstance(x, np.generic):
-        return x.item()
-    raise TypeError(type(x))
+    return jd(x)
 
 
 def cmd_mission_run(args: argparse.Namespace) -> int:

@@ -38,30 +38,10 @@ import numpy as np
 from scipy.linalg import expm
 
 from offboard.bearing import Formation
+from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
-N_ZETA = 6
 ZETA_BOUND = 5.0  # ‖ζ̂‖ ≤ ζ̄ (§2.2 bound), enforced by projection
 V_EVAL_MAX = 20.0  # m/s, velocity at which f̂ is evaluated is clipped (overflow guard)
-
-
-def regressor(p: np.ndarray, v: np.ndarray, ground_effect_height: float) -> np.ndarray:
-    """Φ(p, v): (..., 3, 6) regressor of f̃ = Φ ζ (paper §2.2); equals the simulator's.
-
-    Columns: bias (1,1,1); linear drag −v; quadratic drag −‖v‖v; cubic damping −v∘v∘v;
-    ground effect exp(−max(z,0)/h) e_z; cross-coupling e_z × v.
-    """
-    p = np.asarray(p, dtype=float)
-    v = np.asarray(v, dtype=float)
-    shape = np.broadcast_shapes(p.shape, v.shape)
-    out = np.zeros((*shape[:-1], 3, N_ZETA))
-    out[..., :, 0] = 1.0
-    out[..., :, 1] = -v
-    out[..., :, 2] = -np.linalg.norm(v, axis=-1, keepdims=True) * v
-    out[..., :, 3] = -(v**3)
-    out[..., 2, 4] = np.exp(-np.maximum(p[..., 2], 0.0) / ground_effect_height)
-    out[..., 0, 5] = -v[..., 1]
-    out[..., 1, 5] = v[..., 0]
-    return out
 
 
 def model_accel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:

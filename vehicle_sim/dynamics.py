@@ -25,28 +25,7 @@ import math
 import numpy as np
 
 from swarm_common.scenario import Scenario
-
-N_ZETA = 6
-
-
-def regressor(p: np.ndarray, v: np.ndarray, ground_effect_height: float) -> np.ndarray:
-    """Φ(p, v): (..., 3, 6) regressor of the unmodeled dynamics f̃ = Φ ζ (paper §2.2).
-
-    Columns: constant bias (1,1,1); linear drag −v; quadratic drag −‖v‖v;
-    nonlinear (cubic) damping −v∘v∘v; ground effect exp(−z/h) e_z; cross-coupling e_z × v.
-    """
-    p = np.asarray(p, dtype=float)
-    v = np.asarray(v, dtype=float)
-    shape = np.broadcast_shapes(p.shape, v.shape)
-    out = np.zeros((*shape[:-1], 3, N_ZETA))
-    out[..., :, 0] = 1.0
-    out[..., :, 1] = -v
-    out[..., :, 2] = -np.linalg.norm(v, axis=-1, keepdims=True) * v
-    out[..., :, 3] = -(v**3)
-    out[..., 2, 4] = np.exp(-np.maximum(p[..., 2], 0.0) / ground_effect_height)
-    out[..., 0, 5] = -v[..., 1]
-    out[..., 1, 5] = v[..., 0]
-    return out
+from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
 
 def external_disturbance(t: float, amplitude_n: float, omega: float) -> np.ndarray:
