@@ -304,6 +304,14 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
                 ser.h_min[r, i] = st.h_min
                 ser.solve_us[r, i] = st.qp_solve_us
                 ser.fallback[r, i] = st.qp_status in ("relaxed", "fallback")
+    # Real time: an agent may skip a stamp (late cycle), leaving a row without its
+    # message; hold the last value (lockstep runs have none missing).
+    for arr in (ser.z1, ser.z2, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
+        for r in range(1, kk):
+            gap = np.isnan(arr[r])
+            if np.any(gap):
+                arr[r][gap] = arr[r - 1][gap]
+    ser.u[np.isnan(ser.u)] = 0.0  # before a daemon's first status: no command known
     return ser
 
 
