@@ -168,7 +168,7 @@ def run_distributed(
             "--stats-out",
             str(out_dir / "vehicle-sim-stats.json"),
             "--step-timeout",
-            "1.0",  # > the daemons' neighbour timeout (0.3 s): a dead agent costs one wait
+            "1.0",  # > the daemons' neighbour timeout (0.45 s): a dead agent costs one wait
             *seed_args,
         ]
         if not realtime:

@@ -103,7 +103,7 @@ class DaemonConfig:
     tlog: str | None = None
     heartbeat_timeout: float = 30.0
     truth_timeout: float = 2.0
-    neighbour_timeout: float = 0.3  # must stay below vehicle-sim --step-timeout
+    neighbour_timeout: float = 0.45  # must stay below vehicle-sim --step-timeout (1.0 s)
     vehicle_lost_timeout: float = 5.0
     stream_before_offboard: float = 0.6
     zenoh_connect: list[str] = field(default_factory=list)
