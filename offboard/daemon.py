@@ -124,7 +124,7 @@ class OffboardDaemon:
         self.others = [i for i in sc.ids if i != cfg.agent_id]
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed)
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, tlog=cfg.tlog)
-        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)
+        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)  # polled: measured faster
         self.control_hz = int(sc["scenario"]["control_hz"])
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []

@@ -52,7 +52,7 @@ def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
     assert np.sqrt(np.mean(e_d**2)) == pytest.approx(np.sqrt(np.mean(e_i**2)), abs=1e-6)
     assert m["collisions"] == ref.metrics["collisions"] == 0
     # every process ran and was measured
-    assert set(facts["processes"]) == {"vehicle-sim", *(f"offboard-{i}" for i in sc.ids)}
+    assert {"vehicle-sim", *(f"offboard-{i}" for i in sc.ids)} <= set(facts["processes"])
     # the daemons' .tlog files are real MAVLink logs pymavlink reads
     log = mavutil.mavlink_connection(str(tmp_path / "vehicle_3.tlog"))
     kinds = set()
