@@ -116,8 +116,14 @@ class SwarmDynamics:
     def lumped_accel(self, t: float | None = None) -> np.ndarray:
         """(N,3) true lumped disturbance Φ(p,v)ζ + d(t)/m (m/s²), what the DESO estimates."""
         tt = self.t if t is None else t
-        phi = regressor(self.p, self.v, self.ge_height)
-        f = np.einsum("nij,nj->ni", phi, self.zeta)
+        # Φ(p, v) ζ written out per column (same sum as regressor(...) @ ζ, without
+        # building the (N,3,6) array: this runs at every physics step)
+        v, z = self.v, self.zeta
+        speed = np.sqrt(np.einsum("ij,ij->i", v, v))[:, None]
+        f = z[:, 0:1] - (z[:, 1:2] + z[:, 2:3] * speed) * v - z[:, 3:4] * v**3
+        f[:, 2] += z[:, 4] * np.exp(-np.maximum(self.p[:, 2], 0.0) / self.ge_height)
+        f[:, 0] -= z[:, 5] * v[:, 1]
+        f[:, 1] += z[:, 5] * v[:, 0]
         return f + external_disturbance(tt, self.dist_amp, self.dist_omega)[None, :] / self.mass
 
     def step(self) -> None:
