@@ -417,7 +417,17 @@ class LeaderAgent:
         self.v_hat = sc.agents[self.index].velocity.astype(float).copy()
         self.d_hat = np.zeros(3)
         self.yaw = 0.0
+        self.start_time = 0.0
         self.gains = None
+
+    def reference(self, t: float) -> np.ndarray:
+        """ξ_L(t) = [p, ṗ, p̈, p⃛] of the leader trajectory; held at p_L(0) before
+        ``start_time`` (0 in lockstep; in real time the daemon sets the first whole
+        trajectory period after arming, the same for both leaders, so the motion starts
+        smoothly and the leaders stay in step)."""
+        if t < self.start_time:
+            return np.concatenate([self.traj.state(0.0)[0:3], np.zeros(9)])
+        return self.traj.state(t)
 
     def set_method(self, method: str) -> None:
         if method not in METHODS:
@@ -442,7 +452,7 @@ class LeaderAgent:
     ) -> AgentOutput:
         p = np.asarray(truth_p[self.index], dtype=float)
         v = np.asarray(truth_v[self.index], dtype=float)
-        ref = self.traj.state(t)
+        ref = self.reference(t)
         a_ff = ref[6:9] + self.veh["tau_rollpitch_s"] * ref[9:12]  # lag compensation
         u = a_ff - self.d_hat + self.kp * (ref[0:3] - p) + self.kd * (ref[3:6] - v)
         u = np.clip(u, self.u_lo, self.u_hi)
@@ -457,7 +467,7 @@ class LeaderAgent:
         a = u_sub.mean(axis=0) + self.d_hat
         est = NeighbourEstimate(
             self.id, t + self.dt, p + v * self.dt + 0.5 * a * self.dt**2, v + a * self.dt,
-            self.d_hat.copy(), self.traj.state(t + self.dt), True,
+            self.d_hat.copy(), self.reference(t + self.dt), True,
         )
         status = AgentStatus(method=self.method, comm_ok=comm_ok)
         return AgentOutput(

@@ -23,6 +23,7 @@ predicted by the agent); skipped stamps are counted as late steps.
 from __future__ import annotations
 
 import logging
+import math
 import signal
 import time
 from dataclasses import dataclass, field
@@ -30,7 +31,13 @@ from typing import Any
 
 import numpy as np
 
-from offboard.agent import AgentOutput, FollowerAgent, NeighbourEstimate, make_agent
+from offboard.agent import (
+    AgentOutput,
+    FollowerAgent,
+    LeaderAgent,
+    NeighbourEstimate,
+    make_agent,
+)
 from offboard.mavlink_link import VehicleLink
 from offboard.zenoh_link import SwarmBus
 from swarm_common import wire
@@ -139,6 +146,7 @@ class OffboardDaemon:
         self.late_steps = 0
         self.steps_done = 0
         self.offboard_state = "init"
+        self.trajectory_started = False
 
     # -- helpers ----------------------------------------------------------------------
     def comm_ok(self, t: float) -> bool:
@@ -163,6 +171,20 @@ class OffboardDaemon:
             elif cmd.kind == "outage" and cmd.duration_s > 0:
                 self.extra_outages.append((t, t + cmd.duration_s))
                 log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
+
+    def _maybe_start_trajectory(self, t: float) -> None:
+        """Real time: hold p_L(0) until flying in OFFBOARD, then start the trajectory at
+        the next whole period (both leaders pick the same instant)."""
+        assert isinstance(self.agent, LeaderAgent)
+        if self.trajectory_started:
+            return
+        if self.link.armed and self.link.in_offboard:
+            period = 1.0 / float(self.sc["leader_trajectory"]["frequency_hz"])
+            self.agent.start_time = math.ceil(t / period) * period
+            self.trajectory_started = True
+            log.info("agent %d: trajectory starts at t = %.2f s", self.id, self.agent.start_time)
+        else:
+            self.agent.start_time = math.inf
 
     def _zeta(self) -> np.ndarray | None:
         return self.agent.deso.zeta if isinstance(self.agent, FollowerAgent) else None
@@ -234,6 +256,8 @@ class OffboardDaemon:
             if truth is None:
                 return False
         self._apply_commands(t)
+        if not self.cfg.lockstep and isinstance(self.agent, LeaderAgent):
+            self._maybe_start_trajectory(t)
         received, comm_ok = self._neighbours_for(k, t)
         neighbours = {j: estimate_from_wire(e) for j, e in received.items()}
         out = self.agent.step(k, t, truth.p, truth.v, neighbours, comm_ok)
