@@ -126,9 +126,10 @@ class _Predictor:
     """
 
     def __init__(self, omega: float, dt: float, fol_gains: tuple[float, float],
-                 lead_gains: tuple[float, float]) -> None:
+                 lead_gains: tuple[float, float], max_age: float = math.inf) -> None:
         self.omega = omega
         self.dt = dt
+        self.max_age = max_age  # older data is dropped, not predicted (communication.max_age_s)
         self.gains = {False: fol_gains, True: lead_gains}
         self.last: dict[int, NeighbourEstimate] = {}
 
@@ -160,9 +161,11 @@ class _Predictor:
                 last[j] = e
 
     def get(self, agent_id: int, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """(p, v, ξ) of ``agent_id`` predicted to ``t``, or None if never received."""
+        """(p, v, ξ) of ``agent_id`` predicted to ``t``; None if never received or older
+        than ``max_age`` (the agent then runs without that neighbour: the conservative
+        behaviour for a silent or dead neighbour; onboard sensing still feeds the RCBF)."""
         e = self.last.get(agent_id)
-        if e is None:
+        if e is None or t - e.t > self.max_age + 1e-9:
             return None
         n = int(round((t - e.t) / self.dt))
         if n <= 0:
@@ -217,7 +220,7 @@ class FollowerAgent:
         lam, ks = ctl["clf_lambda"], ctl["ks"]
         self.pred = _Predictor(
             omega, self.dt, (ks * lam + ctl["kp"] / ctl["kd"], lam + ks),
-            (ctl["leader_kp"], ctl["leader_kd"]),
+            (ctl["leader_kp"], ctl["leader_kd"]), sc["communication"]["max_age_s"],
         )
         self.inner = InnerLoopModel(veh, self.dt / self.substeps)
         self.u_lo, self.u_hi = control_box(sc)
