@@ -125,3 +125,21 @@ def test_cli_mission_run_json(tmp_path: Path) -> None:
     assert doc["metrics"]["collisions"] == 0
     assert (tmp_path / "metrics.json").exists() and (tmp_path / "series.npz").exists()
     assert (tmp_path / "vehicle-sim.log").exists()
+
+
+def test_cli_compare_distributed_writes_report(tmp_path: Path) -> None:
+    """The README's main command, shortened: three distributed runs and the report."""
+    off = free_port_offset()
+    out = subprocess.run(
+        [sys.executable, "-m", "gcs.cli", "mission", "compare", CUBE8, "--duration", "1.0",
+         "--out", str(tmp_path), "--port-offset", str(off)],
+        cwd=ROOT, capture_output=True, text=True, timeout=240,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    report = (tmp_path / "report.md").read_text()
+    assert "distributed" in report and "Proposed RCBF" in report and "0.75" in report
+    for m in ("rcbf", "apf", "none"):
+        doc = json.loads((tmp_path / m / "metrics.json").read_text())
+        assert doc["method"] == m and doc["mode"] == "lockstep"
+        assert (tmp_path / m / "vehicle_1.tlog").stat().st_size > 0
+    assert (tmp_path / "min_distance.png").stat().st_size > 0
