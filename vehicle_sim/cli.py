@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import signal
 import sys
 
@@ -109,7 +110,16 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    prof_path = os.environ.get("VEHICLE_SIM_PROFILE")  # developer aid: cProfile dump
     try:
+        if prof_path:
+            import cProfile
+
+            prof = cProfile.Profile()
+            try:
+                return prof.runcall(server.run)
+            finally:
+                prof.dump_stats(prof_path)
         return server.run()
     finally:
         server.close()

@@ -191,7 +191,10 @@ class SimServer:
                 self.log(f"zenoh put failed: {exc}")
 
     def send_odometry(self, v: Vehicle) -> None:
-        v.outbox.append((v.odometry(self.clock.t()), None))
+        """The lockstep clock signal: ODOMETRY stamped t_k on the API link only (the
+        controller's link; a GCS gets LOCAL_POSITION_NED at its stream rate). Sending it
+        to the GCS port too doubled the simulator's sendto calls, its largest CPU cost."""
+        v.outbox.append((v.odometry(self.clock.t()), ("api", None)))
 
     def integrate(self) -> None:
         """Step k -> k+1: state machines, commands, physics, then announce step k+1."""
@@ -308,6 +311,8 @@ class SimServer:
                 if dest is None:
                     for name, ln in links.items():
                         ln.send_bytes(buf, dests[name])
+                elif dest[1] is None:  # every destination of one link
+                    links[dest[0]].send_bytes(buf, dests[dest[0]])
                 else:
                     links[dest[0]].send_bytes(buf, [], dest[1])
         self.log_events()
