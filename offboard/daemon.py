@@ -40,7 +40,7 @@ from offboard.agent import (
 )
 from offboard.mavlink_link import VehicleLink
 from offboard.zenoh_link import SwarmBus
-from swarm_common import wire
+from swarm_common import px4, wire
 from swarm_common.scenario import Scenario
 
 log = logging.getLogger("offboard")
@@ -155,14 +155,6 @@ class OffboardDaemon:
                 return False
         return True
 
-    def _mode_name(self) -> str:
-        main = (self.link.custom_mode >> 16) & 0xFF
-        sub = (self.link.custom_mode >> 24) & 0xFF
-        names = {6: "OFFBOARD", 3: "POSCTL", 2: "ALTCTL", 1: "MANUAL"}
-        if main == 4:
-            return {3: "HOLD", 6: "LAND"}.get(sub, "AUTO")
-        return names.get(main, f"MODE{main}")
-
     def _apply_commands(self, t: float) -> None:
         for cmd in self.bus.pop_commands():
             if cmd.kind == "method" and cmd.method in ("rcbf", "apf", "none"):
@@ -264,7 +256,8 @@ class OffboardDaemon:
         self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
         self._send_answer()
         self._publish_estimate(estimate_to_wire(out.estimate, k, self._zeta()))
-        self.bus.publish_status(status_to_wire(self.id, k, t, out, self._mode_name(), comm_ok))
+        mode = px4.short_name(self.link.custom_mode)
+        self.bus.publish_status(status_to_wire(self.id, k, t, out, mode, comm_ok))
         self.steps_done += 1
         return True
 

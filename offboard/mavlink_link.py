@@ -19,10 +19,10 @@ from typing import Any, BinaryIO
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from swarm_common import px4  # noqa: E402
+
 mavlink = mavutil.mavlink
 
-PX4_MAIN_OFFBOARD = 6
-PX4_CUSTOM_OFFBOARD = PX4_MAIN_OFFBOARD << 16
 COMP_ONBOARD = 191
 # SET_ATTITUDE_TARGET type_mask: ignore the three body rates (bits 0..2)
 ATT_MASK_IGNORE_RATES = 0b0000_0111
@@ -107,7 +107,7 @@ class VehicleLink:
     # -- high level ---------------------------------------------------------------------
     @property
     def in_offboard(self) -> bool:
-        return (self.custom_mode >> 16) & 0xFF == PX4_MAIN_OFFBOARD
+        return px4.split_mode(self.custom_mode)[0] == px4.MAIN_OFFBOARD
 
     def wait_heartbeat(self, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -153,7 +153,7 @@ class VehicleLink:
     def set_offboard(self) -> int | None:
         return self.command(
             mavlink.MAV_CMD_DO_SET_MODE,
-            [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | 128, PX4_MAIN_OFFBOARD, 0],
+            [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | 128, px4.MAIN_OFFBOARD, 0],
         )
 
     def arm(self) -> int | None:

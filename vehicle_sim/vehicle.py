@@ -26,26 +26,19 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink2
 
-from swarm_common import frames
+from swarm_common import frames, px4
 from vehicle_sim.failsafe_controller import FailsafeController
 
 M = mavlink2
 
-# -- PX4 modes -------------------------------------------------------------------------
-PX4_MAIN_POSCTL = 3
-PX4_MAIN_AUTO = 4
-PX4_MAIN_OFFBOARD = 6
-PX4_SUB_AUTO_LOITER = 3
-PX4_SUB_AUTO_LAND = 6
-
-CUSTOM_MODE = {
-    "POSCTL": PX4_MAIN_POSCTL << 16,
-    "OFFBOARD": PX4_MAIN_OFFBOARD << 16,
-    "HOLD": (PX4_MAIN_AUTO << 16) | (PX4_SUB_AUTO_LOITER << 24),
-    "LAND": (PX4_MAIN_AUTO << 16) | (PX4_SUB_AUTO_LAND << 24),
-}
-
-FORCE_MAGIC = 21196  # ARM_DISARM param2: force (PX4)
+# -- PX4 modes (swarm_common/px4.py) --------------------------------------------------
+PX4_MAIN_POSCTL = px4.MAIN_POSCTL
+PX4_MAIN_AUTO = px4.MAIN_AUTO
+PX4_MAIN_OFFBOARD = px4.MAIN_OFFBOARD
+PX4_SUB_AUTO_LOITER = px4.SUB_AUTO_LOITER
+PX4_SUB_AUTO_LAND = px4.SUB_AUTO_LAND
+CUSTOM_MODE = px4.CUSTOM_MODE
+FORCE_MAGIC = px4.FORCE_MAGIC
 
 # MAVLink ids used below
 MSG_HEARTBEAT = M.MAVLINK_MSG_ID_HEARTBEAT

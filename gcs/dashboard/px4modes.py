@@ -7,32 +7,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-MAIN_MODES = {
-    1: "MANUAL",
-    2: "ALTCTL",
-    3: "POSCTL",
-    4: "AUTO",
-    5: "ACRO",
-    6: "OFFBOARD",
-    7: "STABILIZED",
-    8: "RATTITUDE",
-    9: "TERMINATION",
-}
-AUTO_SUB_MODES = {
-    1: "READY",
-    2: "TAKEOFF",
-    3: "LOITER",
-    4: "MISSION",
-    5: "RTL",
-    6: "LAND",
-    8: "FOLLOW",
-    9: "PRECLAND",
-}
+from swarm_common import px4
+from swarm_common.px4 import AUTO_SUB_MODES, FORCE_MAGIC, MAIN_MODES, custom_mode  # noqa: F401
 
-MAIN_AUTO = 4
-MAIN_OFFBOARD = 6
-SUB_LOITER = 3
-SUB_LAND = 6
+MAIN_AUTO = px4.MAIN_AUTO
+MAIN_OFFBOARD = px4.MAIN_OFFBOARD
+SUB_LOITER = px4.SUB_AUTO_LOITER
+SUB_LAND = px4.SUB_AUTO_LAND
 
 # MAV_CMD numbers (common.xml) used here.
 MAV_CMD_NAV_LAND = 21
@@ -41,7 +22,6 @@ MAV_CMD_DO_FLIGHTTERMINATION = 185
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 MAV_MODE_FLAG_SAFETY_ARMED = 128
-FORCE_MAGIC = 21196.0
 
 MAV_RESULT_NAMES = {
     0: "ACCEPTED",
@@ -54,16 +34,11 @@ MAV_RESULT_NAMES = {
 }
 
 
-def custom_mode(main: int, sub: int = 0) -> int:
-    return (main & 0xFF) << 16 | (sub & 0xFF) << 24
-
-
 def decode_px4_mode(custom: int, base_mode: int = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED) -> str:
     """``custom_mode`` -> a PX4 name such as ``OFFBOARD``, ``AUTO.LOITER``, ``AUTO.LAND``."""
     if not base_mode & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
         return f"BASE:{base_mode}"
-    main = (custom >> 16) & 0xFF
-    sub = (custom >> 24) & 0xFF
+    main, sub = px4.split_mode(custom)
     name = MAIN_MODES.get(main)
     if name is None:
         return f"MODE:{custom:#x}"
