@@ -28,7 +28,7 @@ from gcs.procs import ProcessGroup, python_entry
 from gcs.router import open_router
 from offboard.bearing import formation_from_scenario
 from swarm_common import wire
-from swarm_common.ports import vehicle_ports
+from swarm_common.ports import port_free, swarm_udp_ports
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
 
@@ -39,28 +39,14 @@ class MissionError(RuntimeError):
     """A run failed: a child died or the run stalled. ``str()`` names the culprit."""
 
 
-def port_free(port: int, kind: int = socket.SOCK_DGRAM) -> bool:
-    s = socket.socket(socket.AF_INET, kind)
-    if kind == socket.SOCK_STREAM:  # a TIME_WAIT left by a previous run is not "busy"
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
-
-
 def check_ports(sc: Scenario, offset: int) -> None:
     """Raise MissionError naming the first busy port of this run."""
     for a in sc.agents:
-        vp = vehicle_ports(a.id, offset)
-        for p in (vp.api_local, vp.api_remote, vp.gcs_local):
+        for p in swarm_udp_ports([a.id], offset)[1:]:
             if not port_free(p):
                 raise MissionError(f"UDP port {p} (vehicle {a.id}) is busy; try --port-offset")
     for p in (ZENOH_BASE + offset, ZENOH_BASE + offset + 1):
-        if not port_free(p, socket.SOCK_STREAM):
+        if not port_free(p, socket.SOCK_STREAM, allow_time_wait=True):
             raise MissionError(f"TCP port {p} (Zenoh) is busy; try --port-offset")
 
 

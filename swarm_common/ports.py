@@ -21,6 +21,7 @@ used is 18570 + 254 + offset.
 
 from __future__ import annotations
 
+import socket
 from dataclasses import dataclass
 
 GCS_PORT = 14550
@@ -51,3 +52,34 @@ def vehicle_ports(agent_id: int, offset: int = 0) -> VehiclePorts:
         gcs_local=GCS_LOCAL_BASE + i + offset,
         gcs_remote=GCS_PORT + offset,
     )
+
+
+def port_free(
+    port: int, kind: int = socket.SOCK_DGRAM, host: str = "127.0.0.1",
+    allow_time_wait: bool = False,
+) -> bool:
+    """True if ``port`` can be bound on ``host`` right now (UDP by default).
+
+    ``allow_time_wait``: for TCP, a port held only by a TIME_WAIT of a previous run counts
+    as free (SO_REUSEADDR), as it will for a server that binds it the same way (Zenoh).
+    """
+    s = socket.socket(socket.AF_INET, kind)
+    if allow_time_wait and kind == socket.SOCK_STREAM:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        s.bind((host, port))
+        return True
+    except OSError:
+        return False
+    finally:
+        s.close()
+
+
+def swarm_udp_ports(ids: list[int], offset: int = 0) -> list[int]:
+    """Every UDP port a swarm of these vehicle ids uses: the GCS port, then per vehicle
+    its API link (both ends) and GCS link."""
+    out = [GCS_PORT + offset]
+    for i in ids:
+        vp = vehicle_ports(i, offset)
+        out += [vp.api_local, vp.api_remote, vp.gcs_local]
+    return out

@@ -19,34 +19,12 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from swarm_common.ports import vehicle_ports  # noqa: E402
+from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CUBE8 = str(ROOT / "scenarios" / "cube8.toml")
 SIM_CMD = [sys.executable, "-m", "vehicle_sim.cli"]
 HOVER_NORM = 1.8 * 9.81 / 52.92
-
-
-def _udp_free(port: int) -> bool:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
-
-
-def _tcp_free(port: int) -> bool:
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
 
 
 _used_offsets: set[int] = set()
@@ -62,12 +40,8 @@ def free_port_offset(n_vehicles: int = 8) -> int:
         off = rng.randrange(1, 46) * 1000 + rng.choice([0, 300])
         if off in _used_offsets:
             continue
-        ports = []
-        for i in range(1, n_vehicles + 1):
-            vp = vehicle_ports(i, off)
-            ports += [vp.api_local, vp.api_remote, vp.gcs_local]
-        ports.append(vehicle_ports(1, off).gcs_remote)
-        if all(_udp_free(p) for p in ports) and _tcp_free(7447 + off):
+        ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
+        if all(port_free(p) for p in ports) and port_free(7447 + off, socket.SOCK_STREAM):
             _used_offsets.add(off)
             return off
     raise RuntimeError("no free port offset found")

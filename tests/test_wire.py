@@ -91,3 +91,20 @@ def test_port_scheme_px4_compatible_and_collision_free_to_255() -> None:
     assert vehicle_ports(5, offset=1000).api_local == 14584 + 1000
     with pytest.raises(ValueError):
         vehicle_ports(0)
+
+
+def test_port_free_sees_a_bound_socket() -> None:
+    import socket
+
+    from swarm_common.ports import port_free, swarm_udp_ports
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    try:
+        assert not port_free(port)
+    finally:
+        s.close()
+    assert port_free(port)
+    ports = swarm_udp_ports([1, 2], offset=1000)
+    assert ports[0] == 14550 + 1000 and len(ports) == 1 + 2 * 3 and len(set(ports)) == 7

@@ -11,14 +11,13 @@ skips them (then OFFBOARD is refused: nothing streams setpoints).
 
 from __future__ import annotations
 
-import socket
 import time
 from pathlib import Path
 from typing import Any
 
 from gcs.procs import ProcessGroup, python_entry
 from gcs.router import open_router
-from swarm_common.ports import GCS_PORT, vehicle_ports
+from swarm_common.ports import port_free, swarm_udp_ports
 from swarm_common.scenario import Scenario
 
 ZENOH_BASE = 7447
@@ -34,20 +33,7 @@ def sim_endpoint(offset: int) -> str:
 
 def busy_ports(sc: Scenario, offset: int) -> list[str]:
     """Every UDP port the launched swarm will bind, that is already taken."""
-    ports = [GCS_PORT + offset]
-    for a in sc.agents:
-        vp = vehicle_ports(a.id, offset)
-        ports += [vp.api_local, vp.gcs_local, vp.api_remote]
-    busy = []
-    for p in ports:
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            s.bind(("127.0.0.1", p))
-        except OSError:
-            busy.append(f"udp {p}")
-        finally:
-            s.close()
-    return busy
+    return [f"udp {p}" for p in swarm_udp_ports(sc.ids, offset) if not port_free(p)]
 
 
 def sim_argv(sc: Scenario, offset: int, swarm: str, zenoh: bool) -> list[str]:

@@ -3,22 +3,10 @@
 from __future__ import annotations
 
 import random
-import socket
 
 import pytest
 
-from swarm_common.ports import vehicle_ports
-
-
-def _udp_free(port: int) -> bool:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        s.bind(("127.0.0.1", port))
-        return True
-    except OSError:
-        return False
-    finally:
-        s.close()
+from swarm_common.ports import port_free, swarm_udp_ports
 
 
 def free_port_offset(n_vehicles: int = 8) -> int:
@@ -26,11 +14,8 @@ def free_port_offset(n_vehicles: int = 8) -> int:
     rng = random.Random()
     for _ in range(200):
         off = rng.randrange(1000, 30000)
-        ports = {14550 + off}
-        for i in range(1, n_vehicles + 1):
-            vp = vehicle_ports(i, off)
-            ports |= {vp.api_local, vp.api_remote, vp.gcs_local}
-        if all(_udp_free(p) for p in ports):
+        ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
+        if all(port_free(p) for p in ports):
             return off
     raise RuntimeError("no free port offset found")
 
