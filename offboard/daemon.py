@@ -17,7 +17,7 @@ silent for ``neighbour_timeout`` seconds is declared lost and no longer waited f
 (its data is then predicted by the agent, then dropped); it rejoins when it speaks.
 In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, but uses
 the latest truth and neighbour data it holds instead of waiting (stale neighbours are
-predicted by the agent); skipped stamps are counted as late steps.
+predicted by the agent); vehicle-sim measures how late each answer is.
 """
 
 from __future__ import annotations
@@ -127,11 +127,10 @@ class OffboardDaemon:
         sc = cfg.scenario
         self.sc = sc
         self.id = cfg.agent_id
-        self.is_leader = cfg.agent_id in sc.leader_ids
         self.others = [i for i in sc.ids if i != cfg.agent_id]
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed)
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, tlog=cfg.tlog)
-        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)  # polled: measured faster
+        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)
         self.control_hz = int(sc["scenario"]["control_hz"])
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
@@ -143,9 +142,7 @@ class OffboardDaemon:
         self.prev_estimate: wire.Estimate | None = None
         self.last_est_pub = 0.0
         self.stop = False
-        self.late_steps = 0
-        self.steps_done = 0
-        self.offboard_state = "init"
+        self.startup_done = False  # OFFBOARD accepted and armed
         self.trajectory_started = False
 
     # -- helpers ----------------------------------------------------------------------
@@ -223,14 +220,13 @@ class OffboardDaemon:
         # Step 0 waits for every agent's initial estimate as long as start-up may take
         # (the others may still be importing); later a silent neighbour is declared lost.
         timeout = self.cfg.heartbeat_timeout if k == 0 else self.cfg.neighbour_timeout
-        if not self.bus.wait(have_all, timeout):
-            got = self.bus.estimates_at(k - 1)
-            missing = [j for j in want if j not in got]
-            for j in missing:
-                if j not in self.lost:
-                    log.warning("agent %d: neighbour %d silent at step %d: lost", self.id, j, k)
-                self.lost.add(j)
+        complete = self.bus.wait(have_all, timeout)
         got = self.bus.estimates_at(k - 1)
+        if not complete:
+            for j in want:
+                if j not in got:
+                    log.warning("agent %d: neighbour %d silent at step %d: lost", self.id, j, k)
+                    self.lost.add(j)
         for j in list(self.lost):
             if j in got:
                 self.lost.discard(j)
@@ -258,13 +254,12 @@ class OffboardDaemon:
         self._publish_estimate(estimate_to_wire(out.estimate, k, self._zeta()))
         mode = px4.short_name(self.link.custom_mode)
         self.bus.publish_status(status_to_wire(self.id, k, t, out, mode, comm_ok))
-        self.steps_done += 1
         return True
 
     # -- main loop ----------------------------------------------------------------------
     def _startup_transitions(self) -> None:
         """Switch to OFFBOARD and arm once setpoints have streamed for a while."""
-        if self.answer is None or self.offboard_state == "done" or self.cfg.manual_start:
+        if self.answer is None or self.startup_done or self.cfg.manual_start:
             return
         if time.monotonic() - self.first_send < self.cfg.stream_before_offboard:
             return
@@ -280,7 +275,7 @@ class OffboardDaemon:
                 log.warning("agent %d: ARM not accepted (result %s), retrying", self.id, res)
                 return
             log.info("agent %d: armed", self.id)
-        self.offboard_state = "done"
+        self.startup_done = True
 
     def run(self) -> int:
         signal.signal(signal.SIGTERM, self._on_signal)
@@ -308,8 +303,6 @@ class OffboardDaemon:
                     if k > self.last_step:
                         t = k / self.control_hz
                         if self.control_step(k, t, int(round(t * 1000))):
-                            if k > self.last_step + 1 and self.last_step >= 0:
-                                self.late_steps += k - self.last_step - 1
                             self.last_step = k
                 now = time.monotonic()
                 if self.answer is not None and now - self.last_send > 0.05:
