@@ -127,7 +127,8 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
             continue
         from gcs.mission import MissionError, run_and_score
 
-        duration = float(args.duration or sc["scenario"]["duration_s"])
+        duration = float(sc["scenario"]["duration_s"] if args.duration is None
+                         else args.duration)
         print(f"running {m}: vehicle-sim + {sc.n} offboard daemons, lockstep ...",
               file=sys.stderr)
         try:
@@ -171,6 +172,28 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _seconds(text: str, allow_zero: bool) -> float:
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: must be a finite number of seconds {'>= 0' if allow_zero else '> 0'}"
+        )
+    return v
+
+
+def _positive_seconds(text: str) -> float:
+    return _seconds(text, allow_zero=False)
+
+
+def _non_negative_seconds(text: str) -> float:
+    return _seconds(text, allow_zero=True)
+
+
 def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("mission", help="run or compare missions")
     msub = p.add_subparsers(dest="mission_cmd", required=True)
@@ -179,20 +202,22 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--inproc", action="store_true", help="all in one process (no MAVLink)")
     r.add_argument("--method", choices=METHODS, default=None)
     r.add_argument("--seed", type=int, default=None)
-    r.add_argument("--duration", type=float, default=None, help="seconds (default: scenario)")
+    r.add_argument("--duration", type=_positive_seconds, default=None,
+                   help="seconds (default: scenario)")
     r.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
     d = r.add_argument_group("distributed runs (without --inproc)")
     d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
     d.add_argument("--port-offset", type=int, default=0, help="added to every UDP/TCP port")
     d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
-    d.add_argument("--kill-at", type=float, default=None, help="... at this mission time (s)")
+    d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
+                   help="... at this mission time (s)")
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")
     c.add_argument("scenario")
     c.add_argument("--inproc", action="store_true")
     c.add_argument("--seed", type=int, default=None)
-    c.add_argument("--duration", type=float, default=None)
+    c.add_argument("--duration", type=_positive_seconds, default=None)
     c.add_argument("--seeds", type=int, default=0, help="also sweep N seeds per method")
     c.add_argument("--jobs", type=int, default=2, help="parallel processes for the sweep")
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")

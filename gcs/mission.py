@@ -399,7 +399,14 @@ def _json_default(x: Any) -> Any:
 def cli_run(args: Any, sc: Scenario) -> int:
     """``gcs mission run SCENARIO`` (distributed): the hook gcs.cli calls."""
     method = args.method or sc["controller"]["method"]
-    duration = float(args.duration or sc["scenario"]["duration_s"])
+    duration = float(sc["scenario"]["duration_s"] if args.duration is None else args.duration)
+    if args.kill_agent is not None and args.kill_agent not in sc.ids:
+        print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
+              f"{sc.ids}", file=sys.stderr)
+        return 2
+    if args.kill_at is not None and args.kill_agent is None:
+        print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
+        return 2
     out = Path(args.out) if args.out else default_out_dir(sc, method)
     try:
         doc = run_and_score(

@@ -23,7 +23,7 @@ def open_router(listen: list[str]) -> Any:
 def run_router(listen: list[str]) -> int:
     try:
         session = open_router(listen)
-    except RuntimeError as exc:
+    except (RuntimeError, ValueError) as exc:
         print(f"gcs router: {exc}", file=sys.stderr)
         return 2
     print(f"gcs router: listening on {', '.join(listen)} (Ctrl-C to stop)", file=sys.stderr)

@@ -19,6 +19,7 @@ from swarm_common.scenario import ScenarioError, load_scenario
 from swarm_common.zenoh_session import open_session
 
 ZENOH_BASE_PORT = 7447
+MAVLINK_SCHEMES = ("udpin:", "udpout:", "udp:", "tcp:", "tcpin:")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -57,6 +58,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     ports = vehicle_ports(args.agent, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
+    if not url.startswith(MAVLINK_SCHEMES):
+        print(f"offboard: --mavlink {url!r}: must start with one of "
+              f"{', '.join(MAVLINK_SCHEMES)} (e.g. udpin:127.0.0.1:14540)", file=sys.stderr)
+        return 2
     connect = args.zenoh_connect
     if connect is None:
         connect = [f"tcp/127.0.0.1:{ZENOH_BASE_PORT + args.port_offset}"]

@@ -143,3 +143,29 @@ def test_cli_compare_distributed_writes_report(tmp_path: Path) -> None:
         assert doc["method"] == m and doc["mode"] == "lockstep"
         assert (tmp_path / m / "vehicle_1.tlog").stat().st_size > 0
     assert (tmp_path / "min_distance.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("argv", "expect"),
+    [
+        (["mission", "run", CUBE8, "--duration", "0"], "--duration: '0': must be"),
+        (["mission", "run", CUBE8, "--duration", "nan"], "--duration: 'nan': must be"),
+        (["mission", "compare", CUBE8, "--duration", "-1"], "--duration: '-1': must be"),
+        (["mission", "run", CUBE8, "--kill-agent", "99"], "--kill-agent 99: not an agent"),
+        (["mission", "run", CUBE8, "--kill-at", "2"], "--kill-at needs --kill-agent"),
+        (["router", "--listen", "bogus"], "zenoh endpoint 'bogus'"),
+    ],
+)
+def test_cli_bad_input_one_line_and_nonzero(argv: list[str], expect: str) -> None:
+    out = subprocess.run([sys.executable, "-m", "gcs.cli", *argv], cwd=ROOT,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert expect in out.stderr.strip().splitlines()[-1]
+    assert "Traceback" not in out.stderr
+
+
+def test_offboard_rejects_a_bad_mavlink_url() -> None:
+    out = subprocess.run(
+        [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", "3",
+         "--mavlink", "nonsense://"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "--mavlink 'nonsense://'" in out.stderr
