@@ -36,7 +36,7 @@ def main() -> None:
         print(f"lockstep cube8 {args.duration:.0f} s: stepping "
               f"{run['stepping_realtime_factor']:.2f}x real time "
               f"(whole run incl. start-up {args.duration / run['wall_s']:.2f}x)")
-        steps = args.duration * sc["scenario"]["control_hz"]
+        steps = args.duration * sc.run.control_hz
         print(f"{'process':14s} {'cpu_s':>7s} {'ms/step':>8s} {'peak RSS MiB':>13s}")
         for name, u in run["processes"].items():
             print(f"{name:14s} {u['cpu_s']:7.2f} {1000 * u['cpu_s'] / steps:8.2f} "

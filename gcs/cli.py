@@ -127,7 +127,7 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
             continue
         from gcs.mission import MissionError, run_and_score
 
-        duration = float(sc["scenario"]["duration_s"] if args.duration is None
+        duration = float(sc.run.duration_s if args.duration is None
                          else args.duration)
         print(f"running {m}: vehicle-sim + {sc.n} offboard daemons, lockstep ...",
               file=sys.stderr)
@@ -160,7 +160,7 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
         seeds = {m: [r for (_, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
                  for m in METHODS}
     form = formation_from_scenario(sc)
-    d_safe = sc["controller"]["d_safe_m"]
+    d_safe = sc.controller.d_safe_m
     path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
                         gains, seeds,
                         mode="in-process" if args.inproc else

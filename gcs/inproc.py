@@ -98,13 +98,13 @@ def run_inproc(
 ) -> MissionResult:
     """Run a mission in process and return its metrics and time series."""
     seed = sc.seed if seed is None else int(seed)
-    method = method or sc["controller"]["method"]
-    dur = float(sc["scenario"]["duration_s"] if duration is None else duration)
+    method = method or sc.controller.method
+    dur = float(sc.run.duration_s if duration is None else duration)
     dt = sc.control_dt
     n_steps = int(round(dur / dt))
     nsub = sc.substeps_per_control
-    veh = sc["vehicle"]
-    f_max = veh["thrust_max_n"]
+    veh = sc.vehicle
+    f_max = veh.thrust_max_n
     form = formation_from_scenario(sc)
     dyn = SwarmDynamics(sc, seed=seed)
     agents = [make_agent(sc, a.id, method=method, seed=seed, form=form) for a in sc.agents]
@@ -169,7 +169,7 @@ def run_inproc(
             zeta_est[i] = ag.deso.zeta
             fallbacks += ag.fallbacks
     metrics = compute_metrics(
-        ser, form.follower_idx, dt, veh["mass_kg"], veh["gravity_mps2"], dyn.collisions,
+        ser, form.follower_idx, dt, veh.mass_kg, veh.gravity_mps2, dyn.collisions,
         dyn.zeta, zeta_est, fallbacks, wall, dur,
     )
     return MissionResult(

@@ -127,7 +127,7 @@ def run_distributed(
         router = open_router([router_ep])
     except RuntimeError as exc:
         raise MissionError(str(exc)) from None
-    steps = int(round(duration * sc["scenario"]["control_hz"]))
+    steps = int(round(duration * sc.run.control_hz))
     rec = Recorder(sc, steps, seed=seed)
     swarm = sc.name
     subs = [
@@ -322,7 +322,7 @@ def recorded_metrics(
     """Metrics of a distributed run, computed by the same function as in process."""
     ser = recorder_series(rec, sc)
     form = formation_from_scenario(sc)
-    veh = sc["vehicle"]
+    veh = sc.vehicle
     last = rec.truth[max(rec.truth)] if rec.truth else None
     fols = form.follower_idx
     zeta_true = _zeta_true(sc, rec)
@@ -337,7 +337,7 @@ def recorded_metrics(
     if not np.all(valid):  # a run cut short: drop the incomplete tail
         ser = Series(**{k: v[valid] for k, v in ser.as_dict().items()})
     metrics = compute_metrics(
-        ser, fols, sc.control_dt, veh["mass_kg"], veh["gravity_mps2"],
+        ser, fols, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
     )
     return metrics, ser
@@ -398,8 +398,8 @@ def _json_default(x: Any) -> Any:
 
 def cli_run(args: Any, sc: Scenario) -> int:
     """``gcs mission run SCENARIO`` (distributed): the hook gcs.cli calls."""
-    method = args.method or sc["controller"]["method"]
-    duration = float(sc["scenario"]["duration_s"] if args.duration is None else args.duration)
+    method = args.method or sc.controller.method
+    duration = float(sc.run.duration_s if args.duration is None else args.duration)
     if args.kill_agent is not None and args.kill_agent not in sc.ids:
         print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
               f"{sc.ids}", file=sys.stderr)

@@ -104,12 +104,12 @@ def control_box(sc) -> tuple[np.ndarray, np.ndarray]:
     z in [−u_max, u_max]; horizontal per axis ``(g − 2) tan(tilt)/√2`` (tilt cone at
     u_z ≥ −2 m/s²), at most u_max.
     """
-    veh, ctl = sc["vehicle"], sc["controller"]
-    umax = ctl["u_max_mps2"]
-    g = veh["gravity_mps2"]
+    veh, ctl = sc.vehicle, sc.controller
+    umax = ctl.u_max_mps2
+    g = veh.gravity_mps2
     uz_lo = min(umax, 0.9 * g)
-    uz_hi = min(umax, veh["thrust_max_n"] / veh["mass_kg"] - g)
-    uh = min(umax, (g - 2.0) * math.tan(math.radians(veh["tilt_max_deg"])) / math.sqrt(2.0))
+    uz_hi = min(umax, veh.thrust_max_n / veh.mass_kg - g)
+    uh = min(umax, (g - 2.0) * math.tan(math.radians(veh.tilt_max_deg)) / math.sqrt(2.0))
     return np.array([-uh, -uh, -uz_lo]), np.array([uh, uh, uz_hi])
 
 
@@ -192,42 +192,42 @@ class FollowerAgent:
         self.form = form if form is not None else formation_from_scenario(sc)
         self.dt = sc.control_dt
         seed = sc.seed if seed is None else int(seed)
-        obs, ctl, veh = sc["observer"], sc["controller"], sc["vehicle"]
+        obs, ctl, veh = sc.observer, sc.controller, sc.vehicle
         self.veh = veh
         self.ctl = ctl
-        self.tau_ff = veh["tau_rollpitch_s"]
-        self.set_method(method or ctl["method"])
+        self.tau_ff = veh.tau_rollpitch_s
+        self.set_method(method or ctl.method)
         self.sensor = Sensor(
-            self.index, agent_id, sc.n, sc["sensing"], sc["formation"]["sensing_range_m"], seed
+            self.index, agent_id, sc.n, sc.sensing, sc.formation.sensing_range_m, seed
         )
         rng = np.random.default_rng([seed, agent_id, 0x1E])
         spec = sc.agents[self.index]
-        z1 = spec.position + rng.standard_normal(3) * obs["init_pos_error_m"]
-        z2 = spec.velocity + rng.standard_normal(3) * obs["init_vel_error_mps"]
-        self.substeps = obs["substeps"]
-        self.anchor = obs["leader_anchor"] > 0.0
-        beta = tuple(obs["beta"])
+        z1 = spec.position + rng.standard_normal(3) * obs.init_pos_error_m
+        z2 = spec.velocity + rng.standard_normal(3) * obs.init_vel_error_mps
+        self.substeps = obs.substeps
+        self.anchor = obs.leader_anchor > 0.0
+        beta = tuple(obs.beta)
         self.deso = DESO(
-            self.form, self.index, beta, obs["mu"], obs["sigma"], self.substeps, self.dt,
-            sc["unmodeled"]["ground_effect_height_m"], z1, z2, obs["leader_anchor"],
-            tuple(obs["velocity_gain"]),
+            self.form, self.index, beta, obs.mu, obs.sigma, self.substeps, self.dt,
+            sc.unmodeled.ground_effect_height_m, z1, z2, obs.leader_anchor,
+            tuple(obs.velocity_gain),
         )
-        omega = 2.0 * math.pi * sc["leader_trajectory"]["frequency_hz"]
+        omega = 2.0 * math.pi * sc.leader_trajectory.frequency_hz
         xi0 = np.concatenate([z1, np.zeros(9)])
         self.ref = DesiredStateObserver(
-            self.form, self.index, omega, obs["reference_gain"], self.dt, xi0
+            self.form, self.index, omega, obs.reference_gain, self.dt, xi0
         )
-        lam, ks = ctl["clf_lambda"], ctl["ks"]
+        lam, ks = ctl.clf_lambda, ctl.ks
         self.pred = _Predictor(
-            omega, self.dt, (ks * lam + ctl["kp"] / ctl["kd"], lam + ks),
-            (ctl["leader_kp"], ctl["leader_kd"]), sc["communication"]["max_age_s"],
+            omega, self.dt, (ks * lam + ctl.kp / ctl.kd, lam + ks),
+            (ctl.leader_kp, ctl.leader_kd), sc.communication.max_age_s,
         )
         self.inner = InnerLoopModel(veh, self.dt / self.substeps)
         self.u_lo, self.u_hi = control_box(sc)
         self.qp = SafetyQP(
-            sc.n - 1, self.u_lo, self.u_hi, ctl["rho"], ctl["clf_c"],
+            sc.n - 1, self.u_lo, self.u_hi, ctl.rho, ctl.clf_c,
         )
-        if ctl["tau_safe_s"] <= 0.0:
+        if ctl.tau_safe_s <= 0.0:
             raise ValueError("controller.tau_safe_s must be > 0 for the RCBF (relative degree 1)")
         self.leader_mask = np.zeros(sc.n, dtype=bool)
         self.leader_mask[self.form.leader_idx] = True
@@ -240,7 +240,7 @@ class FollowerAgent:
         self.yaw = 0.0
         self.fallbacks = 0
         self._gains: GainReport | None = None
-        self._hold_dropped = sc["sensing"]["dropout_prob"] > 0.0
+        self._hold_dropped = sc.sensing.dropout_prob > 0.0
         self._last_seen = np.full(sc.n, -np.inf)
         self._last_rp = np.zeros((sc.n, 3))
         self._last_rv = np.zeros((sc.n, 3))
@@ -249,10 +249,10 @@ class FollowerAgent:
     def gains(self) -> GainReport:
         """DESO gain check (errata 7), computed on first use."""
         if self._gains is None:
-            obs = self.sc["observer"]
+            obs = self.sc.observer
             self._gains = gain_report(
-                self.form, tuple(obs["beta"]), self.dt, obs["substeps"], obs["leader_anchor"],
-                tuple(obs["velocity_gain"]),
+                self.form, tuple(obs.beta), self.dt, obs.substeps, obs.leader_anchor,
+                tuple(obs.velocity_gain),
             )
         return self._gains
 
@@ -306,7 +306,7 @@ class FollowerAgent:
         # acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): compensates the
         # first-order attitude lag of the inner loop on the moving reference
         a_ff = self.ref.a + self.tau_ff * self.ref.xi[9:12]
-        clf = clf_terms(e1, e2, w, a_ff, ctl["kp"], ctl["kd"], ctl["clf_lambda"], ctl["ks"])
+        clf = clf_terms(e1, e2, w, a_ff, ctl.kp, ctl.kd, ctl.clf_lambda, ctl.ks)
         # safety pairs: this step's measurements; a pair dropped this step but sensed within
         # SENSE_HOLD_S is extrapolated with its last relative velocity (dropouts must not
         # switch a barrier off)
@@ -330,21 +330,21 @@ class FollowerAgent:
         dp = -rp_s[sel]  # p_i − p_j
         dv = -rv_s[sel]
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
-        tau, dsafe = ctl["tau_safe_s"], ctl["d_safe_m"]
+        tau, dsafe = ctl.tau_safe_s, ctl.d_safe_m
         if self.method == "none":
             u = none_control(clf.u_nom, self.u_lo, self.u_hi)
             if len(sel):
                 status.h_min = float(barrier(dp, dv, tau, dsafe).min())
         else:
             h = barrier(dp, dv, tau, dsafe)
-            side = tangential_term(dp, h, ctl["deadlock_gain"], ctl["deadlock_h_m2"])
+            side = tangential_term(dp, h, ctl.deadlock_gain, ctl.deadlock_h_m2)
             if self.method == "apf":
                 dd = np.einsum("ij,ij->i", dp, dv) / np.maximum(
                     np.sqrt(np.einsum("ij,ij->i", dp, dp)), 1e-6
                 )  # range rate ḋ_ij (negative when closing)
                 u = apf_control(
-                    clf.u_nom, dp, dd, side, ctl["apf_gain"],
-                    ctl["apf_velocity_gain"], ctl["apf_radius_m"], self.u_lo, self.u_hi,
+                    clf.u_nom, dp, dd, side, ctl.apf_gain,
+                    ctl.apf_velocity_gain, ctl.apf_radius_m, self.u_lo, self.u_hi,
                 )
                 status.h_min = float(h.min()) if len(h) else float("inf")
             else:
@@ -359,7 +359,7 @@ class FollowerAgent:
                 wsn = math.sqrt(float(w @ w))
                 w_safe = w * (W_SAFE / wsn) if wsn > W_SAFE else w
                 n_hat, rhs, h = rcbf_rows(
-                    dp, dv, w_safe, a_other, share, tau, dsafe, ctl["gamma"], h=h
+                    dp, dv, w_safe, a_other, share, tau, dsafe, ctl.gamma, h=h
                 )
                 brake = -w - self.qp.brake_gain * z2
                 res: QPResult = self.qp.solve(clf.u_nom + side, clf, n_hat, rhs, h, brake)
@@ -404,16 +404,16 @@ class LeaderAgent:
         self.id = agent_id
         self.index = sc.index_of(agent_id)
         self.dt = sc.control_dt
-        self.veh = sc["vehicle"]
-        ctl = sc["controller"]
-        self.kp, self.kd = ctl["leader_kp"], ctl["leader_kd"]
-        lt = sc["leader_trajectory"]
+        self.veh = sc.vehicle
+        ctl = sc.controller
+        self.kp, self.kd = ctl.leader_kp, ctl.leader_kd
+        lt = sc.leader_trajectory
         self.traj = LeaderTrajectory(
-            sc.agents[self.index].position, np.array(lt["amplitude_m"]), lt["frequency_hz"]
+            sc.agents[self.index].position, np.array(lt.amplitude_m), lt.frequency_hz
         )
-        self.method = method or ctl["method"]
+        self.method = method or ctl.method
         self.u_lo, self.u_hi = control_box(sc)
-        self.substeps = sc["observer"]["substeps"]
+        self.substeps = sc.observer.substeps
         self.inner = InnerLoopModel(self.veh, self.dt / self.substeps)
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
@@ -456,7 +456,7 @@ class LeaderAgent:
         p = np.asarray(truth_p[self.index], dtype=float)
         v = np.asarray(truth_v[self.index], dtype=float)
         ref = self.reference(t)
-        a_ff = ref[6:9] + self.veh["tau_rollpitch_s"] * ref[9:12]  # lag compensation
+        a_ff = ref[6:9] + self.veh.tau_rollpitch_s * ref[9:12]  # lag compensation
         u = a_ff - self.d_hat + self.kp * (ref[0:3] - p) + self.kd * (ref[3:6] - v)
         u = np.clip(u, self.u_lo, self.u_hi)
         sp = setpoint_from_accel(u, self.yaw, self.veh)

@@ -87,9 +87,9 @@ def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict, decode: bool = Fal
     Angles/thrust are the commanded values, or (``decode=True``) the values decoded from the
     float32 wire form (differ by ~1e-7; the agent's inner-loop model does not need them).
     """
-    f_max = veh["thrust_max_n"]
+    f_max = veh.thrust_max_n
     roll, pitch, yaw_c, f = accel_to_attitude(
-        u, yaw, veh["gravity_mps2"], veh["mass_kg"], math.radians(veh["tilt_max_deg"]), f_max
+        u, yaw, veh.gravity_mps2, veh.mass_kg, math.radians(veh.tilt_max_deg), f_max
     )
     q = quat_ned_fast(roll, pitch, yaw_c).astype(np.float32)
     tn = np.float32(thrust_to_norm(f, f_max))
@@ -115,13 +115,13 @@ class InnerLoopModel:
     """First-order attitude (τ_rp, τ_ψ) and thrust (τ_F) lags, exact per sub-step."""
 
     def __init__(self, veh: dict, dt_sub: float) -> None:
-        self.m = veh["mass_kg"]
-        self.g = veh["gravity_mps2"]
-        self.tilt = math.radians(veh["tilt_max_deg"])
-        self.f_max = veh["thrust_max_n"]
-        self.a_rp = math.exp(-dt_sub / veh["tau_rollpitch_s"])
-        self.a_y = math.exp(-dt_sub / veh["tau_yaw_s"])
-        self.a_f = math.exp(-dt_sub / veh["tau_thrust_s"])
+        self.m = veh.mass_kg
+        self.g = veh.gravity_mps2
+        self.tilt = math.radians(veh.tilt_max_deg)
+        self.f_max = veh.thrust_max_n
+        self.a_rp = math.exp(-dt_sub / veh.tau_rollpitch_s)
+        self.a_y = math.exp(-dt_sub / veh.tau_yaw_s)
+        self.a_f = math.exp(-dt_sub / veh.tau_thrust_s)
         self.att = [0.0, 0.0, 0.0]
         self.f = self.m * self.g
 

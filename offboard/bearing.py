@@ -181,4 +181,4 @@ def check_rigidity(form: Formation, graph: str = "") -> None:
 
 def formation_from_scenario(sc) -> Formation:  # sc: swarm_common.scenario.Scenario
     """Build the :class:`Formation` of a scenario (``[formation].graph``)."""
-    return build_formation(sc.ids, sc.leader_ids, sc.vertices(), sc["formation"]["graph"])
+    return build_formation(sc.ids, sc.leader_ids, sc.vertices(), sc.formation.graph)

@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     connect = args.zenoh_connect
     if connect is None:
         connect = [f"tcp/127.0.0.1:{ZENOH_BASE_PORT + args.port_offset}"]
-    method = args.method or sc["controller"]["method"]
+    method = args.method or sc.controller.method
     cfg = DaemonConfig(
         scenario=sc,
         agent_id=args.agent,

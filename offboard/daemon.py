@@ -131,7 +131,7 @@ class OffboardDaemon:
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed)
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, tlog=cfg.tlog)
         self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)
-        self.control_hz = int(sc["scenario"]["control_hz"])
+        self.control_hz = int(sc.run.control_hz)
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1
@@ -168,7 +168,7 @@ class OffboardDaemon:
         if self.trajectory_started:
             return
         if self.link.armed and self.link.in_offboard:
-            period = 1.0 / float(self.sc["leader_trajectory"]["frequency_hz"])
+            period = 1.0 / float(self.sc.leader_trajectory.frequency_hz)
             self.agent.start_time = math.ceil(t / period) * period
             self.trajectory_started = True
             log.info("agent %d: trajectory starts at t = %.2f s", self.id, self.agent.start_time)

@@ -54,14 +54,14 @@ class Sensor:
         self.range = float(sensing_range_m)
         self.sig = np.array(
             [
-                sensing["bearing_noise_rad"],
-                sensing["bearing_rate_noise_radps"],
-                sensing["distance_noise_m"],
-                sensing["range_rate_noise_mps"],
+                sensing.bearing_noise_rad,
+                sensing.bearing_rate_noise_radps,
+                sensing.distance_noise_m,
+                sensing.range_rate_noise_mps,
             ],
             dtype=float,
         )
-        self.dropout = float(sensing["dropout_prob"])
+        self.dropout = float(sensing.dropout_prob)
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
 
     def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:

@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from swarm_common.enums import GraphKind, Method, Role
 
 
 class ScenarioError(ValueError):
@@ -25,99 +28,202 @@ class ScenarioError(ValueError):
 
 
 # ---------------------------------------------------------------------------
-# Schema: section -> key -> spec. A spec is a tuple
+# Schema. Each section is a frozen dataclass; each field carries its spec in its
+# metadata, and ``SCHEMA`` is generated from the dataclasses, so the typed view and
+# the validation cannot disagree. A spec is a tuple
 #   ("float", lo, hi, lo_open, hi_open) | ("int", lo, hi) | ("str", choices)
 #   ("vec", n, lo, hi)  (list of n numbers) | ("windows",) | ("ids",)
 # ---------------------------------------------------------------------------
 Spec = tuple[Any, ...]
 
+
+def _num(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> Any:
+    return field(metadata={"spec": ("float", lo, hi, lo_open, hi_open)})
+
+
+def _int(lo: int, hi: int) -> Any:
+    return field(metadata={"spec": ("int", lo, hi)})
+
+
+def _vec(n: int, lo: float, hi: float) -> Any:
+    return field(metadata={"spec": ("vec", n, lo, hi)})
+
+
+def _choice(enum: type[StrEnum] | None) -> Any:
+    return field(metadata={"spec": ("str", tuple(enum) if enum else None), "enum": enum})
+
+
+def _special(kind: str) -> Any:
+    return field(metadata={"spec": (kind,)})
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """``[scenario]``: name, seed and clocks."""
+
+    name: str = _choice(None)
+    seed: int = _int(0, 2**32 - 1)
+    duration_s: float = _num(0.0, 3600.0, lo_open=True)  # s
+    physics_hz: int = _int(50, 5000)  # Hz, fixed-step integration of the dynamics
+    control_hz: int = _int(1, 1000)  # Hz, one setpoint per control step
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """``[vehicle]``: airframe and inner-loop model (paper 2.1)."""
+
+    mass_kg: float = _num(0.05, 100.0)
+    gravity_mps2: float = _num(0.0, 30.0)
+    thrust_max_n: float = _num(0.0, 5000.0, lo_open=True)
+    tilt_max_deg: float = _num(0.0, 89.0, lo_open=True)
+    tau_rollpitch_s: float = _num(0.0, 5.0, lo_open=True)
+    tau_yaw_s: float = _num(0.0, 5.0, lo_open=True)
+    tau_thrust_s: float = _num(0.0, 5.0, lo_open=True)
+    collision_radius_m: float = _num(0.0, 10.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class DisturbanceConfig:
+    """``[disturbance]``: d(t) = [A cos wt, A sin wt, A sin wt] N (paper 5.1)."""
+
+    amplitude_n: float = _num(0.0, 100.0)
+    omega_rad_s: float = _num(0.0, 100.0)
+
+
+@dataclass(frozen=True)
+class UnmodeledConfig:
+    """``[unmodeled]``: f~ = Phi(p, v) zeta (paper 2.2), m/s^2 per regressor unit."""
+
+    zeta_nominal: tuple[float, ...] = _vec(6, -10.0, 10.0)
+    zeta_spread: float = _num(0.0, 1.0)
+    ground_effect_height_m: float = _num(0.0, 100.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class FormationConfig:
+    """``[formation]``: leaders, neighbour graph and sensing range."""
+
+    leaders: tuple[int, ...] = _special("ids")
+    graph: GraphKind = _choice(GraphKind)
+    sensing_range_m: float = _num(0.0, 1000.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class LeaderTrajectoryConfig:
+    """``[leader_trajectory]``: p_L(t) = p_L(0) + A (1 - cos wt), w = 2 pi f."""
+
+    frequency_hz: float = _num(0.0, 10.0)
+    amplitude_m: tuple[float, ...] = _vec(3, -100.0, 100.0)
+
+
+@dataclass(frozen=True)
+class SensingConfig:
+    """``[sensing]``: noise standard deviations and per-pair dropout probability."""
+
+    bearing_noise_rad: float = _num(0.0, 1.0)
+    bearing_rate_noise_radps: float = _num(0.0, 10.0)
+    distance_noise_m: float = _num(0.0, 10.0)
+    range_rate_noise_mps: float = _num(0.0, 10.0)
+    dropout_prob: float = _num(0.0, 1.0, hi_open=True)
+
+
+@dataclass(frozen=True)
+class CommunicationConfig:
+    """``[communication]``: outage windows (s) and neighbour-data ageing (s)."""
+
+    outages_s: tuple[tuple[float, float], ...] = _special("windows")
+    max_age_s: float = _num(0.0, 10.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """``[observer]``: DESO (paper 3) and desired-state observer (paper 4.1) gains."""
+
+    beta: tuple[float, ...] = _vec(3, 0.0, 1e4)
+    mu: float = _num(0.0, 100.0)
+    sigma: float = _num(0.0, 100.0)
+    substeps: int = _int(1, 100)
+    reference_gain: float = _num(0.0, 1e4, lo_open=True)
+    init_pos_error_m: float = _num(0.0, 100.0)
+    init_vel_error_mps: float = _num(0.0, 100.0)
+    leader_anchor: float = _num(0.0, 100.0)
+    velocity_gain: tuple[float, ...] = _vec(2, 0.0, 1e4)
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """``[controller]``: CLF (paper 4.2), RCBF (4.3), APF baseline and leader PD."""
+
+    method: Method = _choice(Method)
+    kp: float = _num(0.0, 1e4, lo_open=True)
+    kd: float = _num(0.0, 1e4, lo_open=True)
+    clf_lambda: float = _num(0.0, 1e3, lo_open=True)
+    clf_c: float = _num(0.0, 1e3, lo_open=True)
+    rho: float = _num(0.0, 1e9, lo_open=True)
+    u_max_mps2: float = _num(0.0, 100.0, lo_open=True)
+    gamma: float = _num(0.0, 100.0, lo_open=True)
+    tau_safe_s: float = _num(0.0, 10.0)
+    d_safe_m: float = _num(0.0, 100.0, lo_open=True)
+    apf_gain: float = _num(0.0, 1e4)
+    apf_velocity_gain: float = _num(0.0, 1e4)
+    apf_radius_m: float = _num(0.0, 100.0, lo_open=True)
+    leader_kp: float = _num(0.0, 1e3, lo_open=True)
+    leader_kd: float = _num(0.0, 1e3, lo_open=True)
+    ks: float = _num(0.0, 1e3, lo_open=True)
+    deadlock_gain: float = _num(0.0, 100.0)
+    deadlock_h_m2: float = _num(0.0, 1e3, lo_open=True)
+
+
+# TOML section name -> its dataclass, in file order.
+SECTIONS: dict[str, type] = {
+    "scenario": RunConfig,
+    "vehicle": VehicleConfig,
+    "disturbance": DisturbanceConfig,
+    "unmodeled": UnmodeledConfig,
+    "formation": FormationConfig,
+    "leader_trajectory": LeaderTrajectoryConfig,
+    "sensing": SensingConfig,
+    "communication": CommunicationConfig,
+    "observer": ObserverConfig,
+    "controller": ControllerConfig,
+}
+
 SCHEMA: dict[str, dict[str, Spec]] = {
-    "scenario": {
-        "name": ("str", None),
-        "seed": ("int", 0, 2**32 - 1),
-        "duration_s": ("float", 0.0, 3600.0, True, False),
-        "physics_hz": ("int", 50, 5000),
-        "control_hz": ("int", 1, 1000),
-    },
-    "vehicle": {
-        "mass_kg": ("float", 0.05, 100.0, False, False),
-        "gravity_mps2": ("float", 0.0, 30.0, False, False),
-        "thrust_max_n": ("float", 0.0, 5000.0, True, False),
-        "tilt_max_deg": ("float", 0.0, 89.0, True, False),
-        "tau_rollpitch_s": ("float", 0.0, 5.0, True, False),
-        "tau_yaw_s": ("float", 0.0, 5.0, True, False),
-        "tau_thrust_s": ("float", 0.0, 5.0, True, False),
-        "collision_radius_m": ("float", 0.0, 10.0, True, False),
-    },
-    "disturbance": {
-        "amplitude_n": ("float", 0.0, 100.0, False, False),
-        "omega_rad_s": ("float", 0.0, 100.0, False, False),
-    },
-    "unmodeled": {
-        "zeta_nominal": ("vec", 6, -10.0, 10.0),
-        "zeta_spread": ("float", 0.0, 1.0, False, False),
-        "ground_effect_height_m": ("float", 0.0, 100.0, True, False),
-    },
-    "formation": {
-        "leaders": ("ids",),
-        "graph": ("str", ("cube_face_diagonals", "complete")),
-        "sensing_range_m": ("float", 0.0, 1000.0, True, False),
-    },
-    "leader_trajectory": {
-        "frequency_hz": ("float", 0.0, 10.0, False, False),
-        "amplitude_m": ("vec", 3, -100.0, 100.0),
-    },
-    "sensing": {
-        "bearing_noise_rad": ("float", 0.0, 1.0, False, False),
-        "bearing_rate_noise_radps": ("float", 0.0, 10.0, False, False),
-        "distance_noise_m": ("float", 0.0, 10.0, False, False),
-        "range_rate_noise_mps": ("float", 0.0, 10.0, False, False),
-        "dropout_prob": ("float", 0.0, 1.0, False, True),
-    },
-    "communication": {
-        "outages_s": ("windows",),
-        "max_age_s": ("float", 0.0, 10.0, True, False),
-    },
-    "observer": {
-        "beta": ("vec", 3, 0.0, 1e4),
-        "mu": ("float", 0.0, 100.0, False, False),
-        "sigma": ("float", 0.0, 100.0, False, False),
-        "substeps": ("int", 1, 100),
-        "reference_gain": ("float", 0.0, 1e4, True, False),
-        "init_pos_error_m": ("float", 0.0, 100.0, False, False),
-        "init_vel_error_mps": ("float", 0.0, 100.0, False, False),
-        "leader_anchor": ("float", 0.0, 100.0, False, False),
-        "velocity_gain": ("vec", 2, 0.0, 1e4),
-    },
-    "controller": {
-        "method": ("str", ("rcbf", "apf", "none")),
-        "kp": ("float", 0.0, 1e4, True, False),
-        "kd": ("float", 0.0, 1e4, True, False),
-        "clf_lambda": ("float", 0.0, 1e3, True, False),
-        "clf_c": ("float", 0.0, 1e3, True, False),
-        "rho": ("float", 0.0, 1e9, True, False),
-        "u_max_mps2": ("float", 0.0, 100.0, True, False),
-        "gamma": ("float", 0.0, 100.0, True, False),
-        "tau_safe_s": ("float", 0.0, 10.0, False, False),
-        "d_safe_m": ("float", 0.0, 100.0, True, False),
-        "apf_gain": ("float", 0.0, 1e4, False, False),
-        "apf_velocity_gain": ("float", 0.0, 1e4, False, False),
-        "apf_radius_m": ("float", 0.0, 100.0, True, False),
-        "leader_kp": ("float", 0.0, 1e3, True, False),
-        "leader_kd": ("float", 0.0, 1e3, True, False),
-        "ks": ("float", 0.0, 1e3, True, False),
-        "deadlock_gain": ("float", 0.0, 100.0, False, False),
-        "deadlock_h_m2": ("float", 0.0, 1e3, True, False),
-    },
+    section: {f.name: f.metadata["spec"] for f in fields(cls)} for section, cls in SECTIONS.items()
 }
 
 AGENT_SCHEMA: dict[str, Spec] = {
     "id": ("int", 1, 255),
-    "role": ("str", ("leader", "follower")),
+    "role": ("str", tuple(Role)),
     "position": ("vec", 3, -1e4, 1e4),
     "velocity": ("vec", 3, -100.0, 100.0),
     "vertex": ("vec", 3, -1e3, 1e3),
 }
+
+
+def _typed_value(f: Any, value: Any) -> Any:
+    """A validated TOML value as the dataclass field holds it."""
+    kind = f.metadata["spec"][0]
+    if kind == "float":
+        return float(value)
+    if kind == "vec":
+        return tuple(float(v) for v in value)
+    if kind == "ids":
+        return tuple(int(v) for v in value)
+    if kind == "windows":
+        return tuple((float(w[0]), float(w[1])) for w in value)
+    if kind == "str" and f.metadata["enum"] is not None:
+        return f.metadata["enum"](value)
+    return value
+
+
+def _toml_value(value: Any) -> Any:
+    """A typed field value back in TOML form (lists, plain str)."""
+    if isinstance(value, tuple):
+        return [_toml_value(v) for v in value]
+    if isinstance(value, StrEnum):
+        return str(value)
+    return value
 
 
 def _describe(spec: Spec) -> str:
@@ -187,36 +293,67 @@ class AgentSpec:
     """One agent. ``id`` is 1-based and is the MAVLink system id."""
 
     id: int
-    role: str
+    role: Role
     position: np.ndarray  # (3,) ENU m
     velocity: np.ndarray  # (3,) ENU m/s
     vertex: np.ndarray  # (3,) formation vertex (unit-free; bearings come from it)
 
     @property
     def is_leader(self) -> bool:
-        return self.role == "leader"
+        return self.role is Role.LEADER
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scenario. Sections are plain dicts of validated values."""
+    """A validated scenario: one typed, frozen section per TOML table (``sc.controller.kp``)."""
 
     path: str
-    raw: dict[str, dict[str, Any]]
+    run: RunConfig
+    vehicle: VehicleConfig
+    disturbance: DisturbanceConfig
+    unmodeled: UnmodeledConfig
+    formation: FormationConfig
+    leader_trajectory: LeaderTrajectoryConfig
+    sensing: SensingConfig
+    communication: CommunicationConfig
+    observer: ObserverConfig
+    controller: ControllerConfig
     agents: tuple[AgentSpec, ...]
-    outages: tuple[tuple[float, float], ...] = field(default=())
 
-    def __getitem__(self, section: str) -> dict[str, Any]:
-        return self.raw[section]
+    def section(self, name: str) -> Any:
+        """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
+        return self.run if name == "scenario" else getattr(self, name)
+
+    def to_toml_dict(self) -> dict[str, Any]:
+        """The scenario as a TOML document (sections and ``agent`` list)."""
+        data: dict[str, Any] = {
+            name: {f.name: _toml_value(getattr(self.section(name), f.name)) for f in fields(cls)}
+            for name, cls in SECTIONS.items()
+        }
+        data["agent"] = [
+            {
+                "id": a.id,
+                "role": str(a.role),
+                "position": a.position.tolist(),
+                "velocity": a.velocity.tolist(),
+                "vertex": a.vertex.tolist(),
+            }
+            for a in self.agents
+        ]
+        return data
 
     # Convenience accessors used everywhere --------------------------------
     @property
     def name(self) -> str:
-        return str(self.raw["scenario"]["name"])
+        return self.run.name
 
     @property
     def seed(self) -> int:
-        return int(self.raw["scenario"]["seed"])
+        return self.run.seed
+
+    @property
+    def outages(self) -> tuple[tuple[float, float], ...]:
+        return self.communication.outages_s
 
     @property
     def n(self) -> int:
@@ -236,20 +373,19 @@ class Scenario:
 
     @property
     def control_dt(self) -> float:
-        return 1.0 / float(self.raw["scenario"]["control_hz"])
+        return 1.0 / float(self.run.control_hz)
 
     @property
     def physics_dt(self) -> float:
-        return 1.0 / float(self.raw["scenario"]["physics_hz"])
+        return 1.0 / float(self.run.physics_hz)
 
     @property
     def substeps_per_control(self) -> int:
-        return int(self.raw["scenario"]["physics_hz"]) // int(self.raw["scenario"]["control_hz"])
+        return self.run.physics_hz // self.run.control_hz
 
     @property
     def steps(self) -> int:
-        sc = self.raw["scenario"]
-        return int(round(float(sc["duration_s"]) * sc["control_hz"]))
+        return int(round(self.run.duration_s * self.run.control_hz))
 
     def index_of(self, agent_id: int) -> int:
         for k, a in enumerate(self.agents):
@@ -268,20 +404,9 @@ class Scenario:
 
     def with_overrides(self, **sections: dict[str, Any]) -> Scenario:
         """A copy with some keys replaced (validated like a file)."""
-        raw = {k: dict(v) for k, v in self.raw.items()}
+        data = self.to_toml_dict()
         for sec, kv in sections.items():
-            raw.setdefault(sec, {}).update(kv)
-        data: dict[str, Any] = dict(raw)
-        data["agent"] = [
-            {
-                "id": a.id,
-                "role": a.role,
-                "position": a.position.tolist(),
-                "velocity": a.velocity.tolist(),
-                "vertex": a.vertex.tolist(),
-            }
-            for a in self.agents
-        ]
+            data.setdefault(sec, {}).update(kv)
         return parse_scenario(data, self.path)
 
 
@@ -313,7 +438,7 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
             v = given[key]
             if not _check(v, spec):
                 raise fail(f"{section}.{key} = {v!r}: must be {_describe(spec)}")
-            out[key] = float(v) if spec[0] == "float" else v
+            out[key] = v
         raw[section] = out
 
     sc = raw["scenario"]
@@ -352,7 +477,7 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
         agents.append(
             AgentSpec(
                 id=int(a["id"]),
-                role=str(a["role"]),
+                role=Role(a["role"]),
                 position=np.array(a["position"], dtype=float),
                 velocity=np.array(a["velocity"], dtype=float),
                 vertex=np.array(a["vertex"], dtype=float),
@@ -376,8 +501,13 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
                 raise fail(
                     f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
                 )
-    outages = tuple((float(w[0]), float(w[1])) for w in raw["communication"]["outages_s"])
-    return Scenario(path=path, raw=raw, agents=tuple(agents), outages=outages)
+    typed = {
+        ("run" if name == "scenario" else name): cls(
+            **{f.name: _typed_value(f, raw[name][f.name]) for f in fields(cls)}
+        )
+        for name, cls in SECTIONS.items()
+    }
+    return Scenario(path=path, agents=tuple(agents), **typed)
 
 
 def load_scenario(path: str | Path) -> Scenario:

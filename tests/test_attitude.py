@@ -6,9 +6,12 @@ import numpy as np
 
 from offboard.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
 from swarm_common.frames import thrust_accel
+from swarm_common.scenario import VehicleConfig
 
-VEH = {"mass_kg": 1.8, "gravity_mps2": 9.81, "thrust_max_n": 52.92, "tilt_max_deg": 30.0,
-       "tau_rollpitch_s": 0.15, "tau_yaw_s": 0.15, "tau_thrust_s": 0.03}
+VEH = VehicleConfig(
+    mass_kg=1.8, gravity_mps2=9.81, thrust_max_n=52.92, tilt_max_deg=30.0,
+    tau_rollpitch_s=0.15, tau_yaw_s=0.15, tau_thrust_s=0.03, collision_radius_m=0.3,
+)
 
 
 def test_round_trip_within_limits():

@@ -1,5 +1,6 @@
 """Bearing geometry, Laplacian properties and rigidity (paper §2.1; errata 3)."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -66,15 +67,17 @@ def test_sensing_reproducible_and_exact_without_noise(sc):
     rng = np.random.default_rng(0)
     p = rng.uniform(0, 5, (sc.n, 3))
     v = rng.normal(0, 1, (sc.n, 3))
-    quiet = {k: 0.0 for k in sc["sensing"]}
+    quiet = dataclasses.replace(
+        sc.sensing, **{f.name: 0.0 for f in dataclasses.fields(sc.sensing)}
+    )
     s = Sensor(2, 3, sc.n, quiet, 10.0, seed=1)
     m = s.measure(p, v)
     assert not m.valid[2] and m.valid.sum() == sc.n - 1
     ok = m.valid
     assert np.allclose(m.rel_pos()[ok], (p - p[2])[ok])
     assert np.allclose(m.rel_vel()[ok], (v - v[2])[ok])
-    a = Sensor(2, 3, sc.n, sc["sensing"], 10.0, seed=7).measure(p, v)
-    b = Sensor(2, 3, sc.n, sc["sensing"], 10.0, seed=7).measure(p, v)
+    a = Sensor(2, 3, sc.n, sc.sensing, 10.0, seed=7).measure(p, v)
+    b = Sensor(2, 3, sc.n, sc.sensing, 10.0, seed=7).measure(p, v)
     assert np.array_equal(a.g, b.g) and np.array_equal(a.d, b.d)
-    far = Sensor(2, 3, sc.n, sc["sensing"], 0.1, seed=7).measure(p, v)
+    far = Sensor(2, 3, sc.n, sc.sensing, 0.1, seed=7).measure(p, v)
     assert not far.valid.any()

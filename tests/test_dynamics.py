@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import CUBE8
 
+from swarm_common.enums import Role
 from swarm_common.scenario import AgentSpec, load_scenario
 from vehicle_sim.dynamics import SwarmDynamics, external_disturbance, regressor
 
@@ -34,7 +35,7 @@ def with_agents(sc, positions, velocities=None):
     agents = tuple(
         AgentSpec(
             id=k + 1,
-            role="leader" if k < 2 else "follower",
+            role=Role.LEADER if k < 2 else Role.FOLLOWER,
             position=np.array(p, dtype=float),
             velocity=np.array(v, dtype=float),
             vertex=np.array([k, 0, 0], dtype=float),
@@ -76,7 +77,7 @@ def test_attitude_step_time_constant(cube8, axis):
     for _ in range(200):
         dyn.step()
         trace.append(dyn.att[0, axis])
-    tau_cfg = cube8["vehicle"]["tau_yaw_s" if axis == 2 else "tau_rollpitch_s"]
+    tau_cfg = getattr(cube8.vehicle, "tau_yaw_s" if axis == 2 else "tau_rollpitch_s")
     assert _time_constant(trace, 0.3, dyn.dt) == pytest.approx(tau_cfg, rel=0.10)
     # 63 % rise time, read off the samples, within 10 % too
     k63 = next(k for k, x in enumerate(trace, start=1) if x >= 0.3 * (1 - math.exp(-1)))
@@ -92,16 +93,16 @@ def test_thrust_step_time_constant(cube8):
         dyn.step()
         trace.append(dyn.thrust[0] - f0)
     assert _time_constant(trace, 10.0, dyn.dt) == pytest.approx(
-        cube8["vehicle"]["tau_thrust_s"], rel=0.10
+        cube8.vehicle.tau_thrust_s, rel=0.10
     )
 
 
 def test_tilt_and_thrust_clamped(cube8):
     dyn = SwarmDynamics(quiet(cube8))
     dyn.set_command(0, 2.0, -2.0, 0.5, 1e6)
-    lim = math.radians(cube8["vehicle"]["tilt_max_deg"])
+    lim = math.radians(cube8.vehicle.tilt_max_deg)
     assert dyn.cmd_att[0, 0] == pytest.approx(lim) and dyn.cmd_att[0, 1] == pytest.approx(-lim)
-    assert dyn.cmd_thrust[0] == pytest.approx(cube8["vehicle"]["thrust_max_n"])
+    assert dyn.cmd_thrust[0] == pytest.approx(cube8.vehicle.thrust_max_n)
     dyn.set_command(1, math.nan, 0.0, 0.0, 10.0)  # ignored
     assert dyn.cmd_thrust[1] == pytest.approx(dyn.hold_thrust())
 
@@ -121,7 +122,7 @@ def test_tilt_accelerates_horizontally(cube8):
 def test_external_disturbance_effect(cube8):
     sc = cube8.with_overrides(unmodeled={"zeta_nominal": [0.0] * 6, "zeta_spread": 0.0})
     dyn = SwarmDynamics(sc)
-    a, w = sc["disturbance"]["amplitude_n"], sc["disturbance"]["omega_rad_s"]
+    a, w = sc.disturbance.amplitude_n, sc.disturbance.omega_rad_s
     for t in (0.0, 0.7, 2.0):
         expect = a * np.array([math.cos(w * t), math.sin(w * t), math.sin(w * t)]) / dyn.mass
         np.testing.assert_allclose(dyn.lumped_accel(t)[3], expect, atol=1e-12)
@@ -154,11 +155,11 @@ def test_drag_terms_effect(cube8):
     assert phi_low[2, 4] > 0.8 and phi_high[2, 4] < 0.01
     # the lumped term equals Φ ζ + d/m
     dyn = SwarmDynamics(cube8)
-    phi = regressor(dyn.p, dyn.v, cube8["unmodeled"]["ground_effect_height_m"])
+    phi = regressor(dyn.p, dyn.v, cube8.unmodeled.ground_effect_height_m)
     expect = (
         np.einsum("nij,nj->ni", phi, dyn.zeta)
         + external_disturbance(
-            0.0, cube8["disturbance"]["amplitude_n"], cube8["disturbance"]["omega_rad_s"]
+            0.0, cube8.disturbance.amplitude_n, cube8.disturbance.omega_rad_s
         )
         / dyn.mass
     )
@@ -196,7 +197,7 @@ def test_collision_counting(cube8):
     assert dyn.collisions == 1
     t, a, b = dyn.collision_pairs[0]
     assert (a, b) == (1, 2)
-    r = cube8["vehicle"]["collision_radius_m"]
+    r = cube8.vehicle.collision_radius_m
     assert t == pytest.approx((2.0 - r) / 2.0, abs=2 * dyn.dt)  # gap 2 m, closing at 2 m/s
     assert dyn.min_pair_distance() > r
 

@@ -31,7 +31,7 @@ def rcbf15(sc):
 def test_rcbf_safe_and_forms(rcbf15, sc):
     m = rcbf15.metrics
     assert set(m) == set(METRIC_KEYS)
-    assert m["min_distance_m"] >= sc["controller"]["d_safe_m"]
+    assert m["min_distance_m"] >= sc.controller.d_safe_m
     assert m["min_distance_m"] >= 0.75
     assert m["collisions"] == 0
     assert m["formation_time_s"] is not None and m["formation_time_s"] < 15.0
@@ -43,7 +43,7 @@ def test_rcbf_safe_and_forms(rcbf15, sc):
 
 def test_no_avoidance_violates(sc):
     r = run_inproc(sc, "none", duration=4.0)
-    assert r.metrics["min_distance_m"] < sc["controller"]["d_safe_m"]
+    assert r.metrics["min_distance_m"] < sc.controller.d_safe_m
 
 
 def test_reproducible(sc):
@@ -53,8 +53,8 @@ def test_reproducible(sc):
 
 
 def test_wire_helpers_match_agent_encoding(sc):
-    sp = setpoint_from_accel(np.array([0.7, -0.3, 0.4]), 0.2, sc["vehicle"], decode=True)
-    cmd = wire_to_command(sp.q_ned, sp.thrust_norm, sc["vehicle"]["thrust_max_n"])
+    sp = setpoint_from_accel(np.array([0.7, -0.3, 0.4]), 0.2, sc.vehicle, decode=True)
+    cmd = wire_to_command(sp.q_ned, sp.thrust_norm, sc.vehicle.thrust_max_n)
     assert cmd == (sp.roll, sp.pitch, sp.yaw, sp.thrust_n)
     x = np.array([1.0 + 1e-9, np.pi])
     assert np.array_equal(f32(x), np.float32(x).astype(np.float64))
@@ -94,5 +94,5 @@ def test_cli_run_json(tmp_path):
 def test_rcbf_safe_with_sensing_dropouts(sc):
     s2 = sc.with_overrides(sensing={"dropout_prob": 0.1})
     r = run_inproc(s2, "rcbf", duration=5.0)
-    assert r.metrics["min_distance_m"] >= s2["controller"]["d_safe_m"]
+    assert r.metrics["min_distance_m"] >= s2.controller.d_safe_m
     assert np.all(np.isfinite(r.series.u))

@@ -74,7 +74,7 @@ def test_killed_follower_enters_failsafe_and_others_stay_clear(tmp_path: Path) -
     assert last.mode[vi] == "HOLD"  # the documented offboard-loss failsafe
     assert all(m == "OFFBOARD" for i, m in enumerate(last.mode) if i != vi)
     # after the kill, nobody comes within D_safe of the abandoned vehicle
-    d_safe = sc["controller"]["d_safe_m"]
+    d_safe = sc.controller.d_safe_m
     after = [k for k in rec.truth if rec.truth[k].t >= 2.0]
     dmin = min(
         float(np.min(np.delete(np.linalg.norm(rec.truth[k].p - rec.truth[k].p[vi], axis=1), vi)))

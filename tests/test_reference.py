@@ -31,11 +31,11 @@ def test_trajectory_derivatives_and_exosystem():
 def test_desired_state_observer_converges(sc):
     f = formation_from_scenario(sc)
     dt = 0.02
-    lt = sc["leader_trajectory"]
-    amp = np.array(lt["amplitude_m"])
-    trs = {i: LeaderTrajectory(sc.agents[i].position, amp, lt["frequency_hz"])
+    lt = sc.leader_trajectory
+    amp = np.array(lt.amplitude_m)
+    trs = {i: LeaderTrajectory(sc.agents[i].position, amp, lt.frequency_hz)
            for i in f.leader_idx}
-    omega = 2 * np.pi * lt["frequency_hz"]
+    omega = 2 * np.pi * lt.frequency_hz
     obs = {i: DesiredStateObserver(f, i, omega, 4.0, dt,
                                    np.concatenate([sc.agents[i].position, np.zeros(9)]))
            for i in f.follower_idx}

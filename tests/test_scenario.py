@@ -19,7 +19,7 @@ def test_cube8_loads():
     assert sc.leader_ids == [1, 2]
     assert sc.substeps_per_control == 4
     assert sc.control_dt == pytest.approx(0.02)
-    assert sc["vehicle"]["mass_kg"] == pytest.approx(1.8)
+    assert sc.vehicle.mass_kg == pytest.approx(1.8)
     assert sc.initial_positions()[0].tolist() == [4.0, 0.0, 6.0]
     assert sc.outages == ((5.0, 5.5), (15.0, 15.5), (40.0, 40.5))
 

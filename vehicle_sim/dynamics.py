@@ -37,23 +37,23 @@ class SwarmDynamics:
     """N quadrotors integrated together at a fixed physics step."""
 
     def __init__(self, sc: Scenario, seed: int | None = None, held: bool = False) -> None:
-        veh = sc["vehicle"]
+        veh = sc.vehicle
         self.n = sc.n
         self.ids = sc.ids
         self.dt = sc.physics_dt
-        self.mass = veh["mass_kg"]
-        self.g = veh["gravity_mps2"]
-        self.f_max = veh["thrust_max_n"]
-        self.tilt_max = math.radians(veh["tilt_max_deg"])
-        self.tau = np.array([veh["tau_rollpitch_s"], veh["tau_rollpitch_s"], veh["tau_yaw_s"]])
-        self.tau_f = veh["tau_thrust_s"]
-        self.collision_radius = veh["collision_radius_m"]
-        self.dist_amp = sc["disturbance"]["amplitude_n"]
-        self.dist_omega = sc["disturbance"]["omega_rad_s"]
-        self.ge_height = sc["unmodeled"]["ground_effect_height_m"]
+        self.mass = veh.mass_kg
+        self.g = veh.gravity_mps2
+        self.f_max = veh.thrust_max_n
+        self.tilt_max = math.radians(veh.tilt_max_deg)
+        self.tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_yaw_s])
+        self.tau_f = veh.tau_thrust_s
+        self.collision_radius = veh.collision_radius_m
+        self.dist_amp = sc.disturbance.amplitude_n
+        self.dist_omega = sc.disturbance.omega_rad_s
+        self.ge_height = sc.unmodeled.ground_effect_height_m
         rng = np.random.default_rng([sc.seed if seed is None else seed, 0xD1])
-        nominal = np.array(sc["unmodeled"]["zeta_nominal"], dtype=float)
-        spread = sc["unmodeled"]["zeta_spread"]
+        nominal = np.array(sc.unmodeled.zeta_nominal, dtype=float)
+        spread = sc.unmodeled.zeta_spread
         self.zeta = nominal * (1.0 + spread * rng.uniform(-1.0, 1.0, size=(self.n, N_ZETA)))
         # exact discretisation of the first-order lags over one physics step
         self._a_att = np.exp(-self.dt / self.tau)

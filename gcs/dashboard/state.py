@@ -200,8 +200,8 @@ class LiveSource:
         self.roles = {a.id: a.role for a in scenario.agents}
         self.vertices = scenario.vertices()
         self.edges = cube_edges(self.ids, self.vertices)
-        self.d_safe = float(scenario["controller"]["d_safe_m"])
-        self.method = str(scenario["controller"]["method"])
+        self.d_safe = float(scenario.controller.d_safe_m)
+        self.method = str(scenario.controller.method)
         self.history: deque[float] = deque(maxlen=history)
         self._fs_text: dict[int, bool] = {}
         self._init_pos = {a.id: np.asarray(a.position, float) for a in scenario.agents}

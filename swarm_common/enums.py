@@ -1,0 +1,62 @@
+"""Every choice the product makes, as a ``StrEnum``: one vocabulary for all packages.
+
+A ``StrEnum`` member *is* its string (``Method.RCBF == "rcbf"``), so scenario files,
+wire records and command lines carry the plain word, while code compares against the
+member and a type checker sees the closed set.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class Method(StrEnum):
+    """Collision-avoidance method of a follower (paper Section 5 comparison)."""
+
+    RCBF = "rcbf"  # CLF + reciprocal CBF QP (paper Section 4)
+    APF = "apf"  # nominal controller + improved artificial potential field
+    NONE = "none"  # nominal controller only, no avoidance
+
+
+class Role(StrEnum):
+    """An agent's role in the bearing formation."""
+
+    LEADER = "leader"
+    FOLLOWER = "follower"
+
+
+class GraphKind(StrEnum):
+    """Neighbour (sensing) graph of the formation."""
+
+    CUBE_FACE_DIAGONALS = "cube_face_diagonals"
+    COMPLETE = "complete"
+
+
+class QPStatus(StrEnum):
+    """Outcome of one safety-filter step (``offboard.clf_rcbf.QPResult.status``)."""
+
+    INACTIVE = "inactive"  # no QP was needed (no constraint near, or not rcbf)
+    SOLVED = "solved"  # OSQP solved the QP as posed
+    RELAXED = "relaxed"  # hard rows were relaxed to regain feasibility
+    FALLBACK = "fallback"  # solver failed: documented safe fallback applied
+
+    @property
+    def degraded(self) -> bool:
+        """True when the step did not solve the QP as posed (counted as a fallback)."""
+        return self in (QPStatus.RELAXED, QPStatus.FALLBACK)
+
+
+class FailsafeAction(StrEnum):
+    """What a vehicle does when its offboard setpoints stop (PX4 ``COM_OBL_RC_ACT``)."""
+
+    HOLD = "hold"
+    LAND = "land"
+
+
+class VehicleMode(StrEnum):
+    """The flight modes ``vehicle-sim`` implements, by the short names it reports."""
+
+    POSCTL = "POSCTL"
+    OFFBOARD = "OFFBOARD"
+    HOLD = "HOLD"
+    LAND = "LAND"
