@@ -195,3 +195,12 @@ def mav_client():
     yield make
     for c in clients:
         c.close()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark each test by its layer folder: ``unit`` (pure, seconds) or ``integration``
+    (subprocesses, UDP and Zenoh)."""
+    for item in items:
+        layer = Path(str(item.fspath)).relative_to(ROOT / "tests").parts[0]
+        if layer in ("unit", "integration"):
+            item.add_marker(getattr(pytest.mark, layer))

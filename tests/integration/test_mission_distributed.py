@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
+from conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from gcs.inproc import run_inproc  # noqa: E402
 from gcs.mission import MissionError, recorded_metrics, run_distributed  # noqa: E402
 from swarm_common.scenario import load_scenario  # noqa: E402
-from tests.conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
 
 pytestmark = pytest.mark.timeout(240)
 

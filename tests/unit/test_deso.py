@@ -1,16 +1,14 @@
 """DESO (paper §3): regressor equals the simulator's, gain check, convergence."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import CUBE8  # noqa: E402
 
 from offboard.bearing import formation_from_scenario
 from offboard.deso import DESO, gain_report, model_accel, regressor, regressor_t_times
 from swarm_common.scenario import load_scenario
 from vehicle_sim.dynamics import regressor as sim_regressor
-
-CUBE8 = Path(__file__).resolve().parents[1] / "scenarios" / "cube8.toml"
 
 
 @pytest.fixture(scope="module")

@@ -3,10 +3,10 @@
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT  # noqa: E402
 
 from gcs.inproc import f32, run_inproc, wire_to_command
 from gcs.metrics import METRIC_KEYS
@@ -14,7 +14,6 @@ from offboard.agent import FollowerAgent, make_agent
 from offboard.attitude import setpoint_from_accel
 from swarm_common.scenario import load_scenario
 
-ROOT = Path(__file__).resolve().parents[1]
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 
 

@@ -9,9 +9,9 @@ import argparse
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
+from conftest import ROOT  # noqa: E402
 
 from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.cli import build, configure_parser
@@ -21,7 +21,6 @@ from gcs.dashboard.state import LiveSource
 from gcs.dashboard.widgets import EventLog
 from swarm_common.scenario import load_scenario
 
-ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "cube8.toml"
 
 pytestmark = pytest.mark.skipif(

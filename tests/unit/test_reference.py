@@ -1,15 +1,13 @@
 """Leader trajectory, exosystem and desired-state observer (paper §4.1; errata 9)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import CUBE8  # noqa: E402
 
 from offboard.bearing import formation_from_scenario
 from offboard.reference import DesiredStateObserver, LeaderTrajectory, exo_propagator
 from swarm_common.scenario import load_scenario
-
-CUBE8 = Path(__file__).resolve().parents[1] / "scenarios" / "cube8.toml"
 
 
 @pytest.fixture(scope="module")

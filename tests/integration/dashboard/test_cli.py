@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import socket
-from pathlib import Path
+
+from conftest import CUBE8  # noqa: E402
 
 from gcs.dashboard.cli import add_dashboard_parser, run_dashboard
 
-SCENARIO = str(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SCENARIO = CUBE8
 
 
 def parser() -> argparse.ArgumentParser:

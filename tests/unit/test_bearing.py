@@ -1,16 +1,14 @@
 """Bearing geometry, Laplacian properties and rigidity (paper §2.1; errata 3)."""
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import CUBE8  # noqa: E402
 
 from offboard.bearing import RigidityError, build_formation, formation_from_scenario, projector
 from offboard.sensing import Sensor
 from swarm_common.scenario import load_scenario
-
-CUBE8 = Path(__file__).resolve().parents[1] / "scenarios" / "cube8.toml"
 
 
 @pytest.fixture(scope="module")
