@@ -29,7 +29,9 @@ class LogLevel(StrEnum):
 FORMAT = "%(asctime)s.%(msecs)03d %(levelname)s %(name)s: %(message)s"
 
 
-def add_log_level_argument(parser: argparse.ArgumentParser, default: LogLevel = LogLevel.INFO) -> None:
+def add_log_level_argument(
+    parser: argparse.ArgumentParser, default: LogLevel = LogLevel.INFO
+) -> None:
     """Add ``--log-level {debug,info,warning,error}`` to a command line."""
     parser.add_argument(
         "--log-level",
