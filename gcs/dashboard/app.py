@@ -26,10 +26,12 @@ Every MAVLink command waits for its COMMAND_ACK; each result goes to the event l
 from __future__ import annotations
 
 import asyncio
+import logging
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from pymavlink.dialects.v20 import common as mavlink
 from textual.app import App, ComposeResult, SystemCommand
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
@@ -53,6 +55,11 @@ from .widgets import (
 )
 from .zenoh_feed import METHODS
 
+log = logging.getLogger(__name__)
+
+NOTICE = mavlink.MAV_SEVERITY_NOTICE
+WARNING = mavlink.MAV_SEVERITY_WARNING
+ERROR = mavlink.MAV_SEVERITY_ERROR
 OUTAGES_S = (0.5, 1.0, 2.0, 5.0)
 MAV_ACTIONS = ("arm", "disarm", "offboard", "hold", "land")
 WIDE_TABLE_COLUMNS = 150
@@ -123,8 +130,9 @@ class DashboardApp(App[int]):
     def refresh_data(self) -> None:
         try:
             view, events = self.source.poll()
-        except Exception as exc:  # a feed hiccup must not take the ground station down
-            self.log_event(0, "error", f"source: {exc!r}", 3)
+        except Exception as exc:  # any feed hiccup: logged, the ground station stays up
+            log.warning("dashboard source poll failed", exc_info=True)
+            self.log_event(0, "error", f"source: {exc!r}", ERROR)
             return
         self.view = view
         for ev in events:
@@ -143,7 +151,9 @@ class DashboardApp(App[int]):
         if self.view is not None:
             self.query_one(StatusBar).show(self.view, self.target_label())
 
-    def log_event(self, agent: int, kind: str, text: str, severity: int = 6) -> None:
+    def log_event(
+        self, agent: int, kind: str, text: str, severity: int = mavlink.MAV_SEVERITY_INFO
+    ) -> None:
         t = self.view.t if self.view is not None else 0.0
         self.query_one(EventLog).add(DashEvent(t, agent, kind, text, severity))
 
@@ -181,24 +191,26 @@ class DashboardApp(App[int]):
     def send_mav(self, key: str, ids: list[int]) -> None:
         spec = COMMANDS[key]
         if not ids:
-            self.log_event(0, "cmd", f"{spec.label}: no vehicle selected", 4)
+            self.log_event(0, "cmd", f"{spec.label}: no vehicle selected", WARNING)
             return
         if self.commander is None:
-            self.log_event(0, "cmd", f"{spec.label}: read-only (no command link)", 4)
+            self.log_event(0, "cmd", f"{spec.label}: read-only (no command link)", WARNING)
             return
-        self.log_event(0, "cmd", f"{spec.label} -> {self.target_label(ids)}", 5)
+        self.log_event(0, "cmd", f"{spec.label} -> {self.target_label(ids)}", NOTICE)
         self.run_worker(self._mav_worker(key, ids), group="mav", exit_on_error=False)
 
     async def _mav_worker(self, key: str, ids: list[int]) -> None:
         results = await asyncio.gather(*(self.commander.mav(i, key) for i in ids))
         for r in results:
             self.results.append(r)
-            self.log_event(r.sysid, "ack", r.describe(), 6 if r.ok else 3)
+            self.log_event(
+                r.sysid, "ack", r.describe(), mavlink.MAV_SEVERITY_INFO if r.ok else ERROR
+            )
 
     def action_estop(self) -> None:
         ids = self.targets()
         if not ids:
-            self.log_event(0, "cmd", "emergency stop: no vehicle selected", 4)
+            self.log_event(0, "cmd", "emergency stop: no vehicle selected", WARNING)
             return
         label = self.target_label(ids)
 
@@ -206,7 +218,7 @@ class DashboardApp(App[int]):
             if yes:
                 self.send_mav("terminate", ids)
             else:
-                self.log_event(0, "cmd", f"emergency stop {label} cancelled", 6)
+                self.log_event(0, "cmd", f"emergency stop {label} cancelled")
 
         self.push_screen(
             ConfirmScreen(f"EMERGENCY STOP {label}?\nFlight termination: motors stop at once."),
@@ -248,19 +260,20 @@ class DashboardApp(App[int]):
         who = "all" if cmd.agent == 0 else f"#{cmd.agent}"
         what = f"method {cmd.method}" if cmd.kind == "method" else f"outage {cmd.duration_s:g} s"
         if self.commander is None:
-            self.log_event(0, "cmd", f"{what} ({who}): read-only (no command link)", 4)
+            self.log_event(0, "cmd", f"{what} ({who}): read-only (no command link)", WARNING)
             return
         try:
             key = self.commander.zenoh(cmd)
-        except Exception as exc:
-            self.log_event(cmd.agent, "cmd", f"{what} ({who}) failed: {exc}", 3)
+        except Exception as exc:  # RuntimeError, ValueError, zenoh.ZError, ...: logged, go on
+            log.warning("publishing %s failed", what, exc_info=True)
+            self.log_event(cmd.agent, "cmd", f"{what} ({who}) failed: {exc}", ERROR)
             return
         self.published.append(key)
         self.log_event(
             cmd.agent,
             "outage" if cmd.kind == "outage" else "method",
             f"{what} ({who}) published",
-            5,
+            NOTICE,
         )
 
     # -- command palette ---------------------------------------------------------------

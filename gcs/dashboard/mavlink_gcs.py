@@ -19,6 +19,7 @@ The socket runs in a daemon thread; no Textual here, so all of it is unit-testab
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import socket
 import threading
@@ -28,21 +29,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from pymavlink.dialects.v20 import common as mavlink2
+from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_common.frames import ned_to_enu, rotm_from_quat
 from swarm_common.ports import GCS_PORT
 
 from .px4modes import MAV_RESULT_NAMES, CommandSpec, decode_px4_mode
 
-SEVERITY_NAMES = ["EMERG", "ALERT", "CRIT", "ERROR", "WARN", "NOTICE", "INFO", "DEBUG"]
-MAV_FRAME_LOCAL_NED = 1
-MAV_FRAME_BODY_NED = 8
-MAV_FRAME_BODY_FRD = 12
-MAV_FRAME_LOCAL_FRD = 20
-MAV_TYPE_GCS = 6
-MAV_AUTOPILOT_INVALID = 8
-MAV_STATE_ACTIVE = 4
+log = logging.getLogger(__name__)
+
+LOCAL_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_FRD)
+BODY_FRAMES = (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED)
+# what a well-formed message with absurd field values can raise in _handle
+_CONTENT_ERRORS = (ArithmeticError, LookupError, TypeError, ValueError, AttributeError)
 
 
 @dataclass
@@ -87,7 +86,7 @@ class LinkEvent:
     sysid: int
     kind: str  # statustext | mode | armed | link | ack
     text: str
-    severity: int = 6  # MAV_SEVERITY (0 emergency .. 7 debug)
+    severity: int = mavlink.MAV_SEVERITY_INFO  # MAV_SEVERITY (0 emergency .. 7 debug)
 
 
 @dataclass(frozen=True)
@@ -104,7 +103,7 @@ class CommandResult:
 
     @property
     def ok(self) -> bool:
-        return self.result == 0
+        return self.result == mavlink.MAV_RESULT_ACCEPTED
 
     @property
     def result_name(self) -> str:
@@ -134,7 +133,7 @@ class MavlinkGcs:
         port: int | None = None,
         heartbeat_timeout_s: float = 2.0,
         source_system: int = 255,
-        source_component: int = 190,
+        source_component: int = mavlink.MAV_COMP_ID_MISSIONPLANNER,
         send_heartbeat: bool = True,
         clock: Callable[[], float] = time.monotonic,
         max_events: int = 2000,
@@ -144,9 +143,9 @@ class MavlinkGcs:
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.clock = clock
         self._send_heartbeat = send_heartbeat
-        self._rx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        self._rx = mavlink.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         self._rx.robust_parsing = True
-        self._tx = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        self._tx = mavlink.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         self._tx_lock = threading.Lock()
         self._lock = threading.Lock()
         self._vehicles: dict[int, LinkVehicle] = {}
@@ -216,14 +215,15 @@ class MavlinkGcs:
         rx = self._rx
         try:
             msgs = rx.parse_buffer(data) or []
-        except Exception:  # pymavlink raises on some malformed input even when robust
+        except mavlink.MAVError as exc:  # pymavlink raises on some input even when robust
             msgs = []
             self.bad_packets += 1
+            log.debug("bad MAVLink datagram from %s: %s", addr, exc)
         if rx.buf_len() > 0:  # a datagram holds whole packets: leftovers are a truncation
             self.bad_packets += 1
             rx.buf = bytearray()
             rx.buf_index = 0
-            rx.expected_length = mavlink2.HEADER_LEN_V1 + 2
+            rx.expected_length = mavlink.HEADER_LEN_V1 + 2
         if not msgs:
             return
         now = self.clock()
@@ -235,8 +235,9 @@ class MavlinkGcs:
                 self.packets += 1
                 try:
                     self._handle(msg, addr, now)
-                except Exception:  # a well-formed packet with absurd content
+                except _CONTENT_ERRORS as exc:  # a well-formed packet with absurd content
                     self.bad_packets += 1
+                    log.debug("bad %s from %s: %r", msg.get_type(), addr, exc)
 
     def _vehicle(self, sysid: int, addr: tuple[str, int], now: float) -> LinkVehicle:
         v = self._vehicles.get(sysid)
@@ -246,36 +247,47 @@ class MavlinkGcs:
         v.addr = addr
         return v
 
-    def _event(self, now: float, sysid: int, kind: str, text: str, severity: int = 6) -> None:
+    def _event(
+        self,
+        now: float,
+        sysid: int,
+        kind: str,
+        text: str,
+        severity: int = mavlink.MAV_SEVERITY_INFO,
+    ) -> None:
         self._events.append(LinkEvent(now, sysid, kind, text, severity))
 
     def _handle(self, msg: object, addr: tuple[str, int], now: float) -> None:
         sysid = msg.get_srcSystem()  # type: ignore[attr-defined]
         mtype = msg.get_type()  # type: ignore[attr-defined]
-        if msg.get_srcComponent() != 1 and mtype != "COMMAND_ACK":  # type: ignore[attr-defined]
+        comp = msg.get_srcComponent()  # type: ignore[attr-defined]
+        if comp != mavlink.MAV_COMP_ID_AUTOPILOT1 and mtype != "COMMAND_ACK":
             return
         v = self._vehicle(sysid, addr, now)
         v.last_msg = now
         v.msg_count += 1
         if mtype == "HEARTBEAT":
-            if msg.type == MAV_TYPE_GCS:  # type: ignore[attr-defined]
+            if msg.type == mavlink.MAV_TYPE_GCS:  # type: ignore[attr-defined]
                 return
             v.last_heartbeat = now
             if v.lost:
                 v.lost = False
-                self._event(now, sysid, "link", "link regained", 5)
+                self._event(now, sysid, "link", "link regained", mavlink.MAV_SEVERITY_NOTICE)
             v.base_mode = msg.base_mode  # type: ignore[attr-defined]
             v.autopilot = msg.autopilot  # type: ignore[attr-defined]
             v.system_status = msg.system_status  # type: ignore[attr-defined]
             mode = decode_px4_mode(msg.custom_mode, msg.base_mode)  # type: ignore[attr-defined]
             if mode != v.mode:
                 if v.mode != "?":
-                    self._event(now, sysid, "mode", f"mode {v.mode} -> {mode}", 5)
+                    text = f"mode {v.mode} -> {mode}"
+                    self._event(now, sysid, "mode", text, mavlink.MAV_SEVERITY_NOTICE)
                 v.mode = mode
             v.custom_mode = msg.custom_mode  # type: ignore[attr-defined]
-            armed = bool(msg.base_mode & 128)  # type: ignore[attr-defined]
+            base_mode: int = msg.base_mode  # type: ignore[attr-defined]
+            armed = bool(base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             if armed != v.armed:
-                self._event(now, sysid, "armed", "armed" if armed else "disarmed", 5)
+                text = "armed" if armed else "disarmed"
+                self._event(now, sysid, "armed", text, mavlink.MAV_SEVERITY_NOTICE)
                 v.armed = armed
         elif mtype == "LOCAL_POSITION_NED":
             m = msg
@@ -284,13 +296,13 @@ class MavlinkGcs:
             v.time_boot_ms = m.time_boot_ms  # type: ignore[attr-defined]
         elif mtype == "ODOMETRY":
             m = msg
-            if m.frame_id in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_FRD):  # type: ignore[attr-defined]
+            if m.frame_id in LOCAL_FRAMES:  # type: ignore[attr-defined]
                 v.pos_enu = _enu(m.x, m.y, m.z)  # type: ignore[attr-defined]
             vel = (m.vx, m.vy, m.vz)  # type: ignore[attr-defined]
             q = tuple(float(c) for c in m.q)  # type: ignore[attr-defined]
-            if m.child_frame_id in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_FRD):  # type: ignore[attr-defined]
+            if m.child_frame_id in LOCAL_FRAMES:  # type: ignore[attr-defined]
                 v.vel_enu = _enu(*vel)
-            elif m.child_frame_id in (MAV_FRAME_BODY_FRD, MAV_FRAME_BODY_NED):  # type: ignore[attr-defined]
+            elif m.child_frame_id in BODY_FRAMES:  # type: ignore[attr-defined]
                 if all(math.isfinite(c) for c in q) and abs(np.linalg.norm(q) - 1) < 0.1:
                     v.vel_enu = _enu(*(rotm_from_quat(np.array(q)) @ np.array(vel)))
             v.q_ned = q  # type: ignore[assignment]
@@ -312,7 +324,7 @@ class MavlinkGcs:
         elif mtype == "COMMAND_ACK":
             pend = self._pending.get((sysid, msg.command))  # type: ignore[attr-defined]
             if pend is not None:
-                if msg.result == 5:  # IN_PROGRESS: keep waiting  # type: ignore[attr-defined]
+                if msg.result == mavlink.MAV_RESULT_IN_PROGRESS:  # type: ignore[attr-defined]
                     pend.progress = now
                 else:
                     pend.result = int(msg.result)  # type: ignore[attr-defined]
@@ -333,20 +345,25 @@ class MavlinkGcs:
                 silent = (now - v.first_seen) if age is None else age
                 if not v.lost and silent > self.heartbeat_timeout_s:
                     v.lost = True
-                    self._event(now, v.sysid, "link", f"link lost (heartbeat {_age(age)})", 2)
+                    text = f"link lost (heartbeat {_age(age)})"
+                    self._event(now, v.sysid, "link", text, mavlink.MAV_SEVERITY_CRITICAL)
                 if v.addr is not None:
                     targets.append(v.addr)
         if self._send_heartbeat and now - self._last_gcs_hb >= 1.0 and self.sock is not None:
             self._last_gcs_hb = now
             with self._tx_lock:
                 buf = self._tx.heartbeat_encode(
-                    MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE
+                    mavlink.MAV_TYPE_GCS,
+                    mavlink.MAV_AUTOPILOT_INVALID,
+                    0,
+                    0,
+                    mavlink.MAV_STATE_ACTIVE,
                 ).pack(self._tx)
             for addr in set(targets):
                 try:
                     self.sock.sendto(buf, addr)
-                except OSError:
-                    pass
+                except OSError as exc:  # the vehicle's port went away: its link times out
+                    log.debug("GCS heartbeat to %s: %s", addr, exc)
 
     # -- snapshots -----------------------------------------------------------------
     def vehicles(self) -> dict[int, LinkVehicle]:

@@ -11,7 +11,9 @@ import math
 from pathlib import Path
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
 
+from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario import Scenario, load_scenario
 
 from .state import (
@@ -19,6 +21,7 @@ from .state import (
     RecordedSource,
     SwarmView,
     VehicleRow,
+    as_vec3,
     cube_edges,
     desired_from_leaders,
     failsafe_label,
@@ -38,6 +41,12 @@ OFFSETS = {
     7: (0.05, -0.07, 0.02),
     8: (0.30, 0.25, -0.12),
 }
+
+
+NOTICE = mavlink.MAV_SEVERITY_NOTICE
+WARNING = mavlink.MAV_SEVERITY_WARNING
+ERROR = mavlink.MAV_SEVERITY_ERROR
+CRIT = mavlink.MAV_SEVERITY_CRITICAL
 
 
 def recorded_history(n: int = 80, d_safe: float = 0.5) -> list[float]:
@@ -76,14 +85,14 @@ def recorded_view(sc: Scenario | None = None) -> tuple[SwarmView, list[DashEvent
             link_lost=False,
             pos=(float(p[0]), float(p[1]), float(p[2])),
             vel=(0.12 * (k % 3), -0.05 * (k % 2), 0.02 * k - 0.06),
-            p_des=tuple(float(c) for c in cube[i]),
+            p_des=as_vec3(cube[i]),
             track_err=float(np.linalg.norm(p - cube[i])),
             est_err=0.02 + 0.015 * k,
             nn_dist=nn[i],
             h_min=round(nn[i] - sc.controller.d_safe_m, 3),
-            qp_status="solved",
+            qp_status=QPStatus.SOLVED,
             qp_us=60.0 + 7 * k,
-            method="rcbf",
+            method=Method.RCBF,
             status_missing=False,
             status_age=0.02,
         )
@@ -94,13 +103,13 @@ def recorded_view(sc: Scenario | None = None) -> tuple[SwarmView, list[DashEvent
             r.status_missing, r.h_min, r.qp_status, r.qp_us, r.method = True, None, None, None, None
             r.est_err = None
         if i == 5:
-            r.qp_status = "fallbk"
+            r.qp_status = QPStatus.FALLBACK
         r.failsafe = failsafe_label(r, True, est, False)
         rows.append(r)
     view = SwarmView(
         t=t,
         rows=rows,
-        desired={i: tuple(float(c) for c in cube[i]) for i in ids},
+        desired={i: as_vec3(cube[i]) for i in ids},
         cube_edges=cube_edges(ids, verts),
         d_safe=float(sc.controller.d_safe_m),
         min_dist=dmin,
@@ -110,22 +119,22 @@ def recorded_view(sc: Scenario | None = None) -> tuple[SwarmView, list[DashEvent
         link="udp 127.0.0.1:14550",
         zenoh="missing 1",
         swarm="cube8",
-        method="rcbf",
+        method=Method.RCBF,
         sim_time=t,
     )
     events = [
-        DashEvent(0.4, 0, "cmd", "arm -> ALL", 5),
-        DashEvent(0.5, 1, "armed", "armed", 5),
-        DashEvent(0.5, 2, "armed", "armed", 5),
-        DashEvent(2.1, 0, "cmd", "start formation (OFFBOARD) -> ALL", 5),
-        DashEvent(2.2, 3, "mode", "mode POSCTL -> OFFBOARD", 5),
-        DashEvent(8.9, 5, "fallback", "QP fallback (infeasible), total 1", 4),
-        DashEvent(12.0, 0, "outage", "outage 2 s (all) published", 5),
-        DashEvent(12.1, 4, "comm", "comm outage", 3),
-        DashEvent(14.1, 4, "comm", "comm restored", 5),
-        DashEvent(15.2, 8, "status", "status stale (1.0s)", 3),
-        DashEvent(12.7, 6, "statustext", "Failsafe: offboard setpoints lost", 2),
-        DashEvent(14.7, 6, "link", "link lost (heartbeat 2.1s)", 2),
+        DashEvent(0.4, 0, "cmd", "arm -> ALL", NOTICE),
+        DashEvent(0.5, 1, "armed", "armed", NOTICE),
+        DashEvent(0.5, 2, "armed", "armed", NOTICE),
+        DashEvent(2.1, 0, "cmd", "start formation (OFFBOARD) -> ALL", NOTICE),
+        DashEvent(2.2, 3, "mode", "mode POSCTL -> OFFBOARD", NOTICE),
+        DashEvent(8.9, 5, "fallback", "QP fallback (infeasible), total 1", WARNING),
+        DashEvent(12.0, 0, "outage", "outage 2 s (all) published", NOTICE),
+        DashEvent(12.1, 4, "comm", "comm outage", ERROR),
+        DashEvent(14.1, 4, "comm", "comm restored", NOTICE),
+        DashEvent(15.2, 8, "status", "status stale (1.0s)", ERROR),
+        DashEvent(12.7, 6, "statustext", "Failsafe: offboard setpoints lost", CRIT),
+        DashEvent(14.7, 6, "link", "link lost (heartbeat 2.1s)", CRIT),
     ]
     events.sort(key=lambda e: e.t)
     return view, events

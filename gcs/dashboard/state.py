@@ -20,6 +20,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from swarm_common.enums import QPStatus, Role
 
 Vec3 = tuple[float, float, float]
 
@@ -53,7 +56,7 @@ class VehicleRow:
 
     @property
     def is_leader(self) -> bool:
-        return self.role == "leader"
+        return self.role == Role.LEADER
 
 
 @dataclass
@@ -89,7 +92,7 @@ class DashEvent:
     agent: int  # 0 = swarm / ground station
     kind: str
     text: str
-    severity: int = 6  # MAV_SEVERITY: 0 emergency .. 7 debug
+    severity: int = mavlink.MAV_SEVERITY_INFO  # MAV_SEVERITY: 0 emergency .. 7 debug
 
 
 # -- geometry -------------------------------------------------------------------------
@@ -135,7 +138,8 @@ def nearest_neighbours(pos: dict[int, np.ndarray]) -> tuple[dict[int, float], fl
     return {i: float(nn[k]) for k, i in enumerate(ids)}, float(nn.min())
 
 
-def _t3(a: Any) -> Vec3:
+def as_vec3(a: Any) -> Vec3:
+    """Three floats from any indexable (numpy array, list)."""
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
@@ -150,9 +154,17 @@ def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_t
         return "NO-OFB"
     if est_health not in (None, "ok"):
         return f"EST:{est_health}"[:8]
-    if row.qp_status in ("relaxed", "fallback"):  # offboard.clf_rcbf.QPResult.status
+    if qp_degraded(row.qp_status):
         return "QP-FB"
     return "ok"
+
+
+def qp_degraded(status: str | None) -> bool:
+    """True when an agent's last QP step was relaxed or fell back (unknown words: False)."""
+    try:
+        return status is not None and QPStatus(status).degraded
+    except ValueError:  # a word this ground station does not know
+        return False
 
 
 # -- sources ----------------------------------------------------------------------------
@@ -228,16 +240,19 @@ class LiveSource:
             for e in self.link.drain_events():
                 events.append(DashEvent(self._rel(e.t), e.sysid, e.kind, e.text, e.severity))
                 if e.kind == "statustext" and any(w in e.text.lower() for w in FAILSAFE_WORDS):
-                    self._fs_text[e.sysid] = e.severity <= 4
+                    self._fs_text[e.sysid] = e.severity <= mavlink.MAV_SEVERITY_WARNING
         if self.procs is not None:
             for d in self.procs.dead():
                 if d not in self._dead_seen:
                     self._dead_seen.add(d)
-                    events.append(DashEvent(self._rel(now), 0, "process", f"exited: {d}", 2))
+                    ev = DashEvent(
+                        self._rel(now), 0, "process", f"exited: {d}", mavlink.MAV_SEVERITY_CRITICAL
+                    )
+                    events.append(ev)
         events.sort(key=lambda e: e.t)
 
         truth = snap.truth if snap is not None else None
-        truth_fresh = truth is not None and now - (snap.truth_time or 0) < 2.0
+        truth_fresh = snap is not None and truth is not None and now - (snap.truth_time or 0) < 2.0
         tpos: dict[int, np.ndarray] = {}
         tvel: dict[int, np.ndarray] = {}
         if truth is not None and truth_fresh:
@@ -281,10 +296,10 @@ class LiveSource:
                 r.armed = truth.armed[k] if k < len(truth.armed) else None
                 r.link_lost = self.link is not None
             if i in pos:
-                r.pos = _t3(pos[i])
+                r.pos = as_vec3(pos[i])
                 r.nn_dist = nn.get(i)
             if i in vel:
-                r.vel = _t3(vel[i])
+                r.vel = as_vec3(vel[i])
             st = status.get(i)
             est_health = None
             if st is not None:
@@ -298,14 +313,14 @@ class LiveSource:
                 methods.add(s.method)
                 est_health = s.est_health
                 if np.all(np.isfinite(s.p_des)) and np.any(s.p_des != 0):
-                    desired[i] = _t3(s.p_des)
+                    desired[i] = as_vec3(s.p_des)
                 z1 = s.z1 if np.any(s.z1 != 0) else None
                 if z1 is None and i in estimate:
                     z1 = estimate[i][0].z1
                 if z1 is not None and i in pos:
                     r.est_err = float(np.linalg.norm(z1 - pos[i]))
             if i not in desired and i in cube:
-                desired[i] = _t3(cube[i])
+                desired[i] = as_vec3(cube[i])
             r.p_des = desired.get(i)
             if r.p_des is not None and r.pos is not None:
                 r.track_err = float(np.linalg.norm(np.subtract(r.pos, r.p_des)))
@@ -319,7 +334,8 @@ class LiveSource:
         elif not status and truth is None:
             zstate = "waiting"
         else:
-            zstate = "ok" if not snap.missing else f"missing {len(snap.missing)}"
+            missing = snap.missing if snap is not None else []
+            zstate = "ok" if not missing else f"missing {len(missing)}"
         if methods:
             method = methods.pop() if len(methods) == 1 else "mixed"
         else:

@@ -14,6 +14,7 @@ passed in instead (tests, or a process that already has one). No Textual here.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections import deque
@@ -21,6 +22,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import zenoh
+from pymavlink.dialects.v20 import common as mavlink
+
+from swarm_common.enums import Method
 from swarm_common.wire import (
     Command,
     Estimate,
@@ -37,7 +42,11 @@ from swarm_common.wire import (
 )
 from swarm_common.zenoh_session import open_session
 
-METHODS = ("rcbf", "apf", "none")
+log = logging.getLogger(__name__)
+
+METHODS = tuple(Method)
+NOTICE = mavlink.MAV_SEVERITY_NOTICE
+INFO = mavlink.MAV_SEVERITY_INFO
 
 
 @dataclass(frozen=True)
@@ -46,7 +55,7 @@ class FeedEvent:
     agent: int  # 0 = swarm-wide
     kind: str  # method | fallback | comm | estimator | status | mode | outage
     text: str
-    severity: int = 6  # MAV_SEVERITY scale: 0..7, lower is worse
+    severity: int = INFO  # MAV_SEVERITY scale: 0..7, lower is worse
 
 
 @dataclass
@@ -114,14 +123,14 @@ class ZenohFeed:
         for sub in self._subs:
             try:
                 sub.undeclare()
-            except Exception:
-                pass
+            except zenoh.ZError as exc:  # the session is already gone
+                log.debug("undeclare %s: %s", sub, exc)
         self._subs = []
         if self._own_session and self._session is not None:
             try:
                 self._session.close()
-            except Exception:
-                pass
+            except zenoh.ZError as exc:
+                log.warning("closing the Zenoh session: %s", exc)
             self._session = None
 
     # -- receive -----------------------------------------------------------------
@@ -129,8 +138,10 @@ class ZenohFeed:
         try:
             data = sample.payload.to_bytes()
             key = str(sample.key_expr)
-        except Exception:
-            self.bad_payloads += 1
+        except (AttributeError, TypeError, ValueError, zenoh.ZError) as exc:
+            with self._lock:
+                self.bad_payloads += 1
+            log.debug("unreadable Zenoh sample: %r", exc)
             return
         self.ingest(key, data)
 
@@ -144,6 +155,7 @@ class ZenohFeed:
         except WireError:
             with self._lock:
                 self.bad_payloads += 1
+            log.debug("undecodable payload on %s", key)
             return
         with self._lock:
             if isinstance(obj, Truth):
@@ -154,7 +166,7 @@ class ZenohFeed:
                 self.status[obj.id] = (obj, now)
                 if self._stale_flag.get(obj.id):
                     self._stale_flag[obj.id] = False
-                    self._events.append(FeedEvent(now, obj.id, "status", "status back", 5))
+                    self._events.append(FeedEvent(now, obj.id, "status", "status back", NOTICE))
             elif isinstance(obj, Estimate):
                 self.estimate[obj.id] = (obj, now)
             else:
@@ -163,23 +175,25 @@ class ZenohFeed:
     def _status_events(self, prev: Status | None, s: Status, now: float) -> None:
         ev = self._events
         if prev is None:
-            ev.append(FeedEvent(now, s.id, "status", f"status up ({s.mode}, {s.method})", 6))
+            ev.append(FeedEvent(now, s.id, "status", f"status up ({s.mode}, {s.method})", INFO))
             return
         if s.method != prev.method:
-            ev.append(FeedEvent(now, s.id, "method", f"method {prev.method} -> {s.method}", 5))
+            text = f"method {prev.method} -> {s.method}"
+            ev.append(FeedEvent(now, s.id, "method", text, NOTICE))
         if s.mode != prev.mode:
-            ev.append(FeedEvent(now, s.id, "mode", f"offboard {prev.mode} -> {s.mode}", 5))
+            ev.append(FeedEvent(now, s.id, "mode", f"offboard {prev.mode} -> {s.mode}", NOTICE))
         if s.fallbacks > prev.fallbacks:
-            ev.append(
-                FeedEvent(
-                    now, s.id, "fallback", f"QP fallback ({s.qp_status}), total {s.fallbacks}", 4
-                )
-            )
+            text = f"QP fallback ({s.qp_status}), total {s.fallbacks}"
+            ev.append(FeedEvent(now, s.id, "fallback", text, mavlink.MAV_SEVERITY_WARNING))
         if s.comm_ok != prev.comm_ok:
-            text, sev = ("comm restored", 5) if s.comm_ok else ("comm outage", 3)
+            text, sev = (
+                ("comm restored", NOTICE)
+                if s.comm_ok
+                else ("comm outage", mavlink.MAV_SEVERITY_ERROR)
+            )
             ev.append(FeedEvent(now, s.id, "comm", text, sev))
         if s.est_health != prev.est_health:
-            sev = 6 if s.est_health == "ok" else 3
+            sev = INFO if s.est_health == "ok" else mavlink.MAV_SEVERITY_ERROR
             ev.append(FeedEvent(now, s.id, "estimator", f"estimator {s.est_health}", sev))
 
     # -- snapshots ---------------------------------------------------------------
@@ -206,7 +220,13 @@ class ZenohFeed:
                 if rec is not None and now - rec[1] > self.stale_s and not self._stale_flag.get(i):
                     self._stale_flag[i] = True
                     self._events.append(
-                        FeedEvent(now, i, "status", f"status stale ({now - rec[1]:.1f}s)", 3)
+                        FeedEvent(
+                            now,
+                            i,
+                            "status",
+                            f"status stale ({now - rec[1]:.1f}s)",
+                            mavlink.MAV_SEVERITY_ERROR,
+                        )
                     )
 
     def snapshot(self) -> FeedSnapshot:

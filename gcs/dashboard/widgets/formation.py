@@ -103,15 +103,15 @@ class FormationView(Widget):
             put(*cell(p), "+", "bold green")
         # vehicles, far ones first (so the nearer one is on top)
         depth = 3 - ia - ib
-        rows = sorted((r for r in v.rows if r.pos is not None), key=lambda r: r.pos[depth])
-        for r in rows:
+        placed = [(r, r.pos) for r in v.rows if r.pos is not None]
+        for r, pos in sorted(placed, key=lambda rp: rp[1][depth]):
             if r.link_lost:
                 st = "bold white on red"
             elif r.is_leader:
                 st = "bold yellow"
             else:
                 st = "bold cyan"
-            put(*cell(r.pos), glyph(r.id), st)
+            put(*cell(pos), glyph(r.id), st)
         text = Text(no_wrap=True)
         for rr in range(h):
             for c in range(w):

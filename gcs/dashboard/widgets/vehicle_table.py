@@ -7,10 +7,18 @@ from collections.abc import Callable
 from rich.text import Text
 from textual.widgets import DataTable
 
+from swarm_common.enums import QPStatus
+
 from ..px4modes import short_mode
 from ..state import SwarmView, VehicleRow
 from .fmt import age, num, vec
 
+QP_SHORT: dict[str, str] = {
+    QPStatus.INACTIVE: "inact",
+    QPStatus.SOLVED: "solved",
+    QPStatus.RELAXED: "relax",
+    QPStatus.FALLBACK: "fallbk",
+}
 Cell = Callable[[VehicleRow, SwarmView], Text | str]
 
 
@@ -36,8 +44,8 @@ def _nn(r: VehicleRow, v: SwarmView) -> Text:
 def _qp(r: VehicleRow, compact: bool) -> Text:
     if r.qp_status is None:
         return Text("miss" if r.status_missing else "-", "yellow" if r.status_missing else "dim")
-    st = r.qp_status[:6]
-    good = r.qp_status in ("solved", "ok")
+    st = QP_SHORT.get(r.qp_status, r.qp_status[:6])
+    good = r.qp_status == QPStatus.SOLVED
     style = "" if good else "yellow"
     if compact:
         return Text(f"{r.qp_us or 0:4.0f}" if good else st[:4], style)
