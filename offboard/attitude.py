@@ -25,6 +25,7 @@ from swarm_common.frames import (
     norm_to_thrust,
     thrust_to_norm,
 )
+from swarm_common.scenario import VehicleConfig
 
 
 @dataclass
@@ -78,10 +79,12 @@ def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> t
     """(roll, pitch, yaw, F) the simulator derives from a float32 wire setpoint."""
     q = np.asarray(q_ned, dtype=np.float32)
     roll, pitch, yaw = euler_enu_from_quat_ned(q)
-    return roll, pitch, yaw, norm_to_thrust(np.float32(thrust_norm), thrust_max_n)
+    return roll, pitch, yaw, norm_to_thrust(float(np.float32(thrust_norm)), thrust_max_n)
 
 
-def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict, decode: bool = False) -> Setpoint:
+def setpoint_from_accel(
+    u: np.ndarray, yaw: float, veh: VehicleConfig, decode: bool = False
+) -> Setpoint:
     """u (ENU) → setpoint within ``[vehicle]`` tilt/thrust limits.
 
     Angles/thrust are the commanded values, or (``decode=True``) the values decoded from the
@@ -94,7 +97,7 @@ def setpoint_from_accel(u: np.ndarray, yaw: float, veh: dict, decode: bool = Fal
     q = quat_ned_fast(roll, pitch, yaw_c).astype(np.float32)
     tn = np.float32(thrust_to_norm(f, f_max))
     if decode:
-        roll, pitch, yaw_c, f = decode_wire(q, tn, f_max)
+        roll, pitch, yaw_c, f = decode_wire(q, float(tn), f_max)
     return Setpoint(roll, pitch, yaw_c, f, q, tn)
 
 
@@ -114,7 +117,7 @@ def accel_from_attitude(
 class InnerLoopModel:
     """First-order attitude (τ_rp, τ_ψ) and thrust (τ_F) lags, exact per sub-step."""
 
-    def __init__(self, veh: dict, dt_sub: float) -> None:
+    def __init__(self, veh: VehicleConfig, dt_sub: float) -> None:
         self.m = veh.mass_kg
         self.g = veh.gravity_mps2
         self.tilt = math.radians(veh.tilt_max_deg)

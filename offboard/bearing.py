@@ -43,6 +43,7 @@ def build_edges(vertices: np.ndarray, kind: str, tol: float = 1e-6) -> list[tupl
     if kind == "complete":
         return pairs
     dist = {pr: float(np.linalg.norm(v[pr[0]] - v[pr[1]])) for pr in pairs}
+    allowed: tuple[float, ...]
     if kind == "cube_edges":
         allowed = (1.0,)
     elif kind == "cube_face_diagonals":

@@ -45,6 +45,8 @@ import numpy as np
 import osqp
 from scipy import sparse
 
+from swarm_common.enums import QPStatus
+
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
 
@@ -146,7 +148,7 @@ class QPResult:
     """Outcome of one control QP."""
 
     u: np.ndarray
-    status: str  # "solved" | "relaxed" | "fallback" | "inactive"
+    status: QPStatus
     status_val: int
     solve_us: float
     h_min: float
@@ -227,7 +229,7 @@ class SafetyQP:
         clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
         if len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all()):
             us = (time.perf_counter() - t0) * 1e6
-            return QPResult(u_c, "inactive", 0, us, h_min, clf.V, 0.0, 0.0, False)
+            return QPResult(u_c, QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0, False)
         m = self.m
         k = min(len(rhs), m)
         finite = np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k])) and np.all(
@@ -235,7 +237,7 @@ class SafetyQP:
         if not finite:
             u = np.clip(np.nan_to_num(brake, posinf=0.0, neginf=0.0), self.u_lo, self.u_hi)
             us = (time.perf_counter() - t0) * 1e6
-            return QPResult(u, "fallback", -1, us, h_min, clf.V, 0.0, 0.0, True)
+            return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
         a = self._a
         # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
         # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the RCBF rows)
@@ -261,11 +263,11 @@ class SafetyQP:
             u = np.clip(np.asarray(x[0:3], dtype=float), self.u_lo, self.u_hi)
             sigma = max(0.0, float(x[4]))
             relaxed = sigma > 1e-3
-            status = "relaxed" if relaxed else "solved"
+            status = QPStatus.RELAXED if relaxed else QPStatus.SOLVED
             out = QPResult(u, status, int(sv), 0.0, h_min, clf.V, float(x[3]), sigma, relaxed)
         else:
             u = np.clip(np.nan_to_num(brake), self.u_lo, self.u_hi)
-            out = QPResult(u, "fallback", int(sv), 0.0, h_min, clf.V, 0.0, 0.0, True)
+            out = QPResult(u, QPStatus.FALLBACK, int(sv), 0.0, h_min, clf.V, 0.0, 0.0, True)
             self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out

@@ -86,7 +86,7 @@ def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dic
 
 
 def _cont_matrix(
-    dmat: np.ndarray, beta: tuple[float, float, float], kappa: tuple[float, float] = (0.0, 0.0)
+    dmat: np.ndarray, beta: tuple[float, ...], kappa: tuple[float, ...] = (0.0, 0.0)
 ) -> np.ndarray:
     """Continuous 18×18 matrix of X = [z1, z2, z3, b1, ḃ1, w] (w = Φζ̂ + u held).
 
@@ -119,7 +119,7 @@ def _cont_matrix(
 class GainReport:
     """Numbers of the DESO gain check (errata 7); ``lines()`` for printing at start-up."""
 
-    beta: tuple[float, float, float]
+    beta: tuple[float, ...]
     dt: float
     substeps: int
     lambda_ff: np.ndarray
@@ -132,7 +132,7 @@ class GainReport:
     rho_euler_post: float  # explicit Euler sub-steps, post-update exchange
     rho_single_euler_stale: float  # one Euler step per period, one-step stale (naive)
     paper_condition: bool  # β2 > β1 + β3/λ_min (paper §3)
-    kappa: tuple[float, float] = (0.0, 0.0)  # velocity-innovation gains κ2, κ3
+    kappa: tuple[float, ...] = (0.0, 0.0)  # velocity-innovation gains κ2, κ3
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -160,8 +160,8 @@ class GainReport:
 
 
 def _network_transition(
-    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int, euler: bool,
-    leader_anchor: float = 0.0, kappa: tuple[float, float] = (0.0, 0.0),
+    form: Formation, beta: tuple[float, ...], dt: float, substeps: int, euler: bool,
+    leader_anchor: float = 0.0, kappa: tuple[float, ...] = (0.0, 0.0),
 ) -> tuple[np.ndarray, np.ndarray]:
     """One-period error transition of all followers: E_{k+1} = T0 E_k + T1 E_nbr.
 
@@ -176,7 +176,9 @@ def _network_transition(
     delta = dt / substeps
     for k, i in enumerate(fol):
         wts = observer_weights(form, i, leader_anchor)
-        dmat = sum(wts.values())
+        dmat = np.zeros((3, 3))
+        for pij in wts.values():
+            dmat += pij
         a = _cont_matrix(dmat, beta, kappa)
         m = np.eye(18) + a * delta if euler else expm(a * delta)
         mm = np.linalg.matrix_power(m, substeps)[:9, :15]
@@ -199,8 +201,8 @@ def _rho(t0: np.ndarray, t1: np.ndarray, stale: bool) -> float:
 
 
 def gain_report(
-    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int,
-    leader_anchor: float = 0.0, kappa: tuple[float, float] = (0.0, 0.0),
+    form: Formation, beta: tuple[float, ...], dt: float, substeps: int,
+    leader_anchor: float = 0.0, kappa: tuple[float, ...] = (0.0, 0.0),
 ) -> GainReport:
     """Per-channel and sampled-loop stability numbers of the DESO gains (errata 7).
 
@@ -253,7 +255,7 @@ class DESO:
         self,
         form: Formation,
         index: int,
-        beta: tuple[float, float, float],
+        beta: tuple[float, ...],
         mu: float,
         sigma: float,
         substeps: int,
@@ -262,7 +264,7 @@ class DESO:
         z1: np.ndarray,
         z2: np.ndarray,
         leader_anchor: float = 0.0,
-        kappa: tuple[float, float] = (0.0, 0.0),
+        kappa: tuple[float, ...] = (0.0, 0.0),
     ) -> None:
         self.form = form
         self.weights = observer_weights(form, index, leader_anchor)

@@ -28,6 +28,33 @@ from scipy.linalg import expm
 
 from offboard.bearing import Formation
 
+XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
+
+
+def xi_p(xi: np.ndarray) -> np.ndarray:
+    """Desired position p* (m) of a 12-vector ξ (a view)."""
+    return xi[0:3]
+
+
+def xi_v(xi: np.ndarray) -> np.ndarray:
+    """Desired velocity v* (m/s) of ξ (a view)."""
+    return xi[3:6]
+
+
+def xi_a(xi: np.ndarray) -> np.ndarray:
+    """Desired acceleration a* (m/s²) of ξ (a view)."""
+    return xi[6:9]
+
+
+def xi_j(xi: np.ndarray) -> np.ndarray:
+    """Desired jerk j* (m/s³) of ξ (a view)."""
+    return xi[9:12]
+
+
+def xi_at_rest(p: np.ndarray) -> np.ndarray:
+    """ξ = [p, 0, 0, 0]: standing still at ``p`` (a new array)."""
+    return np.concatenate([np.asarray(p, dtype=float), np.zeros(XI_DIM - 3)])
+
 
 def exo_matrix(omega: float) -> np.ndarray:
     """4×4 exosystem matrix S of x'''' = −ω² x'' (errata 9)."""
@@ -113,12 +140,20 @@ class DesiredStateObserver:
 
     @property
     def p(self) -> np.ndarray:
-        return self.xi[0:3]
+        """p̂* (m)."""
+        return xi_p(self.xi)
 
     @property
     def v(self) -> np.ndarray:
-        return self.xi[3:6]
+        """v̂* (m/s)."""
+        return xi_v(self.xi)
 
     @property
     def a(self) -> np.ndarray:
-        return self.xi[6:9]
+        """â* (m/s²)."""
+        return xi_a(self.xi)
+
+    @property
+    def j(self) -> np.ndarray:
+        """ĵ* (m/s³)."""
+        return xi_j(self.xi)

@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarm_common.scenario import SensingConfig
+
 
 @dataclass
 class Measurements:
@@ -45,7 +47,7 @@ class Sensor:
         index: int,
         agent_id: int,
         n: int,
-        sensing: dict,
+        sensing: SensingConfig,
         sensing_range_m: float,
         seed: int,
     ) -> None:
@@ -53,7 +55,7 @@ class Sensor:
         self.n = n
         self.range = float(sensing_range_m)
         self.sig = np.array(
-            [
+            [  # noise standard deviations (rad, rad/s, m, m/s)
                 sensing.bearing_noise_rad,
                 sensing.bearing_rate_noise_radps,
                 sensing.distance_noise_m,
@@ -87,3 +89,40 @@ class Sensor:
         valid = (d <= self.range) & (drop >= self.dropout)
         valid[i] = False
         return Measurements(valid=valid, g=gm, g_dot=gdm, d=dm, d_dot=ddm)
+
+
+class DropoutHold:
+    """Keeps a dropped pair in the safety constraints for ``hold_s`` seconds.
+
+    A pair dropped this step but sensed within ``hold_s`` is extrapolated with its last
+    measured relative velocity (dropouts must not switch a barrier off). ``enabled`` is
+    False when the scenario has no dropouts (then nothing is tracked).
+    """
+
+    def __init__(self, n: int, index: int, hold_s: float, enabled: bool) -> None:
+        self.index = index
+        self.hold_s = hold_s
+        self.enabled = enabled
+        self._last_seen = np.full(n, -np.inf)
+        self._last_rp = np.zeros((n, 3))
+        self._last_rv = np.zeros((n, 3))
+
+    def pairs(
+        self, t: float, valid: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(sel, rp, rv): indices of the pairs to constrain at ``t`` (s) and the (N,3)
+        relative positions p_j − p_i (m) / velocities (m/s) to use for them."""
+        held = None
+        if self.enabled:
+            self._last_seen[valid] = t
+            self._last_rp[valid] = rel_p[valid]
+            self._last_rv[valid] = rel_v[valid]
+            held = ~valid & (t - self._last_seen <= self.hold_s)
+            held[self.index] = False
+        if held is None or not held.any():
+            return np.nonzero(valid)[0], rel_p, rel_v
+        age = (t - self._last_seen[held])[:, None]
+        rp_s, rv_s = rel_p.copy(), rel_v.copy()
+        rp_s[held] = self._last_rp[held] + age * self._last_rv[held]
+        rv_s[held] = self._last_rv[held]
+        return np.nonzero(valid | held)[0], rp_s, rv_s

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.agent import NeighbourEstimate, _Predictor
+from offboard.agent_types import NeighbourEstimate
+from offboard.predictor import NeighbourPredictor
 
 
 def _est(t: float) -> NeighbourEstimate:
@@ -15,7 +16,7 @@ def _est(t: float) -> NeighbourEstimate:
 
 
 def test_predicts_through_an_outage_then_drops_stale_data() -> None:
-    pred = _Predictor(2 * np.pi * 0.2, 0.02, (4.0, 4.0), (4.0, 3.0), max_age=1.0)
+    pred = NeighbourPredictor(2 * np.pi * 0.2, 0.02, (4.0, 4.0), (4.0, 3.0), max_age=1.0)
     pred.ingest({5: _est(0.0)}, comm_ok=True)
     p, v, _ = pred.get(5, 0.0)
     assert np.allclose(p, 0.0)

@@ -1,0 +1,83 @@
+"""What leaders and followers share: identity, timing, the control box, the inner-loop
+model of the attitude/thrust lags, the method switch and the output record."""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import numpy as np
+
+from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
+from offboard.attitude import InnerLoopModel, Setpoint
+from offboard.safety_filter import parse_method
+from swarm_common.enums import Method
+from swarm_common.scenario import Scenario
+
+
+def control_box(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Box on u that the tilt/thrust limits can realise (paper §4.4 ‖u‖∞ ≤ u_max, tightened).
+
+    z in [−u_max, u_max]; horizontal per axis ``(g − 2) tan(tilt)/√2`` (tilt cone at
+    u_z ≥ −2 m/s²), at most u_max (all m/s²).
+    """
+    veh, ctl = sc.vehicle, sc.controller
+    umax = ctl.u_max_mps2
+    g = veh.gravity_mps2
+    uz_lo = min(umax, 0.9 * g)
+    uz_hi = min(umax, veh.thrust_max_n / veh.mass_kg - g)
+    uh = min(umax, (g - 2.0) * math.tan(math.radians(veh.tilt_max_deg)) / math.sqrt(2.0))
+    return np.array([-uh, -uh, -uz_lo]), np.array([uh, uh, uz_hi])
+
+
+class AgentBase(ABC):
+    """Setup common to every agent of scenario ``sc``; subclasses implement the step.
+
+    ``step(k, t, truth_p, truth_v, neighbours, comm_ok)`` is called once per control
+    period ``dt`` (s) at t_k and returns the setpoint for [t_k, t_{k+1}).
+    """
+
+    is_leader: ClassVar[bool]
+
+    def __init__(self, sc: Scenario, agent_id: int, method: Method | str | None) -> None:
+        self.sc = sc
+        self.id = agent_id
+        self.index = sc.index_of(agent_id)
+        self.dt = sc.control_dt
+        self.veh = sc.vehicle
+        self.method = parse_method(method or sc.controller.method)
+        self.substeps = sc.observer.substeps
+        self.inner = InnerLoopModel(self.veh, self.dt / self.substeps)
+        self.u_lo, self.u_hi = control_box(sc)
+        self.yaw = 0.0
+
+    def set_method(self, method: Method | str) -> None:
+        """Switch the collision-avoidance method (at run time); ValueError if unknown."""
+        self.method = parse_method(method)
+
+    @abstractmethod
+    def initial_estimate(self) -> NeighbourEstimate:
+        """The estimate valid for t_0 (published before the first step)."""
+
+    @abstractmethod
+    def step(
+        self,
+        k: int,
+        t: float,
+        truth_p: np.ndarray,
+        truth_v: np.ndarray,
+        neighbours: dict[int, NeighbourEstimate],
+        comm_ok: bool = True,
+    ) -> AgentOutput:
+        """One control step at t_k (see :mod:`offboard.agent`)."""
+
+    @staticmethod
+    def _output(
+        sp: Setpoint, u: np.ndarray, est: NeighbourEstimate, status: AgentStatus,
+        lumped: np.ndarray,
+    ) -> AgentOutput:
+        return AgentOutput(
+            sp.roll, sp.pitch, sp.yaw, sp.thrust_n, sp.q_ned, sp.thrust_norm, u, est, status,
+            lumped=lumped,
+        )

@@ -1,0 +1,183 @@
+"""Follower agent: sensing → DESO (§3) + desired-state observer (§4.1) → safety filter (§4.4).
+
+Step k: sense (t_k) → predict neighbours to t_k → nominal controller on (z(t_k), ξ̂(t_k))
+→ safety filter of the current method → setpoint → inner-loop model → DESO and
+desired-state observer advanced to t_{k+1} → publish.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from offboard.agent_base import AgentBase
+from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
+from offboard.attitude import Setpoint, setpoint_from_accel
+from offboard.bearing import Formation, formation_from_scenario
+from offboard.clf_rcbf import ClfTerms, clf_terms
+from offboard.deso import DESO, GainReport, gain_report
+from offboard.predictor import NeighbourPredictor
+from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
+from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
+from offboard.sensing import DropoutHold, Sensor
+from swarm_common.enums import Method
+from swarm_common.scenario import Scenario
+
+W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
+SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
+
+
+@dataclass
+class _Peers:
+    """Neighbour data predicted to t_k, by scenario index."""
+
+    p: dict[int, np.ndarray] = field(default_factory=dict)  # positions (m)
+    v: dict[int, np.ndarray] = field(default_factory=dict)  # velocities (m/s)
+    xi: dict[int, np.ndarray] = field(default_factory=dict)  # ξ̂_j of bearing neighbours
+    lead_acc: dict[int, np.ndarray] = field(default_factory=dict)  # leaders' a* (m/s²)
+
+
+class FollowerAgent(AgentBase):
+    """Follower: sensing → DESO (§3) + desired-state observer (§4.1) → CLF–RCBF QP (§4.4)."""
+
+    is_leader = False
+
+    def __init__(
+        self, sc: Scenario, agent_id: int, method: Method | str | None = None,
+        seed: int | None = None, form: Formation | None = None,
+    ) -> None:
+        super().__init__(sc, agent_id, method)
+        self.form = form if form is not None else formation_from_scenario(sc)
+        seed = sc.seed if seed is None else int(seed)
+        obs, ctl = sc.observer, sc.controller
+        self.ctl = ctl
+        self.tau_ff = self.veh.tau_rollpitch_s
+        self.sensor = Sensor(
+            self.index, agent_id, sc.n, sc.sensing, sc.formation.sensing_range_m, seed
+        )
+        rng = np.random.default_rng([seed, agent_id, 0x1E])
+        spec = sc.agents[self.index]
+        z1 = spec.position + rng.standard_normal(3) * obs.init_pos_error_m
+        z2 = spec.velocity + rng.standard_normal(3) * obs.init_vel_error_mps
+        self.anchor = obs.leader_anchor > 0.0
+        self.deso = DESO(
+            self.form, self.index, tuple(obs.beta), obs.mu, obs.sigma, self.substeps, self.dt,
+            sc.unmodeled.ground_effect_height_m, z1, z2, obs.leader_anchor,
+            tuple(obs.velocity_gain),
+        )
+        omega = 2.0 * math.pi * sc.leader_trajectory.frequency_hz
+        self.ref = DesiredStateObserver(
+            self.form, self.index, omega, obs.reference_gain, self.dt, xi_at_rest(z1)
+        )
+        lam, ks = ctl.clf_lambda, ctl.ks
+        self.pred = NeighbourPredictor(
+            omega, self.dt, (ks * lam + ctl.kp / ctl.kd, lam + ks),
+            (ctl.leader_kp, ctl.leader_kd), sc.communication.max_age_s,
+        )
+        self.leader_mask = np.zeros(sc.n, dtype=bool)
+        self.leader_mask[self.form.leader_idx] = True
+        self.filters = make_filters(ctl, self.u_lo, self.u_hi, self.leader_mask)
+        self.ids = sc.ids
+        nb = set(self.form.neighbours[self.index])
+        self._peers = [
+            (j, j in nb, bool(self.leader_mask[j]))
+            for j in sorted(nb | set(self.form.leader_idx))
+        ]
+        self.fallbacks = 0
+        self._gains: GainReport | None = None
+        self.hold = DropoutHold(sc.n, self.index, SENSE_HOLD_S, sc.sensing.dropout_prob > 0.0)
+
+    @property
+    def gains(self) -> GainReport:
+        """DESO gain check (errata 7), computed on first use."""
+        if self._gains is None:
+            obs = self.sc.observer
+            self._gains = gain_report(
+                self.form, tuple(obs.beta), self.dt, obs.substeps, obs.leader_anchor,
+                tuple(obs.velocity_gain),
+            )
+        return self._gains
+
+    def initial_estimate(self) -> NeighbourEstimate:
+        return self._estimate(0.0)
+
+    def step(
+        self,
+        k: int,
+        t: float,
+        truth_p: np.ndarray,
+        truth_v: np.ndarray,
+        neighbours: dict[int, NeighbourEstimate],
+        comm_ok: bool = True,
+    ) -> AgentOutput:
+        meas = self.sensor.measure(np.asarray(truth_p, float), np.asarray(truth_v, float))
+        rel_p = meas.rel_pos()  # p_j − p_i
+        rel_v = meas.rel_vel()
+        self.pred.ingest(neighbours, comm_ok)
+        peers = self._predict_peers(t)
+        # --- controller at t_k --------------------------------------------------------
+        w_raw = self.deso.lumped()
+        # peaking of the high-gain observer: saturate the disturbance estimate used in control
+        w = saturate_norm(w_raw, W_MAX)
+        clf = self._nominal(w)
+        sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
+        status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
+        u = self._safe_control(SafetyInput(
+            clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc
+        ), status)
+        sp: Setpoint = setpoint_from_accel(u, self.yaw, self.veh)
+        # --- observers to t_{k+1} ---------------------------------------------------
+        u_sub = self.inner.run(sp, self.substeps)
+        self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
+        self.ref.update(peers.xi)
+        status.n_used = self.deso.n_used
+        return self._output(sp, u, self._estimate(t + self.dt), status, w_raw)
+
+    # -- the named parts of the step --------------------------------------------------
+    def _predict_peers(self, t: float) -> _Peers:
+        """Neighbours' (and, for the anchor and the RCBF, leaders') data predicted to t."""
+        out = _Peers()
+        for j, is_nbr, is_lead in self._peers:
+            got = self.pred.get(self.ids[j], t)
+            if got is None:
+                continue
+            if is_nbr:
+                out.xi[j] = got[2]
+            if is_nbr or (is_lead and self.anchor):
+                out.p[j], out.v[j] = got[0], got[1]
+            if is_lead:
+                out.lead_acc[j] = xi_a(got[2])
+        return out
+
+    def _nominal(self, w: np.ndarray) -> ClfTerms:
+        """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, errata 10)."""
+        ctl, ref = self.ctl, self.ref
+        e1 = self.deso.z1 - ref.p
+        e2 = self.deso.z2 - ref.v
+        # acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): compensates the
+        # first-order attitude lag of the inner loop on the moving reference
+        a_ff = ref.a + self.tau_ff * ref.j
+        return clf_terms(e1, e2, w, a_ff, ctl.kp, ctl.kd, ctl.clf_lambda, ctl.ks)
+
+    def _safe_control(self, x: SafetyInput, status: AgentStatus) -> np.ndarray:
+        """The current method's filter; a non-finite result brakes on −w (a fallback)."""
+        res = self.filters[self.method].apply(x)
+        u = res.u
+        if res.fallback:
+            self.fallbacks += 1
+        status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
+        status.slack, status.violation = res.slack, res.violation
+        if not np.all(np.isfinite(u)):
+            u = np.clip(np.nan_to_num(-x.w), self.u_lo, self.u_hi)
+            self.fallbacks += 1
+        status.fallbacks = self.fallbacks
+        return u
+
+    def _estimate(self, t: float) -> NeighbourEstimate:
+        """What this agent publishes, valid at ``t``."""
+        d = self.deso
+        return NeighbourEstimate(
+            self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.ref.xi.copy(), False
+        )

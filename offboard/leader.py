@@ -1,0 +1,88 @@
+"""Leader agent: PD + feed-forward on its own trajectory with a small velocity ESO for its
+disturbance (errata 4). It publishes its state predicted for t_{k+1} and ξ_L(t_{k+1})."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from offboard.agent_base import AgentBase
+from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
+from offboard.attitude import setpoint_from_accel
+from offboard.bearing import Formation
+from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
+from swarm_common.enums import Method
+from swarm_common.scenario import Scenario
+
+
+class LeaderAgent(AgentBase):
+    """Leader: tracks p_L(t) = p_L(0) + A(1 − cos ωt) with its own state (errata 4)."""
+
+    is_leader = True
+
+    def __init__(
+        self, sc: Scenario, agent_id: int, method: Method | str | None = None,
+        seed: int | None = None, form: Formation | None = None,
+    ) -> None:
+        super().__init__(sc, agent_id, method)
+        ctl = sc.controller
+        self.kp, self.kd = ctl.leader_kp, ctl.leader_kd
+        lt = sc.leader_trajectory
+        self.traj = LeaderTrajectory(
+            sc.agents[self.index].position, np.array(lt.amplitude_m), lt.frequency_hz
+        )
+        # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
+        self.l1, self.l2 = 10.0, 25.0
+        self.v_hat = sc.agents[self.index].velocity.astype(float).copy()
+        self.d_hat = np.zeros(3)
+        self.start_time = 0.0
+        self.gains = None
+
+    def reference(self, t: float) -> np.ndarray:
+        """ξ_L(t) = [p, ṗ, p̈, p⃛] of the leader trajectory; held at p_L(0) before
+        ``start_time`` (0 in lockstep; in real time the daemon sets the first whole
+        trajectory period after arming, the same for both leaders, so the motion starts
+        smoothly and the leaders stay in step)."""
+        if t < self.start_time:
+            return xi_at_rest(xi_p(self.traj.state(0.0)))
+        return self.traj.state(t)
+
+    def initial_estimate(self) -> NeighbourEstimate:
+        spec = self.sc.agents[self.index]
+        return NeighbourEstimate(
+            self.id, 0.0, spec.position.astype(float).copy(), spec.velocity.astype(float).copy(),
+            np.zeros(3), self.traj.state(0.0), True,
+        )
+
+    def step(
+        self,
+        k: int,
+        t: float,
+        truth_p: np.ndarray,
+        truth_v: np.ndarray,
+        neighbours: dict[int, NeighbourEstimate],
+        comm_ok: bool = True,
+    ) -> AgentOutput:
+        p = np.asarray(truth_p[self.index], dtype=float)
+        v = np.asarray(truth_v[self.index], dtype=float)
+        ref = self.reference(t)
+        a_ff = xi_a(ref) + self.veh.tau_rollpitch_s * xi_j(ref)  # lag compensation
+        u = a_ff - self.d_hat + self.kp * (xi_p(ref) - p) + self.kd * (xi_v(ref) - v)
+        u = np.clip(u, self.u_lo, self.u_hi)
+        sp = setpoint_from_accel(u, self.yaw, self.veh)
+        u_sub = self.inner.run(sp, self.substeps)
+        self._update_eso(v, u_sub)
+        a = u_sub.mean(axis=0) + self.d_hat
+        est = NeighbourEstimate(
+            self.id, t + self.dt, p + v * self.dt + 0.5 * a * self.dt**2, v + a * self.dt,
+            self.d_hat.copy(), self.reference(t + self.dt), True,
+        )
+        status = AgentStatus(method=self.method, comm_ok=comm_ok)
+        return self._output(sp, u, est, status, self.d_hat.copy())
+
+    def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:
+        """Velocity ESO over the period (sub-stepped Euler, measurement ``v`` held)."""
+        dl = self.dt / self.substeps
+        for s in range(self.substeps):
+            err = v - self.v_hat
+            self.v_hat = self.v_hat + dl * (u_sub[s] + self.d_hat + self.l1 * err)
+            self.d_hat = self.d_hat + dl * self.l2 * err

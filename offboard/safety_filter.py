@@ -1,0 +1,190 @@
+"""Safety filters: how a follower turns the nominal control into the applied one.
+
+One class per collision-avoidance method (:class:`swarm_common.enums.Method`), found
+through :data:`SAFETY_FILTERS`; a new method plugs in by adding a ``Method`` member and
+one :class:`SafetyFilter` subclass decorated with :func:`register_filter`. Every filter
+starts from the same nominal formation controller ``u_nom`` (paper §4.2, errata 10):
+
+* ``rcbf``: CLF–RCBF QP (§4.3–4.4, errata 12–14) of :mod:`offboard.clf_rcbf`;
+* ``apf``: improved artificial potential field (§5.4, errata 17) of :mod:`offboard.apf`;
+* ``none``: the nominal control clipped to the box.
+
+Pairs are rows of Δp = p_i − p_j (m), Δv = v_i − v_j (m/s) over the sensed agents j.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar, TypeVar
+
+import numpy as np
+
+from offboard.apf import apf_control, none_control
+from offboard.clf_rcbf import ClfTerms, SafetyQP, barrier, rcbf_rows, tangential_term
+from swarm_common.enums import Method, QPStatus
+from swarm_common.scenario import ControllerConfig
+
+W_SAFE = 0.5  # m/s², bound on the lumped-disturbance estimate inside the RCBF rows
+
+
+def parse_method(method: Method | str) -> Method:
+    """``method`` as a :class:`Method`; ValueError naming the choices if it is not one."""
+    try:
+        return Method(method)
+    except ValueError:
+        choices = ", ".join(m.value for m in Method)
+        raise ValueError(f"unknown method {method!r}; use one of {choices}") from None
+
+
+def saturate_norm(x: np.ndarray, bound: float) -> np.ndarray:
+    """``x`` scaled down to Euclidean norm ``bound`` if longer (same array otherwise)."""
+    n = math.sqrt(float(x @ x))
+    return x * (bound / n) if n > bound else x
+
+
+@dataclass
+class SafetyInput:
+    """What a filter sees at t_k (ENU)."""
+
+    clf: ClfTerms  # CLF terms and nominal control u_nom (m/s²)
+    w: np.ndarray  # own lumped disturbance estimate, saturated (m/s²)
+    z2: np.ndarray  # own velocity estimate (m/s)
+    dp: np.ndarray  # (M,3) Δp = p_i − p_j over the sensed pairs (m)
+    dv: np.ndarray  # (M,3) Δv = v_i − v_j (m/s)
+    pairs: np.ndarray  # (M,) scenario index j of each row
+    lead_acc: dict[int, np.ndarray]  # broadcast desired acceleration of leaders (m/s²)
+
+
+@dataclass
+class SafetyOutput:
+    """The applied control and what the status record reports about the step."""
+
+    u: np.ndarray  # ENU virtual control (m/s²), inside the box
+    h_min: float = math.inf  # smallest barrier value h_ij (m²), inf without pairs
+    qp_status: QPStatus = QPStatus.INACTIVE
+    solve_us: float = 0.0
+    slack: float = 0.0  # CLF slack δ
+    violation: float = 0.0  # RCBF relaxation σ
+    fallback: bool = False  # counted in the agent's fallbacks
+
+
+class SafetyFilter(ABC):
+    """Base: the controller parameters, the box [u_lo, u_hi] and which agents lead."""
+
+    method: ClassVar[Method]
+
+    def __init__(
+        self, ctl: ControllerConfig, u_lo: np.ndarray, u_hi: np.ndarray, leader_mask: np.ndarray
+    ) -> None:
+        self.ctl = ctl
+        self.u_lo = u_lo
+        self.u_hi = u_hi
+        self.leader_mask = leader_mask
+
+    @abstractmethod
+    def apply(self, x: SafetyInput) -> SafetyOutput:
+        """The control to apply for this step."""
+
+    def _barrier(self, x: SafetyInput) -> np.ndarray:
+        """h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² per pair (§2.3)."""
+        return barrier(x.dp, x.dv, self.ctl.tau_safe_s, self.ctl.d_safe_m)
+
+    def _sidestep(self, x: SafetyInput, h: np.ndarray) -> np.ndarray:
+        """Deadlock breaker shared by rcbf and apf (:func:`~offboard.clf_rcbf.tangential_term`)."""
+        return tangential_term(x.dp, h, self.ctl.deadlock_gain, self.ctl.deadlock_h_m2)
+
+
+SAFETY_FILTERS: dict[Method, type[SafetyFilter]] = {}
+_F = TypeVar("_F", bound=type[SafetyFilter])
+
+
+def register_filter(cls: _F) -> _F:
+    """Class decorator: make ``cls`` the filter of ``cls.method``."""
+    SAFETY_FILTERS[cls.method] = cls
+    return cls
+
+
+@register_filter
+class NoFilter(SafetyFilter):
+    """No collision avoidance: ``u = clip(u_nom)``; h is only reported."""
+
+    method = Method.NONE
+
+    def apply(self, x: SafetyInput) -> SafetyOutput:
+        u = none_control(x.clf.u_nom, self.u_lo, self.u_hi)
+        h_min = float(self._barrier(x).min()) if len(x.pairs) else math.inf
+        return SafetyOutput(u, h_min=h_min)
+
+
+@register_filter
+class ApfFilter(SafetyFilter):
+    """Improved APF: ``u = clip(u_nom + Σ u_rep + u_side)`` (§5.4, errata 17)."""
+
+    method = Method.APF
+
+    def apply(self, x: SafetyInput) -> SafetyOutput:
+        ctl = self.ctl
+        h = self._barrier(x)
+        side = self._sidestep(x, h)
+        dp, dv = x.dp, x.dv
+        dd = np.einsum("ij,ij->i", dp, dv) / np.maximum(
+            np.sqrt(np.einsum("ij,ij->i", dp, dp)), 1e-6
+        )  # range rate ḋ_ij (negative when closing)
+        u = apf_control(
+            x.clf.u_nom, dp, dd, side, ctl.apf_gain,
+            ctl.apf_velocity_gain, ctl.apf_radius_m, self.u_lo, self.u_hi,
+        )
+        return SafetyOutput(u, h_min=float(h.min()) if len(h) else math.inf)
+
+
+@register_filter
+class RcbfFilter(SafetyFilter):
+    """CLF–RCBF QP (§4.4): one OSQP problem with room for every other agent."""
+
+    method = Method.RCBF
+
+    def __init__(
+        self, ctl: ControllerConfig, u_lo: np.ndarray, u_hi: np.ndarray, leader_mask: np.ndarray
+    ) -> None:
+        super().__init__(ctl, u_lo, u_hi, leader_mask)
+        self.qp = SafetyQP(len(leader_mask) - 1, u_lo, u_hi, ctl.rho, ctl.clf_c)
+        if ctl.tau_safe_s <= 0.0:
+            raise ValueError("controller.tau_safe_s must be > 0 for the RCBF (relative degree 1)")
+
+    def _other_accel(self, x: SafetyInput, lm: np.ndarray) -> np.ndarray:
+        """(M,3) acceleration of the other agent taken as known: leaders' broadcast a*,
+        zero for followers (errata 13)."""
+        a_other = np.zeros((len(x.pairs), 3))
+        if x.lead_acc and np.any(lm):
+            for r in np.nonzero(lm)[0]:
+                a_other[r] = x.lead_acc.get(int(x.pairs[r]), 0.0)
+        return a_other
+
+    def apply(self, x: SafetyInput) -> SafetyOutput:
+        ctl = self.ctl
+        h = self._barrier(x)
+        side = self._sidestep(x, h)
+        lm = self.leader_mask[x.pairs]
+        share = np.where(lm, 1.0, 0.5)  # follower–follower pairs split the budget
+        # own disturbance in the barrier rows: the estimate saturated at W_SAFE, so a
+        # start-up transient of the observer cannot cancel a safety row
+        w_safe = saturate_norm(x.w, W_SAFE)
+        n_hat, rhs, h = rcbf_rows(
+            x.dp, x.dv, w_safe, self._other_accel(x, lm), share, ctl.tau_safe_s, ctl.d_safe_m,
+            ctl.gamma, h=h,
+        )
+        brake = -x.w - self.qp.brake_gain * x.z2
+        res = self.qp.solve(x.clf.u_nom + side, x.clf, n_hat, rhs, h, brake)
+        return SafetyOutput(
+            res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
+        )
+
+
+def make_filters(
+    ctl: ControllerConfig, u_lo: np.ndarray, u_hi: np.ndarray, leader_mask: np.ndarray
+) -> dict[Method, SafetyFilter]:
+    """One filter per registered method (kept for the agent's lifetime: a method switch
+    keeps each filter's state, e.g. the QP's warm start)."""
+    return {m: cls(ctl, u_lo, u_hi, leader_mask) for m, cls in SAFETY_FILTERS.items()}
