@@ -2,77 +2,73 @@
 
 ``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
 ``--inproc``; the seed sweep of ``compare --seeds N`` always runs in process.
+``gcs --log-level {debug,info,warning,error} ...`` sets the diagnostics level.
+
+Exit codes (every command):
+
+====  =====================================================================================
+0     success
+1     a distributed run failed once started: a child process died or the run stalled
+2     bad input: a bad flag or scenario, a busy port, a refused Zenoh endpoint
+130   interrupted by Ctrl-C (SIGINT); every child process was stopped first
+143   ``mission`` stopped by SIGTERM; every child process was stopped first
+====  =====================================================================================
 
 Subcommands are registered in :data:`COMMANDS` as ``name -> add_parser(subparsers)``;
-each ``add_parser`` sets ``func`` on its parser (``func(args) -> int``). To add a command
-(e.g. ``router``, ``dashboard``) append ``COMMANDS["router"] = add_router_parser``.
+each ``add_parser`` sets ``func`` on its parser (``func(args) -> int``).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import logging
+import math
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
-METHODS = ("rcbf", "apf", "none")
-# ``runner(args, scenario) -> exit code`` for ``mission run`` without ``--inproc``
-# (gcs.mission.cli_run); None = not available.
-DISTRIBUTED_RUNNER: Callable[[argparse.Namespace, object], int] | None = None
+from swarm_common.enums import Method
+from swarm_common.logsetup import add_log_level_argument, configure_logging
+from swarm_common.scenario import Scenario
+from swarm_common.zenoh_session import default_endpoint
 
+log = logging.getLogger(__name__)
 
-def _distributed_runner() -> Callable[[argparse.Namespace, object], int] | None:
-    if DISTRIBUTED_RUNNER is not None:
-        return DISTRIBUTED_RUNNER
-    try:
-        from gcs.mission import cli_run
-    except ImportError:
-        return None
-    return cli_run
+METHODS = [str(m) for m in Method]
+EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 
-def _load(path: str):
+def _load(path: str) -> Scenario:
     from swarm_common.scenario import ScenarioError, load_scenario
 
     try:
         return load_scenario(path)
     except ScenarioError as exc:
         print(f"gcs: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
-
-
-def _json_default(x):
-    from gcs.mission import _json_default as jd
-
-    return jd(x)
+        raise SystemExit(EXIT_USAGE) from None
 
 
 def cmd_mission_run(args: argparse.Namespace) -> int:
     sc = _load(args.scenario)
     if not args.inproc:
-        runner = _distributed_runner()
-        if runner is None:
-            print("gcs mission run: distributed runs: not yet available (use --inproc)",
-                  file=sys.stderr)
-            return 2
-        return runner(args, sc)
+        from gcs.mission import cli_run
+
+        return cli_run(args, sc)
     from gcs.inproc import run_inproc
+    from gcs.run_output import print_result
 
     res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True)
     if args.out:
         res.save(args.out)
-        print(f"wrote {args.out}/metrics.json, series.npz", file=sys.stderr)
-    doc = {"scenario": sc.name, "method": res.method, "seed": res.seed, "metrics": res.metrics}
-    if args.json:
-        print(json.dumps(doc, default=_json_default))
-    else:
-        for k, v in res.metrics.items():
-            print(f"{k:24s} {v}")
-    return 0
+        log.info("wrote %s/metrics.json, series.npz", args.out)
+    print_result(res.document(), args.json)
+    return EXIT_OK
 
 
-def _run_one(job: tuple[str, str, int, float | None]) -> dict:
+def _run_one(job: tuple[str, str, int, float | None]) -> dict[str, Any]:
     from gcs.inproc import run_inproc
     from swarm_common.scenario import load_scenario
 
@@ -80,7 +76,7 @@ def _run_one(job: tuple[str, str, int, float | None]) -> dict:
     return run_inproc(load_scenario(path), method, seed=seed, duration=duration).metrics
 
 
-def _gain_lines(sc) -> list[str]:
+def _gain_lines(sc: Scenario) -> list[str]:
     from offboard.agent import FollowerAgent, make_agent
 
     ag = make_agent(sc, sc.follower_ids[0])
@@ -95,8 +91,8 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 def add_router_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="run a Zenoh router (multi-machine setups)")
-    p.add_argument("--listen", nargs="+", default=["tcp/127.0.0.1:7447"], metavar="EP",
-                   help="endpoints to listen on (default tcp/127.0.0.1:7447)")
+    p.add_argument("--listen", nargs="+", default=[default_endpoint()], metavar="EP",
+                   help=f"endpoints to listen on (default {default_endpoint()})")
     p.set_defaults(func=cmd_router)
 
 
@@ -106,59 +102,74 @@ def add_dashboard(sub: argparse._SubParsersAction) -> None:
     add_dashboard_parser(sub)
 
 
+Outcome = tuple[dict[str, Any], dict[str, Any], list[str]]  # metrics, series, gains
+
+
+def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome:
+    from gcs.inproc import run_inproc
+
+    metrics: dict[str, Any] = {}
+    series: dict[str, Any] = {}
+    gains: list[str] = []
+    for m in METHODS:
+        log.info("running %s in process ...", m)
+        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
+        res.save(out / m)
+        metrics[m], series[m], gains = res.metrics, res.series.as_dict(), res.gains
+    return metrics, series, gains
+
+
+def _compare_distributed(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome | int:
+    """The three distributed runs, or an exit code (2 busy port, 1 a run failed)."""
+    import numpy as np
+
+    from gcs.launch_spec import LaunchError
+    from gcs.mission import MissionError, run_and_score
+
+    metrics: dict[str, Any] = {}
+    series: dict[str, Any] = {}
+    duration = float(sc.run.duration_s if args.duration is None else args.duration)
+    for m in METHODS:
+        log.info("running %s: vehicle-sim + %d offboard daemons, lockstep ...", m, sc.n)
+        try:
+            doc = run_and_score(sc, out / m, m, args.seed, duration,
+                                port_offset=args.port_offset, show_progress=True)
+        except LaunchError as exc:
+            print(f"gcs mission compare: {exc}", file=sys.stderr)
+            return EXIT_USAGE
+        except MissionError as exc:
+            print(f"gcs mission compare: {exc}", file=sys.stderr)
+            return EXIT_RUN_FAILED
+        metrics[m] = doc["metrics"]
+        with np.load(out / m / "series.npz") as z:
+            series[m] = {k: z[k] for k in z.files}
+    return metrics, series, _gain_lines(sc)
+
+
+def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
+    from concurrent.futures import ProcessPoolExecutor
+
+    base = sc.seed if args.seed is None else args.seed
+    jobs = [(args.scenario, m, base + s, args.duration) for m in METHODS
+            for s in range(args.seeds)]
+    log.info("seed sweep: %d runs ...", len(jobs))
+    with ProcessPoolExecutor(max_workers=args.jobs) as ex:
+        res_all = list(ex.map(_run_one, jobs))
+    return {m: [r for (_, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
+            for m in METHODS}
+
+
 def cmd_mission_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario)
-    from gcs.inproc import run_inproc
     from gcs.report import compare_table, seeds_table, write_report
     from offboard.bearing import formation_from_scenario
 
     out = Path(args.out or "runs/compare")
-    metrics: dict[str, dict] = {}
-    series: dict[str, dict] = {}
-    gains: list[str] = []
-    for m in METHODS:
-        if args.inproc:
-            print(f"running {m} in process ...", file=sys.stderr)
-            res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
-            res.save(out / m)
-            metrics[m] = res.metrics
-            series[m] = res.series.as_dict()
-            gains = res.gains
-            continue
-        from gcs.mission import MissionError, run_and_score
-
-        duration = float(sc.run.duration_s if args.duration is None
-                         else args.duration)
-        print(f"running {m}: vehicle-sim + {sc.n} offboard daemons, lockstep ...",
-              file=sys.stderr)
-        try:
-            doc = run_and_score(sc, out / m, m, args.seed, duration,
-                                port_offset=args.port_offset, show_progress=True)
-        except KeyboardInterrupt:
-            print("\ngcs mission compare: interrupted; every process stopped", file=sys.stderr)
-            return 130
-        except MissionError as exc:
-            print(f"\ngcs mission compare: {exc}", file=sys.stderr)
-            return 1
-        metrics[m] = doc["metrics"]
-        import numpy as np
-
-        with np.load(out / m / "series.npz") as z:
-            series[m] = {k: z[k] for k in z.files}
-        if not gains:
-            gains = _gain_lines(sc)
-    seeds = None
-    if args.seeds and args.seeds > 1:
-        from concurrent.futures import ProcessPoolExecutor
-
-        base = sc.seed if args.seed is None else args.seed
-        jobs = [(args.scenario, m, base + s, args.duration) for m in METHODS
-                for s in range(args.seeds)]
-        print(f"seed sweep: {len(jobs)} runs ...", file=sys.stderr)
-        with ProcessPoolExecutor(max_workers=args.jobs) as ex:
-            res_all = list(ex.map(_run_one, jobs))
-        seeds = {m: [r for (_, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
-                 for m in METHODS}
+    outcome = (_compare_inproc if args.inproc else _compare_distributed)(sc, args, out)
+    if isinstance(outcome, int):
+        return outcome
+    metrics, series, gains = outcome
+    seeds = _seed_sweep(sc, args) if args.seeds and args.seeds > 1 else None
     form = formation_from_scenario(sc)
     d_safe = sc.controller.d_safe_m
     path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
@@ -168,13 +179,11 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     print(compare_table(metrics, d_safe))
     if seeds:
         print(seeds_table(seeds, d_safe))
-    print(f"wrote {path}", file=sys.stderr)
-    return 0
+    log.info("wrote %s", path)
+    return EXIT_OK
 
 
 def _seconds(text: str, allow_zero: bool) -> float:
-    import math
-
     try:
         v = float(text)
     except ValueError:
@@ -234,15 +243,29 @@ COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="gcs", description="bearing-swarm ground station")
+    add_log_level_argument(ap)
     sub = ap.add_subparsers(dest="command", required=True)
     for add in COMMANDS.values():
         add(sub)
     return ap
 
 
+def _terminated(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM during a mission: unwind (the runners' ``finally`` stop every child)."""
+    raise SystemExit(EXIT_TERMINATED)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``gcs``; returns the exit code (table in the module docstring)."""
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    configure_logging(args.log_level)
+    if args.command == "mission":
+        signal.signal(signal.SIGTERM, _terminated)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print(f"gcs {args.command}: interrupted; every process stopped", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -16,19 +16,25 @@ Everything that would cross a wire is rounded to float32 with :func:`f32` /
 
 from __future__ import annotations
 
+import logging
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from gcs.metrics import Series, compute_metrics
+from gcs.progress import Progress
+from gcs.run_output import empty_series, run_document, set_agent_row, set_truth_row, write_run
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.bearing import formation_from_scenario
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
+from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
+
+log = logging.getLogger(__name__)
 
 
 def f32(x: np.ndarray | float) -> np.ndarray:
@@ -41,7 +47,7 @@ def f32(x: np.ndarray | float) -> np.ndarray:
 
 
 def wire_to_command(
-    q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float
+    q_ned: np.ndarray, thrust_norm: float | np.floating[Any], thrust_max_n: float
 ) -> tuple[float, float, float, float]:
     """SET_ATTITUDE_TARGET payload → (roll, pitch, yaw, F) exactly as the simulator does it.
 
@@ -49,7 +55,7 @@ def wire_to_command(
     thrust_norm)``. The simulator's MAVLink side must call this same function.
     """
     roll, pitch, yaw = euler_enu_from_quat_ned(np.asarray(q_ned, dtype=np.float32))
-    return roll, pitch, yaw, norm_to_thrust(np.float32(thrust_norm), thrust_max_n)
+    return roll, pitch, yaw, norm_to_thrust(float(np.float32(thrust_norm)), thrust_max_n)
 
 
 def round_estimate(e: NeighbourEstimate) -> NeighbourEstimate:
@@ -66,39 +72,36 @@ class MissionResult:
     scenario: str
     method: str
     seed: int
-    metrics: dict
+    metrics: dict[str, Any]
     series: Series
     gains: list[str] = field(default_factory=list)
-    collision_pairs: list = field(default_factory=list)
+    collision_pairs: list[Any] = field(default_factory=list)
+
+    def document(self) -> dict[str, Any]:
+        """The run's ``metrics.json`` document (:func:`gcs.run_output.run_document`)."""
+        return run_document(
+            self.scenario, self.method, self.seed, self.metrics, gains=self.gains,
+            collision_pairs=[list(map(float, c)) for c in self.collision_pairs],
+        )
 
     def save(self, out_dir: str | Path) -> None:
         """Write metrics.json and series.npz to ``out_dir``."""
-        import json
-
-        d = Path(out_dir)
-        d.mkdir(parents=True, exist_ok=True)
-        meta = {
-            "scenario": self.scenario,
-            "method": self.method,
-            "seed": self.seed,
-            "metrics": self.metrics,
-            "gains": self.gains,
-            "collision_pairs": [list(map(float, c)) for c in self.collision_pairs],
-        }
-        (d / "metrics.json").write_text(json.dumps(meta, indent=2) + "\n")
-        np.savez_compressed(d / "series.npz", **self.series.as_dict())
+        write_run(Path(out_dir), self.document(), self.series)
 
 
 def run_inproc(
-    sc,
+    sc: Scenario,
     method: str | None = None,
     seed: int | None = None,
     duration: float | None = None,
     progress: bool = False,
 ) -> MissionResult:
-    """Run a mission in process and return its metrics and time series."""
+    """Run a mission in process and return its metrics and time series.
+
+    ``progress``: log the gains and show a :class:`~gcs.progress.Progress` on stderr.
+    """
     seed = sc.seed if seed is None else int(seed)
-    method = method or sc.controller.method
+    method = str(method or sc.controller.method)
     dur = float(sc.run.duration_s if duration is None else duration)
     dt = sc.control_dt
     n_steps = int(round(dur / dt))
@@ -113,30 +116,20 @@ def run_inproc(
         if isinstance(ag, FollowerAgent):
             gains = ag.gains.lines()
             break
+    bar = Progress(dur, label=method) if progress else None
     if progress:
-        print("\n".join(gains), file=sys.stderr)
+        for line in gains:
+            log.info("%s", line)
     published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
     n = sc.n
-    K = n_steps
-    z = lambda *s: np.zeros((K, *s))  # noqa: E731
-    ser = Series(
-        t=np.arange(K) * dt, p=z(n, 3), v=z(n, 3), p_des=z(n, 3), v_des=z(n, 3), z1=z(n, 3),
-        z2=z(n, 3), lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n),
-        tilt_deg=z(n), min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((K, n), bool),
-    )
-    lid = form.leader_idx
+    ser = empty_series(np.arange(n_steps) * dt, n)
+    md_run = math.inf
     t_wall = time.perf_counter()
-    for k in range(K):
+    for k in range(n_steps):
         t = k * dt
         tp, tv = f32(dyn.p), f32(dyn.v)
         comm = not in_outage(t, sc.outages)
-        ser.p[k], ser.v[k] = dyn.p, dyn.v
-        ser.p_des[k] = form.desired_positions(dyn.p[lid])
-        ser.v_des[k] = form.desired_positions(dyn.v[lid]) - 0.0
-        ser.lumped_true[k] = dyn.lumped_accel()
-        ser.thrust[k] = dyn.thrust
-        r, pch = dyn.att[:, 0], dyn.att[:, 1]
-        ser.tilt_deg[k] = np.degrees(np.arccos(np.clip(np.cos(r) * np.cos(pch), -1, 1)))
+        set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)
         new_pub: dict[int, NeighbourEstimate] = {}
         for i, ag in enumerate(agents):
             e = published[ag.id]
@@ -146,21 +139,19 @@ def run_inproc(
             roll, pitch, yaw, fn = wire_to_command(out.q_ned, out.thrust_norm, f_max)
             dyn.set_command(i, roll, pitch, yaw, fn)
             new_pub[ag.id] = round_estimate(out.estimate)
-            ser.u[k, i] = out.u
-            ser.lumped_est[k, i] = out.lumped
             st = out.status
-            ser.h_min[k, i] = st.h_min
-            ser.solve_us[k, i] = st.solve_us
-            ser.fallback[k, i] = st.qp_status in ("relaxed", "fallback")
+            set_agent_row(ser, k, i, out.u, out.lumped, st.h_min, st.solve_us, st.qp_status)
         published = new_pub
         md = math.inf
         for _ in range(nsub):
             dyn.step()
             md = min(md, dyn.min_pair_distance())
         ser.min_dist[k] = md
-        if progress and k % int(round(5.0 / dt)) == 0:
-            print(f"  [{method}] t = {t:5.1f} s  min dist {ser.min_dist[: k + 1].min():.3f} m",
-                  file=sys.stderr)
+        md_run = min(md_run, md)
+        if bar is not None:
+            bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
+    if bar is not None:
+        bar.close()
     wall = time.perf_counter() - t_wall
     zeta_est = np.zeros((n, 6))
     fallbacks = 0

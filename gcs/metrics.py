@@ -85,11 +85,11 @@ def compute_metrics(
     err = np.linalg.norm(s.p[:, f] - s.p_des[:, f], axis=2)
     tf = formation_time(s.t, err)
     after = s.t >= (tf if tf is not None else s.t[-1] + 1.0)
+    trk_rms: float | None = None
+    trk_max: float | None = None
     if np.any(after):
         trk_rms = float(np.sqrt(np.mean(err[after] ** 2)))
         trk_max = float(err[after].max())
-    else:
-        trk_rms = trk_max = None
     late = s.t >= est_after_s
     ep = np.linalg.norm(s.z1[late][:, f] - s.p[late][:, f], axis=2)
     ev = np.linalg.norm(s.z2[late][:, f] - s.v[late][:, f], axis=2)

@@ -2,10 +2,11 @@
 
 Starts, as real processes: one ``vehicle-sim`` (lockstep by default) and one
 ``offboard`` daemon per agent; hosts the Zenoh router itself (clients connect to it);
-records every step's truth, estimates and statuses from Zenoh; shows a progress bar;
-stops everything at the end, on Ctrl-C, or when a child dies (naming it, exit 1).
+records every step's truth, estimates and statuses from Zenoh; shows a progress bar
+(:mod:`gcs.progress`); stops everything at the end, on Ctrl-C, or when a child dies
+(naming it, exit 1). Ports and command lines come from :class:`gcs.launch_spec.LaunchSpec`.
 
-Run directory: ``metrics.json``, ``series.npz`` (truth, estimates, commands),
+Run directory: ``metrics.json``, ``series.npz`` (:mod:`gcs.run_output`),
 ``vehicle_<id>.tlog`` (each daemon's MAVLink link, readable by pymavlink's tools) and
 one ``<process>.log`` per child.
 """
@@ -13,7 +14,8 @@ one ``<process>.log`` per child.
 from __future__ import annotations
 
 import json
-import socket
+import logging
+import resource
 import sys
 import threading
 import time
@@ -22,32 +24,32 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import zenoh
 
+from gcs.launch_spec import LaunchError, LaunchSpec
 from gcs.metrics import Series, compute_metrics
-from gcs.procs import ProcessGroup, python_entry
+from gcs.procs import ProcessGroup
+from gcs.progress import Progress
 from gcs.router import open_router
+from gcs.run_output import (
+    empty_series,
+    print_result,
+    run_document,
+    set_agent_row,
+    set_truth_row,
+    write_run,
+)
 from offboard.bearing import formation_from_scenario
 from swarm_common import wire
-from swarm_common.ports import port_free, swarm_udp_ports
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
 
-ZENOH_BASE = 7447
+log = logging.getLogger(__name__)
 
 
 class MissionError(RuntimeError):
-    """A run failed: a child died or the run stalled. ``str()`` names the culprit."""
-
-
-def check_ports(sc: Scenario, offset: int) -> None:
-    """Raise MissionError naming the first busy port of this run."""
-    for a in sc.agents:
-        for p in swarm_udp_ports([a.id], offset)[1:]:
-            if not port_free(p):
-                raise MissionError(f"UDP port {p} (vehicle {a.id}) is busy; try --port-offset")
-    for p in (ZENOH_BASE + offset, ZENOH_BASE + offset + 1):
-        if not port_free(p, socket.SOCK_STREAM, allow_time_wait=True):
-            raise MissionError(f"TCP port {p} (Zenoh) is busy; try --port-offset")
+    """A run failed once started: a child died or the run stalled (exit 1). ``str()``
+    names the culprit."""
 
 
 @dataclass
@@ -64,6 +66,14 @@ class Recorder:
     max_step: int = -1
     seed: int | None = None
     raw: list[bytes] = field(default_factory=list)
+
+    def subscribe(self, session: Any, swarm: str) -> list[Any]:
+        """Declare the truth, estimate and status subscribers on ``session``."""
+        return [
+            session.declare_subscriber(wire.key_truth(swarm), self.on_truth),
+            session.declare_subscriber(wire.key_estimate(swarm, "*"), self.on_estimate),
+            session.declare_subscriber(wire.key_status(swarm, "*"), self.on_status),
+        ]
 
     def on_truth(self, sample: Any) -> None:
         try:
@@ -97,14 +107,6 @@ class Recorder:
                 self.last_status[msg.id] = msg
 
 
-def progress(t: float, duration: float, wall: float) -> None:
-    frac = min(1.0, t / duration) if duration > 0 else 1.0
-    bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
-    rate = t / wall if wall > 0 else 0.0
-    sys.stderr.write(f"\r[{bar}] {t:6.2f}/{duration:.1f} s  {rate:5.1f}x real time")
-    sys.stderr.flush()
-
-
 def run_distributed(
     sc: Scenario,
     out_dir: Path,
@@ -118,99 +120,99 @@ def run_distributed(
     show_progress: bool = True,
     stall_timeout: float = 20.0,
 ) -> tuple[Recorder, dict[str, Any]]:
-    """Run the mission as real processes; return the recorder and run facts."""
+    """Run the mission as real processes; return the recorder and run facts.
+
+    Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
+    busy, :class:`MissionError` when a child dies or the run stalls. Every child is
+    stopped on the way out, whatever ends the run (Ctrl-C included).
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
-    check_ports(sc, port_offset)
-    router_ep = f"tcp/127.0.0.1:{ZENOH_BASE + port_offset}"
-    sim_ep = f"tcp/127.0.0.1:{ZENOH_BASE + port_offset + 1}"
+    spec = LaunchSpec(
+        sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
+        sim_duration=duration + 1.0,
+    )
+    spec.check_ports()
     try:
-        router = open_router([router_ep])
-    except RuntimeError as exc:
-        raise MissionError(str(exc)) from None
+        router = open_router([spec.router_endpoint])
+    except (RuntimeError, ValueError) as exc:
+        raise LaunchError(str(exc)) from None
     steps = int(round(duration * sc.run.control_hz))
     rec = Recorder(sc, steps, seed=seed)
-    swarm = sc.name
-    subs = [
-        router.declare_subscriber(wire.key_truth(swarm), rec.on_truth),
-        router.declare_subscriber(wire.key_estimate(swarm, "*"), rec.on_estimate),
-        router.declare_subscriber(wire.key_status(swarm, "*"), rec.on_status),
-    ]
+    subs = rec.subscribe(router, spec.swarm_name)
     group = ProcessGroup(out_dir)
-    seed_args = ["--seed", str(seed)] if seed is not None else []
     facts: dict[str, Any] = {"failed_agents": [], "killed_agents": []}
     t_wall0 = time.monotonic()
     cpu0 = time.process_time()
     try:
-        sim_argv = [
-            *python_entry("vehicle_sim.cli"),
-            "--scenario",
-            sc.path,
-            "--port-offset",
-            str(port_offset),
-            "--swarm",
-            swarm,
-            "--zenoh-listen",
-            sim_ep,
-            "--zenoh-connect",
-            router_ep,
-            "--duration",
-            f"{duration + 1.0}",
-            "--stats-out",
-            str(out_dir / "vehicle-sim-stats.json"),
-            "--step-timeout",
-            "1.0",  # > the daemons' neighbour timeout (0.45 s): a dead agent costs one wait
-            *seed_args,
-        ]
-        if not realtime:
-            sim_argv.append("--lockstep")
-        group.start("vehicle-sim", sim_argv)
-        for a in sc.agents:
-            argv = [
-                *python_entry("offboard.cli"),
-                "--scenario",
-                sc.path,
-                "--agent",
-                str(a.id),
-                "--port-offset",
-                str(port_offset),
-                "--swarm",
-                swarm,
-                "--method",
-                method,
-                "--zenoh-connect",
-                router_ep,
-                "--tlog",
-                str(out_dir / f"vehicle_{a.id}.tlog"),
-                *seed_args,
-            ]
-            if realtime:
-                argv.append("--realtime")
-            group.start(f"offboard-{a.id}", argv)
-        last_progress = -1
-        last_change = time.monotonic()
-        t_run0 = time.monotonic()
-        t_first: float | None = None
-        k_first = 0
-        killed = False
+        for name, argv in spec.processes():
+            group.start(name, argv)
+        bar = Progress(duration, label=str(method)) if show_progress else None
+        facts.update(
+            _supervise(rec, group, sc.control_dt, kill_agent, kill_at, bar,
+                       stall_timeout, out_dir)
+        )
+        facts["processes"] = group.usage()
+        facts["processes"]["gcs (router + recorder)"] = {
+            "cpu_s": time.process_time() - cpu0,
+            "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        }
+    finally:
+        group.stop()
+        for s in subs:
+            try:
+                s.undeclare()
+            except zenoh.ZError as exc:
+                log.debug("undeclare subscriber: %s", exc)
+        router.close()
+        rec.finalize()
+    facts["wall_s"] = time.monotonic() - t_wall0
+    stats_path = spec.sim_stats_path
+    if stats_path is not None and stats_path.exists():
+        try:
+            facts["simulator"] = json.loads(stats_path.read_text())
+        except ValueError as exc:
+            log.warning("%s: not JSON (%s); run facts without simulator stats", stats_path, exc)
+    facts["failed_agents"] = list(facts["killed_agents"])
+    return rec, facts
+
+
+def _supervise(
+    rec: Recorder,
+    group: ProcessGroup,
+    dt: float,
+    kill_agent: int | None,
+    kill_at: float | None,
+    bar: Progress | None,
+    stall_timeout: float,
+    out_dir: Path,
+) -> dict[str, Any]:
+    """Watch a started run until step ``rec.steps``: show progress, kill ``kill_agent``
+    at ``kill_at`` (s), raise :class:`MissionError` on a death or a stall. Returns the
+    timing facts (``run_wall_s``, ``stepping_wall_s``, ``stepping_realtime_factor``)."""
+    facts: dict[str, Any] = {"killed_agents": []}
+    victim = None if kill_agent is None else f"offboard-{kill_agent}"
+    last_k = -1
+    last_change = t_run0 = time.monotonic()
+    t_first: float | None = None
+    k_first = 0
+    try:
         while True:
             time.sleep(0.05)
             with rec.lock:
                 k = rec.max_step
             if k >= 1 and t_first is None:
                 t_first, k_first = time.monotonic(), k
-            if k != last_progress:
-                last_change = time.monotonic()
-                last_progress = k
-                if show_progress:
-                    progress(max(k, 0) * sc.control_dt, duration, time.monotonic() - t_wall0)
-            if k >= steps:
+            if k != last_k:
+                last_change, last_k = time.monotonic(), k
+                if bar is not None:
+                    bar.update(max(k, 0) * dt)
+            if k >= rec.steps:
                 break
-            if kill_agent is not None and not killed and k * sc.control_dt >= (kill_at or 0.0):
-                group.kill(f"offboard-{kill_agent}")
+            if victim is not None and not facts["killed_agents"] and k * dt >= (kill_at or 0.0):
+                group.kill(victim)
                 facts["killed_agents"].append(kill_agent)
-                killed = True
             for child in group.dead():
-                if child.name == f"offboard-{kill_agent}" and killed:
+                if child.name == victim and facts["killed_agents"]:
                     continue
                 raise MissionError(
                     f"{child.name} exited with code {child.proc.returncode}; "
@@ -220,43 +222,15 @@ def run_distributed(
                 raise MissionError(
                     f"run stalled at step {k} for {stall_timeout:.0f} s; see logs in {out_dir}"
                 )
-        if show_progress:
-            sys.stderr.write("\n")
-        facts["run_wall_s"] = time.monotonic() - t_run0
-        if t_first is not None:
-            stepping = time.monotonic() - t_first
-            facts["stepping_wall_s"] = stepping
-            facts["stepping_realtime_factor"] = (steps - k_first) * sc.control_dt / stepping
-        facts["processes"] = group.usage()
-        facts["processes"]["gcs (router + recorder)"] = {
-            "cpu_s": time.process_time() - cpu0,
-            "peak_rss_mib": _peak_rss_mib(),
-        }
     finally:
-        group.stop()
-        for s in subs:
-            try:
-                s.undeclare()
-            except Exception:  # noqa: BLE001
-                pass
-        router.close()
-        rec.finalize()
-    facts["wall_s"] = time.monotonic() - t_wall0
-    stats_path = out_dir / "vehicle-sim-stats.json"
-    if stats_path.exists():
-        try:
-            facts["simulator"] = json.loads(stats_path.read_text())
-        except ValueError:
-            pass
-    if killed:
-        facts["failed_agents"] = list(facts["killed_agents"])
-    return rec, facts
-
-
-def _peak_rss_mib() -> float:
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        if bar is not None:
+            bar.close()
+    facts["run_wall_s"] = time.monotonic() - t_run0
+    if t_first is not None:
+        stepping = time.monotonic() - t_first
+        facts["stepping_wall_s"] = stepping
+        facts["stepping_realtime_factor"] = (rec.steps - k_first) * dt / stepping
+    return facts
 
 
 def recorder_series(rec: Recorder, sc: Scenario) -> Series:
@@ -267,31 +241,12 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
     truth(k+1)). Rows use the float32 values that crossed the wire, as in-process.
     """
     form = formation_from_scenario(sc)
-    lid = form.leader_idx
     steps = [k for k in range(rec.steps) if k in rec.truth]
-    kk = len(steps)
-    n = sc.n
     idx = {a.id: i for i, a in enumerate(sc.agents)}
-
-    def z(*shape: int) -> np.ndarray:
-        return np.full((kk, *shape), np.nan)
-
-    ser = Series(
-        t=np.array([rec.truth[k].t for k in steps]), p=z(n, 3), v=z(n, 3), p_des=z(n, 3),
-        v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3), lumped_est=z(n, 3), lumped_true=z(n, 3),
-        u=z(n, 3), thrust=z(n), tilt_deg=z(n), min_dist=z(), h_min=z(n), solve_us=z(n),
-        fallback=np.zeros((kk, n), bool),
-    )
+    ser = empty_series(np.array([rec.truth[k].t for k in steps]), sc.n, fill=np.nan)
     for r, k in enumerate(steps):
         tr = rec.truth[k]
-        ser.p[r], ser.v[r] = tr.p, tr.v
-        ser.p_des[r] = form.desired_positions(tr.p[lid])
-        ser.v_des[r] = form.desired_positions(tr.v[lid])
-        ser.lumped_true[r] = tr.lumped
-        ser.thrust[r] = tr.thrust
-        ser.tilt_deg[r] = np.degrees(
-            np.arccos(np.clip(np.cos(tr.att[:, 0]) * np.cos(tr.att[:, 1]), -1, 1))
-        )
+        set_truth_row(ser, r, form, tr.p, tr.v, tr.lumped, tr.thrust, tr.att)
         nxt = rec.truth.get(k + 1)
         ser.min_dist[r] = nxt.min_dist if nxt is not None else np.nan
         for aid, e in rec.est.get(k - 1, {}).items():
@@ -299,16 +254,13 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
                 ser.z1[r, idx[aid]], ser.z2[r, idx[aid]] = e.z1, e.z2
         for aid, st in rec.status.get(k, {}).items():
             if aid in idx:
-                i = idx[aid]
-                ser.u[r, i] = st.u
-                ser.lumped_est[r, i] = st.lumped
-                ser.h_min[r, i] = st.h_min
-                ser.solve_us[r, i] = st.qp_solve_us
-                ser.fallback[r, i] = st.qp_status in ("relaxed", "fallback")
+                set_agent_row(
+                    ser, r, idx[aid], st.u, st.lumped, st.h_min, st.qp_solve_us, st.qp_status
+                )
     # Real time: an agent may skip a stamp (late cycle), leaving a row without its
     # message; hold the last value (lockstep runs have none missing).
     for arr in (ser.z1, ser.z2, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
-        for r in range(1, kk):
+        for r in range(1, len(steps)):
             gap = np.isnan(arr[r])
             if np.any(gap):
                 arr[r][gap] = arr[r - 1][gap]
@@ -324,34 +276,19 @@ def recorded_metrics(
     form = formation_from_scenario(sc)
     veh = sc.vehicle
     last = rec.truth[max(rec.truth)] if rec.truth else None
-    fols = form.follower_idx
-    zeta_true = _zeta_true(sc, rec)
+    zeta_true = SwarmDynamics(sc, seed=rec.seed).zeta  # the simulator's seeded draw of ζ
     zeta_est = np.zeros((sc.n, 6))
-    fallbacks = 0
-    final_est = rec.est.get(rec.steps - 1, {})
-    for a_id, e in final_est.items():
+    for a_id, e in rec.est.get(rec.steps - 1, {}).items():
         zeta_est[sc.index_of(a_id)] = e.zeta
-    for st in rec.last_status.values():
-        fallbacks += st.fallbacks
+    fallbacks = sum(st.fallbacks for st in rec.last_status.values())
     valid = ~np.isnan(ser.min_dist)
     if not np.all(valid):  # a run cut short: drop the incomplete tail
         ser = Series(**{k: v[valid] for k, v in ser.as_dict().items()})
     metrics = compute_metrics(
-        ser, fols, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
+        ser, form.follower_idx, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
     )
     return metrics, ser
-
-
-def _zeta_true(sc: Scenario, rec: Recorder) -> np.ndarray:
-    """The simulator's true ζ (same seeded draw as vehicle_sim.dynamics)."""
-    return SwarmDynamics(sc, seed=rec.seed).zeta
-
-
-def write_run(out_dir: Path, metrics: dict[str, Any], series: dict[str, np.ndarray]) -> None:
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(metrics, indent=2, sort_keys=True))
-    np.savez_compressed(out_dir / "series.npz", **series)
 
 
 def default_out_dir(sc: Scenario, method: str) -> Path:
@@ -376,29 +313,18 @@ def run_and_score(
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress,
     )
     metrics, ser = recorded_metrics(rec, sc, facts["wall_s"], duration)
-    doc = {
-        "scenario": sc.name,
-        "method": method,
-        "seed": sc.seed if seed is None else seed,
-        "mode": "realtime" if realtime else "lockstep",
-        "metrics": metrics,
-        "run": facts,
-    }
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
-    np.savez_compressed(out_dir / "series.npz", **ser.as_dict())
+    doc = run_document(
+        sc.name, method, sc.seed if seed is None else seed, metrics,
+        mode="realtime" if realtime else "lockstep", run=facts,
+    )
+    write_run(out_dir, doc, ser)
     return doc
 
 
-def _json_default(x: Any) -> Any:
-    if isinstance(x, np.generic):
-        return x.item()
-    raise TypeError(type(x))
-
-
 def cli_run(args: Any, sc: Scenario) -> int:
-    """``gcs mission run SCENARIO`` (distributed): the hook gcs.cli calls."""
-    method = args.method or sc.controller.method
+    """``gcs mission run SCENARIO`` (distributed). Exit 2: bad input or a busy port;
+    1: a child died or the run stalled (see :mod:`gcs.cli` for the table)."""
+    method = str(args.method or sc.controller.method)
     duration = float(sc.run.duration_s if args.duration is None else args.duration)
     if args.kill_agent is not None and args.kill_agent not in sc.ids:
         print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
@@ -414,18 +340,14 @@ def cli_run(args: Any, sc: Scenario) -> int:
             port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
             show_progress=True,
         )
-    except KeyboardInterrupt:
-        print("\ngcs mission run: interrupted; every process stopped", file=sys.stderr)
-        return 130
+    except LaunchError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 2
     except MissionError as exc:
-        print(f"\ngcs mission run: {exc}", file=sys.stderr)
+        print(f"gcs mission run: {exc}", file=sys.stderr)
         return 1
-    print(f"wrote {out}/metrics.json, series.npz, vehicle_*.tlog, *.log", file=sys.stderr)
+    log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
     if doc["run"]["failed_agents"]:
-        print(f"failed agents: {doc['run']['failed_agents']}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(doc, default=_json_default))
-    else:
-        for k, v in doc["metrics"].items():
-            print(f"{k:24s} {v}")
+        log.warning("failed agents: %s", doc["run"]["failed_agents"])
+    print_result(doc, args.json)
     return 0

@@ -19,7 +19,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from swarm_common.enums import Method
+from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.zenoh_session import default_endpoint
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 
@@ -37,7 +40,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="EP",
-        help="Zenoh endpoints to dial (default tcp/127.0.0.1:7447+offset)",
+        help=f"Zenoh endpoints to dial (default {default_endpoint()}+offset)",
     )
     p.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
     p.add_argument("--no-zenoh", action="store_true", help="MAVLink only")
@@ -50,7 +53,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--no-daemons", action="store_true", help="with --launch: simulator only")
     p.add_argument(
         "--method",
-        choices=("rcbf", "apf", "none"),
+        choices=[str(m) for m in Method],
         default=None,
         help="with --launch: the daemons' initial method",
     )
@@ -82,7 +85,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     """(app, source, launch, title) from parsed args; raises ValueError/OSError/RuntimeError."""
     from .app import DashboardApp
     from .commands import LiveCommander
-    from .launch import Launch, busy_ports, router_endpoint
+    from .launch import Launch, dashboard_spec
     from .mavlink_gcs import MavlinkGcs
     from .recorded import recorded_source
     from .state import LiveSource
@@ -96,32 +99,20 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     launch = None
     link = feed = None
     try:
+        swarm = args.swarm or sc.name
         if args.launch:
-            busy = busy_ports(sc, offset)
-            if busy:
-                raise OSError(f"ports in use: {', '.join(busy)} (another swarm? try --port-offset)")
-            swarm = args.swarm or sc.name
+            spec = dashboard_spec(sc, offset, swarm, not args.no_zenoh, args.method)
             log_dir = Path(args.log_dir or tempfile.mkdtemp(prefix="gcs-dashboard-"))
-            launch = Launch(
-                sc,
-                offset,
-                swarm,
-                log_dir,
-                zenoh=not args.no_zenoh,
-                daemons=not args.no_daemons,
-                method=args.method,
-            ).start()
+            launch = Launch(spec, log_dir, daemons=not args.no_daemons).start()
             why = launch.wait_sim_up()
             if why:
                 raise RuntimeError(why)
-        else:
-            swarm = args.swarm or sc.name
         link = MavlinkGcs(port_offset=offset).start()
         if not args.no_zenoh:
             if launch is not None:
                 feed = ZenohFeed(swarm, sc.ids, session=launch.router).start()
             else:
-                connect = args.zenoh_connect or [router_endpoint(offset)]
+                connect = args.zenoh_connect or [default_endpoint(offset)]
                 feed = ZenohFeed(swarm, sc.ids, connect=connect, mode=args.zenoh_mode).start()
     except BaseException:
         if link is not None:
@@ -160,6 +151,9 @@ def run_dashboard(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m gcs.dashboard`` (until gcs/cli.py wires the subcommand)."""
+    """``python -m gcs.dashboard`` (the same as ``gcs dashboard``)."""
     p = configure_parser(argparse.ArgumentParser(prog="gcs dashboard"))
-    return run_dashboard(p.parse_args(argv))
+    add_log_level_argument(p)
+    args = p.parse_args(argv)
+    configure_logging(args.log_level)
+    return run_dashboard(args)

@@ -1,116 +1,66 @@
 """``gcs dashboard --launch``: start the swarm's processes, stop them on exit.
 
-Topology (as ``gcs mission run``): this process opens a Zenoh router on
-``tcp/127.0.0.1:7447+offset``; ``vehicle-sim`` (real time, no ``--lockstep``) listens
-on ``7448+offset`` and dials the router; every offboard daemon dials the router in
-client mode. The dashboard's own feed uses the router session directly.
-
-:func:`daemon_argv` is the hook for the per-agent offboard daemons: ``--no-daemons``
-skips them (then OFFBOARD is refused: nothing streams setpoints).
+Topology and command lines are :class:`gcs.launch_spec.LaunchSpec`'s, as for
+``gcs mission run``, but on the wall clock: ``vehicle-sim`` without ``--lockstep`` and
+every offboard daemon with ``--realtime --manual-start`` (the operator arms and starts
+the formation from the dashboard). This process hosts the Zenoh router; the dashboard's
+own feed uses the router session directly. ``--no-daemons`` skips the daemons (then
+OFFBOARD is refused: nothing streams setpoints).
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 from typing import Any
 
-from gcs.procs import ProcessGroup, python_entry
+import zenoh
+
+from gcs.launch_spec import LaunchError, LaunchSpec
+from gcs.procs import ProcessGroup
 from gcs.router import open_router
-from swarm_common.ports import port_free, swarm_udp_ports
 from swarm_common.scenario import Scenario
 
-ZENOH_BASE = 7447
+log = logging.getLogger(__name__)
 
 
-def router_endpoint(offset: int) -> str:
-    return f"tcp/127.0.0.1:{ZENOH_BASE + offset}"
-
-
-def sim_endpoint(offset: int) -> str:
-    return f"tcp/127.0.0.1:{ZENOH_BASE + offset + 1}"
-
-
-def busy_ports(sc: Scenario, offset: int) -> list[str]:
-    """Every UDP port the launched swarm will bind, that is already taken."""
-    return [f"udp {p}" for p in swarm_udp_ports(sc.ids, offset) if not port_free(p)]
-
-
-def sim_argv(sc: Scenario, offset: int, swarm: str, zenoh: bool) -> list[str]:
-    argv = [
-        *python_entry("vehicle_sim.cli"),
-        "--scenario",
-        sc.path,
-        "--port-offset",
-        str(offset),
-        "--swarm",
-        swarm,
-    ]
-    if zenoh:
-        argv += ["--zenoh-listen", sim_endpoint(offset), "--zenoh-connect", router_endpoint(offset)]
-    else:
-        argv.append("--no-zenoh")
-    return argv
-
-
-def daemon_argv(
-    sc: Scenario, agent_id: int, offset: int, swarm: str, method: str | None
-) -> list[str]:
-    """HOOK: the offboard daemon of one agent, real time, dialling the router."""
-    argv = [
-        *python_entry("offboard.cli"),
-        "--scenario",
-        sc.path,
-        "--agent",
-        str(agent_id),
-        "--port-offset",
-        str(offset),
-        "--swarm",
-        swarm,
-        "--realtime",
-        "--manual-start",  # the operator arms and starts the formation from the dashboard
-        "--zenoh-connect",
-        router_endpoint(offset),
-    ]
-    if method:
-        argv += ["--method", method]
-    return argv
+def dashboard_spec(
+    sc: Scenario, offset: int, swarm: str | None, zenoh: bool, method: str | None
+) -> LaunchSpec:
+    """The launch spec of ``--launch``: real time, manual start, no run directory."""
+    return LaunchSpec(
+        sc, offset, swarm=swarm, method=method, lockstep=False, zenoh=zenoh, manual_start=True
+    )
 
 
 class Launch:
     """The processes ``--launch`` started (and the router session)."""
 
-    def __init__(
-        self,
-        sc: Scenario,
-        offset: int,
-        swarm: str,
-        log_dir: Path,
-        zenoh: bool = True,
-        daemons: bool = True,
-        method: str | None = None,
-    ) -> None:
-        self.sc = sc
-        self.offset = offset
-        self.swarm = swarm
+    def __init__(self, spec: LaunchSpec, log_dir: Path, daemons: bool = True) -> None:
+        self.spec = spec
         self.log_dir = log_dir
-        self.zenoh = zenoh
-        self.daemons = daemons and zenoh
-        self.method = method
+        self.daemons = daemons and spec.zenoh
         self.router: Any = None
         self.group = ProcessGroup(log_dir)
 
     def start(self) -> Launch:
+        """Check the ports (the GCS port too: the dashboard binds it), open the router,
+        start the children. Raises :class:`~gcs.launch_spec.LaunchError` (nothing left
+        running) when a port is busy or the router cannot listen."""
+        self.spec.check_ports(gcs_port=True)
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        if self.zenoh:
-            self.router = open_router([router_endpoint(self.offset)])
-        self.group.start("vehicle-sim", sim_argv(self.sc, self.offset, self.swarm, self.zenoh))
-        if self.daemons:
-            for a in self.sc.agents:
-                self.group.start(
-                    f"offboard-{a.id}",
-                    daemon_argv(self.sc, a.id, self.offset, self.swarm, self.method),
-                )
+        if self.spec.zenoh:
+            try:
+                self.router = open_router([self.spec.router_endpoint])
+            except (RuntimeError, ValueError) as exc:
+                raise LaunchError(str(exc)) from None
+        try:
+            for name, argv in self.spec.processes(daemons=self.daemons):
+                self.group.start(name, argv)
+        except BaseException:
+            self.stop()
+            raise
         return self
 
     def dead(self) -> list[str]:
@@ -135,6 +85,6 @@ class Launch:
         if self.router is not None:
             try:
                 self.router.close()
-            except Exception:
-                pass
+            except zenoh.ZError as exc:
+                log.warning("closing the Zenoh router: %s", exc)
             self.router = None

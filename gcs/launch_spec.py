@@ -1,0 +1,155 @@
+"""What a launched swarm is: ports, Zenoh endpoints and the command line of every process.
+
+One :class:`LaunchSpec` is used by ``gcs mission run``/``compare`` (lockstep by default,
+recording a run directory) and by ``gcs dashboard --launch`` (real time, the operator
+arms and starts). Topology, for port offset ``o``:
+
+* the ``gcs`` process hosts the Zenoh router on ``tcp/127.0.0.1:7447+o``
+  (:data:`~swarm_common.zenoh_session.DEFAULT_ZENOH_PORT`);
+* ``vehicle-sim`` listens on ``7448+o`` and dials the router;
+* one ``offboard`` daemon per agent dials the router in client mode;
+* MAVLink runs over the UDP ports of :mod:`swarm_common.ports`.
+"""
+
+from __future__ import annotations
+
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+
+from gcs.procs import python_entry
+from swarm_common.ports import GCS_PORT, port_free, vehicle_ports
+from swarm_common.scenario import Scenario
+from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
+
+LOCALHOST = "127.0.0.1"
+# > the daemons' neighbour timeout (0.45 s): in lockstep a dead agent costs one wait
+LOCKSTEP_STEP_TIMEOUT_S = 1.0
+
+
+class LaunchError(RuntimeError):
+    """The swarm cannot start here: a port is busy or an endpoint is refused (exit 2)."""
+
+
+@dataclass(frozen=True)
+class LaunchSpec:
+    """Ports, endpoints and argv of one launched swarm.
+
+    ``lockstep``: the simulator waits for every controller (mission runs); otherwise all
+    processes run on the wall clock. ``manual_start``: the daemons stream setpoints but
+    leave arming and OFFBOARD to the operator (dashboard). ``run_dir``: where each
+    daemon writes its ``vehicle_<id>.tlog`` and the simulator its statistics.
+    ``sim_duration``: the simulator exits after this much simulated time (s).
+    """
+
+    sc: Scenario
+    port_offset: int = 0
+    swarm: str | None = None
+    method: str | None = None
+    seed: int | None = None
+    lockstep: bool = True
+    zenoh: bool = True
+    manual_start: bool = False
+    run_dir: Path | None = None
+    sim_duration: float | None = None
+
+    @property
+    def swarm_name(self) -> str:
+        """The swarm name in the Zenoh keys (default: the scenario name)."""
+        return self.swarm or self.sc.name
+
+    @property
+    def router_port(self) -> int:
+        return DEFAULT_ZENOH_PORT + self.port_offset
+
+    @property
+    def sim_port(self) -> int:
+        return DEFAULT_ZENOH_PORT + self.port_offset + 1
+
+    @property
+    def router_endpoint(self) -> str:
+        return f"tcp/{LOCALHOST}:{self.router_port}"
+
+    @property
+    def sim_endpoint(self) -> str:
+        return f"tcp/{LOCALHOST}:{self.sim_port}"
+
+    @property
+    def sim_stats_path(self) -> Path | None:
+        return None if self.run_dir is None else self.run_dir / "vehicle-sim-stats.json"
+
+    def busy_ports(self, gcs_port: bool = False) -> list[str]:
+        """Every port the swarm will bind that is already taken, as ``"udp 14580 (vehicle
+        1)"``. ``gcs_port``: also the GCS port (14550+offset), which only a ground station
+        (the dashboard) binds; a mission run leaves it to whoever listens there."""
+        udp: list[tuple[int, str]] = [(GCS_PORT + self.port_offset, "GCS")] if gcs_port else []
+        for a in self.sc.agents:
+            vp = vehicle_ports(a.id, self.port_offset)
+            udp += [(p, f"vehicle {a.id}") for p in (vp.api_local, vp.api_remote, vp.gcs_local)]
+        busy = [f"udp {p} ({who})" for p, who in udp if not port_free(p)]
+        if self.zenoh:
+            for p, who in ((self.router_port, "Zenoh router"), (self.sim_port, "Zenoh sim")):
+                if not port_free(p, socket.SOCK_STREAM, allow_time_wait=True):
+                    busy.append(f"tcp {p} ({who})")
+        return busy
+
+    def check_ports(self, gcs_port: bool = False) -> None:
+        """Raise :class:`LaunchError` naming every busy port of this swarm."""
+        busy = self.busy_ports(gcs_port)
+        if busy:
+            raise LaunchError(
+                f"ports in use: {', '.join(busy)} (another swarm? try --port-offset)"
+            )
+
+    def sim_argv(self) -> list[str]:
+        """``vehicle-sim`` for this swarm."""
+        argv = [
+            *python_entry("vehicle_sim.cli"),
+            "--scenario", self.sc.path,
+            "--port-offset", str(self.port_offset),
+            "--swarm", self.swarm_name,
+        ]  # fmt: skip
+        if self.zenoh:
+            argv += ["--zenoh-listen", self.sim_endpoint, "--zenoh-connect", self.router_endpoint]
+        else:
+            argv.append("--no-zenoh")
+        if self.sim_duration is not None:
+            argv += ["--duration", f"{self.sim_duration}"]
+        if self.sim_stats_path is not None:
+            argv += ["--stats-out", str(self.sim_stats_path)]
+        if self.lockstep:
+            argv += ["--step-timeout", f"{LOCKSTEP_STEP_TIMEOUT_S}", "--lockstep"]
+        argv += self._seed_args()
+        return argv
+
+    def daemon_argv(self, agent_id: int) -> list[str]:
+        """The ``offboard`` daemon of one agent, dialling the router."""
+        argv = [
+            *python_entry("offboard.cli"),
+            "--scenario", self.sc.path,
+            "--agent", str(agent_id),
+            "--port-offset", str(self.port_offset),
+            "--swarm", self.swarm_name,
+            "--zenoh-connect", self.router_endpoint,
+        ]  # fmt: skip
+        if self.method:
+            argv += ["--method", str(self.method)]
+        if self.run_dir is not None:
+            argv += ["--tlog", str(self.run_dir / f"vehicle_{agent_id}.tlog")]
+        if not self.lockstep:
+            argv.append("--realtime")
+        if self.manual_start:
+            argv.append("--manual-start")
+        argv += self._seed_args()
+        return argv
+
+    def processes(self, daemons: bool = True) -> list[tuple[str, list[str]]]:
+        """``(name, argv)`` of every child, simulator first; the daemons (which need Zenoh)
+        unless ``daemons`` is False."""
+        out = [("vehicle-sim", self.sim_argv())]
+        if daemons and self.zenoh:
+            out += [(f"offboard-{a.id}", self.daemon_argv(a.id)) for a in self.sc.agents]
+        return out
+
+    def _seed_args(self) -> list[str]:
+        return [] if self.seed is None else ["--seed", str(self.seed)]

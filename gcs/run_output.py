@@ -1,0 +1,119 @@
+"""What a mission run leaves behind: the recorded :class:`~gcs.metrics.Series` and the run
+directory (``metrics.json`` + ``series.npz``), for in-process and distributed runs alike.
+
+``series.npz`` holds one array per :class:`~gcs.metrics.Series` field (``t``, ``p``, ``v``,
+``p_des``, ``v_des``, ``z1``, ``z2``, ``lumped_est``, ``lumped_true``, ``u``, ``thrust``,
+``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``). ``metrics.json`` is
+:func:`run_document`: ``scenario``, ``method``, ``seed``, ``metrics`` (keys
+:data:`~gcs.metrics.METRIC_KEYS`) and the runner's extras (in process: ``gains``,
+``collision_pairs``; distributed: ``mode``, ``run``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs.metrics import Series
+from offboard.bearing import Formation
+from swarm_common.enums import QPStatus
+
+log = logging.getLogger(__name__)
+
+
+def tilt_deg(att: np.ndarray) -> np.ndarray:
+    """Tilt of each vehicle from vertical (deg): arccos(cos φ cos θ) of (N, 3) ENU
+    roll/pitch/yaw in rad (the angle between body z and world z)."""
+    return np.degrees(np.arccos(np.clip(np.cos(att[:, 0]) * np.cos(att[:, 1]), -1, 1)))
+
+
+def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
+    """A :class:`Series` of ``len(t)`` steps for ``n`` agents, every value ``fill``
+    (NaN where rows may stay unknown, as in a recorded run); ``fallback`` all False."""
+    kk = len(t)
+
+    def z(*shape: int) -> np.ndarray:
+        return np.full((kk, *shape), fill)
+
+    return Series(
+        t=t, p=z(n, 3), v=z(n, 3), p_des=z(n, 3), v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3),
+        lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n), tilt_deg=z(n),
+        min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((kk, n), bool),
+    )
+
+
+def set_truth_row(
+    ser: Series,
+    r: int,
+    form: Formation,
+    p: np.ndarray,
+    v: np.ndarray,
+    lumped: np.ndarray,
+    thrust: np.ndarray,
+    att: np.ndarray,
+) -> None:
+    """Row ``r`` of the simulator's truth: positions/velocities (m, m/s, ENU), the desired
+    ones from the leaders' (paper eq. 5), true lumped disturbance (m/s²), thrust (N), tilt."""
+    lid = form.leader_idx
+    ser.p[r], ser.v[r] = p, v
+    ser.p_des[r] = form.desired_positions(p[lid])
+    ser.v_des[r] = form.desired_positions(v[lid])
+    ser.lumped_true[r] = lumped
+    ser.thrust[r] = thrust
+    ser.tilt_deg[r] = tilt_deg(att)
+
+
+def set_agent_row(
+    ser: Series,
+    r: int,
+    i: int,
+    u: np.ndarray,
+    lumped: np.ndarray,
+    h_min: float,
+    solve_us: float,
+    qp_status: str,
+) -> None:
+    """Row ``r`` of agent ``i``'s status: virtual control u (m/s²), estimated lumped
+    disturbance, smallest barrier value, QP time (µs), and whether the QP degraded."""
+    ser.u[r, i] = u
+    ser.lumped_est[r, i] = lumped
+    ser.h_min[r, i] = h_min
+    ser.solve_us[r, i] = solve_us
+    ser.fallback[r, i] = QPStatus(qp_status).degraded
+
+
+def run_document(
+    scenario: str, method: str, seed: int, metrics: Mapping[str, Any], **extra: Any
+) -> dict[str, Any]:
+    """The ``metrics.json`` document of one run (also what ``--json`` prints)."""
+    return {"scenario": scenario, "method": str(method), "seed": seed, "metrics": metrics,
+            **extra}
+
+
+def json_default(x: Any) -> Any:
+    """``json.dumps`` hook: numpy scalars as Python numbers."""
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(f"{type(x).__name__} is not JSON serializable")
+
+
+def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
+    """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "metrics.json").write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
+    arrays: dict[str, Any] = series.as_dict()
+    np.savez_compressed(out_dir / "series.npz", **arrays)
+
+
+def print_result(doc: Mapping[str, Any], as_json: bool) -> None:
+    """stdout of ``gcs mission run``: the document as one JSON line, or a metrics table."""
+    if as_json:
+        print(json.dumps(doc, default=json_default))
+    else:
+        for k, v in doc["metrics"].items():
+            print(f"{k:24s} {v}")
