@@ -18,8 +18,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gcs.report import seeds_table  # noqa: E402
+from swarm_common.enums import Method  # noqa: E402
 
-METHODS = ("rcbf", "apf", "none")
+METHODS = [str(m) for m in Method]
 
 
 def _one(job: tuple[str, str, int, float | None]) -> tuple[str, int, dict]:

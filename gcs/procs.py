@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -11,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+log = logging.getLogger(__name__)
 
 @dataclass
 class Child:
@@ -75,8 +77,8 @@ class ProcessGroup:
             if c.proc.poll() is None:
                 try:
                     c.proc.send_signal(signal.SIGTERM)
-                except OSError:
-                    pass
+                except OSError as exc:  # exited between poll() and the signal
+                    log.debug("SIGTERM %s: %s", c.name, exc)
         deadline = time.monotonic() + timeout
         for c in self.children:
             remaining = max(0.0, deadline - time.monotonic())

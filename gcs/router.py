@@ -7,12 +7,15 @@ on one machine; start ``vehicle-sim --zenoh-connect tcp/<host>:7447`` and every
 
 from __future__ import annotations
 
+import logging
 import signal
 import sys
 import threading
 from typing import Any
 
 from swarm_common.zenoh_session import open_session
+
+log = logging.getLogger(__name__)
 
 
 def open_router(listen: list[str]) -> Any:
@@ -26,7 +29,7 @@ def run_router(listen: list[str]) -> int:
     except (RuntimeError, ValueError) as exc:
         print(f"gcs router: {exc}", file=sys.stderr)
         return 2
-    print(f"gcs router: listening on {', '.join(listen)} (Ctrl-C to stop)", file=sys.stderr)
+    log.info("listening on %s (Ctrl-C to stop)", ", ".join(listen))
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     signal.signal(signal.SIGINT, lambda *_: done.set())

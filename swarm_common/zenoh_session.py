@@ -18,6 +18,10 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import zenoh
 
 DEFAULT_ZENOH_PORT = 7447
 
@@ -32,7 +36,7 @@ def make_config(
     listen: Sequence[str] = (),
     connect: Sequence[str] = (),
     multicast: bool = False,
-):
+) -> zenoh.Config:
     """A ``zenoh.Config`` with the project's defaults."""
     import zenoh
 
@@ -60,7 +64,7 @@ def open_session(
     listen: Sequence[str] = (),
     connect: Sequence[str] = (),
     multicast: bool = False,
-):
+) -> zenoh.Session:
     """Open and return a ``zenoh.Session``. Raises ``RuntimeError`` with one line on failure
     (for example a listen port already in use)."""
     import zenoh
@@ -68,7 +72,7 @@ def open_session(
     cfg = make_config(mode, listen, connect, multicast)
     try:
         return zenoh.open(cfg)
-    except Exception as exc:  # zenoh.ZError and friends
+    except zenoh.ZError as exc:
         where = ", ".join([*listen, *connect]) or "no endpoints"
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise RuntimeError(f"cannot open zenoh {mode} session ({where}): {msg}") from None

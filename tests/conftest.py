@@ -20,6 +20,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
+from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CUBE8 = str(ROOT / "scenarios" / "cube8.toml")
@@ -41,7 +42,8 @@ def free_port_offset(n_vehicles: int = 8) -> int:
         if off in _used_offsets:
             continue
         ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
-        if all(port_free(p) for p in ports) and port_free(7447 + off, socket.SOCK_STREAM):
+        zenoh_free = port_free(DEFAULT_ZENOH_PORT + off, socket.SOCK_STREAM)
+        if all(port_free(p) for p in ports) and zenoh_free:
             _used_offsets.add(off)
             return off
     raise RuntimeError("no free port offset found")
