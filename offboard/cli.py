@@ -8,17 +8,20 @@ started by ``gcs mission run`` or ``gcs router`` on tcp/127.0.0.1:7447+offset.
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 import sys
 import time
 
 from offboard.daemon import DaemonConfig, OffboardDaemon
+from offboard.zenoh_link import ZENOH_ERRORS
+from swarm_common.enums import Method
+from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import ScenarioError, load_scenario
-from swarm_common.zenoh_session import open_session
+from swarm_common.zenoh_session import default_endpoint, open_session
 
-ZENOH_BASE_PORT = 7447
+# a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
+OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
 MAVLINK_SCHEMES = ("udpin:", "udpout:", "udp:", "tcp:", "tcpin:")
 
 
@@ -29,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--mavlink", default=None, help="MAVLink URL (default udpin on the API port)")
     ap.add_argument("--port-offset", type=int, default=0, help="shift every port by N")
     ap.add_argument("--swarm", default=None, help="swarm name in Zenoh keys (default: scenario)")
-    ap.add_argument("--method", choices=("rcbf", "apf", "none"), default=None)
+    ap.add_argument("--method", choices=[m.value for m in Method], default=None)
     ap.add_argument("--seed", type=int, default=None, help="override scenario.seed")
     ap.add_argument("--realtime", action="store_true", help="wall-clock mode (default lockstep)")
     ap.add_argument("--zenoh-connect", nargs="*", default=None, metavar="EP")
@@ -38,15 +41,13 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--manual-start", action="store_true",
                     help="stream setpoints but leave arming and OFFBOARD to the operator (GCS)")
     ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
-    ap.add_argument("--log-level", default="INFO")
+    add_log_level_argument(ap)
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    logging.basicConfig(
-        level=args.log_level.upper(), format="%(asctime)s %(name)s %(levelname)s %(message)s"
-    )
+    configure_logging(args.log_level)
     try:
         sc = load_scenario(args.scenario)
     except ScenarioError as exc:
@@ -64,8 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     connect = args.zenoh_connect
     if connect is None:
-        connect = [f"tcp/127.0.0.1:{ZENOH_BASE_PORT + args.port_offset}"]
-    method = args.method or sc.controller.method
+        connect = [default_endpoint(args.port_offset)]
+    method = Method(args.method) if args.method else sc.controller.method
     cfg = DaemonConfig(
         scenario=sc,
         agent_id=args.agent,
@@ -82,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         session = open_session(mode=cfg.zenoh_mode, connect=connect, listen=cfg.zenoh_listen)
-    except Exception as exc:  # noqa: BLE001 - zenoh raises its own error type
+    except OPEN_ERRORS as exc:
         print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
         return 2
     try:

@@ -38,14 +38,15 @@ from offboard.agent import (
     NeighbourEstimate,
     make_agent,
 )
-from offboard.mavlink_link import VehicleLink
+from offboard.mavlink_link import VehicleLink, mavlink
+from offboard.reference import xi_p
+from offboard.safety_filter import parse_method
 from offboard.zenoh_link import SwarmBus
 from swarm_common import px4, wire
+from swarm_common.enums import Method, Role
 from swarm_common.scenario import Scenario
 
-log = logging.getLogger("offboard")
-
-MAV_RESULT_ACCEPTED = 0
+log = logging.getLogger(__name__)
 
 
 def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -> wire.Estimate:
@@ -54,7 +55,7 @@ def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -
         id=e.id,
         step=step,
         t=float(e.t),
-        role="leader" if e.is_leader else "follower",
+        role=Role.LEADER if e.is_leader else Role.FOLLOWER,
         z1=e.z1,
         z2=e.z2,
         z3=e.z3,
@@ -65,7 +66,7 @@ def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -
 
 def estimate_from_wire(e: wire.Estimate) -> NeighbourEstimate:
     """A received payload as the agent consumes it (float32-rounded vectors)."""
-    return NeighbourEstimate(e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == "leader")
+    return NeighbourEstimate(e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == Role.LEADER)
 
 
 def status_to_wire(
@@ -74,7 +75,7 @@ def status_to_wire(
     st = out.status
     if not comm_ok:
         health = "predicting"
-    elif st.fallbacks and st.qp_status in ("relaxed", "fallback"):
+    elif st.fallbacks and st.qp_status.degraded:
         health = "qp-fallback"
     else:
         health = "ok"
@@ -92,7 +93,7 @@ def status_to_wire(
         fallbacks=int(st.fallbacks),
         u=np.asarray(out.u, dtype=float),
         z1=np.asarray(out.estimate.z1, dtype=float),
-        p_des=np.asarray(out.estimate.xi[0:3], dtype=float),
+        p_des=np.asarray(xi_p(out.estimate.xi), dtype=float),
         comm_ok=comm_ok,
         lumped=np.asarray(out.lumped, dtype=float),
     )
@@ -104,7 +105,7 @@ class DaemonConfig:
     agent_id: int
     mavlink_url: str
     swarm: str = "cube8"
-    method: str = "rcbf"
+    method: Method = Method.RCBF
     seed: int | None = None
     lockstep: bool = True
     tlog: str | None = None
@@ -135,7 +136,8 @@ class OffboardDaemon:
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1
-        self.answer: tuple[int, Any, float] | None = None  # (time_boot_ms, q, thrust)
+        # (time_boot_ms, q_ned float32 (4,), normalised thrust float32)
+        self.answer: tuple[int, np.ndarray, np.float32] | None = None
         self.last_send = 0.0
         self.first_send = 0.0
         self.last_estimate: wire.Estimate | None = None
@@ -154,9 +156,14 @@ class OffboardDaemon:
 
     def _apply_commands(self, t: float) -> None:
         for cmd in self.bus.pop_commands():
-            if cmd.kind == "method" and cmd.method in ("rcbf", "apf", "none"):
-                self.agent.set_method(cmd.method)
-                log.info("agent %d: method -> %s", self.id, cmd.method)
+            if cmd.kind == "method":
+                try:
+                    method = parse_method(cmd.method)
+                except ValueError as exc:
+                    log.warning("agent %d: command ignored: %s", self.id, exc)
+                    continue
+                self.agent.set_method(method)
+                log.info("agent %d: method -> %s", self.id, method)
             elif cmd.kind == "outage" and cmd.duration_s > 0:
                 self.extra_outages.append((t, t + cmd.duration_s))
                 log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
@@ -233,16 +240,19 @@ class OffboardDaemon:
                 log.info("agent %d: neighbour %d back", self.id, j)
         return got, True
 
+    def _truth_for(self, k: int) -> wire.Truth | None:
+        """The simulator's truth of step k (lockstep: waited for), or the latest one."""
+        if not self.cfg.lockstep:
+            return self.bus.latest_truth
+        if not self.bus.wait(lambda: k in self.bus.truth, self.cfg.truth_timeout):
+            log.warning("agent %d: no truth for step %d", self.id, k)
+            return None
+        return self.bus.truth[k]
+
     def control_step(self, k: int, t: float, time_boot_ms: int) -> bool:
-        if self.cfg.lockstep:
-            if not self.bus.wait(lambda: k in self.bus.truth, self.cfg.truth_timeout):
-                log.warning("agent %d: no truth for step %d", self.id, k)
-                return False
-            truth = self.bus.truth[k]
-        else:
-            truth = self.bus.latest_truth
-            if truth is None:
-                return False
+        truth = self._truth_for(k)
+        if truth is None:
+            return False
         self._apply_commands(t)
         if not self.cfg.lockstep and isinstance(self.agent, LeaderAgent):
             self._maybe_start_trajectory(t)
@@ -265,13 +275,13 @@ class OffboardDaemon:
             return
         if not self.link.in_offboard:
             res = self.link.set_offboard()
-            if res != MAV_RESULT_ACCEPTED:
+            if res != mavlink.MAV_RESULT_ACCEPTED:
                 log.warning("agent %d: OFFBOARD not accepted (result %s), retrying", self.id, res)
                 return
             log.info("agent %d: OFFBOARD accepted", self.id)
         if not self.link.armed:
             res = self.link.arm()
-            if res != MAV_RESULT_ACCEPTED:
+            if res != mavlink.MAV_RESULT_ACCEPTED:
                 log.warning("agent %d: ARM not accepted (result %s), retrying", self.id, res)
                 return
             log.info("agent %d: armed", self.id)

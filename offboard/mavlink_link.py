@@ -13,8 +13,9 @@ import math
 import os
 import struct
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, SupportsFloat
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -23,9 +24,14 @@ from swarm_common import px4  # noqa: E402
 
 mavlink = mavutil.mavlink
 
-COMP_ONBOARD = 191
-# SET_ATTITUDE_TARGET type_mask: ignore the three body rates (bits 0..2)
-ATT_MASK_IGNORE_RATES = 0b0000_0111
+COMP_ONBOARD = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+COMP_AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
+# SET_ATTITUDE_TARGET type_mask: ignore the three body rates
+ATT_MASK_IGNORE_RATES = (
+    mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+    | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+    | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+)
 
 
 @dataclass
@@ -87,7 +93,7 @@ class VehicleLink:
 
     def _handle(self, msg: Any) -> None:
         kind = msg.get_type()
-        if kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
+        if kind == "HEARTBEAT" and msg.get_srcComponent() == COMP_AUTOPILOT:
             self.heartbeat = msg
             self.heartbeat_time = time.monotonic()
             self.custom_mode = int(msg.custom_mode)
@@ -115,13 +121,15 @@ class VehicleLink:
             self.poll(0.1)
         return self.heartbeat is not None
 
-    def send_attitude_target(self, time_boot_ms: int, q_wxyz: Any, thrust_norm: float) -> None:
+    def send_attitude_target(
+        self, time_boot_ms: int, q_wxyz: Iterable[SupportsFloat], thrust_norm: SupportsFloat
+    ) -> None:
         """SET_ATTITUDE_TARGET (NED/FRD quaternion, normalised thrust, rates ignored)."""
         q = [float(c) for c in q_wxyz]
         msg = mavlink.MAVLink_set_attitude_target_message(
             int(time_boot_ms) & 0xFFFFFFFF,
             self.agent_id,
-            1,
+            COMP_AUTOPILOT,
             ATT_MASK_IGNORE_RATES,
             q,
             0.0,
@@ -139,7 +147,7 @@ class VehicleLink:
         for attempt in range(retries):
             self.acks.pop(command, None)
             msg = mavlink.MAVLink_command_long_message(
-                self.agent_id, 1, command, attempt, *p[:7]
+                self.agent_id, COMP_AUTOPILOT, command, attempt, *p[:7]
             )
             self._send(msg)
             deadline = time.monotonic() + timeout
@@ -153,11 +161,15 @@ class VehicleLink:
     def set_offboard(self) -> int | None:
         return self.command(
             mavlink.MAV_CMD_DO_SET_MODE,
-            [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | 128, px4.MAIN_OFFBOARD, 0],
+            [
+                mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
+                px4.MAIN_OFFBOARD,
+                0,
+            ],
         )
 
     def arm(self) -> int | None:
-        return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1, 0])
+        return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1, 0])  # param1 1 = arm
 
     def close(self) -> None:
         try:

@@ -15,6 +15,7 @@ with drain threads plus a condition variable the lockstep run was 1.39× against
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import deque
 from collections.abc import Callable
@@ -24,6 +25,10 @@ import zenoh
 
 from swarm_common import wire
 
+log = logging.getLogger(__name__)
+
+# what a channel read or an undeclare raises once the subscriber or session is gone
+ZENOH_ERRORS: tuple[type[Exception], ...] = (zenoh.ZError, RuntimeError)
 KEEP_STEPS = 64
 FIFO_DEPTH = 1024
 POLL_S = 0.0002  # channel polling period while waiting for data
@@ -95,7 +100,7 @@ class SwarmBus:
             while True:
                 try:
                     sample = sub.try_recv()
-                except Exception:  # noqa: BLE001 - undeclared / session closed
+                except ZENOH_ERRORS:  # undeclared / session closed: nothing more to read
                     break
                 if sample is None:
                     break
@@ -132,5 +137,5 @@ class SwarmBus:
         for sub, _ in self._subs:
             try:
                 sub.undeclare()
-            except Exception:  # noqa: BLE001 - closing best effort
-                pass
+            except ZENOH_ERRORS as exc:  # closing is best effort
+                log.debug("undeclare on close: %s", exc)
