@@ -1,42 +1,64 @@
 """PX4 custom modes as MAVLink carries them: one definition for vehicle, daemon and GCS.
 
 PX4 packs its mode into HEARTBEAT ``custom_mode`` as ``main_mode << 16 | sub_mode << 24``
-and takes the same numbers in DO_SET_MODE (param2 = main, param3 = sub).
+and takes the same numbers in DO_SET_MODE (param2 = main, param3 = sub). The numbers are
+pymavlink's ``mavutil.PX4_CUSTOM_MAIN_MODE_*`` / ``PX4_CUSTOM_SUB_MODE_*`` (PX4's
+``px4_custom_mode.h``); the few PX4 has and pymavlink lacks are named here.
 """
 
 from __future__ import annotations
 
-MAIN_MANUAL = 1
-MAIN_ALTCTL = 2
-MAIN_POSCTL = 3
-MAIN_AUTO = 4
-MAIN_OFFBOARD = 6
-SUB_AUTO_LOITER = 3
-SUB_AUTO_LAND = 6
+import os
+
+from swarm_common.enums import VehicleMode
+
+# mavutil picks its MAVLink dialect version when first imported: every process of the
+# project speaks MAVLink 2 (the same setdefault as offboard/mavlink_link.py).
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+MAIN_MANUAL: int = mavutil.PX4_CUSTOM_MAIN_MODE_MANUAL
+MAIN_ALTCTL: int = mavutil.PX4_CUSTOM_MAIN_MODE_ALTCTL
+MAIN_POSCTL: int = mavutil.PX4_CUSTOM_MAIN_MODE_POSCTL
+MAIN_AUTO: int = mavutil.PX4_CUSTOM_MAIN_MODE_AUTO
+MAIN_ACRO: int = mavutil.PX4_CUSTOM_MAIN_MODE_ACRO
+MAIN_OFFBOARD: int = mavutil.PX4_CUSTOM_MAIN_MODE_OFFBOARD
+MAIN_STABILIZED: int = mavutil.PX4_CUSTOM_MAIN_MODE_STABILIZED
+MAIN_RATTITUDE: int = mavutil.PX4_CUSTOM_MAIN_MODE_RATTITUDE
+MAIN_TERMINATION = 9  # PX4_CUSTOM_MAIN_MODE_TERMINATION (not in pymavlink)
+
+SUB_AUTO_READY: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_READY
+SUB_AUTO_TAKEOFF: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_TAKEOFF
+SUB_AUTO_LOITER: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_LOITER
+SUB_AUTO_MISSION: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_MISSION
+SUB_AUTO_RTL: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_RTL
+SUB_AUTO_LAND: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_LAND
+SUB_AUTO_FOLLOW_TARGET: int = mavutil.PX4_CUSTOM_SUB_MODE_AUTO_FOLLOW_TARGET
+SUB_AUTO_PRECLAND = 9  # PX4_CUSTOM_SUB_MODE_AUTO_PRECLAND (not in pymavlink)
 
 MAIN_MODES = {
     MAIN_MANUAL: "MANUAL",
     MAIN_ALTCTL: "ALTCTL",
     MAIN_POSCTL: "POSCTL",
     MAIN_AUTO: "AUTO",
-    5: "ACRO",
+    MAIN_ACRO: "ACRO",
     MAIN_OFFBOARD: "OFFBOARD",
-    7: "STABILIZED",
-    8: "RATTITUDE",
-    9: "TERMINATION",
+    MAIN_STABILIZED: "STABILIZED",
+    MAIN_RATTITUDE: "RATTITUDE",
+    MAIN_TERMINATION: "TERMINATION",
 }
 AUTO_SUB_MODES = {
-    1: "READY",
-    2: "TAKEOFF",
+    SUB_AUTO_READY: "READY",
+    SUB_AUTO_TAKEOFF: "TAKEOFF",
     SUB_AUTO_LOITER: "LOITER",
-    4: "MISSION",
-    5: "RTL",
+    SUB_AUTO_MISSION: "MISSION",
+    SUB_AUTO_RTL: "RTL",
     SUB_AUTO_LAND: "LAND",
-    8: "FOLLOW",
-    9: "PRECLAND",
+    SUB_AUTO_FOLLOW_TARGET: "FOLLOW",
+    SUB_AUTO_PRECLAND: "PRECLAND",
 }
 
-FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2: force (PX4)
+FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2: force (PX4; no MAVLink enum)
 
 
 def custom_mode(main: int, sub: int = 0) -> int:
@@ -50,13 +72,23 @@ def split_mode(custom: int) -> tuple[int, int]:
 
 
 # The modes vehicle-sim implements, by the short names it reports (Truth, STATUSTEXT)
-CUSTOM_MODE = {
-    "POSCTL": custom_mode(MAIN_POSCTL),
-    "OFFBOARD": custom_mode(MAIN_OFFBOARD),
-    "HOLD": custom_mode(MAIN_AUTO, SUB_AUTO_LOITER),
-    "LAND": custom_mode(MAIN_AUTO, SUB_AUTO_LAND),
+CUSTOM_MODE: dict[VehicleMode, int] = {
+    VehicleMode.POSCTL: custom_mode(MAIN_POSCTL),
+    VehicleMode.OFFBOARD: custom_mode(MAIN_OFFBOARD),
+    VehicleMode.HOLD: custom_mode(MAIN_AUTO, SUB_AUTO_LOITER),
+    VehicleMode.LAND: custom_mode(MAIN_AUTO, SUB_AUTO_LAND),
 }
 _SHORT_NAME = {v: k for k, v in CUSTOM_MODE.items()}
+
+
+def vehicle_mode(main: int, sub: int = 0) -> VehicleMode | None:
+    """The simulator's mode for a PX4 (main, sub) pair; None when it does not implement it
+    (OFFBOARD and POSCTL ignore ``sub``, as PX4 does)."""
+    if main in (MAIN_OFFBOARD, MAIN_POSCTL):
+        sub = 0
+    if not (0 <= main <= 0xFF and 0 <= sub <= 0xFF):
+        return None
+    return _SHORT_NAME.get(custom_mode(main, sub))
 
 
 def short_name(custom: int) -> str:
@@ -64,6 +96,6 @@ def short_name(custom: int) -> str:
     mode name, else ``MODE<n>``."""
     name = _SHORT_NAME.get(custom)
     if name is not None:
-        return name
+        return str(name)
     main, _ = split_mode(custom)
     return MAIN_MODES.get(main, f"MODE{main}")

@@ -1,21 +1,33 @@
 """``vehicle-sim``: SITL-style multi-vehicle MAVLink simulator (docs/conventions.md).
 
 Exit codes: 0 on SIGINT/SIGTERM or when ``--duration`` is reached; 2 on a bad scenario,
-a bad option or a busy port (one line on stderr naming it).
+a bad option or a busy port (one line on stderr naming it). Diagnostics go through
+``logging`` (``--log-level``; ``--quiet`` = at most warnings); the last line on stderr is
+the ``stats:`` summary.
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import signal
 import sys
+from collections.abc import Callable
+from types import FrameType
 
+from swarm_common.enums import FailsafeAction
+from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
+from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
 from swarm_common.scenario import ScenarioError, load_scenario
 
+log = logging.getLogger("vehicle_sim")
+MAX_PORT = 65535
+HIGHEST_BASE_PORT = GCS_LOCAL_BASE + MAX_ID  # the highest vehicle port before the offset
 
-def _pos_float(name: str):
+
+def _pos_float(name: str) -> Callable[[str], float]:
     def conv(s: str) -> float:
         try:
             x = float(s)
@@ -45,7 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
-    ap.add_argument("--failsafe", choices=("hold", "land"), default="hold")
+    ap.add_argument("--failsafe", type=FailsafeAction, choices=list(FailsafeAction),
+                    default=FailsafeAction.HOLD, help="what a vehicle does on offboard loss")
     ap.add_argument("--offboard-timeout", type=_pos_float("--offboard-timeout"), default=0.5)
     ap.add_argument("--odometry-hz", type=_pos_float("--odometry-hz"), default=50.0)
     ap.add_argument("--step-timeout", type=_pos_float("--step-timeout"), default=0.5)
@@ -53,7 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="exit 0 after this much simulated time (s)")  # fmt: skip
     ap.add_argument("--vehicles", type=int, default=None, metavar="K",
                     help="simulate only the first K agents of the scenario")  # fmt: skip
-    ap.add_argument("--quiet", action="store_true", help="no event log on stderr")
+    ap.add_argument("--quiet", action="store_true",
+                    help="no event log on stderr (same as --log-level warning)")
+    add_log_level_argument(ap)
     ap.add_argument("--stats-out", default=None, metavar="PATH",
                     help="write run statistics (setpoint latency, timeouts) as JSON at exit")
     return ap
@@ -61,6 +76,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    level = LogLevel(args.log_level)
+    if args.quiet and level in (LogLevel.DEBUG, LogLevel.INFO):
+        level = LogLevel.WARNING
+    configure_logging(level)
     try:
         sc = load_scenario(args.scenario)
     except ScenarioError as exc:
@@ -69,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.vehicles is not None and not 1 <= args.vehicles <= sc.n:
         print(f"vehicle-sim: --vehicles {args.vehicles}: must be in [1, {sc.n}]", file=sys.stderr)
         return 2
-    if not 0 <= args.port_offset <= 65535 - 18570 - 255:
+    if not 0 <= args.port_offset <= MAX_PORT - HIGHEST_BASE_PORT:
         print(f"vehicle-sim: --port-offset {args.port_offset}: out of range", file=sys.stderr)
         return 2
 
@@ -93,7 +112,6 @@ def main(argv: list[str] | None = None) -> int:
         step_timeout=args.step_timeout,
         duration=args.duration,
         vehicles=args.vehicles,
-        verbose=not args.quiet,
         stats_out=args.stats_out,
     )
     try:
@@ -105,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"vehicle-sim: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
 
-    def on_signal(signum, _frame):
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
         server.stop_requested = True
 
     signal.signal(signal.SIGINT, on_signal)
@@ -115,6 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         if prof_path:
             import cProfile
 
+            log.info("profiling to %s", prof_path)
             prof = cProfile.Profile()
             try:
                 return prof.runcall(server.run)

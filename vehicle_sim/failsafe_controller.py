@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from swarm_common import frames
+from swarm_common.enums import FailsafeAction
 
 
 @dataclass
@@ -45,16 +46,15 @@ class FailsafeController:
     gains: HoldGains = field(default_factory=HoldGains)
 
     def __post_init__(self) -> None:
-        self.mode = "hold"
+        self.mode = FailsafeAction.HOLD
         self.p_ref = np.zeros(3)
         self.yaw_ref = 0.0
         self.integ = np.zeros(3)
 
-    def engage(self, mode: str, p: np.ndarray, yaw: float) -> None:
-        """Start holding (``mode="hold"``) or landing (``"land"``) from position ``p``."""
-        if mode not in ("hold", "land"):
-            raise ValueError(mode)
-        self.mode = mode
+    def engage(self, mode: FailsafeAction | str, p: np.ndarray, yaw: float) -> None:
+        """Start holding (``FailsafeAction.HOLD``) or landing (``LAND``) from position ``p``
+        (a plain ``"hold"``/``"land"`` works too; anything else raises ValueError)."""
+        self.mode = FailsafeAction(mode)
         self.p_ref = np.array(p, dtype=float)
         self.yaw_ref = float(yaw) if math.isfinite(yaw) else 0.0
         self.integ = np.zeros(3)
@@ -72,7 +72,7 @@ class FailsafeController:
         if n > g.v_max_xy:
             v_xy *= g.v_max_xy / n
         v_ref[:2] = v_xy
-        if self.mode == "land":
+        if self.mode == FailsafeAction.LAND:
             v_ref[2] = -g.land_speed
         else:
             v_ref[2] = max(-1.5, min(1.5, g.kp_z * e[2]))

@@ -17,14 +17,21 @@
 from __future__ import annotations
 
 import errno
+import logging
 import socket
+import struct
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+log = logging.getLogger(__name__)
+
 MAX_DATAGRAM = 65535
+RCVBUF_BYTES = 1 << 20
+# what pymavlink's parser raises on pathological input (MAVError; the others defensively)
+PARSE_ERRORS = (mavlink2.MAVError, struct.error, IndexError, ValueError)
 
 
 class LinkError(OSError):
@@ -80,10 +87,12 @@ class MavlinkLink:
             ) from None
         self.sock.setblocking(False)
         try:
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        except OSError:
-            pass
-        self.mav = mavlink2.MAVLink(None, srcSystem=self.sysid, srcComponent=1)
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+        except OSError as exc:  # the default buffer works, only bursts may drop
+            log.debug("%s link: SO_RCVBUF not set: %s", self.name, exc)
+        self.mav = mavlink2.MAVLink(
+            None, srcSystem=self.sysid, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1
+        )
         self.mav.robust_parsing = True
         self.peers: dict[tuple[str, int], Peer] = {}
 
@@ -115,8 +124,9 @@ class MavlinkLink:
             st.bytes += len(data)
             try:
                 msgs = mav.parse_buffer(data) or []
-            except Exception:  # pymavlink can raise on pathological input
+            except PARSE_ERRORS as exc:  # counted as garbage, the parser starts afresh
                 st.garbage += 1
+                log.debug("%s link: unparsable datagram from %s: %r", self.name, addr, exc)
                 self._reset_parser()
                 continue
             if mav.buf_len() > 0:
@@ -179,5 +189,5 @@ class MavlinkLink:
     def close(self) -> None:
         try:
             self.sock.close()
-        except OSError:
-            pass
+        except OSError as exc:
+            log.debug("%s link: close: %s", self.name, exc)

@@ -14,55 +14,43 @@ Telemetry streams (HEARTBEAT 1 Hz etc.) run on the wall clock in both modes.
 
 from __future__ import annotations
 
-import dataclasses
+import logging
 import selectors
+import struct
 import sys
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
+from pymavlink.dialects.v20 import common as M
 
 from swarm_common import wire
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import Scenario
+from vehicle_sim import stats
 from vehicle_sim.clock import LockstepClock, RealTimeClock
 from vehicle_sim.dynamics import SwarmDynamics
 from vehicle_sim.mavlink_link import MavlinkLink
+from vehicle_sim.options import SimOptions, restrict
+from vehicle_sim.truth import TruthPublisher
 from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle, VehicleConfig
+
+log = logging.getLogger(__name__)
 
 LOCKSTEP_SUSPEND_AFTER = 5  # consecutive step timeouts before we stop waiting for a vehicle
 LOCKSTEP_RESEND_S = 0.1  # re-send ODOMETRY t_k to a vehicle that has not answered yet
-
-
-@dataclass
-class SimOptions:
-    lockstep: bool = False
-    seed: int | None = None
-    port_offset: int = 0
-    bind_host: str = "127.0.0.1"
-    remote_host: str = "127.0.0.1"
-    swarm: str = "default"
-    zenoh: bool = True
-    zenoh_mode: str = "peer"
-    zenoh_listen: list[str] = field(default_factory=list)
-    zenoh_connect: list[str] = field(default_factory=list)
-    failsafe: str = "hold"
-    offboard_timeout: float = 0.5
-    odometry_hz: float = 50.0
-    step_timeout: float = 0.5
-    duration: float | None = None
-    vehicles: int | None = None
-    verbose: bool = True
-    stats_out: str | None = None
-
-
-def restrict(sc: Scenario, k: int | None) -> Scenario:
-    """The scenario with only its first ``k`` agents (``--vehicles K``)."""
-    if k is None or k >= sc.n:
-        return sc
-    if k < 1:
-        raise ValueError(f"--vehicles {k}: must be in [1, {sc.n}]")
-    return dataclasses.replace(sc, agents=sc.agents[:k])
+ERRORS_LOGGED = 10  # per-packet errors logged before only counting them
+PACK_ERRORS = (struct.error, ValueError, TypeError, OverflowError)  # field out of wire range
+# STATUSTEXT severity -> logging level of the same event in the simulator's own log
+_LOG_LEVEL = {
+    M.MAV_SEVERITY_EMERGENCY: logging.CRITICAL,
+    M.MAV_SEVERITY_ALERT: logging.CRITICAL,
+    M.MAV_SEVERITY_CRITICAL: logging.CRITICAL,
+    M.MAV_SEVERITY_ERROR: logging.ERROR,
+    M.MAV_SEVERITY_WARNING: logging.WARNING,
+    M.MAV_SEVERITY_NOTICE: logging.INFO,
+    M.MAV_SEVERITY_INFO: logging.INFO,
+    M.MAV_SEVERITY_DEBUG: logging.DEBUG,
+}
 
 
 class SimServer:
@@ -79,9 +67,7 @@ class SimServer:
         self.stop_requested = False
         self.lockstep_timeouts = 0
         self.handler_errors = 0
-        self.truth_published = 0
-        self.zsession = None
-        self.zpub = None
+        self.truth_pub = TruthPublisher()
         self.links: list[MavlinkLink] = []
         self.vehicles: list[Vehicle] = []
         self.vlinks: dict[int, dict[str, MavlinkLink]] = {}
@@ -90,13 +76,15 @@ class SimServer:
         self._min_dist = self.dyn.min_pair_distance() if self.dyn.n >= 2 else float("inf")
         self._last_resend: dict[int, float] = {}
         self._prestart_next = 0.0
+        opened = False
         try:
             self._open_links()
             if opts.zenoh:
-                self._open_zenoh()
-        except Exception:
-            self.close()
-            raise
+                self.log(self.truth_pub.open(opts))
+            opened = True
+        finally:  # a busy port or Zenoh failing: release what was opened, then raise
+            if not opened:
+                self.close()
 
     # -- setup ------------------------------------------------------------------------
     def _open_links(self) -> None:
@@ -124,45 +112,25 @@ class SimServer:
             self.sel.register(api.sock, selectors.EVENT_READ, (v, api))
             self.sel.register(gcs.sock, selectors.EVENT_READ, (v, gcs))
 
-    def _open_zenoh(self) -> None:
-        from swarm_common.zenoh_session import default_endpoint, open_session
-
-        o = self.opts
-        listen = list(o.zenoh_listen)
-        if not listen and not o.zenoh_connect and o.zenoh_mode != "client":
-            listen = [default_endpoint(o.port_offset)]
-        self.zsession = open_session(o.zenoh_mode, listen=listen, connect=o.zenoh_connect)
-        self.zpub = self.zsession.declare_publisher(wire.key_truth(o.swarm))
-        self.log(f"zenoh {o.zenoh_mode} listen={listen} connect={o.zenoh_connect}")
-
-    def log(self, text: str) -> None:
-        if self.opts.verbose:
-            print(f"[vehicle-sim t={self.clock.t():.2f}] {text}", file=sys.stderr, flush=True)
+    def log(self, text: str, level: int = logging.INFO) -> None:
+        """A diagnostic line stamped with the simulation time."""
+        if log.isEnabledFor(level):
+            log.log(level, "t=%.2f %s", self.clock.t(), text)
 
     def close(self) -> None:
+        """Close sockets and Zenoh; safe to call twice."""
         for link in self.links:
             try:
                 self.sel.unregister(link.sock)
-            except (KeyError, ValueError, OSError):
-                pass
+            except (KeyError, ValueError, OSError) as exc:
+                log.debug("unregister %s link: %r", link.name, exc)
             link.close()
         self.links = []
         try:
             self.sel.close()
-        except OSError:
-            pass
-        if self.zpub is not None:
-            try:
-                self.zpub.undeclare()
-            except Exception:
-                pass
-            self.zpub = None
-        if self.zsession is not None:
-            try:
-                self.zsession.close()
-            except Exception:
-                pass
-            self.zsession = None
+        except OSError as exc:
+            log.debug("selector close: %r", exc)
+        self.truth_pub.close()
 
     # -- per step ---------------------------------------------------------------------
     def truth(self) -> wire.Truth:
@@ -183,12 +151,8 @@ class SimServer:
         )
 
     def publish_truth(self) -> None:
-        if self.zpub is not None:
-            try:
-                self.zpub.put(wire.encode(self.truth()))
-                self.truth_published += 1
-            except Exception as exc:  # never let Zenoh kill the simulation
-                self.log(f"zenoh put failed: {exc}")
+        if self.truth_pub.active:
+            self.truth_pub.put(self.truth())
 
     def send_odometry(self, v: Vehicle) -> None:
         """The lockstep clock signal: ODOMETRY stamped t_k on the API link only (the
@@ -199,7 +163,8 @@ class SimServer:
     def integrate(self) -> None:
         """Step k -> k+1: state machines, commands, physics, then announce step k+1."""
         t = self.clock.t()
-        lockstep_prestart = self.clock.lockstep and not self.clock.started
+        clk = self.clock
+        lockstep_prestart = isinstance(clk, LockstepClock) and not clk.started
         for v in self.vehicles:
             v.update(t)
             if v.release_requested and not lockstep_prestart:
@@ -235,7 +200,7 @@ class SimServer:
             for v in self.vehicles:
                 if v.id in (a, b):
                     other = b if v.id == a else a
-                    v.event(f"collision with vehicle {other}", 2)
+                    v.event(f"collision with vehicle {other}", M.MAV_SEVERITY_CRITICAL)
 
     # -- lockstep ---------------------------------------------------------------------
     def barrier_ready(self) -> bool:
@@ -246,26 +211,12 @@ class SimServer:
         return [v for v in self.vehicles if v.lockstep_should_wait() and v.answered_ms != ms]
 
     def lockstep_poll(self, now: float) -> None:
+        """One pass of the lockstep loop: start barrier, step when every answer is in, step
+        anyway at the step timeout, re-send ODOMETRY t_k to whoever is late."""
         clk = self.clock
         assert isinstance(clk, LockstepClock)
         if not clk.started:
-            if self.barrier_ready():
-                self.log_events()
-                clk.started = True
-                for v in self.vehicles:
-                    self.dyn.release(v.idx)
-                    v.release_requested = False
-                self.log("lockstep: start barrier passed, all vehicles released at t_0")
-                self.integrate()
-                return
-            if now >= self._prestart_next:  # keep offering t_0 until everyone is ready
-                self._prestart_next = now + (
-                    1.0 / self.opts.odometry_hz if self.opts.odometry_hz else 0.1
-                )
-                self.publish_truth()
-                for v in self.vehicles:
-                    v.expect_ms = 0
-                    self.send_odometry(v)
+            self._lockstep_prestart(clk, now)
             return
         if not any(v.lockstep_should_wait() for v in self.vehicles):
             # nobody to wait for (all in failsafe, disarmed or suspended): pace on the
@@ -278,19 +229,44 @@ class SimServer:
             self.integrate()
             return
         if now >= clk.deadline():
-            for v in waiting:
-                v.ctr.lockstep_timeouts += 1
-                v.consecutive_timeouts += 1
-                self.lockstep_timeouts += 1
-                if v.consecutive_timeouts >= LOCKSTEP_SUSPEND_AFTER and not v.wait_suspended:
-                    v.wait_suspended = True
-                    v.event(f"lockstep: no answer for {v.consecutive_timeouts} steps, not waiting")
+            self._lockstep_timeout(waiting)
             self.integrate()
             return
         for v in waiting:  # a lost datagram must not cost a whole step timeout
             if now - self._last_resend.get(v.id, 0.0) >= LOCKSTEP_RESEND_S:
                 self._last_resend[v.id] = now
                 self.send_odometry(v)
+
+    def _lockstep_prestart(self, clk: LockstepClock, now: float) -> None:
+        """Before the barrier: offer t_0 until every vehicle answers it in OFFBOARD."""
+        if self.barrier_ready():
+            self.log_events()
+            clk.started = True
+            for v in self.vehicles:
+                self.dyn.release(v.idx)
+                v.release_requested = False
+            self.log("lockstep: start barrier passed, all vehicles released at t_0")
+            self.integrate()
+            return
+        if now >= self._prestart_next:  # keep offering t_0 until everyone is ready
+            self._prestart_next = now + (
+                1.0 / self.opts.odometry_hz if self.opts.odometry_hz else LOCKSTEP_RESEND_S
+            )
+            self.publish_truth()
+            for v in self.vehicles:
+                v.expect_ms = 0
+                self.send_odometry(v)
+
+    def _lockstep_timeout(self, waiting: list[Vehicle]) -> None:
+        """Count a step timeout for each late vehicle; stop waiting for one after
+        ``LOCKSTEP_SUSPEND_AFTER`` in a row (its next answer resumes the wait)."""
+        for v in waiting:
+            v.ctr.lockstep_timeouts += 1
+            v.consecutive_timeouts += 1
+            self.lockstep_timeouts += 1
+            if v.consecutive_timeouts >= LOCKSTEP_SUSPEND_AFTER and not v.wait_suspended:
+                v.wait_suspended = True
+                v.event(f"lockstep: no answer for {v.consecutive_timeouts} steps, not waiting")
 
     # -- I/O --------------------------------------------------------------------------
     def flush(self, now: float) -> None:
@@ -303,10 +279,11 @@ class SimServer:
             for msg, dest in out:
                 try:
                     buf = v.pack(msg)
-                except Exception as exc:  # a field out of its wire range: drop, count
+                except PACK_ERRORS as exc:  # a field out of its wire range: drop, count
                     self.handler_errors += 1
-                    if self.handler_errors <= 10:
-                        self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}")
+                    if self.handler_errors <= ERRORS_LOGGED:
+                        self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}",
+                                 logging.ERROR)  # fmt: skip
                     continue
                 if dest is None:
                     for name, ln in links.items():
@@ -319,8 +296,8 @@ class SimServer:
 
     def log_events(self) -> None:
         for v in self.vehicles:
-            for line in v.events:
-                self.log(line)
+            for severity, line in v.events:
+                self.log(line, _LOG_LEVEL.get(severity, logging.INFO))
             v.events.clear()
 
     def receive(self, timeout: float) -> None:
@@ -331,10 +308,12 @@ class SimServer:
             for m in link.receive(now):
                 try:
                     v.handle(m, (link.name, m._peer), now, t)
-                except Exception as exc:  # a message must never take the simulator down
+                except Exception as exc:  # noqa: BLE001 - logged and counted: a hostile
+                    # message must never take the simulator down (handler_errors=0 in tests)
                     self.handler_errors += 1
-                    if self.handler_errors <= 10:
-                        self.log(f"vehicle {v.id}: error handling {m.get_type()}: {exc!r}")
+                    if self.handler_errors <= ERRORS_LOGGED:
+                        self.log(f"vehicle {v.id}: error handling {m.get_type()}: {exc!r}",
+                                 logging.ERROR)  # fmt: skip
 
     def next_wakeup(self, now: float) -> float:
         if isinstance(self.clock, RealTimeClock):
@@ -380,66 +359,18 @@ class SimServer:
                 if o.duration is not None and t >= o.duration - 1e-9:
                     self.log(f"duration {o.duration} s reached")
                     break
-        finally:  # the counters are printed even with --quiet
+        finally:  # the result line, not a diagnostic: printed at every --log-level
             if o.stats_out:
                 self.write_stats(o.stats_out)
-            print(
-                f"[vehicle-sim t={self.clock.t():.2f}] {self.summary()}",
-                file=sys.stderr,
-                flush=True,
-            )
+            print(f"[vehicle-sim t={self.clock.t():.2f}] {self.summary()}",
+                  file=sys.stderr, flush=True)  # fmt: skip
         return 0
 
-    def latency_stats(self) -> dict:
-        """Setpoint-to-odometry latency over all vehicles (ms) and the late fraction."""
-        lat = np.array([x for v in self.vehicles for x in v.latency]) * 1000.0
-        if lat.size == 0:
-            return {"n": 0}
-        q = np.percentile(lat, [50, 90, 99])
-        return {
-            "n": int(lat.size),
-            "p50_ms": float(q[0]),
-            "p90_ms": float(q[1]),
-            "p99_ms": float(q[2]),
-            "max_ms": float(lat.max()),
-            "late_fraction": float(np.mean(lat > self.dt * 1000.0)),
-        }
-
     def write_stats(self, path: str) -> None:
-        import json
-
-        doc = {
-            "mode": "lockstep" if self.opts.lockstep else "realtime",
-            "steps": self.clock.k,
-            "lockstep_timeouts": self.lockstep_timeouts,
-            "collisions": self.dyn.collisions,
-            "latency": self.latency_stats(),
-            "relocks": getattr(self.clock, "relocks", 0),
-            "summary": self.summary(),
-        }
-        try:
-            with open(path, "w") as f:
-                json.dump(doc, f, indent=2)
-        except OSError as exc:
-            self.log(f"cannot write stats to {path}: {exc}")
+        stats.write_stats(self, path)
 
     def summary(self) -> str:
-        tot: dict[str, int] = {}
-        for link in self.links:
-            for k, val in link.stats.as_dict().items():
-                tot[k] = tot.get(k, 0) + val
-        for v in self.vehicles:
-            for k, val in v.ctr.as_dict().items():
-                tot[k] = tot.get(k, 0) + val
-        keys = ("messages", "bad", "garbage", "truncated", "foreign", "setpoints",
-                "setpoints_rejected", "setpoints_stale", "commands", "commands_unsupported",
-                "commands_foreign", "failsafes")  # fmt: skip
-        body = " ".join(f"{k}={tot.get(k, 0)}" for k in keys)
-        return (
-            f"stats: steps={self.clock.k} collisions={self.dyn.collisions} "
-            f"lockstep_timeouts={self.lockstep_timeouts} handler_errors={self.handler_errors} "
-            f"truth={self.truth_published} {body}"
-        )
+        return stats.summary(self)
 
     def states_finite(self) -> bool:
         d = self.dyn

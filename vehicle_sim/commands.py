@@ -1,0 +1,135 @@
+"""MAVLink commands a simulated PX4 vehicle answers (COMMAND_LONG / COMMAND_INT).
+
+:data:`HANDLERS` maps a ``MAV_CMD_*`` to a function ``(vehicle, command) -> Outcome``:
+the ``MAV_RESULT_*`` to acknowledge and, for the commands that answer with a message
+(GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES), that message,
+sent right after the COMMAND_ACK. Any other command is acknowledged UNSUPPORTED.
+Parameters arrive as floats, NaN where unused (MAVSDK sends NaN): :func:`finite`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from pymavlink.dialects.v20 import common as M
+
+from swarm_common import px4
+from vehicle_sim import telemetry
+
+if TYPE_CHECKING:
+    from vehicle_sim.vehicle import Vehicle
+
+Outcome = tuple[int, M.MAVLink_message | None]
+MSG_ID_LIMIT = 1 << 24  # MAVLink 2 message ids are 24 bits
+TRUE_THRESHOLD = 0.5  # a boolean parameter is "on" above this
+
+
+def finite(x: Any, default: float | None = None) -> float | None:
+    """A command parameter, or ``default`` when it is NaN/inf or not a number."""
+    try:
+        xf = float(x)
+    except (TypeError, ValueError):
+        return default
+    return xf if math.isfinite(xf) else default
+
+
+def _flag(x: Any, default: float) -> float:
+    """A parameter with a finite default (never None)."""
+    f = finite(x, default)
+    return default if f is None else f
+
+
+@dataclass(frozen=True)
+class Command:
+    """One received command, its 7 parameters (COMMAND_INT x/y scaled by 1e-7)."""
+
+    cmd: int
+    p: tuple[float, ...]
+    wall: float
+    sim_t: float
+
+
+def _arm_disarm(v: Vehicle, c: Command) -> Outcome:
+    want = finite(c.p[0])
+    force = finite(c.p[1], 0.0) == px4.FORCE_MAGIC
+    if want is None:
+        return M.MAV_RESULT_DENIED, None
+    if want > TRUE_THRESHOLD:
+        return v.arm(c.sim_t), None
+    return v.disarm(force, "forced" if force else ""), None
+
+
+def _set_mode(v: Vehicle, c: Command) -> Outcome:
+    base, main, sub = finite(c.p[0]), finite(c.p[1]), _flag(c.p[2], 0.0)
+    if base is None or main is None or not (int(base) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED):
+        return M.MAV_RESULT_UNSUPPORTED, None
+    return v.request_mode(int(main), int(sub), c.sim_t), None
+
+
+def _land(v: Vehicle, c: Command) -> Outcome:
+    return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LAND, c.sim_t), None
+
+
+def _loiter(v: Vehicle, c: Command) -> Outcome:
+    return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LOITER, c.sim_t), None
+
+
+def _terminate(v: Vehicle, c: Command) -> Outcome:
+    on = _flag(c.p[0], 0.0) > TRUE_THRESHOLD
+    return (v.terminate() if on else M.MAV_RESULT_ACCEPTED), None
+
+
+def _set_interval(v: Vehicle, c: Command) -> Outcome:
+    mid, interval_us = finite(c.p[0]), finite(c.p[1])
+    if mid is None or interval_us is None or int(mid) not in v.streams:
+        return M.MAV_RESULT_UNSUPPORTED, None
+    v.streams.set_interval(int(mid), interval_us, c.wall)
+    return M.MAV_RESULT_ACCEPTED, None
+
+
+def _get_interval(v: Vehicle, c: Command) -> Outcome:
+    mid = finite(c.p[0])
+    if mid is None or int(mid) not in v.streams:
+        return M.MAV_RESULT_UNSUPPORTED, None
+    reply = M.MAVLink_message_interval_message(int(mid), v.streams.interval_us(int(mid)))
+    return M.MAV_RESULT_ACCEPTED, reply
+
+
+def _request_message(v: Vehicle, c: Command) -> Outcome:
+    mid = finite(c.p[0])
+    msg = None
+    if mid is not None and 0 <= mid < MSG_ID_LIMIT:
+        msg = telemetry.build(v, int(mid), c.sim_t)
+    if msg is None:
+        return M.MAV_RESULT_UNSUPPORTED, None
+    return M.MAV_RESULT_ACCEPTED, msg
+
+
+def _request_capabilities(v: Vehicle, c: Command) -> Outcome:
+    if _flag(c.p[0], 1.0) > TRUE_THRESHOLD:
+        return M.MAV_RESULT_ACCEPTED, telemetry.autopilot_version(v, c.sim_t)
+    return M.MAV_RESULT_ACCEPTED, None
+
+
+HANDLERS: dict[int, Callable[[Vehicle, Command], Outcome]] = {
+    M.MAV_CMD_COMPONENT_ARM_DISARM: _arm_disarm,
+    M.MAV_CMD_DO_SET_MODE: _set_mode,
+    M.MAV_CMD_NAV_LAND: _land,
+    M.MAV_CMD_NAV_LOITER_UNLIM: _loiter,
+    M.MAV_CMD_DO_FLIGHTTERMINATION: _terminate,
+    M.MAV_CMD_SET_MESSAGE_INTERVAL: _set_interval,
+    M.MAV_CMD_GET_MESSAGE_INTERVAL: _get_interval,
+    M.MAV_CMD_REQUEST_MESSAGE: _request_message,
+    M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: _request_capabilities,
+}
+
+
+def execute(v: Vehicle, c: Command) -> Outcome:
+    """Run one command; UNSUPPORTED for a command the vehicle does not implement."""
+    handler = HANDLERS.get(c.cmd)
+    if handler is None:
+        return M.MAV_RESULT_UNSUPPORTED, None
+    return handler(v, c)

@@ -1,0 +1,80 @@
+"""Run statistics of ``vehicle-sim``: the ``stats:`` summary line and ``--stats-out`` JSON.
+
+The summary is the last line the process writes to stderr (docs/conventions.md)::
+
+    stats: steps=… collisions=… lockstep_timeouts=… handler_errors=… truth=… messages=…
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from vehicle_sim.vehicle import Vehicle
+
+if TYPE_CHECKING:
+    from vehicle_sim.server import SimServer
+
+log = logging.getLogger(__name__)
+
+SUMMARY_KEYS = (
+    "messages", "bad", "garbage", "truncated", "foreign", "setpoints", "setpoints_rejected",
+    "setpoints_stale", "commands", "commands_unsupported", "commands_foreign", "failsafes",
+)  # fmt: skip
+LATENCY_PERCENTILES = (50, 90, 99)
+
+
+def latency_stats(vehicles: Iterable[Vehicle], dt: float) -> dict[str, Any]:
+    """Setpoint-to-odometry latency over all vehicles (ms) and the fraction later than one
+    control step ``dt`` (s)."""
+    lat = np.array([x for v in vehicles for x in v.latency]) * 1000.0
+    if lat.size == 0:
+        return {"n": 0}
+    q = np.percentile(lat, LATENCY_PERCENTILES)
+    return {
+        "n": int(lat.size),
+        "p50_ms": float(q[0]),
+        "p90_ms": float(q[1]),
+        "p99_ms": float(q[2]),
+        "max_ms": float(lat.max()),
+        "late_fraction": float(np.mean(lat > dt * 1000.0)),
+    }
+
+
+def summary(sim: SimServer) -> str:
+    """The ``stats:`` line: server counters, then link and vehicle counters summed."""
+    tot: dict[str, int] = {}
+    for link in sim.links:
+        for k, val in link.stats.as_dict().items():
+            tot[k] = tot.get(k, 0) + val
+    for v in sim.vehicles:
+        for k, val in v.ctr.as_dict().items():
+            tot[k] = tot.get(k, 0) + val
+    body = " ".join(f"{k}={tot.get(k, 0)}" for k in SUMMARY_KEYS)
+    return (
+        f"stats: steps={sim.clock.k} collisions={sim.dyn.collisions} "
+        f"lockstep_timeouts={sim.lockstep_timeouts} handler_errors={sim.handler_errors} "
+        f"truth={sim.truth_pub.published} {body}"
+    )
+
+
+def write_stats(sim: SimServer, path: str) -> None:
+    """``--stats-out``: mode, steps, timeouts, collisions, latency and the summary line."""
+    doc = {
+        "mode": "lockstep" if sim.opts.lockstep else "realtime",
+        "steps": sim.clock.k,
+        "lockstep_timeouts": sim.lockstep_timeouts,
+        "collisions": sim.dyn.collisions,
+        "latency": latency_stats(sim.vehicles, sim.dt),
+        "relocks": getattr(sim.clock, "relocks", 0),
+        "summary": summary(sim),
+    }
+    try:
+        with open(path, "w") as f:
+            json.dump(doc, f, indent=2)
+    except OSError as exc:
+        log.error("cannot write stats to %s: %s", path, exc)

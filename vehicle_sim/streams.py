@@ -1,0 +1,70 @@
+"""Telemetry stream schedule of one vehicle (MAV_CMD_SET/GET_MESSAGE_INTERVAL).
+
+Intervals are wall-clock seconds (0 = off). Every stream starts at its default rate
+(``telemetry.DEFAULT_RATES``, ODOMETRY at ``odometry_hz``); SET_MESSAGE_INTERVAL changes
+one (-1 µs: off, 0: back to the default, else clamped to [1 ms, 2000 s]). HEARTBEAT is the
+link's liveness: never off, at least 1 Hz, at most 50 Hz.
+"""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import common as M
+
+MIN_INTERVAL_S = 1e-3
+MAX_INTERVAL_S = 2000.0  # fits the int32 µs of MESSAGE_INTERVAL
+HEARTBEAT_MIN_S, HEARTBEAT_MAX_S = 0.02, 1.0
+DUE_SLACK_S = 1e-3  # a stream due within this much is sent now
+
+
+def _interval(hz: float) -> float:
+    return 1.0 / hz if hz > 0 else 0.0
+
+
+class StreamSchedule:
+    """Which message ids are due on the wall clock."""
+
+    def __init__(self, rates: dict[int, float], odometry_hz: float) -> None:
+        self.defaults = dict(rates)
+        self.defaults[M.MAVLINK_MSG_ID_ODOMETRY] = odometry_hz
+        self.intervals: dict[int, float] = {mid: _interval(hz) for mid, hz in rates.items()}
+        self.intervals[M.MAVLINK_MSG_ID_ODOMETRY] = 1.0 / odometry_hz if odometry_hz else 0
+        self._next_due: dict[int, float] = {}
+
+    def __contains__(self, mid: int) -> bool:
+        return mid in self.intervals
+
+    def interval_us(self, mid: int) -> int:
+        """MESSAGE_INTERVAL.interval_us of a known stream (-1 = off)."""
+        iv = self.intervals[mid]
+        return int(iv * 1e6) if iv else -1
+
+    def set_interval(self, mid: int, interval_us: float, wall: float) -> None:
+        """SET_MESSAGE_INTERVAL for a known stream; the next one is due at ``wall``."""
+        if interval_us < 0:
+            self.intervals[mid] = 0.0
+        elif interval_us == 0:
+            self.intervals[mid] = _interval(self.defaults.get(mid, 0.0))
+        else:
+            self.intervals[mid] = min(max(interval_us * 1e-6, MIN_INTERVAL_S), MAX_INTERVAL_S)
+        if mid == M.MAVLINK_MSG_ID_HEARTBEAT:
+            iv = self.intervals[mid]
+            iv = iv if iv > 0 else HEARTBEAT_MAX_S
+            self.intervals[mid] = min(HEARTBEAT_MAX_S, max(HEARTBEAT_MIN_S, iv))
+        self._next_due[mid] = wall
+
+    def due(self, wall: float, skip: tuple[int, ...] = ()) -> list[int]:
+        """The streams whose interval has elapsed at ``wall`` (and book their next time)."""
+        out: list[int] = []
+        for mid, iv in self.intervals.items():
+            if iv <= 0 or mid in skip:
+                continue
+            due = self._next_due.get(mid)
+            if due is None:
+                due = wall
+            if wall + DUE_SLACK_S >= due:
+                out.append(mid)
+                due += iv
+                if due < wall:
+                    due = wall + iv
+            self._next_due[mid] = due
+        return out

@@ -1,0 +1,287 @@
+"""Telemetry a simulated PX4 vehicle sends: one builder per MAVLink message, in a table.
+
+:data:`BUILDERS` maps a message id (``MAVLINK_MSG_ID_*``) to a function
+``(vehicle, sim_t) -> message`` that reads the vehicle's state (dynamics row, mode,
+setpoint); :func:`build` looks it up (``None`` for a message the vehicle does not send).
+:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with (Hz, 0 = off); the
+ODOMETRY rate comes from ``VehicleConfig.odometry_hz``.
+
+Frames: the dynamics are ENU / FLU (z up); every message is NED / FRD. Time stamps are
+simulation time (``time_boot_ms`` = round(sim_t · 1000), ``time_usec`` = round(sim_t · 1e6)).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pymavlink.dialects.v20 import common as M
+
+from swarm_common import frames
+from swarm_common.enums import VehicleMode
+
+if TYPE_CHECKING:
+    from vehicle_sim.vehicle import Vehicle, VehicleConfig
+
+Builder = Callable[["Vehicle", float], M.MAVLink_message]
+
+SENSORS = (
+    M.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | M.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | M.MAV_SYS_STATUS_SENSOR_GPS
+    | M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | M.MAV_SYS_STATUS_AHRS
+    | M.MAV_SYS_STATUS_SENSOR_BATTERY
+    | M.MAV_SYS_STATUS_PREARM_CHECK
+)
+
+TM_RATES_IGNORE = (
+    M.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+    | M.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+    | M.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+)
+TM_THRUST_IGNORE = M.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE
+TM_ATT_IGNORE = M.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+
+EARTH_R = 6378137.0  # m, WGS-84 equatorial radius (flat-earth lat/lon around home)
+MAVLINK_WIRE_VERSION = 3  # HEARTBEAT.mavlink_version
+# SYS_STATUS: a healthy vehicle on a full battery
+SYS_LOAD_PERMILLE = 100
+BATTERY_MV = 16200
+BATTERY_CA = 1000  # cA
+BATTERY_PERCENT = 100
+# GPS_RAW_INT: a good 3D fix
+GPS_EPH_CM, GPS_EPV_CM, GPS_COG_UNKNOWN, GPS_SATELLITES = 80, 120, 65535, 16
+# AUTOPILOT_VERSION: PX4 v1.15.0 official, pid.codes vendor id, "SS" product id
+PX4_VERSION = (1, 15, 0)
+USB_VENDOR_ID, USB_PRODUCT_ID = 0x1209, 0x5353
+ODOMETRY_QUALITY = 100  # %
+INT16_MAX = 32767
+
+DEFAULT_RATES: dict[int, float] = {
+    M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 20.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 0.0,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 20.0,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
+    M.MAVLINK_MSG_ID_HOME_POSITION: 0.2,
+    M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.0,
+}
+
+
+# -- state in MAVLink frames ----------------------------------------------------------
+def _t_ms(sim_t: float) -> int:
+    return int(round(sim_t * 1000)) & 0xFFFFFFFF
+
+
+def _t_us(sim_t: float) -> int:
+    return int(round(sim_t * 1e6))
+
+
+def _p_ned(v: Vehicle) -> np.ndarray:
+    return frames.enu_to_ned(v.dyn.p[v.idx])
+
+
+def _v_ned(v: Vehicle) -> np.ndarray:
+    return frames.enu_to_ned(v.dyn.v[v.idx])
+
+
+def q_ned(v: Vehicle) -> np.ndarray:
+    """Attitude quaternion (w, x, y, z), body FRD -> NED."""
+    r, p, y = v.dyn.att[v.idx]
+    return frames.quat_ned_from_euler_enu(float(r), float(p), float(y))
+
+
+def rates_frd(v: Vehicle) -> tuple[float, float, float]:
+    """Body rates (FRD, rad/s) approximated by the Euler-angle rates of the attitude lag."""
+    d = v.dyn
+    rate = (d.cmd_att[v.idx] - d.att[v.idx]) / d.tau
+    return float(rate[0]), float(-rate[1]), float(-rate[2])
+
+
+def latlon(cfg: VehicleConfig, ned: np.ndarray) -> tuple[int, int]:
+    """(lat, lon) in degE7 of a NED offset from home (flat earth)."""
+    lat = cfg.home_lat + math.degrees(ned[0] / EARTH_R)
+    lon = cfg.home_lon + math.degrees(ned[1] / (EARTH_R * math.cos(math.radians(cfg.home_lat))))
+    return int(round(lat * 1e7)), int(round(lon * 1e7))
+
+
+def _alt_mm(cfg: VehicleConfig, pn: np.ndarray) -> int:
+    """AMSL altitude (mm) of a NED position."""
+    return int(round((cfg.home_alt - pn[2]) * 1000))
+
+
+def landed_state(v: Vehicle) -> int:
+    """MAV_LANDED_STATE of the vehicle."""
+    if v.on_ground():
+        return M.MAV_LANDED_STATE_ON_GROUND
+    if v.armed and v.mode == VehicleMode.LAND:
+        return M.MAV_LANDED_STATE_LANDING
+    return M.MAV_LANDED_STATE_IN_AIR
+
+
+# -- builders ---------------------------------------------------------------------------
+def heartbeat(v: Vehicle, sim_t: float = 0.0) -> M.MAVLink_heartbeat_message:
+    base = (
+        M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+        | M.MAV_MODE_FLAG_GUIDED_ENABLED
+    )
+    if v.mode == VehicleMode.POSCTL:
+        base |= M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+    else:
+        base |= M.MAV_MODE_FLAG_AUTO_ENABLED
+    if v.armed:
+        base |= M.MAV_MODE_FLAG_SAFETY_ARMED
+    if v.terminated:
+        status = M.MAV_STATE_FLIGHT_TERMINATION
+    else:
+        status = M.MAV_STATE_ACTIVE if v.armed else M.MAV_STATE_STANDBY
+    return M.MAVLink_heartbeat_message(
+        M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4, base, v.custom_mode, status,
+        MAVLINK_WIRE_VERSION,
+    )  # fmt: skip
+
+
+def odometry(v: Vehicle, sim_t: float) -> M.MAVLink_odometry_message:
+    """ODOMETRY stamped ``sim_t``; the wall time of its first send is kept for the
+    setpoint-to-odometry latency (``Vehicle.odom_wall``)."""
+    stamp = int(round(sim_t * 1000))
+    if stamp not in v.odom_wall:  # a re-send keeps the first send time
+        if len(v.odom_wall) > 256:
+            v.odom_wall.clear()
+        v.odom_wall[stamp] = time.monotonic()
+    pn = _p_ned(v)
+    vn = _v_ned(v)
+    q = q_ned(v)
+    vb = frames.rotm_from_quat(q).T @ vn  # body FRD velocity (child_frame_id = BODY_FRD)
+    wr = rates_frd(v)
+    nan21 = [math.nan] * 21
+    return M.MAVLink_odometry_message(
+        _t_us(sim_t), M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD,
+        float(pn[0]), float(pn[1]), float(pn[2]),
+        [float(x) for x in q],
+        float(vb[0]), float(vb[1]), float(vb[2]),
+        wr[0], wr[1], wr[2],
+        nan21, nan21, 0, M.MAV_ESTIMATOR_TYPE_NAIVE, ODOMETRY_QUALITY,
+    )  # fmt: skip
+
+
+def attitude_quaternion(v: Vehicle, sim_t: float) -> M.MAVLink_attitude_quaternion_message:
+    q = q_ned(v)
+    return M.MAVLink_attitude_quaternion_message(
+        _t_ms(sim_t), float(q[0]), float(q[1]), float(q[2]), float(q[3]), *rates_frd(v)
+    )
+
+
+def attitude(v: Vehicle, sim_t: float) -> M.MAVLink_attitude_message:
+    rn, pn, yn = frames.euler_from_rotm(frames.rotm_from_quat(q_ned(v)))
+    return M.MAVLink_attitude_message(_t_ms(sim_t), rn, pn, yn, *rates_frd(v))
+
+
+def local_position_ned(v: Vehicle, sim_t: float) -> M.MAVLink_local_position_ned_message:
+    pn, vn = _p_ned(v), _v_ned(v)
+    return M.MAVLink_local_position_ned_message(
+        _t_ms(sim_t), float(pn[0]), float(pn[1]), float(pn[2]),
+        float(vn[0]), float(vn[1]), float(vn[2]),
+    )  # fmt: skip
+
+
+def global_position_int(v: Vehicle, sim_t: float) -> M.MAVLink_global_position_int_message:
+    pn, vn = _p_ned(v), _v_ned(v)
+    lat, lon = latlon(v.cfg, pn)
+    yaw_ned = math.pi / 2 - float(v.dyn.att[v.idx, 2])
+    hdg = int(round(math.degrees(yaw_ned) % 360.0 * 100)) % 36000
+    vx, vy, vz = (int(max(-INT16_MAX - 1, min(INT16_MAX, round(x * 100)))) for x in vn)
+    return M.MAVLink_global_position_int_message(
+        _t_ms(sim_t), lat, lon, _alt_mm(v.cfg, pn), int(round(-pn[2] * 1000)), vx, vy, vz, hdg
+    )
+
+
+def gps_raw_int(v: Vehicle, sim_t: float) -> M.MAVLink_gps_raw_int_message:
+    pn = _p_ned(v)
+    lat, lon = latlon(v.cfg, pn)
+    return M.MAVLink_gps_raw_int_message(
+        _t_us(sim_t), M.GPS_FIX_TYPE_3D_FIX, lat, lon, _alt_mm(v.cfg, pn),
+        GPS_EPH_CM, GPS_EPV_CM, 0, GPS_COG_UNKNOWN, GPS_SATELLITES,
+    )  # fmt: skip
+
+
+def home_position(v: Vehicle, sim_t: float) -> M.MAVLink_home_position_message:
+    h = v.home_ned
+    lat, lon = latlon(v.cfg, h)
+    return M.MAVLink_home_position_message(
+        lat, lon, int(round(v.cfg.home_alt * 1000)),
+        float(h[0]), float(h[1]), float(h[2]), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+        _t_us(sim_t),
+    )  # fmt: skip
+
+
+def extended_sys_state(v: Vehicle, sim_t: float) -> M.MAVLink_extended_sys_state_message:
+    return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed_state(v))
+
+
+def sys_status(v: Vehicle, sim_t: float) -> M.MAVLink_sys_status_message:
+    return M.MAVLink_sys_status_message(
+        SENSORS, SENSORS, SENSORS, SYS_LOAD_PERMILLE, BATTERY_MV, BATTERY_CA, BATTERY_PERCENT,
+        0, 0, 0, 0, 0, 0,
+    )  # fmt: skip
+
+
+def autopilot_version(v: Vehicle, sim_t: float) -> M.MAVLink_autopilot_version_message:
+    caps = (
+        M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+        | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+        | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    )
+    major, minor, patch = PX4_VERSION
+    sw = (major << 24) | (minor << 16) | (patch << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
+    return M.MAVLink_autopilot_version_message(
+        caps, sw, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, USB_VENDOR_ID, USB_PRODUCT_ID,
+        v.uid & 0xFFFFFFFFFFFFFFFF, list(v.uid.to_bytes(8, "little")) + [0] * 10,
+    )  # fmt: skip
+
+
+def attitude_target(v: Vehicle, sim_t: float) -> M.MAVLink_attitude_target_message:
+    """The setpoint being applied (what PX4 reports back)."""
+    r, p, y = (float(a) for a in v.sp_att)
+    q = frames.quat_ned_from_euler_enu(r, p, y)
+    return M.MAVLink_attitude_target_message(
+        _t_ms(sim_t), TM_RATES_IGNORE, [float(x) for x in q], 0.0, 0.0, 0.0,
+        frames.thrust_to_norm(v.sp_thrust, v.dyn.f_max),
+    )  # fmt: skip
+
+
+BUILDERS: dict[int, Builder] = {
+    M.MAVLINK_MSG_ID_HEARTBEAT: heartbeat,
+    M.MAVLINK_MSG_ID_ODOMETRY: odometry,
+    M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: attitude_quaternion,
+    M.MAVLINK_MSG_ID_ATTITUDE: attitude,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: local_position_ned,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
+    M.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
+    M.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
+    M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+    M.MAVLINK_MSG_ID_ATTITUDE_TARGET: attitude_target,
+}
+
+
+def build(v: Vehicle, mid: int, sim_t: float) -> M.MAVLink_message | None:
+    """Message ``mid`` built from the vehicle's current state (None if not supported)."""
+    builder = BUILDERS.get(mid)
+    return None if builder is None else builder(v, sim_t)
