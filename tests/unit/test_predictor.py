@@ -18,10 +18,12 @@ def _est(t: float) -> NeighbourEstimate:
 def test_predicts_through_an_outage_then_drops_stale_data() -> None:
     pred = NeighbourPredictor(2 * np.pi * 0.2, 0.02, (4.0, 4.0), (4.0, 3.0), max_age=1.0)
     pred.ingest({5: _est(0.0)}, comm_ok=True)
-    p, v, _ = pred.get(5, 0.0)
-    assert np.allclose(p, 0.0)
+    got = pred.get(5, 0.0)
+    assert got is not None and np.allclose(got[0], 0.0)
     # 0.5 s later (an outage): predicted forward, on its desired motion (1 m/s along x)
-    p, v, _ = pred.get(5, 0.5)
+    got = pred.get(5, 0.5)
+    assert got is not None
+    p, v, _ = got
     assert p[0] > 0.4 and abs(v[0] - 1.0) < 0.05
     # older than max_age: dropped, not extrapolated forever
     assert pred.get(5, 1.2) is None
