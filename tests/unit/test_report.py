@@ -1,0 +1,128 @@
+"""The comparison report (gcs.report) on a tiny synthetic input: files, legends, text."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs.report import (
+    closest_approach,
+    compare_legend,
+    compare_table,
+    paper_differences,
+    seeds_legend,
+    seeds_table,
+    write_report,
+)
+from gcs.report_plots import snapshot_times
+
+D_SAFE = 0.5
+FOLLOWERS = [2, 3]
+EDGES = [(0, 1), (0, 2), (1, 3), (2, 3)]
+
+
+def _series(dip_t: float, dip_d: float, n: int = 60, dt: float = 0.1) -> dict:
+    """4 vehicles (leaders 0, 1 at 4 m apart; followers 2, 3) whose followers close to
+    ``dip_d`` at ``dip_t``."""
+    t = np.arange(n) * dt
+    p = np.zeros((n, 4, 3))
+    p[:, 0] = (0.0, 0.0, 5.0)
+    p[:, 1] = (4.0, 0.0, 5.0)
+    gap = 2.0 - (2.0 - dip_d) * np.exp(-(((t - dip_t) / 0.3) ** 2))
+    p[:, 2] = np.stack([2.0 - gap / 2, np.full(n, 3.0), np.full(n, 5.0)], axis=1)
+    p[:, 3] = np.stack([2.0 + gap / 2, np.full(n, 3.0), np.full(n, 5.0)], axis=1)
+    zeros = np.zeros_like(p)
+    return {
+        "t": t,
+        "p": p,
+        "v": zeros,
+        "p_des": p + 0.01,
+        "z1": p,
+        "z2": zeros,
+        "lumped_est": zeros,
+        "lumped_true": zeros + 0.01,
+        "min_dist": np.minimum(gap, 4.0),
+    }
+
+
+def _metrics(min_d: float, eu: float, formed: float | None) -> dict:
+    return {
+        "min_distance_m": min_d,
+        "collisions": int(min_d < 0.3),
+        "energy_u": eu,
+        "energy_thrust": 1000.0 + eu,
+        "energy_thrust_excess": eu / 2,
+        "formation_time_s": formed,
+        "tracking_rms_m": 0.02 if formed is not None else None,
+        "tracking_max_m": 0.05 if formed is not None else None,
+        "qp_fallbacks": 0,
+    }
+
+
+@pytest.fixture
+def inputs() -> tuple[dict, dict]:
+    series = {"rcbf": _series(2.0, 0.8), "apf": _series(1.5, 0.2), "none": _series(1.0, 0.1)}
+    metrics = {
+        m: _metrics(float(s["min_dist"].min()), eu, 4.0 if m != "none" else None)
+        for (m, s), eu in zip(series.items(), (300.0, 900.0, 200.0), strict=True)
+    }
+    return metrics, series
+
+
+def _columns(table: str) -> list[str]:
+    return [c.strip() for c in table.splitlines()[0].strip("|").split("|")]
+
+
+def test_every_column_has_a_definition(inputs: tuple[dict, dict]) -> None:
+    metrics, _ = inputs
+    cols = _columns(compare_table(metrics, D_SAFE))
+    defined = re.findall(r"^\* \*\*(.+?)\*\*: ", compare_legend(D_SAFE), flags=re.M)
+    assert cols == defined
+    assert all("(" in c for c in cols if c.startswith(("Ours", "Paper min", "∫", "Formed")))
+    runs = {m: [metrics[m], metrics[m]] for m in metrics}
+    cols = _columns(seeds_table(runs, D_SAFE))
+    defined = re.findall(r"^\* \*\*(.+?)\*\*: ", seeds_legend(D_SAFE), flags=re.M)
+    assert cols[1:] == defined  # "Method" is the same column as in the first table
+
+
+def test_closest_approach_and_snapshot_times(inputs: tuple[dict, dict]) -> None:
+    _, series = inputs
+    k, d, pair = closest_approach(series["apf"])
+    assert series["apf"]["t"][k] == pytest.approx(1.5)
+    assert d == pytest.approx(0.2) and pair == (2, 3)
+    times = snapshot_times(series["apf"], 4.0)
+    assert [round(t, 3) for t, _ in times] == [0.0, 1.5, 4.0, 5.9]
+    assert "closest" in times[1][1] and times[2][1] == "formed"
+    assert len(snapshot_times(series["none"], None)) == 3  # never formed: no such snapshot
+
+
+def test_paper_paragraph_uses_the_run(inputs: tuple[dict, dict]) -> None:
+    metrics, series = inputs
+    text = paper_differences(metrics, series, D_SAFE, FOLLOWERS)
+    assert "4.0 m edges" in text  # the leaders' separation in the synthetic run
+    assert "over by t = 1.6 s" in text  # last sample below D_safe (APF's dip)
+    assert "kept by Proposed RCBF; crossed by Improved APF, No collision avoidance" in text
+    assert "the same ordering as the paper" in text
+    assert "docs/paper-departures.md" in text
+    metrics["apf"]["energy_u"] = 100.0
+    assert "a different ordering from the paper" in paper_differences(
+        metrics, series, D_SAFE, FOLLOWERS
+    )
+
+
+def test_write_report_writes_markdown_and_plots(inputs: tuple[dict, dict], tmp_path: Path) -> None:
+    metrics, series = inputs
+    seeds = {m: [metrics[m]] * 3 for m in metrics}
+    path = write_report(
+        tmp_path, "tiny", metrics, series, FOLLOWERS, EDGES, D_SAFE, ["gain line"], seeds
+    )
+    text = path.read_text()
+    assert "* **∫Σ‖u‖²dt (m²/s³)**:" in text and "* **Runs < D_safe**:" in text
+    assert "### How these numbers differ from the paper's Table 3" in text
+    for name in ("min_distance", "errors", "energy", *(f"snapshots_{m}" for m in series)):
+        png = tmp_path / f"{name}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert f"({name}.png)" in text
