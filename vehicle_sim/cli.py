@@ -51,14 +51,20 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--port-offset", type=int, default=0, help="shift every UDP/TCP port")
     ap.add_argument("--bind", default="127.0.0.1", help="address the vehicle sockets bind")
     ap.add_argument("--remote-host", default="127.0.0.1", help="where default streams go")
-    ap.add_argument("--swarm", default=None,
-                    help="swarm name in the Zenoh keys (default: the scenario name)")
+    ap.add_argument(
+        "--swarm", default=None, help="swarm name in the Zenoh keys (default: the scenario name)"
+    )
     ap.add_argument("--zenoh-listen", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
-    ap.add_argument("--failsafe", type=FailsafeAction, choices=list(FailsafeAction),
-                    default=FailsafeAction.HOLD, help="what a vehicle does on offboard loss")
+    ap.add_argument(
+        "--failsafe",
+        type=FailsafeAction,
+        choices=list(FailsafeAction),
+        default=FailsafeAction.HOLD,
+        help="what a vehicle does on offboard loss",
+    )
     ap.add_argument("--offboard-timeout", type=_pos_float("--offboard-timeout"), default=0.5)
     ap.add_argument("--odometry-hz", type=_pos_float("--odometry-hz"), default=50.0)
     ap.add_argument("--step-timeout", type=_pos_float("--step-timeout"), default=0.5)
@@ -66,11 +72,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help="exit 0 after this much simulated time (s)")  # fmt: skip
     ap.add_argument("--vehicles", type=int, default=None, metavar="K",
                     help="simulate only the first K agents of the scenario")  # fmt: skip
-    ap.add_argument("--quiet", action="store_true",
-                    help="no event log on stderr (same as --log-level warning)")
+    ap.add_argument(
+        "--quiet", action="store_true", help="no event log on stderr (same as --log-level warning)"
+    )
     add_log_level_argument(ap)
-    ap.add_argument("--stats-out", default=None, metavar="PATH",
-                    help="write run statistics (setpoint latency, timeouts) as JSON at exit")
+    ap.add_argument(
+        "--stats-out",
+        default=None,
+        metavar="PATH",
+        help="write run statistics (setpoint latency, timeouts) as JSON at exit",
+    )
     return ap
 
 

@@ -85,9 +85,7 @@ class VehicleCounters:
 class Vehicle:
     """One simulated PX4 vehicle, reading its state from ``dyn`` row ``idx``."""
 
-    def __init__(
-        self, agent_id: int, idx: int, dyn: Any, cfg: VehicleConfig | None = None
-    ) -> None:
+    def __init__(self, agent_id: int, idx: int, dyn: Any, cfg: VehicleConfig | None = None) -> None:
         self.id = int(agent_id)
         self.idx = int(idx)
         self.dyn = dyn
