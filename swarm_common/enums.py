@@ -13,7 +13,8 @@ from enum import StrEnum
 class Method(StrEnum):
     """Collision-avoidance method of a follower (paper Section 5 comparison)."""
 
-    RCBF = "rcbf"  # CLF + reciprocal CBF QP (paper Section 4)
+    RCBF = "rcbf"  # CLF + reciprocal CBF QP (paper Section 4), as the paper poses it
+    DCBF = "dcbf"  # CLF + sampled-data CBF QP over the realisable input set (docs/safety.md)
     APF = "apf"  # nominal controller + improved artificial potential field
     NONE = "none"  # nominal controller only, no avoidance
 
