@@ -26,6 +26,7 @@ from offboard.clf_rcbf import SafetyQP  # noqa: E402
 from offboard.deso import DESO  # noqa: E402
 from offboard.reference import DesiredStateObserver  # noqa: E402
 from offboard.sensing import Sensor  # noqa: E402
+from swarm_common.enums import Method  # noqa: E402
 from swarm_common.scenario import load_scenario  # noqa: E402
 
 
@@ -55,7 +56,7 @@ def main() -> int:
     a = ap.parse_args()
     sc = load_scenario(a.scenario)
     # 1. real-time factor, no instrumentation
-    for m in ("rcbf", "apf", "none"):
+    for m in Method:
         r = run_inproc(sc, m, duration=a.duration)
         print(f"in-process {sc.name} {a.duration:.0f} s [{m}]: wall {r.metrics['wall_s']:.2f} s, "
               f"{r.metrics['realtime_factor']:.1f}x real time")

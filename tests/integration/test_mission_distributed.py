@@ -21,6 +21,7 @@ from pymavlink import mavutil  # noqa: E402
 
 from gcs.inproc import run_inproc  # noqa: E402
 from gcs.mission import MissionError, recorded_metrics, run_distributed  # noqa: E402
+from swarm_common.enums import Method  # noqa: E402
 from swarm_common.scenario import load_scenario  # noqa: E402
 
 pytestmark = pytest.mark.timeout(240)
@@ -138,7 +139,7 @@ def test_cli_compare_distributed_writes_report(tmp_path: Path) -> None:
     assert out.returncode == 0, out.stderr[-2000:]
     report = (tmp_path / "report.md").read_text()
     assert "distributed" in report and "Proposed RCBF" in report and "0.75" in report
-    for m in ("rcbf", "apf", "none"):
+    for m in Method:
         doc = json.loads((tmp_path / m / "metrics.json").read_text())
         assert doc["method"] == m and doc["mode"] == "lockstep"
         assert (tmp_path / m / "vehicle_1.tlog").stat().st_size > 0
