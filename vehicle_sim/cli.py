@@ -60,9 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
     ap.add_argument(
         "--failsafe",
-        type=FailsafeAction,
-        choices=list(FailsafeAction),
-        default=FailsafeAction.HOLD,
+        type=str.lower,
+        choices=[str(a) for a in FailsafeAction],
+        default=str(FailsafeAction.HOLD),
         help="what a vehicle does on offboard loss",
     )
     ap.add_argument("--offboard-timeout", type=_pos_float("--offboard-timeout"), default=0.5)
@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_mode=args.zenoh_mode,
         zenoh_listen=args.zenoh_listen,
         zenoh_connect=args.zenoh_connect,
-        failsafe=args.failsafe,
+        failsafe=FailsafeAction(args.failsafe),
         offboard_timeout=args.offboard_timeout,
         odometry_hz=args.odometry_hz,
         step_timeout=args.step_timeout,
