@@ -1,5 +1,5 @@
 """``gcs`` exit codes: 0 success, 1 a run failed once started (a child died), 2 bad input
-or a busy port, 130 Ctrl-C; and the progress display off a terminal."""
+or a busy port, 130 Ctrl-C, 143 SIGTERM; and the progress display off a terminal."""
 
 from __future__ import annotations
 
@@ -143,3 +143,17 @@ def test_child_death_mid_run_exits_1_naming_it(tmp_path: Path) -> None:
     assert proc.returncode == 1, err
     assert "offboard-4 exited with code -9" in err
     assert leftovers(off) == b""
+
+
+def test_sigterm_mission_exits_143() -> None:
+    proc = start_gcs("mission", "run", CUBE8, "--inproc", "--method", "none",
+                     "--duration", "600")
+    try:
+        wait_for_progress(proc)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err
