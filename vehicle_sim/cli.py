@@ -16,11 +16,16 @@ import signal
 import sys
 from collections.abc import Callable
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from swarm_common.enums import FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
-from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.scenario import Scenario, ScenarioError, load_scenario
+from vehicle_sim.options import SimOptions
+
+if TYPE_CHECKING:
+    from vehicle_sim.server import SimServer
 
 log = logging.getLogger("vehicle_sim")
 MAX_PORT = 65535
@@ -85,28 +90,20 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    level = LogLevel(args.log_level)
-    if args.quiet and level in (LogLevel.DEBUG, LogLevel.INFO):
-        level = LogLevel.WARNING
-    configure_logging(level)
-    try:
-        sc = load_scenario(args.scenario)
-    except ScenarioError as exc:
-        print(f"vehicle-sim: {exc}", file=sys.stderr)
-        return 2
+EXIT_USAGE = 2
+
+
+class _Fatal(Exception):
+    """A one-line fatal error: printed as ``vehicle-sim: <line>``, exit 2."""
+
+
+def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
+    """Check the options that depend on the scenario and type them."""
     if args.vehicles is not None and not 1 <= args.vehicles <= sc.n:
-        print(f"vehicle-sim: --vehicles {args.vehicles}: must be in [1, {sc.n}]", file=sys.stderr)
-        return 2
+        raise _Fatal(f"--vehicles {args.vehicles}: must be in [1, {sc.n}]")
     if not 0 <= args.port_offset <= MAX_PORT - HIGHEST_BASE_PORT:
-        print(f"vehicle-sim: --port-offset {args.port_offset}: out of range", file=sys.stderr)
-        return 2
-
-    from vehicle_sim.mavlink_link import LinkError
-    from vehicle_sim.server import SimOptions, SimServer
-
-    opts = SimOptions(
+        raise _Fatal(f"--port-offset {args.port_offset}: out of range")
+    return SimOptions(
         lockstep=args.lockstep,
         seed=args.seed,
         port_offset=args.port_offset,
@@ -125,21 +122,36 @@ def main(argv: list[str] | None = None) -> int:
         vehicles=args.vehicles,
         stats_out=args.stats_out,
     )
+
+
+def _server(args: argparse.Namespace) -> SimServer:
+    """Load the scenario and open every socket; :class:`_Fatal` with one line if not."""
+    from vehicle_sim.mavlink_link import LinkError
+    from vehicle_sim.server import SimServer
+
     try:
-        server = SimServer(sc, opts)
+        sc = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        raise _Fatal(str(exc)) from None
+    opts = _options(args, sc)
+    try:
+        return SimServer(sc, opts)
     except LinkError as exc:
-        print(f"vehicle-sim: {exc.strerror}", file=sys.stderr)
-        return 2
+        raise _Fatal(str(exc.strerror)) from None
     except (RuntimeError, ValueError) as exc:
-        print(f"vehicle-sim: {str(exc).splitlines()[0]}", file=sys.stderr)
-        return 2
+        raise _Fatal(str(exc).splitlines()[0]) from None
+
+
+def _run(server: SimServer) -> int:
+    """Run until SIGINT/SIGTERM or ``--duration``; ``VEHICLE_SIM_PROFILE=path`` dumps a
+    cProfile of the loop (developer aid)."""
 
     def on_signal(signum: int, _frame: FrameType | None) -> None:
         server.stop_requested = True
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    prof_path = os.environ.get("VEHICLE_SIM_PROFILE")  # developer aid: cProfile dump
+    prof_path = os.environ.get("VEHICLE_SIM_PROFILE")
     try:
         if prof_path:
             import cProfile
@@ -153,6 +165,20 @@ def main(argv: list[str] | None = None) -> int:
         return server.run()
     finally:
         server.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    level = LogLevel(args.log_level)
+    if args.quiet and level in (LogLevel.DEBUG, LogLevel.INFO):
+        level = LogLevel.WARNING
+    configure_logging(level)
+    try:
+        server = _server(args)
+    except _Fatal as exc:
+        print(f"vehicle-sim: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return _run(server)
 
 
 if __name__ == "__main__":
