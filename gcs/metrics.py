@@ -1,8 +1,8 @@
-"""Mission metrics from the in-process (or replayed) time series (paper §5; errata 15).
+"""Mission metrics from the in-process (or replayed) time series (paper §5; Departure 15).
 
 Energies are over the followers (the methods differ only there):
 ``energy_u = ∫Σ‖u_i‖²dt``, ``energy_thrust = ∫ΣF_i²dt`` and
-``energy_thrust_excess = ∫Σ(F_i − m g)²dt`` (errata 15: ∫F² is dominated by hover).
+``energy_thrust_excess = ∫Σ(F_i − m g)²dt`` (Departure 15: ∫F² is dominated by hover).
 """
 
 from __future__ import annotations

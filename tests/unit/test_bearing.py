@@ -1,4 +1,4 @@
-"""Bearing geometry, Laplacian properties and rigidity (paper §2.1; errata 3)."""
+"""Bearing geometry, Laplacian properties and rigidity (paper §2.1; Departure 3)."""
 
 import dataclasses
 
@@ -46,7 +46,7 @@ def test_laplacian_properties(sc):
 def test_desired_positions_cube(sc):
     f = formation_from_scenario(sc)
     pd = f.desired_positions(sc.initial_positions()[f.leader_idx])
-    # edge = leader separation = 4 m (errata 1); vertex assignment of the scenario
+    # edge = leader separation = 4 m (Departure 1); vertex assignment of the scenario
     expect = np.array([4, 0, 2]) + 4.0 * (f.vertices - np.array([1, 0, 0]))
     assert np.allclose(pd, expect)
 

@@ -1,4 +1,4 @@
-"""CLF–RCBF QP (paper §4.2–4.4; errata 10–14): constraints checked independently of OSQP."""
+"""CLF–RCBF QP (paper §4.2–4.4; Departures 10–14): constraints checked independently of OSQP."""
 
 import numpy as np
 

@@ -32,7 +32,7 @@ def test_regressor_equals_simulator():
 def test_gain_report_paper_gains_unstable_ours_ok(sc):
     f = formation_from_scenario(sc)
     paper = gain_report(f, (9, 27, 54), 0.02, 4)
-    assert not paper.ok and paper.margin.min() < 0  # errata 7
+    assert not paper.ok and paper.margin.min() < 0  # Departure 7
     ours = gain_report(f, tuple(sc.observer.beta), 0.02, sc.observer.substeps)
     assert ours.ok and ours.margin.min() > 0 and ours.rho_post_update < 1.0
     assert ours.rho_single_euler_stale > 1.0  # one Euler step with stale data diverges

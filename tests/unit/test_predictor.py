@@ -1,4 +1,4 @@
-"""Neighbour data ageing in the agent (errata 16 and communication.max_age_s)."""
+"""Neighbour data ageing in the agent (Departure 16 and communication.max_age_s)."""
 
 from __future__ import annotations
 

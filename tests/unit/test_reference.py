@@ -1,4 +1,4 @@
-"""Leader trajectory, exosystem and desired-state observer (paper §4.1; errata 9)."""
+"""Leader trajectory, exosystem and desired-state observer (paper §4.1; Departure 9)."""
 
 
 import numpy as np
