@@ -225,7 +225,8 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
     """Bytes -> payload. Raises :class:`WireError` on anything malformed."""
     try:
         d = msgpack.unpackb(bytes(data), raw=False)
-    except Exception as exc:  # msgpack raises several exception types
+    except (ValueError, TypeError) as exc:
+        # msgpack's malformed-input errors are ValueErrors; unhashable map keys TypeError
         raise WireError(f"not msgpack: {exc}") from None
     if not isinstance(d, dict):
         raise WireError("payload is not a map")

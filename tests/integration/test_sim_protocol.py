@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as M
 from swarm_common import px4, wire
 from swarm_common.enums import VehicleMode
 from swarm_common.ports import vehicle_ports
+from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
 from vehicle_sim.server import LOCKSTEP_SUSPEND_AFTER
 
 pytestmark = pytest.mark.timeout(120)
@@ -333,7 +334,7 @@ def test_lockstep_progression_and_truth(sim_factory, mav_client):
         ["--lockstep", "--vehicles", "2", "--step-timeout", "30", "--swarm", "t"], offset=off
     )
     truths: list[wire.Truth] = []
-    sess = open_session(connect=[f"tcp/127.0.0.1:{7447 + off}"])
+    sess = open_session(connect=[f"tcp/127.0.0.1:{DEFAULT_ZENOH_PORT + off}"])
     sub = sess.declare_subscriber(
         wire.key_truth("t"), lambda s: truths.append(wire.decode(s.payload.to_bytes()))
     )
@@ -451,7 +452,7 @@ def test_busy_port_exits_nonzero_naming_it(sim_factory):
 def test_busy_zenoh_port_exits_nonzero(sim_factory):
     off = free_port_offset()
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.bind(("127.0.0.1", 7447 + off))
+    s.bind(("127.0.0.1", DEFAULT_ZENOH_PORT + off))
     s.listen(1)
     try:
         sim = sim_factory([], offset=off, ready=False)
@@ -461,7 +462,7 @@ def test_busy_zenoh_port_exits_nonzero(sim_factory):
         s.close()
     assert rc != 0
     lines = [ln for ln in sim.lines if ln.strip()]
-    assert len(lines) == 1 and str(7447 + off) in lines[0], lines
+    assert len(lines) == 1 and str(DEFAULT_ZENOH_PORT + off) in lines[0], lines
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
