@@ -41,6 +41,7 @@ class AgentStatus:
     n_sensed: int = 0
     n_used: int = 0
     comm_ok: bool = True
+    input_clipped: bool = False  # setpoint conversion changed u (tilt/thrust clip)
 
 
 @dataclass

@@ -14,9 +14,10 @@ import numpy as np
 
 from offboard.agent_base import AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.attitude import Setpoint, setpoint_from_accel
+from offboard.attitude import Setpoint, accel_from_attitude, setpoint_from_accel
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.clf_rcbf import ClfTerms, clf_terms
+from offboard.dcbf_filter import DcbfFilter
 from offboard.deso import DESO, GainReport, gain_report
 from offboard.predictor import NeighbourPredictor
 from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
@@ -27,6 +28,7 @@ from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
+CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as input_clipped
 
 
 @dataclass
@@ -79,6 +81,12 @@ class FollowerAgent(AgentBase):
         self.leader_mask = np.zeros(sc.n, dtype=bool)
         self.leader_mask[self.form.leader_idx] = True
         self.filters = make_filters(ctl, self.u_lo, self.u_hi, self.leader_mask)
+        dcbf = self.filters.get(Method.DCBF)
+        if isinstance(dcbf, DcbfFilter):
+            dcbf.configure(self.veh, self.dt)
+        self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX)
+        self.u_prev = np.zeros(3)
+        self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.ids = sc.ids
         nb = set(self.form.neighbours[self.index])
         self._peers = [
@@ -124,12 +132,16 @@ class FollowerAgent(AgentBase):
         clf = self._nominal(w)
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
+        self.acc_est.ingest(neighbours)
         u = self._safe_control(SafetyInput(
-            clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc
+            clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc,
+            self.a_real, self.u_prev, self.acc_est.rows(sel),
         ), status)
         sp: Setpoint = setpoint_from_accel(u, self.yaw, self.veh)
+        status.input_clipped = input_clipped(sp, u, self.veh.mass_kg, self.veh.gravity_mps2)
         # --- observers to t_{k+1} ---------------------------------------------------
         u_sub = self.inner.run(sp, self.substeps)
+        self.u_prev, self.a_real = u, u_sub[-1].copy()
         self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
         self.ref.update(peers.xi)
         status.n_used = self.deso.n_used
@@ -181,3 +193,40 @@ class FollowerAgent(AgentBase):
         return NeighbourEstimate(
             self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.ref.xi.copy(), False
         )
+
+
+def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
+    """True if the setpoint realises an acceleration farther than CLIP_TOL from ``u``."""
+    real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, mass, g)
+    return bool(np.max(np.abs(real - u)) > CLIP_TOL)
+
+
+class NeighbourAccel:
+    """Other agents' actual accelerations (m/s²), finite differences of their successive
+    broadcast velocities z2 (leaders: their predicted true velocity), norm-bounded by
+    ``a_max``; held while no new data arrives (docs/safety.md §3)."""
+
+    def __init__(self, ids: list[int] | tuple[int, ...], a_max: float) -> None:
+        self.ids = list(ids)
+        self.a_max = a_max
+        self.last: dict[int, tuple[float, np.ndarray]] = {}
+        self.acc: dict[int, np.ndarray] = {}
+
+    def ingest(self, neighbours: dict[int, NeighbourEstimate]) -> None:
+        """Update from the estimates received this step (by agent id)."""
+        for aid, e in neighbours.items():
+            prev = self.last.get(aid)
+            if prev is not None and e.t > prev[0] + 1e-9:
+                a = (np.asarray(e.z2, float) - prev[1]) / (e.t - prev[0])
+                self.acc[aid] = saturate_norm(a, self.a_max)
+            if prev is None or e.t > prev[0] + 1e-9:
+                self.last[aid] = (float(e.t), np.asarray(e.z2, float).copy())
+
+    def rows(self, idx: np.ndarray) -> np.ndarray:
+        """(M,3) estimates for scenario indices ``idx`` (zero where none yet)."""
+        out = np.zeros((len(idx), 3))
+        for r, j in enumerate(idx):
+            a = self.acc.get(self.ids[int(j)])
+            if a is not None:
+                out[r] = a
+        return out

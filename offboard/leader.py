@@ -7,7 +7,7 @@ import numpy as np
 
 from offboard.agent_base import AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.attitude import setpoint_from_accel
+from offboard.attitude import accel_from_attitude, setpoint_from_accel
 from offboard.bearing import Formation
 from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
 from swarm_common.enums import Method
@@ -77,6 +77,9 @@ class LeaderAgent(AgentBase):
             self.d_hat.copy(), self.reference(t + self.dt), True,
         )
         status = AgentStatus(method=self.method, comm_ok=comm_ok)
+        real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, self.veh.mass_kg,
+                                   self.veh.gravity_mps2)
+        status.input_clipped = bool(np.max(np.abs(real - u)) > 1e-3)
         return self._output(sp, u, est, status, self.d_hat.copy())
 
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:

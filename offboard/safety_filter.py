@@ -7,6 +7,8 @@ starts from the same nominal formation controller ``u_nom`` (paper §4.2, errata
 
 * ``rcbf``: CLF–RCBF QP (§4.3–4.4, errata 12–14) of :mod:`offboard.clf_rcbf`;
 * ``apf``: improved artificial potential field (§5.4, errata 17) of :mod:`offboard.apf`;
+* ``dcbf``: CLF + sampled-data CBF QP over the realisable input set
+  (:mod:`offboard.dcbf_filter`, docs/safety.md);
 * ``none``: the nominal control clipped to the box.
 
 Pairs are rows of Δp = p_i − p_j (m), Δv = v_i − v_j (m/s) over the sensed agents j.
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar, TypeVar
 
 import numpy as np
@@ -55,6 +57,11 @@ class SafetyInput:
     dv: np.ndarray  # (M,3) Δv = v_i − v_j (m/s)
     pairs: np.ndarray  # (M,) scenario index j of each row
     lead_acc: dict[int, np.ndarray]  # broadcast desired acceleration of leaders (m/s²)
+    # dcbf only: own realised virtual control of the inner-loop model (m/s²), the
+    # previous command (m/s²) and the others' estimated actual accelerations (M,3)
+    a_real: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    u_prev: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    other_acc: np.ndarray | None = None
 
 
 @dataclass
@@ -188,3 +195,7 @@ def make_filters(
     """One filter per registered method (kept for the agent's lifetime: a method switch
     keeps each filter's state, e.g. the QP's warm start)."""
     return {m: cls(ctl, u_lo, u_hi, leader_mask) for m, cls in SAFETY_FILTERS.items()}
+
+
+# the dcbf filter registers itself on import (kept in its own module)
+import offboard.dcbf_filter  # noqa: E402,F401

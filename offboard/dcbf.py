@@ -1,0 +1,184 @@
+"""Sampled-data CBF over the realisable input set (``Method.DCBF``; derivation: docs/safety.md).
+
+Three departures from the paper's RCBF (:mod:`offboard.clf_rcbf`), each against a measured
+failure of it:
+
+1. **Input set.** u is constrained to the set the vehicle can fly (tilt cone and thrust
+   limit), as linear rows of the QP: ``u_z ∈ [u_z_min, (F_max/m)cos θ − g]`` and the cone
+   ``‖u_h‖ ≤ (u_z + g) tan θ`` as K inscribed half-planes
+   ``n_kᵀu_h − tanθ cos(π/K) u_z ≤ g tanθ cos(π/K)`` (n_k = (cos 2πk/K, sin 2πk/K)).
+   ``‖u + g e_z‖ ≤ (u_z+g)/cos θ ≤ F_max/m``, so the thrust limit holds too, and the
+   setpoint conversion (:func:`swarm_common.frames.accel_to_attitude`) never clips u.
+2. **Lag and sampling.** The command u_k acts through the first-order inner loop
+   ``ȧ = (u − a)/τ`` (τ per axis: τ_rp horizontally, τ_F vertically). The barrier
+   condition is enforced on the relative state predicted ``T = τ_rp + dt`` ahead
+   (:func:`predict`), with a linear + cubic class-K function and a margin for the
+   acceleration error bound ``ē``: ``f(u) = ḣ(x̂_T) + γ1 ĥ_T + γ3 ĥ_T³ − ‖∂f/∂a‖ ē ≥ 0``.
+3. **Neighbour motion.** The other agent's acceleration is its estimated actual one
+   (finite difference of its broadcast velocity, bounded), never a reference.
+
+f is quadratic in u (small coefficients); each step it is linearised at the previous
+command ``u_ref`` and every pair gives one row ``gᵀ(u − u_ref) ≥ −share·f(u_ref)``
+(share ½ for follower–follower pairs, 1 against a leader).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class InputSet:
+    """Polytope inner approximation of the realisable virtual controls (m/s², ENU)."""
+
+    uz_min: float  # lowest u_z (m/s²)
+    uz_max: float  # (F_max/m) cos θ − g (m/s²)
+    tan_tilt: float
+    sides: int  # K half-planes of the tilt cone
+    uh_max: float  # per-axis horizontal bound (m/s², the ‖u‖∞ bound of §4.4)
+    g: float  # gravity (m/s²)
+    shrink: float = 0.02  # m/s², rows tightened so solver tolerance stays inside
+
+    @classmethod
+    def from_vehicle(
+        cls, mass: float, g: float, f_max: float, tilt_deg: float, u_max: float, sides: int,
+    ) -> InputSet:
+        """The set of a vehicle: mass (kg), gravity (m/s²), F_max (N), tilt limit (deg)."""
+        th = math.radians(tilt_deg)
+        uz_max = min(u_max, f_max / mass * math.cos(th) - g)
+        return cls(-min(u_max, 0.9 * g), uz_max, math.tan(th), int(sides), u_max, g)
+
+    def rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(A, lo, hi) with ``lo ≤ A u ≤ hi``: K cone rows, then u_z, u_x, u_y bounds."""
+        k, s = self.sides, self.shrink
+        c = self.tan_tilt * math.cos(math.pi / k)
+        ang = 2.0 * math.pi * np.arange(k) / k
+        a = np.zeros((k + 3, 3))
+        a[:k, 0], a[:k, 1], a[:k, 2] = np.cos(ang), np.sin(ang), -c
+        lo = np.full(k + 3, -np.inf)
+        hi = np.empty(k + 3)
+        hi[:k] = self.g * c - s
+        a[k, 2] = 1.0
+        lo[k], hi[k] = self.uz_min + s, self.uz_max - s
+        a[k + 1, 0] = a[k + 2, 1] = 1.0
+        lo[k + 1 :] = -self.uh_max + s
+        hi[k + 1 :] = self.uh_max - s
+        return a, lo, hi
+
+    def contains(self, u: np.ndarray, tol: float = 0.0) -> bool:
+        """True if ``u`` satisfies every row, the shrink margin not counted, up to ``tol``."""
+        a, lo, hi = self.rows()
+        y = a @ u
+        s = self.shrink + tol
+        return bool(np.all(y <= hi + s) and np.all(y >= lo - s))
+
+    def project(self, u: np.ndarray) -> np.ndarray:
+        """A point of the (shrunk) set near ``u``: u_z clipped, then u_h scaled inward."""
+        out = np.array(u, dtype=float)
+        s = self.shrink
+        out[2] = min(max(out[2], self.uz_min + s), self.uz_max - s)
+        out[0:2] = np.clip(out[0:2], -self.uh_max + s, self.uh_max - s)
+        k = self.sides
+        c = self.tan_tilt * math.cos(math.pi / k)
+        r = (self.g + out[2]) * c - s
+        ang = 2.0 * math.pi * np.arange(k) / k
+        worst = float(np.max(np.cos(ang) * out[0] + np.sin(ang) * out[1]))
+        if worst > r:
+            out[0:2] *= max(r, 0.0) / worst
+        return out
+
+
+@dataclass(frozen=True)
+class LagCoefficients:
+    """How the command u enters the state T ahead under ``ȧ = (u − a)/τ`` (per axis).
+
+    With E = e^{−T/τ}: ``a(T) = E a0 + ca u``, ``∫a = ia a0 + cv u``,
+    ``∬a = iia a0 + cp u`` (a0 the realised acceleration now).
+    """
+
+    T: float
+    ca: np.ndarray
+    cv: np.ndarray
+    cp: np.ndarray
+    ea: np.ndarray  # E
+    ia: np.ndarray
+    iia: np.ndarray
+
+    @classmethod
+    def of(cls, tau: np.ndarray, horizon: float) -> LagCoefficients:
+        """Coefficients for per-axis lags ``tau`` (s) over ``horizon`` T (s)."""
+        t = float(horizon)
+        tau = np.asarray(tau, dtype=float)
+        e = np.exp(-t / tau)
+        ia = tau * (1.0 - e)
+        iia = tau * t - tau * ia
+        return cls(t, 1.0 - e, t - ia, 0.5 * t * t - iia, e, ia, iia)
+
+
+@dataclass
+class Prediction:
+    """Relative state T ahead and the barrier terms there (rows over pairs)."""
+
+    dp: np.ndarray  # (M,3) Δp̂_T (m)
+    dv: np.ndarray  # (M,3) Δv̂_T (m/s)
+    da: np.ndarray  # (M,3) Δâ_T (m/s²)
+    h: np.ndarray  # (M,) ĥ_T (m²)
+    hdot: np.ndarray  # (M,) ḣ at x̂_T (m²/s)
+
+
+def predict(
+    dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u: np.ndarray, a_other: np.ndarray,
+    lag: LagCoefficients, tau_s: float, d_safe: float,
+) -> Prediction:
+    """Predict Δp, Δv, Δa T ahead: own a from a0 (3,) toward u (3,) through the lag, the
+    other agent at constant acceleration a_other (M,3); h and ḣ (§2.3) there."""
+    t = lag.T
+    own_v = lag.ia * a0 + lag.cv * u
+    own_p = lag.iia * a0 + lag.cp * u
+    own_a = lag.ea * a0 + lag.ca * u
+    pv = dv + own_v[None, :] - a_other * t
+    pp = dp + dv * t + own_p[None, :] - 0.5 * a_other * t * t
+    pa = own_a[None, :] - a_other
+    vp = np.einsum("ij,ij->i", pv, pp)
+    h = np.einsum("ij,ij->i", pp, pp) + 2.0 * tau_s * vp - d_safe**2
+    hdot = 2.0 * vp + 2.0 * tau_s * (
+        np.einsum("ij,ij->i", pv, pv) + np.einsum("ij,ij->i", pp, pa)
+    )
+    return Prediction(pp, pv, pa, h, hdot)
+
+
+def _grad(pr: Prediction, cp: np.ndarray, cv: np.ndarray, ca: np.ndarray, tau_s: float,
+          k_h: np.ndarray) -> np.ndarray:
+    """∂(ḣ + α(h))/∂x (M,3) for per-axis sensitivities of (Δp̂, Δv̂, Δâ) to x."""
+    dh_dot = 2.0 * (cp * pr.dv + cv * pr.dp) + 2.0 * tau_s * (
+        2.0 * cv * pr.dv + cp * pr.da + ca * pr.dp
+    )
+    dh = 2.0 * cp * pr.dp + 2.0 * tau_s * (cv * pr.dp + cp * pr.dv)
+    return dh_dot + k_h[:, None] * dh
+
+
+def dcbf_rows(
+    dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u_ref: np.ndarray, a_other: np.ndarray,
+    share: np.ndarray, lag: LagCoefficients, tau_s: float, d_safe: float,
+    gamma1: float, gamma3: float, accel_err: float,
+) -> tuple[np.ndarray, np.ndarray, Prediction]:
+    """Rows ``gᵀu ≥ r`` (g normalised to unit length, r in m/s²) and the prediction at u_ref.
+
+    ``f(u) = ḣ_T + γ1 h_T + γ3 h_T³ − ‖∂f/∂a‖ ē`` linearised at ``u_ref``:
+    ``gᵀ(u − u_ref) ≥ −share·f(u_ref)``. ``ē`` (m/s²) bounds the error of the assumed
+    relative acceleration (own disturbance estimate, neighbour's acceleration estimate).
+    """
+    pr = predict(dp, dv, a0, u_ref, a_other, lag, tau_s, d_safe)
+    k_h = gamma1 + 3.0 * gamma3 * pr.h**2
+    f = pr.hdot + gamma1 * pr.h + gamma3 * pr.h**3
+    one = np.ones(3)
+    # a constant relative-acceleration error e over [0, T] moves Δv̂ by eT, Δp̂ by eT²/2
+    g_err = _grad(pr, 0.5 * lag.T**2 * one, lag.T * one, one, tau_s, k_h)
+    f -= np.sqrt(np.einsum("ij,ij->i", g_err, g_err)) * accel_err
+    g = _grad(pr, lag.cp, lag.cv, lag.ca, tau_s, k_h)
+    nrm = np.maximum(np.sqrt(np.einsum("ij,ij->i", g, g)), 1e-9)
+    rhs = (g @ u_ref - share * f) / nrm
+    return g / nrm[:, None], rhs, pr

@@ -1,0 +1,123 @@
+"""The DCBF filter's OSQP problem: CLF + sampled-data CBF rows over the input polytope.
+
+Variables x = [u (3), δ, σ] (docs/safety.md §4)::
+
+    min ½‖u − u_nom‖² + ρ δ² + ρ_σ σ² + M σ
+    s.t.  L_gV u − δ ≤ −L_fV − cV            (soft CLF, as the RCBF QP, errata 10–11)
+          gᵀu + σ ≥ r                       per sensed pair (:func:`offboard.dcbf.dcbf_rows`)
+          A_U u ∈ [lo, hi]                  input polytope (:class:`offboard.dcbf.InputSet`)
+          σ ≥ 0
+
+Unlike the RCBF QP the input rows are never relaxed (σ acts on the barrier rows only), so
+the answer is always realisable; if OSQP fails the fallback brake is projected into the set.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import osqp
+from scipy import sparse
+
+from offboard.clf_rcbf import SOLVED, ClfTerms, QPResult
+from offboard.dcbf import InputSet
+from swarm_common.enums import QPStatus
+
+
+class DcbfQP:
+    """One agent's OSQP problem with room for ``max_pairs`` barrier rows."""
+
+    def __init__(
+        self, max_pairs: int, uset: InputSet, rho: float, clf_c: float,
+        violation_weight: float = 100.0, eps: float = 1e-5,
+    ) -> None:
+        self.m = m = int(max_pairs)
+        self.uset = uset
+        self.c = float(clf_c)
+        self.lin_sigma = max(1e3, 50.0 * rho)
+        a_u, lo_u, hi_u = uset.rows()
+        self.a_u, self.lo_u, self.hi_u = a_u, lo_u, hi_u
+        nu = len(lo_u)
+        self.nrow = nrow = 1 + m + nu + 1
+        pat = np.zeros((nrow, 5))
+        pat[0, 0:4] = 1.0
+        pat[1 : 1 + m, 0:3] = 1.0
+        pat[1 : 1 + m, 4] = 1.0
+        pat[1 + m : 1 + m + nu, 0:3] = np.where(a_u != 0.0, 1.0, 0.0)
+        pat[nrow - 1, 4] = 1.0
+        self._mask_t = (pat != 0).T
+        self._a = pat.copy()
+        self._a[1 + m : 1 + m + nu, 0:3] = a_u
+        self.l = np.full(nrow, -np.inf)
+        self.u = np.full(nrow, np.inf)
+        self.l[1 + m : 1 + m + nu] = lo_u
+        self.u[1 + m : 1 + m + nu] = hi_u
+        self.l[nrow - 1] = 0.0
+        self.q = np.zeros(5)
+        self.q[4] = self.lin_sigma
+        pmat = sparse.diags([1.0, 1.0, 1.0, 2.0 * rho, 2.0 * violation_weight]).tocsc()
+        amat = sparse.csc_matrix(pat)
+        amat.data[:] = self._a.T[self._mask_t]
+        self.solver = osqp.OSQP()
+        self.solver.setup(
+            pmat, self.q, amat, self.l, self.u,
+            eps_abs=eps, eps_rel=eps, warm_starting=True, polishing=True,
+            verbose=False, max_iter=4000,
+        )
+
+    def _inside(self, u: np.ndarray) -> bool:
+        y = self.a_u @ u
+        return bool(np.all(y <= self.hi_u) and np.all(y >= self.lo_u))
+
+    def solve(
+        self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
+        h_min: float, brake: np.ndarray,
+    ) -> QPResult:
+        """Solve for u (always inside the input set); ``brake`` (3,) is the fallback."""
+        t0 = time.perf_counter()
+        k = min(len(rhs), self.m)
+        if self._inside(u_nom) and (k == 0 or bool((g[:k] @ u_nom >= rhs[:k]).all())):
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
+                            False)
+        finite = bool(np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k]))
+                      and np.all(np.isfinite(g[:k])) and np.all(np.isfinite(clf.lgv))
+                      and math.isfinite(clf.lfv) and math.isfinite(clf.V))
+        if not finite:
+            u = self.uset.project(np.nan_to_num(brake, posinf=0.0, neginf=0.0))
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
+        a, m = self._a, self.m
+        u_c = self.uset.project(u_nom)
+        nrm = math.sqrt(float(clf.lgv @ clf.lgv))
+        if nrm > 1e-9:
+            a[0, 0:3] = clf.lgv / nrm
+            self.u[0] = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c)) / nrm
+        else:
+            a[0, 0:3] = 0.0
+            self.u[0] = np.inf
+        a[0, 3] = -1.0
+        a[1 : 1 + k, 0:3] = g[:k]
+        a[1 + k : 1 + m, 0:3] = 0.0
+        self.l[1 : 1 + k] = rhs[:k]
+        self.l[1 + k : 1 + m] = -np.inf
+        self.q[0:3] = -u_nom
+        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
+        res = self.solver.solve(raise_error=False)
+        sv = res.info.status_val
+        x = res.x
+        if sv in SOLVED and x is not None and np.all(np.isfinite(x)):
+            # the solver's answer up to its tolerance; project() is a no-op inside the set
+            u = self.uset.project(np.asarray(x[0:3], dtype=float))
+            sigma = max(0.0, float(x[4]))
+            relaxed = sigma > 1e-3
+            status = QPStatus.RELAXED if relaxed else QPStatus.SOLVED
+            out = QPResult(u, status, int(sv), 0.0, h_min, clf.V, float(x[3]), sigma, relaxed)
+        else:
+            u = self.uset.project(np.nan_to_num(brake))
+            out = QPResult(u, QPStatus.FALLBACK, int(sv), 0.0, h_min, clf.V, 0.0, 0.0, True)
+            self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
+        out.solve_us = (time.perf_counter() - t0) * 1e6
+        return out
