@@ -9,6 +9,7 @@ from gcs.dashboard.mavlink_gcs import CommandResult
 from gcs.dashboard.px4modes import COMMANDS
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import ChoiceScreen, ConfirmScreen, EventLog, VehicleTable
+from swarm_common.enums import Method
 
 pytestmark = pytest.mark.asyncio
 
@@ -110,11 +111,13 @@ async def test_method_switch():
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("m")
         assert isinstance(app.screen, ChoiceScreen)
-        await pilot.press("down", "enter")  # rcbf -> apf
+        order = [str(m) for m in Method]  # the picker lists the methods in this order
+        downs = ["down"] * (order.index("apf") - order.index("rcbf"))
+        await pilot.press(*downs, "enter")  # rcbf -> apf
         assert await settle(app, pilot, lambda: cmd.zenoh_calls)
         c = cmd.zenoh_calls[-1]
         assert (c.kind, c.method, c.agent) == ("method", "apf", 1)
-        await pilot.press("t", "m", "down", "down", "enter")  # all -> none
+        await pilot.press("t", "m", *(["down"] * order.index("none")), "enter")  # all -> none
         assert await settle(app, pilot, lambda: len(cmd.zenoh_calls) == 2)
         c = cmd.zenoh_calls[-1]
         assert (c.kind, c.method, c.agent) == ("method", "none", 0)
