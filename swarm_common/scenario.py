@@ -172,6 +172,12 @@ class ControllerConfig:
     ks: float = _num(0.0, 1e3, lo_open=True)
     deadlock_gain: float = _num(0.0, 100.0)
     deadlock_h_m2: float = _num(0.0, 1e3, lo_open=True)
+    # dcbf (docs/safety.md): class-K  alpha(h) = g_lin h + g_cubic h^3, acceleration error
+    # bound of the prediction, K sides of the tilt-cone polytope
+    dcbf_gamma_lin: float = _num(0.0, 100.0)
+    dcbf_gamma_cubic: float = _num(0.0, 100.0)
+    dcbf_accel_error_mps2: float = _num(0.0, 10.0)
+    dcbf_cone_sides: int = _int(3, 64)
 
 
 # TOML section name -> its dataclass, in file order.
