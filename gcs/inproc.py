@@ -1,6 +1,6 @@
 """In-process mission runner: dynamics + all agents in one process, lockstep.
 
-Same order as the distributed run (design-notes "Lockstep, step by step"), step k:
+Same order as the distributed run (docs/architecture.md, lockstep), step k:
 
 1. truth(k) = float32(p, v) of the simulator (what the truth message carries);
 2. every agent, in scenario order: ``agent.step(k, t_k, truth, neighbours(k−1), comm_ok)``

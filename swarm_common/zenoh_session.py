@@ -1,6 +1,6 @@
 """Open a Zenoh 1.x session the way every process of the project does (docs/conventions.md).
 
-Defaults (design-notes §Zenoh): ``peer`` mode, explicit ``listen``/``connect`` endpoints on
+Defaults (docs/conventions.md, Zenoh): ``peer`` mode, explicit ``listen``/``connect`` endpoints on
 127.0.0.1, multicast scouting off, gossip off, so nothing leaves the machine and nothing
 is discovered by accident. ``mode="router"`` turns the session into a router (there is no
 ``zenohd`` binary here); ``mode="client"`` connects to a router.
