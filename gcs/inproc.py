@@ -27,7 +27,14 @@ import numpy as np
 
 from gcs.metrics import Series, compute_metrics
 from gcs.progress import Progress
-from gcs.run_output import empty_series, run_document, set_agent_row, set_truth_row, write_run
+from gcs.run_output import (
+    empty_series,
+    run_document,
+    safety_spec,
+    set_agent_row,
+    set_truth_row,
+    write_run,
+)
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.bearing import formation_from_scenario
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
@@ -140,7 +147,8 @@ def run_inproc(
             dyn.set_command(i, roll, pitch, yaw, fn)
             new_pub[ag.id] = round_estimate(out.estimate)
             st = out.status
-            set_agent_row(ser, k, i, out.u, out.lumped, st.h_min, st.solve_us, st.qp_status)
+            set_agent_row(ser, k, i, out.u, out.lumped, st.h_min, st.solve_us, st.qp_status,
+                          getattr(st, "input_clipped", False))
         published = new_pub
         md = math.inf
         for _ in range(nsub):
@@ -161,7 +169,7 @@ def run_inproc(
             fallbacks += ag.fallbacks
     metrics = compute_metrics(
         ser, form.follower_idx, dt, veh.mass_kg, veh.gravity_mps2, dyn.collisions,
-        dyn.zeta, zeta_est, fallbacks, wall, dur,
+        dyn.zeta, zeta_est, fallbacks, wall, dur, safety_spec(sc),
     )
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,

@@ -1,25 +1,40 @@
 """Mission metrics from the in-process (or replayed) time series (paper §5; Departure 15).
 
-Energies are over the followers (the methods differ only there):
-``energy_u = ∫Σ‖u_i‖²dt``, ``energy_thrust = ∫ΣF_i²dt`` and
-``energy_thrust_excess = ∫Σ(F_i − m g)²dt`` (Departure 15: ∫F² is dominated by hover).
+Every metric is defined, with its unit and window, in docs/metrics.md. In short:
+
+* safety, from the simulator's TRUE states: ``min_distance_m`` (also per phase), the true
+  barrier ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` (paper eq. 9, τ = ``tau_safe_s``,
+  D = ``d_safe_m``) over every pair and step (:func:`pair_barrier`), and the steps where
+  it is negative;
+* tracking, over the FIXED window [``formation_deadline_s``, end] of the followers'
+  ‖p − p_des‖ (:func:`window_tracking`), unconditionally;
+* energies over the followers (the methods differ only there): ``energy_u = ∫Σ‖u_i‖²dt``,
+  ``energy_thrust = ∫ΣF_i²dt`` and ``energy_thrust_excess = ∫Σ(F_i − m g)²dt``
+  (Departure 15: ∫F² is dominated by hover).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 METRIC_KEYS = (
     "min_distance_m",
+    "min_distance_by_phase_m",
+    "h_min",
+    "barrier_violation_steps",
+    "barrier_violation_pair_steps",
     "collisions",
+    "input_clipped_steps",
     "energy_u",
     "energy_thrust",
     "energy_thrust_excess",
     "formation_time_s",
     "tracking_rms_m",
     "tracking_max_m",
+    "tracking_time_above_0p1_s",
     "est_pos_max_m",
     "est_vel_max_mps",
     "est_dist_max_mps2",
@@ -30,6 +45,8 @@ METRIC_KEYS = (
     "wall_s",
     "realtime_factor",
 )
+PHASES = ("takeoff", "formation", "mission", "landing")  # keys of min_distance_by_phase_m
+TRACK_TOL_M = 0.1  # m, tolerance of formation_time_s and tracking_time_above_0p1_s
 
 
 @dataclass
@@ -49,21 +66,96 @@ class Series:
     thrust: np.ndarray  # (K,N) actual thrust (N)
     tilt_deg: np.ndarray  # (K,N) actual tilt
     min_dist: np.ndarray  # (K,) min pair distance over the period following t_k
-    h_min: np.ndarray  # (K,N)
+    h_min: np.ndarray  # (K,N) smallest barrier value as the agent computed it (its estimates)
     solve_us: np.ndarray  # (K,N)
     fallback: np.ndarray  # (K,N) bool
+    input_clipped: np.ndarray  # (K,N) bool: the setpoint conversion changed the commanded u
 
     def as_dict(self) -> dict[str, np.ndarray]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
-def formation_time(t: np.ndarray, err: np.ndarray, tol: float = 0.1) -> float | None:
-    """First time after which every follower stays within ``tol`` (err: (K,F) norms)."""
+def formation_time(t: np.ndarray, err: np.ndarray, tol: float = TRACK_TOL_M) -> float | None:
+    """First time after which every follower stays within ``tol`` until the end of the run
+    (err: (K,F) norms, m); None when some follower is out of tolerance at the last step."""
     bad = np.any(err >= tol, axis=1)
     if bad[-1]:
         return None
     idx = np.nonzero(bad)[0]
     return float(t[0]) if len(idx) == 0 else float(t[idx[-1] + 1])
+
+
+def pair_barrier(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
+    """True barrier of every unordered pair i < j at every step (m²), shape (K, N(N−1)/2):
+    ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` with Δp = p_i − p_j, Δv = v_i − v_j (paper eq. 9;
+    τ in s, D in m, p in m, v in m/s)."""
+    i, j = np.triu_indices(p.shape[1], k=1)
+    dp = p[:, i] - p[:, j]
+    dv = v[:, i] - v[:, j]
+    return np.sum(dp * dp, axis=2) + 2.0 * tau * np.sum(dv * dp, axis=2) - d_safe**2
+
+
+def barrier_metrics(
+    p: np.ndarray, v: np.ndarray, tau: float, d_safe: float
+) -> dict[str, float | int | None]:
+    """``h_min`` (m², min of :func:`pair_barrier` over pairs and steps), the steps where some
+    pair has h < 0 (``barrier_violation_steps``) and the (pair, step) samples with h < 0
+    (``barrier_violation_pair_steps``)."""
+    if p.shape[0] == 0 or p.shape[1] < 2:
+        return {"h_min": None, "barrier_violation_steps": 0, "barrier_violation_pair_steps": 0}
+    h = pair_barrier(p, v, tau, d_safe)
+    neg = h < 0.0
+    return {
+        "h_min": float(h.min()),
+        "barrier_violation_steps": int(np.sum(np.any(neg, axis=1))),
+        "barrier_violation_pair_steps": int(np.sum(neg)),
+    }
+
+
+def window_tracking(
+    t: np.ndarray, err: np.ndarray, t0: float, dt: float, tol: float = TRACK_TOL_M
+) -> dict[str, float | None]:
+    """Tracking over the fixed window t ≥ ``t0`` (s), whatever happened in it.
+
+    ``err``: (K,F) follower errors ‖p − p_des‖ (m). Returns ``tracking_rms_m`` (RMS over
+    every follower-step of the window), ``tracking_max_m`` and
+    ``tracking_time_above_0p1_s`` (steps × ``dt`` where any follower's error > ``tol``);
+    all None when no step reaches ``t0`` (a run shorter than the deadline).
+    """
+    w = t >= t0 - 1e-9
+    if not np.any(w) or err.shape[1] == 0:
+        return {"tracking_rms_m": None, "tracking_max_m": None,
+                "tracking_time_above_0p1_s": None}
+    e = err[w]
+    return {
+        "tracking_rms_m": float(np.sqrt(np.mean(e**2))),
+        "tracking_max_m": float(e.max()),
+        "tracking_time_above_0p1_s": float(np.sum(np.any(e > tol, axis=1)) * dt),
+    }
+
+
+def min_distance_by_phase(
+    t: np.ndarray, min_dist: np.ndarray, deadline_s: float
+) -> dict[str, float | None]:
+    """Smallest pair distance (m) per phase (keys :data:`PHASES`): "formation" t < deadline,
+    "mission" t ≥ deadline; "takeoff"/"landing" are not flown yet (None), as is a phase
+    without steps."""
+
+    def mn(mask: np.ndarray) -> float | None:
+        return float(min_dist[mask].min()) if np.any(mask) else None
+
+    mission = t >= deadline_s - 1e-9
+    return {"takeoff": None, "formation": mn(~mission), "mission": mn(mission), "landing": None}
+
+
+@dataclass(frozen=True)
+class SafetySpec:
+    """What the safety and tracking metrics are measured against (from the scenario)."""
+
+    tau_safe_s: float  # s, barrier horizon τ
+    d_safe_m: float  # m, barrier distance D
+    formation_deadline_s: float  # s, start of the tracking window and of phase "mission"
+    clipped_known: bool = True  # False: the statuses did not carry input_clipped
 
 
 def compute_metrics(
@@ -78,18 +170,12 @@ def compute_metrics(
     fallbacks: int,
     wall_s: float,
     duration_s: float,
+    spec: SafetySpec,
     est_after_s: float = 5.0,
-) -> dict[str, float | int | None]:
-    """The metrics dict (keys :data:`METRIC_KEYS`)."""
+) -> dict[str, Any]:
+    """The metrics dict (keys :data:`METRIC_KEYS`; definitions in docs/metrics.md)."""
     f = follower_idx
     err = np.linalg.norm(s.p[:, f] - s.p_des[:, f], axis=2)
-    tf = formation_time(s.t, err)
-    after = s.t >= (tf if tf is not None else s.t[-1] + 1.0)
-    trk_rms: float | None = None
-    trk_max: float | None = None
-    if np.any(after):
-        trk_rms = float(np.sqrt(np.mean(err[after] ** 2)))
-        trk_max = float(err[after].max())
     late = s.t >= est_after_s
     ep = np.linalg.norm(s.z1[late][:, f] - s.p[late][:, f], axis=2)
     ev = np.linalg.norm(s.z2[late][:, f] - s.v[late][:, f], axis=2)
@@ -98,15 +184,18 @@ def compute_metrics(
     ze = zeta_est[f]
     zrel = float(np.mean(np.linalg.norm(ze - zt, axis=1) / np.linalg.norm(zt, axis=1)))
     thr = s.thrust[:, f]
+    deadline = spec.formation_deadline_s
     return {
         "min_distance_m": float(s.min_dist.min()),
+        "min_distance_by_phase_m": min_distance_by_phase(s.t, s.min_dist, deadline),
+        **barrier_metrics(s.p, s.v, spec.tau_safe_s, spec.d_safe_m),
         "collisions": int(collisions),
+        "input_clipped_steps": int(np.sum(s.input_clipped)) if spec.clipped_known else None,
         "energy_u": float(np.sum(s.u[:, f] ** 2) * dt),
         "energy_thrust": float(np.sum(thr**2) * dt),
         "energy_thrust_excess": float(np.sum((thr - mass * g) ** 2) * dt),
-        "formation_time_s": tf,
-        "tracking_rms_m": trk_rms,
-        "tracking_max_m": trk_max,
+        "formation_time_s": formation_time(s.t, err),
+        **window_tracking(s.t, err, deadline, dt),
         "est_pos_max_m": float(ep.max()) if ep.size else None,
         "est_vel_max_mps": float(ev.max()) if ev.size else None,
         "est_dist_max_mps2": float(ed.max()) if ed.size else None,

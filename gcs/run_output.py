@@ -3,8 +3,8 @@ directory (``metrics.json`` + ``series.npz``), for in-process and distributed ru
 
 ``series.npz`` holds one array per :class:`~gcs.metrics.Series` field (``t``, ``p``, ``v``,
 ``p_des``, ``v_des``, ``z1``, ``z2``, ``lumped_est``, ``lumped_true``, ``u``, ``thrust``,
-``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``). ``metrics.json`` is
-:func:`run_document`: ``scenario``, ``method``, ``seed``, ``metrics`` (keys
+``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``, ``input_clipped``).
+``metrics.json`` is :func:`run_document`: ``scenario``, ``method``, ``seed``, ``metrics`` (keys
 :data:`~gcs.metrics.METRIC_KEYS`) and the runner's extras (in process: ``gains``,
 ``collision_pairs``; distributed: ``mode``, ``run``).
 """
@@ -19,11 +19,20 @@ from typing import Any
 
 import numpy as np
 
-from gcs.metrics import Series
+from gcs.metrics import SafetySpec, Series
 from offboard.bearing import Formation
 from swarm_common.enums import QPStatus
+from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
+
+
+def safety_spec(sc: Scenario, clipped_known: bool = True) -> SafetySpec:
+    """The scenario's barrier τ (s), D (m) and tracking deadline (s) for
+    :func:`~gcs.metrics.compute_metrics`; ``clipped_known``: the statuses carried
+    ``input_clipped``."""
+    return SafetySpec(sc.controller.tau_safe_s, sc.controller.d_safe_m,
+                      sc.run.formation_deadline_s, clipped_known)
 
 
 def tilt_deg(att: np.ndarray) -> np.ndarray:
@@ -34,7 +43,8 @@ def tilt_deg(att: np.ndarray) -> np.ndarray:
 
 def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
     """A :class:`Series` of ``len(t)`` steps for ``n`` agents, every value ``fill``
-    (NaN where rows may stay unknown, as in a recorded run); ``fallback`` all False."""
+    (NaN where rows may stay unknown, as in a recorded run); ``fallback`` and
+    ``input_clipped`` all False."""
     kk = len(t)
 
     def z(*shape: int) -> np.ndarray:
@@ -44,6 +54,7 @@ def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
         t=t, p=z(n, 3), v=z(n, 3), p_des=z(n, 3), v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3),
         lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n), tilt_deg=z(n),
         min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((kk, n), bool),
+        input_clipped=np.zeros((kk, n), bool),
     )
 
 
@@ -77,14 +88,17 @@ def set_agent_row(
     h_min: float,
     solve_us: float,
     qp_status: str,
+    input_clipped: bool = False,
 ) -> None:
     """Row ``r`` of agent ``i``'s status: virtual control u (m/s²), estimated lumped
-    disturbance, smallest barrier value, QP time (µs), and whether the QP degraded."""
+    disturbance, smallest barrier value, QP time (µs), whether the QP degraded, and whether
+    the setpoint conversion changed u (tilt/thrust clip)."""
     ser.u[r, i] = u
     ser.lumped_est[r, i] = lumped
     ser.h_min[r, i] = h_min
     ser.solve_us[r, i] = solve_us
     ser.fallback[r, i] = QPStatus(qp_status).degraded
+    ser.input_clipped[r, i] = bool(input_clipped)
 
 
 def run_document(

@@ -16,7 +16,7 @@ from swarm_common.scenario import load_scenario
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 SERIES_KEYS = ("t", "p", "v", "p_des", "v_des", "z1", "z2", "lumped_est", "lumped_true", "u",
-               "thrust", "tilt_deg", "min_dist", "h_min", "solve_us", "fallback")
+               "thrust", "tilt_deg", "min_dist", "h_min", "solve_us", "fallback", "input_clipped")
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,10 @@ def test_rcbf_safe_and_forms(rcbf15, sc):
     assert m["min_distance_m"] >= 0.75
     assert m["collisions"] == 0
     assert m["formation_time_s"] is not None and m["formation_time_s"] < 15.0
-    assert m["tracking_max_m"] < 0.1
+    # tracking is measured over [formation_deadline_s, end] = [20 s, end]: a 15 s run has no
+    # window, so the tracking metrics are null (the fixed-window bound is in test_metrics)
+    assert m["tracking_max_m"] is None and m["tracking_rms_m"] is None
+    assert m["h_min"] is not None and m["barrier_violation_steps"] >= 0
     assert m["max_tilt_deg"] <= 30.0 + 1e-6 and m["max_thrust_n"] <= 52.92
     s = rcbf15.series
     assert np.all(np.isfinite(s.u)) and np.all(np.isfinite(s.z1))
