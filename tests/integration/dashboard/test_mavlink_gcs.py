@@ -8,6 +8,13 @@ import time
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
+from gcs.dashboard.command_retry import (
+    AwaitAck,
+    PendingAck,
+    SendAttempt,
+    command_exchange,
+    drive_blocking,
+)
 from gcs.dashboard.mavlink_gcs import MavlinkGcs
 from gcs.dashboard.px4modes import COMMANDS, custom_mode, decode_px4_mode
 
@@ -143,6 +150,52 @@ def test_command_async(gcs):
         assert r6.ok and r7.ok
         assert vs[0].commands[-1][0] == 176 and vs[0].commands[-1][2][1:3] == [4.0, 3.0]
         assert vs[1].commands[-1][0] == 185
+    finally:
+        for v in vs:
+            v.stop()
+
+
+def test_retry_policy_steps():
+    """The one policy both paths drive: send, wait, retry with confirmation = retry number."""
+    pend = PendingAck()
+    ex = command_exchange(3, COMMANDS["arm"], pend, time.monotonic, timeout_s=0.25, retries=2)
+    assert next(ex) == SendAttempt(0)
+    assert ex.send(True) == AwaitAck(0.25)
+    assert ex.send(False) == SendAttempt(1)
+    assert ex.send(True) == AwaitAck(0.25)
+    pend.result = mavlink2.MAV_RESULT_ACCEPTED
+    with pytest.raises(StopIteration) as done:
+        ex.send(True)
+    res = done.value.value
+    assert res.ok and res.attempts == 2 and res.sysid == 3
+    # every wait unanswered: TIMEOUT after retries + 1 sends; a failed send: NO-LINK
+    sent: list[int] = []
+    ex = command_exchange(3, COMMANDS["land"], PendingAck(), time.monotonic, 0.0, retries=1)
+    res = drive_blocking(ex, lambda conf: sent.append(conf) is None, lambda _t: False)
+    assert sent == [0, 1] and res.result_name == "TIMEOUT" and res.attempts == 2
+    ex = command_exchange(3, COMMANDS["land"], PendingAck(), time.monotonic, 0.0, retries=3)
+    res = drive_blocking(ex, lambda conf: conf < 1, lambda _t: False)
+    assert res.result_name == "NO-LINK" and res.attempts == 1
+
+
+def test_command_async_all_vehicles_at_once(gcs):
+    """An "all vehicles" gather waits for every ACK at once, not one vehicle after another."""
+    ids = list(range(20, 32))
+    vs = [FakeVehicle(i, gcs.port, drop_first_acks=99).start() for i in ids]
+    try:
+        assert wait_for(lambda: set(ids) <= set(gcs.vehicles()))
+
+        async def everyone():
+            return await asyncio.gather(
+                *(gcs.command(i, COMMANDS["hold"], timeout_s=0.4, retries=1) for i in ids)
+            )
+
+        t0 = time.monotonic()
+        results = asyncio.run(everyone())
+        elapsed = time.monotonic() - t0
+        assert [r.result_name for r in results] == ["TIMEOUT"] * len(ids)
+        assert all(r.attempts == 2 for r in results)
+        assert elapsed < 0.4 * 2 * len(ids) / 3  # serial would take 9.6 s
     finally:
         for v in vs:
             v.stop()

@@ -1,0 +1,302 @@
+"""The receive side of the GCS link: per-system-id vehicle state from MAVLink datagrams.
+
+Vehicles are told apart by the MAVLink system id (= agent id). One pymavlink
+``MAVLink`` parser object reads every datagram (MAVLink 2, common dialect). Per system
+id :class:`LinkTracker` keeps heartbeat age, message rate, PX4 mode, armed state,
+position and velocity (converted NED -> ENU), STATUSTEXT and mode/arming changes as
+:class:`LinkEvent`, and hands a COMMAND_ACK to the :class:`PendingAck` awaiting it.
+Malformed packets are counted, never raised. No socket here: the caller feeds datagrams.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import deque
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from swarm_common.frames import ned_to_enu, rotm_from_quat
+
+from .command_retry import PendingAck
+from .px4modes import decode_px4_mode
+
+log = logging.getLogger(__name__)
+
+LOCAL_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_FRD)
+BODY_FRAMES = (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED)
+# what a well-formed message with absurd field values can raise in a handler
+_CONTENT_ERRORS = (ArithmeticError, LookupError, TypeError, ValueError, AttributeError)
+
+Addr = tuple[str, int]
+
+
+@dataclass
+class LinkVehicle:
+    """What the link knows about one system id (a copy is handed out by snapshots)."""
+
+    sysid: int
+    addr: Addr | None = None
+    first_seen: float = 0.0
+    last_msg: float = 0.0
+    last_heartbeat: float | None = None
+    msg_count: int = 0
+    rate_hz: float = 0.0
+    mode: str = "?"
+    custom_mode: int = -1
+    base_mode: int = 0
+    armed: bool = False
+    system_status: int = 0
+    autopilot: int = 0
+    pos_enu: tuple[float, float, float] | None = None
+    vel_enu: tuple[float, float, float] | None = None
+    q_ned: tuple[float, float, float, float] | None = None
+    time_boot_ms: int = 0
+    sensors_ok: bool | None = None
+    battery_pct: int = -1
+    lost: bool = False
+    statustexts: int = 0
+    last_statustext: str = ""
+    # rate bookkeeping
+    _rate_t: float = 0.0
+    _rate_n: int = 0
+
+    def heartbeat_age(self, now: float) -> float | None:
+        return None if self.last_heartbeat is None else max(0.0, now - self.last_heartbeat)
+
+
+@dataclass(frozen=True)
+class LinkEvent:
+    """Something the operator should read: STATUSTEXT, mode/arming change, link loss."""
+
+    t: float  # clock() time
+    sysid: int
+    kind: str  # statustext | mode | armed | link | ack
+    text: str
+    severity: int = mavlink.MAV_SEVERITY_INFO  # MAV_SEVERITY (0 emergency .. 7 debug)
+
+
+class LinkTracker:
+    """Thread-safe per-system-id state; :meth:`feed` is called from the reader thread."""
+
+    def __init__(
+        self,
+        clock: Callable[[], float],
+        source_system: int,
+        source_component: int,
+        max_events: int = 2000,
+    ) -> None:
+        self.clock = clock
+        self._rx = mavlink.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        self._rx.robust_parsing = True
+        self._lock = threading.Lock()
+        self._vehicles: dict[int, LinkVehicle] = {}
+        self._events: deque[LinkEvent] = deque(maxlen=max_events)
+        self._pending: dict[tuple[int, int], PendingAck] = {}
+        self.bad_packets = 0
+        self.packets = 0
+        self._handlers: dict[str, Callable[[LinkVehicle, Any, float], None]] = {
+            "HEARTBEAT": self._on_heartbeat,
+            "LOCAL_POSITION_NED": self._on_local_position,
+            "ODOMETRY": self._on_odometry,
+            "ATTITUDE_QUATERNION": self._on_attitude,
+            "SYS_STATUS": self._on_sys_status,
+            "STATUSTEXT": self._on_statustext,
+            "COMMAND_ACK": self._on_command_ack,
+        }
+
+    # -- parsing -------------------------------------------------------------------
+    def feed(self, data: bytes, addr: Addr) -> None:
+        """Parse one datagram from ``addr``."""
+        rx = self._rx
+        try:
+            msgs = rx.parse_buffer(data) or []
+        except mavlink.MAVError as exc:  # pymavlink raises on some input even when robust
+            msgs = []
+            self.bad_packets += 1
+            log.debug("bad MAVLink datagram from %s: %s", addr, exc)
+        if rx.buf_len() > 0:  # a datagram holds whole packets: leftovers are a truncation
+            self.bad_packets += 1
+            rx.buf = bytearray()
+            rx.buf_index = 0
+            rx.expected_length = mavlink.HEADER_LEN_V1 + 2
+        if not msgs:
+            return
+        now = self.clock()
+        with self._lock:
+            for msg in msgs:
+                if msg.get_type() == "BAD_DATA":
+                    self.bad_packets += 1
+                    continue
+                self.packets += 1
+                try:
+                    self._handle(msg, addr, now)
+                except _CONTENT_ERRORS as exc:  # a well-formed packet with absurd content
+                    self.bad_packets += 1
+                    log.debug("bad %s from %s: %r", msg.get_type(), addr, exc)
+
+    def _vehicle(self, sysid: int, addr: Addr, now: float) -> LinkVehicle:
+        v = self._vehicles.get(sysid)
+        if v is None:
+            v = LinkVehicle(sysid=sysid, first_seen=now, _rate_t=now)
+            self._vehicles[sysid] = v
+        v.addr = addr
+        return v
+
+    def _event(
+        self,
+        now: float,
+        sysid: int,
+        kind: str,
+        text: str,
+        severity: int = mavlink.MAV_SEVERITY_INFO,
+    ) -> None:
+        self._events.append(LinkEvent(now, sysid, kind, text, severity))
+
+    def _handle(self, msg: Any, addr: Addr, now: float) -> None:
+        """Autopilot messages (and any COMMAND_ACK) update the sender's :class:`LinkVehicle`."""
+        mtype = msg.get_type()
+        if msg.get_srcComponent() != mavlink.MAV_COMP_ID_AUTOPILOT1 and mtype != "COMMAND_ACK":
+            return
+        v = self._vehicle(msg.get_srcSystem(), addr, now)
+        v.last_msg = now
+        v.msg_count += 1
+        handler = self._handlers.get(mtype)
+        if handler is not None:
+            handler(v, msg, now)
+
+    # -- per-message handlers (under self._lock) -----------------------------------
+    def _on_heartbeat(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        if msg.type == mavlink.MAV_TYPE_GCS:
+            return
+        v.last_heartbeat = now
+        if v.lost:
+            v.lost = False
+            self._event(now, v.sysid, "link", "link regained", mavlink.MAV_SEVERITY_NOTICE)
+        v.base_mode = msg.base_mode
+        v.autopilot = msg.autopilot
+        v.system_status = msg.system_status
+        mode = decode_px4_mode(msg.custom_mode, msg.base_mode)
+        if mode != v.mode:
+            if v.mode != "?":
+                text = f"mode {v.mode} -> {mode}"
+                self._event(now, v.sysid, "mode", text, mavlink.MAV_SEVERITY_NOTICE)
+            v.mode = mode
+        v.custom_mode = msg.custom_mode
+        armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        if armed != v.armed:
+            text = "armed" if armed else "disarmed"
+            self._event(now, v.sysid, "armed", text, mavlink.MAV_SEVERITY_NOTICE)
+            v.armed = armed
+
+    def _on_local_position(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        v.pos_enu = _enu(msg.x, msg.y, msg.z)
+        v.vel_enu = _enu(msg.vx, msg.vy, msg.vz)
+        v.time_boot_ms = msg.time_boot_ms
+
+    def _on_odometry(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        """Position in a local frame; velocity in a local or body frame (body: rotate by q)."""
+        if msg.frame_id in LOCAL_FRAMES:
+            v.pos_enu = _enu(msg.x, msg.y, msg.z)
+        vel = (msg.vx, msg.vy, msg.vz)
+        q = tuple(float(c) for c in msg.q)
+        if msg.child_frame_id in LOCAL_FRAMES:
+            v.vel_enu = _enu(*vel)
+        elif msg.child_frame_id in BODY_FRAMES:
+            if all(math.isfinite(c) for c in q) and abs(np.linalg.norm(q) - 1) < 0.1:
+                v.vel_enu = _enu(*(rotm_from_quat(np.array(q)) @ np.array(vel)))
+        v.q_ned = q  # type: ignore[assignment]
+
+    def _on_attitude(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        v.q_ned = (msg.q1, msg.q2, msg.q3, msg.q4)
+
+    def _on_sys_status(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        need = msg.onboard_control_sensors_present & msg.onboard_control_sensors_enabled
+        v.sensors_ok = (need & ~msg.onboard_control_sensors_health) == 0
+        v.battery_pct = int(msg.battery_remaining)
+
+    def _on_statustext(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        text = msg.text
+        if isinstance(text, bytes | bytearray):
+            text = text.decode("utf-8", "replace")
+        text = str(text).rstrip("\x00")
+        v.statustexts += 1
+        v.last_statustext = text
+        self._event(now, v.sysid, "statustext", text, int(msg.severity))
+
+    def _on_command_ack(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        pend = self._pending.get((v.sysid, msg.command))
+        if pend is None:
+            return
+        if msg.result == mavlink.MAV_RESULT_IN_PROGRESS:
+            pend.progress = now
+        else:
+            pend.result = int(msg.result)
+            pend.event.set()
+
+    # -- periodic --------------------------------------------------------------------
+    def update(self, now: float, heartbeat_timeout_s: float) -> list[Addr]:
+        """Update rates, flag links silent for ``heartbeat_timeout_s``; return every address."""
+        targets: list[Addr] = []
+        with self._lock:
+            for v in self._vehicles.values():
+                dt = now - v._rate_t
+                if dt >= 0.9:
+                    v.rate_hz = (v.msg_count - v._rate_n) / dt
+                    v._rate_t, v._rate_n = now, v.msg_count
+                age = v.heartbeat_age(now)
+                silent = (now - v.first_seen) if age is None else age
+                if not v.lost and silent > heartbeat_timeout_s:
+                    v.lost = True
+                    text = f"link lost (heartbeat {_age(age)})"
+                    self._event(now, v.sysid, "link", text, mavlink.MAV_SEVERITY_CRITICAL)
+                if v.addr is not None:
+                    targets.append(v.addr)
+        return targets
+
+    # -- snapshots and command bookkeeping -------------------------------------------
+    def vehicles(self) -> dict[int, LinkVehicle]:
+        """A consistent copy of every tracked vehicle."""
+        with self._lock:
+            return {k: replace(v) for k, v in self._vehicles.items()}
+
+    def drain_events(self) -> list[LinkEvent]:
+        with self._lock:
+            out = list(self._events)
+            self._events.clear()
+        return out
+
+    def address(self, sysid: int) -> Addr | None:
+        """Where ``sysid`` streams from (None: never heard)."""
+        with self._lock:
+            v = self._vehicles.get(sysid)
+            return v.addr if v is not None else None
+
+    @contextmanager
+    def awaiting_ack(self, sysid: int, command: int) -> Iterator[PendingAck]:
+        """Register a :class:`PendingAck` for ``(sysid, command)`` for the ``with`` body."""
+        pend = PendingAck()
+        key = (sysid, command)
+        with self._lock:
+            self._pending[key] = pend
+        try:
+            yield pend
+        finally:
+            with self._lock:
+                if self._pending.get(key) is pend:
+                    del self._pending[key]
+
+
+def _enu(x: float, y: float, z: float) -> tuple[float, float, float]:
+    e = ned_to_enu(np.array([x, y, z], dtype=float))
+    return (float(e[0]), float(e[1]), float(e[2]))
+
+
+def _age(age: float | None) -> str:
+    return "never" if age is None else f"{age:.1f}s"
