@@ -17,7 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gcs.report import seeds_table  # noqa: E402
+from gcs.sweep_report import seeds_table  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
 
 METHODS = [str(m) for m in Method]

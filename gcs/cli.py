@@ -1,7 +1,9 @@
-"""``gcs`` command line: ``gcs mission run|compare SCENARIO``, ``gcs router``, ``gcs dashboard``.
+"""``gcs`` command line: ``gcs mission run|compare|sweep SCENARIO``, ``gcs router``,
+``gcs dashboard``.
 
 ``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
-``--inproc``; the seed sweep of ``compare --seeds N`` always runs in process.
+``--inproc``; the seed sweep of ``compare --seeds N`` and ``mission sweep``
+(:mod:`gcs.sweep`) always run in process.
 ``gcs --log-level {debug,info,warning,error} ...`` sets the diagnostics level.
 
 Exit codes (every command):
@@ -161,7 +163,8 @@ def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[s
 
 def cmd_mission_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario)
-    from gcs.report import compare_table, seeds_table, write_report
+    from gcs.report import compare_table, safety_table, write_report
+    from gcs.sweep_report import seeds_table
     from offboard.bearing import formation_from_scenario
 
     out = Path(args.out or "runs/compare")
@@ -175,8 +178,11 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
                         gains, seeds,
                         mode="in-process" if args.inproc else
-                        "distributed (vehicle-sim + one offboard process per agent, lockstep)")
+                        "distributed (vehicle-sim + one offboard process per agent, lockstep)",
+                        tau_safe_s=sc.controller.tau_safe_s,
+                        deadline_s=sc.run.formation_deadline_s)
     print(compare_table(metrics, d_safe))
+    print(safety_table(metrics))
     if seeds:
         print(seeds_table(seeds, d_safe))
     log.info("wrote %s", path)
@@ -232,6 +238,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
     c.add_argument("--port-offset", type=int, default=0, help="distributed: shift every port")
     c.set_defaults(func=cmd_mission_compare)
+    from gcs.sweep import add_sweep_parser
+
+    add_sweep_parser(msub)
 
 
 COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {

@@ -41,7 +41,7 @@ def _f(x: Any, nd: int = 2) -> str:
     return str(x)
 
 
-def _legend(rows: list[tuple[str, str]]) -> str:
+def md_legend(rows: list[tuple[str, str]]) -> str:
     """A markdown definition list: one ``* **column**: meaning`` line per column."""
     return "".join(f"* **{name}**: {text}\n" for name, text in rows)
 
@@ -51,18 +51,17 @@ def compare_table(metrics: dict[str, dict], d_safe: float = 0.5) -> str:
     head = (
         "| Method | Paper min dist (m) | Ours min dist (m) | < D_safe | Collisions | "
         "Paper energy | ∫Σ‖u‖²dt (m²/s³) | ∫Σ(F−mg)²dt (N²s) | ∫ΣF²dt (N²s) | "
-        "Formed at (s) | Track RMS / max (m) | QP fallbacks |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "Formed at (s) | QP fallbacks |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     rows = []
     for m, met in metrics.items():
         pd, pe = PAPER_TABLE3.get(m, (None, None))
-        trk = f"{_f(met.get('tracking_rms_m'), 3)} / {_f(met.get('tracking_max_m'), 3)}"
         rows.append(
             f"| {LABELS.get(m, m)} | {_f(pd)} | {_f(met['min_distance_m'], 3)} | "
             f"{'yes' if met['min_distance_m'] < d_safe else 'no'} | {met['collisions']} | "
             f"{_f(pe)} | {_f(met['energy_u'], 1)} | {_f(met['energy_thrust_excess'], 1)} | "
-            f"{_f(met['energy_thrust'], 0)} | {_f(met.get('formation_time_s'), 1)} | {trk} | "
+            f"{_f(met['energy_thrust'], 0)} | {_f(met.get('formation_time_s'), 1)} | "
             f"{met['qp_fallbacks']} |"
         )
     return head + "\n".join(rows) + "\n"
@@ -70,7 +69,7 @@ def compare_table(metrics: dict[str, dict], d_safe: float = 0.5) -> str:
 
 def compare_legend(d_safe: float = 0.5) -> str:
     """Definition and unit of every column of :func:`compare_table`."""
-    return _legend(
+    return md_legend(
         [
             (
                 "Method",
@@ -118,12 +117,8 @@ def compare_legend(d_safe: float = 0.5) -> str:
             (
                 "Formed at (s)",
                 f"first time after which every follower stays within "
-                f"{FORMED_TOL_M:g} m of its desired vertex until the end; '–' if never.",
-            ),
-            (
-                "Track RMS / max (m)",
-                "root-mean-square and maximum distance of the followers "
-                "from their desired vertices after the formation time; '–' if never formed.",
+                f"{FORMED_TOL_M:g} m of its desired vertex until the end; '–' if never "
+                "(tracking itself is in the safety table).",
             ),
             (
                 "QP fallbacks",
@@ -135,52 +130,59 @@ def compare_legend(d_safe: float = 0.5) -> str:
     )
 
 
-def seeds_table(dist: dict[str, list[dict]], d_safe: float = 0.5) -> str:
-    """Markdown table of the min-distance distribution over seeds per method."""
+def safety_table(metrics: dict[str, dict]) -> str:
+    """Markdown table of the honest safety and tracking metrics (docs/metrics.md)."""
     out = (
-        "| Method | Seeds | Min dist: min / median / max (m) | Runs < D_safe | Collisions "
-        "(total) | ∫Σ‖u‖²dt median (m²/s³) | Formed at median (s) |\n"
-        "|---|---|---|---|---|---|---|\n"
+        "| Method | True h_min (m²) | Steps h<0 | Pair-steps h<0 | Min dist formation / "
+        "mission (m) | Clipped agent-steps | Track RMS / max (m) | Time err > 0.1 m (s) |\n"
+        "|---|---|---|---|---|---|---|---|\n"
     )
-    for m, runs in dist.items():
-        md = np.array([r["min_distance_m"] for r in runs])
-        col = sum(r["collisions"] for r in runs)
-        eu = np.median([r["energy_u"] for r in runs])
-        ft = [r["formation_time_s"] for r in runs if r["formation_time_s"] is not None]
-        ftm = f"{np.median(ft):.1f} ({len(ft)}/{len(runs)} formed)" if ft else "never"
+    for m, met in metrics.items():
+        ph = met.get("min_distance_by_phase_m") or {}
         out += (
-            f"| {LABELS.get(m, m)} | {len(runs)} | {md.min():.3f} / {np.median(md):.3f} / "
-            f"{md.max():.3f} | {int(np.sum(md < d_safe))} | {col} | {eu:.1f} | {ftm} |\n"
+            f"| {LABELS.get(m, m)} | {_f(met.get('h_min'), 3)} | "
+            f"{_f(met.get('barrier_violation_steps'))} | "
+            f"{_f(met.get('barrier_violation_pair_steps'))} | "
+            f"{_f(ph.get('formation'), 3)} / {_f(ph.get('mission'), 3)} | "
+            f"{_f(met.get('input_clipped_steps'))} | {_f(met.get('tracking_rms_m'), 3)} / "
+            f"{_f(met.get('tracking_max_m'), 3)} | "
+            f"{_f(met.get('tracking_time_above_0p1_s'), 2)} |\n"
         )
     return out
 
 
-def seeds_legend(d_safe: float = 0.5) -> str:
-    """Definition and unit of every column of :func:`seeds_table`."""
-    return _legend(
+def safety_legend(d_safe: float, tau: float, deadline_s: float) -> str:
+    """Definition and unit of every column of :func:`safety_table`."""
+    return md_legend(
         [
+            ("Method", "as above."),
             (
-                "Seeds",
-                "number of runs, each with its own random seed (sensing noise, "
-                "disturbances); the scenario is otherwise the same.",
+                "True h_min (m²)",
+                f"smallest barrier h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (τ = {tau:g} s, "
+                f"D = {d_safe:g} m) over every pair of vehicles and every control step, from "
+                "the simulator's true positions and velocities; negative: the safe set was left.",
+            ),
+            ("Steps h<0", "control steps at which some pair has a negative true barrier."),
+            ("Pair-steps h<0", "(pair, control step) samples with a negative true barrier."),
+            (
+                "Min dist formation / mission (m)",
+                f"smallest pair distance before / from t = {deadline_s:g} s "
+                "(`run.formation_deadline_s`); '–' for a phase the run does not reach.",
             ),
             (
-                "Min dist: min / median / max (m)",
-                "over the runs, of each run's smallest distance between any two vehicles.",
-            ),
-            ("Runs < D_safe", f"runs whose smallest distance is below D_safe = {d_safe:g} m."),
-            (
-                "Collisions (total)",
-                "contact events (closer than the collision radius) summed over all runs.",
+                "Clipped agent-steps",
+                "agent-steps where the attitude/thrust limits changed the commanded u; '–' "
+                "when the recorded statuses do not carry it.",
             ),
             (
-                "∫Σ‖u‖²dt median (m²/s³)",
-                "median over the runs of the integral of the followers' squared virtual control.",
+                "Track RMS / max (m)",
+                f"RMS and maximum of the followers' distance to their desired vertices over the "
+                f"fixed window [{deadline_s:g} s, end], whatever happens in it; '–' when the run "
+                "ends before the window starts.",
             ),
             (
-                "Formed at median (s)",
-                f"median over the runs that formed (every follower within "
-                f"{FORMED_TOL_M:g} m to the end) of the formation time, with how many formed.",
+                "Time err > 0.1 m (s)",
+                "time in that window during which some follower is more than 0.1 m off.",
             ),
         ]
     )
@@ -314,8 +316,12 @@ def write_report(
     gains: list[str],
     seeds: dict[str, list[dict]] | None = None,
     mode: str = "in-process",
+    *,
+    tau_safe_s: float,
+    deadline_s: float,
 ) -> Path:
-    """Write report.md and the PNG plots into ``out_dir``; returns the report path."""
+    """Write report.md and the PNG plots into ``out_dir``; returns the report path
+    (``tau_safe_s``, ``deadline_s``: the scenario's barrier τ and tracking-window start, s)."""
     from gcs.report_plots import (
         plot_energy,
         plot_errors,
@@ -323,6 +329,7 @@ def write_report(
         plot_snapshots,
         snapshot_times,
     )
+    from gcs.sweep_report import seeds_legend, seeds_table
 
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
@@ -340,6 +347,10 @@ def write_report(
         "",
         compare_table(metrics, d_safe),
         compare_legend(d_safe),
+        "## Safety and tracking (true states)",
+        "",
+        safety_table(metrics),
+        safety_legend(d_safe, tau_safe_s, deadline_s),
         paper_differences(metrics, series, d_safe, follower_idx),
     ]
     if seeds:

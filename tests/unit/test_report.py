@@ -13,11 +13,12 @@ from gcs.report import (
     compare_legend,
     compare_table,
     paper_differences,
-    seeds_legend,
-    seeds_table,
+    safety_legend,
+    safety_table,
     write_report,
 )
 from gcs.report_plots import snapshot_times
+from gcs.sweep_report import seeds_legend, seeds_table
 
 D_SAFE = 0.5
 FOLLOWERS = [2, 3]
@@ -58,6 +59,13 @@ def _metrics(min_d: float, eu: float, formed: float | None) -> dict:
         "formation_time_s": formed,
         "tracking_rms_m": 0.02 if formed is not None else None,
         "tracking_max_m": 0.05 if formed is not None else None,
+        "tracking_time_above_0p1_s": 0.0 if formed is not None else None,
+        "h_min": 0.12 if min_d > 0.5 else -0.3,
+        "barrier_violation_steps": 0 if min_d > 0.5 else 4,
+        "barrier_violation_pair_steps": 0 if min_d > 0.5 else 5,
+        "min_distance_by_phase_m": {"takeoff": None, "formation": 0.9 if min_d > 0.5 else min_d,
+                                    "mission": 1.5, "landing": None},
+        "input_clipped_steps": 7,
         "qp_fallbacks": 0,
     }
 
@@ -82,6 +90,9 @@ def test_every_column_has_a_definition(inputs: tuple[dict, dict]) -> None:
     defined = re.findall(r"^\* \*\*(.+?)\*\*: ", compare_legend(D_SAFE), flags=re.M)
     assert cols == defined
     assert all("(" in c for c in cols if c.startswith(("Ours", "Paper min", "∫", "Formed")))
+    cols = _columns(safety_table(metrics))
+    defined = re.findall(r"^\* \*\*(.+?)\*\*: ", safety_legend(D_SAFE, 0.8, 20.0), flags=re.M)
+    assert cols == defined
     runs = {m: [metrics[m], metrics[m]] for m in metrics}
     cols = _columns(seeds_table(runs, D_SAFE))
     defined = re.findall(r"^\* \*\*(.+?)\*\*: ", seeds_legend(D_SAFE), flags=re.M)
@@ -117,11 +128,14 @@ def test_write_report_writes_markdown_and_plots(inputs: tuple[dict, dict], tmp_p
     metrics, series = inputs
     seeds = {m: [metrics[m]] * 3 for m in metrics}
     path = write_report(
-        tmp_path, "tiny", metrics, series, FOLLOWERS, EDGES, D_SAFE, ["gain line"], seeds
+        tmp_path, "tiny", metrics, series, FOLLOWERS, EDGES, D_SAFE, ["gain line"], seeds,
+        tau_safe_s=0.8, deadline_s=3.0,
     )
     text = path.read_text()
     assert "* **∫Σ‖u‖²dt (m²/s³)**:" in text and "* **Runs < D_safe**:" in text
     assert "### How these numbers differ from the paper's Table 3" in text
+    assert "## Safety and tracking (true states)" in text and "* **True h_min (m²)**:" in text
+    assert "| Proposed RCBF | 0.120 | 0 | 0 | 0.900 / 1.500 | 7 | 0.020 / 0.050 | 0.00 |" in text
     for name in ("min_distance", "errors", "energy", *(f"snapshots_{m}" for m in series)):
         png = tmp_path / f"{name}.png"
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
