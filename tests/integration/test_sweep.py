@@ -1,0 +1,82 @@
+"""``gcs mission sweep`` as a real subprocess: runs.csv, summary.md, crashed runs, bad input."""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import CUBE8, ROOT
+
+from gcs.sweep import Job, run_sweep
+from gcs.sweep_report import CSV_COLUMNS
+
+pytestmark = pytest.mark.timeout(240)
+GCS = [sys.executable, "-m", "gcs.cli"]
+
+
+def _sweep(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*GCS, "mission", "sweep", *args], capture_output=True, text=True,
+                          cwd=ROOT, timeout=200)
+
+
+def test_sweep_writes_rows_and_summary(tmp_path: Path) -> None:
+    r = _sweep(CUBE8, "--seeds", "1-2", "--methods", "rcbf,none", "--jobs", "2",
+               "--duration", "3", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    with (tmp_path / "runs.csv").open() as fh:
+        reader = csv.DictReader(fh)
+        assert tuple(reader.fieldnames or ()) == CSV_COLUMNS
+        rows = list(reader)
+    assert sorted((x["method"], int(x["seed"])) for x in rows) == [
+        ("none", 1), ("none", 2), ("rcbf", 1), ("rcbf", 2)]
+    assert all(x["status"] == "ok" and x["scenario"] == "cube8" for x in rows)
+    for x in rows:
+        for k in ("min_distance_m", "h_min", "barrier_violation_steps", "collisions",
+                  "input_clipped_steps", "min_distance_formation_m"):
+            assert math.isfinite(float(x[k])), (k, x[k])
+        # a 3 s run never reaches the 20 s formation deadline: no tracking window
+        assert x["tracking_rms_m"] == "" and x["min_distance_mission_m"] == ""
+    none = [x for x in rows if x["method"] == "none"]
+    assert all(int(x["barrier_violation_steps"]) > 0 and float(x["h_min"]) < 0 for x in none)
+    summary = (tmp_path / "summary.md").read_text()
+    assert "| cube8 | none | 2 (0) |" in summary and "| cube8 | rcbf | 2 (0) |" in summary
+    assert (tmp_path / "summary.png").read_bytes()[:4] == b"\x89PNG"
+    assert "runs, 0 crashed" in r.stderr  # the progress display
+
+
+def test_crashed_run_is_a_row_not_lost(tmp_path: Path) -> None:
+    bad = tmp_path / "gone.toml"  # removed after validation: the worker's load fails
+    jobs = [Job(str(bad), "gone", "rcbf", 1, 1.0), Job(CUBE8, "cube8", "none", 1, 0.2)]
+    rows = {r["scenario"]: r for r in run_sweep(jobs, 2, show_progress=False)}
+    assert rows["gone"]["status"] == "crashed" and "gone.toml" in rows["gone"]["error"]
+    assert rows["cube8"]["status"] == "ok" and float(rows["cube8"]["min_distance_m"]) > 0
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--seeds", "5-1"], "--seeds"),
+        (["--seeds", "-3"], "--seeds"),
+        (["--seeds", "a,b"], "--seeds"),
+        (["--jobs", "0"], "--jobs"),
+        (["--methods", "rcbf,magic"], "magic"),
+        (["--duration", "-1"], "--duration"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(args: list[str], needle: str, tmp_path: Path) -> None:
+    r = _sweep(CUBE8, *args, "--out", str(tmp_path / "o"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("gcs mission sweep:") and needle in lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_unknown_scenario_exits_2(tmp_path: Path) -> None:
+    r = _sweep(str(tmp_path / "nope.toml"), "--seeds", "1", "--out", str(tmp_path / "o"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "nope.toml" in lines[0]
