@@ -17,9 +17,10 @@ failure of it:
 3. **Neighbour motion.** The other agent's acceleration is its estimated actual one
    (finite difference of its broadcast velocity, bounded), never a reference.
 
-f is quadratic in u (small coefficients); each step it is linearised at the previous
-command ``u_ref`` and every pair gives one row ``gᵀ(u − u_ref) ≥ −share·f(u_ref)``
-(share ½ for follower–follower pairs, 1 against a leader).
+A second condition per pair keeps h itself from dipping over the horizon:
+``ĥ_T ≥ h0 − T α(h0)`` (tightened by ē too). Both are quadratic in u (small coefficients);
+each step they are linearised at the previous command ``u_ref`` and every pair gives two
+rows ``gᵀ(u − u_ref) ≥ −share·c(u_ref)`` (share ½ follower–follower, 1 against a leader).
 """
 
 from __future__ import annotations
@@ -150,14 +151,18 @@ def predict(
     return Prediction(pp, pv, pa, h, hdot)
 
 
-def _grad(pr: Prediction, cp: np.ndarray, cv: np.ndarray, ca: np.ndarray, tau_s: float,
-          k_h: np.ndarray) -> np.ndarray:
-    """∂(ḣ + α(h))/∂x (M,3) for per-axis sensitivities of (Δp̂, Δv̂, Δâ) to x."""
+def _grads(pr: Prediction, cp: np.ndarray, cv: np.ndarray, ca: np.ndarray,
+           tau_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(∂ḣ_T/∂x, ∂h_T/∂x), each (M,3), for per-axis sensitivities of (Δp̂, Δv̂, Δâ) to x."""
     dh_dot = 2.0 * (cp * pr.dv + cv * pr.dp) + 2.0 * tau_s * (
         2.0 * cv * pr.dv + cp * pr.da + ca * pr.dp
     )
     dh = 2.0 * cp * pr.dp + 2.0 * tau_s * (cv * pr.dp + cp * pr.dv)
-    return dh_dot + k_h[:, None] * dh
+    return dh_dot, dh
+
+
+def _norm(x: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("ij,ij->i", x, x))
 
 
 def dcbf_rows(
@@ -165,20 +170,28 @@ def dcbf_rows(
     share: np.ndarray, lag: LagCoefficients, tau_s: float, d_safe: float,
     gamma1: float, gamma3: float, accel_err: float,
 ) -> tuple[np.ndarray, np.ndarray, Prediction]:
-    """Rows ``gᵀu ≥ r`` (g normalised to unit length, r in m/s²) and the prediction at u_ref.
+    """Rows ``gᵀu ≥ r`` (2M of them, g unit length, r in m/s²) and the prediction at u_ref.
 
-    ``f(u) = ḣ_T + γ1 h_T + γ3 h_T³ − ‖∂f/∂a‖ ē`` linearised at ``u_ref``:
-    ``gᵀ(u − u_ref) ≥ −share·f(u_ref)``. ``ē`` (m/s²) bounds the error of the assumed
-    relative acceleration (own disturbance estimate, neighbour's acceleration estimate).
+    With α(h) = γ1 h + γ3 h³ and h0 the barrier now, two conditions per pair:
+
+    * (C1) ``f(u) = ḣ_T + α(ĥ_T) − ‖∂f/∂a‖ ē ≥ 0`` (the CBF condition at x̂_T);
+    * (C2) ``ĥ_T − ‖∂ĥ_T/∂a‖ ē ≥ h0 − T α(h0)`` (no dip of h over the horizon).
+
+    Each linearised at ``u_ref``: ``gᵀ(u − u_ref) ≥ −share·c(u_ref)``. ``ē`` (m/s²) bounds
+    the error of the assumed relative acceleration over [0, T] (model, estimates).
     """
     pr = predict(dp, dv, a0, u_ref, a_other, lag, tau_s, d_safe)
-    k_h = gamma1 + 3.0 * gamma3 * pr.h**2
-    f = pr.hdot + gamma1 * pr.h + gamma3 * pr.h**3
+    h0 = np.einsum("ij,ij->i", dp, dp) + 2.0 * tau_s * np.einsum("ij,ij->i", dv, dp) - d_safe**2
+    k_h = (gamma1 + 3.0 * gamma3 * pr.h**2)[:, None]
     one = np.ones(3)
     # a constant relative-acceleration error e over [0, T] moves Δv̂ by eT, Δp̂ by eT²/2
-    g_err = _grad(pr, 0.5 * lag.T**2 * one, lag.T * one, one, tau_s, k_h)
-    f -= np.sqrt(np.einsum("ij,ij->i", g_err, g_err)) * accel_err
-    g = _grad(pr, lag.cp, lag.cv, lag.ca, tau_s, k_h)
-    nrm = np.maximum(np.sqrt(np.einsum("ij,ij->i", g, g)), 1e-9)
-    rhs = (g @ u_ref - share * f) / nrm
+    e_hd, e_h = _grads(pr, 0.5 * lag.T**2 * one, lag.T * one, one, tau_s)
+    u_hd, u_h = _grads(pr, lag.cp, lag.cv, lag.ca, tau_s)
+    c1 = pr.hdot + gamma1 * pr.h + gamma3 * pr.h**3 - _norm(e_hd + k_h * e_h) * accel_err
+    c2 = pr.h - _norm(e_h) * accel_err - (h0 - lag.T * (gamma1 * h0 + gamma3 * h0**3))
+    g = np.vstack([u_hd + k_h * u_h, u_h])
+    c = np.concatenate([c1, c2])
+    sh = np.concatenate([share, share])
+    nrm = np.maximum(_norm(g), 1e-9)
+    rhs = (g @ u_ref - sh * c) / nrm
     return g / nrm[:, None], rhs, pr

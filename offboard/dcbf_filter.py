@@ -24,6 +24,8 @@ from offboard.safety_filter import (
 from swarm_common.enums import Method
 from swarm_common.scenario import ControllerConfig, VehicleConfig
 
+REL_ACC_SMOOTH = 0.5  # low-pass weight of the previous relative-acceleration estimate
+
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
     """The realisable input polytope of ``[vehicle]`` with ``ctl.dcbf_cone_sides`` sides."""
@@ -48,14 +50,45 @@ class DcbfFilter(SafetyFilter):
         self.qp: DcbfQP | None = None
         self.lag: LagCoefficients | None = None
         self.brake_gain = 2.0
+        self.dt = 0.0
+        self._prev_dv: dict[int, np.ndarray] = {}
+        self._rel_acc: dict[int, np.ndarray] = {}
 
     def configure(self, veh: VehicleConfig, dt: float) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
         the prediction horizon is T = τ_rp + dt."""
         uset = input_set_of(self.ctl, veh)
-        self.qp = DcbfQP(len(self.leader_mask) - 1, uset, self.ctl.rho, self.ctl.clf_c)
+        self.qp = DcbfQP(2 * (len(self.leader_mask) - 1), uset, self.ctl.rho, self.ctl.clf_c)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
+        self.dt = dt
+
+    def _other_term(self, x: SafetyInput) -> np.ndarray:
+        """(M,3) ``a_j − w_i`` for :func:`~offboard.dcbf.dcbf_rows` (own lumped disturbance
+        is not lagged, so it enters as an offset of the other's acceleration).
+
+        Where the pair was sensed the step before: from the sensed relative velocity,
+        ``Δa = (Δv_k − Δv_{k−1})/dt = a_i − a_j`` over the last period with
+        ``a_i = ā_i + w_i`` (ā_i the inner-loop model's mean realised control), so
+        ``a_j − w_i = ā_i − Δa`` (low-passed, no disturbance estimate needed). Otherwise the
+        other's broadcast-velocity estimate minus the saturated own estimate.
+        """
+        n = len(x.pairs)
+        out = np.zeros((n, 3)) if x.other_acc is None else x.other_acc.copy()
+        out -= saturate_norm(x.w, W_SAFE)[None, :]
+        prev, self._prev_dv = self._prev_dv, {}
+        for r in range(n):
+            j = int(x.pairs[r])
+            self._prev_dv[j] = x.dv[r].copy()
+            if j not in prev:
+                self._rel_acc.pop(j, None)
+                continue
+            da = (x.dv[r] - prev[j]) / self.dt
+            old = self._rel_acc.get(j)
+            da = da if old is None else REL_ACC_SMOOTH * old + (1.0 - REL_ACC_SMOOTH) * da
+            self._rel_acc[j] = da
+            out[r] = x.a_mean - da
+        return out
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
         if self.qp is None or self.lag is None:
@@ -66,11 +99,8 @@ class DcbfFilter(SafetyFilter):
         side = self._sidestep(x, h)
         lm = self.leader_mask[x.pairs]
         share = np.where(lm, 1.0, 0.5)
-        other = x.other_acc if x.other_acc is not None else np.zeros((len(x.pairs), 3))
-        # own disturbance is not lagged: it enters as a constant offset of Δa
-        w_safe = saturate_norm(x.w, W_SAFE)
         g, rhs, _ = dcbf_rows(
-            x.dp, x.dv, x.a_real, x.u_prev, other - w_safe[None, :], share, self.lag,
+            x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x), share, self.lag,
             ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2,
         )

@@ -87,6 +87,7 @@ class FollowerAgent(AgentBase):
         self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX)
         self.u_prev = np.zeros(3)
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
+        self.a_mean = np.zeros(3)  # ... its mean over the last control period
         self.ids = sc.ids
         nb = set(self.form.neighbours[self.index])
         self._peers = [
@@ -135,13 +136,13 @@ class FollowerAgent(AgentBase):
         self.acc_est.ingest(neighbours)
         u = self._safe_control(SafetyInput(
             clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc,
-            self.a_real, self.u_prev, self.acc_est.rows(sel),
+            self.a_real, self.u_prev, self.a_mean, self.acc_est.rows(sel),
         ), status)
         sp: Setpoint = setpoint_from_accel(u, self.yaw, self.veh)
         status.input_clipped = input_clipped(sp, u, self.veh.mass_kg, self.veh.gravity_mps2)
         # --- observers to t_{k+1} ---------------------------------------------------
         u_sub = self.inner.run(sp, self.substeps)
-        self.u_prev, self.a_real = u, u_sub[-1].copy()
+        self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), u_sub.mean(axis=0)
         self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
         self.ref.update(peers.xi)
         status.n_used = self.deso.n_used

@@ -61,6 +61,7 @@ class SafetyInput:
     # previous command (m/s²) and the others' estimated actual accelerations (M,3)
     a_real: np.ndarray = field(default_factory=lambda: np.zeros(3))
     u_prev: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    a_mean: np.ndarray = field(default_factory=lambda: np.zeros(3))  # realised, last period
     other_acc: np.ndarray | None = None
 
 

@@ -96,6 +96,12 @@ def test_row_gradient_matches_finite_difference_of_prediction() -> None:
     fd = np.array([(f(u0 + eps * e) - f(u0 - eps * e)) / (2 * eps) for e in np.eye(3)])
     assert np.allclose(g[0], fd / np.linalg.norm(fd), atol=1e-6)
 
+    def h_t(u: np.ndarray) -> float:
+        return float(predict(dp, dv, a0, u, oth, lag, CTL.tau_safe_s, CTL.d_safe_m).h[0])
+
+    fd = np.array([(h_t(u0 + eps * e) - h_t(u0 - eps * e)) / (2 * eps) for e in np.eye(3)])
+    assert np.allclose(g[1], fd / np.linalg.norm(fd), atol=1e-6)
+
 
 def test_polytope_is_inside_true_tilt_cone_and_thrust_limit() -> None:
     uset = input_set_of(CTL, VEH)
@@ -124,7 +130,7 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
     fine = NSUB
     uset = input_set_of(CTL, VEH)
     lag = LagCoefficients.of(TAU, VEH.tau_rollpitch_s + DT)
-    qps = [DcbfQP(1, uset, CTL.rho, CTL.clf_c) for _ in range(2)]
+    qps = [DcbfQP(2, uset, CTL.rho, CTL.clf_c) for _ in range(2)]
     inners = [InnerLoopModel(VEH, DT / fine) for _ in range(2)]
     p = [np.array([-4.0, 0.0, 5.0]), np.array([4.0, 0.05, 5.0])]
     v = [np.array([2.0, 0.0, 0.0]), np.array([-2.0, 0.0, 0.0])]
