@@ -26,6 +26,7 @@ PAPER_TABLE3: dict[str, tuple[float, float]] = {
 }
 LABELS: dict[str, str] = {
     Method.RCBF: "Proposed RCBF",
+    Method.DCBF: "Sampled-data CBF (ours)",
     Method.APF: "Improved APF",
     Method.NONE: "No collision avoidance",
 }
