@@ -164,3 +164,20 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
     assert min(d_true) >= CTL.d_safe_m
     assert min(h_true) >= 0.0
     assert min(d_true) < 3.0  # the nominal input did push them together
+
+
+def test_input_clipped_flag_and_neighbour_acceleration() -> None:
+    from offboard.agent_types import NeighbourEstimate
+    from offboard.follower import NeighbourAccel, input_clipped
+
+    inside, outside = np.array([2.0, 1.0, 0.0]), np.array([7.0, 0.0, -3.0])  # 30° cone
+    for u, clipped in ((inside, False), (outside, True)):
+        sp = setpoint_from_accel(u, 0.0, VEH)
+        assert input_clipped(sp, u, VEH.mass_kg, VEH.gravity_mps2) is clipped
+    acc = NeighbourAccel([1, 2], a_max=5.0)
+    z = np.zeros(3)
+    for t, vx in ((0.0, 0.0), (0.02, 0.04), (0.04, 1.0)):
+        acc.ingest({2: NeighbourEstimate(2, t, z, np.array([vx, 0.0, 0.0]), z, np.zeros(12))})
+        if t == 0.02:
+            assert np.allclose(acc.rows(np.array([0, 1])), [[0, 0, 0], [2.0, 0, 0]])
+    assert np.allclose(acc.rows(np.array([1])), [[5.0, 0, 0]])  # 48 m/s² bounded to a_max

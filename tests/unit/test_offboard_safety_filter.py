@@ -9,6 +9,7 @@ import pytest
 
 from offboard.agent import FollowerAgent, LeaderAgent, make_agent
 from offboard.clf_rcbf import clf_terms
+from offboard.dcbf_filter import DcbfFilter
 from offboard.safety_filter import (
     SAFETY_FILTERS,
     ApfFilter,
@@ -38,6 +39,21 @@ def _input(dp: np.ndarray, dv: np.ndarray, pairs: list[int]) -> SafetyInput:
     return SafetyInput(clf, np.zeros(3), np.zeros(3), dp, dv, np.array(pairs, dtype=int), {})
 
 
+def _filters(sc, mask: np.ndarray) -> dict:
+    """make_filters, with the dcbf filter configured for the scenario's vehicle."""
+    filters = make_filters(sc.controller, LO, HI, mask)
+    dcbf = filters[Method.DCBF]
+    assert isinstance(dcbf, DcbfFilter)
+    dcbf.configure(sc.vehicle, sc.control_dt)
+    return filters
+
+
+def test_dcbf_needs_configure(sc) -> None:
+    filt = make_filters(sc.controller, LO, HI, np.zeros(sc.n, dtype=bool))[Method.DCBF]
+    with pytest.raises(RuntimeError, match="configure"):
+        filt.apply(_input(np.zeros((0, 3)), np.zeros((0, 3)), []))
+
+
 def test_every_method_has_exactly_its_filter() -> None:
     assert set(SAFETY_FILTERS) == set(Method)
     assert SAFETY_FILTERS[Method.RCBF] is RcbfFilter
@@ -50,7 +66,7 @@ def test_every_method_has_exactly_its_filter() -> None:
 def test_parse_method_accepts_member_or_string_and_rejects_others() -> None:
     assert parse_method("apf") is Method.APF
     assert parse_method(Method.RCBF) is Method.RCBF
-    with pytest.raises(ValueError, match="unknown method 'cbf'; use one of rcbf, apf, none"):
+    with pytest.raises(ValueError, match="unknown method 'cbf'; use one of rcbf, dcbf, apf, none"):
         parse_method("cbf")
 
 
@@ -72,7 +88,7 @@ def test_filters_without_pairs_return_the_clipped_nominal(sc) -> None:
     mask = np.zeros(sc.n, dtype=bool)
     x = _input(np.zeros((0, 3)), np.zeros((0, 3)), [])
     u_ref = np.clip(x.clf.u_nom, LO, HI)
-    for m, filt in make_filters(sc.controller, LO, HI, mask).items():
+    for m, filt in _filters(sc, mask).items():
         res = filt.apply(x)
         assert np.array_equal(res.u, u_ref), m
         assert res.h_min == np.inf and res.qp_status is QPStatus.INACTIVE and not res.fallback
