@@ -179,5 +179,5 @@ def test_input_clipped_flag_and_neighbour_acceleration() -> None:
     for t, vx in ((0.0, 0.0), (0.02, 0.04), (0.04, 1.0)):
         acc.ingest({2: NeighbourEstimate(2, t, z, np.array([vx, 0.0, 0.0]), z, np.zeros(12))})
         if t == 0.02:
-            assert np.allclose(acc.rows(np.array([0, 1])), [[0, 0, 0], [2.0, 0, 0]])
+            assert np.allclose(acc.rows(np.array([0, 1])), np.array([[0.0, 0, 0], [2.0, 0, 0]]))
     assert np.allclose(acc.rows(np.array([1])), [[5.0, 0, 0]])  # 48 m/s² bounded to a_max
