@@ -18,9 +18,10 @@ failure of it:
    (finite difference of its broadcast velocity, bounded), never a reference.
 
 A second condition per pair keeps h itself from dipping over the horizon:
-``ĥ_T ≥ h0 − T α(h0)`` (tightened by ē too). Both are quadratic in u (small coefficients);
-each step they are linearised at the previous command ``u_ref`` and every pair gives two
-rows ``gᵀ(u − u_ref) ≥ −share·c(u_ref)`` (share ½ follower–follower, 1 against a leader).
+``ĥ_T ≥ h0 − min(T α(h0), h0/2)`` (tightened by ē too). Both are convex quadratics in u
+(small coefficients); each step they are linearised at the previous command ``u_ref``
+(a lower bound, so conservative) and every pair gives two rows
+``gᵀ(u − u_ref) ≥ −share·c(u_ref)`` (share ½ follower–follower, 1 against a leader).
 """
 
 from __future__ import annotations
@@ -175,7 +176,8 @@ def dcbf_rows(
     With α(h) = γ1 h + γ3 h³ and h0 the barrier now, two conditions per pair:
 
     * (C1) ``f(u) = ḣ_T + α(ĥ_T) − ‖∂f/∂a‖ ē ≥ 0`` (the CBF condition at x̂_T);
-    * (C2) ``ĥ_T − ‖∂ĥ_T/∂a‖ ē ≥ h0 − T α(h0)`` (no dip of h over the horizon).
+    * (C2) ``ĥ_T − ‖∂ĥ_T/∂a‖ ē ≥ h0 − min(T α(h0), h0/2)`` (h0 > 0; ``h0 − T α(h0)``
+      for h0 ≤ 0, which demands growth): h does not dip over the horizon.
 
     Each linearised at ``u_ref``: ``gᵀ(u − u_ref) ≥ −share·c(u_ref)``. ``ē`` (m/s²) bounds
     the error of the assumed relative acceleration over [0, T] (model, estimates).
@@ -188,7 +190,9 @@ def dcbf_rows(
     e_hd, e_h = _grads(pr, 0.5 * lag.T**2 * one, lag.T * one, one, tau_s)
     u_hd, u_h = _grads(pr, lag.cp, lag.cv, lag.ca, tau_s)
     c1 = pr.hdot + gamma1 * pr.h + gamma3 * pr.h**3 - _norm(e_hd + k_h * e_h) * accel_err
-    c2 = pr.h - _norm(e_h) * accel_err - (h0 - lag.T * (gamma1 * h0 + gamma3 * h0**3))
+    drop = lag.T * (gamma1 * h0 + gamma3 * h0**3)
+    drop = np.where(h0 > 0.0, np.minimum(drop, 0.5 * h0), drop)  # keep ≥ half of h > 0
+    c2 = pr.h - _norm(e_h) * accel_err - (h0 - drop)
     g = np.vstack([u_hd + k_h * u_h, u_h])
     c = np.concatenate([c1, c2])
     sh = np.concatenate([share, share])
