@@ -66,6 +66,7 @@ class RunConfig:
     duration_s: float = _num(0.0, 3600.0, lo_open=True)  # s
     physics_hz: int = _int(50, 5000)  # Hz, fixed-step integration of the dynamics
     control_hz: int = _int(1, 1000)  # Hz, one setpoint per control step
+    formation_deadline_s: float = _num(0.0, 3600.0)  # s, start of the tracking-metric window
 
 
 @dataclass(frozen=True)
