@@ -12,7 +12,7 @@ Interface (all vectors ENU, z up; agents addressed by id, arrays in scenario ord
   follower uses them ONLY through its :class:`~offboard.sensing.Sensor` (relative
   bearing/range measurements); it never reads its own row. A leader reads its own row.
 * ``neighbours``: {id: NeighbourEstimate} published by the others at step k−1 (post-update,
-  i.e. valid for t_k). Missing entries or ``comm_ok=False`` (outage, errata 16): the agent
+  i.e. valid for t_k). Missing entries or ``comm_ok=False`` (outage, Departure 16): the agent
   predicts the last received data to t_k (constant velocity for followers' z, the
   exosystem for ξ and for leaders' broadcast state).
 * ``AgentOutput``: the attitude/thrust setpoint (as decoded from the float32 wire form),

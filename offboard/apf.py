@@ -1,4 +1,4 @@
-"""Baselines: "improved APF" and no collision avoidance (paper §5.4; errata 17).
+"""Baselines: "improved APF" and no collision avoidance (paper §5.4; Departure 17).
 
 Both use the same nominal formation controller as the CLF–RCBF method
 (:func:`offboard.clf_rcbf.clf_terms`); they differ only in how they avoid others:
@@ -17,7 +17,7 @@ import numpy as np
 def apf_term(
     dp: np.ndarray, d_dot: np.ndarray, gain: float, vgain: float, radius: float
 ) -> np.ndarray:
-    """Improved APF repulsion (errata 17) summed over sensed agents.
+    """Improved APF repulsion (Departure 17) summed over sensed agents.
 
     For d < R: ``[k (1/d − 1/R)/d² + k_v max(0, −ḋ)(1/d − 1/R)] n̂``, n̂ = (p_i − p_j)/d,
     ḋ the range rate (negative when closing): a distance part plus a part proportional to

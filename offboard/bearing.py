@@ -2,11 +2,11 @@
 
 * ``g_ij = (p_j − p_i)/‖p_j − p_i‖`` and ``P_ij = I₃ − g_ij g_ijᵀ`` (§2.1).
 * Desired bearings ``g*_ij`` come from the agents' formation ``vertex`` coordinates.
-* Neighbour graph (errata 3): ``"cube_face_diagonals"`` links pairs whose vertex distance
+* Neighbour graph (Departure 3): ``"cube_face_diagonals"`` links pairs whose vertex distance
   is the shortest one (cube edge) or √2 times it (face diagonal); ``"complete"`` links all.
 * Bearing Laplacian ``L`` (§2.1) with blocks ``−P*_ij`` off-diagonal and ``Σ_k P*_ik`` on
   the diagonal, partitioned into leaders/followers (``L_ff``, ``L_fl``).
-* Rigidity check (errata 3): ``rank L = 3N − 4`` (null space = translations + scaling) and
+* Rigidity check (Departure 3): ``rank L = 3N − 4`` (null space = translations + scaling) and
   ``λ_min(L_ff) > 0``; otherwise :class:`RigidityError`.
 
 Agents are addressed by their *index* in scenario order; ``ids`` maps index → id.
@@ -165,7 +165,7 @@ def build_formation(
 
 
 def check_rigidity(form: Formation, graph: str = "") -> None:
-    """Raise :class:`RigidityError` unless rank L = 3N−4 and λ_min(L_ff) > 0 (errata 3)."""
+    """Raise :class:`RigidityError` unless rank L = 3N−4 and λ_min(L_ff) > 0 (Departure 3)."""
     n = form.n
     need = 3 * n - 4
     if form.rank != need:

@@ -1,6 +1,6 @@
-"""CLF–RCBF quadratic program (paper §4.2–4.4; errata 10–14).
+"""CLF–RCBF quadratic program (paper §4.2–4.4; Departures 10–14).
 
-CLF (errata 10): with ``e1 = z1 − p̂*``, ``e2 = z2 − v̂*`` and the sliding variable
+CLF (Departure 10): with ``e1 = z1 − p̂*``, ``e2 = z2 − v̂*`` and the sliding variable
 ``s = e2 + λ e1``::
 
     V = k_p ‖e1‖² + k_d ‖s‖²
@@ -11,12 +11,12 @@ is a valid CLF. The nominal formation controller (shared by all methods)::
 
     u_nom = â* − w − λ e2 − k_s s − (k_p/k_d) e1     ⇒  V̇ = −2k_pλ‖e1‖² − 2k_d k_s‖s‖²
 
-RCBF (errata 12): ``h = ‖Δp‖² + 2τ Δvᵀ Δp − D²`` (§2.3, Δ = i − j) and the reciprocal
+RCBF (Departure 12): ``h = ‖Δp‖² + 2τ Δvᵀ Δp − D²`` (§2.3, Δ = i − j) and the reciprocal
 condition ``L_fB + L_gB u − γ/B ≤ 0`` with B = 1/h, which equals ``ḣ ≥ −γ h³``::
 
     ḣ = 2Δpᵀ Δv + 2τ (‖Δv‖² + Δpᵀ(a_i − a_j))
 
-Pairs (errata 13): every agent in sensing range; follower–follower pairs take half of
+Pairs (Departure 13): every agent in sensing range; follower–follower pairs take half of
 the budget each (``2τΔpᵀ a_i ≥ −½(2ΔpᵀΔv + 2τ‖Δv‖² + γh³)``), against a leader the
 follower takes all of it with the leader's broadcast acceleration. Δp, Δv come from the
 onboard relative sensing (available for non-neighbours, unlike estimates).
@@ -31,7 +31,7 @@ QP (§4.4), variables x = [u (3), δ, σ]::
 σ is an exact-penalty relaxation (linear weight M = max(10³, 50ρ) above the rows'
 multipliers, incl. the CLF row's 2ρδ; quadratic weight 100): σ = 0 whenever the
 hard RCBF rows and the box are jointly feasible; otherwise the QP returns the
-least-violating input and the step is counted as a fallback (errata 14). If OSQP itself
+least-violating input and the step is counted as a fallback (Departure 14). If OSQP itself
 fails, the fallback is braking ``u = clip(−w − k_b z2)``. u is never NaN.
 """
 
@@ -70,7 +70,7 @@ def clf_terms(
     lam: float,
     ks: float,
 ) -> ClfTerms:
-    """CLF of errata 10 and the nominal formation controller (see module docstring)."""
+    """CLF of Departure 10 and the nominal formation controller (see module docstring)."""
     s = e2 + lam * e1
     v = kp * float(e1 @ e1) + kd * float(s @ s)
     drift = w - a_ref + lam * e2
@@ -99,7 +99,7 @@ def rcbf_rows(
     margin: float = 1e-3,
     h: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """RCBF rows ``n̂ᵀu ≥ r`` for agent i (errata 12–13) and h per pair.
+    """RCBF rows ``n̂ᵀu ≥ r`` for agent i (Departures 12–13) and h per pair.
 
     dp, dv (M,3): Δp = p_i − p_j, Δv = v_i − v_j; w_i (3,): own lumped disturbance
     estimate; a_other (M,3): other agent's acceleration taken as known (leaders'

@@ -3,7 +3,7 @@
 Variables x = [u (3), δ, σ] (docs/safety.md §4)::
 
     min ½‖u − u_nom‖² + ρ δ² + ρ_σ σ² + M σ
-    s.t.  L_gV u − δ ≤ −L_fV − cV            (soft CLF, as the RCBF QP, errata 10–11)
+    s.t.  L_gV u − δ ≤ −L_fV − cV            (soft CLF, as the RCBF QP, Departures 10–11)
           gᵀu + σ ≥ r                       per sensed pair (:func:`offboard.dcbf.dcbf_rows`)
           A_U u ∈ [lo, hi]                  input polytope (:class:`offboard.dcbf.InputSet`)
           σ ≥ 0

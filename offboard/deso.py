@@ -1,14 +1,14 @@
-"""Parameter-adaptive distributed extended state observer, DESO (paper §3; errata 5–8).
+"""Parameter-adaptive distributed extended state observer, DESO (paper §3; Departures 5–8).
 
 Follower i estimates its position z1, velocity z2 and lumped residual z3 (the extended
 state x3: external disturbance and whatever the adaptive model does not explain)::
 
     ż1 = z2                      − β1 e1
-    ż2 = z3 + Φ(z1, z2) ζ̂ + u    − β2 e1 − κ2 e2  (stable sign, errata 5)
+    ż2 = z3 + Φ(z1, z2) ζ̂ + u    − β2 e1 − κ2 e2  (stable sign, Departure 5)
     ż3 =                         − β3 e1 − κ3 e2
-    ζ̂̇  = −μ Φᵀ(z1, z2) e2 − μ σ ζ̂                 (σ-modification; sign as errata 5)
+    ζ̂̇  = −μ Φᵀ(z1, z2) e2 − μ σ ζ̂                 (σ-modification; sign as Departure 5)
 
-with the innovations of errata 6 (``r_ij = p_j − p_i`` measured as ``g_ij d_ij``)::
+with the innovations of Departure 6 (``r_ij = p_j − p_i`` measured as ``g_ij d_ij``)::
 
     e1 = Σ_j P*_ij [(z1 − ẑ_j1) + r_ij]      e2 = Σ_j P*_ij [(z2 − ẑ_j2) + ṙ_ij]
 
@@ -117,7 +117,7 @@ def _cont_matrix(
 
 @dataclass
 class GainReport:
-    """Numbers of the DESO gain check (errata 7); ``lines()`` for printing at start-up."""
+    """Numbers of the DESO gain check (Departure 7); ``lines()`` for printing at start-up."""
 
     beta: tuple[float, ...]
     dt: float
@@ -204,7 +204,7 @@ def gain_report(
     form: Formation, beta: tuple[float, ...], dt: float, substeps: int,
     leader_anchor: float = 0.0, kappa: tuple[float, ...] = (0.0, 0.0),
 ) -> GainReport:
-    """Per-channel and sampled-loop stability numbers of the DESO gains (errata 7).
+    """Per-channel and sampled-loop stability numbers of the DESO gains (Departure 7).
 
     The channels are the eigenvalues of the observer's Laplacian
     ``L_ff + leader_anchor·n_leaders·I`` (= L_ff for the paper's observer).

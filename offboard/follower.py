@@ -100,7 +100,7 @@ class FollowerAgent(AgentBase):
 
     @property
     def gains(self) -> GainReport:
-        """DESO gain check (errata 7), computed on first use."""
+        """DESO gain check (Departure 7), computed on first use."""
         if self._gains is None:
             obs = self.sc.observer
             self._gains = gain_report(
@@ -165,7 +165,7 @@ class FollowerAgent(AgentBase):
         return out
 
     def _nominal(self, w: np.ndarray) -> ClfTerms:
-        """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, errata 10)."""
+        """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10)."""
         ctl, ref = self.ctl, self.ref
         e1 = self.deso.z1 - ref.p
         e2 = self.deso.z2 - ref.v

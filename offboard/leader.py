@@ -1,5 +1,5 @@
 """Leader agent: PD + feed-forward on its own trajectory with a small velocity ESO for its
-disturbance (errata 4). It publishes its state predicted for t_{k+1} and ξ_L(t_{k+1})."""
+disturbance (Departure 4). It publishes its state predicted for t_{k+1} and ξ_L(t_{k+1})."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from swarm_common.scenario import Scenario
 
 
 class LeaderAgent(AgentBase):
-    """Leader: tracks p_L(t) = p_L(0) + A(1 − cos ωt) with its own state (errata 4)."""
+    """Leader: tracks p_L(t) = p_L(0) + A(1 − cos ωt) with its own state (Departure 4)."""
 
     is_leader = True
 

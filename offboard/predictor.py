@@ -1,5 +1,5 @@
 """Neighbour data ageing: the last received estimate per agent, predicted to a requested
-time (errata 16, ``communication.max_age_s``).
+time (Departure 16, ``communication.max_age_s``).
 
 The desired state ξ is propagated by the exosystem (:func:`offboard.reference.exo_propagator`);
 the agent's offset from it (e1 = z1 − p*, e2 = z2 − v*) by the closed-loop error dynamics
@@ -24,7 +24,7 @@ Prediction = tuple[np.ndarray, np.ndarray, np.ndarray]  # (p, v, ξ) of one agen
 
 
 class NeighbourPredictor:
-    """Last received estimate per agent, predicted to a requested time (errata 16).
+    """Last received estimate per agent, predicted to a requested time (Departure 16).
 
     ``omega`` (rad/s) is the exosystem frequency, ``dt`` (s) the control period;
     ``fol_gains``/``lead_gains`` are (k_p', k_v) of the error dynamics of followers and

@@ -1,10 +1,10 @@
-"""Leader trajectory and the desired-state observer (paper §4.1; errata 4, 9).
+"""Leader trajectory and the desired-state observer (paper §4.1; Departures 4, 9).
 
-Leader trajectory (errata 4): every leader moves by the same smooth offset
+Leader trajectory (Departure 4): every leader moves by the same smooth offset
 ``p_L(t) = p_L(0) + A (1 − cos ωt)``, ω = 2π f (``[leader_trajectory]``), so the
 bearings between leaders stay constant and the desired formation is a rigid translation.
 
-Exosystem (errata 9): per axis ``x'''' = −ω² x''`` i.e. ``ξ̇ = (S ⊗ I₃) ξ`` with
+Exosystem (Departure 9): per axis ``x'''' = −ω² x''`` i.e. ``ξ̇ = (S ⊗ I₃) ξ`` with
 ``ξ = [p, ṗ, p̈, p⃛]`` (12,) and ``S = [[0,1,0,0],[0,0,1,0],[0,0,0,1],[0,0,−ω²,0]]``;
 it generates constant + ramp + sinusoid, hence the trajectory above exactly.
 
@@ -57,7 +57,7 @@ def xi_at_rest(p: np.ndarray) -> np.ndarray:
 
 
 def exo_matrix(omega: float) -> np.ndarray:
-    """4×4 exosystem matrix S of x'''' = −ω² x'' (errata 9)."""
+    """4×4 exosystem matrix S of x'''' = −ω² x'' (Departure 9)."""
     s = np.zeros((4, 4))
     s[0, 1] = s[1, 2] = s[2, 3] = 1.0
     s[3, 2] = -omega * omega

@@ -3,10 +3,10 @@
 One class per collision-avoidance method (:class:`swarm_common.enums.Method`), found
 through :data:`SAFETY_FILTERS`; a new method plugs in by adding a ``Method`` member and
 one :class:`SafetyFilter` subclass decorated with :func:`register_filter`. Every filter
-starts from the same nominal formation controller ``u_nom`` (paper §4.2, errata 10):
+starts from the same nominal formation controller ``u_nom`` (paper §4.2, Departure 10):
 
-* ``rcbf``: CLF–RCBF QP (§4.3–4.4, errata 12–14) of :mod:`offboard.clf_rcbf`;
-* ``apf``: improved artificial potential field (§5.4, errata 17) of :mod:`offboard.apf`;
+* ``rcbf``: CLF–RCBF QP (§4.3–4.4, Departures 12–14) of :mod:`offboard.clf_rcbf`;
+* ``apf``: improved artificial potential field (§5.4, Departure 17) of :mod:`offboard.apf`;
 * ``dcbf``: CLF + sampled-data CBF QP over the realisable input set
   (:mod:`offboard.dcbf_filter`, docs/safety.md);
 * ``none``: the nominal control clipped to the box.
@@ -128,7 +128,7 @@ class NoFilter(SafetyFilter):
 
 @register_filter
 class ApfFilter(SafetyFilter):
-    """Improved APF: ``u = clip(u_nom + Σ u_rep + u_side)`` (§5.4, errata 17)."""
+    """Improved APF: ``u = clip(u_nom + Σ u_rep + u_side)`` (§5.4, Departure 17)."""
 
     method = Method.APF
 
@@ -163,7 +163,7 @@ class RcbfFilter(SafetyFilter):
 
     def _other_accel(self, x: SafetyInput, lm: np.ndarray) -> np.ndarray:
         """(M,3) acceleration of the other agent taken as known: leaders' broadcast a*,
-        zero for followers (errata 13)."""
+        zero for followers (Departure 13)."""
         a_other = np.zeros((len(x.pairs), 3))
         if x.lead_acc and np.any(lm):
             for r in np.nonzero(lm)[0]:

@@ -1,4 +1,4 @@
-"""Synthetic onboard relative sensing (paper §3 inputs; errata 6).
+"""Synthetic onboard relative sensing (paper §3 inputs; Departure 6).
 
 For agent i and every other agent j within ``formation.sensing_range_m`` the sensor gives
 the bearing ``g_ij``, the bearing rate ``ġ_ij = P_ij (v_j − v_i)/d_ij``, the distance
