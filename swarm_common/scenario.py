@@ -1,6 +1,7 @@
 """Scenario files (TOML under ``scenarios/``): schema, validation and typed access.
 
-Every key is declared once in ``SCHEMA`` with its type and allowed range. Loading
+Every key is declared once in :mod:`swarm_common.scenario_schema` (``SCHEMA``, generated
+from one frozen dataclass per section) with its type and allowed range. Loading
 rejects an unknown key, a wrong type or an out-of-range value with one
 :class:`ScenarioError` line naming the key and what is allowed, e.g.::
 
@@ -11,285 +12,56 @@ Vectors are in the paper's world frame (ENU-style, z up); see docs/conventions.m
 
 from __future__ import annotations
 
-import math
 import tomllib
-from dataclasses import dataclass, field, fields
-from enum import StrEnum
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from swarm_common.enums import GraphKind, Method, Role
+from swarm_common.enums import Role
+from swarm_common.scenario_schema import (
+    AGENT_SCHEMA,
+    SCHEMA,
+    SECTIONS,
+    CommunicationConfig,
+    ControllerConfig,
+    DisturbanceConfig,
+    FormationConfig,
+    LeaderTrajectoryConfig,
+    ObserverConfig,
+    RunConfig,
+    SensingConfig,
+    UnmodeledConfig,
+    VehicleConfig,
+    check_value,
+    describe_spec,
+    toml_value,
+    typed_value,
+)
+
+__all__ = [
+    "SCHEMA",
+    "AgentSpec",
+    "CommunicationConfig",
+    "ControllerConfig",
+    "DisturbanceConfig",
+    "FormationConfig",
+    "LeaderTrajectoryConfig",
+    "ObserverConfig",
+    "RunConfig",
+    "Scenario",
+    "ScenarioError",
+    "SensingConfig",
+    "UnmodeledConfig",
+    "VehicleConfig",
+    "load_scenario",
+    "parse_scenario",
+]
 
 
 class ScenarioError(ValueError):
     """A scenario file is missing, unreadable or invalid. ``str()`` is one line."""
-
-
-# ---------------------------------------------------------------------------
-# Schema. Each section is a frozen dataclass; each field carries its spec in its
-# metadata, and ``SCHEMA`` is generated from the dataclasses, so the typed view and
-# the validation cannot disagree. A spec is a tuple
-#   ("float", lo, hi, lo_open, hi_open) | ("int", lo, hi) | ("str", choices)
-#   ("vec", n, lo, hi)  (list of n numbers) | ("windows",) | ("ids",)
-# ---------------------------------------------------------------------------
-Spec = tuple[Any, ...]
-
-
-def _num(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False) -> Any:
-    return field(metadata={"spec": ("float", lo, hi, lo_open, hi_open)})
-
-
-def _int(lo: int, hi: int) -> Any:
-    return field(metadata={"spec": ("int", lo, hi)})
-
-
-def _vec(n: int, lo: float, hi: float) -> Any:
-    return field(metadata={"spec": ("vec", n, lo, hi)})
-
-
-def _choice(enum: type[StrEnum] | None) -> Any:
-    return field(metadata={"spec": ("str", tuple(enum) if enum else None), "enum": enum})
-
-
-def _special(kind: str) -> Any:
-    return field(metadata={"spec": (kind,)})
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """``[scenario]``: name, seed and clocks."""
-
-    name: str = _choice(None)
-    seed: int = _int(0, 2**32 - 1)
-    duration_s: float = _num(0.0, 3600.0, lo_open=True)  # s
-    physics_hz: int = _int(50, 5000)  # Hz, fixed-step integration of the dynamics
-    control_hz: int = _int(1, 1000)  # Hz, one setpoint per control step
-    formation_deadline_s: float = _num(0.0, 3600.0)  # s, start of the tracking-metric window
-
-
-@dataclass(frozen=True)
-class VehicleConfig:
-    """``[vehicle]``: airframe and inner-loop model (paper 2.1)."""
-
-    mass_kg: float = _num(0.05, 100.0)
-    gravity_mps2: float = _num(0.0, 30.0)
-    thrust_max_n: float = _num(0.0, 5000.0, lo_open=True)
-    tilt_max_deg: float = _num(0.0, 89.0, lo_open=True)
-    tau_rollpitch_s: float = _num(0.0, 5.0, lo_open=True)
-    tau_yaw_s: float = _num(0.0, 5.0, lo_open=True)
-    tau_thrust_s: float = _num(0.0, 5.0, lo_open=True)
-    collision_radius_m: float = _num(0.0, 10.0, lo_open=True)
-
-
-@dataclass(frozen=True)
-class DisturbanceConfig:
-    """``[disturbance]``: d(t) = [A cos wt, A sin wt, A sin wt] N (paper 5.1)."""
-
-    amplitude_n: float = _num(0.0, 100.0)
-    omega_rad_s: float = _num(0.0, 100.0)
-
-
-@dataclass(frozen=True)
-class UnmodeledConfig:
-    """``[unmodeled]``: f~ = Phi(p, v) zeta (paper 2.2), m/s^2 per regressor unit."""
-
-    zeta_nominal: tuple[float, ...] = _vec(6, -10.0, 10.0)
-    zeta_spread: float = _num(0.0, 1.0)
-    ground_effect_height_m: float = _num(0.0, 100.0, lo_open=True)
-
-
-@dataclass(frozen=True)
-class FormationConfig:
-    """``[formation]``: leaders, neighbour graph and sensing range."""
-
-    leaders: tuple[int, ...] = _special("ids")
-    graph: GraphKind = _choice(GraphKind)
-    sensing_range_m: float = _num(0.0, 1000.0, lo_open=True)
-
-
-@dataclass(frozen=True)
-class LeaderTrajectoryConfig:
-    """``[leader_trajectory]``: p_L(t) = p_L(0) + A (1 - cos wt), w = 2 pi f."""
-
-    frequency_hz: float = _num(0.0, 10.0)
-    amplitude_m: tuple[float, ...] = _vec(3, -100.0, 100.0)
-
-
-@dataclass(frozen=True)
-class SensingConfig:
-    """``[sensing]``: noise standard deviations and per-pair dropout probability."""
-
-    bearing_noise_rad: float = _num(0.0, 1.0)
-    bearing_rate_noise_radps: float = _num(0.0, 10.0)
-    distance_noise_m: float = _num(0.0, 10.0)
-    range_rate_noise_mps: float = _num(0.0, 10.0)
-    dropout_prob: float = _num(0.0, 1.0, hi_open=True)
-
-
-@dataclass(frozen=True)
-class CommunicationConfig:
-    """``[communication]``: outage windows (s) and neighbour-data ageing (s)."""
-
-    outages_s: tuple[tuple[float, float], ...] = _special("windows")
-    max_age_s: float = _num(0.0, 10.0, lo_open=True)
-
-
-@dataclass(frozen=True)
-class ObserverConfig:
-    """``[observer]``: DESO (paper 3) and desired-state observer (paper 4.1) gains."""
-
-    beta: tuple[float, ...] = _vec(3, 0.0, 1e4)
-    mu: float = _num(0.0, 100.0)
-    sigma: float = _num(0.0, 100.0)
-    substeps: int = _int(1, 100)
-    reference_gain: float = _num(0.0, 1e4, lo_open=True)
-    init_pos_error_m: float = _num(0.0, 100.0)
-    init_vel_error_mps: float = _num(0.0, 100.0)
-    leader_anchor: float = _num(0.0, 100.0)
-    velocity_gain: tuple[float, ...] = _vec(2, 0.0, 1e4)
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    """``[controller]``: CLF (paper 4.2), RCBF (4.3), APF baseline and leader PD."""
-
-    method: Method = _choice(Method)
-    kp: float = _num(0.0, 1e4, lo_open=True)
-    kd: float = _num(0.0, 1e4, lo_open=True)
-    clf_lambda: float = _num(0.0, 1e3, lo_open=True)
-    clf_c: float = _num(0.0, 1e3, lo_open=True)
-    rho: float = _num(0.0, 1e9, lo_open=True)
-    u_max_mps2: float = _num(0.0, 100.0, lo_open=True)
-    gamma: float = _num(0.0, 100.0, lo_open=True)
-    tau_safe_s: float = _num(0.0, 10.0)
-    d_safe_m: float = _num(0.0, 100.0, lo_open=True)
-    apf_gain: float = _num(0.0, 1e4)
-    apf_velocity_gain: float = _num(0.0, 1e4)
-    apf_radius_m: float = _num(0.0, 100.0, lo_open=True)
-    leader_kp: float = _num(0.0, 1e3, lo_open=True)
-    leader_kd: float = _num(0.0, 1e3, lo_open=True)
-    ks: float = _num(0.0, 1e3, lo_open=True)
-    deadlock_gain: float = _num(0.0, 100.0)
-    deadlock_h_m2: float = _num(0.0, 1e3, lo_open=True)
-    # dcbf (docs/safety.md): class-K  alpha(h) = g_lin h + g_cubic h^3, acceleration error
-    # bound of the prediction, K sides of the tilt-cone polytope
-    dcbf_gamma_lin: float = _num(0.0, 100.0)
-    dcbf_gamma_cubic: float = _num(0.0, 100.0)
-    dcbf_accel_error_mps2: float = _num(0.0, 10.0)
-    dcbf_cone_sides: int = _int(3, 64)
-
-
-# TOML section name -> its dataclass, in file order.
-SECTIONS: dict[str, type] = {
-    "scenario": RunConfig,
-    "vehicle": VehicleConfig,
-    "disturbance": DisturbanceConfig,
-    "unmodeled": UnmodeledConfig,
-    "formation": FormationConfig,
-    "leader_trajectory": LeaderTrajectoryConfig,
-    "sensing": SensingConfig,
-    "communication": CommunicationConfig,
-    "observer": ObserverConfig,
-    "controller": ControllerConfig,
-}
-
-SCHEMA: dict[str, dict[str, Spec]] = {
-    section: {f.name: f.metadata["spec"] for f in fields(cls)} for section, cls in SECTIONS.items()
-}
-
-AGENT_SCHEMA: dict[str, Spec] = {
-    "id": ("int", 1, 255),
-    "role": ("str", tuple(Role)),
-    "position": ("vec", 3, -1e4, 1e4),
-    "velocity": ("vec", 3, -100.0, 100.0),
-    "vertex": ("vec", 3, -1e3, 1e3),
-}
-
-
-def _typed_value(f: Any, value: Any) -> Any:
-    """A validated TOML value as the dataclass field holds it."""
-    kind = f.metadata["spec"][0]
-    if kind == "float":
-        return float(value)
-    if kind == "vec":
-        return tuple(float(v) for v in value)
-    if kind == "ids":
-        return tuple(int(v) for v in value)
-    if kind == "windows":
-        return tuple((float(w[0]), float(w[1])) for w in value)
-    if kind == "str" and f.metadata["enum"] is not None:
-        return f.metadata["enum"](value)
-    return value
-
-
-def _toml_value(value: Any) -> Any:
-    """A typed field value back in TOML form (lists, plain str)."""
-    if isinstance(value, tuple):
-        return [_toml_value(v) for v in value]
-    if isinstance(value, StrEnum):
-        return str(value)
-    return value
-
-
-def _describe(spec: Spec) -> str:
-    kind = spec[0]
-    if kind == "float":
-        _, lo, hi, lo_open, hi_open = spec
-        return f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
-    if kind == "int":
-        return f"an integer in [{spec[1]}, {spec[2]}]"
-    if kind == "str":
-        return "one of " + ", ".join(repr(c) for c in spec[1]) if spec[1] else "a string"
-    if kind == "vec":
-        return f"a list of {spec[1]} numbers in [{spec[2]:g}, {spec[3]:g}]"
-    if kind == "windows":
-        return "a list of [start, end] pairs with 0 <= start < end"
-    if kind == "ids":
-        return "a non-empty list of agent ids (integers 1..255)"
-    raise AssertionError(kind)
-
-
-def _is_num(x: Any) -> bool:
-    return isinstance(x, int | float) and not isinstance(x, bool)
-
-
-def _check(value: Any, spec: Spec) -> bool:
-    kind = spec[0]
-    if kind == "float":
-        _, lo, hi, lo_open, hi_open = spec
-        if not _is_num(value) or not math.isfinite(value):
-            return False
-        ok_lo = value > lo if lo_open else value >= lo
-        ok_hi = value < hi if hi_open else value <= hi
-        return ok_lo and ok_hi
-    if kind == "int":
-        is_int = isinstance(value, int) and not isinstance(value, bool)
-        return is_int and spec[1] <= value <= spec[2]
-    if kind == "str":
-        return isinstance(value, str) and (spec[1] is None or value in spec[1])
-    if kind == "vec":
-        return (
-            isinstance(value, list)
-            and len(value) == spec[1]
-            and all(_is_num(v) and math.isfinite(v) and spec[2] <= v <= spec[3] for v in value)
-        )
-    if kind == "windows":
-        return isinstance(value, list) and all(
-            isinstance(w, list)
-            and len(w) == 2
-            and all(_is_num(x) and math.isfinite(x) for x in w)
-            and 0 <= w[0] < w[1]
-            for w in value
-        )
-    if kind == "ids":
-        return (
-            isinstance(value, list)
-            and len(value) > 0
-            and all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 255 for v in value)
-        )
-    raise AssertionError(kind)
 
 
 # ---------------------------------------------------------------------------
@@ -334,7 +106,7 @@ class Scenario:
     def to_toml_dict(self) -> dict[str, Any]:
         """The scenario as a TOML document (sections and ``agent`` list)."""
         data: dict[str, Any] = {
-            name: {f.name: _toml_value(getattr(self.section(name), f.name)) for f in fields(cls)}
+            name: {f.name: toml_value(getattr(self.section(name), f.name)) for f in fields(cls)}
             for name, cls in SECTIONS.items()
         }
         data["agent"] = [
@@ -441,10 +213,10 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
         out: dict[str, Any] = {}
         for key, spec in keys.items():
             if key not in given:
-                raise fail(f"missing key {section}.{key} ({_describe(spec)})")
+                raise fail(f"missing key {section}.{key} ({describe_spec(spec)})")
             v = given[key]
-            if not _check(v, spec):
-                raise fail(f"{section}.{key} = {v!r}: must be {_describe(spec)}")
+            if not check_value(v, spec):
+                raise fail(f"{section}.{key} = {v!r}: must be {describe_spec(spec)}")
             out[key] = v
         raw[section] = out
 
@@ -475,9 +247,9 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
                 raise fail(f"unknown key {where}.{key}; allowed: {', '.join(AGENT_SCHEMA)}")
         for key, spec in AGENT_SCHEMA.items():
             if key not in a:
-                raise fail(f"missing key {where}.{key} ({_describe(spec)})")
-            if not _check(a[key], spec):
-                raise fail(f"{where}.{key} = {a[key]!r}: must be {_describe(spec)}")
+                raise fail(f"missing key {where}.{key} ({describe_spec(spec)})")
+            if not check_value(a[key], spec):
+                raise fail(f"{where}.{key} = {a[key]!r}: must be {describe_spec(spec)}")
         if a["id"] in seen:
             raise fail(f"{where}.id = {a['id']}: duplicate agent id")
         seen.add(a["id"])
@@ -510,7 +282,7 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
                 )
     typed = {
         ("run" if name == "scenario" else name): cls(
-            **{f.name: _typed_value(f, raw[name][f.name]) for f in fields(cls)}
+            **{f.name: typed_value(f, raw[name][f.name]) for f in fields(cls)}
         )
         for name, cls in SECTIONS.items()
     }
