@@ -62,7 +62,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     from gcs.inproc import run_inproc
     from gcs.run_output import print_result
 
-    res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True)
+    res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True,
+                     land_at=args.land_at)
     if args.out:
         res.save(args.out)
         log.info("wrote %s/metrics.json, series.npz", args.out)
@@ -221,6 +222,8 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="seconds (default: scenario)")
     r.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
+    r.add_argument("--land-at", type=_non_negative_seconds, default=None, metavar="T",
+                   help="coordinated land-all at mission time T s (docs/lifecycle.md)")
     d = r.add_argument_group("distributed runs (without --inproc)")
     d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
     d.add_argument("--port-offset", type=int, default=0, help="added to every UDP/TCP port")

@@ -37,6 +37,7 @@ from gcs.run_output import (
 )
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.bearing import formation_from_scenario
+from offboard.landing import landing_plan
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
@@ -102,10 +103,14 @@ def run_inproc(
     seed: int | None = None,
     duration: float | None = None,
     progress: bool = False,
+    land_at: float | None = None,
 ) -> MissionResult:
     """Run a mission in process and return its metrics and time series.
 
     ``progress``: log the gains and show a :class:`~gcs.progress.Progress` on stderr.
+    ``land_at``: mission time (s) of a coordinated land-all (offboard.landing,
+    docs/lifecycle.md): from the first step at or after it every agent tracks its landing
+    reference, the safety filter still active.
     """
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
@@ -134,6 +139,11 @@ def run_inproc(
     t_wall = time.perf_counter()
     for k in range(n_steps):
         t = k * dt
+        if land_at is not None and t >= land_at and agents[0].landing is None:
+            plan = landing_plan(sc, t, form)
+            log.info("land-all at t=%.2f s (transit %.2f s)", t, plan.t_h)
+            for ag in agents:
+                ag.start_landing(plan)
         tp, tv = f32(dyn.p), f32(dyn.v)
         comm = not in_outage(t, sc.outages)
         set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)

@@ -11,6 +11,7 @@ import numpy as np
 
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import InnerLoopModel, Setpoint
+from offboard.landing import LandingPlan, LandingReference, landed
 from offboard.safety_filter import parse_method
 from swarm_common.enums import Method
 from swarm_common.scenario import Scenario
@@ -51,10 +52,28 @@ class AgentBase(ABC):
         self.inner = InnerLoopModel(self.veh, self.dt / self.substeps)
         self.u_lo, self.u_hi = control_box(sc)
         self.yaw = 0.0
+        self.landing: LandingReference | None = None
 
     def set_method(self, method: Method | str) -> None:
         """Switch the collision-avoidance method (at run time); ValueError if unknown."""
         self.method = parse_method(method)
+
+    def start_landing(self, plan: LandingPlan) -> None:
+        """Switch to the coordinated land-all of ``plan`` (offboard.landing) from the current
+        reference at ``plan.t_land``; the safety filter stays active. Idempotent."""
+        if self.landing is None:
+            self.landing = LandingReference(plan, self.index, self.current_reference(plan.t_land))
+
+    def landed_idle(self, t: float, z: float, u: np.ndarray) -> np.ndarray:
+        """``u``, or the idle command (lowest vertical acceleration, no tilt) once the landing
+        reference ended and the altitude ``z`` (m) is below offboard.landing.LANDED_Z."""
+        if landed(self.landing, t, z):
+            return np.array([0.0, 0.0, self.u_lo[2]])
+        return u
+
+    @abstractmethod
+    def current_reference(self, t: float) -> np.ndarray:
+        """ξ = [p*, v*, a*, j*] (12,) this agent tracks at t."""
 
     @abstractmethod
     def initial_estimate(self) -> NeighbourEstimate:

@@ -20,7 +20,14 @@ from offboard.clf_rcbf import ClfTerms, clf_terms
 from offboard.dcbf_filter import DcbfFilter
 from offboard.deso import DESO, GainReport, gain_report
 from offboard.predictor import NeighbourPredictor
-from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
+from offboard.reference import (
+    DesiredStateObserver,
+    xi_a,
+    xi_at_rest,
+    xi_j,
+    xi_p,
+    xi_v,
+)
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from swarm_common.enums import Method
@@ -130,7 +137,7 @@ class FollowerAgent(AgentBase):
         w_raw = self.deso.lumped()
         # peaking of the high-gain observer: saturate the disturbance estimate used in control
         w = saturate_norm(w_raw, W_MAX)
-        clf = self._nominal(w)
+        clf = self._nominal(w, t)
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
         self.acc_est.ingest(neighbours)
@@ -138,6 +145,8 @@ class FollowerAgent(AgentBase):
             clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc,
             self.a_real, self.u_prev, self.a_mean, self.acc_est.rows(sel),
         ), status)
+        if self.landing is not None:
+            u = self.landed_idle(t, float(self.deso.z1[2]), u)
         sp: Setpoint = setpoint_from_accel(u, self.yaw, self.veh)
         status.input_clipped = input_clipped(sp, u, self.veh.mass_kg, self.veh.gravity_mps2)
         # --- observers to t_{k+1} ---------------------------------------------------
@@ -164,14 +173,19 @@ class FollowerAgent(AgentBase):
                 out.lead_acc[j] = xi_a(got[2])
         return out
 
-    def _nominal(self, w: np.ndarray) -> ClfTerms:
+    def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10)."""
         ctl, ref = self.ctl, self.ref
-        e1 = self.deso.z1 - ref.p
-        e2 = self.deso.z2 - ref.v
+        if self.landing is not None:  # offboard.landing: the plan replaces ξ̂
+            xi = self.landing.xi(t)
+            p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
+        else:
+            p, v, a, j = ref.p, ref.v, ref.a, ref.j
+        e1 = self.deso.z1 - p
+        e2 = self.deso.z2 - v
         # acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): compensates the
         # first-order attitude lag of the inner loop on the moving reference
-        a_ff = ref.a + self.tau_ff * ref.j
+        a_ff = a + self.tau_ff * j
         return clf_terms(e1, e2, w, a_ff, ctl.kp, ctl.kd, ctl.clf_lambda, ctl.ks)
 
     def _safe_control(self, x: SafetyInput, status: AgentStatus) -> np.ndarray:
@@ -188,11 +202,18 @@ class FollowerAgent(AgentBase):
         status.fallbacks = self.fallbacks
         return u
 
+    def current_reference(self, t: float) -> np.ndarray:
+        """The landing reference once landing, else the observer's ξ̂ (valid at its last
+        update time; ``t`` is used only by the landing reference)."""
+        if self.landing is not None:
+            return self.landing.xi(t)
+        return self.ref.xi.copy()
+
     def _estimate(self, t: float) -> NeighbourEstimate:
         """What this agent publishes, valid at ``t``."""
         d = self.deso
         return NeighbourEstimate(
-            self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.ref.xi.copy(), False
+            self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False
         )
 
 

@@ -46,6 +46,12 @@ class LeaderAgent(AgentBase):
             return xi_at_rest(xi_p(self.traj.state(0.0)))
         return self.traj.state(t)
 
+    def current_reference(self, t: float) -> np.ndarray:
+        """The landing reference once landing, else :meth:`reference`."""
+        if self.landing is not None:
+            return self.landing.xi(t)
+        return self.reference(t)
+
     def initial_estimate(self) -> NeighbourEstimate:
         spec = self.sc.agents[self.index]
         return NeighbourEstimate(
@@ -64,17 +70,19 @@ class LeaderAgent(AgentBase):
     ) -> AgentOutput:
         p = np.asarray(truth_p[self.index], dtype=float)
         v = np.asarray(truth_v[self.index], dtype=float)
-        ref = self.reference(t)
+        ref = self.current_reference(t)
         a_ff = xi_a(ref) + self.veh.tau_rollpitch_s * xi_j(ref)  # lag compensation
         u = a_ff - self.d_hat + self.kp * (xi_p(ref) - p) + self.kd * (xi_v(ref) - v)
         u = np.clip(u, self.u_lo, self.u_hi)
+        if self.landing is not None:
+            u = self.landed_idle(t, float(p[2]), u)
         sp = setpoint_from_accel(u, self.yaw, self.veh)
         u_sub = self.inner.run(sp, self.substeps)
         self._update_eso(v, u_sub)
         a = u_sub.mean(axis=0) + self.d_hat
         est = NeighbourEstimate(
             self.id, t + self.dt, p + v * self.dt + 0.5 * a * self.dt**2, v + a * self.dt,
-            self.d_hat.copy(), self.reference(t + self.dt), True,
+            self.d_hat.copy(), self.current_reference(t + self.dt), True,
         )
         status = AgentStatus(method=self.method, comm_ok=comm_ok)
         real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, self.veh.mass_kg,
