@@ -140,8 +140,8 @@ def run_inproc(
     for k in range(n_steps):
         t = k * dt
         if land_at is not None and t >= land_at and agents[0].landing is None:
-            plan = landing_plan(sc, t, form)
-            log.info("land-all at t=%.2f s (transit %.2f s)", t, plan.t_h)
+            plan = landing_plan(sc, land_at, form)  # t_L = land_at, as in offboard.daemon
+            log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
             for ag in agents:
                 ag.start_landing(plan)
         tp, tv = f32(dyn.p), f32(dyn.v)

@@ -19,6 +19,7 @@ import resource
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -120,8 +121,12 @@ def run_distributed(
     kill_at: float | None = None,
     show_progress: bool = True,
     stall_timeout: float = 20.0,
+    land_at: float | None = None,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
+
+    ``land_at``: publish a Zenoh land-all command (``wire.Command`` kind "land", at_s =
+    land_at) until the run passes that mission time (docs/lifecycle.md).
 
     Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
     busy, :class:`MissionError` when a child dies or the run stalls. Every child is
@@ -148,9 +153,11 @@ def run_distributed(
         for name, argv in spec.processes():
             group.start(name, argv)
         bar = Progress(duration, label=str(method)) if show_progress else None
+        on_step = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
+                                                             sc.control_dt)
         facts.update(
             _supervise(rec, group, sc.control_dt, kill_agent, kill_at, bar,
-                       stall_timeout, out_dir)
+                       stall_timeout, out_dir, on_step)
         )
         facts["processes"] = group.usage()
         facts["processes"]["gcs (router + recorder)"] = {
@@ -177,6 +184,23 @@ def run_distributed(
     return rec, facts
 
 
+def _land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callable[[int], None]:
+    """on_step callback: (re)publish the land command every 0.5 s (wall) from step 1 on
+    (every agent subscribed) until the run is 1 s past ``land_at``; the daemons keep the
+    first one they receive."""
+    key = wire.key_cmd(swarm, "land")
+    payload = wire.encode(wire.Command(kind="land", at_s=float(land_at)))
+    last = [0.0]
+
+    def send(k: int) -> None:
+        now = time.monotonic()
+        if k >= 1 and k * dt <= land_at + 1.0 and now - last[0] >= 0.5:
+            session.put(key, payload)
+            last[0] = now
+
+    return send
+
+
 def _supervise(
     rec: Recorder,
     group: ProcessGroup,
@@ -186,6 +210,7 @@ def _supervise(
     bar: Progress | None,
     stall_timeout: float,
     out_dir: Path,
+    on_step: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Watch a started run until step ``rec.steps``: show progress, kill ``kill_agent``
     at ``kill_at`` (s), raise :class:`MissionError` on a death or a stall. Returns the
@@ -209,6 +234,8 @@ def _supervise(
                     bar.update(max(k, 0) * dt)
             if k >= rec.steps:
                 break
+            if on_step is not None:
+                on_step(k)
             if victim is not None and not facts["killed_agents"] and k * dt >= (kill_at or 0.0):
                 group.kill(victim)
                 facts["killed_agents"].append(kill_agent)
@@ -311,11 +338,12 @@ def run_and_score(
     kill_agent: int | None = None,
     kill_at: float | None = None,
     show_progress: bool = True,
+    land_at: float | None = None,
 ) -> dict[str, Any]:
     """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document."""
     rec, facts = run_distributed(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
-        kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress,
+        kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
     )
     metrics, ser = recorded_metrics(rec, sc, facts["wall_s"], duration)
     doc = run_document(
@@ -343,7 +371,7 @@ def cli_run(args: Any, sc: Scenario) -> int:
         doc = run_and_score(
             sc, out, method, args.seed, duration, realtime=args.realtime,
             port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
-            show_progress=True,
+            show_progress=True, land_at=getattr(args, "land_at", None),
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)

@@ -38,6 +38,7 @@ from offboard.agent import (
     NeighbourEstimate,
     make_agent,
 )
+from offboard.landing import landing_plan
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.reference import xi_p
 from offboard.safety_filter import parse_method
@@ -118,6 +119,7 @@ class DaemonConfig:
     zenoh_listen: list[str] = field(default_factory=list)
     zenoh_mode: str = "client"
     manual_start: bool = False  # leave arming / OFFBOARD to the operator
+    land_at: float | None = None  # mission time (s) of a coordinated land-all
 
 
 class OffboardDaemon:
@@ -146,6 +148,7 @@ class OffboardDaemon:
         self.stop = False
         self.startup_done = False  # OFFBOARD accepted and armed
         self.trajectory_started = False
+        self.land_at: float | None = cfg.land_at
 
     # -- helpers ----------------------------------------------------------------------
     def comm_ok(self, t: float) -> bool:
@@ -167,6 +170,17 @@ class OffboardDaemon:
             elif cmd.kind == "outage" and cmd.duration_s > 0:
                 self.extra_outages.append((t, t + cmd.duration_s))
                 log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
+            elif cmd.kind == "land" and self.land_at is None:
+                self.land_at = cmd.at_s if cmd.at_s >= 0.0 else t
+                log.info("agent %d: land-all at t=%.2f s", self.id, self.land_at)
+
+    def _maybe_start_landing(self, t: float) -> None:
+        """From the first step at or after ``land_at``: the common plan of offboard.landing,
+        computed for t_L = ``land_at`` (the same on every agent, no communication)."""
+        if self.land_at is not None and t >= self.land_at and self.agent.landing is None:
+            plan = landing_plan(self.sc, self.land_at)
+            self.agent.start_landing(plan)
+            log.info("agent %d: landing at t=%.2f s (transit %.2f s)", self.id, t, plan.t_h)
 
     def _maybe_start_trajectory(self, t: float) -> None:
         """Real time: hold p_L(0) until flying in OFFBOARD, then start the trajectory at
@@ -254,6 +268,7 @@ class OffboardDaemon:
         if truth is None:
             return False
         self._apply_commands(t)
+        self._maybe_start_landing(t)
         if not self.cfg.lockstep and isinstance(self.agent, LeaderAgent):
             self._maybe_start_trajectory(t)
         received, comm_ok = self._neighbours_for(k, t)

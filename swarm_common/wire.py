@@ -10,6 +10,7 @@ key                                    payload                                  
 ``<root>/<swarm>/agent/<id>/status``   :class:`Status`                             offboard
 ``<root>/<swarm>/cmd/method``          :class:`Command` kind="method"              gcs
 ``<root>/<swarm>/cmd/outage``          :class:`Command` kind="outage"              gcs
+``<root>/<swarm>/cmd/land``            :class:`Command` kind="land"                gcs
 =====================================  ==========================================  ==========
 
 Payloads are msgpack maps with a version field ``"v": 1``; every float vector is
@@ -141,12 +142,15 @@ class Status:
 
 @dataclass
 class Command:
-    """A ground-station command to the swarm: ``kind`` = "method" or "outage"."""
+    """A ground-station command to the swarm: ``kind`` = "method", "outage" or "land"
+    (coordinated land-all, docs/lifecycle.md: every agent starts its landing reference at
+    mission time ``at_s``; a negative ``at_s`` means at the step the command arrives)."""
 
     kind: str
     agent: int = 0  # 0 = all
     method: str = ""
     duration_s: float = 0.0
+    at_s: float = -1.0
 
 
 Payload = Truth | Estimate | Status | Command
@@ -215,6 +219,7 @@ def encode(obj: Payload) -> bytes:
             "agent": int(obj.agent),
             "method": obj.method,
             "dur": float(obj.duration_s),
+            "at": float(obj.at_s),
         }
     else:
         raise TypeError(f"cannot encode {type(obj).__name__}")
@@ -289,6 +294,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 agent=int(d["agent"]),
                 method=str(d["method"]),
                 duration_s=float(d["dur"]),
+                at_s=float(d.get("at", -1.0)),
             )
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, WireError):

@@ -7,8 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT  # noqa: E402
+from conftest import ROOT, free_port_offset  # noqa: E402
 
+from gcs.inproc import run_inproc
+from gcs.mission import recorded_metrics, run_distributed
 from offboard.landing import landing_plan
 from swarm_common.scenario import load_scenario
 
@@ -42,3 +44,18 @@ def test_land_all_cube8_safe_and_on_pads(tmp_path: Path, method: str, pad_tol: f
     # the landing phase itself keeps the vehicles far apart (stacked layers on distinct pads)
     t = ser["t"]
     assert ser["min_dist"][t >= LAND_AT].min() >= 1.0
+
+
+def test_distributed_land_all_matches_inproc(tmp_path: Path) -> None:
+    """The Zenoh land command (gcs.mission, offboard.daemon) reproduces the in-process
+    land-all to float32 wire rounding (< 1e-6 m; test_mission_distributed)."""
+    sc = load_scenario(CUBE8)
+    ref = run_inproc(sc, "rcbf", duration=30.0, land_at=LAND_AT)
+    rec, facts = run_distributed(
+        sc, tmp_path, "rcbf", None, 30.0, port_offset=free_port_offset(), show_progress=False,
+        land_at=LAND_AT,
+    )
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], 30.0)
+    assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
+    assert m["collisions"] == ref.metrics["collisions"] == 0
+    assert np.all(ser.p[-1, :, 2] <= 0.1)
