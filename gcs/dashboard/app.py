@@ -12,7 +12,8 @@ a      arm                                                    COMMAND_LONG 400 p
 d      disarm                                                 COMMAND_LONG 400 p1=0
 f      start formation (OFFBOARD)                             DO_SET_MODE 176 129,6
 h      hold (AUTO.LOITER)                                     DO_SET_MODE 176 129,4,3
-l      land                                                   NAV_LAND 21
+l      land; all vehicles with Zenoh up: coordinated land-all Zenoh Command "land" (else
+       (docs/lifecycle.md), else per vehicle AUTO.LAND          NAV_LAND 21)
 x      emergency stop (asks first)                            DO_FLIGHTTERMINATION 185
 m      collision-avoidance method rcbf / apf / none           Zenoh Command "method"
 o      inject a communication outage                          Zenoh Command "outage"
@@ -62,6 +63,7 @@ WARNING = mavlink.MAV_SEVERITY_WARNING
 ERROR = mavlink.MAV_SEVERITY_ERROR
 OUTAGES_S = (0.5, 1.0, 2.0, 5.0)
 MAV_ACTIONS = ("arm", "disarm", "offboard", "hold", "land")
+LAND_LEAD_S = 1.0  # s of mission time between the land-all key and the common t_L
 WIDE_TABLE_COLUMNS = 150
 
 
@@ -75,7 +77,7 @@ class DashboardApp(App[int]):
         Binding("d", "mav('disarm')", "Disarm"),
         Binding("f", "mav('offboard')", "Formation"),
         Binding("h", "mav('hold')", "Hold"),
-        Binding("l", "mav('land')", "Land"),
+        Binding("l", "land", "Land"),
         Binding("x", "estop", "E-STOP"),
         Binding("m", "method", "Method"),
         Binding("o", "outage", "Outage"),
@@ -207,6 +209,19 @@ class DashboardApp(App[int]):
                 r.sysid, "ack", r.describe(), mavlink.MAV_SEVERITY_INFO if r.ok else ERROR
             )
 
+    def action_land(self) -> None:
+        """All vehicles with a Zenoh link up: the coordinated land-all (offboard.landing),
+        starting LAND_LEAD_S after the swarm's latest mission time, safety filter active;
+        otherwise MAV_CMD_NAV_LAND (AUTO.LAND) to each target, as before."""
+        ids = self.targets()
+        up = getattr(self.commander, "zenoh_up", None)
+        if self.target_all and len(ids) > 1 and callable(up) and up():
+            t_now = getattr(self.commander, "mission_time", lambda: None)()
+            at_s = -1.0 if t_now is None else float(t_now) + LAND_LEAD_S
+            self.send_zenoh(Command(kind="land", agent=0, at_s=at_s))
+            return
+        self.send_mav("land", ids)
+
     def action_estop(self) -> None:
         ids = self.targets()
         if not ids:
@@ -258,7 +273,10 @@ class DashboardApp(App[int]):
 
     def send_zenoh(self, cmd: Command) -> None:
         who = "all" if cmd.agent == 0 else f"#{cmd.agent}"
-        what = f"method {cmd.method}" if cmd.kind == "method" else f"outage {cmd.duration_s:g} s"
+        what = {
+            "method": f"method {cmd.method}", "outage": f"outage {cmd.duration_s:g} s",
+            "land": f"land-all at t={cmd.at_s:.2f} s" if cmd.at_s >= 0 else "land-all now",
+        }.get(cmd.kind, cmd.kind)
         if self.commander is None:
             self.log_event(0, "cmd", f"{what} ({who}): read-only (no command link)", WARNING)
             return
@@ -271,7 +289,7 @@ class DashboardApp(App[int]):
         self.published.append(key)
         self.log_event(
             cmd.agent,
-            "outage" if cmd.kind == "outage" else "method",
+            cmd.kind if cmd.kind in ("outage", "land") else "method",
             f"{what} ({who}) published",
             NOTICE,
         )
@@ -306,4 +324,9 @@ class DashboardApp(App[int]):
                 "Inject a communication outage (Zenoh)",
                 lambda d=d: self.send_zenoh(Command(kind="outage", agent=0, duration_s=d)),
             )
+        yield SystemCommand(
+            "Coordinated land-all (Zenoh)",
+            "Every agent lands on its own pad, lowest first, safety filter active",
+            lambda: self.send_zenoh(Command(kind="land", agent=0, at_s=-1.0)),
+        )
         yield SystemCommand("Toggle command target (selected / all)", "", self.action_toggle_target)

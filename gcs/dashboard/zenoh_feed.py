@@ -254,13 +254,23 @@ class ZenohFeed:
         """Publish ``cmd`` on ``key_cmd(swarm, cmd.kind)``; returns the key."""
         if cmd.kind == "method" and cmd.method not in METHODS:
             raise ValueError(f"method {cmd.method!r}: must be one of {', '.join(METHODS)}")
-        if cmd.kind not in ("method", "outage"):
-            raise ValueError(f"command kind {cmd.kind!r}: must be 'method' or 'outage'")
+        if cmd.kind not in ("method", "outage", "land"):
+            raise ValueError(f"command kind {cmd.kind!r}: must be 'method', 'outage' or 'land'")
         if self._session is None:
             raise RuntimeError("zenoh feed is not started")
         key = key_cmd(self.swarm, cmd.kind)
         self._session.put(key, encode(cmd))
         return key
+
+    @property
+    def started(self) -> bool:
+        """The Zenoh session is open (commands can be published)."""
+        return self._session is not None
+
+    def mission_time(self) -> float | None:
+        """Latest mission time (s) any agent reported in its status, None before any."""
+        with self._lock:
+            return max((st.t for st, _ in self.status.values()), default=None)
 
     def switch_method(self, method: str, agent: int = 0) -> str:
         return self.publish(Command(kind="method", agent=agent, method=method))

@@ -1,0 +1,122 @@
+"""Dashboard ``l`` (docs/lifecycle.md): all vehicles with Zenoh up -> one Zenoh land-all
+command at the swarm's mission time + LAND_LEAD_S; otherwise AUTO.LAND per vehicle."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from gcs.dashboard.app import LAND_LEAD_S, DashboardApp
+from gcs.dashboard.commands import LiveCommander
+from gcs.dashboard.mavlink_gcs import CommandResult
+from gcs.dashboard.px4modes import COMMANDS
+from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.zenoh_feed import ZenohFeed
+from offboard.zenoh_link import SwarmBus
+from swarm_common.wire import Command
+from swarm_common.zenoh_session import open_session
+
+
+class Commander:
+    def __init__(self, up: bool, t: float | None = 12.5) -> None:
+        self.up, self.t = up, t
+        self.mav_calls: list[tuple[int, str]] = []
+        self.zenoh_calls: list[Command] = []
+
+    async def mav(self, sysid: int, key: str) -> CommandResult:
+        self.mav_calls.append((sysid, key))
+        spec = COMMANDS[key]
+        return CommandResult(sysid, spec.command, spec.label, 0, 1, 0.01)
+
+    def zenoh(self, cmd: Command) -> str:
+        self.zenoh_calls.append(cmd)
+        return f"swarm/test/cmd/{cmd.kind}"
+
+    def zenoh_up(self) -> bool:
+        return self.up
+
+    def mission_time(self) -> float | None:
+        return self.t
+
+
+async def settle(app, pilot, pred, tries: int = 100) -> bool:
+    for _ in range(tries):
+        await app.workers.wait_for_complete()
+        await pilot.pause()
+        if pred():
+            return True
+    return False
+
+
+@pytest.mark.asyncio
+async def test_land_all_goes_out_as_one_zenoh_command() -> None:
+    cmd = Commander(up=True)
+    app = DashboardApp(recorded_source(), cmd)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("t", "l")
+        assert await settle(app, pilot, lambda: bool(cmd.zenoh_calls))
+        assert cmd.mav_calls == []
+        (c,) = cmd.zenoh_calls
+        assert c.kind == "land" and c.agent == 0
+        assert c.at_s == pytest.approx(12.5 + LAND_LEAD_S)
+
+
+@pytest.mark.asyncio
+async def test_single_vehicle_or_no_zenoh_uses_auto_land() -> None:
+    cmd = Commander(up=True)
+    app = DashboardApp(recorded_source(), cmd)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("down", "down", "l")  # vehicle 3 only
+        assert await settle(app, pilot, lambda: bool(cmd.mav_calls))
+        assert cmd.mav_calls == [(3, "land")] and cmd.zenoh_calls == []
+    down = Commander(up=False)
+    app = DashboardApp(recorded_source(), down)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("t", "l")
+        assert await settle(app, pilot, lambda: len(down.mav_calls) > 1)
+        assert {k for _, k in down.mav_calls} == {"land"} and down.zenoh_calls == []
+
+
+def test_feed_land_command_reaches_the_agents_bus() -> None:
+    """ZenohFeed (dashboard) -> offboard.zenoh_link.SwarmBus (daemon): the land command with
+    its at_s, and the feed's mission time from the agents' status."""
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    agent_session = open_session(listen=[ep])
+    bus = SwarmBus(agent_session, "t2", 3)
+    feed = ZenohFeed("t2", ids=[3], connect=[ep]).start()
+    got: list[Command] = []
+    try:
+        commander = LiveCommander(feed=feed)
+        assert commander.zenoh_up() and commander.mission_time() is None
+
+        def send() -> bool:
+            commander.zenoh(Command(kind="land", at_s=7.25))
+            bus.pump()
+            got.extend(bus.pop_commands())
+            return bool(got)
+
+        assert wait_for(send)
+        assert got[0].kind == "land" and got[0].at_s == 7.25
+    finally:
+        feed.close()
+        bus.close()
+        agent_session.close()
+
+
+def wait_for(pred, timeout: float = 8.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.05)
+    return pred()
+
+
+def free_tcp_port() -> int:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
