@@ -284,7 +284,7 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
             if aid in idx:
                 set_agent_row(
                     ser, r, idx[aid], st.u, st.lumped, st.h_min, st.qp_solve_us, st.qp_status,
-                    getattr(st, "input_clipped", False),
+                    st.input_clipped,
                 )
     # Real time: an agent may skip a stamp (late cycle), leaving a row without its
     # message; hold the last value (lockstep runs have none missing).
@@ -313,12 +313,10 @@ def recorded_metrics(
     valid = ~np.isnan(ser.min_dist)
     if not np.all(valid):  # a run cut short: drop the incomplete tail
         ser = Series(**{k: v[valid] for k, v in ser.as_dict().items()})
-    # input_clipped is counted only if the statuses on the wire carry it (docs/metrics.md)
-    clipped_known = all(hasattr(st, "input_clipped") for st in rec.last_status.values())
     metrics = compute_metrics(
         ser, form.follower_idx, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
-        safety_spec(sc, clipped_known and bool(rec.last_status)),
+        safety_spec(sc, bool(rec.last_status)),
     )
     return metrics, ser
 

@@ -97,6 +97,7 @@ def status_to_wire(
         p_des=np.asarray(xi_p(out.estimate.xi), dtype=float),
         comm_ok=comm_ok,
         lumped=np.asarray(out.lumped, dtype=float),
+        input_clipped=bool(st.input_clipped),
     )
 
 

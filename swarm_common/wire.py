@@ -138,6 +138,7 @@ class Status:
     p_des: np.ndarray = field(default_factory=lambda: np.zeros(3))
     comm_ok: bool = True
     lumped: np.ndarray = field(default_factory=lambda: np.zeros(3))  # z3 + Φζ̂ used, m/s²
+    input_clipped: bool = False  # the setpoint conversion changed the commanded u this step
 
 
 @dataclass
@@ -210,6 +211,7 @@ def encode(obj: Payload) -> bytes:
             "p_des": _pack_vec(obj.p_des),
             "comm": bool(obj.comm_ok),
             "lump": _pack_vec(obj.lumped),
+            "clip": bool(obj.input_clipped),
         }
     elif isinstance(obj, Command):
         d = {
@@ -287,6 +289,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 p_des=_unpack_vec(d["p_des"], (3,)),
                 comm_ok=bool(d["comm"]),
                 lumped=_unpack_vec(d["lump"], (3,)) if "lump" in d else np.zeros(3),
+                input_clipped=bool(d.get("clip", False)),
             )
         if kind == "cmd":
             return Command(

@@ -43,6 +43,9 @@ def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
     assert len(ser.t) == len(ref.series.t) == int(dur * 50)
     assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
+    # clipped inputs travel in the status record: the same steps as in process
+    assert m["input_clipped_steps"] == ref.metrics["input_clipped_steps"]
+    assert np.array_equal(ser.input_clipped, ref.series.input_clipped)
     assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
     # estimates received over Zenoh equal the in-process published ones (both float32)
     np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)

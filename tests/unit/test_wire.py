@@ -47,6 +47,10 @@ def test_estimate_status_command_roundtrip() -> None:
     s = wire.Status(3, 1, 0.02, "OFFBOARD", "rcbf", "solved", 55.0, 1.2, 0.3, "ok", 0)
     rs = wire.roundtrip(s)
     assert isinstance(rs, wire.Status) and rs.qp_status == "solved" and rs.h_min == 1.2
+    assert rs.input_clipped is False
+    s.input_clipped = True
+    rc = wire.roundtrip(s)
+    assert isinstance(rc, wire.Status) and rc.input_clipped is True
     c = wire.roundtrip(wire.Command("outage", agent=0, duration_s=0.5))
     assert isinstance(c, wire.Command) and c.duration_s == 0.5
 
