@@ -280,6 +280,7 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
                 raise fail(
                     f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
                 )
+    _check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
     typed = {
         ("run" if name == "scenario" else name): cls(
             **{f.name: typed_value(f, raw[name][f.name]) for f in fields(cls)}
@@ -287,6 +288,33 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
         for name, cls in SECTIONS.items()
     }
     return Scenario(path=path, agents=tuple(agents), **typed)
+
+
+def _check_separation(
+    agents: list[AgentSpec], leaders: list[int], d_safe: float, fail: Any
+) -> None:
+    """Refuse a scenario that is unsafe before it starts: two agents starting closer than
+    ``controller.d_safe_m``, or a formation whose vertices, scaled by the leaders'
+    separation (Departure 1), put two agents closer than that."""
+    p = np.array([a.position for a in agents])
+    v = np.array([a.vertex for a in agents])
+    k1, k2 = (next(k for k, a in enumerate(agents) if a.id == lid) for lid in leaders[:2])
+    scale = float(np.linalg.norm(p[k1] - p[k2]) / np.linalg.norm(v[k1] - v[k2]))
+    for i in range(len(agents)):
+        for j in range(i + 1, len(agents)):
+            d0 = float(np.linalg.norm(p[i] - p[j]))
+            if d0 < d_safe:
+                raise fail(
+                    f"agent[{j}].position = {p[j].tolist()}: starts {d0:.3f} m from agent id "
+                    f"{agents[i].id}, closer than controller.d_safe_m = {d_safe:g}"
+                )
+            dv = scale * float(np.linalg.norm(v[i] - v[j]))
+            if dv < d_safe:
+                raise fail(
+                    f"agent[{j}].vertex = {v[j].tolist()}: {dv:.3f} m from agent id "
+                    f"{agents[i].id}'s vertex at the leaders' scale, closer than "
+                    f"controller.d_safe_m = {d_safe:g}"
+                )
 
 
 def load_scenario(path: str | Path) -> Scenario:

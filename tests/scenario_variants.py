@@ -24,4 +24,7 @@ CASES = [
     ("zeta_spread = 0.2", "zeta_spread = -0.2", ["unmodeled.zeta_spread", "[0, 1]"]),
     ("position = [4.0, 0.0, 6.0]", "position = [4.0, 0.0]", ["agent[0].position", "3 numbers"]),
     ("[sensing]", "[sensingg]\nx = 1\n[sensing]", ["sensingg", "allowed"]),
+    # unsafe before it starts: agent 3 starts 0.2 m from agent 4; a vertex 0.4 m from another
+    ("position = [2.0, 0.4, 2.9]", "position = [2.0, 0.4, 4.9]", ["agent[3].position", "d_safe_m"]),
+    ("vertex = [0, 0, 1]", "vertex = [0, 0, 0.1]", ["agent[3].vertex", "d_safe_m"]),
 ]
