@@ -38,6 +38,7 @@ from gcs.run_output import (
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.bearing import formation_from_scenario
 from offboard.landing import landing_plan
+from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
@@ -180,6 +181,8 @@ def run_inproc(
     metrics = compute_metrics(
         ser, form.follower_idx, dt, veh.mass_kg, veh.gravity_mps2, dyn.collisions,
         dyn.zeta, zeta_est, fallbacks, wall, dur, safety_spec(sc),
+        takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
+        land_at_s=land_at,
     )
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,

@@ -135,17 +135,28 @@ def window_tracking(
 
 
 def min_distance_by_phase(
-    t: np.ndarray, min_dist: np.ndarray, deadline_s: float
+    t: np.ndarray, min_dist: np.ndarray, deadline_s: float,
+    takeoff_end_s: float | None = None, land_at_s: float | None = None,
 ) -> dict[str, float | None]:
-    """Smallest pair distance (m) per phase (keys :data:`PHASES`): "formation" t < deadline,
-    "mission" t ≥ deadline; "takeoff"/"landing" are not flown yet (None), as is a phase
-    without steps."""
+    """Smallest pair distance (m) per phase (keys :data:`PHASES`): "takeoff" t < takeoff_end_s
+    (ground starts, docs/lifecycle.md; else None), "formation" from then to the deadline,
+    "mission" from the deadline to ``land_at_s`` (or the end), "landing" t ≥ land_at_s (None
+    without a land-all); a phase without steps is None."""
 
     def mn(mask: np.ndarray) -> float | None:
         return float(min_dist[mask].min()) if np.any(mask) else None
 
-    mission = t >= deadline_s - 1e-9
-    return {"takeoff": None, "formation": mn(~mission), "mission": mn(mission), "landing": None}
+    eps = 1e-9
+    takeoff = t < takeoff_end_s - eps if takeoff_end_s is not None else np.zeros(len(t), bool)
+    landing = t >= land_at_s - eps if land_at_s is not None else np.zeros(len(t), bool)
+    mission = (t >= deadline_s - eps) & ~landing
+    formation = ~takeoff & ~mission & ~landing
+    return {
+        "takeoff": mn(takeoff) if takeoff_end_s is not None else None,
+        "formation": mn(formation),
+        "mission": mn(mission),
+        "landing": mn(landing) if land_at_s is not None else None,
+    }
 
 
 @dataclass(frozen=True)
@@ -172,8 +183,11 @@ def compute_metrics(
     duration_s: float,
     spec: SafetySpec,
     est_after_s: float = 5.0,
+    takeoff_end_s: float | None = None,
+    land_at_s: float | None = None,
 ) -> dict[str, Any]:
-    """The metrics dict (keys :data:`METRIC_KEYS`; definitions in docs/metrics.md)."""
+    """The metrics dict (keys :data:`METRIC_KEYS`; definitions in docs/metrics.md).
+    ``takeoff_end_s`` / ``land_at_s`` (s): phase bounds of ``min_distance_by_phase_m``."""
     f = follower_idx
     err = np.linalg.norm(s.p[:, f] - s.p_des[:, f], axis=2)
     late = s.t >= est_after_s
@@ -187,7 +201,9 @@ def compute_metrics(
     deadline = spec.formation_deadline_s
     return {
         "min_distance_m": float(s.min_dist.min()),
-        "min_distance_by_phase_m": min_distance_by_phase(s.t, s.min_dist, deadline),
+        "min_distance_by_phase_m": min_distance_by_phase(
+            s.t, s.min_dist, deadline, takeoff_end_s, land_at_s
+        ),
         **barrier_metrics(s.p, s.v, spec.tau_safe_s, spec.d_safe_m),
         "collisions": int(collisions),
         "input_clipped_steps": int(np.sum(s.input_clipped)) if spec.clipped_known else None,

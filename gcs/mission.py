@@ -42,6 +42,7 @@ from gcs.run_output import (
     write_run,
 )
 from offboard.bearing import formation_from_scenario
+from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common import wire
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
@@ -298,9 +299,10 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
 
 
 def recorded_metrics(
-    rec: Recorder, sc: Scenario, wall_s: float, duration: float
+    rec: Recorder, sc: Scenario, wall_s: float, duration: float, land_at: float | None = None
 ) -> tuple[dict[str, Any], Series]:
-    """Metrics of a distributed run, computed by the same function as in process."""
+    """Metrics of a distributed run, computed by the same function as in process
+    (``land_at``: the land-all time, s, bounds the "landing" phase)."""
     ser = recorder_series(rec, sc)
     form = formation_from_scenario(sc)
     veh = sc.vehicle
@@ -317,6 +319,8 @@ def recorded_metrics(
         ser, form.follower_idx, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
         safety_spec(sc, bool(rec.last_status)),
+        takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
+        land_at_s=land_at,
     )
     return metrics, ser
 
@@ -343,7 +347,7 @@ def run_and_score(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
     )
-    metrics, ser = recorded_metrics(rec, sc, facts["wall_s"], duration)
+    metrics, ser = recorded_metrics(rec, sc, facts["wall_s"], duration, land_at)
     doc = run_document(
         sc.name, method, sc.seed if seed is None else seed, metrics,
         mode="realtime" if realtime else "lockstep", run=facts,

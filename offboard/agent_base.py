@@ -13,6 +13,7 @@ from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import InnerLoopModel, Setpoint
 from offboard.landing import LandingPlan, LandingReference, landed
 from offboard.safety_filter import parse_method
+from offboard.takeoff import TakeoffPlan, is_ground_start, takeoff_plan
 from swarm_common.enums import Method
 from swarm_common.scenario import Scenario
 
@@ -53,6 +54,8 @@ class AgentBase(ABC):
         self.u_lo, self.u_hi = control_box(sc)
         self.yaw = 0.0
         self.landing: LandingReference | None = None
+        # ground start (offboard.takeoff): the common take-off plan, else None
+        self.takeoff: TakeoffPlan | None = takeoff_plan(sc) if is_ground_start(sc) else None
 
     def set_method(self, method: Method | str) -> None:
         """Switch the collision-avoidance method (at run time); ValueError if unknown."""

@@ -30,6 +30,7 @@ from offboard.reference import (
 )
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
+from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
 from swarm_common.scenario import Scenario
 
@@ -178,6 +179,9 @@ class FollowerAgent(AgentBase):
         ctl, ref = self.ctl, self.ref
         if self.landing is not None:  # offboard.landing: the plan replaces ξ̂
             xi = self.landing.xi(t)
+            p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
+        elif self.takeoff is not None and t < self.takeoff.t_blend:  # offboard.takeoff
+            xi = follower_xi(self.takeoff, self.index, t, self.ref.xi)
             p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
         else:
             p, v, a, j = ref.p, ref.v, ref.a, ref.j

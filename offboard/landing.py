@@ -29,6 +29,7 @@ import numpy as np
 
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.reference import LeaderTrajectory, xi_a, xi_p, xi_v
+from offboard.takeoff import leader_origin
 from swarm_common.scenario import Scenario
 
 V_H = 1.5  # m/s, peak horizontal transit speed
@@ -83,7 +84,7 @@ def planned_positions(sc: Scenario, t_land: float, form: Formation | None = None
     form = form if form is not None else formation_from_scenario(sc)
     lt = sc.leader_trajectory
     lead = np.array([
-        LeaderTrajectory(sc.agents[i].position, np.array(lt.amplitude_m), lt.frequency_hz)
+        LeaderTrajectory(leader_origin(sc, i), np.array(lt.amplitude_m), lt.frequency_hz)
         .state(t_land)[0:3]
         for i in form.leader_idx
     ])

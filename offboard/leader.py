@@ -10,6 +10,7 @@ from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import accel_from_attitude, setpoint_from_accel
 from offboard.bearing import Formation
 from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
+from offboard.takeoff import climb_xi, leader_origin
 from swarm_common.enums import Method
 from swarm_common.scenario import Scenario
 
@@ -28,7 +29,7 @@ class LeaderAgent(AgentBase):
         self.kp, self.kd = ctl.leader_kp, ctl.leader_kd
         lt = sc.leader_trajectory
         self.traj = LeaderTrajectory(
-            sc.agents[self.index].position, np.array(lt.amplitude_m), lt.frequency_hz
+            leader_origin(sc, self.index), np.array(lt.amplitude_m), lt.frequency_hz
         )
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
@@ -41,7 +42,10 @@ class LeaderAgent(AgentBase):
         """ξ_L(t) = [p, ṗ, p̈, p⃛] of the leader trajectory; held at p_L(0) before
         ``start_time`` (0 in lockstep; in real time the daemon sets the first whole
         trajectory period after arming, the same for both leaders, so the motion starts
-        smoothly and the leaders stay in step)."""
+        smoothly and the leaders stay in step). Ground start (offboard.takeoff): the climb
+        from the pad, held at the staging point p_L(0) until the plan's ``t_traj``."""
+        if self.takeoff is not None and t < max(self.start_time, self.takeoff.t_traj):
+            return climb_xi(self.takeoff, self.index, t)
         if t < self.start_time:
             return xi_at_rest(xi_p(self.traj.state(0.0)))
         return self.traj.state(t)
@@ -56,7 +60,7 @@ class LeaderAgent(AgentBase):
         spec = self.sc.agents[self.index]
         return NeighbourEstimate(
             self.id, 0.0, spec.position.astype(float).copy(), spec.velocity.astype(float).copy(),
-            np.zeros(3), self.traj.state(0.0), True,
+            np.zeros(3), self.reference(0.0) if self.takeoff else self.traj.state(0.0), True,
         )
 
     def step(

@@ -22,6 +22,7 @@ import numpy as np
 from swarm_common.enums import Role
 from swarm_common.scenario_schema import (
     AGENT_SCHEMA,
+    OPTIONAL_SECTIONS,
     SCHEMA,
     SECTIONS,
     CommunicationConfig,
@@ -29,6 +30,7 @@ from swarm_common.scenario_schema import (
     DisturbanceConfig,
     FormationConfig,
     LeaderTrajectoryConfig,
+    LifecycleConfig,
     ObserverConfig,
     RunConfig,
     SensingConfig,
@@ -48,6 +50,7 @@ __all__ = [
     "DisturbanceConfig",
     "FormationConfig",
     "LeaderTrajectoryConfig",
+    "LifecycleConfig",
     "ObserverConfig",
     "RunConfig",
     "Scenario",
@@ -98,6 +101,7 @@ class Scenario:
     observer: ObserverConfig
     controller: ControllerConfig
     agents: tuple[AgentSpec, ...]
+    lifecycle: LifecycleConfig = LifecycleConfig()
 
     def section(self, name: str) -> Any:
         """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
@@ -203,6 +207,8 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
     raw: dict[str, dict[str, Any]] = {}
     for section, keys in SCHEMA.items():
         given = data.get(section)
+        if given is None and section in OPTIONAL_SECTIONS:
+            given = {f.name: f.default for f in fields(SECTIONS[section])}
         if given is None:
             raise fail(f"missing section [{section}]")
         if not isinstance(given, dict):
@@ -281,6 +287,8 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
                     f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
                 )
     _check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
+    if raw["lifecycle"]["start"] == "ground":
+        _check_pads(agents, float(raw["controller"]["d_safe_m"]), fail)
     typed = {
         ("run" if name == "scenario" else name): cls(
             **{f.name: typed_value(f, raw[name][f.name]) for f in fields(cls)}
@@ -314,6 +322,26 @@ def _check_separation(
                     f"agent[{j}].vertex = {v[j].tolist()}: {dv:.3f} m from agent id "
                     f"{agents[i].id}'s vertex at the leaders' scale, closer than "
                     f"controller.d_safe_m = {d_safe:g}"
+                )
+
+
+def _check_pads(agents: list[AgentSpec], d_safe: float, fail: Any) -> None:
+    """lifecycle.start = "ground": every ``position`` is a pad on the ground (z = 0) and the
+    pads are at least 2·``controller.d_safe_m`` apart (the climb columns, offboard.takeoff)."""
+    for k, a in enumerate(agents):
+        if abs(float(a.position[2])) > 1e-9:
+            raise fail(
+                f"agent[{k}].position = {a.position.tolist()}: with lifecycle.start = 'ground' "
+                f"the position is a pad and its z must be 0"
+            )
+    for i in range(len(agents)):
+        for j in range(i + 1, len(agents)):
+            d = float(np.linalg.norm(agents[i].position[:2] - agents[j].position[:2]))
+            if d < 2.0 * d_safe - 1e-9:
+                raise fail(
+                    f"agent[{j}].position = {agents[j].position.tolist()}: pad {d:.3f} m from "
+                    f"agent id {agents[i].id}'s, closer than 2 * controller.d_safe_m = "
+                    f"{2.0 * d_safe:g} (lifecycle.start = 'ground')"
                 )
 
 

@@ -168,6 +168,22 @@ class ControllerConfig:
     dcbf_cone_sides: int = _int(3, 64)
 
 
+START_MODES = ("airborne", "ground")  # lifecycle.start
+
+
+@dataclass(frozen=True)
+class LifecycleConfig:
+    """``[lifecycle]`` (optional; these defaults when absent; docs/lifecycle.md): ``start``
+    "airborne" (agents start at ``position``) or "ground" (``position`` is the pad, z = 0;
+    take-off to ``takeoff_altitude_m`` + the vertex layer's height at ``climb_rate_mps``)."""
+
+    start: str = field(default="airborne", metadata={"spec": ("str", START_MODES), "enum": None})
+    takeoff_altitude_m: float = field(
+        default=2.0, metadata={"spec": ("float", 0.0, 1000.0, True, False)}
+    )
+    climb_rate_mps: float = field(default=1.0, metadata={"spec": ("float", 0.0, 20.0, True, False)})
+
+
 # TOML section name -> its dataclass, in file order.
 SECTIONS: dict[str, type] = {
     "scenario": RunConfig,
@@ -180,7 +196,9 @@ SECTIONS: dict[str, type] = {
     "communication": CommunicationConfig,
     "observer": ObserverConfig,
     "controller": ControllerConfig,
+    "lifecycle": LifecycleConfig,
 }
+OPTIONAL_SECTIONS = ("lifecycle",)  # may be absent: their fields' defaults apply
 
 SCHEMA: dict[str, dict[str, Spec]] = {
     section: {f.name: f.metadata["spec"] for f in fields(cls)} for section, cls in SECTIONS.items()

@@ -1,0 +1,113 @@
+"""Coordinated take-off plan (offboard/takeoff.py, docs/lifecycle.md) and ground-start pads."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import CUBE8, ROOT
+
+from gcs.metrics import min_distance_by_phase
+from offboard.leader import LeaderAgent
+from offboard.takeoff import (
+    climb_xi,
+    follower_xi,
+    is_ground_start,
+    leader_origin,
+    min_column_separation,
+    takeoff_plan,
+)
+from swarm_common.scenario import ScenarioError, load_scenario
+
+GROUND8 = ROOT / "scenarios" / "ground8.toml"
+
+
+def test_cube8_defaults_to_airborne() -> None:
+    sc = load_scenario(CUBE8)
+    assert sc.lifecycle.start == "airborne" and not is_ground_start(sc)
+    assert np.array_equal(leader_origin(sc, 0), sc.agents[0].position)
+
+
+def test_plan_is_deterministic_and_layered() -> None:
+    sc = load_scenario(GROUND8)
+    a, b = takeoff_plan(sc), takeoff_plan(load_scenario(GROUND8))
+    assert np.array_equal(a.pads, b.pads) and np.array_equal(a.z_stage, b.z_stage)
+    assert (a.t_climb, a.t_blend, a.t_traj) == (b.t_climb, b.t_blend, b.t_traj)
+    # staging altitudes = the cube's layers (leaders at 6 m, scale 4 m, lowest layer 2 m)
+    layer = sc.vertices()[:, 2]
+    assert np.allclose(a.z_stage, 2.0 + 4.0 * layer)
+    assert min_column_separation(a) >= 2.0 * sc.controller.d_safe_m
+    # the leaders' trajectory starts at their staging point, after the take-off window
+    assert np.allclose(leader_origin(sc, 0), [4.0, 0.0, 6.0])
+    assert a.t_traj >= a.t_blend > a.t_climb
+
+
+def test_climb_reference_is_vertical_and_ends_at_rest() -> None:
+    sc = load_scenario(GROUND8)
+    plan = takeoff_plan(sc)
+    for i in range(sc.n):
+        xs = np.array([climb_xi(plan, i, t) for t in np.arange(0.0, plan.t_climb + 1.0, 0.05)])
+        assert np.allclose(xs[:, 0:2], plan.pads[i, :2])  # its own column, all the way up
+        assert np.all(np.diff(xs[:, 2]) >= -1e-12)
+        assert xs[:, 5].max() <= sc.lifecycle.climb_rate_mps + 1e-9
+        end = climb_xi(plan, i, plan.t_climb)
+        assert end[2] == pytest.approx(plan.z_stage[i]) and np.allclose(end[3:], 0.0)
+
+
+def test_follower_blend_is_continuous() -> None:
+    sc = load_scenario(GROUND8)
+    plan = takeoff_plan(sc)
+    target = np.concatenate([[0.0, 0.0, 6.0], np.zeros(9)])
+    before = follower_xi(plan, 2, plan.t_climb - 1e-6, target)
+    after = follower_xi(plan, 2, plan.t_climb + 1e-6, target)
+    assert np.allclose(before[:6], after[:6], atol=1e-4)
+    assert np.allclose(follower_xi(plan, 2, plan.t_blend - 1e-6, target)[:3], target[:3],
+                       atol=1e-4)
+    assert np.array_equal(follower_xi(plan, 2, plan.t_blend, target), target)
+
+
+def test_leader_climbs_then_holds_until_trajectory() -> None:
+    sc = load_scenario(GROUND8)
+    plan = takeoff_plan(sc)
+    ld = LeaderAgent(sc, 1)
+    assert np.allclose(ld.reference(0.0)[:3], [4.0, 0.0, 0.0])
+    assert np.allclose(ld.reference(plan.t_traj - 0.01)[:3], [4.0, 0.0, 6.0])
+    assert np.allclose(ld.reference(plan.t_traj + 1.0), ld.traj.state(plan.t_traj + 1.0))
+
+
+def _variant(tmp_path: Path, old: str, new: str) -> Path:
+    text = GROUND8.read_text()
+    assert old in text
+    p = tmp_path / "bad.toml"
+    p.write_text(text.replace(old, new, 1))
+    return p
+
+
+@pytest.mark.parametrize(("old", "new", "expect"), [
+    ("position = [1.0, 1.0, 0.0]", "position = [1.0, 1.0, 0.5]", ["agent[3].position", "z"]),
+    ("position = [1.0, 1.0, 0.0]", "position = [0.6, 0.6, 0.0]",
+     ["agent[3].position", "2 * controller.d_safe_m"]),
+    ('start = "ground"', 'start = "sky"', ["lifecycle.start", "'ground'"]),
+    ("climb_rate_mps = 1.0", "climb_rate_mps = 0.0", ["lifecycle.climb_rate_mps"]),
+])
+def test_bad_pads_refused_naming_the_key(
+    tmp_path: Path, old: str, new: str, expect: list[str]
+) -> None:
+    with pytest.raises(ScenarioError) as ei:
+        load_scenario(_variant(tmp_path, old, new))
+    msg = str(ei.value)
+    assert "\n" not in msg
+    for s in expect:
+        assert s in msg, (s, msg)
+
+
+def test_phase_split() -> None:
+    t = np.arange(0.0, 60.0, 0.5)
+    md = np.full(len(t), 5.0)
+    md[t == 1.0], md[t == 15.0], md[t == 30.0], md[t == 50.0] = 1.0, 2.0, 3.0, 4.0
+    r = min_distance_by_phase(t, md, 20.0, takeoff_end_s=10.0, land_at_s=40.0)
+    assert r == {"takeoff": 1.0, "formation": 2.0, "mission": 3.0, "landing": 4.0}
+    r0 = min_distance_by_phase(t, md, 20.0)
+    assert r0["takeoff"] is None and r0["landing"] is None and r0["formation"] == 1.0
+    assert r0["mission"] == 3.0
