@@ -11,7 +11,7 @@ import numpy as np
 
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import InnerLoopModel, Setpoint
-from offboard.landing import LandingPlan, LandingReference, landed
+from offboard.landing import LANDED_Z, LandingPlan, LandingReference, landed
 from offboard.safety_filter import parse_method
 from offboard.takeoff import TakeoffPlan, is_ground_start, takeoff_plan
 from swarm_common.enums import Method
@@ -73,6 +73,15 @@ class AgentBase(ABC):
         if landed(self.landing, t, z):
             return np.array([0.0, 0.0, self.u_lo[2]])
         return u
+
+    def on_pad_floor(self, t: float, z: float, u: np.ndarray) -> np.ndarray:
+        """``u`` with its vertical part at least 0 (hover thrust) while on the pad during the
+        take-off climb (t < t_climb, altitude ``z`` (m) below offboard.landing.LANDED_Z): the
+        ground contact does not realise a downward command, and the filters' inner-loop
+        model (dcbf) would otherwise predict an acceleration that does not happen."""
+        if self.takeoff is None or t >= self.takeoff.t_climb or z >= LANDED_Z or u[2] >= 0.0:
+            return u
+        return np.array([u[0], u[1], 0.0])
 
     @abstractmethod
     def current_reference(self, t: float) -> np.ndarray:

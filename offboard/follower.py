@@ -148,6 +148,7 @@ class FollowerAgent(AgentBase):
         ), status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
+        u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
         sp: Setpoint = setpoint_from_accel(u, self.yaw, self.veh)
         status.input_clipped = input_clipped(sp, u, self.veh.mass_kg, self.veh.gravity_mps2)
         # --- observers to t_{k+1} ---------------------------------------------------

@@ -80,6 +80,7 @@ class LeaderAgent(AgentBase):
         u = np.clip(u, self.u_lo, self.u_hi)
         if self.landing is not None:
             u = self.landed_idle(t, float(p[2]), u)
+        u = self.on_pad_floor(t, float(p[2]), u)
         sp = setpoint_from_accel(u, self.yaw, self.veh)
         u_sub = self.inner.run(sp, self.substeps)
         self._update_eso(v, u_sub)

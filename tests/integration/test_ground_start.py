@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import ROOT
 
 from gcs.inproc import run_inproc
@@ -12,9 +13,10 @@ from swarm_common.scenario import load_scenario
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 
 
-def test_ground8_rcbf_takes_off_forms_and_lands() -> None:
+@pytest.mark.parametrize("method", ["rcbf", "dcbf"])
+def test_ground8_takes_off_forms_and_lands(method: str) -> None:
     sc = load_scenario(GROUND8)
-    res = run_inproc(sc, method="rcbf", duration=60.0, land_at=40.0)
+    res = run_inproc(sc, method=method, duration=60.0, land_at=40.0)
     m = res.metrics
     assert m["collisions"] == 0
     assert m["min_distance_m"] >= 0.5

@@ -111,3 +111,13 @@ def test_phase_split() -> None:
     r0 = min_distance_by_phase(t, md, 20.0)
     assert r0["takeoff"] is None and r0["landing"] is None and r0["formation"] == 1.0
     assert r0["mission"] == 3.0
+
+
+def test_no_downward_command_on_the_pad_during_the_climb() -> None:
+    sc = load_scenario(GROUND8)
+    ld = LeaderAgent(sc, 1)
+    u = np.array([0.5, -0.5, -3.0])
+    assert np.array_equal(ld.on_pad_floor(0.5, 0.0, u), [0.5, -0.5, 0.0])
+    assert np.array_equal(ld.on_pad_floor(0.5, 1.0, u), u)  # airborne: unchanged
+    assert np.array_equal(ld.on_pad_floor(takeoff_plan(sc).t_climb, 0.0, u), u)
+    assert np.array_equal(LeaderAgent(load_scenario(CUBE8), 1).on_pad_floor(0.5, 0.0, u), u)
