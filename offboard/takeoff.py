@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarm_common.enums import StartMode
 from swarm_common.scenario import Scenario
 
 TAU_R = 1.0  # s, climb speed ramp time
@@ -52,7 +53,7 @@ class TakeoffPlan:
 
 
 def is_ground_start(sc: Scenario) -> bool:
-    return sc.lifecycle.start == "ground"
+    return sc.lifecycle.start is StartMode.GROUND
 
 
 def takeoff_plan(sc: Scenario) -> TakeoffPlan:

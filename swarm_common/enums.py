@@ -61,3 +61,10 @@ class VehicleMode(StrEnum):
     OFFBOARD = "OFFBOARD"
     HOLD = "HOLD"
     LAND = "LAND"
+
+
+class StartMode(StrEnum):
+    """Where a mission starts (``[lifecycle] start``; docs/lifecycle.md)."""
+
+    AIRBORNE = "airborne"  # agents start at their ``position`` in the air (the paper's setup)
+    GROUND = "ground"  # ``position`` is a pad on the ground; coordinated take-off first

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_common.enums import Role
+from swarm_common.enums import Role, StartMode
 from swarm_common.scenario_schema import (
     AGENT_SCHEMA,
     OPTIONAL_SECTIONS,
@@ -287,7 +287,7 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
                     f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
                 )
     _check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
-    if raw["lifecycle"]["start"] == "ground":
+    if raw["lifecycle"]["start"] == StartMode.GROUND:
         _check_pads(agents, float(raw["controller"]["d_safe_m"]), fail)
     typed = {
         ("run" if name == "scenario" else name): cls(

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from swarm_common.enums import GraphKind, Method, Role
+from swarm_common.enums import GraphKind, Method, Role, StartMode
 
 # ---------------------------------------------------------------------------
 # Schema. Each section is a frozen dataclass; each field carries its spec in its
@@ -168,7 +168,6 @@ class ControllerConfig:
     dcbf_cone_sides: int = _int(3, 64)
 
 
-START_MODES = ("airborne", "ground")  # lifecycle.start
 
 
 @dataclass(frozen=True)
@@ -177,7 +176,9 @@ class LifecycleConfig:
     "airborne" (agents start at ``position``) or "ground" (``position`` is the pad, z = 0;
     take-off to ``takeoff_altitude_m`` + the vertex layer's height at ``climb_rate_mps``)."""
 
-    start: str = field(default="airborne", metadata={"spec": ("str", START_MODES), "enum": None})
+    start: StartMode = field(
+        default=StartMode.AIRBORNE, metadata={"spec": ("str", tuple(StartMode)), "enum": StartMode}
+    )
     takeoff_altitude_m: float = field(
         default=2.0, metadata={"spec": ("float", 0.0, 1000.0, True, False)}
     )
