@@ -13,7 +13,8 @@ failure of it:
    ``ȧ = (u − a)/τ`` (τ per axis: τ_rp horizontally, τ_F vertically). The barrier
    condition is enforced on the relative state predicted ``T = τ_rp + dt`` ahead
    (:func:`predict`), with a linear + cubic class-K function and a margin for the
-   acceleration error bound ``ē``: ``f(u) = ḣ(x̂_T) + γ1 ĥ_T + γ3 ĥ_T³ − ‖∂f/∂a‖ ē ≥ 0``.
+   acceleration error bound ``ē``: ``f(u) = ḣ(x̂_T) − ‖∂ḣ_T/∂a‖ē + α(ĥ_T − ‖∂ĥ_T/∂a‖ē) ≥ 0``
+   with ``α(h) = γ1 h + γ3 h³``.
 3. **Neighbour motion.** The other agent's acceleration is its estimated actual one
    (finite difference of its broadcast velocity, bounded), never a reference.
 
@@ -175,7 +176,9 @@ def dcbf_rows(
 
     With α(h) = γ1 h + γ3 h³ and h0 the barrier now, two conditions per pair:
 
-    * (C1) ``f(u) = ḣ_T + α(ĥ_T) − ‖∂f/∂a‖ ē ≥ 0`` (the CBF condition at x̂_T);
+    * (C1) ``f(u) = ḣ_T − ‖∂ḣ_T/∂a‖ ē + α(ĥ_T − ‖∂ĥ_T/∂a‖ ē) ≥ 0`` (the CBF condition at
+      x̂_T; α increasing, so the error enters α exactly, not through α'(ĥ_T), which for
+      the cubic term made every pair within ≈ 2.9 m repel: docs/safety.md §4);
     * (C2) ``ĥ_T − ‖∂ĥ_T/∂a‖ ē ≥ h0 − min(T α(h0), h0/2)`` (h0 > 0; ``h0 − T α(h0)``
       for h0 ≤ 0, which demands growth): h does not dip over the horizon.
 
@@ -184,12 +187,14 @@ def dcbf_rows(
     """
     pr = predict(dp, dv, a0, u_ref, a_other, lag, tau_s, d_safe)
     h0 = np.einsum("ij,ij->i", dp, dp) + 2.0 * tau_s * np.einsum("ij,ij->i", dv, dp) - d_safe**2
-    k_h = (gamma1 + 3.0 * gamma3 * pr.h**2)[:, None]
     one = np.ones(3)
     # a constant relative-acceleration error e over [0, T] moves Δv̂ by eT, Δp̂ by eT²/2
     e_hd, e_h = _grads(pr, 0.5 * lag.T**2 * one, lag.T * one, one, tau_s)
     u_hd, u_h = _grads(pr, lag.cp, lag.cv, lag.ca, tau_s)
-    c1 = pr.hdot + gamma1 * pr.h + gamma3 * pr.h**3 - _norm(e_hd + k_h * e_h) * accel_err
+    # α is increasing: α(h_T) ≥ α(ĥ_T − ‖∂ĥ_T/∂a‖ē) exactly (no linearisation of α)
+    h_lo = pr.h - _norm(e_h) * accel_err
+    k_h = (gamma1 + 3.0 * gamma3 * h_lo**2)[:, None]
+    c1 = pr.hdot - _norm(e_hd) * accel_err + gamma1 * h_lo + gamma3 * h_lo**3
     drop = lag.T * (gamma1 * h0 + gamma3 * h0**3)
     drop = np.where(h0 > 0.0, np.minimum(drop, 0.5 * h0), drop)  # keep ≥ half of h > 0
     c2 = pr.h - _norm(e_h) * accel_err - (h0 - drop)

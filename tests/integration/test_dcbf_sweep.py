@@ -36,3 +36,21 @@ def test_dcbf_true_barrier_nonnegative(name, seed, tmp_path):
     assert doc["metrics"]["min_distance_m"] >= ctl.d_safe_m
     assert doc["metrics"]["collisions"] == 0
     assert clipped_steps(ser["u"], fol, sc.vehicle) == 0
+
+
+@pytest.mark.parametrize(("name", "seed"), [("swap_centre", 4)])
+def test_dcbf_previously_deadlocked_case_forms(name, seed, tmp_path):
+    """swap_centre seed 4 never formed in 30 s while C1's ē margin was linearised at ĥ_T
+    (a follower stopped ≈ 2.9 m from the corners of the cube face it had to cross,
+    docs/safety.md §6); it must form, safely."""
+    path = ROOT / "scenarios" / f"{name}.toml"
+    cmd = [sys.executable, "-m", "gcs.cli", "mission", "run", str(path), "--inproc",
+           "--method", "dcbf", "--seed", str(seed), "--duration", "30", "--json",
+           "--out", str(tmp_path / "run")]
+    res = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    met = json.loads(res.stdout)["metrics"]
+    assert met["formation_time_s"] is not None, f"no formation, rms {met['tracking_rms_m']}"
+    assert met["h_min"] >= 0.0
+    assert met["collisions"] == 0
+    assert met["input_clipped_steps"] == 0

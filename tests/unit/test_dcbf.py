@@ -181,3 +181,22 @@ def test_input_clipped_flag_and_neighbour_acceleration() -> None:
         if t == 0.02:
             assert np.allclose(acc.rows(np.array([0, 1])), np.array([[0.0, 0, 0], [2.0, 0, 0]]))
     assert np.allclose(acc.rows(np.array([1])), [[5.0, 0, 0]])  # 48 m/s² bounded to a_max
+
+
+def test_error_margin_does_not_repel_a_pair_at_rest_outside_the_safe_distance() -> None:
+    """Two agents at rest 2.83 m apart (a cube face's centre to a corner, side 4 m) pass
+    under ē = 2 m/s² with u = 0: the ē margin enters α exactly (C1), not linearised at ĥ_T,
+    where α'(ĥ_T) = γ1 + 3γ3ĥ_T² ≈ 10 1/s made it exceed α and forced ḣ_T > 0 (a repulsion
+    out to ≈ 2.9 m that deadlocked swap_centre seed 4, docs/safety.md §4)."""
+    lag = LagCoefficients.of(TAU, VEH.tau_rollpitch_s + DT)
+    dp, dv = np.array([[2.0, 2.0, 0.0]]), np.zeros((1, 3))
+    zero = np.zeros(3)
+    g, rhs, _ = dcbf_rows(dp, dv, zero, zero, np.zeros((1, 3)), np.array([0.5]), lag,
+                          CTL.tau_safe_s, CTL.d_safe_m, CTL.dcbf_gamma_lin,
+                          CTL.dcbf_gamma_cubic, 2.0)
+    assert np.all(g @ zero >= rhs)
+    # ... while a pair at rest near D still has to be pushed apart
+    g, rhs, _ = dcbf_rows(np.array([[0.6, 0.0, 0.0]]), dv, zero, zero, np.zeros((1, 3)),
+                          np.array([0.5]), lag, CTL.tau_safe_s, CTL.d_safe_m,
+                          CTL.dcbf_gamma_lin, CTL.dcbf_gamma_cubic, 2.0)
+    assert not np.all(g @ zero >= rhs)
