@@ -158,7 +158,67 @@ class QPResult:
     fallback: bool
 
 
-class SafetyQP:
+class _ClfRowsQP:
+    """The part of the safety QPs (:class:`SafetyQP`, ``offboard.dcbf_qp.DcbfQP``) that is
+    the same: variables x = [u (3), δ, σ], row 0 the CLF row normalised by ‖L_gV‖, rows
+    1..m the safety rows ``g_jᵀu + σ ≥ r_j``; the subclass sets up the matrices and the
+    input-set rows after them."""
+
+    m: int
+    nrow: int
+    solver: osqp.OSQP
+    q: np.ndarray
+    l: np.ndarray
+    u: np.ndarray
+    _a: np.ndarray
+    _mask_t: np.ndarray
+
+    def _solve_rows(
+        self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray, rhs: np.ndarray,
+        k: int,
+    ) -> tuple[int, np.ndarray | None]:
+        """Write the CLF row (``L_gV u − δ ≤ clf_rhs``) and the first k safety rows, solve
+        warm-started; (OSQP status value, x) with x None when OSQP failed."""
+        a, m = self._a, self.m
+        # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
+        # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the safety rows)
+        nrm = math.sqrt(float(clf.lgv @ clf.lgv))
+        if nrm > 1e-9:
+            a[0, 0:3] = clf.lgv / nrm
+            self.u[0] = clf_rhs / nrm
+        else:
+            a[0, 0:3] = 0.0
+            self.u[0] = np.inf
+        a[0, 3] = -1.0
+        a[1 : 1 + k, 0:3] = g[:k]
+        a[1 + k : 1 + m, 0:3] = 0.0
+        self.l[1 : 1 + k] = rhs[:k]
+        self.l[1 + k : 1 + m] = -np.inf
+        self.q[0:3] = -u_nom
+        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
+        res = self.solver.solve(raise_error=False)
+        sv = int(res.info.status_val)
+        x = res.x
+        if res.info.status_val in SOLVED and x is not None and np.all(np.isfinite(x)):
+            return sv, np.asarray(x, dtype=float)
+        self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
+        return sv, None
+
+    @staticmethod
+    def _result(
+        sv: int, x: np.ndarray | None, u: np.ndarray, h_min: float, clf: ClfTerms
+    ) -> QPResult:
+        """QPResult of a solve: ``u`` is the solver's input made admissible, or the braking
+        fallback made admissible when ``x`` is None."""
+        if x is None:
+            return QPResult(u, QPStatus.FALLBACK, sv, 0.0, h_min, clf.V, 0.0, 0.0, True)
+        sigma = max(0.0, float(x[4]))
+        relaxed = sigma > 1e-3
+        status = QPStatus.RELAXED if relaxed else QPStatus.SOLVED
+        return QPResult(u, status, sv, 0.0, h_min, clf.V, float(x[3]), sigma, relaxed)
+
+
+class SafetyQP(_ClfRowsQP):
     """One agent's OSQP problem, set up once with room for ``max_pairs`` RCBF rows."""
 
     def __init__(
@@ -238,37 +298,9 @@ class SafetyQP:
             u = np.clip(np.nan_to_num(brake, posinf=0.0, neginf=0.0), self.u_lo, self.u_hi)
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
-        a = self._a
-        # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
-        # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the RCBF rows)
-        nrm = math.sqrt(float(clf.lgv @ clf.lgv))
-        if nrm > 1e-9:
-            a[0, 0:3] = clf.lgv / nrm
-            self.u[0] = clf_rhs / nrm
-        else:
-            a[0, 0:3] = 0.0
-            self.u[0] = np.inf
-        a[0, 3] = -1.0
-        a[1 : 1 + k, 0:3] = n_hat[:k]
-        a[1 + k : 1 + m, 0:3] = 0.0
-        self.l[1 : 1 + k] = rhs[:k]
-        self.l[1 + k : 1 + m] = -np.inf
-        self.q[0:3] = -u_nom
-        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
-        res = self.solver.solve(raise_error=False)
-        sv = res.info.status_val
-        x = res.x
-        ok = sv in SOLVED and x is not None and np.all(np.isfinite(x))
-        if ok:
-            u = np.clip(np.asarray(x[0:3], dtype=float), self.u_lo, self.u_hi)
-            sigma = max(0.0, float(x[4]))
-            relaxed = sigma > 1e-3
-            status = QPStatus.RELAXED if relaxed else QPStatus.SOLVED
-            out = QPResult(u, status, int(sv), 0.0, h_min, clf.V, float(x[3]), sigma, relaxed)
-        else:
-            u = np.clip(np.nan_to_num(brake), self.u_lo, self.u_hi)
-            out = QPResult(u, QPStatus.FALLBACK, int(sv), 0.0, h_min, clf.V, 0.0, 0.0, True)
-            self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
+        sv, x = self._solve_rows(u_nom, clf, clf_rhs, n_hat, rhs, k)
+        u = np.clip(x[0:3] if x is not None else np.nan_to_num(brake), self.u_lo, self.u_hi)
+        out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out
 

@@ -21,12 +21,12 @@ import numpy as np
 import osqp
 from scipy import sparse
 
-from offboard.clf_rcbf import SOLVED, ClfTerms, QPResult
+from offboard.clf_rcbf import ClfTerms, QPResult, _ClfRowsQP
 from offboard.dcbf import InputSet
 from swarm_common.enums import QPStatus
 
 
-class DcbfQP:
+class DcbfQP(_ClfRowsQP):
     """One agent's OSQP problem with room for ``max_pairs`` barrier rows."""
 
     def __init__(
@@ -89,35 +89,11 @@ class DcbfQP:
             u = self.uset.project(np.nan_to_num(brake, posinf=0.0, neginf=0.0))
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
-        a, m = self._a, self.m
         u_c = self.uset.project(u_nom)
-        nrm = math.sqrt(float(clf.lgv @ clf.lgv))
-        if nrm > 1e-9:
-            a[0, 0:3] = clf.lgv / nrm
-            self.u[0] = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c)) / nrm
-        else:
-            a[0, 0:3] = 0.0
-            self.u[0] = np.inf
-        a[0, 3] = -1.0
-        a[1 : 1 + k, 0:3] = g[:k]
-        a[1 + k : 1 + m, 0:3] = 0.0
-        self.l[1 : 1 + k] = rhs[:k]
-        self.l[1 + k : 1 + m] = -np.inf
-        self.q[0:3] = -u_nom
-        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
-        res = self.solver.solve(raise_error=False)
-        sv = res.info.status_val
-        x = res.x
-        if sv in SOLVED and x is not None and np.all(np.isfinite(x)):
-            # the solver's answer up to its tolerance; project() is a no-op inside the set
-            u = self.uset.project(np.asarray(x[0:3], dtype=float))
-            sigma = max(0.0, float(x[4]))
-            relaxed = sigma > 1e-3
-            status = QPStatus.RELAXED if relaxed else QPStatus.SOLVED
-            out = QPResult(u, status, int(sv), 0.0, h_min, clf.V, float(x[3]), sigma, relaxed)
-        else:
-            u = self.uset.project(np.nan_to_num(brake))
-            out = QPResult(u, QPStatus.FALLBACK, int(sv), 0.0, h_min, clf.V, 0.0, 0.0, True)
-            self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
+        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
+        sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
+        # the solver's answer up to its tolerance; project() is a no-op inside the set
+        u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(brake))
+        out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out
