@@ -29,12 +29,11 @@ import numpy as np
 
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.reference import LeaderTrajectory, xi_a, xi_p, xi_v
-from offboard.takeoff import leader_origin
+from offboard.takeoff import TAU_R, leader_origin, ramped_travel
 from swarm_common.scenario import Scenario
 
 V_H = 1.5  # m/s, peak horizontal transit speed
 V_D = 0.6  # m/s, descent speed
-TAU_R = 1.0  # s, descent speed ramp time
 T_H_MIN = 2.0  # s, shortest horizontal transit
 PAD_MARGIN = 0.25  # m, added to 2·D_safe between pads
 LANDED_Z = 0.08  # m, an agent below this after its reference ended is landed
@@ -142,26 +141,6 @@ def landing_plan(sc: Scenario, t_land: float, form: Formation | None = None) -> 
     return LandingPlan(float(t_land), pads, delay, t_h, sep)
 
 
-def descent(s: float, dz: float) -> tuple[float, float, float, float]:
-    """Distance descended, speed, acceleration, jerk at s ≥ 0 s into a descent of dz m
-    (speed V_D with smoothstep ramps of TAU_R; ends at rest after dz/V_D + TAU_R s)."""
-    if s <= 0.0 or dz <= 0.0:
-        return 0.0, 0.0, 0.0, 0.0
-    tau = TAU_R
-    t_end = dz / V_D + tau
-    if s >= t_end:
-        return dz, 0.0, 0.0, 0.0
-    if s < tau:
-        x = s / tau
-        return (V_D * tau * (x**3 - 0.5 * x**4), V_D * (3 * x * x - 2 * x**3),
-                V_D * (6 * x - 6 * x * x) / tau, V_D * (6 - 12 * x) / tau**2)
-    if s <= t_end - tau:
-        return V_D * (s - 0.5 * tau), V_D, 0.0, 0.0
-    x = (t_end - s) / tau
-    return (dz - V_D * tau * (x**3 - 0.5 * x**4), V_D * (3 * x * x - 2 * x**3),
-            -V_D * (6 * x - 6 * x * x) / tau, V_D * (6 - 12 * x) / tau**2)
-
-
 class LandingReference:
     """ξ(t) of one agent (module docstring); ``xi0`` is its reference state at t_land."""
 
@@ -186,7 +165,7 @@ class LandingReference:
             out[k], out[3 + k], out[6 + k], out[9 + k] = _poly(c, s)
             if t - self.t0 >= self.t_h:
                 out[3 + k] = out[6 + k] = out[9 + k] = 0.0
-        d, v, a, j = descent(t - self.t0 - self.delay, self.dz)
+        d, v, a, j = ramped_travel(t - self.t0 - self.delay, self.dz, V_D)
         out[2] -= d
         out[5] -= v
         out[8] -= a

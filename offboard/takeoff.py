@@ -30,7 +30,7 @@ import numpy as np
 from swarm_common.enums import StartMode
 from swarm_common.scenario import Scenario
 
-TAU_R = 1.0  # s, climb speed ramp time
+TAU_R = 1.0  # s, speed ramp time of every climb and descent (offboard.landing too)
 BLEND_S = 3.0  # s, followers' blend from the climb reference into ξ̂
 
 
@@ -71,9 +71,10 @@ def takeoff_plan(sc: Scenario) -> TakeoffPlan:
     return TakeoffPlan(pads, z, lc.climb_rate_mps, t_climb, t_blend, t_traj)
 
 
-def climb(s: float, dz: float, v: float) -> tuple[float, float, float, float]:
-    """Height climbed, speed, acceleration, jerk at s ≥ 0 s into a climb of dz m (speed v
-    m/s with smoothstep ramps of TAU_R s; at rest after dz/v + TAU_R s)."""
+def ramped_travel(s: float, dz: float, v: float) -> tuple[float, float, float, float]:
+    """Distance travelled, speed, acceleration, jerk at s ≥ 0 s into a straight move of dz m
+    (speed v m/s with smoothstep ramps of TAU_R s; at rest after dz/v + TAU_R s): the
+    take-off climb here and the landing descent (offboard.landing)."""
     if s <= 0.0 or dz <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
     tau = TAU_R
@@ -95,7 +96,7 @@ def climb_xi(plan: TakeoffPlan, index: int, t: float) -> np.ndarray:
     """ξ = [p*, v*, a*, j*] (12,) of agent ``index``'s vertical climb at mission time t."""
     out = np.zeros(12)
     out[0:2] = plan.pads[index, :2]
-    d, v, a, j = climb(t, float(plan.z_stage[index]), plan.climb_rate)
+    d, v, a, j = ramped_travel(t, float(plan.z_stage[index]), plan.climb_rate)
     out[2] = plan.pads[index, 2] + d
     out[5], out[8], out[11] = v, a, j
     return out

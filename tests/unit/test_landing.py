@@ -8,10 +8,10 @@ import pytest
 from offboard.landing import (
     V_D,
     LandingReference,
-    descent,
     landing_plan,
     planned_positions,
 )
+from offboard.takeoff import ramped_travel
 from swarm_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -81,8 +81,8 @@ def test_reference_smooth_bounded_and_ends_on_pad() -> None:
 def test_descent_profile_distance_and_speed() -> None:
     dz = 4.0
     t_end = dz / V_D + 1.0
-    assert descent(t_end + 1.0, dz)[0] == pytest.approx(dz)
-    assert descent(0.5 * t_end, dz)[1] == pytest.approx(V_D)
+    assert ramped_travel(t_end + 1.0, dz, V_D)[0] == pytest.approx(dz)
+    assert ramped_travel(0.5 * t_end, dz, V_D)[1] == pytest.approx(V_D)
     ss = np.linspace(0.0, t_end, 2001)
-    d = np.array([descent(s, dz)[0] for s in ss])
+    d = np.array([ramped_travel(s, dz, V_D)[0] for s in ss])
     assert np.all(np.diff(d) >= -1e-12)
