@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -197,6 +198,25 @@ def mav_client():
     yield make
     for c in clients:
         c.close()
+
+
+def wait_for(pred: Callable[[], object], timeout: float = 8.0) -> bool:
+    """Poll ``pred`` until it is truthy or ``timeout`` s pass (a deadline, never a count)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return bool(pred())
+
+
+def free_tcp_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return int(port)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -3,10 +3,8 @@ command at the swarm's mission time + LAND_LEAD_S; otherwise AUTO.LAND per vehic
 
 from __future__ import annotations
 
-import socket
-import time
-
 import pytest
+from conftest import free_tcp_port, wait_for  # noqa: E402
 
 from gcs.dashboard.app import LAND_LEAD_S, DashboardApp
 from gcs.dashboard.commands import LiveCommander
@@ -105,18 +103,5 @@ def test_feed_land_command_reaches_the_agents_bus() -> None:
         agent_session.close()
 
 
-def wait_for(pred, timeout: float = 8.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.05)
-    return pred()
 
 
-def free_tcp_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port

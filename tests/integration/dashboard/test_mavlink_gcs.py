@@ -6,6 +6,7 @@ import asyncio
 import time
 
 import pytest
+from conftest import wait_for  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink2
 
 from gcs.dashboard.command_retry import (
@@ -19,15 +20,6 @@ from gcs.dashboard.mavlink_gcs import MavlinkGcs
 from gcs.dashboard.px4modes import COMMANDS, custom_mode, decode_px4_mode
 
 from .fake_vehicle import FakeVehicle
-
-
-def wait_for(pred, timeout=5.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return pred()
 
 
 def test_decode_px4_modes():

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import socket
 import time
 
 import numpy as np
 import pytest
+from conftest import free_tcp_port, wait_for  # noqa: E402
 
 from gcs.dashboard.zenoh_feed import ZenohFeed
 from swarm_common.wire import (
@@ -22,23 +22,6 @@ from swarm_common.wire import (
     key_truth,
 )
 from swarm_common.zenoh_session import open_session
-
-
-def wait_for(pred, timeout=8.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return pred()
-
-
-def free_tcp_port() -> int:
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def status(i: int, **kw) -> Status:
