@@ -24,6 +24,10 @@ class NeighbourEstimate:
     z3: np.ndarray  # lumped disturbance estimate (m/s²)
     xi: np.ndarray  # (12,) desired-state estimate [p*, v*, a*, j*] (leaders: ξ_L)
     is_leader: bool = False
+    # False when the agent no longer flies its own safety filter (its vehicle was taken
+    # out of offboard, e.g. AUTO.LAND by a third-party client): the others then take the
+    # whole avoidance budget against it, as against a leader (docs/safety.md, A5)
+    cooperative: bool = True
 
 
 @dataclass

@@ -97,7 +97,7 @@ class DcbfFilter(SafetyFilter):
         h = barrier(x.dp, x.dv, ctl.tau_safe_s, ctl.d_safe_m)
         h_min = float(h.min()) if len(h) else float("inf")
         side = self._sidestep(x, h)
-        lm = self.leader_mask[x.pairs]
+        lm = self.leader_mask[x.pairs] if x.full_share is None else x.full_share
         share = np.where(lm, 1.0, 0.5)
         g, rhs, _ = dcbf_rows(
             x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x), share, self.lag,

@@ -145,6 +145,7 @@ class FollowerAgent(AgentBase):
         u = self._safe_control(SafetyInput(
             clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc,
             self.a_real, self.u_prev, self.a_mean, self.acc_est.rows(sel),
+            self._full_share(sel),
         ), status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
@@ -173,6 +174,16 @@ class FollowerAgent(AgentBase):
                 out.p[j], out.v[j] = got[0], got[1]
             if is_lead:
                 out.lead_acc[j] = xi_a(got[2])
+        return out
+
+    def _full_share(self, sel: np.ndarray) -> np.ndarray:
+        """(M,) True where this agent takes the whole avoidance budget: the other is a
+        leader, or its last estimate says it no longer cooperates (docs/safety.md, A5)."""
+        out = self.leader_mask[sel].copy()
+        for r, j in enumerate(sel):
+            e = self.pred.last.get(self.ids[int(j)])
+            if e is not None and not e.cooperative:
+                out[r] = True
         return out
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:

@@ -63,6 +63,9 @@ class SafetyInput:
     u_prev: np.ndarray = field(default_factory=lambda: np.zeros(3))
     a_mean: np.ndarray = field(default_factory=lambda: np.zeros(3))  # realised, last period
     other_acc: np.ndarray | None = None
+    # (M,) True where this agent takes the whole avoidance budget (the other is a leader
+    # or does not cooperate); None: leaders only (the filter's leader mask)
+    full_share: np.ndarray | None = None
 
 
 @dataclass
