@@ -39,11 +39,11 @@ from offboard.agent import (
     make_agent,
 )
 from offboard.landing import landing_plan
-from offboard.mavlink_link import VehicleLink, mavlink
+from offboard.mavlink_link import Odometry, VehicleLink, mavlink
 from offboard.reference import xi_p
 from offboard.safety_filter import parse_method
 from offboard.zenoh_link import SwarmBus
-from swarm_common import px4, wire
+from swarm_common import frames, px4, wire
 from swarm_common.enums import Method, Role
 from swarm_common.scenario import Scenario
 
@@ -53,6 +53,7 @@ log = logging.getLogger(__name__)
 def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -> wire.Estimate:
     """An agent's published estimate as the Zenoh payload (made at control step ``step``)."""
     return wire.Estimate(
+        cooperative=e.cooperative,
         id=e.id,
         step=step,
         t=float(e.t),
@@ -67,7 +68,23 @@ def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -
 
 def estimate_from_wire(e: wire.Estimate) -> NeighbourEstimate:
     """A received payload as the agent consumes it (float32-rounded vectors)."""
-    return NeighbourEstimate(e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == Role.LEADER)
+    return NeighbourEstimate(
+        e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == Role.LEADER, cooperative=e.cooperative
+    )
+
+
+def measured_state(odo: Odometry, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(position, velocity) ENU of the vehicle from its ODOMETRY (NED position, FRD->NED
+    quaternion, body FRD velocity), the position carried ``dt`` s ahead at that velocity
+    (an estimate is valid at t_k+1); None when the message's numbers are unusable."""
+    q = np.asarray(odo.q, dtype=float)
+    p_ned = np.array([odo.x, odo.y, odo.z], dtype=float)
+    v_body = np.asarray(odo.v_body, dtype=float)
+    if not (np.all(np.isfinite(p_ned)) and np.all(np.isfinite(v_body))
+            and frames.valid_quaternion(q)):
+        return None
+    v = frames.ned_to_enu(frames.rotm_from_quat(q / np.linalg.norm(q)) @ v_body)
+    return frames.ned_to_enu(p_ned) + v * dt, v
 
 
 def status_to_wire(
@@ -150,6 +167,8 @@ class OffboardDaemon:
         self.startup_done = False  # OFFBOARD accepted and armed
         self.trajectory_started = False
         self.land_at: float | None = cfg.land_at
+        self.offboard_seen = False  # the mission has had the vehicle in OFFBOARD
+        self.cooperative = True
 
     # -- helpers ----------------------------------------------------------------------
     def comm_ok(self, t: float) -> bool:
@@ -277,10 +296,37 @@ class OffboardDaemon:
         out = self.agent.step(k, t, truth.p, truth.v, neighbours, comm_ok)
         self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
         self._send_answer()
-        self._publish_estimate(estimate_to_wire(out.estimate, k, self._zeta()))
+        est = estimate_to_wire(out.estimate, k, self._zeta())
+        self._publish_estimate(self._mark_cooperation(est, t))
         mode = px4.short_name(self.link.custom_mode)
         self.bus.publish_status(status_to_wire(self.id, k, t, out, mode, comm_ok))
         return True
+
+    def _mark_cooperation(self, est: wire.Estimate, t: float) -> wire.Estimate:
+        """Out of OFFBOARD after the mission had it there (a third party's AUTO.LAND, HOLD,
+        ...): the agent's setpoints no longer fly, so publish cooperative=False and the
+        vehicle's measured state instead of the estimate of a controller that does not fly
+        it (docs/lifecycle.md, "Third-party AUTO.LAND"). Control is not taken back."""
+        if self.link.in_offboard:
+            self.offboard_seen = True
+        cooperative = self.link.in_offboard or not self.offboard_seen
+        if cooperative != self.cooperative:
+            self.cooperative = cooperative
+            mode = px4.short_name(self.link.custom_mode)
+            if cooperative:
+                log.info("agent %d: vehicle back in OFFBOARD at t=%.2f s", self.id, t)
+            else:
+                log.warning("agent %d: vehicle left OFFBOARD (%s) at t=%.2f s: publishing "
+                            "its measured state as non-cooperative", self.id, mode, t)
+        if cooperative:
+            return est
+        est.cooperative = False
+        odo = self.link.odometry
+        got = None if odo is None else measured_state(odo, 1.0 / self.control_hz)
+        if got is not None:
+            est.z1, est.z2 = got
+            est.z3 = np.zeros(3)
+        return est
 
     # -- main loop ----------------------------------------------------------------------
     def _startup_transitions(self) -> None:

@@ -36,13 +36,16 @@ ATT_MASK_IGNORE_RATES = (
 
 @dataclass
 class Odometry:
-    """The latest ODOMETRY of the vehicle (NED, as on the wire)."""
+    """The latest ODOMETRY of the vehicle (NED, as on the wire): position (m), attitude
+    quaternion (w, x, y, z, FRD -> NED) and body FRD velocity (m/s)."""
 
     time_usec: int
     x: float
     y: float
     z: float
     received: float
+    q: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    v_body: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 class VehicleLink:
@@ -99,7 +102,11 @@ class VehicleLink:
             self.custom_mode = int(msg.custom_mode)
             self.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         elif kind == "ODOMETRY":
-            self.odometry = Odometry(int(msg.time_usec), msg.x, msg.y, msg.z, time.monotonic())
+            q = tuple(float(c) for c in msg.q)
+            self.odometry = Odometry(
+                int(msg.time_usec), msg.x, msg.y, msg.z, time.monotonic(),
+                (q[0], q[1], q[2], q[3]), (float(msg.vx), float(msg.vy), float(msg.vz)),
+            )
         elif kind == "COMMAND_ACK":
             self.acks[int(msg.command)] = msg
         elif kind == "STATUSTEXT":

@@ -83,6 +83,14 @@ def _unpack_vec(b: Any, shape: tuple[int, ...]) -> np.ndarray:
     return np.frombuffer(b, dtype="<f4").astype(np.float64).reshape(shape)
 
 
+def _opt_bool(d: dict[str, Any], key: str, default: bool) -> bool:
+    """An optional boolean field: absent -> ``default``; anything but a bool is malformed."""
+    value = d.get(key, default)
+    if not isinstance(value, bool):
+        raise WireError(f"field {key!r} is {type(value).__name__}, expected bool")
+    return value
+
+
 # -- payloads ------------------------------------------------------------------------
 @dataclass
 class Truth:
@@ -116,6 +124,10 @@ class Estimate:
     z3: np.ndarray  # (3,) lumped disturbance (zeros for leaders)
     xi: np.ndarray  # (12,) desired state [p*, ṗ*, p̈*, p⃛*]
     zeta: np.ndarray = field(default_factory=lambda: np.zeros(6))  # (6,) ζ̂
+    # False while the agent's vehicle is out of OFFBOARD although the mission expects it
+    # there (e.g. AUTO.LAND by a third party): z1, z2 are then its measured state and it
+    # flies no safety filter, so the others avoid it alone (docs/lifecycle.md)
+    cooperative: bool = True
 
 
 @dataclass
@@ -191,6 +203,8 @@ def encode(obj: Payload) -> bytes:
                 np.ravel(obj.zeta),
             ])),
         }
+        if not obj.cooperative:  # absent = True: older receivers and senders agree
+            d["coop"] = False
     elif isinstance(obj, Status):
         d = {
             "v": VERSION,
@@ -270,6 +284,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 z3=x[6:9],
                 xi=x[9:21],
                 zeta=x[21:27],
+                cooperative=_opt_bool(d, "coop", True),
             )
         if kind == "status":
             return Status(

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.daemon import estimate_from_wire, estimate_to_wire, status_to_wire
+from offboard.daemon import (
+    estimate_from_wire,
+    estimate_to_wire,
+    measured_state,
+    status_to_wire,
+)
+from offboard.mavlink_link import Odometry
 from swarm_common import wire
 from swarm_common.enums import Method, QPStatus
 
@@ -21,6 +27,29 @@ def test_estimate_round_trip_keeps_the_role() -> None:
         back = wire.decode(wire.encode(w))
         assert isinstance(back, wire.Estimate) and back.role == role
         assert estimate_from_wire(back).is_leader is leader
+
+
+def test_estimate_round_trip_keeps_cooperation() -> None:
+    for cooperative in (True, False):
+        e = _est(False)
+        e.cooperative = cooperative
+        back = wire.decode(wire.encode(estimate_to_wire(e, 7, None)))
+        assert isinstance(back, wire.Estimate)
+        assert estimate_from_wire(back).cooperative is cooperative
+
+
+def test_measured_state_is_enu_and_carried_one_step() -> None:
+    # yaw 90° in NED (nose east): body forward = NED east = ENU x
+    c = float(np.sqrt(0.5))
+    odo = Odometry(0, 1.0, 2.0, -3.0, 0.0, (c, 0.0, 0.0, c), (2.0, 0.0, -1.0))
+    got = measured_state(odo, 0.1)
+    assert got is not None
+    p, v = got
+    np.testing.assert_allclose(v, [2.0, 0.0, 1.0], atol=1e-12)  # east 2, climbing 1
+    np.testing.assert_allclose(p, [2.0 + 0.2, 1.0, 3.0 + 0.1], atol=1e-12)
+    bad = Odometry(0, float("nan"), 2.0, -3.0, 0.0, (c, 0.0, 0.0, c), (0.0, 0.0, 0.0))
+    assert measured_state(bad, 0.1) is None
+    assert measured_state(Odometry(0, 0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0, 0.0)), 0.1) is None
 
 
 def test_status_strings_and_health() -> None:

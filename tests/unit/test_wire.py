@@ -55,6 +55,22 @@ def test_estimate_status_command_roundtrip() -> None:
     assert isinstance(c, wire.Command) and c.duration_s == 0.5
 
 
+def test_estimate_cooperative_flag() -> None:
+    e = wire.Estimate(4, 10, 0.22, "follower", np.ones(3), np.zeros(3), np.zeros(3),
+                      np.arange(12.0))
+    plain = wire.encode(e)
+    assert b"coop" not in plain  # the default adds nothing: old receivers decode it as before
+    back = wire.decode(plain)
+    assert isinstance(back, wire.Estimate) and back.cooperative is True
+    e.cooperative = False
+    back = wire.roundtrip(e)
+    assert isinstance(back, wire.Estimate) and back.cooperative is False
+    d = msgpack.unpackb(wire.encode(e), raw=False)
+    d["coop"] = 1  # not a bool
+    with pytest.raises(wire.WireError, match="coop"):
+        wire.decode(msgpack.packb(d, use_bin_type=True))
+
+
 @pytest.mark.parametrize(
     "payload",
     [
