@@ -6,7 +6,7 @@ state x3: external disturbance and whatever the adaptive model does not explain)
     ż1 = z2                      − β1 e1
     ż2 = z3 + Φ(z1, z2) ζ̂ + u    − β2 e1 − κ2 e2  (stable sign, Departure 5)
     ż3 =                         − β3 e1 − κ3 e2
-    ζ̂̇  = −μ Φᵀ(z1, z2) e2 − μ σ ζ̂                 (σ-modification; sign as Departure 5)
+    ζ̂̇  = −μ Φᵀ e2 / (1 + ‖Φ‖²) − μ σ ζ̂, ζ̂ in a box  (sign as Departure 5; Departure 8)
 
 with the innovations of Departure 6 (``r_ij = p_j − p_i`` measured as ``g_ij d_ij``)::
 
@@ -22,6 +22,10 @@ position with the measured relative velocity). The linear part is integrated exa
 (matrix exponential); the input u is resolved at ``substeps`` sub-steps (the realised
 virtual control predicted by the inner-loop model, a first-order hold of the command),
 Φ(z1,z2)ζ̂ is held over the period and ζ̂ is advanced once per period (μ is small).
+The adaptive law is made harmless (docs/estimation.md): Φ is evaluated at a speed saturated
+to V_EVAL_MAX, the gradient is normalised, ζ̂ is projected onto a box of physical values,
+‖f̂‖ is saturated to F_HAT_MAX, and ζ̂ moves only once the innovations have stayed small
+for GATE_HOLD_S (never during start-up transients or outages).
 The whole period is then one affine map ``X⁺ = A_S X + Σ_s G_s (u_s + f̂)``.
 
 :func:`gain_report` checks the gains per eigen-channel (``s³ + β1λ s² + β2λ s + β3λ``
@@ -40,37 +44,82 @@ from scipy.linalg import expm
 from offboard.bearing import Formation
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
-ZETA_BOUND = 5.0  # ‖ζ̂‖ ≤ ζ̄ (§2.2 bound), enforced by projection
-V_EVAL_MAX = 20.0  # m/s, velocity at which f̂ is evaluated is clipped (overflow guard)
+# Adaptive law (docs/estimation.md): ζ̂ stays in a box of physically meaningful values
+# (bias, drag ≥ 0, cubic damping ≥ 0, ground effect ≥ 0, cross-coupling), m/s² per unit
+ZETA_LO = np.array([-1.0, 0.0, 0.0, 0.0, 0.0, -1.0])
+ZETA_HI = np.array([1.0, 1.0, 0.5, 0.1, 2.0, 1.0])
+ZETA_BOUND = float(np.linalg.norm(np.maximum(-ZETA_LO, ZETA_HI)))  # ‖ζ̂‖ in the box (2.55)
+V_EVAL_MAX = 10.0  # m/s, speed at which Φ is evaluated (norm saturated; physical max speed)
+F_HAT_MAX = 3.0  # m/s², ‖f̂‖ = ‖Φζ̂‖ used inside the observer model is saturated to this
+GATE_E1 = 0.3  # m, adaptation runs only while ‖e1‖ ≤ GATE_E1 ...
+GATE_E2 = 1.0  # m/s, ... and ‖e2‖ ≤ GATE_E2 ...
+GATE_HOLD_S = 1.0  # s, ... have held continuously this long (the observer has converged)
+
+
+def _v_eval(z2: np.ndarray) -> tuple[float, float, float]:
+    """Velocity at which Φ is evaluated: ``z2`` with its norm saturated to V_EVAL_MAX."""
+    vx, vy, vz = (float(c) for c in z2)
+    nv = math.sqrt(vx * vx + vy * vy + vz * vz)
+    if not math.isfinite(nv):
+        return 0.0, 0.0, 0.0
+    if nv > V_EVAL_MAX:
+        s = V_EVAL_MAX / nv
+        return vx * s, vy * s, vz * s
+    return vx, vy, vz
 
 
 def model_accel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
-    """f̂ = Φ(z1, z2) ζ̂ without building Φ (fast path of :func:`regressor`; |v| clipped)."""
-    vx, vy, vz = (min(V_EVAL_MAX, max(-V_EVAL_MAX, float(c))) for c in z2)
+    """f̂ = Φ(z1, z2) ζ̂ without building Φ (fast path of :func:`regressor`), with ‖v‖
+    saturated to V_EVAL_MAX and ‖f̂‖ to F_HAT_MAX (m/s²)."""
+    vx, vy, vz = _v_eval(z2)
     z0, z1_, z2_, z3_, z4, z5 = (float(c) for c in zeta)
     nv = math.sqrt(vx * vx + vy * vy + vz * vz)
     ge = math.exp(-max(float(z1[2]), 0.0) / h)
     k = z1_ + z2_ * nv
-    return np.array(
-        [
-            z0 - k * vx - z3_ * vx**3 - z5 * vy,
-            z0 - k * vy - z3_ * vy**3 + z5 * vx,
-            z0 - k * vz - z3_ * vz**3 + z4 * ge,
-        ]
-    )
+    fx = z0 - k * vx - z3_ * vx**3 - z5 * vy
+    fy = z0 - k * vy - z3_ * vy**3 + z5 * vx
+    fz = z0 - k * vz - z3_ * vz**3 + z4 * ge
+    nf = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if nf > F_HAT_MAX:
+        s = F_HAT_MAX / nf
+        fx, fy, fz = fx * s, fy * s, fz * s
+    return np.array([fx, fy, fz])
 
 
-def regressor_t_times(z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float) -> np.ndarray:
-    """Φ(z1, z2)ᵀ e (6,) without building Φ (|v| clipped like :func:`model_accel`)."""
-    vx, vy, vz = (min(V_EVAL_MAX, max(-V_EVAL_MAX, float(c))) for c in z2)
+def regressor_t_times(
+    z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float
+) -> tuple[np.ndarray, float]:
+    """(Φᵀ e (6,), ‖Φ‖_F²) without building Φ (‖v‖ saturated like :func:`model_accel`)."""
+    vx, vy, vz = _v_eval(z2)
     ex, ey, ez = float(e[0]), float(e[1]), float(e[2])
-    nv = math.sqrt(vx * vx + vy * vy + vz * vz)
+    v2 = vx * vx + vy * vy + vz * vz
+    nv = math.sqrt(v2)
     ve = vx * ex + vy * ey + vz * ez
     ge = math.exp(-max(float(z1[2]), 0.0) / h)
-    return np.array(
+    phte = np.array(
         [ex + ey + ez, -ve, -nv * ve, -(vx**3 * ex + vy**3 * ey + vz**3 * ez), ge * ez,
          -vy * ex + vx * ey]
     )
+    fro2 = 3.0 + v2 + v2 * v2 + (vx**6 + vy**6 + vz**6) + ge * ge + vx * vx + vy * vy
+    return phte, fro2
+
+
+def adapt_step(
+    zeta: np.ndarray, phte: np.ndarray, fro2: float, mu: float, sigma: float, dt: float
+) -> np.ndarray:
+    """One period of the adaptive law (paper §3, Departures 5 and 8; docs/estimation.md)::
+
+        ζ̂⁺ = Π_box( ζ̂ − dt μ [ Φᵀe2 / (1 + ‖Φ‖_F²) + σ ζ̂ ] )
+
+    Normalised gradient with σ-modification, projected (per component, which is the
+    Euclidean projection onto a box) onto [ZETA_LO, ZETA_HI]. Whatever e2 and Φ are,
+    ‖Φᵀe2‖/(1 + ‖Φ‖²) ≤ ‖e2‖/2, so one step moves ζ̂ by at most dt μ (‖e2‖/2 + σ‖ζ̂‖)
+    and ζ̂ never leaves the box.
+    """
+    step = phte / (1.0 + fro2) + sigma * zeta
+    if not np.all(np.isfinite(step)):
+        return zeta
+    return np.clip(zeta - dt * mu * step, ZETA_LO, ZETA_HI)
 
 
 def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dict[int, np.ndarray]:
@@ -287,6 +336,19 @@ class DESO:
         self.last_e2 = np.zeros(3)
         self.n_used = 0
         self._f_hat: np.ndarray | None = None  # f̂ at the current state (set by lumped())
+        self.converged_s = 0.0  # s for which the innovations have stayed inside the gate
+
+    def _gate_open(self) -> bool:
+        """Advance the convergence timer with this period's innovations; True once
+        ‖e1‖ ≤ GATE_E1 and ‖e2‖ ≤ GATE_E2 have held for GATE_HOLD_S (docs/estimation.md).
+        Start-up transients, outages and lost neighbours freeze ζ̂ instead of driving it."""
+        e1 = float(np.linalg.norm(self.last_e1))
+        e2 = float(np.linalg.norm(self.last_e2))
+        if e1 <= GATE_E1 and e2 <= GATE_E2:
+            self.converged_s += self.dt
+        else:
+            self.converged_s = 0.0
+        return self.converged_s >= GATE_HOLD_S - 1e-9
 
     def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_S (15×15), G (15×3S), D) for this neighbour set (cached)."""
@@ -328,6 +390,7 @@ class DESO:
         used = tuple(j for j in self.nbrs if valid[j] and j in nbr_p)
         self.n_used = len(used)
         if not used:  # no relative information: dead-reckon with the model
+            self.converged_s = 0.0
             for s in range(self.substeps):
                 acc = self.z3 + model_accel(self.z1, self.z2, self.zeta, self.h) + u_sub[s]
                 self.z1 = self.z1 + self.delta * self.z2 + 0.5 * self.delta**2 * acc
@@ -345,11 +408,9 @@ class DESO:
         f_hat = f_cached if f_cached is not None else model_accel(z1, z2, self.zeta, self.h)
         self.last_e1 = dmat @ z1 - b1
         self.last_e2 = dmat @ z2 - b2
-        if self.mu > 0.0:
-            phie = regressor_t_times(z1, z2, self.last_e2, self.h)
-            zeta = self.zeta + self.dt * self.mu * (-phie - self.sigma * self.zeta)
-            nz = float(np.linalg.norm(zeta))
-            self.zeta = zeta * (ZETA_BOUND / nz) if nz > ZETA_BOUND else zeta  # projection
+        if self.mu > 0.0 and self._gate_open():
+            phte, fro2 = regressor_t_times(z1, z2, self.last_e2, self.h)
+            self.zeta = adapt_step(self.zeta, phte, fro2, self.mu, self.sigma, self.dt)
         x = np.concatenate([z1, z2, self.z3, b1, b1d])
         x = a_s @ x + g @ (np.asarray(u_sub, dtype=float) + f_hat).reshape(-1)
         self.z1 = x[0:3].copy()
