@@ -27,6 +27,7 @@ METRIC_KEYS = (
     "barrier_violation_steps",
     "barrier_violation_pair_steps",
     "collisions",
+    "ground_strikes",
     "input_clipped_steps",
     "energy_u",
     "energy_thrust",
@@ -169,6 +170,21 @@ class SafetySpec:
     clipped_known: bool = True  # False: the statuses did not carry input_clipped
 
 
+GROUND_Z_M = 0.02  # m, an agent this low is on the ground
+STRIKE_SPEED_MPS = 0.5  # m/s, descent speed above which a touchdown is a ground strike
+
+
+def ground_strikes(p: np.ndarray, v: np.ndarray) -> int:
+    """Touchdowns faster than :data:`STRIKE_SPEED_MPS`: steps where an agent that was above
+    :data:`GROUND_Z_M` is at or below it, having descended faster than that the step
+    before (a landing at the landing reference's 0.6 m/s ends slower than this)."""
+    if len(p) < 2:
+        return 0
+    z, vz = p[:, :, 2], v[:, :, 2]
+    hit = (z[1:] <= GROUND_Z_M) & (z[:-1] > GROUND_Z_M) & (vz[:-1] < -STRIKE_SPEED_MPS)
+    return int(np.sum(hit))
+
+
 def compute_metrics(
     s: Series,
     follower_idx: list[int],
@@ -206,6 +222,7 @@ def compute_metrics(
         ),
         **barrier_metrics(s.p, s.v, spec.tau_safe_s, spec.d_safe_m),
         "collisions": int(collisions),
+        "ground_strikes": ground_strikes(s.p, s.v),
         "input_clipped_steps": int(np.sum(s.input_clipped)) if spec.clipped_known else None,
         "energy_u": float(np.sum(s.u[:, f] ** 2) * dt),
         "energy_thrust": float(np.sum(thr**2) * dt),

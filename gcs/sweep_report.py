@@ -136,6 +136,9 @@ def group_stats(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "violation_steps": sum(int(r.get("barrier_violation_steps") or 0) for r in ok),
         "collision_runs": coll_runs,
         "collisions": sum(int(r.get("collisions") or 0) for r in ok),
+        "ground_strikes": sum(int(r.get("ground_strikes") or 0) for r in ok),
+        "clipped_steps": sum(int(r.get("input_clipped_steps") or 0) for r in ok),
+        "formed": sum(1 for r in ok if r.get("formation_time_s") not in (None, "")),
         "violation_p_upper": clopper_pearson_upper(viol, n) if n else None,
         "collision_p_upper": clopper_pearson_upper(coll_runs, n) if n else None,
     }
@@ -144,8 +147,9 @@ def group_stats(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 SUMMARY_HEAD = (
     "| Scenario | Method | Runs (crashed) | Min dist p0 / p5 / p50 (m) | "
     "True h_min p0 / p5 / p50 (m²) | Runs with h<0 | Steps h<0 (total) | "
-    "Runs with collision (contacts) | P(violation) 95 % UB | P(collision) 95 % UB |\n"
-    "|---|---|---|---|---|---|---|---|---|---|\n"
+    "Runs with collision (contacts) | P(violation) 95 % UB | P(collision) 95 % UB | "
+    "Ground strikes | Clipped steps | Formed |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
 )
 
 
@@ -164,7 +168,8 @@ def summary_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
                 f"| {scen} | {m} | {g['runs']} ({g['crashed']}) | {_pcts(g['min_distance_m'])} | "
                 f"{_pcts(g['h_min'])} | {g['violation_runs']}/{g['runs']} | "
                 f"{g['violation_steps']} | {g['collision_runs']}/{g['runs']} "
-                f"({g['collisions']}) | {ub} | {cub} |\n"
+                f"({g['collisions']}) | {ub} | {cub} | {g['ground_strikes']} | "
+                f"{g['clipped_steps']} | {g['formed']}/{g['runs']} |\n"
             )
     return out
 

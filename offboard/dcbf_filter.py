@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.clf_rcbf import barrier
-from offboard.dcbf import InputSet, LagCoefficients, dcbf_rows
+from offboard.dcbf import InputSet, LagCoefficients, dcbf_rows, ground_rows
 from offboard.dcbf_qp import DcbfQP
 from offboard.safety_filter import (
     W_SAFE,
@@ -24,7 +24,13 @@ from offboard.safety_filter import (
 from swarm_common.enums import Method
 from swarm_common.scenario import ControllerConfig, VehicleConfig
 
-REL_ACC_SMOOTH = 0.5  # low-pass weight of the previous relative-acceleration estimate
+REL_ACC_SMOOTH = 0.5
+# ground barrier (offboard.dcbf.ground_rows): its class-K gain (1/s) and the bound on the
+# error of the predicted own vertical acceleration (m/s²): thrust lag τ_F = 0.03 s makes
+# the vertical channel fast, and the error is the disturbance estimate's (saturated at
+# W_SAFE) plus the tilt–thrust coupling; at rest the floor is kept by h_g ≥ ē(T+τ)/γ
+GROUND_GAMMA = 2.0
+GROUND_ACCEL_ERR = 1.0  # low-pass weight of the previous relative-acceleration estimate
 
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
@@ -58,7 +64,7 @@ class DcbfFilter(SafetyFilter):
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
         the prediction horizon is T = τ_rp + dt."""
         uset = input_set_of(self.ctl, veh)
-        self.qp = DcbfQP(2 * (len(self.leader_mask) - 1), uset, self.ctl.rho, self.ctl.clf_c)
+        self.qp = DcbfQP(2 * (len(self.leader_mask) - 1) + 2, uset, self.ctl.rho, self.ctl.clf_c)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
         self.dt = dt
@@ -104,6 +110,13 @@ class DcbfFilter(SafetyFilter):
             ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2,
         )
+        if x.floor_m is not None and x.z1 is not None:  # airborne: the ground barrier
+            wz = float(saturate_norm(x.w, W_SAFE)[2])
+            gg, rg = ground_rows(
+                float(x.z1[2]), float(x.z2[2]), float(x.a_real[2]), wz, x.floor_m, self.lag,
+                ctl.tau_safe_s, GROUND_GAMMA, GROUND_ACCEL_ERR,
+            )
+            g, rhs = np.vstack([g, gg]), np.concatenate([rhs, rg])
         brake = -x.w - self.brake_gain * x.z2
         res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min, brake)
         return SafetyOutput(

@@ -103,6 +103,7 @@ class FollowerAgent(AgentBase):
             for j in sorted(nb | set(self.form.leader_idx))
         ]
         self.fallbacks = 0
+        self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
         self.hold = DropoutHold(sc.n, self.index, SENSE_HOLD_S, sc.sensing.dropout_prob > 0.0)
 
@@ -145,7 +146,7 @@ class FollowerAgent(AgentBase):
         u = self._safe_control(SafetyInput(
             clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc,
             self.a_real, self.u_prev, self.a_mean, self.acc_est.rows(sel),
-            self._full_share(sel),
+            self._full_share(sel), self.deso.z1, self._ground_floor(),
         ), status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
@@ -175,6 +176,16 @@ class FollowerAgent(AgentBase):
             if is_lead:
                 out.lead_acc[j] = xi_a(got[2])
         return out
+
+    def _ground_floor(self) -> float | None:
+        """The dcbf ground barrier's floor (m) once this follower has been above it, None
+        before (ground start) and while landing (docs/safety.md §7)."""
+        floor = self.ctl.dcbf_ground_clearance_m
+        if self.landing is not None or floor <= 0.0:
+            return None
+        if not self._airborne and float(self.deso.z1[2]) >= floor:
+            self._airborne = True
+        return floor if self._airborne else None
 
     def _full_share(self, sel: np.ndarray) -> np.ndarray:
         """(M,) True where this agent takes the whole avoidance budget: the other is a

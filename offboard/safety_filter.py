@@ -66,6 +66,10 @@ class SafetyInput:
     # (M,) True where this agent takes the whole avoidance budget (the other is a leader
     # or does not cooperate); None: leaders only (the filter's leader mask)
     full_share: np.ndarray | None = None
+    # dcbf only: own position estimate (m) and the ground barrier's floor altitude (m);
+    # floor None = no ground barrier (on the pad, taking off below the floor, landing)
+    z1: np.ndarray | None = None
+    floor_m: float | None = None
 
 
 @dataclass

@@ -166,6 +166,8 @@ class ControllerConfig:
     dcbf_gamma_cubic: float = _num(0.0, 100.0)
     dcbf_accel_error_mps2: float = _num(0.0, 10.0)
     dcbf_cone_sides: int = _int(3, 64)
+    # dcbf: altitude (m) below which an airborne follower may not descend (ground barrier)
+    dcbf_ground_clearance_m: float = _num(0.0, 100.0)
 
 
 

@@ -12,8 +12,8 @@ import pytest
 
 from offboard.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
 from offboard.clf_rcbf import ClfTerms, barrier
-from offboard.dcbf import LagCoefficients, dcbf_rows, predict
-from offboard.dcbf_filter import input_set_of
+from offboard.dcbf import LagCoefficients, dcbf_rows, ground_rows, predict
+from offboard.dcbf_filter import GROUND_ACCEL_ERR, GROUND_GAMMA, input_set_of
 from offboard.dcbf_qp import DcbfQP
 from swarm_common.scenario import load_scenario
 
@@ -200,3 +200,33 @@ def test_error_margin_does_not_repel_a_pair_at_rest_outside_the_safe_distance() 
                           np.array([0.5]), lag, CTL.tau_safe_s, CTL.d_safe_m,
                           CTL.dcbf_gamma_lin, CTL.dcbf_gamma_cubic, 2.0)
     assert not np.all(g @ zero >= rhs)
+
+
+@pytest.mark.parametrize("vz0", [0.0, -3.0])
+def test_ground_barrier_holds_a_full_down_command_above_the_floor(vz0: float) -> None:
+    """One agent at 4 m, nominal input straight down at the input limit, 50 Hz, real lag
+    model, a constant 0.8 m/s² downward disturbance the rows only know within ē: the true
+    altitude must stay above the floor (and the agent must have come down towards it)."""
+    fine = NSUB
+    uset = input_set_of(CTL, VEH)
+    lag = LagCoefficients.of(TAU, VEH.tau_rollpitch_s + DT)
+    qp = DcbfQP(2, uset, CTL.rho, CTL.clf_c)
+    inner = InnerLoopModel(VEH, DT / fine)
+    floor, dist = 0.5, np.array([0.0, 0.0, -0.8])
+    p, v = np.array([0.0, 0.0, 4.0]), np.array([0.0, 0.0, vz0])
+    a_real = np.zeros(3)
+    zs, hs = [], []
+    for _ in range(400):  # 8 s
+        g, rhs = ground_rows(float(p[2]), float(v[2]), float(a_real[2]), 0.0, floor, lag,
+                             CTL.tau_safe_s, GROUND_GAMMA, GROUND_ACCEL_ERR)
+        u = qp.solve(uset.project(np.array([0.0, 0.0, -20.0])), NO_CLF, g, rhs, 1.0, -v).u
+        assert uset.contains(u, tol=1e-6)
+        for a in inner.run(setpoint_from_accel(u, 0.0, VEH), fine):
+            v = v + (a + dist) * DT / fine
+            p = p + v * DT / fine
+        a_real = a
+        zs.append(float(p[2]))
+        hs.append(float(p[2] - floor + CTL.tau_safe_s * v[2]))
+    assert min(zs) > floor
+    assert zs[-1] < 1.5  # it did descend toward the floor (not frozen far above it)
+    assert min(hs) >= 0.0  # h_g(0) > 0 and the barrier keeps it so

@@ -67,7 +67,7 @@ def test_group_stats_and_table_count_crashes_apart() -> None:
     assert g["violation_p_upper"] == pytest.approx(1 - 0.05 ** 0.1)
     table = summary_table(rows, ["rcbf", "none"])
     assert "| s | rcbf | 10 (1) | 0.800 / 0.809 / 0.890 |" in table
-    assert "| 10/10 | 400 | 10/10 (20) | 1.000 | 1.000 |" in table
+    assert "| 10/10 | 400 | 10/10 (20) | 1.000 | 1.000 | 0 | 0 | 0/10 |" in table
 
 
 def test_flat_row_covers_every_metric_column() -> None:
