@@ -12,6 +12,7 @@ Vectors are in the paper's world frame (ENU-style, z up); see docs/conventions.m
 
 from __future__ import annotations
 
+import logging
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -20,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from swarm_common.enums import Role, StartMode
+from swarm_common.feasibility import feasibility_problem
 from swarm_common.scenario_schema import (
     AGENT_SCHEMA,
     OPTIONAL_SECTIONS,
@@ -49,6 +51,7 @@ __all__ = [
     "ControllerConfig",
     "DisturbanceConfig",
     "FormationConfig",
+    "InfeasibleScenarioError",
     "LeaderTrajectoryConfig",
     "LifecycleConfig",
     "ObserverConfig",
@@ -63,8 +66,18 @@ __all__ = [
 ]
 
 
+log = logging.getLogger(__name__)
+
+ALLOW_INFEASIBLE_FLAG = "--allow-infeasible"
+
+
 class ScenarioError(ValueError):
     """A scenario file is missing, unreadable or invalid. ``str()`` is one line."""
+
+
+class InfeasibleScenarioError(ScenarioError):
+    """A valid scenario that the vehicles cannot fly (:mod:`swarm_common.feasibility`);
+    ``--allow-infeasible`` turns it into a warning."""
 
 
 # ---------------------------------------------------------------------------
@@ -102,6 +115,8 @@ class Scenario:
     controller: ControllerConfig
     agents: tuple[AgentSpec, ...]
     lifecycle: LifecycleConfig = LifecycleConfig()
+    # loaded with the feasibility check waived (--allow-infeasible); children inherit it
+    allow_infeasible: bool = False
 
     def section(self, name: str) -> Any:
         """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
@@ -190,11 +205,16 @@ class Scenario:
         data = self.to_toml_dict()
         for sec, kv in sections.items():
             data.setdefault(sec, {}).update(kv)
-        return parse_scenario(data, self.path)
+        return parse_scenario(data, self.path, self.allow_infeasible)
 
 
-def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
-    """Validate a decoded TOML document and return a :class:`Scenario`."""
+def parse_scenario(
+    data: dict[str, Any], path: str = "<scenario>", allow_infeasible: bool = False
+) -> Scenario:
+    """Validate a decoded TOML document and return a :class:`Scenario`.
+
+    A valid scenario the vehicles cannot fly (:func:`check_feasible`) raises
+    :class:`InfeasibleScenarioError`, or only logs a warning with ``allow_infeasible``."""
 
     def fail(msg: str) -> ScenarioError:
         return ScenarioError(f"{path}: {msg}")
@@ -295,7 +315,24 @@ def parse_scenario(data: dict[str, Any], path: str = "<scenario>") -> Scenario:
         )
         for name, cls in SECTIONS.items()
     }
-    return Scenario(path=path, agents=tuple(agents), **typed)
+    scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible, **typed)
+    check_feasible(scen)
+    return scen
+
+
+def check_feasible(sc: Scenario) -> None:
+    """Raise :class:`InfeasibleScenarioError` (one line: file, key, numbers) if the vehicles
+    cannot fly ``sc`` (:func:`swarm_common.feasibility.feasibility_problem`); with
+    ``sc.allow_infeasible`` log it as a warning instead (docs/scenarios.md)."""
+    problem = feasibility_problem(sc)
+    if problem is None:
+        return
+    if sc.allow_infeasible:
+        log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)
+        return
+    raise InfeasibleScenarioError(
+        f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway"
+    )
 
 
 def _check_separation(
@@ -345,8 +382,8 @@ def _check_pads(agents: list[AgentSpec], d_safe: float, fail: Any) -> None:
                 )
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario TOML file."""
+def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
+    """Read and validate a scenario TOML file (``allow_infeasible``: :func:`parse_scenario`)."""
     p = Path(path)
     try:
         text = p.read_text()
@@ -356,4 +393,4 @@ def load_scenario(path: str | Path) -> Scenario:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{p}: not valid TOML ({exc})") from None
-    return parse_scenario(data, str(p))
+    return parse_scenario(data, str(p), allow_infeasible)
