@@ -19,7 +19,7 @@ from pathlib import Path
 
 from gcs.procs import python_entry
 from swarm_common.ports import GCS_PORT, port_free, vehicle_ports
-from swarm_common.scenario import Scenario
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
 
 LOCALHOST = "127.0.0.1"
@@ -119,8 +119,7 @@ class LaunchSpec:
             argv += ["--stats-out", str(self.sim_stats_path)]
         if self.lockstep:
             argv += ["--step-timeout", f"{LOCKSTEP_STEP_TIMEOUT_S}", "--lockstep"]
-        argv += self._seed_args()
-        return argv
+        return argv + self._common_args()
 
     def daemon_argv(self, agent_id: int) -> list[str]:
         """The ``offboard`` daemon of one agent, dialling the router."""
@@ -140,8 +139,7 @@ class LaunchSpec:
             argv.append("--realtime")
         if self.manual_start:
             argv.append("--manual-start")
-        argv += self._seed_args()
-        return argv
+        return argv + self._common_args()
 
     def processes(self, daemons: bool = True) -> list[tuple[str, list[str]]]:
         """``(name, argv)`` of every child, simulator first; the daemons (which need Zenoh)
@@ -151,5 +149,7 @@ class LaunchSpec:
             out += [(f"offboard-{a.id}", self.daemon_argv(a.id)) for a in self.sc.agents]
         return out
 
-    def _seed_args(self) -> list[str]:
-        return [] if self.seed is None else ["--seed", str(self.seed)]
+    def _common_args(self) -> list[str]:
+        """``--seed`` if set; ``--allow-infeasible`` if the scenario was loaded with it."""
+        argv = [] if self.seed is None else ["--seed", str(self.seed)]
+        return argv + ([ALLOW_INFEASIBLE_FLAG] if self.sc.allow_infeasible else [])

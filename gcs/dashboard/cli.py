@@ -21,7 +21,7 @@ from typing import Any
 
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
-from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
 from swarm_common.zenoh_session import default_endpoint
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
@@ -51,6 +51,11 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="start vehicle-sim (real time) and the offboard daemons; stop on exit",
     )
     p.add_argument("--no-daemons", action="store_true", help="with --launch: simulator only")
+    p.add_argument(
+        ALLOW_INFEASIBLE_FLAG,
+        action="store_true",
+        help="run a scenario that fails the feasibility check (docs/scenarios.md) with a warning",
+    )
     p.add_argument(
         "--method",
         choices=[str(m) for m in Method],
@@ -94,7 +99,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     if args.demo:
         return DashboardApp(recorded_source(), None, title="demo (recorded)"), None, None, None
     path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
-    sc = load_scenario(path)
+    sc = load_scenario(path, allow_infeasible=args.allow_infeasible)
     offset = args.port_offset
     launch = None
     link = feed = None
