@@ -138,6 +138,8 @@ class DaemonConfig:
     zenoh_mode: str = "client"
     manual_start: bool = False  # leave arming / OFFBOARD to the operator
     land_at: float | None = None  # mission time (s) of a coordinated land-all
+    # HEARTBEAT period asked of the vehicle (s): how soon a third party's mode change is seen
+    heartbeat_interval: float = 0.1
 
 
 class OffboardDaemon:
@@ -357,6 +359,12 @@ class OffboardDaemon:
             log.error("agent %d: no heartbeat from vehicle on %s", self.id, cfg.mavlink_url)
             return 2
         log.info("agent %d: vehicle heartbeat received (%s)", self.id, self.cfg.mavlink_url)
+        res = self.link.set_message_interval(
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval
+        )
+        if res != mavlink.MAV_RESULT_ACCEPTED:  # its default rate (1 Hz) still works
+            log.warning("agent %d: HEARTBEAT interval %.2f s not accepted (result %s)",
+                        self.id, cfg.heartbeat_interval, res)
         if isinstance(self.agent, FollowerAgent):
             for line in self.agent.gains.lines():
                 log.info("agent %d: %s", self.id, line)

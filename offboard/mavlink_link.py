@@ -175,6 +175,12 @@ class VehicleLink:
             ],
         )
 
+    def set_message_interval(self, msg_id: int, interval_s: float) -> int | None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL on this link (param2 in µs); the MAV_RESULT or None."""
+        return self.command(
+            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [msg_id, round(interval_s * 1e6)]
+        )
+
     def arm(self) -> int | None:
         return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1, 0])  # param1 1 = arm
 
