@@ -34,7 +34,7 @@ from typing import Any
 
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
-from swarm_common.scenario import Scenario
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
 from swarm_common.zenoh_session import default_endpoint
 
 log = logging.getLogger(__name__)
@@ -43,18 +43,18 @@ METHODS = [str(m) for m in Method]
 EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 
-def _load(path: str) -> Scenario:
+def _load(path: str, allow_infeasible: bool) -> Scenario:
     from swarm_common.scenario import ScenarioError, load_scenario
 
     try:
-        return load_scenario(path)
+        return load_scenario(path, allow_infeasible)
     except ScenarioError as exc:
         print(f"gcs: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
 
 
 def cmd_mission_run(args: argparse.Namespace) -> int:
-    sc = _load(args.scenario)
+    sc = _load(args.scenario, args.allow_infeasible)
     if not args.inproc:
         from gcs.mission import cli_run
 
@@ -71,12 +71,13 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _run_one(job: tuple[str, str, int, float | None]) -> dict[str, Any]:
+def _run_one(job: tuple[str, bool, str, int, float | None]) -> dict[str, Any]:
     from gcs.inproc import run_inproc
     from swarm_common.scenario import load_scenario
 
-    path, method, seed, duration = job
-    return run_inproc(load_scenario(path), method, seed=seed, duration=duration).metrics
+    path, allow_infeasible, method, seed, duration = job
+    sc = load_scenario(path, allow_infeasible)
+    return run_inproc(sc, method, seed=seed, duration=duration).metrics
 
 
 def _gain_lines(sc: Scenario) -> list[str]:
@@ -153,17 +154,17 @@ def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[s
     from concurrent.futures import ProcessPoolExecutor
 
     base = sc.seed if args.seed is None else args.seed
-    jobs = [(args.scenario, m, base + s, args.duration) for m in METHODS
+    jobs = [(args.scenario, sc.allow_infeasible, m, base + s, args.duration) for m in METHODS
             for s in range(args.seeds)]
     log.info("seed sweep: %d runs ...", len(jobs))
     with ProcessPoolExecutor(max_workers=args.jobs) as ex:
         res_all = list(ex.map(_run_one, jobs))
-    return {m: [r for (_, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
+    return {m: [r for (_, _, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
             for m in METHODS}
 
 
 def cmd_mission_compare(args: argparse.Namespace) -> int:
-    sc = _load(args.scenario)
+    sc = _load(args.scenario, args.allow_infeasible)
     from gcs.report import compare_table, safety_table, write_report
     from gcs.sweep_report import seeds_table
     from offboard.bearing import formation_from_scenario
@@ -210,6 +211,12 @@ def _non_negative_seconds(text: str) -> float:
     return _seconds(text, allow_zero=True)
 
 
+def _add_allow_infeasible(p: argparse.ArgumentParser) -> None:
+    p.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
+                   help="run a scenario that fails the feasibility check (docs/scenarios.md), "
+                   "with a warning")
+
+
 def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("mission", help="run or compare missions")
     msub = p.add_subparsers(dest="mission_cmd", required=True)
@@ -230,6 +237,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
+    _add_allow_infeasible(r)
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")
     c.add_argument("scenario")
@@ -240,6 +248,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--jobs", type=int, default=2, help="parallel processes for the sweep")
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
     c.add_argument("--port-offset", type=int, default=0, help="distributed: shift every port")
+    _add_allow_infeasible(c)
     c.set_defaults(func=cmd_mission_compare)
     from gcs.sweep import add_sweep_parser
 

@@ -30,7 +30,7 @@ from typing import Any
 from gcs.progress import Progress
 from gcs.sweep_report import flat_row, write_outputs
 from swarm_common.enums import Method
-from swarm_common.scenario import Scenario, ScenarioError, load_scenario
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, ScenarioError, load_scenario
 
 log = logging.getLogger(__name__)
 EXIT_USAGE = 2
@@ -49,6 +49,7 @@ class Job:
     method: str
     seed: int
     duration_s: float
+    allow_infeasible: bool = False  # --allow-infeasible: load the scenario with a warning
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -113,12 +114,12 @@ def parse_duration(text: str | None) -> float | None:
     return v
 
 
-def load_all(paths: list[str]) -> list[tuple[str, Scenario]]:
+def load_all(paths: list[str], allow_infeasible: bool = False) -> list[tuple[str, Scenario]]:
     """Load every scenario file up front (a bad one is bad input, before any run)."""
     out = []
     for p in paths:
         try:
-            out.append((p, load_scenario(p)))
+            out.append((p, load_scenario(p, allow_infeasible)))
         except ScenarioError as exc:
             raise SweepInputError(str(exc).replace("\n", " ")) from None
     return out
@@ -129,7 +130,8 @@ def make_jobs(
     duration: float | None,
 ) -> list[Job]:
     return [
-        Job(p, sc.name, m, s, float(sc.run.duration_s if duration is None else duration))
+        Job(p, sc.name, m, s, float(sc.run.duration_s if duration is None else duration),
+            sc.allow_infeasible)
         for p, sc in scenarios for m in methods for s in seeds
     ]
 
@@ -143,7 +145,7 @@ def run_job(job: Job) -> dict[str, Any]:
             "duration_s": job.duration_s}
     t0 = time.perf_counter()
     try:
-        res = run_inproc(load_scenario(job.path), job.method, seed=job.seed,
+        res = run_inproc(load_scenario(job.path, job.allow_infeasible), job.method, seed=job.seed,
                          duration=job.duration_s)
     except Exception as exc:  # any failure of a run is logged and recorded, never lost
         log.error("run %s/%s/seed %d crashed:\n%s", job.scenario, job.method, job.seed,
@@ -191,7 +193,7 @@ def cmd_mission_sweep(args: argparse.Namespace) -> int:
         methods = parse_methods(args.methods)
         workers = parse_jobs(args.jobs)
         duration = parse_duration(args.duration)
-        scenarios = load_all(args.scenario)
+        scenarios = load_all(args.scenario, args.allow_infeasible)
     except SweepInputError as exc:
         print(f"gcs mission sweep: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -219,4 +221,6 @@ def add_sweep_parser(msub: argparse._SubParsersAction) -> None:
     s.add_argument("--jobs", default=None, help="worker processes (default: CPU count)")
     s.add_argument("--duration", default=None, help="seconds per run (default: scenario)")
     s.add_argument("--out", default=None, help="output directory (default runs/sweep-TIME)")
+    s.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
+                   help="run scenarios that fail the feasibility check, with a warning")
     s.set_defaults(func=cmd_mission_sweep)

@@ -17,7 +17,7 @@ from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
-from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
 from swarm_common.zenoh_session import default_endpoint, open_session
 
 # a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
@@ -41,6 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--manual-start", action="store_true",
                     help="stream setpoints but leave arming and OFFBOARD to the operator (GCS)")
     ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
+    ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
+                    help="run a scenario that fails the feasibility check, with a warning")
     add_log_level_argument(ap)
     return ap
 
@@ -49,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
     try:
-        sc = load_scenario(args.scenario)
+        sc = load_scenario(args.scenario, args.allow_infeasible)
     except ScenarioError as exc:
         print(f"offboard: {exc}", file=sys.stderr)
         return 2

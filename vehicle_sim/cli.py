@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from swarm_common.enums import FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
-from swarm_common.scenario import Scenario, ScenarioError, load_scenario
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, ScenarioError, load_scenario
 from vehicle_sim.options import SimOptions
 
 if TYPE_CHECKING:
@@ -53,6 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--scenario", required=True, help="scenario TOML file (scenarios/cube8.toml)")
     ap.add_argument("--lockstep", action="store_true", help="advance only when controllers answer")
     ap.add_argument("--seed", type=int, default=None, help="dynamics seed (default: scenario)")
+    ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
+                    help="run a scenario that fails the feasibility check, with a warning")
     ap.add_argument("--port-offset", type=int, default=0, help="shift every UDP/TCP port")
     ap.add_argument("--bind", default="127.0.0.1", help="address the vehicle sockets bind")
     ap.add_argument("--remote-host", default="127.0.0.1", help="where default streams go")
@@ -130,7 +132,7 @@ def _server(args: argparse.Namespace) -> SimServer:
     from vehicle_sim.server import SimServer
 
     try:
-        sc = load_scenario(args.scenario)
+        sc = load_scenario(args.scenario, args.allow_infeasible)
     except ScenarioError as exc:
         raise _Fatal(str(exc)) from None
     opts = _options(args, sc)
