@@ -116,6 +116,8 @@ def run_inproc(
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
     dur = float(sc.run.duration_s if duration is None else duration)
+    if land_at is None and sc.lifecycle.land_at_s > 0.0:
+        land_at = sc.lifecycle.land_at_s
     dt = sc.control_dt
     n_steps = int(round(dur / dt))
     nsub = sc.substeps_per_control

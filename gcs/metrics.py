@@ -205,7 +205,11 @@ def compute_metrics(
     """The metrics dict (keys :data:`METRIC_KEYS`; definitions in docs/metrics.md).
     ``takeoff_end_s`` / ``land_at_s`` (s): phase bounds of ``min_distance_by_phase_m``."""
     f = follower_idx
-    err = np.linalg.norm(s.p[:, f] - s.p_des[:, f], axis=2)
+    # formation tracking ends where the land-all begins (the landing reference is not the
+    # formation): the window is [deadline, land_at_s), fixed before the run
+    flying = s.t < land_at_s - 1e-9 if land_at_s is not None else np.ones(len(s.t), bool)
+    err = np.linalg.norm(s.p[flying][:, f] - s.p_des[flying][:, f], axis=2)
+    t_fly = s.t[flying]
     late = s.t >= est_after_s
     ep = np.linalg.norm(s.z1[late][:, f] - s.p[late][:, f], axis=2)
     ev = np.linalg.norm(s.z2[late][:, f] - s.v[late][:, f], axis=2)
@@ -227,8 +231,8 @@ def compute_metrics(
         "energy_u": float(np.sum(s.u[:, f] ** 2) * dt),
         "energy_thrust": float(np.sum(thr**2) * dt),
         "energy_thrust_excess": float(np.sum((thr - mass * g) ** 2) * dt),
-        "formation_time_s": formation_time(s.t, err),
-        **window_tracking(s.t, err, deadline, dt),
+        "formation_time_s": formation_time(t_fly, err) if len(t_fly) else None,
+        **window_tracking(t_fly, err, deadline, dt),
         "est_pos_max_m": float(ep.max()) if ep.size else None,
         "est_vel_max_mps": float(ev.max()) if ev.size else None,
         "est_dist_max_mps2": float(ed.max()) if ed.size else None,

@@ -176,7 +176,8 @@ class ControllerConfig:
 class LifecycleConfig:
     """``[lifecycle]`` (optional; these defaults when absent; docs/lifecycle.md): ``start``
     "airborne" (agents start at ``position``) or "ground" (``position`` is the pad, z = 0;
-    take-off to ``takeoff_altitude_m`` + the vertex layer's height at ``climb_rate_mps``)."""
+    take-off to ``takeoff_altitude_m`` + the vertex layer's height at ``climb_rate_mps``);
+    ``land_at_s`` > 0 schedules the coordinated land-all at that mission time."""
 
     start: StartMode = field(
         default=StartMode.AIRBORNE, metadata={"spec": ("str", tuple(StartMode)), "enum": StartMode}
@@ -185,6 +186,9 @@ class LifecycleConfig:
         default=2.0, metadata={"spec": ("float", 0.0, 1000.0, True, False)}
     )
     climb_rate_mps: float = field(default=1.0, metadata={"spec": ("float", 0.0, 20.0, True, False)})
+    # mission time (s) of a scheduled coordinated land-all; 0 = none (gcs mission run
+    # --land-at overrides it)
+    land_at_s: float = field(default=0.0, metadata={"spec": ("float", 0.0, 1e6, False, False)})
 
 
 # TOML section name -> its dataclass, in file order.
