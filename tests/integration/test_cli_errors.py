@@ -37,3 +37,25 @@ def test_cli_bad_vehicles_count(tmp_path):
     )
     assert r.returncode != 0
     assert r.stderr.strip().count("\n") == 0 and "--vehicles" in r.stderr
+
+
+def _gcs(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "gcs.cli", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_infeasible_scenario_exits_2_unless_allowed(tmp_path):
+    """cube8's trajectory at 0.4 Hz needs more acceleration than the input set allows: one
+    line naming the key and the flag, exit 2; with --allow-infeasible it runs (a warning)."""
+    p = scenario_variant(tmp_path, "frequency_hz = 0.2", "frequency_hz = 0.4")
+    r = _gcs("mission", "run", str(p), "--inproc", "--duration", "0.2")
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, r.stderr
+    assert "leader_trajectory.frequency_hz = 0.4" in lines[0]
+    assert "--allow-infeasible" in lines[0]
+    r = _gcs("mission", "run", str(p), "--inproc", "--duration", "0.2", "--json",
+             "--allow-infeasible")
+    assert r.returncode == 0, r.stderr
+    assert "WARNING" in r.stderr and "leader_trajectory.frequency_hz = 0.4" in r.stderr
+    assert r.stdout.strip().startswith("{")

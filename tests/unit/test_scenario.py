@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from conftest import CUBE8
+from conftest import CUBE8, ROOT
 from scenario_variants import CASES, scenario_variant
 
 from swarm_common.scenario import ScenarioError, load_scenario
@@ -19,6 +19,13 @@ def test_cube8_loads():
     assert sc.vehicle.mass_kg == pytest.approx(1.8)
     assert sc.initial_positions()[0].tolist() == [4.0, 0.0, 6.0]
     assert sc.outages == ((5.0, 5.5), (15.0, 15.5), (40.0, 40.5))
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "scenarios").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_scenario_loads(path):
+    """Valid and feasible (swarm_common.feasibility): no --allow-infeasible needed."""
+    sc = load_scenario(path)
+    assert sc.n >= 2 and not sc.allow_infeasible
 
 
 @pytest.mark.parametrize(("old", "new", "expect"), CASES)
