@@ -20,7 +20,7 @@ CASES = [
     ("mass_kg = 1.8", "mass_kg = 1.8\nmass_lb = 4.0", ["vehicle.mass_lb", "allowed", "mass_kg"]),
     ("control_hz = 50", 'control_hz = "fifty"', ["scenario.control_hz", "integer"]),
     ("tilt_max_deg = 30.0", "tilt_max_deg = 95.0", ["vehicle.tilt_max_deg", "(0, 89]"]),
-    ('method = "rcbf"', 'method = "magic"', ["controller.method", "'rcbf'", "'apf'"]),
+    ('method = "dcbf"', 'method = "magic"', ["controller.method", "'rcbf'", "'apf'"]),
     ("zeta_spread = 0.2", "zeta_spread = -0.2", ["unmodeled.zeta_spread", "[0, 1]"]),
     ("position = [4.0, 0.0, 6.0]", "position = [4.0, 0.0]", ["agent[0].position", "3 numbers"]),
     ("[sensing]", "[sensingg]\nx = 1\n[sensing]", ["sensingg", "allowed"]),
