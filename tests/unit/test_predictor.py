@@ -1,35 +1,138 @@
-"""Neighbour data ageing in the agent (Departure 16 and communication.max_age_s)."""
+"""Neighbour data ageing in the agent (Departure 16, communication.max_age_s,
+docs/estimation.md §4): leaders exact through any outage, followers with an error bound."""
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import expm
 
 from offboard.agent_types import NeighbourEstimate
-from offboard.predictor import NeighbourPredictor
+from offboard.predictor import NeighbourPredictor, error_accel_gain
+from offboard.reference import exo_propagator, xi_a, xi_p, xi_v
+
+OMEGA = 2 * np.pi * 0.2
+DT = 0.02
+FOL = (7.0, 3.0)  # k_p', k_v of the followers' assumed loop (cube8: ks λ + kp/kd, λ + ks)
+LEAD = (4.0, 3.0)
 
 
-def _est(t: float) -> NeighbourEstimate:
+def _xi0() -> np.ndarray:
+    """A leader-like desired state: p*(t) = p0 + A(1 − cos ωt) at t = 0.3 s."""
+    amp = np.array([0.8, 0.4, 0.2])
+    t = 0.3
     xi = np.zeros(12)
-    xi[3:6] = [1.0, 0.0, 0.0]  # desired velocity 1 m/s along x
-    return NeighbourEstimate(5, t, np.array([0.0, 0, 0]), np.array([1.0, 0, 0]), np.zeros(3),
-                             xi, False)
+    xi[0:3] = np.array([4.0, 0.0, 6.0]) + amp * (1 - np.cos(OMEGA * t))
+    xi[3:6] = amp * OMEGA * np.sin(OMEGA * t)
+    xi[6:9] = amp * OMEGA**2 * np.cos(OMEGA * t)
+    xi[9:12] = -amp * OMEGA**3 * np.sin(OMEGA * t)
+    return xi
 
 
-def test_predicts_through_an_outage_then_drops_stale_data() -> None:
-    pred = NeighbourPredictor(2 * np.pi * 0.2, 0.02, (4.0, 4.0), (4.0, 3.0), max_age=1.0)
-    pred.ingest({5: _est(0.0)}, comm_ok=True)
-    got = pred.get(5, 0.0)
-    assert got is not None and np.allclose(got[0], 0.0)
-    # 0.5 s later (an outage): predicted forward, on its desired motion (1 m/s along x)
-    got = pred.get(5, 0.5)
-    assert got is not None
-    p, v, _ = got
-    assert p[0] > 0.4 and abs(v[0] - 1.0) < 0.05
-    # older than max_age: dropped, not extrapolated forever
-    assert pred.get(5, 1.2) is None
-    # a fresh message brings it back
-    pred.ingest({5: _est(1.2)}, comm_ok=True)
-    assert pred.get(5, 1.2) is not None
-    # during an outage nothing is ingested
-    pred.ingest({5: _est(5.0)}, comm_ok=False)
+def _est(aid: int, t: float, z1: np.ndarray, z2: np.ndarray, xi: np.ndarray,
+         leader: bool) -> NeighbourEstimate:
+    return NeighbourEstimate(aid, t, z1, z2, np.zeros(3), xi, leader)
+
+
+def test_leader_exact_through_a_long_outage() -> None:
+    """A leader on the exosystem with a PD offset: the prediction 5 s later equals the
+    exosystem's state plus the PD loop's decayed offset, and is never dropped (max_age 1 s)."""
+    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=1.0)
+    xi = _xi0()
+    off_p, off_v = np.array([0.05, -0.02, 0.01]), np.array([0.0, 0.03, -0.01])
+    pred.ingest({1: _est(1, 0.0, xi_p(xi) + off_p, xi_v(xi) + off_v, xi, True)}, comm_ok=True)
+    for k in range(1, 251):  # a 5 s outage; every step predicted, every 10th checked
+        t = k * DT
+        if k % 10:
+            assert pred.get(1, t) is not None
+            continue
+        got = pred.get(1, t)
+        assert got is not None
+        xi_t = exo_propagator(OMEGA, t) @ xi
+        m = expm(np.array([[0.0, 1.0], [-LEAD[0], -LEAD[1]]]) * t)
+        assert np.allclose(got[2], xi_t, atol=1e-9)
+        assert np.allclose(got[0], xi_p(xi_t) + m[0, 0] * off_p + m[0, 1] * off_v, atol=1e-9)
+        assert np.allclose(got[1], xi_v(xi_t) + m[1, 0] * off_p + m[1, 1] * off_v, atol=1e-9)
+        assert pred.bound(1, t) == 0.0
+    # the exosystem reproduces the leader trajectory itself
+    t = 5.0
+    p_true = np.array([4.0, 0.0, 6.0]) + np.array([0.8, 0.4, 0.2]) * (
+        1 - np.cos(OMEGA * (0.3 + t)))
+    assert np.allclose(xi_p(exo_propagator(OMEGA, t) @ xi), p_true, atol=1e-9)
+
+
+def test_follower_bound_grows_and_drops() -> None:
+    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=1.0, a_max=10.0, drop_bound=0.5)
+    xi = _xi0()
+    pred.ingest({5: _est(5, 0.0, xi_p(xi), xi_v(xi), xi, False)}, comm_ok=True)
+    assert pred.bound(5, 0.0) == 0.0 and pred.bound(9, 0.0) is None
+    b1, b2 = pred.bound(5, 0.1), pred.bound(5, 0.2)
+    assert b1 is not None and b2 is not None and np.isclose(b2, 4 * b1)  # ½ a_dev age²
+    a_star = np.sqrt(np.sum(xi_a(xi) ** 2) + np.sum(xi[9:12] ** 2) / OMEGA**2)
+    assert np.isclose(b1, 0.5 * (10.0 + a_star) * 0.01)
+    # on its desired motion the prediction is the exosystem's
+    got = pred.get(5, 0.2)
+    assert got is not None and np.allclose(got[0], xi_p(exo_propagator(OMEGA, 0.2) @ xi))
+    # dropped once the bound exceeds drop_bound: ½ (10 + ā*) age² > 0.5 m
+    t_drop = np.sqrt(2 * 0.5 / (10.0 + a_star))
+    assert pred.get(5, t_drop - 0.02) is not None
+    assert pred.get(5, t_drop + 0.02) is None
+    # a follower far from its target has a larger bound (the assumed loop accelerates it)
+    far = _est(6, 0.0, xi_p(xi) + np.array([3.0, 0.0, 0.0]), xi_v(xi), xi, False)
+    pred.ingest({6: far}, comm_ok=True)
+    bf = pred.bound(6, 0.1)
+    assert bf is not None and bf > b1 + 0.5 * error_accel_gain(*FOL) * 3.0 * 0.01 - 1e-12
+    # during an outage nothing is ingested; a fresh message brings it back
+    pred.ingest({5: _est(5, 5.0, xi_p(xi), xi_v(xi), xi, False)}, comm_ok=False)
     assert pred.get(5, 5.0) is None
+    pred.ingest({5: _est(5, 5.0, xi_p(xi), xi_v(xi), xi, False)}, comm_ok=True)
+    assert pred.get(5, 5.0) is not None and pred.bound(5, 5.0) == 0.0
+
+
+def test_max_age_caps_followers() -> None:
+    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=0.1, a_max=0.0, drop_bound=1e9)
+    xi = _xi0()
+    pred.ingest({5: _est(5, 0.0, xi_p(xi), xi_v(xi), xi, False)}, comm_ok=True)
+    assert pred.get(5, 0.1) is not None and pred.get(5, 0.12) is None
+
+
+def test_error_accel_gain_bounds_the_loop() -> None:
+    """c_r bounds |[−k_p, −k_v] e^{As} x| / |x| over s, for random x and s."""
+    kp, kv = FOL
+    c = error_accel_gain(kp, kv)
+    a = np.array([[0.0, 1.0], [-kp, -kv]])
+    rng = np.random.default_rng(4)
+    worst = 0.0
+    for _ in range(300):
+        x = rng.normal(size=2)
+        s = rng.uniform(0, 3)
+        worst = max(worst, abs(np.array([-kp, -kv]) @ expm(a * s) @ x) / np.linalg.norm(x))
+    assert worst <= c and c < 1.5 * np.hypot(kp, kv)
+
+
+def test_follower_bound_holds_on_simulated_data() -> None:
+    """A follower whose true acceleration deviates from the assumed loop (held, saturated,
+    disturbed) within a_max: the prediction error stays inside the bound at every step."""
+    a_max = 6.0
+    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, a_max=a_max, drop_bound=1e9)
+    rng = np.random.default_rng(7)
+    kp, kv = FOL
+    for trial in range(10):
+        xi = _xi0()
+        p = xi_p(xi) + rng.normal(0, 1.5, 3)
+        v = xi_v(xi) + rng.normal(0, 0.5, 3)
+        pred.ingest({5: _est(5, float(trial), p.copy(), v.copy(), xi, False)}, comm_ok=True)
+        h = 2e-3
+        held = rng.uniform() < 0.5
+        xi_t = xi.copy()
+        step_exo = exo_propagator(OMEGA, h)
+        for k in range(1, 501):  # 1 s, fine Euler; check at control steps
+            nominal = xi_a(xi_t) - kp * (p - xi_p(xi_t)) - kv * (v - xi_v(xi_t))
+            a = rng.uniform(-1, 1, 3) * a_max / np.sqrt(3) if held else nominal
+            a = a if np.linalg.norm(a) <= a_max else a * a_max / np.linalg.norm(a)
+            p, v = p + h * v + 0.5 * h * h * a, v + h * a
+            xi_t = step_exo @ xi_t
+            if k % 10 == 0:
+                t = trial + k * h
+                got, b = pred.get(5, t), pred.bound(5, t)
+                assert got is not None and b is not None
+                assert np.linalg.norm(got[0] - p) <= b + 1e-6
