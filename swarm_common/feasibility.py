@@ -203,10 +203,10 @@ def acceleration_problem(sc: Scenario, origins: np.ndarray, idx: list[int]) -> s
     uz, uh = u[:, 2:3], np.linalg.norm(u[:, :2], axis=1)[:, None]
     shape = e_h.shape
     checks = (  # (name, need, allowed, trajectory part) each (M, n)
-        ("horizontally", uh + e_h, lim.horizontal(uz - e_z), np.broadcast_to(uh, shape)),
         ("upward", uz + e_z, np.full(shape, k * lim.uz_max), np.broadcast_to(uz, shape)),
         ("downward", e_z - uz, np.full(shape, -k * lim.uz_min), np.broadcast_to(-uz, shape)),
-    )
+        ("horizontally", uh + e_h, lim.horizontal(uz - e_z), np.broadcast_to(uh, shape)),
+    )  # vertical first: within them the horizontal allowance is > 0
     for name, need, allowed, traj in checks:
         over = need - allowed
         m, n = np.unravel_index(int(np.argmax(over)), over.shape)
