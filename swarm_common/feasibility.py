@@ -18,10 +18,11 @@ exactly ``amplitude_n/m`` in norm) and the unmodeled dynamics ``f̃ = Φ(p*, v*)
 Input set (the dcbf polytope, :class:`offboard.dcbf.InputSet`): ``u_z ∈ [−min(u_max, 0.9g),
 min(u_max, (F_max/m) cos θ − g)]`` and ``‖u_h‖ ≤ (g + u_z) tan θ cos(π/K)``, capped at
 ``u_max``. A share :data:`FEEDBACK_RESERVE` of it is kept for feedback: the need must lie in
-the set scaled by ``1 − r`` about hover (u = 0). Sampled over one period.
+the set scaled by ``1 − r`` about hover (u = 0). Sampled at :data:`PHASE_SAMPLES` phases of
+one period, per agent.
 
-Reachability. A desired position below :data:`ground clearance <clearance>` (``d_safe_m``)
-at any time of the trajectory (``min_t z = z(0) + min(0, 2A_z)``) is unreachable.
+Reachability. A desired position below the ground clearance ``controller.d_safe_m`` at any
+time of the trajectory (``min_t z = z(0) + min(0, 2A_z)``) is unreachable.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from gcs.launch_spec import LaunchSpec
 from offboard.bearing import formation_from_scenario
 from offboard.dcbf import InputSet
 from offboard.reference import LeaderTrajectory
@@ -198,3 +199,13 @@ def test_ground_start_staging_too_low_is_refused():
     sc = _variant(ground8, lifecycle={"takeoff_altitude_m": 0.3})
     msg = feasibility_problem(sc)
     assert msg is not None and "z = 0.30 m" in msg and "below the ground clearance" in msg, msg
+
+
+def test_launched_processes_inherit_allow_infeasible(tmp_path):
+    p = _write(tmp_path, "frequency_hz = 0.2", "frequency_hz = 0.4")
+    for allow in (False, True):
+        sc = load_scenario(p if allow else CUBE8, allow_infeasible=allow)
+        spec = LaunchSpec(sc, seed=3)
+        for argv in (spec.sim_argv(), spec.daemon_argv(1)):
+            assert ("--allow-infeasible" in argv) is allow, argv
+            assert argv[argv.index("--seed") + 1] == "3"
