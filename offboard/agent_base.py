@@ -56,6 +56,8 @@ class AgentBase(ABC):
         self.landing: LandingReference | None = None
         # ground start (offboard.takeoff): the common take-off plan, else None
         self.takeoff: TakeoffPlan | None = takeoff_plan(sc) if is_ground_start(sc) else None
+        # held on the pad until start_takeoff (a real-time swarm the operator starts)
+        self.takeoff_held = False
 
     def set_method(self, method: Method | str) -> None:
         """Switch the collision-avoidance method (at run time); ValueError if unknown."""
@@ -66,6 +68,32 @@ class AgentBase(ABC):
         reference at ``plan.t_land``; the safety filter stays active. Idempotent."""
         if self.landing is None:
             self.landing = LandingReference(plan, self.index, self.current_reference(plan.t_land))
+
+    def hold_for_takeoff(self) -> bool:
+        """Ground start: stay idle on the pad (as landed) until :meth:`start_takeoff`; call
+        it before the first step. False (nothing changes) for an airborne start."""
+        if self.takeoff is None:
+            return False
+        self.takeoff_held = True
+        return True
+
+    def start_takeoff(self, t0: float) -> bool:
+        """Start the held coordinated take-off with its climbs at mission time ``t0`` (s,
+        the same on every agent: offboard.takeoff). True if it started now; False when
+        there is nothing held (airborne start, already started, or landing). Raises
+        ValueError for a negative or non-finite ``t0``."""
+        if self.takeoff is None or not self.takeoff_held or self.landing is not None:
+            return False
+        self.takeoff = takeoff_plan(self.sc, t0)
+        self.takeoff_held = False
+        return True
+
+    def takeoff_clock(self, t: float) -> float:
+        """The time at which to read the take-off plan: ``t``, or the plan's start (pad at
+        rest) while held."""
+        if self.takeoff is not None and self.takeoff_held:
+            return self.takeoff.t0
+        return t
 
     def landed_idle(self, t: float, z: float, u: np.ndarray) -> np.ndarray:
         """``u``, or the idle command (lowest vertical acceleration, no tilt) once the landing
@@ -78,7 +106,10 @@ class AgentBase(ABC):
         """``u`` with its vertical part at least 0 (hover thrust) while on the pad during the
         take-off climb (t < t_climb, altitude ``z`` (m) below offboard.landing.LANDED_Z): the
         ground contact does not realise a downward command, and the filters' inner-loop
-        model (dcbf) would otherwise predict an acceleration that does not happen."""
+        model (dcbf) would otherwise predict an acceleration that does not happen. While
+        held for the take-off (:meth:`hold_for_takeoff`): the idle command."""
+        if self.takeoff_held and self.landing is None:
+            return np.array([0.0, 0.0, self.u_lo[2]])
         if self.takeoff is None or t >= self.takeoff.t_climb or z >= LANDED_Z or u[2] >= 0.0:
             return u
         return np.array([u[0], u[1], 0.0])

@@ -17,7 +17,9 @@ silent for ``neighbour_timeout`` seconds is declared lost and no longer waited f
 (its data is then predicted by the agent, then dropped); it rejoins when it speaks.
 In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, but uses
 the latest truth and neighbour data it holds instead of waiting (stale neighbours are
-predicted by the agent); vehicle-sim measures how late each answer is.
+predicted by the agent); vehicle-sim measures how late each answer is. A ground start in
+real time with ``--manual-start`` holds the agent idle on its pad until the ground
+station's take-off command (docs/lifecycle.md).
 """
 
 from __future__ import annotations
@@ -48,6 +50,9 @@ from swarm_common.enums import Method, Role
 from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
+
+TAKEOFF_LATE_S = 1.0  # s, a take-off command's at_s may lie this far behind the step time
+TAKEOFF_LEAD_S = 60.0  # s, ... and at most this far ahead of it
 
 
 def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -> wire.Estimate:
@@ -171,6 +176,9 @@ class OffboardDaemon:
         self.land_at: float | None = cfg.land_at
         self.offboard_seen = False  # the mission has had the vehicle in OFFBOARD
         self.cooperative = True
+        self.bad_commands = 0  # commands with unusable fields: counted, logged, dropped
+        if not cfg.lockstep and cfg.manual_start and self.agent.hold_for_takeoff():
+            log.info("agent %d: on its pad until the take-off command", self.id)
 
     # -- helpers ----------------------------------------------------------------------
     def comm_ok(self, t: float) -> bool:
@@ -193,8 +201,37 @@ class OffboardDaemon:
                 self.extra_outages.append((t, t + cmd.duration_s))
                 log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
             elif cmd.kind == "land" and self.land_at is None:
-                self.land_at = cmd.at_s if cmd.at_s >= 0.0 else t
-                log.info("agent %d: land-all at t=%.2f s", self.id, self.land_at)
+                self._land_command(cmd, t)
+            elif cmd.kind == "takeoff":
+                self._takeoff_command(cmd, t)
+
+    def _bad_command(self, cmd: wire.Command, why: str) -> None:
+        self.bad_commands += 1
+        log.warning("agent %d: %s command dropped: %s", self.id, cmd.kind, why)
+
+    def _land_command(self, cmd: wire.Command, t: float) -> None:
+        """Coordinated land-all at ``at_s`` (negative: now); ignored on the pad."""
+        if not math.isfinite(cmd.at_s):
+            self._bad_command(cmd, f"at_s = {cmd.at_s!r} is not finite")
+        elif self.agent.takeoff_held:
+            log.info("agent %d: land-all ignored: still on its pad", self.id)
+        else:
+            self.land_at = cmd.at_s if cmd.at_s >= 0.0 else t
+            log.info("agent %d: land-all at t=%.2f s", self.id, self.land_at)
+
+    def _takeoff_command(self, cmd: wire.Command, t: float) -> None:
+        """Coordinated take-off with the climbs at ``at_s`` (negative: now), if held on the
+        pad; ``at_s`` must be finite, at most TAKEOFF_LATE_S behind t, TAKEOFF_LEAD_S ahead."""
+        at = cmd.at_s
+        late_or_far = at >= 0.0 and not t - TAKEOFF_LATE_S <= at <= t + TAKEOFF_LEAD_S
+        if not math.isfinite(at) or late_or_far:
+            self._bad_command(cmd, f"at_s = {at!r} at t = {t:.2f} s")
+            return
+        t0 = at if at >= 0.0 else t
+        if self.agent.start_takeoff(t0):
+            log.info("agent %d: take-off at t=%.2f s", self.id, t0)
+        else:
+            log.info("agent %d: take-off ignored: not held on a pad", self.id)
 
     def _maybe_start_landing(self, t: float) -> None:
         """From the first step at or after ``land_at``: the common plan of offboard.landing,

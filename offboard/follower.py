@@ -203,8 +203,9 @@ class FollowerAgent(AgentBase):
         if self.landing is not None:  # offboard.landing: the plan replaces ξ̂
             xi = self.landing.xi(t)
             p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
-        elif self.takeoff is not None and t < self.takeoff.t_blend:  # offboard.takeoff
-            xi = follower_xi(self.takeoff, self.index, t, self.ref.xi)
+        elif self.takeoff is not None and self.takeoff_clock(t) < self.takeoff.t_blend:
+            # offboard.takeoff (at rest on the pad while held for the take-off command)
+            xi = follower_xi(self.takeoff, self.index, self.takeoff_clock(t), self.ref.xi)
             p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
         else:
             p, v, a, j = ref.p, ref.v, ref.a, ref.j

@@ -43,9 +43,11 @@ class LeaderAgent(AgentBase):
         ``start_time`` (0 in lockstep; in real time the daemon sets the first whole
         trajectory period after arming, the same for both leaders, so the motion starts
         smoothly and the leaders stay in step). Ground start (offboard.takeoff): the climb
-        from the pad, held at the staging point p_L(0) until the plan's ``t_traj``."""
-        if self.takeoff is not None and t < max(self.start_time, self.takeoff.t_traj):
-            return climb_xi(self.takeoff, self.index, t)
+        from the pad, held at the staging point p_L(0) until the plan's ``t_traj`` (at rest
+        on the pad while held for the take-off command)."""
+        tk = self.takeoff_clock(t)
+        if self.takeoff is not None and tk < max(self.start_time, self.takeoff.t_traj):
+            return climb_xi(self.takeoff, self.index, tk)
         if t < self.start_time:
             return xi_at_rest(xi_p(self.traj.state(0.0)))
         return self.traj.state(t)

@@ -10,8 +10,11 @@ Agent i climbs vertically above its pad to its staging altitude
 i.e. each vertex layer climbs to its own layer's altitude, so no vehicle ever enters
 another's climb column (the columns are the pads, ≥ 2·D_safe apart) and the layers are
 already vertically separated when they move sideways into the formation. All agents start
-at t = 0 at ``climb_rate_mps`` with smoothstep speed ramps of ``TAU_R`` s; the climb of
-``z_i`` m ends at ``z_i / v_c + TAU_R`` s; ``t_climb`` is the latest end.
+at the plan's start time ``t0`` at ``climb_rate_mps`` with smoothstep speed ramps of
+``TAU_R`` s; the climb of ``z_i`` m ends at ``t0 + z_i / v_c + TAU_R`` s; ``t_climb`` is the
+latest end. ``t0`` = 0 for a lockstep or in-process run; a real-time swarm started by the
+operator (``--manual-start``) holds on its pads until the ground station's take-off command
+gives a common ``t0`` (docs/lifecycle.md).
 
 Hand-over: followers track the climb reference until ``t_climb``, then blend into the
 desired-state observer's ξ̂ over ``BLEND_S`` s (min-jerk weight σ, derivatives by the
@@ -38,7 +41,7 @@ BLEND_S = 3.0  # s, followers' blend from the climb reference into ξ̂
 class TakeoffPlan:
     """Common plan: pads (N,3) (m), staging altitudes (N,) (m), climb rate (m/s), the end of
     the climbs ``t_climb`` (s), of the followers' blend ``t_blend`` (s) and the start of the
-    leaders' trajectory ``t_traj`` (s)."""
+    leaders' trajectory ``t_traj`` (s), all mission times; the climbs start at ``t0`` (s)."""
 
     pads: np.ndarray
     z_stage: np.ndarray
@@ -46,6 +49,7 @@ class TakeoffPlan:
     t_climb: float
     t_blend: float
     t_traj: float
+    t0: float = 0.0
 
     def staging(self, index: int) -> np.ndarray:
         """(3,) staging point of agent ``index`` (above its pad)."""
@@ -56,19 +60,22 @@ def is_ground_start(sc: Scenario) -> bool:
     return sc.lifecycle.start is StartMode.GROUND
 
 
-def takeoff_plan(sc: Scenario) -> TakeoffPlan:
-    """The common take-off plan of a ground-start scenario (module docstring)."""
+def takeoff_plan(sc: Scenario, t0: float = 0.0) -> TakeoffPlan:
+    """The common take-off plan of a ground-start scenario, climbs starting at mission time
+    ``t0`` ≥ 0 s (module docstring); ValueError for a negative or non-finite ``t0``."""
+    if not (math.isfinite(t0) and t0 >= 0.0):
+        raise ValueError(f"take-off start time {t0!r} s: must be finite and >= 0")
     pads = sc.initial_positions()
     verts = sc.vertices()
     k1, k2 = (sc.index_of(i) for i in sc.formation.leaders[:2])
     scale = float(np.linalg.norm(pads[k1] - pads[k2]) / np.linalg.norm(verts[k1] - verts[k2]))
     lc = sc.lifecycle
     z = lc.takeoff_altitude_m + scale * (verts[:, 2] - verts[:, 2].min())
-    t_climb = float(z.max()) / lc.climb_rate_mps + TAU_R
+    t_climb = t0 + float(z.max()) / lc.climb_rate_mps + TAU_R
     t_blend = t_climb + BLEND_S
     period = 1.0 / sc.leader_trajectory.frequency_hz if sc.leader_trajectory.frequency_hz else 0.0
     t_traj = math.ceil(t_blend / period - 1e-9) * period if period > 0.0 else t_blend
-    return TakeoffPlan(pads, z, lc.climb_rate_mps, t_climb, t_blend, t_traj)
+    return TakeoffPlan(pads, z, lc.climb_rate_mps, t_climb, t_blend, t_traj, float(t0))
 
 
 def ramped_travel(s: float, dz: float, v: float) -> tuple[float, float, float, float]:
@@ -93,10 +100,11 @@ def ramped_travel(s: float, dz: float, v: float) -> tuple[float, float, float, f
 
 
 def climb_xi(plan: TakeoffPlan, index: int, t: float) -> np.ndarray:
-    """ξ = [p*, v*, a*, j*] (12,) of agent ``index``'s vertical climb at mission time t."""
+    """ξ = [p*, v*, a*, j*] (12,) of agent ``index``'s vertical climb at mission time t (at
+    rest on its pad until ``plan.t0``)."""
     out = np.zeros(12)
     out[0:2] = plan.pads[index, :2]
-    d, v, a, j = ramped_travel(t, float(plan.z_stage[index]), plan.climb_rate)
+    d, v, a, j = ramped_travel(t - plan.t0, float(plan.z_stage[index]), plan.climb_rate)
     out[2] = plan.pads[index, 2] + d
     out[5], out[8], out[11] = v, a, j
     return out

@@ -11,6 +11,7 @@ key                                    payload                                  
 ``<root>/<swarm>/cmd/method``          :class:`Command` kind="method"              gcs
 ``<root>/<swarm>/cmd/outage``          :class:`Command` kind="outage"              gcs
 ``<root>/<swarm>/cmd/land``            :class:`Command` kind="land"                gcs
+``<root>/<swarm>/cmd/takeoff``         :class:`Command` kind="takeoff"             gcs
 =====================================  ==========================================  ==========
 
 Payloads are msgpack maps with a version field ``"v": 1``; every float vector is
@@ -153,11 +154,16 @@ class Status:
     input_clipped: bool = False  # the setpoint conversion changed the commanded u this step
 
 
+COMMAND_KINDS = ("method", "outage", "land", "takeoff")  # Command.kind; others fail decode
+
+
 @dataclass
 class Command:
-    """A ground-station command to the swarm: ``kind`` = "method", "outage" or "land"
+    """A ground-station command to the swarm: ``kind`` = "method", "outage", "land"
     (coordinated land-all, docs/lifecycle.md: every agent starts its landing reference at
-    mission time ``at_s``; a negative ``at_s`` means at the step the command arrives)."""
+    mission time ``at_s``) or "takeoff" (coordinated take-off of a ground start held on its
+    pads: the climbs start at mission time ``at_s``); a negative ``at_s`` means at the step
+    the command arrives."""
 
     kind: str
     agent: int = 0  # 0 = all
@@ -307,6 +313,8 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 input_clipped=bool(d.get("clip", False)),
             )
         if kind == "cmd":
+            if d["kind"] not in COMMAND_KINDS:
+                raise WireError(f"unknown command kind {d['kind']!r}")
             return Command(
                 kind=str(d["kind"]),
                 agent=int(d["agent"]),

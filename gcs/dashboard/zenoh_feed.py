@@ -27,6 +27,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_common.enums import Method
 from swarm_common.wire import (
+    COMMAND_KINDS,
     Command,
     Estimate,
     Status,
@@ -254,8 +255,9 @@ class ZenohFeed:
         """Publish ``cmd`` on ``key_cmd(swarm, cmd.kind)``; returns the key."""
         if cmd.kind == "method" and cmd.method not in METHODS:
             raise ValueError(f"method {cmd.method!r}: must be one of {', '.join(METHODS)}")
-        if cmd.kind not in ("method", "outage", "land"):
-            raise ValueError(f"command kind {cmd.kind!r}: must be 'method', 'outage' or 'land'")
+        if cmd.kind not in COMMAND_KINDS:
+            kinds = ", ".join(COMMAND_KINDS)
+            raise ValueError(f"command kind {cmd.kind!r}: must be one of {kinds}")
         if self._session is None:
             raise RuntimeError("zenoh feed is not started")
         key = key_cmd(self.swarm, cmd.kind)
