@@ -12,6 +12,9 @@ a      arm                                                    COMMAND_LONG 400 p
 d      disarm                                                 COMMAND_LONG 400 p1=0
 f      start formation (OFFBOARD)                             DO_SET_MODE 176 129,6
 h      hold (AUTO.LOITER)                                     DO_SET_MODE 176 129,4,3
+u      take off, target ALL with Zenoh up: OFFBOARD + arm     DO_SET_MODE + COMMAND_LONG
+       every vehicle, then (all ACKed) the coordinated        400, then Zenoh Command
+       take-off of a ground start (docs/lifecycle.md)          "takeoff"
 l      land; all vehicles with Zenoh up: coordinated land-all Zenoh Command "land" (else
        (docs/lifecycle.md), else per vehicle AUTO.LAND          NAV_LAND 21)
 x      emergency stop (asks first)                            DO_FLIGHTTERMINATION 185
@@ -64,6 +67,7 @@ ERROR = mavlink.MAV_SEVERITY_ERROR
 OUTAGES_S = (0.5, 1.0, 2.0, 5.0)
 MAV_ACTIONS = ("arm", "disarm", "offboard", "hold", "land")
 LAND_LEAD_S = 1.0  # s of mission time between the land-all key and the common t_L
+TAKEOFF_LEAD_S = 1.0  # s of mission time between the last ACK and the common take-off t0
 WIDE_TABLE_COLUMNS = 150
 
 
@@ -77,6 +81,7 @@ class DashboardApp(App[int]):
         Binding("d", "mav('disarm')", "Disarm"),
         Binding("f", "mav('offboard')", "Formation"),
         Binding("h", "mav('hold')", "Hold"),
+        Binding("u", "takeoff", "Take off"),
         Binding("l", "land", "Land"),
         Binding("x", "estop", "E-STOP"),
         Binding("m", "method", "Method"),
@@ -202,7 +207,9 @@ class DashboardApp(App[int]):
         self.run_worker(self._mav_worker(key, ids), group="mav", exit_on_error=False)
 
     async def _mav_worker(self, key: str, ids: list[int]) -> None:
-        results = await asyncio.gather(*(self.commander.mav(i, key) for i in ids))
+        self._log_results(await asyncio.gather(*(self.commander.mav(i, key) for i in ids)))
+
+    def _log_results(self, results: Iterable[CommandResult]) -> None:
         for r in results:
             self.results.append(r)
             self.log_event(
@@ -221,6 +228,39 @@ class DashboardApp(App[int]):
             self.send_zenoh(Command(kind="land", agent=0, at_s=at_s))
             return
         self.send_mav("land", ids)
+
+    def action_takeoff(self) -> None:
+        """Target ALL with a Zenoh link up: OFFBOARD then arm every vehicle, and once every
+        one ACKed, the coordinated take-off (offboard.takeoff) at the swarm's latest
+        mission time + TAKEOFF_LEAD_S; the daemons of a ground start held on the pads
+        climb from then on (an airborne start ignores it: this is then ``f`` + ``a``)."""
+        ids = self.targets()
+        up = getattr(self.commander, "zenoh_up", None)
+        why = ""
+        if self.commander is None:
+            why = "read-only (no command link)"
+        elif not (callable(up) and up()):
+            why = "needs Zenoh (started with --no-zenoh?)"
+        elif not (self.target_all and len(ids) > 1):
+            why = "needs target ALL (t)"
+        if why:
+            self.log_event(0, "cmd", f"take-off is for all vehicles at once: {why}", WARNING)
+            return
+        self.log_event(0, "cmd", "take-off -> ALL: OFFBOARD, arm, then take-off", NOTICE)
+        self.run_worker(self._takeoff_worker(ids), group="mav", exit_on_error=False)
+
+    async def _takeoff_worker(self, ids: list[int]) -> None:
+        for key in ("offboard", "arm"):
+            results = await asyncio.gather(*(self.commander.mav(i, key) for i in ids))
+            self._log_results(results)
+            failed = [r.sysid for r in results if not r.ok]
+            if failed:
+                who = ",".join(f"#{i}" for i in failed)
+                self.log_event(0, "cmd", f"take-off not sent: {key} refused by {who}", ERROR)
+                return
+        t_now = getattr(self.commander, "mission_time", lambda: None)()
+        at_s = -1.0 if t_now is None else float(t_now) + TAKEOFF_LEAD_S
+        self.send_zenoh(Command(kind="takeoff", agent=0, at_s=at_s))
 
     def action_estop(self) -> None:
         ids = self.targets()
@@ -276,6 +316,7 @@ class DashboardApp(App[int]):
         what = {
             "method": f"method {cmd.method}", "outage": f"outage {cmd.duration_s:g} s",
             "land": f"land-all at t={cmd.at_s:.2f} s" if cmd.at_s >= 0 else "land-all now",
+            "takeoff": f"take-off at t={cmd.at_s:.2f} s" if cmd.at_s >= 0 else "take-off now",
         }.get(cmd.kind, cmd.kind)
         if self.commander is None:
             self.log_event(0, "cmd", f"{what} ({who}): read-only (no command link)", WARNING)
@@ -289,10 +330,14 @@ class DashboardApp(App[int]):
         self.published.append(key)
         self.log_event(
             cmd.agent,
-            cmd.kind if cmd.kind in ("outage", "land") else "method",
+            cmd.kind if cmd.kind in ("outage", "land", "takeoff") else "method",
             f"{what} ({who}) published",
             NOTICE,
         )
+
+    def _palette_takeoff(self) -> None:
+        self.target_all = True
+        self.action_takeoff()
 
     # -- command palette ---------------------------------------------------------------
     def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
@@ -328,5 +373,10 @@ class DashboardApp(App[int]):
             "Coordinated land-all (Zenoh)",
             "Every agent lands on its own pad, lowest first, safety filter active",
             lambda: self.send_zenoh(Command(kind="land", agent=0, at_s=-1.0)),
+        )
+        yield SystemCommand(
+            "Coordinated take-off: all vehicles",
+            "OFFBOARD + arm every vehicle, then the ground start's layered climb (Zenoh)",
+            self._palette_takeoff,
         )
         yield SystemCommand("Toggle command target (selected / all)", "", self.action_toggle_target)

@@ -2,7 +2,8 @@
 
 :class:`LiveCommander` wraps a :class:`MavlinkGcs` and a :class:`ZenohFeed` (either may
 be None); tests pass their own object with the same two methods (and, optionally,
-``zenoh_up()`` and ``mission_time()``, used by the coordinated land-all: docs/lifecycle.md).
+``zenoh_up()`` and ``mission_time()``, used by the coordinated land-all and take-off:
+docs/lifecycle.md).
 """
 
 from __future__ import annotations
@@ -37,7 +38,8 @@ class LiveCommander:
         return await self.link.command(sysid, spec, timeout_s=self.timeout_s, retries=self.retries)
 
     def zenoh_up(self) -> bool:
-        """A Zenoh feed is started (a land-all then goes out as a Zenoh "land" command)."""
+        """A Zenoh feed is started (a land-all then goes out as a Zenoh "land" command, a
+        take-off as "takeoff")."""
         return self.feed is not None and bool(self.feed.started)
 
     def mission_time(self) -> float | None:

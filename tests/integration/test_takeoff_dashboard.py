@@ -1,0 +1,194 @@
+"""Dashboard ``u`` (docs/lifecycle.md): OFFBOARD + arm every vehicle, then one Zenoh take-off
+command; a real-time ``--manual-start`` ground start holds on its pads until then.
+
+The live test drives the real app headless against ``gcs dashboard --launch
+scenarios/ground8.toml`` (simulator in real time, eight daemons): ``t`` ``u``, the layered
+climb, ``l``, everyone back on the ground with no collision."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import time
+
+import numpy as np
+import pytest
+from conftest import ROOT, free_port_offset
+
+from gcs.dashboard.app import TAKEOFF_LEAD_S, DashboardApp
+from gcs.dashboard.cli import build, configure_parser
+from gcs.dashboard.mavlink_gcs import CommandResult
+from gcs.dashboard.px4modes import COMMANDS
+from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.widgets import EventLog
+from offboard.takeoff import takeoff_plan
+from swarm_common.scenario import load_scenario
+from swarm_common.wire import Command
+
+GROUND8 = ROOT / "scenarios" / "ground8.toml"
+
+
+class Commander:
+    def __init__(self, up: bool = True, t: float | None = 4.0, refuse: int = 0) -> None:
+        self.up, self.t, self.refuse = up, t, refuse
+        self.mav_calls: list[tuple[int, str]] = []
+        self.zenoh_calls: list[Command] = []
+
+    async def mav(self, sysid: int, key: str) -> CommandResult:
+        self.mav_calls.append((sysid, key))
+        spec = COMMANDS[key]
+        result = 4 if sysid == self.refuse and key == "arm" else 0  # 4: MAV_RESULT_FAILED
+        return CommandResult(sysid, spec.command, spec.label, result, 1, 0.01)
+
+    def zenoh(self, cmd: Command) -> str:
+        self.zenoh_calls.append(cmd)
+        return f"swarm/test/cmd/{cmd.kind}"
+
+    def zenoh_up(self) -> bool:
+        return self.up
+
+    def mission_time(self) -> float | None:
+        return self.t
+
+
+def log_text(app: DashboardApp) -> str:
+    return "\n".join(app.query_one(EventLog).lines_text)
+
+
+async def settle(app, pilot, pred, tries: int = 100) -> bool:
+    for _ in range(tries):
+        await app.workers.wait_for_complete()
+        await pilot.pause()
+        if pred():
+            return True
+    return False
+
+
+@pytest.mark.asyncio
+async def test_takeoff_key_offboard_arm_then_one_zenoh_command() -> None:
+    cmd = Commander()
+    app = DashboardApp(recorded_source(), cmd)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("t", "u")
+        assert await settle(app, pilot, lambda: bool(cmd.zenoh_calls))
+        ids = app.all_ids()
+        assert len(ids) > 1
+        # every vehicle to OFFBOARD first, then every vehicle armed, then the take-off
+        assert cmd.mav_calls == [(i, "offboard") for i in ids] + [(i, "arm") for i in ids]
+        (c,) = cmd.zenoh_calls
+        assert c.kind == "takeoff" and c.agent == 0
+        assert c.at_s == pytest.approx(4.0 + TAKEOFF_LEAD_S)
+        assert "take-off at t=5.00 s (all) published" in log_text(app)
+
+
+@pytest.mark.asyncio
+async def test_takeoff_key_refused_or_not_all() -> None:
+    cmd = Commander(refuse=3)  # vehicle 3 refuses to arm: no take-off command
+    app = DashboardApp(recorded_source(), cmd)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("t", "u")
+        assert await settle(app, pilot, lambda: "take-off not sent" in log_text(app))
+        assert "arm refused by #3" in log_text(app) and cmd.zenoh_calls == []
+    for commander, keys in ((Commander(), ("u",)), (Commander(up=False), ("t", "u"))):
+        one = DashboardApp(recorded_source(), commander)
+        async with one.run_test(size=(80, 24)) as pilot:
+            await pilot.press(*keys)  # one vehicle, or all without Zenoh: refused, nothing sent
+            assert await settle(one, pilot, lambda a=one: "take-off is for all" in log_text(a))
+            assert commander.mav_calls == [] and commander.zenoh_calls == []
+
+
+async def until(pilot, pred, timeout: float, each=lambda: None) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        await pilot.pause(0.1)
+        each()
+        if pred():
+            return True
+    return False
+
+
+def _daemon_takeoffs(launch) -> dict[str, tuple[bool, list[float]]]:
+    """Per daemon log: (held on its pad at start, take-off times it logged)."""
+    out = {}
+    for c in launch.group.children[1:]:
+        text = c.log_path.read_text(errors="replace")
+        t0 = [float(x) for x in re.findall(r"take-off at t=([0-9.]+) s", text)]
+        out[c.name] = ("on its pad until the take-off command" in text, t0)
+    return out
+
+
+@pytest.mark.asyncio
+async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
+    sc = load_scenario(GROUND8)
+    plan = takeoff_plan(sc)
+    args = configure_parser(argparse.ArgumentParser()).parse_args(
+        ["--launch", str(GROUND8), "--port-offset", str(free_port_offset()),
+         "--log-dir", str(tmp_path)]
+    )  # fmt: skip
+    app, source, launch, _ = build(args)
+    ids = list(sc.ids)
+    z_max = dict.fromkeys(ids, 0.0)
+    first_up: dict[int, float] = {}
+    min_dist = np.inf
+
+    def sample() -> None:
+        nonlocal min_dist
+        v = app.view
+        if v is None or v.sim_time is None:
+            return
+        if v.min_dist is not None:
+            min_dist = min(min_dist, v.min_dist)
+        for r in v.rows:
+            if r.pos is not None:
+                z_max[r.id] = max(z_max[r.id], r.pos[2])
+                if r.pos[2] > 0.1 and r.id not in first_up:
+                    first_up[r.id] = v.sim_time
+
+    def rows_z() -> list[float]:
+        assert app.view is not None
+        return [r.pos[2] if r.pos is not None else np.nan for r in app.view.rows]
+
+    async def watch(pred, timeout: float) -> bool:
+        return await until(pilot, pred, timeout, sample)
+
+    try:
+        app.poll_s = 0.1
+        async with app.run_test(size=(120, 40)) as pilot:
+            ready = lambda: (  # noqa: E731
+                app.view is not None and app.view.sim_time is not None
+                and all(r.pos is not None and not r.status_missing for r in app.view.rows)
+            )
+            assert await watch(ready, timeout=60.0), launch.dead()
+            await pilot.press("t", "u")
+            assert await watch(lambda: "take-off at t=" in log_text(app), 20.0)
+            t0 = float(re.findall(r"take-off at t=([0-9.]+) s", log_text(app))[0])
+
+            def airborne() -> bool:
+                return all(z > 1.5 for z in z_max.values())
+
+            assert await watch(airborne, timeout=30.0), (z_max, launch.dead())
+            # formed: leaders on their trajectory (after t_traj of the shifted plan)
+            t_traj = takeoff_plan(sc, t0).t_traj
+            assert await watch(lambda: app.view.sim_time >= t_traj, timeout=30.0)
+            await pilot.press("l")
+            assert await watch(lambda: "land-all at t=" in log_text(app), 10.0)
+
+            def down() -> bool:
+                return max(rows_z()) < 0.1
+
+            assert await watch(down, timeout=40.0), (rows_z(), launch.dead())
+            collisions = app.view.collisions
+    finally:
+        source.close()
+        launch.stop()
+    held = _daemon_takeoffs(launch)
+    print(f"t0 = {t0:.2f} s, min distance {min_dist:.3f} m, z_max {z_max}")
+    assert collisions == 0
+    assert all(z > 1.5 for z in z_max.values()), z_max
+    # every daemon held on its pad and started the one plan at t0 ...
+    assert all(h and t == [pytest.approx(t0)] for h, t in held.values()), held
+    # ... and nobody left its pad before t0 (held idle after OFFBOARD + arm)
+    assert min(first_up.values()) >= t0 - 0.3, (first_up, t0)
+    # the top layer climbed higher than the bottom layer (layered staging altitudes)
+    top = [i for k, i in enumerate(ids) if plan.z_stage[k] > plan.z_stage.min() + 1.0]
+    assert min(z_max[i] for i in top) > 0.8 * plan.z_stage.max()
