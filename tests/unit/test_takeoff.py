@@ -9,6 +9,8 @@ import pytest
 from conftest import CUBE8, ROOT
 
 from gcs.metrics import min_distance_by_phase
+from offboard.agent import make_agent
+from offboard.daemon import OffboardDaemon
 from offboard.leader import LeaderAgent
 from offboard.takeoff import (
     climb_xi,
@@ -18,6 +20,7 @@ from offboard.takeoff import (
     min_column_separation,
     takeoff_plan,
 )
+from swarm_common import wire
 from swarm_common.scenario import ScenarioError, load_scenario
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
@@ -121,3 +124,93 @@ def test_no_downward_command_on_the_pad_during_the_climb() -> None:
     assert np.array_equal(ld.on_pad_floor(0.5, 1.0, u), u)  # airborne: unchanged
     assert np.array_equal(ld.on_pad_floor(takeoff_plan(sc).t_climb, 0.0, u), u)
     assert np.array_equal(LeaderAgent(load_scenario(CUBE8), 1).on_pad_floor(0.5, 0.0, u), u)
+
+
+def test_plan_start_time_shifts_every_time() -> None:
+    sc = load_scenario(GROUND8)
+    a, b = takeoff_plan(sc), takeoff_plan(sc, 12.3)
+    assert a.t0 == 0.0 and b.t0 == 12.3
+    assert b.t_climb == pytest.approx(a.t_climb + 12.3)
+    assert b.t_blend == pytest.approx(a.t_blend + 12.3)
+    # the leaders start their trajectory at a whole period: 5 s for ground8
+    assert b.t_traj >= b.t_blend and b.t_traj % 5.0 == pytest.approx(0.0, abs=1e-9)
+    for i in range(sc.n):
+        assert np.allclose(climb_xi(b, i, 5.0), climb_xi(a, i, 0.0))  # on the pad until t0
+        for s in (0.4, 2.0, 6.5):
+            assert np.allclose(climb_xi(b, i, 12.3 + s), climb_xi(a, i, s))
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="take-off start time"):
+            takeoff_plan(sc, bad)
+
+
+def test_held_agents_idle_on_the_pad_until_start_takeoff() -> None:
+    sc = load_scenario(GROUND8)
+    leader, follower = make_agent(sc, sc.ids[0]), make_agent(sc, 4)
+    assert isinstance(leader, LeaderAgent) and not isinstance(follower, LeaderAgent)
+    assert leader.takeoff is not None
+    pad = leader.takeoff.pads[leader.index]
+    for ag in (leader, follower):
+        assert ag.hold_for_takeoff() and ag.takeoff_held
+    # idle (the control box's lowest vertical acceleration, no tilt) while held, any time
+    u = np.array([0.5, -0.2, 3.0])
+    assert np.array_equal(leader.on_pad_floor(30.0, 0.0, u), [0.0, 0.0, leader.u_lo[2]])
+    assert np.allclose(leader.current_reference(30.0)[0:3], pad)
+    assert np.allclose(leader.current_reference(30.0)[3:], 0.0)
+    for ag in (leader, follower):
+        assert ag.start_takeoff(20.0) and not ag.takeoff_held
+        assert not ag.start_takeoff(25.0)  # once
+        assert ag.takeoff is not None and ag.takeoff.t0 == 20.0
+    # the leader climbs from t0 = 20 s as the plan of t0 = 0 did from 0
+    ref0 = takeoff_plan(sc)
+    assert np.allclose(leader.current_reference(22.0), climb_xi(ref0, leader.index, 2.0))
+    assert leader.on_pad_floor(30.0, 5.0, u) is u
+    airborne = make_agent(load_scenario(CUBE8), 1)
+    assert not airborne.hold_for_takeoff() and not airborne.start_takeoff(1.0)
+
+
+class _Bus:
+    def __init__(self, cmds: list[wire.Command]) -> None:
+        self.cmds = cmds
+
+    def pop_commands(self) -> list[wire.Command]:
+        out, self.cmds = self.cmds, []
+        return out
+
+
+def _daemon(cmds: list[wire.Command]) -> OffboardDaemon:
+    """OffboardDaemon's command handling alone (no links): a held ground8 leader."""
+    d = OffboardDaemon.__new__(OffboardDaemon)
+    d.id, d.land_at, d.bad_commands, d.extra_outages = 1, None, 0, []
+    d.agent = make_agent(load_scenario(GROUND8), 1)
+    d.agent.hold_for_takeoff()
+    d.bus = _Bus(cmds)  # type: ignore[assignment]
+    return d
+
+
+@pytest.mark.parametrize("at_s", [float("nan"), float("inf"), 3.0, 500.0])
+def test_daemon_drops_a_bad_takeoff_time(at_s: float) -> None:
+    d = _daemon([wire.Command(kind="takeoff", at_s=at_s)])
+    d._apply_commands(10.0)  # 3.0: 7 s late; 500: 490 s ahead
+    assert d.bad_commands == 1 and d.agent.takeoff_held
+
+
+def test_daemon_takeoff_and_land_commands() -> None:
+    d = _daemon([wire.Command(kind="land", at_s=12.0), wire.Command(kind="takeoff", at_s=10.5)])
+    d._apply_commands(10.0)
+    assert d.land_at is None  # on the pad: the land-all is ignored
+    assert not d.agent.takeoff_held and d.agent.takeoff is not None
+    assert d.agent.takeoff.t0 == 10.5 and d.bad_commands == 0
+    d.bus.cmds = [wire.Command(kind="takeoff", at_s=-1.0), wire.Command(kind="land", at_s=-1.0)]
+    d._apply_commands(30.0)  # a second take-off changes nothing; land now
+    assert d.agent.takeoff.t0 == 10.5 and d.land_at == 30.0
+    d = _daemon([wire.Command(kind="land", at_s=float("nan"))])
+    d.agent.start_takeoff(0.0)
+    d._apply_commands(30.0)
+    assert d.bad_commands == 1 and d.land_at is None
+
+
+def test_unknown_command_kind_fails_decode() -> None:
+    raw = wire.encode(wire.Command(kind="takeoff", at_s=4.0))
+    assert wire.decode(raw) == wire.Command(kind="takeoff", at_s=4.0)
+    with pytest.raises(wire.WireError, match="unknown command kind"):
+        wire.decode(wire.encode(wire.Command(kind="selfdestruct")))
