@@ -210,28 +210,21 @@ class OffboardDaemon:
         log.warning("agent %d: %s command dropped: %s", self.id, cmd.kind, why)
 
     def _land_command(self, cmd: wire.Command, t: float) -> None:
-        """Coordinated land-all at ``at_s`` (negative: now); ignored on the pad."""
+        """Coordinated land-all at ``at_s`` (negative: now); ignored while on the pad."""
         if not math.isfinite(cmd.at_s):
-            self._bad_command(cmd, f"at_s = {cmd.at_s!r} is not finite")
-        elif self.agent.takeoff_held:
-            log.info("agent %d: land-all ignored: still on its pad", self.id)
-        else:
+            self._bad_command(cmd, f"at_s = {cmd.at_s!r}")
+        elif not self.agent.takeoff_held:
             self.land_at = cmd.at_s if cmd.at_s >= 0.0 else t
             log.info("agent %d: land-all at t=%.2f s", self.id, self.land_at)
 
     def _takeoff_command(self, cmd: wire.Command, t: float) -> None:
-        """Coordinated take-off with the climbs at ``at_s`` (negative: now), if held on the
-        pad; ``at_s`` must be finite, at most TAKEOFF_LATE_S behind t, TAKEOFF_LEAD_S ahead."""
-        at = cmd.at_s
-        late_or_far = at >= 0.0 and not t - TAKEOFF_LATE_S <= at <= t + TAKEOFF_LEAD_S
-        if not math.isfinite(at) or late_or_far:
-            self._bad_command(cmd, f"at_s = {at!r} at t = {t:.2f} s")
-            return
-        t0 = at if at >= 0.0 else t
-        if self.agent.start_takeoff(t0):
+        """Coordinated take-off with the climbs at ``at_s`` (negative: now) if held on the
+        pad; ``at_s`` finite, at most TAKEOFF_LATE_S behind t and TAKEOFF_LEAD_S ahead."""
+        t0 = cmd.at_s if cmd.at_s >= 0.0 else t
+        if not (math.isfinite(cmd.at_s) and -TAKEOFF_LATE_S <= t0 - t <= TAKEOFF_LEAD_S):
+            self._bad_command(cmd, f"at_s = {cmd.at_s!r} at t = {t:.2f} s")
+        elif self.agent.start_takeoff(t0):
             log.info("agent %d: take-off at t=%.2f s", self.id, t0)
-        else:
-            log.info("agent %d: take-off ignored: not held on a pad", self.id)
 
     def _maybe_start_landing(self, t: float) -> None:
         """From the first step at or after ``land_at``: the common plan of offboard.landing,
