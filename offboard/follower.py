@@ -85,6 +85,7 @@ class FollowerAgent(AgentBase):
         self.pred = NeighbourPredictor(
             omega, self.dt, (ks * lam + ctl.kp / ctl.kd, lam + ks),
             (ctl.leader_kp, ctl.leader_kd), sc.communication.max_age_s,
+            a_max=math.sqrt(3.0) * ctl.u_max_mps2 + W_MAX,
         )
         self.leader_mask = np.zeros(sc.n, dtype=bool)
         self.leader_mask[self.form.leader_idx] = True

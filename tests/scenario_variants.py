@@ -27,4 +27,7 @@ CASES = [
     # unsafe before it starts: agent 3 starts 0.2 m from agent 4; a vertex 0.4 m from another
     ("position = [2.0, 0.4, 2.9]", "position = [2.0, 0.4, 4.9]", ["agent[3].position", "d_safe_m"]),
     ("vertex = [0, 0, 1]", "vertex = [0, 0, 0.1]", ["agent[3].vertex", "d_safe_m"]),
+    # infeasible leader trajectory (needs more acceleration than the input set allows)
+    ("frequency_hz = 0.2", "frequency_hz = 0.4",
+     ["leader_trajectory.frequency_hz = 0.4", "--allow-infeasible"]),
 ]
