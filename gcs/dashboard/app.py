@@ -39,6 +39,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from textual.app import App, ComposeResult, SystemCommand
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.reactive import reactive
 from textual.screen import Screen
 from textual.widgets import Footer, Header
@@ -142,9 +143,12 @@ class DashboardApp(App[int]):
             self.log_event(0, "error", f"source: {exc!r}", ERROR)
             return
         self.view = view
-        for ev in events:
-            self.query_one(EventLog).add(ev)
-        self._draw(view)
+        try:
+            for ev in events:
+                self.query_one(EventLog).add(ev)
+            self._draw(view)
+        except NoMatches:  # a last timer tick while the app shuts down: the widgets are gone
+            log.debug("dashboard refresh after its widgets were removed")
 
     def _draw(self, view: SwarmView) -> None:
         compact = self.size.width < WIDE_TABLE_COLUMNS
