@@ -134,7 +134,7 @@ class Prediction:
 
 def predict(
     dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u: np.ndarray, a_other: np.ndarray,
-    lag: LagCoefficients, tau_s: float, d_safe: float,
+    lag: LagCoefficients, tau_s: float, d_safe: float | np.ndarray,
 ) -> Prediction:
     """Predict Δp, Δv, Δa T ahead: own a from a0 (3,) toward u (3,) through the lag, the
     other agent at constant acceleration a_other (M,3); h and ḣ (§2.3) there."""
@@ -169,7 +169,7 @@ def _norm(x: np.ndarray) -> np.ndarray:
 
 def dcbf_rows(
     dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u_ref: np.ndarray, a_other: np.ndarray,
-    share: np.ndarray, lag: LagCoefficients, tau_s: float, d_safe: float,
+    share: np.ndarray, lag: LagCoefficients, tau_s: float, d_safe: float | np.ndarray,
     gamma1: float, gamma3: float, accel_err: float,
 ) -> tuple[np.ndarray, np.ndarray, Prediction]:
     """Rows ``gᵀu ≥ r`` (2M of them, g unit length, r in m/s²) and the prediction at u_ref.

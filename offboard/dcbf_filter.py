@@ -85,6 +85,8 @@ class DcbfFilter(SafetyFilter):
         prev, self._prev_dv = self._prev_dv, {}
         for r in range(n):
             j = int(x.pairs[r])
+            if x.predicted is not None and x.predicted[r]:
+                continue  # not sensed now: the broadcast-velocity estimate, no history
             self._prev_dv[j] = x.dv[r].copy()
             if j not in prev:
                 self._rel_acc.pop(j, None)
@@ -105,9 +107,10 @@ class DcbfFilter(SafetyFilter):
         side = self._sidestep(x, h)
         lm = self.leader_mask[x.pairs] if x.full_share is None else x.full_share
         share = np.where(lm, 1.0, 0.5)
+        d_safe = ctl.d_safe_m if x.margin is None else ctl.d_safe_m + x.margin
         g, rhs, _ = dcbf_rows(
             x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x), share, self.lag,
-            ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
+            ctl.tau_safe_s, d_safe, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2,
         )
         if x.floor_m is not None and x.z1 is not None:  # airborne: the ground barrier

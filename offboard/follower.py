@@ -144,11 +144,8 @@ class FollowerAgent(AgentBase):
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
         self.acc_est.ingest(neighbours)
-        u = self._safe_control(SafetyInput(
-            clf, w, self.deso.z2, -rp[sel], -rv[sel], sel, peers.lead_acc,
-            self.a_real, self.u_prev, self.a_mean, self.acc_est.rows(sel),
-            self._full_share(sel), self.deso.z1, self._ground_floor(),
-        ), status)
+        u = self._safe_control(self._safety_input(t, clf, w, sel, -rp[sel], -rv[sel], peers),
+                               status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
@@ -177,6 +174,55 @@ class FollowerAgent(AgentBase):
             if is_lead:
                 out.lead_acc[j] = xi_a(got[2])
         return out
+
+    def _safety_input(
+        self, t: float, clf: ClfTerms, w: np.ndarray, sel: np.ndarray, dp: np.ndarray,
+        dv: np.ndarray, peers: _Peers,
+    ) -> SafetyInput:
+        """The filter's input: the sensed pairs (Δp = p_i − p_j, Δv), and for dcbf also the
+        neighbours that are not sensed now but predicted (:meth:`_predicted_pairs`)."""
+        margin = np.zeros(len(sel))
+        predicted = np.zeros(len(sel), dtype=bool)
+        if self.method == Method.DCBF:
+            idx, pp, pv, pm = self._predicted_pairs(t, sel)
+            if len(idx):
+                sel = np.concatenate([sel, idx])
+                dp, dv = np.vstack([dp, pp]), np.vstack([dv, pv])
+                margin = np.concatenate([margin, pm])
+                predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
+        return SafetyInput(
+            clf, w, self.deso.z2, dp, dv, sel, peers.lead_acc, self.a_real, self.u_prev,
+            self.a_mean, self.acc_est.rows(sel), self._full_share(sel), self.deso.z1,
+            self._ground_floor(), margin, predicted,
+        )
+
+    def _predicted_pairs(
+        self, t: float, sel: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Agents within sensing range by their predicted position but not sensed now
+        (dropout, occlusion): (idx, Δp, Δv, margin). The margin (m) is the prediction's
+        error bound on the position plus τ times that on the velocity (docs/safety.md §5c),
+        so the barrier is kept against every position the other can be at."""
+        sensed = set(int(j) for j in sel)
+        rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
+        tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
+        for j in range(self.sc.n):
+            if j == self.index or j in sensed:
+                continue
+            aid = self.ids[j]
+            got = self.pred.get(aid, t)
+            if got is None:
+                continue
+            dp = self.deso.z1 - got[0]
+            if float(np.linalg.norm(dp)) > rng:
+                continue
+            b = self.pred.bound(aid, t) or 0.0
+            rows.append((j, dp, self.deso.z2 - got[1], b + tau * self.pred.velocity_bound(aid, t)))
+        if not rows:
+            e = np.zeros((0, 3))
+            return np.zeros(0, dtype=int), e, e, np.zeros(0)
+        return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                np.array([r[2] for r in rows]), np.array([r[3] for r in rows]))
 
     def _ground_floor(self) -> float | None:
         """The dcbf ground barrier's floor (m) once this follower has been above it, None

@@ -140,6 +140,15 @@ class NeighbourPredictor:
             self._a_dev[agent_id] = a
         return 0.5 * a * age * age
 
+    def velocity_bound(self, agent_id: int, t: float) -> float:
+        """Bound (m/s) on the error of ``agent_id``'s predicted velocity at ``t``: a_dev·age
+        for a follower (the derivative of :meth:`bound`), 0 for a leader or current data."""
+        b = self.bound(agent_id, t)
+        e = self.last.get(agent_id)
+        if b is None or e is None or b <= 0.0:
+            return 0.0
+        return 2.0 * b / max(t - e.t, 1e-9)
+
     def get(self, agent_id: int, t: float) -> Prediction | None:
         """(p, v, ξ) of ``agent_id`` predicted to ``t``; None if never received or, for a
         follower, if older than ``max_age`` or its :meth:`bound` exceeds ``drop_bound``

@@ -70,6 +70,10 @@ class SafetyInput:
     # floor None = no ground barrier (on the pad, taking off below the floor, landing)
     z1: np.ndarray | None = None
     floor_m: float | None = None
+    # dcbf only: (M,) distance margin (m) added to D per row: 0 for sensed pairs, the
+    # prediction error bound for a neighbour that is not sensed now (docs/safety.md §5c)
+    margin: np.ndarray | None = None
+    predicted: np.ndarray | None = None  # (M,) True for rows from prediction, not sensing
 
 
 @dataclass
