@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.daemon import (
+from offboard.wire_convert import (
     estimate_from_wire,
     estimate_to_wire,
     measured_state,
