@@ -2,21 +2,30 @@
 
 * ``g_ij = (p_j − p_i)/‖p_j − p_i‖`` and ``P_ij = I₃ − g_ij g_ijᵀ`` (§2.1).
 * Desired bearings ``g*_ij`` come from the agents' formation ``vertex`` coordinates.
-* Neighbour graph (Departure 3): ``"cube_face_diagonals"`` links pairs whose vertex distance
-  is the shortest one (cube edge) or √2 times it (face diagonal); ``"complete"`` links all.
+* Neighbour graph (Departure 3; docs/graphs.md): ``formation.graph`` is one of
+  ``cube_face_diagonals``, ``complete``, ``knn`` (``formation.knn_k``), ``range``
+  (``formation.sensing_range_m``) or ``edges`` (``formation.edges``), built by
+  :mod:`swarm_common.graphs` (the scenario loader refuses a bad graph with the same check).
 * Bearing Laplacian ``L`` (§2.1) with blocks ``−P*_ij`` off-diagonal and ``Σ_k P*_ik`` on
   the diagonal, partitioned into leaders/followers (``L_ff``, ``L_fl``).
-* Rigidity check (Departure 3): ``rank L = 3N − 4`` (null space = translations + scaling) and
-  ``λ_min(L_ff) > 0``; otherwise :class:`RigidityError`.
+* Rigidity check (Departure 3): ``λ_min(L_ff) > 0`` and ``rank L = 3N − 4`` (null space =
+  translations + scaling), sparse; otherwise :class:`RigidityError` naming the key.
+* Sensed sets: per agent, the graph neighbours and every agent within the sensing range in
+  the desired formation; a follower's observer anchors only on the leaders in it, and
+  :func:`check_observable` requires the observer matrix ``L_ff + anchors`` to be
+  positive definite.
 
 Agents are addressed by their *index* in scenario order; ``ids`` maps index → id.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from swarm_common import graphs
+from swarm_common.graphs import GraphSpec
 
 
 class RigidityError(ValueError):
@@ -35,38 +44,19 @@ def projector(g: np.ndarray) -> np.ndarray:
     return np.eye(3) - np.outer(g, g)
 
 
-def build_edges(vertices: np.ndarray, kind: str, tol: float = 1e-6) -> list[tuple[int, int]]:
-    """Undirected edges (i < j) of the neighbour graph over the vertex coordinates."""
+def build_edges(
+    vertices: np.ndarray, kind: str | GraphSpec, ids: list[int] | None = None
+) -> list[tuple[int, int]]:
+    """Undirected edges (i < j) of the neighbour graph over the vertex coordinates
+    (:func:`swarm_common.graphs.build_edges`; a plain ``kind`` uses the default keys)."""
     v = np.asarray(vertices, dtype=float)
-    n = len(v)
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    if kind == "complete":
-        return pairs
-    dist = {pr: float(np.linalg.norm(v[pr[0]] - v[pr[1]])) for pr in pairs}
-    allowed: tuple[float, ...]
-    if kind == "cube_edges":
-        allowed = (1.0,)
-    elif kind == "cube_face_diagonals":
-        allowed = (1.0, np.sqrt(2.0))
-    else:
-        raise ValueError(f"unknown formation graph {kind!r}; use cube_face_diagonals or complete")
-    edge = min(dist.values())
-    tol_abs = tol * max(1.0, edge)
-    return [pr for pr in pairs if any(abs(dist[pr] - a * edge) <= tol_abs for a in allowed)]
+    spec = kind if isinstance(kind, GraphSpec) else GraphSpec(kind=str(kind))
+    return graphs.build_edges(v, spec, ids if ids is not None else list(range(1, len(v) + 1)))
 
 
 def bearing_laplacian(vertices: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray:
-    """(3N, 3N) bearing Laplacian of the desired bearings (§2.1)."""
-    v = np.asarray(vertices, dtype=float)
-    n = len(v)
-    lap = np.zeros((3 * n, 3 * n))
-    for i, j in edges:
-        pij = projector(bearing(v[i], v[j]))
-        lap[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] -= pij
-        lap[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] -= pij
-        lap[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += pij
-        lap[3 * j : 3 * j + 3, 3 * j : 3 * j + 3] += pij
-    return lap
+    """(3N, 3N) bearing Laplacian of the desired bearings (§2.1), dense."""
+    return graphs.sparse_laplacian(np.asarray(vertices, dtype=float), edges).toarray()
 
 
 def _blocks(idx: list[int]) -> np.ndarray:
@@ -90,7 +80,11 @@ class Formation:
     l_fl: np.ndarray
     rank: int
     lambda_ff: np.ndarray  # eigenvalues of L_ff, ascending
+    # per index, the agents sensed in the desired formation (graph neighbours and every
+    # agent within the sensing range; everyone when the range is not given)
+    sensed: list[list[int]] = field(default_factory=list)
     _kfl: np.ndarray | None = None
+    _obs_eigs: dict[float, np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -107,6 +101,26 @@ class Formation:
     def index_of(self, agent_id: int) -> int:
         return self.ids.index(agent_id)
 
+    def anchor_leaders(self, i: int) -> list[int]:
+        """Leaders follower ``i`` senses in the desired formation: the ones its observer's
+        leader anchor may use (docs/graphs.md)."""
+        lead = set(self.leader_idx)
+        return [j for j in self.sensed[i] if j in lead]
+
+    def observer_laplacian(self, leader_anchor: float) -> np.ndarray:
+        """(3F, 3F) L_ff + leader_anchor · blockdiag(m_i I₃), m_i = len(anchor_leaders(i)):
+        the DESO's network matrix (paper §3 with the anchor of D21)."""
+        m = np.array([len(self.anchor_leaders(i)) for i in self.follower_idx], dtype=float)
+        return self.l_ff + leader_anchor * np.diag(np.repeat(m, 3))
+
+    def observer_eigs(self, leader_anchor: float) -> np.ndarray:
+        """Eigenvalues (ascending) of :meth:`observer_laplacian` (cached per anchor)."""
+        key = float(leader_anchor)
+        if key not in self._obs_eigs:
+            lap = self.observer_laplacian(key)
+            self._obs_eigs[key] = np.linalg.eigvalsh(lap) if len(lap) else np.zeros(0)
+        return self._obs_eigs[key]
+
     def desired_positions(self, leader_pos: np.ndarray) -> np.ndarray:
         """(N,3) desired positions p* given leaders' positions: p*_f = −L_ff⁻¹ L_fl p_l."""
         lp = np.asarray(leader_pos, dtype=float)
@@ -119,33 +133,36 @@ class Formation:
 
 
 def build_formation(
-    ids: list[int], leader_ids: list[int], vertices: np.ndarray, graph: str
+    ids: list[int], leader_ids: list[int], vertices: np.ndarray, graph: str | GraphSpec
 ) -> Formation:
-    """Graph, desired bearings, Laplacian and partition; raises :class:`RigidityError`."""
+    """Graph, desired bearings, Laplacian and partition; raises :class:`RigidityError`
+    (one line naming the key) unless the graph passes :func:`graphs.rigidity_problem`."""
     v = np.asarray(vertices, dtype=float)
     n = len(ids)
-    edges = build_edges(v, graph)
-    lap = bearing_laplacian(v, edges)
+    spec = graph if isinstance(graph, GraphSpec) else GraphSpec(kind=str(graph))
+    try:
+        edges = graphs.build_edges(v, spec, ids)
+    except ValueError as exc:
+        raise RigidityError(str(exc)) from None
     leader_idx = [ids.index(i) for i in leader_ids]
+    problem = graphs.rigidity_problem(v, edges, ids, leader_idx)
+    if problem is not None:
+        raise RigidityError(f"{spec.describe()}: {problem}")
+    lap = bearing_laplacian(v, edges)
     follower_idx = [k for k in range(n) if k not in leader_idx]
     nbrs: list[list[int]] = [[] for _ in range(n)]
     for i, j in edges:
         nbrs[i].append(j)
         nbrs[j].append(i)
-    g_star = np.zeros((n, n, 3))
-    p_star = np.zeros((n, n, 3, 3))
-    for i in range(n):
-        for j in range(n):
-            if i != j:
-                g_star[i, j] = bearing(v[i], v[j])
-                p_star[i, j] = projector(g_star[i, j])
+    diff = v[None, :, :] - v[:, None, :]  # v_j − v_i
+    dist = np.linalg.norm(diff, axis=2)
+    np.fill_diagonal(dist, 1.0)
+    g_star = diff / dist[:, :, None]
+    p_star = np.eye(3) - np.einsum("ija,ijb->ijab", g_star, g_star)
+    p_star[np.arange(n), np.arange(n)] = 0.0
     fb, lb = _blocks(follower_idx), _blocks(leader_idx)
     l_ff = lap[np.ix_(fb, fb)]
-    l_fl = lap[np.ix_(fb, lb)]
-    ev_all = np.linalg.eigvalsh(lap)
-    rank = int(np.sum(ev_all > 1e-9 * max(1.0, ev_all[-1])))
-    lam = np.linalg.eigvalsh(l_ff) if len(fb) else np.zeros(0)
-    form = Formation(
+    return Formation(
         ids=list(ids),
         leader_idx=leader_idx,
         follower_idx=follower_idx,
@@ -156,30 +173,38 @@ def build_formation(
         p_star=p_star,
         laplacian=lap,
         l_ff=l_ff,
-        l_fl=l_fl,
-        rank=rank,
-        lambda_ff=lam,
+        l_fl=lap[np.ix_(fb, lb)],
+        rank=3 * n - 4,
+        lambda_ff=np.linalg.eigvalsh(l_ff) if len(fb) else np.zeros(0),
+        sensed=graphs.sensed_sets(v, edges, spec.range_vu),
     )
-    check_rigidity(form, graph)
-    return form
 
 
-def check_rigidity(form: Formation, graph: str = "") -> None:
-    """Raise :class:`RigidityError` unless rank L = 3N−4 and λ_min(L_ff) > 0 (Departure 3)."""
-    n = form.n
-    need = 3 * n - 4
-    if form.rank != need:
+def check_rigidity(form: Formation, graph: str | GraphSpec = "") -> None:
+    """Raise :class:`RigidityError` unless λ_min(L_ff) > 0 and rank L = 3N − 4
+    (Departure 3; :func:`graphs.rigidity_problem`)."""
+    spec = graph if isinstance(graph, GraphSpec) else GraphSpec(kind=str(graph))
+    problem = graphs.rigidity_problem(form.vertices, form.edges, form.ids, form.leader_idx)
+    if problem is not None:
+        raise RigidityError(f"{spec.describe()}: {problem}")
+
+
+def check_observable(form: Formation, leader_anchor: float) -> None:
+    """Raise :class:`RigidityError` unless the DESO's network matrix
+    :meth:`Formation.observer_laplacian` is positive definite (paper §3: every channel
+    s³ + β1λ s² + β2λ s + β3λ needs λ > 0)."""
+    lam = form.observer_eigs(leader_anchor)
+    if len(lam) and lam[0] <= graphs.EIG_TOL * max(1.0, float(lam[-1])):
         raise RigidityError(
-            f"formation graph {graph!r} is not bearing rigid: rank of the bearing Laplacian "
-            f"is {form.rank}, need 3N-4 = {need} (N = {n}); add edges (e.g. face diagonals)"
-        )
-    if len(form.lambda_ff) and form.lambda_ff[0] <= 1e-9:
-        raise RigidityError(
-            f"formation graph {graph!r}: L_ff is singular (lambda_min = {form.lambda_ff[0]:.3g}); "
-            "the leaders do not fix the followers' desired positions"
+            f"observer.leader_anchor = {leader_anchor:g}: the observer matrix L_ff + anchors "
+            f"is not positive definite (lambda_min = {lam[0]:.3g}); the followers' positions "
+            "are not observable from their neighbours and sensed leaders"
         )
 
 
 def formation_from_scenario(sc) -> Formation:  # sc: swarm_common.scenario.Scenario
-    """Build the :class:`Formation` of a scenario (``[formation].graph``)."""
-    return build_formation(sc.ids, sc.leader_ids, sc.vertices(), sc.formation.graph)
+    """Build the :class:`Formation` of a scenario (``[formation]``: graph, knn_k, edges,
+    sensing_range_m; docs/graphs.md)."""
+    lead = [sc.index_of(i) for i in sc.leader_ids]
+    spec = graphs.graph_spec(sc.formation, sc.initial_positions(), sc.vertices(), lead)
+    return build_formation(sc.ids, sc.leader_ids, sc.vertices(), spec)

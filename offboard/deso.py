@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import expm
 
-from offboard.bearing import Formation
+from offboard.bearing import Formation, check_observable
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
 # Adaptive law (docs/estimation.md): ζ̂ stays in a box of physically meaningful values
@@ -124,12 +124,16 @@ def adapt_step(
 
 def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dict[int, np.ndarray]:
     """Innovation weights W_ij of follower i: P*_ij for bearing-graph neighbours (§3), plus
-    ``leader_anchor``·I₃ for every leader (an option, 0 = the paper's observer: the leaders'
-    broadcast position and the sensed relative position anchor the estimate directly;
-    this adds 2·leader_anchor to every eigenvalue of the observer's L_ff)."""
+    ``leader_anchor``·I₃ for every leader follower i senses in the desired formation
+    (``form.anchor_leaders(i)``: graph neighbours and leaders within the sensing range;
+    docs/graphs.md). An option (D21), 0 = the paper's observer: the leader's broadcast
+    position and the sensed relative position anchor the estimate directly, adding
+    leader_anchor·m_i to follower i's diagonal block of the observer's L_ff (m_i sensed
+    leaders). Data of any other leader is ignored (it is not in the weights); a follower
+    that senses no leader relies on the bearing innovations only."""
     w: dict[int, np.ndarray] = {j: form.p_star[i, j].copy() for j in form.neighbours[i]}
     if leader_anchor > 0.0:
-        for j in form.leader_idx:
+        for j in form.anchor_leaders(i):
             w[j] = w.get(j, np.zeros((3, 3))) + leader_anchor * np.eye(3)
     return w
 
@@ -256,10 +260,11 @@ def gain_report(
     """Per-channel and sampled-loop stability numbers of the DESO gains (Departure 7).
 
     The channels are the eigenvalues of the observer's Laplacian
-    ``L_ff + leader_anchor·n_leaders·I`` (= L_ff for the paper's observer).
+    ``L_ff + leader_anchor·blockdiag(m_i I₃)`` (m_i leaders sensed by follower i;
+    ``Formation.observer_laplacian``; = L_ff for the paper's observer).
     """
     b1, b2, b3 = (float(x) for x in beta)
-    lam = np.asarray(form.lambda_ff, dtype=float) + leader_anchor * len(form.leader_idx)
+    lam = form.observer_eigs(leader_anchor)
     margin = b1 * b2 * lam - b3
     k2, k3 = (float(k) for k in kappa)
     poles = [
@@ -316,6 +321,7 @@ class DESO:
         kappa: tuple[float, ...] = (0.0, 0.0),
     ) -> None:
         self.form = form
+        check_observable(form, leader_anchor)  # L_ff + anchors positive definite
         self.weights = observer_weights(form, index, leader_anchor)
         self.kappa = (float(kappa[0]), float(kappa[1]))
         self.index = index

@@ -27,10 +27,13 @@ class Role(StrEnum):
 
 
 class GraphKind(StrEnum):
-    """Neighbour (sensing) graph of the formation."""
+    """Neighbour (sensing) graph of the formation (docs/graphs.md)."""
 
     CUBE_FACE_DIAGONALS = "cube_face_diagonals"
     COMPLETE = "complete"
+    KNN = "knn"  # each vertex to its formation.knn_k nearest, symmetrised
+    RANGE = "range"  # pairs within formation.sensing_range_m in the desired formation
+    EDGES = "edges"  # the id pairs listed in formation.edges
 
 
 class QPStatus(StrEnum):

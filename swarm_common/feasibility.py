@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarm_common.enums import GraphKind, StartMode
+from swarm_common import graphs
+from swarm_common.enums import StartMode
 from swarm_common.unmodeled import regressor
 
 if TYPE_CHECKING:
@@ -71,38 +72,33 @@ class InputLimits:
 # ---------------------------------------------------------------------------
 # Desired motion
 # ---------------------------------------------------------------------------
-def _edges(v: np.ndarray, graph: GraphKind) -> list[tuple[int, int]]:
-    """The neighbour graph of ``offboard.bearing.build_edges`` (same rule)."""
-    n = len(v)
-    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    if graph is GraphKind.COMPLETE:
-        return pairs
-    dist = {pr: float(np.linalg.norm(v[pr[0]] - v[pr[1]])) for pr in pairs}
-    edge = min(dist.values())
-    tol = 1e-6 * max(1.0, edge)
-    return [pr for pr in pairs if any(abs(dist[pr] - a * edge) <= tol for a in (1.0, math.sqrt(2)))]
-
-
 def formation_map(sc: Scenario) -> np.ndarray | None:
     """K = −L_ff⁻¹ L_fl (3F × 3L, scenario order of followers and leaders) with
-    ``p*_f = K p_L`` (paper §2.1); None when L_ff is singular (the leaders do not fix the
-    followers; offboard refuses such a formation when it builds it)."""
+    ``p*_f = K p_L`` (paper §2.1) over the scenario's neighbour graph (any
+    ``formation.graph`` kind, :mod:`swarm_common.graphs`); None when the graph cannot be
+    built or L_ff is singular (the leaders do not fix the followers; the loader refuses
+    such a scenario before this check, :func:`swarm_common.scenario.graph_problem`)."""
     v = sc.vertices()
-    n = len(v)
-    lap = np.zeros((3 * n, 3 * n))
-    for i, j in _edges(v, sc.formation.graph):
-        g = (v[j] - v[i]) / np.linalg.norm(v[j] - v[i])
-        p = np.eye(3) - np.outer(g, g)
-        for a, b, s in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
-            lap[3 * a : 3 * a + 3, 3 * b : 3 * b + 3] += s * p
     lead = [sc.index_of(i) for i in sc.leader_ids]
     foll = [sc.index_of(i) for i in sc.follower_ids]
-    fb = np.array([3 * i + k for i in foll for k in range(3)], dtype=int)
-    lb = np.array([3 * i + k for i in lead for k in range(3)], dtype=int)
-    l_ff = lap[np.ix_(fb, fb)]
-    if len(fb) and np.linalg.eigvalsh(l_ff)[0] <= 1e-9:
+    spec = graphs.graph_spec(sc.formation, sc.initial_positions(), v, lead)
+    try:
+        edges = graphs.build_edges(v, spec, sc.ids)
+    except ValueError:
         return None
-    return -np.linalg.solve(l_ff, lap[np.ix_(fb, lb)]) if len(fb) else np.zeros((0, len(lb)))
+    lap = graphs.sparse_laplacian(v, edges)
+    fb, lb = graphs.blocks(foll), graphs.blocks(lead)
+    if not len(fb):
+        return np.zeros((0, len(lb)))
+    l_ff = lap[fb][:, fb].toarray()
+    try:
+        chol = np.linalg.cholesky(l_ff)
+    except np.linalg.LinAlgError:
+        return None
+    if np.min(np.abs(np.diag(chol))) ** 2 <= graphs.zero_tol(lap[fb][:, fb]):
+        return None
+    rhs = lap[fb][:, lb].toarray()
+    return -np.linalg.solve(l_ff, rhs)
 
 
 def leader_origins(sc: Scenario) -> np.ndarray:

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import logging
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from swarm_common.enums import Role, StartMode
+from swarm_common import graphs
+from swarm_common.enums import GraphKind, Role, StartMode
 from swarm_common.feasibility import feasibility_problem
 from swarm_common.scenario_schema import (
     AGENT_SCHEMA,
@@ -237,10 +238,12 @@ def parse_scenario(
             if key not in keys:
                 raise fail(f"unknown key {section}.{key}; allowed: {', '.join(keys)}")
         out: dict[str, Any] = {}
+        cls_fields = fields(SECTIONS[section])
+        defaults = {f.name: f.default for f in cls_fields if f.default is not MISSING}
         for key, spec in keys.items():
-            if key not in given:
+            if key not in given and key not in defaults:
                 raise fail(f"missing key {section}.{key} ({describe_spec(spec)})")
-            v = given[key]
+            v = given[key] if key in given else toml_value(defaults[key])
             if not check_value(v, spec):
                 raise fail(f"{section}.{key} = {v!r}: must be {describe_spec(spec)}")
             out[key] = v
@@ -316,6 +319,9 @@ def parse_scenario(
         for name, cls in SECTIONS.items()
     }
     scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible, **typed)
+    problem = graph_problem(scen)
+    if problem is not None:
+        raise fail(problem)
     check_feasible(scen)
     return scen
 
@@ -333,6 +339,38 @@ def check_feasible(sc: Scenario) -> None:
     raise InfeasibleScenarioError(
         f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway"
     )
+
+
+def graph_problem(sc: Scenario) -> str | None:
+    """One line naming the ``[formation]`` key if the neighbour graph is unusable, else None
+    (docs/graphs.md): ``formation.edges`` listing an unknown id, a self-loop or a pair twice,
+    or given with another graph kind; ``knn_k`` ≥ N; an edge longer than
+    ``sensing_range_m`` in the desired formation (never sensed there); leaders that do not
+    fix every follower or a graph that is not bearing rigid (:func:`graphs.rigidity_problem`)."""
+    fm = sc.formation
+    if fm.edges and fm.graph is not GraphKind.EDGES:
+        return f'formation.edges: only read with formation.graph = "edges" (not "{fm.graph}")'
+    if fm.graph is GraphKind.EDGES and not fm.edges:
+        return 'formation.edges = []: formation.graph = "edges" needs at least one pair'
+    if fm.graph is GraphKind.KNN and fm.knn_k >= sc.n:
+        return f"formation.knn_k = {fm.knn_k}: must be below the number of agents ({sc.n})"
+    lead = [sc.index_of(i) for i in sc.leader_ids]
+    v = sc.vertices()
+    spec = graphs.graph_spec(fm, sc.initial_positions(), v, lead)
+    try:
+        edges = graphs.build_edges(v, spec, sc.ids)
+    except ValueError as exc:
+        return str(exc)
+    far = graphs.long_edges(v, edges, spec.range_vu)
+    if far:
+        i, j, d = far[0]
+        return (
+            f"formation.sensing_range_m = {fm.sensing_range_m:g}: {spec.describe()} links ids "
+            f"{sc.ids[i]} and {sc.ids[j]}, {d * spec.scale:.2f} m apart in the desired "
+            f"formation, never sensed there ({len(far)} such edges)"
+        )
+    problem = graphs.rigidity_problem(v, edges, sc.ids, lead)
+    return None if problem is None else f"{spec.describe()}: {problem}"
 
 
 def _check_separation(

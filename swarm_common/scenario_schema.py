@@ -19,7 +19,8 @@ from swarm_common.enums import GraphKind, Method, Role, StartMode
 # metadata, and ``SCHEMA`` is generated from the dataclasses, so the typed view and
 # the validation cannot disagree. A spec is a tuple
 #   ("float", lo, hi, lo_open, hi_open) | ("int", lo, hi) | ("str", choices)
-#   ("vec", n, lo, hi)  (list of n numbers) | ("windows",) | ("ids",)
+#   ("vec", n, lo, hi)  (list of n numbers) | ("windows",) | ("ids",) | ("pairs",)
+# A field with a default may be left out of its table (the default applies).
 # ---------------------------------------------------------------------------
 Spec = tuple[Any, ...]
 
@@ -89,11 +90,14 @@ class UnmodeledConfig:
 
 @dataclass(frozen=True)
 class FormationConfig:
-    """``[formation]``: leaders, neighbour graph and sensing range."""
+    """``[formation]``: leaders, neighbour graph and sensing range (docs/graphs.md);
+    ``knn_k`` (graph "knn") and ``edges`` (graph "edges", pairs of agent ids) are optional."""
 
     leaders: tuple[int, ...] = _special("ids")
     graph: GraphKind = _choice(GraphKind)
     sensing_range_m: float = _num(0.0, 1000.0, lo_open=True)
+    knn_k: int = field(default=6, metadata={"spec": ("int", 1, 254)})
+    edges: tuple[tuple[int, int], ...] = field(default=(), metadata={"spec": ("pairs",)})
 
 
 @dataclass(frozen=True)
@@ -231,6 +235,8 @@ def typed_value(f: Any, value: Any) -> Any:
         return tuple(int(v) for v in value)
     if kind == "windows":
         return tuple((float(w[0]), float(w[1])) for w in value)
+    if kind == "pairs":
+        return tuple((int(w[0]), int(w[1])) for w in value)
     if kind == "str" and f.metadata["enum"] is not None:
         return f.metadata["enum"](value)
     return value
@@ -260,6 +266,8 @@ def describe_spec(spec: Spec) -> str:
         return "a list of [start, end] pairs with 0 <= start < end"
     if kind == "ids":
         return "a non-empty list of agent ids (integers 1..255)"
+    if kind == "pairs":
+        return "a list of [id, id] pairs of agent ids (integers 1..255)"
     raise AssertionError(kind)
 
 
@@ -300,5 +308,9 @@ def check_value(value: Any, spec: Spec) -> bool:
             isinstance(value, list)
             and len(value) > 0
             and all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 255 for v in value)
+        )
+    if kind == "pairs":
+        return isinstance(value, list) and all(
+            isinstance(w, list) and len(w) == 2 and check_value(w, ("ids",)) for w in value
         )
     raise AssertionError(kind)
