@@ -1,5 +1,5 @@
 """``gcs`` command line: ``gcs mission run|compare|sweep SCENARIO``, ``gcs router``,
-``gcs dashboard``.
+``gcs dashboard``, ``gcs keys generate --out PATH`` (a MAVLink signing key, :mod:`gcs.keys`).
 
 ``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
 ``--inproc``; the seed sweep of ``compare --seeds N`` and ``mission sweep``
@@ -91,6 +91,12 @@ def cmd_router(args: argparse.Namespace) -> int:
     from gcs.router import run_router
 
     return run_router(args.listen)
+
+
+def add_keys(sub: argparse._SubParsersAction) -> None:
+    from gcs.keys import add_keys_parser
+
+    add_keys_parser(sub)
 
 
 def add_router_parser(sub: argparse._SubParsersAction) -> None:
@@ -259,6 +265,7 @@ COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
     "mission": add_mission_parser,
     "router": add_router_parser,
     "dashboard": add_dashboard,
+    "keys": add_keys,
 }
 
 
