@@ -13,6 +13,9 @@ Vectors are in the paper's world frame (ENU-style, z up); see docs/conventions.m
 from __future__ import annotations
 
 import logging
+import os
+import re
+import stat
 import tomllib
 from dataclasses import MISSING, dataclass, fields
 from pathlib import Path
@@ -58,6 +61,7 @@ __all__ = [
     "ObserverConfig",
     "RunConfig",
     "Scenario",
+    "SWARM_NAME_RE",
     "ScenarioError",
     "SensingConfig",
     "UnmodeledConfig",
@@ -250,6 +254,9 @@ def parse_scenario(
         raw[section] = out
 
     sc = raw["scenario"]
+    name_problem = swarm_name_problem(sc["name"])
+    if name_problem is not None:
+        raise fail(f"scenario.name = {sc['name']!r}: {name_problem}")
     if sc["physics_hz"] % sc["control_hz"] != 0:
         raise fail(
             f"scenario.physics_hz = {sc['physics_hz']}: must be a multiple of "
@@ -292,6 +299,10 @@ def parse_scenario(
             )
         )
     leaders = raw["formation"]["leaders"]
+    if len(set(leaders)) != len(leaders):
+        raise fail(f"formation.leaders = {leaders}: duplicate agent id")
+    if len(set(leaders)) >= len(agents):
+        raise fail(f"formation.leaders = {leaders}: every agent is a leader; need a follower")
     for lid in leaders:
         if lid not in seen:
             raise fail(f"formation.leaders = {leaders}: id {lid} is not an [[agent]] id")
@@ -367,7 +378,7 @@ def graph_problem(sc: Scenario) -> str | None:
         return (
             f"formation.sensing_range_m = {fm.sensing_range_m:g}: {spec.describe()} links ids "
             f"{sc.ids[i]} and {sc.ids[j]}, {d * spec.scale:.2f} m apart in the desired "
-            f"formation, never sensed there ({len(far)} such edges)"
+            f"formation, never sensed there ({len(far)} edge(s) in all)"
         )
     problem = graphs.rigidity_problem(v, edges, sc.ids, lead)
     return None if problem is None else f"{spec.describe()}: {problem}"
@@ -420,15 +431,92 @@ def _check_pads(agents: list[AgentSpec], d_safe: float, fail: Any) -> None:
                 )
 
 
+# The scenario name is the swarm name in every Zenoh key (``swarm/<name>/...``) and part of
+# the default run directory: no wildcard (``*``, ``$*``), separator (``/``), ``..``, ``?``
+# or ``#`` may reach a key expression or a path.
+SWARM_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
+SWARM_NAME_RULE = "1-64 characters of A-Z a-z 0-9 _ -, starting with a letter or digit"
+MAX_SCENARIO_BYTES = 1 << 20  # 1 MiB: the shipped scenarios are a few kB
+MAX_TOML_NESTING = 32  # arrays/tables deeper than this are refused before tomllib sees them
+
+
+def swarm_name_problem(name: object) -> str | None:
+    """None if ``name`` is a valid swarm/scenario name, else what is wrong (one phrase)."""
+    if not isinstance(name, str) or not SWARM_NAME_RE.fullmatch(name):
+        return f"must be {SWARM_NAME_RULE}"
+    return None
+
+
+def _nesting_problem(text: str) -> str | None:
+    """Bracket depth outside strings and comments, counted before parsing: ``tomllib`` is
+    recursive and a file nested thousands deep would raise ``RecursionError``."""
+    depth = 0
+    quote = ""
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if quote:
+            if c == "\\" and quote in ('"', '"""'):
+                i += 2
+                continue
+            if text.startswith(quote, i):
+                i += len(quote)
+                quote = ""
+                continue
+        elif c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        elif c in "\"'":
+            quote = c * 3 if text.startswith(c * 3, i) else c
+            i += len(quote)
+            continue
+        elif c in "[{":
+            depth += 1
+            if depth > MAX_TOML_NESTING:
+                return f"arrays or tables nested deeper than {MAX_TOML_NESTING}"
+        elif c in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    return None
+
+
+def read_scenario_text(p: Path) -> str:
+    """The file's text: a regular file (not a FIFO, device or directory) of at most
+    :data:`MAX_SCENARIO_BYTES`, UTF-8, nested at most :data:`MAX_TOML_NESTING` deep."""
+    try:
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise ScenarioError(f"{p}: cannot read scenario file (not a regular file)")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(MAX_SCENARIO_BYTES + 1)
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
+    finally:
+        os.close(fd)
+    if len(data) > MAX_SCENARIO_BYTES:
+        raise ScenarioError(f"{p}: scenario file larger than {MAX_SCENARIO_BYTES} bytes")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{p}: not UTF-8 (byte {exc.start})") from None
+    problem = _nesting_problem(text)
+    if problem is not None:
+        raise ScenarioError(f"{p}: not a valid scenario ({problem})")
+    return text
+
+
 def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
     """Read and validate a scenario TOML file (``allow_infeasible``: :func:`parse_scenario`)."""
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
+    text = read_scenario_text(p)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{p}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise ScenarioError(f"{p}: not a valid scenario (nested too deep)") from None
     return parse_scenario(data, str(p), allow_infeasible)

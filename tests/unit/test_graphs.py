@@ -1,0 +1,228 @@
+"""Sensing-graph kinds, their validation and rigidity check, and the observers on a sparse
+graph (docs/graphs.md)."""
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+from conftest import CUBE8, ROOT  # noqa: E402
+
+from offboard.bearing import (
+    RigidityError,
+    build_formation,
+    check_observable,
+    formation_from_scenario,
+)
+from offboard.deso import DESO, gain_report, observer_weights
+from offboard.reference import DesiredStateObserver, LeaderTrajectory
+from swarm_common import graphs
+from swarm_common.scenario import ScenarioError, load_scenario
+
+GRID27 = ROOT / "scenarios" / "grid27_knn.toml"
+GRID = np.array(list(itertools.product(range(3), repeat=3)), dtype=float)  # 27 vertices
+
+
+@pytest.fixture(scope="module")
+def sc27():
+    return load_scenario(GRID27)
+
+
+def _degrees(edges, n):
+    return np.bincount(np.array(edges).ravel(), minlength=n)
+
+
+def _adjacency(edges, n):
+    a = np.zeros((n, n), dtype=bool)
+    for i, j in edges:
+        a[i, j] = True
+    return a
+
+
+def test_knn_degrees_ties_and_symmetry():
+    e = graphs.knn_edges(GRID, 6)
+    assert all(i < j for i, j in e) and len(set(e)) == len(e)
+    deg = _degrees(e, 27)
+    # every vertex keeps at least its k nearest; a corner exactly its 3 axis and 3 diagonal
+    # neighbours; the centre chooses its 6 axis neighbours and is chosen by the 12 edge
+    # middles (whose 6th-nearest distance, √2, it ties): 18 after symmetrising
+    assert deg.min() >= 6 and deg[0] == 6 and deg[13] == 18
+    assert deg[4] == 13  # face centre (0,1,1): 5 at distance 1, 8 tied at √2
+    a = _adjacency(e, 27)
+    d = np.linalg.norm(GRID[:, None] - GRID[None], axis=2)
+    assert d[a].max() == pytest.approx(np.sqrt(2.0))  # longest edge: a face diagonal
+    # order of the vertices does not change the graph (ties are included, not broken)
+    perm = np.random.default_rng(1).permutation(27)
+    ep = graphs.knn_edges(GRID[perm], 6)
+    back = {tuple(sorted((int(perm[i]), int(perm[j])))) for i, j in ep}
+    assert back == set(e)
+    assert graphs.knn_edges(GRID[:5], 10) == [(i, j) for i in range(5) for j in range(i + 1, 5)]
+    with pytest.raises(ValueError, match="knn_k = 0"):
+        graphs.knn_edges(GRID, 0)
+
+
+def test_range_edges():
+    e = graphs.range_edges(GRID, 1.0)
+    assert len(e) == 54  # the 3x3x3 grid's axis edges
+    e2 = graphs.range_edges(GRID, np.sqrt(2.0))
+    assert len(e2) == 54 + 72 and set(e) < set(e2)
+    assert graphs.range_edges(GRID, 0.5) == []
+
+
+def test_edge_list_validation():
+    ids = [10, 11, 12, 13]
+    assert graphs.id_edges(ids, [[13, 10], [11, 12]]) == [(0, 3), (1, 2)]
+    with pytest.raises(ValueError, match=r"^formation.edges\[1\] = \[11, 99\]: id 99 is not"):
+        graphs.id_edges(ids, [[10, 11], [11, 99]])
+    with pytest.raises(ValueError, match=r"^formation.edges\[0\] = \[12, 12\]: self-loop$"):
+        graphs.id_edges(ids, [[12, 12]])
+    with pytest.raises(ValueError, match=r"formation.edges\[1\] = \[11, 10\]: pair listed twice"):
+        graphs.id_edges(ids, [[10, 11], [11, 10]])
+
+
+def test_sparse_and_dense_checks_agree(monkeypatch):
+    e = graphs.knn_edges(GRID, 6)
+    lap = graphs.sparse_laplacian(GRID, e)
+    q = graphs.trivial_null_space(GRID)
+    assert np.allclose(lap @ q, 0.0) and np.allclose(q.T @ q, np.eye(4))
+    sparse = graphs.smallest_eig(lap, q)  # 81 > DENSE_MAX: Lanczos
+    monkeypatch.setattr(graphs, "DENSE_MAX", 10**6)
+    dense = graphs.smallest_eig(lap, q)
+    assert sparse == pytest.approx(dense, rel=1e-8) and dense > 0.1
+    # knn_k = 3 keeps only the grid's axis edges: the grid can shear, rank is lost
+    loose = graphs.sparse_laplacian(GRID, graphs.knn_edges(GRID, 3))
+    monkeypatch.setattr(graphs, "DENSE_MAX", 60)
+    assert graphs.smallest_eig(loose, q) < 1e-8
+
+
+def test_scenario_defaults_keep_old_files_valid():
+    sc = load_scenario(CUBE8)
+    assert sc.formation.knn_k == 6 and sc.formation.edges == ()
+    assert "knn_k" in sc.to_toml_dict()["formation"]
+
+
+@pytest.mark.parametrize(
+    "over,pattern",
+    [
+        ({"knn_k": 3}, r'formation.graph = "knn" \(knn_k = 3\): the bearing Laplacian\'s '
+                       r"follower block is singular: the leaders do not fix followers 6, 7, "
+                       r".* \(19 in all\)$"),
+        ({"knn_k": 27}, r"formation.knn_k = 27: must be below the number of agents \(27\)"),
+        ({"knn_k": 0}, r"formation.knn_k = 0: must be an integer in \[1, 254\]"),
+        ({"edges": [[1, 5]]}, r'formation.edges: only read with formation.graph = "edges"'),
+        ({"graph": "edges"}, r'formation.edges = \[\]: formation.graph = "edges" needs'),
+        ({"graph": "edges", "edges": [[1, 40]]}, r"formation.edges\[0\] = \[1, 40\]: id 40"),
+        ({"graph": "edges", "edges": [[2, 2]]}, r"formation.edges\[0\] = \[2, 2\]: self-loop"),
+        ({"graph": "edges", "edges": [[1, 2.5]]}, r"formation.edges = .*: must be a list of"),
+        ({"graph": "edges", "edges": [[5, 6], [6, 7], [5, 7]]},
+         r'formation.graph = "edges" \(formation.edges, 3 pairs\): .*do not fix followers'),
+        ({"graph": "range", "sensing_range_m": 3.5},
+         r'formation.graph = "range" \(sensing_range_m = 3.5\): .*not bearing rigid|do not fix'),
+        ({"sensing_range_m": 4.0},
+         r"formation.sensing_range_m = 4: formation.graph = \"knn\" \(knn_k = 6\) links ids "
+         r"\d+ and \d+, 4.24 m apart in the desired formation, never sensed there"),
+    ],
+)
+def test_bad_graph_refused_at_load_naming_the_key(sc27, over, pattern):
+    with pytest.raises(ScenarioError, match=pattern) as ei:
+        sc27.with_overrides(formation=over)
+    assert "\n" not in str(ei.value)
+
+
+def test_range_graph_loads_and_is_the_range_rule(sc27):
+    sc = sc27.with_overrides(formation={"graph": "range", "sensing_range_m": 4.3})
+    f = formation_from_scenario(sc)
+    assert len(f.edges) == 54 + 72  # 4.3 m at 3 m per unit: axis edges and face diagonals
+
+
+def test_edges_graph_builds_the_listed_pairs(sc27):
+    f0 = formation_from_scenario(sc27)
+    pairs = [[sc27.ids[i], sc27.ids[j]] for i, j in f0.edges]
+    sc = sc27.with_overrides(formation={"graph": "edges", "edges": pairs})
+    assert formation_from_scenario(sc).edges == f0.edges
+
+
+def test_anchor_uses_only_sensed_leaders(sc27):
+    f = formation_from_scenario(sc27)
+    a = sc27.observer.leader_anchor
+    assert a > 0
+    r = sc27.formation.sensing_range_m / 3.0  # 3 m per vertex unit
+    n_none = 0
+    for i in f.follower_idx:
+        w = observer_weights(f, i, a)
+        sensed = [j for j in f.leader_idx
+                  if np.linalg.norm(f.vertices[i] - f.vertices[j]) <= r or j in f.neighbours[i]]
+        assert sorted(set(w) & set(f.leader_idx)) == sorted(sensed) == f.anchor_leaders(i)
+        assert set(w) == set(f.neighbours[i]) | set(sensed)
+        for j in sensed:
+            assert np.allclose(w[j], f.p_star[i, j] * (j in f.neighbours[i]) + a * np.eye(3))
+        n_none += not sensed
+    assert n_none == 5  # these rely on the bearing innovations only
+    # the gain check's channels are the eigenvalues of L_ff + anchors of the sensed leaders
+    m = np.array([len(f.anchor_leaders(i)) for i in f.follower_idx])
+    want = np.linalg.eigvalsh(f.l_ff + a * np.diag(np.repeat(m, 3)))
+    rep = gain_report(f, tuple(sc27.observer.beta), 0.02, 1, a)
+    assert np.allclose(rep.lambda_ff, want) and not np.allclose(want, f.lambda_ff + 4 * a)
+
+
+def test_deso_ignores_data_of_unsensed_leaders(sc27):
+    f = formation_from_scenario(sc27)
+    i = next(k for k in f.follower_idx if not f.anchor_leaders(k))
+    far = [j for j in f.leader_idx if j not in f.neighbours[i]]
+    assert far
+    p = f.desired_positions(sc27.initial_positions()[f.leader_idx])
+    obs = sc27.observer
+
+    def run(extra: bool) -> np.ndarray:
+        d = DESO(f, i, tuple(obs.beta), 0.0, 0.0, 4, 0.02, 0.8, p[i] + 0.5, np.zeros(3),
+                 obs.leader_anchor, tuple(obs.velocity_gain))
+        nbr_p = {j: p[j] for j in f.neighbours[i]}
+        nbr_v = {j: np.zeros(3) for j in f.neighbours[i]}
+        if extra:  # a far leader's (wrong) data arriving anyway must not be used
+            nbr_p.update({j: p[j] + 7.0 for j in far})
+            nbr_v.update({j: np.ones(3) for j in far})
+        valid = np.ones(sc27.n, dtype=bool)
+        valid[i] = False
+        for _ in range(50):
+            d.update(p - p[i], np.zeros((sc27.n, 3)), valid, nbr_p, nbr_v, np.zeros((4, 3)))
+        return d.z1
+
+    z_plain, z_extra = run(False), run(True)
+    assert np.array_equal(z_plain, z_extra)
+    assert np.linalg.norm(z_plain - p[i]) < 0.05  # converges from bearings alone
+
+
+def test_observability_refused_when_observer_matrix_singular(sc27):
+    f = formation_from_scenario(sc27)
+    check_observable(f, 1.0)
+    bad = dataclasses.replace(f, l_ff=np.zeros_like(f.l_ff), _obs_eigs={})
+    with pytest.raises(RigidityError, match=r"^observer.leader_anchor = 0: the observer matrix"):
+        check_observable(bad, 0.0)
+
+
+def test_desired_state_observer_neighbours_only_on_sparse_graph(sc27):
+    f = formation_from_scenario(sc27)
+    dt, lt = 0.02, sc27.leader_trajectory
+    omega = 2 * np.pi * lt.frequency_hz
+    trs = {i: LeaderTrajectory(sc27.agents[i].position, np.array(lt.amplitude_m),
+                               lt.frequency_hz) for i in f.leader_idx}
+    obs = {i: DesiredStateObserver(f, i, omega, sc27.observer.reference_gain, dt,
+                                   np.concatenate([sc27.agents[i].position, np.zeros(9)]))
+           for i in f.follower_idx}
+    steps = int(12 / dt)
+    for k in range(steps):
+        pub = {i: o.xi.copy() for i, o in obs.items()}
+        pub.update({i: trs[i].state(k * dt) for i in f.leader_idx})
+        for i, o in obs.items():  # only graph neighbours' ξ̂ is handed over
+            o.update({j: pub[j] for j in f.neighbours[i]})
+    lead = np.array([trs[i].state(steps * dt) for i in f.leader_idx])
+    want = f.desired_positions(lead[:, 0:3])
+    err = max(np.linalg.norm(o.p - want[i]) for i, o in obs.items())
+    assert err < 1e-3
+
+
+def test_build_formation_plain_kinds_still_work():
+    sc = load_scenario(CUBE8)
+    f = build_formation(sc.ids, sc.leader_ids, sc.vertices(), "knn")
+    assert f.rank == 3 * sc.n - 4 and len(f.edges) >= 8 * 6 // 2
+    assert all(len(f.anchor_leaders(i)) == 2 for i in f.follower_idx)  # no range given
