@@ -11,6 +11,14 @@ is a valid CLF. The nominal formation controller (shared by all methods)::
 
     u_nom = â* − w − λ e2 − k_s s − (k_p/k_d) e1     ⇒  V̇ = −2k_pλ‖e1‖² − 2k_d k_s‖s‖²
 
+Anti-windup (docs/saturation.md §2): given the input box ``[lo, hi]`` the same law is written
+``u_nom = f + fb`` with the feed-forward ``f = â* − w`` and ``fb = −k_v (e2 − v_r)``,
+``k_v = λ + k_s``, ``v_r = −c e1``, ``c = (k_s λ + k_p/k_d)/k_v``; per axis the feed-forward
+is served first (clipped to the box shrunk by :data:`AW_RESERVE`), the feedback gets what
+is left ``[−b⁻, b⁺]``, and the error-velocity reference is limited so that stopping from it
+needs at most a share :data:`AW_BRAKE_SHARE` of the braking budget:
+``|v_r| ≤ sqrt(2 β b_brake |e1|)``. Inside the box and for small errors it is the law above.
+
 RCBF (Departure 12): ``h = ‖Δp‖² + 2τ Δvᵀ Δp − D²`` (§2.3, Δ = i − j) and the reciprocal
 condition ``L_fB + L_gB u − γ/B ≤ 0`` with B = 1/h, which equals ``ḣ ≥ −γ h³``::
 
@@ -60,6 +68,10 @@ class ClfTerms:
     u_nom: np.ndarray
 
 
+AW_RESERVE = 0.1  # share of each axis' half-range the feed-forward leaves to feedback
+AW_BRAKE_SHARE = 0.5  # β: share of the braking budget the error-velocity reference may need
+
+
 def clf_terms(
     e1: np.ndarray,
     e2: np.ndarray,
@@ -69,15 +81,51 @@ def clf_terms(
     kd: float,
     lam: float,
     ks: float,
+    box: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> ClfTerms:
-    """CLF of Departure 10 and the nominal formation controller (see module docstring)."""
+    """CLF of Departure 10 and the nominal formation controller (see module docstring);
+    with ``box`` = (lo, hi) (m/s², per axis) the nominal control has anti-windup
+    (:func:`anti_windup_control`) and lies in the box."""
     s = e2 + lam * e1
     v = kp * float(e1 @ e1) + kd * float(s @ s)
     drift = w - a_ref + lam * e2
     lfv = 2.0 * kp * float(e1 @ e2) + 2.0 * kd * float(s @ drift)
     lgv = 2.0 * kd * s
-    u_nom = a_ref - w - lam * e2 - ks * s - (kp / kd) * e1
+    if box is None:
+        u_nom = a_ref - w - lam * e2 - ks * s - (kp / kd) * e1
+    else:
+        k_v = lam + ks
+        u_nom = anti_windup_control(e1, e2, a_ref - w, k_v, (ks * lam + kp / kd) / k_v, box)
     return ClfTerms(V=v, lfv=lfv, lgv=lgv, u_nom=u_nom)
+
+
+def anti_windup_control(
+    e1: np.ndarray,
+    e2: np.ndarray,
+    ff: np.ndarray,
+    k_v: float,
+    c: float,
+    box: tuple[np.ndarray, np.ndarray],
+    brake_share: float = AW_BRAKE_SHARE,
+    reserve: float = AW_RESERVE,
+) -> np.ndarray:
+    """``u = f_c + clip(−k_v (e2 − v_r), −b⁻, b⁺)`` per axis (docs/saturation.md §2).
+
+    ``ff`` (m/s²): the feed-forward the reference needs; ``f_c`` it clipped into the box
+    shrunk by ``reserve`` of each half-range; ``b⁺ = hi − f_c``, ``b⁻ = f_c − lo``;
+    ``v_r = −sign(e1) min(c|e1|, sqrt(2 β b_brake |e1|))`` with b_brake = b⁺ for e1 > 0
+    (returning needs a positive deceleration), b⁻ for e1 < 0. Without saturation and for
+    ``|e1| ≤ 2βb/c²`` this is ``ff − k_v (e2 + c e1)``, the unsaturated nominal law.
+    """
+    lo, hi = box
+    m = reserve * 0.5 * (hi - lo)
+    f_c = np.minimum(np.maximum(ff, lo + m), hi - m)
+    b_hi, b_lo = hi - f_c, f_c - lo
+    mag = np.abs(e1)
+    b_brake = np.where(e1 > 0.0, b_hi, b_lo)
+    v_r = -np.sign(e1) * np.minimum(c * mag, np.sqrt(2.0 * brake_share * b_brake * mag))
+    fb = -k_v * (e2 - v_r)
+    return f_c + np.minimum(np.maximum(fb, -b_lo), b_hi)
 
 
 def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:

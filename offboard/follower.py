@@ -19,6 +19,7 @@ from offboard.bearing import Formation, formation_from_scenario
 from offboard.clf_rcbf import ClfTerms, clf_terms
 from offboard.dcbf_filter import DcbfFilter
 from offboard.deso import DESO, GainReport, gain_report
+from offboard.governor import governor_for, log_governor
 from offboard.predictor import NeighbourPredictor
 from offboard.reference import (
     DesiredStateObserver,
@@ -32,6 +33,7 @@ from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
+from swarm_common.feasibility import InputLimits
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -77,7 +79,10 @@ class FollowerAgent(AgentBase):
             sc.unmodeled.ground_effect_height_m, z1, z2, obs.leader_anchor,
             tuple(obs.velocity_gain),
         )
-        omega = 2.0 * math.pi * sc.leader_trajectory.frequency_hz
+        # the leaders fly the governed trajectory (offboard.governor, docs/saturation.md)
+        self.governor = governor_for(sc)
+        log_governor(self.governor, agent_id)
+        omega = self.governor.omega
         self.ref = DesiredStateObserver(
             self.form, self.index, omega, obs.reference_gain, self.dt, xi_at_rest(z1)
         )
@@ -94,6 +99,8 @@ class FollowerAgent(AgentBase):
         if isinstance(dcbf, DcbfFilter):
             dcbf.configure(self.veh, self.dt)
         self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX)
+        self.aw_box = {m: (self.u_lo, self.u_hi) for m in Method}
+        self.aw_box[Method.DCBF] = dcbf_box(sc)
         self.u_prev = np.zeros(3)
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
@@ -261,7 +268,8 @@ class FollowerAgent(AgentBase):
         # acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): compensates the
         # first-order attitude lag of the inner loop on the moving reference
         a_ff = a + self.tau_ff * j
-        return clf_terms(e1, e2, w, a_ff, ctl.kp, ctl.kd, ctl.clf_lambda, ctl.ks)
+        return clf_terms(e1, e2, w, a_ff, ctl.kp, ctl.kd, ctl.clf_lambda, ctl.ks,
+                         box=self.aw_box[self.method])
 
     def _safe_control(self, x: SafetyInput, status: AgentStatus) -> np.ndarray:
         """The current method's filter; a non-finite result brakes on −w (a fallback)."""
@@ -290,6 +298,15 @@ class FollowerAgent(AgentBase):
         return NeighbourEstimate(
             self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False
         )
+
+
+def dcbf_box(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis bounds (m/s²) of the dcbf input polytope for the nominal law's anti-windup
+    (docs/saturation.md §2): each horizontal axis alone reaches the tilt cone at hover,
+    ``min(u_max, g tan θ cos(π/K))``; vertically ``[u_z,min, u_z,max]``."""
+    lim = InputLimits.of(sc)
+    uh = float(lim.horizontal(np.asarray(0.0), 0.0))
+    return np.array([-uh, -uh, lim.uz_min]), np.array([uh, uh, lim.uz_max])
 
 
 def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:

@@ -9,6 +9,7 @@ from offboard.agent_base import AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import accel_from_attitude, setpoint_from_accel
 from offboard.bearing import Formation
+from offboard.governor import governor_for, log_governor
 from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
 from offboard.takeoff import climb_xi, leader_origin
 from swarm_common.enums import Method
@@ -28,8 +29,11 @@ class LeaderAgent(AgentBase):
         ctl = sc.controller
         self.kp, self.kd = ctl.leader_kp, ctl.leader_kd
         lt = sc.leader_trajectory
+        # the governed (possibly slowed) trajectory, the same on every agent (docs/saturation.md)
+        self.governor = governor_for(sc)
+        log_governor(self.governor, agent_id)
         self.traj = LeaderTrajectory(
-            leader_origin(sc, self.index), np.array(lt.amplitude_m), lt.frequency_hz
+            leader_origin(sc, self.index), np.array(lt.amplitude_m), self.governor.frequency_hz
         )
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
@@ -44,13 +48,18 @@ class LeaderAgent(AgentBase):
         trajectory period after arming, the same for both leaders, so the motion starts
         smoothly and the leaders stay in step). Ground start (offboard.takeoff): the climb
         from the pad, held at the staging point p_L(0) until the plan's ``t_traj`` (at rest
-        on the pad while held for the take-off command)."""
+        on the pad while held for the take-off command). The trajectory's phase counts from
+        its start, so it starts at rest also when the governed period (offboard.governor)
+        does not divide the start time."""
         tk = self.takeoff_clock(t)
-        if self.takeoff is not None and tk < max(self.start_time, self.takeoff.t_traj):
-            return climb_xi(self.takeoff, self.index, tk)
+        t_start = self.start_time
+        if self.takeoff is not None:
+            if tk < max(self.start_time, self.takeoff.t_traj):
+                return climb_xi(self.takeoff, self.index, tk)
+            t_start = max(self.start_time, self.takeoff.t_traj)
         if t < self.start_time:
             return xi_at_rest(xi_p(self.traj.state(0.0)))
-        return self.traj.state(t)
+        return self.traj.state(t - t_start)
 
     def current_reference(self, t: float) -> np.ndarray:
         """The landing reference once landing, else :meth:`reference`."""
