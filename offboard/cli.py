@@ -8,7 +8,10 @@ started by ``gcs mission run`` or ``gcs router`` on tcp/127.0.0.1:7447+offset.
 from __future__ import annotations
 
 import argparse
+import ctypes
+import ctypes.util
 import os
+import signal
 import sys
 import time
 
@@ -18,11 +21,27 @@ from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
+from swarm_common.signing import SigningKeyError, load_key
 from swarm_common.zenoh_session import default_endpoint, open_session
 
 # a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
 OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
 MAVLINK_SCHEMES = ("udpin:", "udpout:", "udp:", "tcp:", "tcpin:")
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def die_with_parent() -> str | None:
+    """Linux: SIGTERM this process when its parent dies (prctl PR_SET_PDEATHSIG), so no
+    daemon outlives a killed runner. None, or why it could not be set."""
+    if not sys.platform.startswith("linux"):
+        return "PR_SET_PDEATHSIG needs Linux"
+    parent = os.getppid()
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+    if libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0:
+        return f"prctl failed: {os.strerror(ctypes.get_errno())}"
+    if os.getppid() != parent:  # the parent died before the prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+    return None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--manual-start", action="store_true",
                     help="stream setpoints but leave arming and OFFBOARD to the operator (GCS)")
     ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
+    ap.add_argument("--die-with-parent", action="store_true",
+                    help="exit when the parent process (the mission runner) dies (Linux)")
+    ap.add_argument("--signing-key", default=None, metavar="PATH",
+                    help="MAVLink 2 signing key file (0600): sign everything sent to the "
+                         "vehicle, drop unsigned or wrongly signed frames")
     ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                     help="run a scenario that fails the feasibility check, with a warning")
     add_log_level_argument(ap)
@@ -50,6 +74,16 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
+    if args.die_with_parent and (why := die_with_parent()) is not None:
+        print(f"offboard: --die-with-parent: {why}", file=sys.stderr)
+        return 2
+    key = None
+    if args.signing_key is not None:
+        try:
+            key = load_key(args.signing_key)
+        except SigningKeyError as exc:
+            print(f"offboard: --signing-key: {exc}", file=sys.stderr)
+            return 2
     try:
         sc = load_scenario(args.scenario, args.allow_infeasible)
     except ScenarioError as exc:
@@ -82,6 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_listen=args.zenoh_listen or [],
         zenoh_mode=args.zenoh_mode,
         manual_start=args.manual_start,
+        signing_key=key,
     )
     try:
         session = open_session(mode=cfg.zenoh_mode, connect=connect, listen=cfg.zenoh_listen)
@@ -90,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         daemon = OffboardDaemon(cfg, session)
-    except OSError as exc:
+    except (OSError, ValueError) as exc:
         print(f"offboard: cannot open MAVLink {url}: {exc}", file=sys.stderr)
         session.close()
         return 2

@@ -11,8 +11,15 @@ same order (docs/architecture.md, "Lockstep, step by step"):
 3. ``agent.step(...)`` -> SET_ATTITUDE_TARGET with ``time_boot_ms`` = t_k, then publish
    the estimate for t_{k+1} and a status record.
 
-Start-up like a real offboard application: wait for the heartbeat, stream setpoints,
-switch to OFFBOARD (retried until acknowledged), arm (retried). A neighbour that stays
+Start-up like a real offboard application: wait for the heartbeat (logging what it waits
+for every few seconds), stream setpoints, switch to OFFBOARD, arm; commands are retried
+without ever blocking the setpoint stream. Faults (docs/security.md, "Offboard daemon:
+link hygiene and failsafes"): a setpoint is re-sent only while it answers the vehicle's
+current step (lockstep) or for one control period (real time), so with no valid step the
+stream stops and the vehicle's offboard-loss failsafe acts; in real time, truth more than
+``RUNNER_LOST_PERIODS`` behind the vehicle's clock (runner or router lost) stops the
+stream too (the vehicle holds); after a failsafe HOLD the daemon asks for OFFBOARD again
+(:class:`offboard.link_guard.OffboardKeeper`). A neighbour that stays
 silent for ``neighbour_timeout`` seconds is declared lost and no longer waited for
 (its data is then predicted by the agent, then dropped); it rejoins when it speaks.
 In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, but uses
@@ -39,6 +46,7 @@ from offboard.agent import (
     make_agent,
 )
 from offboard.landing import landing_plan
+from offboard.link_guard import OffboardKeeper, PayloadGuard, VehicleView
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.safety_filter import parse_method
 from offboard.wire_convert import (
@@ -56,6 +64,9 @@ log = logging.getLogger(__name__)
 
 TAKEOFF_LATE_S = 1.0  # s, a take-off command's at_s may lie this far behind the step time
 TAKEOFF_LEAD_S = 60.0  # s, ... and at most this far ahead of it
+RUNNER_LOST_PERIODS = 25  # real time: truth this many steps behind the vehicle -> hold
+LOOP_STALL_S = 0.25  # s: a main-loop iteration this late is a fault of the daemon
+WAIT_LOG_S = 3.0  # s: start-up waits say what they wait for this often
 
 
 @dataclass
@@ -80,6 +91,7 @@ class DaemonConfig:
     land_at: float | None = None  # mission time (s) of a coordinated land-all
     # HEARTBEAT period asked of the vehicle (s): how soon a third party's mode change is seen
     heartbeat_interval: float = 0.1
+    signing_key: bytes | None = None  # MAVLink 2 signing of the vehicle link (32 bytes)
 
 
 class OffboardDaemon:
@@ -92,21 +104,29 @@ class OffboardDaemon:
         self.id = cfg.agent_id
         self.others = [i for i in sc.ids if i != cfg.agent_id]
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed)
-        self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, tlog=cfg.tlog)
-        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id)
         self.control_hz = int(sc.run.control_hz)
+        self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, self.control_hz, cfg.lockstep,
+                                tlog=cfg.tlog, signing_key=cfg.signing_key)
+        guard = PayloadGuard(list(sc.ids), list(sc.leader_ids), self.control_hz, cfg.agent_id)
+        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard)
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1
         # (time_boot_ms, q_ned float32 (4,), normalised thrust float32)
         self.answer: tuple[int, np.ndarray, np.float32] | None = None
+        self.answer_step = -1  # the vehicle step the answer is for
+        self.answer_at = 0.0  # monotonic time it was computed
+        self.vehicle_step = -1  # step of the vehicle's latest accepted ODOMETRY
         self.last_send = 0.0
-        self.first_send = 0.0
+        self.stream_since = 0.0  # start of the current gap-free setpoint stream
+        self.streaming = False
+        self.truth_lost = False
+        self.said_waiting = 0.0
+        self.keeper = OffboardKeeper(cfg.stream_before_offboard, cfg.manual_start)
         self.last_estimate: wire.Estimate | None = None
         self.prev_estimate: wire.Estimate | None = None
         self.last_est_pub = 0.0
         self.stop = False
-        self.startup_done = False  # OFFBOARD accepted and armed
         self.trajectory_started = False
         self.land_at: float | None = cfg.land_at
         self.offboard_seen = False  # the mission has had the vehicle in OFFBOARD
@@ -200,15 +220,33 @@ class OffboardDaemon:
                 self.bus.publish_estimate(est)
         self.last_est_pub = time.monotonic()
 
+    def _answer_fresh(self, now: float) -> bool:
+        """A setpoint may go out while it answers the vehicle's current step (lockstep:
+        the vehicle's clock waits for it) or for one control period (real time)."""
+        if self.answer is None or self.truth_lost:
+            return False
+        if self.cfg.lockstep:
+            return self.vehicle_step <= self.answer_step
+        return now - self.answer_at <= 1.0 / self.control_hz
+
     def _send_answer(self) -> None:
-        if self.answer is None:
+        now = time.monotonic()
+        if self.answer is None or not self._answer_fresh(now):
             return
         ms, q, thrust = self.answer
         self.link.send_attitude_target(ms, q, thrust)
-        now = time.monotonic()
-        if self.first_send == 0.0:
-            self.first_send = now
+        if not self.streaming:
+            self.streaming, self.stream_since = True, now
         self.last_send = now
+
+    def _check_stream(self, now: float) -> None:
+        """Stop (and say so) when the setpoint is stale: the vehicle's failsafe acts."""
+        if self.streaming and not self._answer_fresh(now) and now - self.last_send > 0.1:
+            self.streaming = False
+            self.keeper.fault(now)
+            log.warning("agent %d: no valid step since step %d (vehicle at step %d): "
+                        "setpoint stream stopped, the vehicle's failsafe will act",
+                        self.id, self.answer_step, self.vehicle_step)
 
     # -- the control step ---------------------------------------------------------------
     def _neighbours_for(self, k: int, t: float) -> tuple[dict[int, wire.Estimate], bool]:
@@ -228,7 +266,7 @@ class OffboardDaemon:
         # Step 0 waits for every agent's initial estimate as long as start-up may take
         # (the others may still be importing); later a silent neighbour is declared lost.
         timeout = self.cfg.heartbeat_timeout if k == 0 else self.cfg.neighbour_timeout
-        complete = self.bus.wait(have_all, timeout)
+        complete = self.bus.wait(lambda: self.stop or have_all(), timeout) and not self.stop
         got = self.bus.estimates_at(k - 1)
         if not complete:
             for j in want:
@@ -242,13 +280,28 @@ class OffboardDaemon:
         return got, True
 
     def _truth_for(self, k: int) -> wire.Truth | None:
-        """The simulator's truth of step k (lockstep: waited for), or the latest one."""
+        """The simulator's truth of step k (lockstep: waited for), or the latest one if
+        it is at most RUNNER_LOST_PERIODS behind (real time; else the runner is lost)."""
         if not self.cfg.lockstep:
-            return self.bus.latest_truth
-        if not self.bus.wait(lambda: k in self.bus.truth, self.cfg.truth_timeout):
+            truth = self.bus.latest_truth
+            if truth is None and time.monotonic() - self.said_waiting >= WAIT_LOG_S:
+                self.said_waiting = time.monotonic()
+                log.info("agent %d: waiting for truth on Zenoh (%s)", self.id,
+                         ", ".join(self.cfg.zenoh_connect) or "no endpoint")
+            lost = truth is None or k - truth.step > RUNNER_LOST_PERIODS
+            if lost != self.truth_lost and (truth is not None or self.truth_lost):
+                self.truth_lost = lost
+                if lost:
+                    self.keeper.fault(time.monotonic())
+                    log.error("agent %d: truth lost at step %d (runner or router gone?): "
+                              "setpoints stopped, the vehicle holds", self.id, k)
+                else:
+                    log.info("agent %d: truth back at step %d", self.id, k)
+            return None if lost else truth
+        if not self.bus.wait(lambda: self.stop or k in self.bus.truth, self.cfg.truth_timeout):
             log.warning("agent %d: no truth for step %d", self.id, k)
             return None
-        return self.bus.truth[k]
+        return self.bus.truth.get(k)
 
     def control_step(self, k: int, t: float, time_boot_ms: int) -> bool:
         truth = self._truth_for(k)
@@ -262,6 +315,7 @@ class OffboardDaemon:
         neighbours = {j: estimate_from_wire(e) for j, e in received.items()}
         out = self.agent.step(k, t, truth.p, truth.v, neighbours, comm_ok)
         self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
+        self.answer_step, self.answer_at = k, time.monotonic()
         self._send_answer()
         est = estimate_to_wire(out.estimate, k, self._zeta())
         self._publish_estimate(self._mark_cooperation(est, t))
@@ -296,68 +350,119 @@ class OffboardDaemon:
         return est
 
     # -- main loop ----------------------------------------------------------------------
-    def _startup_transitions(self) -> None:
-        """Switch to OFFBOARD and arm once setpoints have streamed for a while."""
-        if self.answer is None or self.startup_done or self.cfg.manual_start:
+    def _mode_requests(self, now: float) -> None:
+        """Start-up and failsafe recovery: OFFBOARD / arm requests, never blocking."""
+        link = self.link
+        for what, cmd in (("offboard", mavlink.MAV_CMD_DO_SET_MODE),
+                          ("arm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM)):
+            done, res = link.finished(cmd)
+            if done:
+                ok = res == mavlink.MAV_RESULT_ACCEPTED
+                self.keeper.result(what, ok, now)
+                (log.info if ok else log.warning)(
+                    "agent %d: %s %s (result %s)", self.id, what.upper(),
+                    "accepted" if ok else "not accepted", res)
+        if self.answer is None or link.busy(mavlink.MAV_CMD_DO_SET_MODE) or link.busy(
+                mavlink.MAV_CMD_COMPONENT_ARM_DISARM):
             return
-        if time.monotonic() - self.first_send < self.cfg.stream_before_offboard:
+        main, sub = px4.split_mode(link.custom_mode)
+        view = VehicleView(
+            in_offboard=link.in_offboard,
+            hold=(main, sub) == (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER),
+            armed=link.armed,
+            failsafe_texts=link.failsafe_texts,
+            streaming_s=now - self.stream_since if self.streaming else 0.0,
+        )
+        want = self.keeper.decide(now, view)
+        if want == "offboard":
+            link.start_set_mode(px4.MAIN_OFFBOARD)
+        elif want == "arm":
+            link.start_arm()
+
+    def _wait_heartbeat(self) -> bool:
+        """Wait for the vehicle's first heartbeat (the link lock), saying what it waits
+        for every WAIT_LOG_S; False on timeout or a stop signal."""
+        start = time.monotonic()
+        said = start
+        while not self.stop and not self.link.locked:
+            self.link.poll(0.1)
+            now = time.monotonic()
+            if now - start > self.cfg.heartbeat_timeout:
+                return False
+            if now - said >= WAIT_LOG_S:
+                said = now
+                log.info("agent %d: waiting for the HEARTBEAT of vehicle %d on %s (%.0f s)",
+                         self.id, self.id, self.cfg.mavlink_url, now - start)
+        return self.link.locked
+
+    def _on_odometry(self) -> None:
+        """One control step per new ODOMETRY stamp (both modes)."""
+        odo = self.link.odometry
+        if odo is None:
             return
-        if not self.link.in_offboard:
-            res = self.link.set_offboard()
-            if res != mavlink.MAV_RESULT_ACCEPTED:
-                log.warning("agent %d: OFFBOARD not accepted (result %s), retrying", self.id, res)
-                return
-            log.info("agent %d: OFFBOARD accepted", self.id)
-        if not self.link.armed:
-            res = self.link.arm()
-            if res != mavlink.MAV_RESULT_ACCEPTED:
-                log.warning("agent %d: ARM not accepted (result %s), retrying", self.id, res)
-                return
-            log.info("agent %d: armed", self.id)
-        self.startup_done = True
+        k = int(round(odo.time_usec * 1e-6 * self.control_hz))
+        if k != self.vehicle_step:
+            self.vehicle_step = k
+            self.bus.set_reference(k)
+        if k > self.last_step:
+            t = k / self.control_hz
+            if self.control_step(k, t, int(round(t * 1000))):
+                self.last_step = k
 
     def run(self) -> int:
         signal.signal(signal.SIGTERM, self._on_signal)
         signal.signal(signal.SIGINT, self._on_signal)
         cfg = self.cfg
-        if not self.link.wait_heartbeat(cfg.heartbeat_timeout):
-            log.error("agent %d: no heartbeat from vehicle on %s", self.id, cfg.mavlink_url)
-            return 2
-        log.info("agent %d: vehicle heartbeat received (%s)", self.id, self.cfg.mavlink_url)
-        res = self.link.set_message_interval(
-            mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval
-        )
-        if res != mavlink.MAV_RESULT_ACCEPTED:  # its default rate (1 Hz) still works
-            log.warning("agent %d: HEARTBEAT interval %.2f s not accepted (result %s)",
-                        self.id, cfg.heartbeat_interval, res)
-        if isinstance(self.agent, FollowerAgent):
-            for line in self.agent.gains.lines():
-                log.info("agent %d: %s", self.id, line)
-        self._publish_estimate(estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
         try:
-            while not self.stop:
-                self.link.poll(0.001)  # ODOMETRY wakes it at once
-                self.bus.pump()
-                now = time.monotonic()
-                if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:
-                    log.error("agent %d: vehicle heartbeat lost", self.id)
-                    return 3
-                odo = self.link.odometry
-                if odo is not None:  # one control step per new ODOMETRY stamp (both modes)
-                    k = int(round(odo.time_usec * 1e-6 * self.control_hz))
-                    if k > self.last_step:
-                        t = k / self.control_hz
-                        if self.control_step(k, t, int(round(t * 1000))):
-                            self.last_step = k
-                now = time.monotonic()
-                if self.answer is not None and now - self.last_send > 0.05:
-                    self._send_answer()  # keep streaming while the vehicle waits
-                if self.last_estimate is not None and now - self.last_est_pub > 0.1:
-                    self._republish_estimates()  # for late joiners / lost datagrams
-                self._startup_transitions()
+            if not self._wait_heartbeat():
+                if not self.stop:
+                    log.error("agent %d: no heartbeat from vehicle on %s", self.id,
+                              cfg.mavlink_url)
+                return 0 if self.stop else 2
+            log.info("agent %d: vehicle heartbeat received (%s)", self.id, cfg.mavlink_url)
+            self.link.start_message_interval(
+                mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval
+            )
+            if isinstance(self.agent, FollowerAgent):
+                for line in self.agent.gains.lines():
+                    log.info("agent %d: %s", self.id, line)
+            self._publish_estimate(
+                estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
+            return self._loop()
         finally:
             self.link.close()
             self.bus.close()
+
+    def _loop(self) -> int:
+        cfg = self.cfg
+        last_iter = time.monotonic()
+        while not self.stop:
+            now = time.monotonic()
+            if now - last_iter > LOOP_STALL_S:  # stopped, swapped out: the stream had a gap
+                self.keeper.fault(now)
+                log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
+            self.link.poll(0.001)  # ODOMETRY wakes it at once
+            self.bus.pump()
+            now = time.monotonic()
+            if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:
+                log.error("agent %d: vehicle heartbeat lost", self.id)
+                return 3
+            self._on_odometry()
+            now = time.monotonic()
+            if self.answer is not None and now - self.last_send > 0.05:
+                self._send_answer()  # lockstep: the vehicle may have missed it
+            self._check_stream(now)
+            if self.last_estimate is not None and now - self.last_est_pub > 0.1:
+                self._republish_estimates()  # for late joiners / lost datagrams
+            done, res = self.link.finished(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
+            if done and res != mavlink.MAV_RESULT_ACCEPTED:  # its default (1 Hz) still works
+                log.warning("agent %d: HEARTBEAT interval %.2f s not accepted (result %s)",
+                            self.id, cfg.heartbeat_interval, res)
+            self._mode_requests(now)
+            self.link.tick()
+            last_iter = time.monotonic()  # between iterations: not our own waits
+        log.info("agent %d: stopped; dropped MAVLink %s, Zenoh %s", self.id,
+                 self.link.drops.counts, self.bus.drops.counts)
         return 0
 
     def _on_signal(self, signum: int, frame: Any) -> None:

@@ -2,15 +2,34 @@
 
 Listens where the vehicle streams its API link (``udpin:127.0.0.1:<api_remote>``, PX4's
 14540 for vehicle 1), talks as system = agent id, component 191 (onboard computer).
-Every command waits for its COMMAND_ACK and is retried; the result is returned, never
-assumed. Every received and sent message is appended to a ``.tlog`` when one is given
-(8-byte big-endian µs timestamp + the raw packet: pymavlink's tools read it).
+
+Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
+
+* **lock**: the first valid HEARTBEAT from system = agent id, component 1
+  (MAV_COMP_ID_AUTOPILOT1) locks the link to that sender's address; from then on
+  datagrams from any other address are dropped unparsed and frames from any other
+  system/component are dropped; everything sent goes to the locked address only;
+* **ODOMETRY**: non-finite or out-of-range fields, duplicate, non-monotonic and
+  implausibly far stamps are dropped (:class:`offboard.link_guard.StampGuard`);
+* **commands** never block: :meth:`VehicleLink.start_command` queues a COMMAND_LONG,
+  :meth:`VehicleLink.tick` (re)sends it, the ACK completes it
+  (:class:`offboard.link_guard.CommandRetry`);
+* **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
+  dropped and counted.
+
+Every drop is counted by reason in :attr:`VehicleLink.drops` and logged rate-limited.
+Every accepted and sent message is appended to a ``.tlog`` when one is given (8-byte
+big-endian µs timestamp + the raw packet: pymavlink's tools read it).
 """
 
 from __future__ import annotations
 
+import errno
+import logging
 import math
 import os
+import select
+import socket
 import struct
 import time
 from collections.abc import Iterable
@@ -20,9 +39,12 @@ from typing import Any, BinaryIO, SupportsFloat
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from offboard.link_guard import CommandRetry, DropLog, StampGuard, odometry_fields_ok  # noqa: E402
 from swarm_common import px4  # noqa: E402
+from swarm_common.signing import setup_signing  # noqa: E402
 
 mavlink = mavutil.mavlink
+log = logging.getLogger(__name__)
 
 COMP_ONBOARD = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 COMP_AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
@@ -31,6 +53,10 @@ ATT_MASK_IGNORE_RATES = (
     mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
     | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
     | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+)
+MAX_DATAGRAM = 65535
+PARSE_ERRORS: tuple[type[Exception], ...] = (
+    mavlink.MAVError, struct.error, ValueError, IndexError, TypeError,
 )
 
 
@@ -48,85 +74,195 @@ class Odometry:
     v_body: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+def parse_udpin(url: str) -> tuple[str, int] | None:
+    """``udpin:HOST:PORT`` -> (host, port); None for any other scheme."""
+    if not url.startswith("udpin:"):
+        return None
+    host, _, port = url[len("udpin:"):].rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"MAVLink URL {url!r}: expected udpin:HOST:PORT")
+    return host, int(port)
+
+
 class VehicleLink:
     """MAVLink connection of one offboard daemon to its vehicle."""
 
-    def __init__(self, url: str, agent_id: int, tlog: str | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        agent_id: int,
+        control_hz: float,
+        lockstep: bool,
+        tlog: str | None = None,
+        signing_key: bytes | None = None,
+    ) -> None:
         self.agent_id = agent_id
-        self.conn = mavutil.mavlink_connection(
-            url, source_system=agent_id, source_component=COMP_ONBOARD, autoreconnect=True
-        )
+        self.url = url
+        self.conn: Any = None
+        self.sock: socket.socket | None = None
+        where = parse_udpin(url)
+        if where is None:  # udpout/tcp: pymavlink's transport, locked by system id only
+            self.conn = mavutil.mavlink_connection(
+                url, source_system=agent_id, source_component=COMP_ONBOARD, autoreconnect=True
+            )
+            self.mav = self.conn.mav
+        else:  # own socket: no SO_REUSEADDR, replies to the locked address only
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.bind(where)
+            self.sock.setblocking(False)
+            self.mav = mavlink.MAVLink(None, agent_id, COMP_ONBOARD)
+        self.mav.robust_parsing = True
+        self.signed = signing_key is not None
+        if signing_key is not None:
+            setup_signing(self.mav, signing_key, link_id=agent_id & 0xFF)
         self._tlog: BinaryIO | None = open(tlog, "wb") if tlog else None  # noqa: SIM115
+        self.peer: tuple[str, int] | None = None  # the locked vehicle address
+        self.locked = False
         self.heartbeat: Any = None
         self.heartbeat_time = 0.0
         self.odometry: Odometry | None = None
-        self.acks: dict[int, Any] = {}
+        self.stamps = StampGuard(control_hz, lockstep)
+        self.drops = DropLog(f"agent {agent_id}: MAVLink")
+        self.pending: dict[int, CommandRetry] = {}
         self.statustexts: list[str] = []
-        self.bad_packets = 0
+        self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
+        self.sent = 0
         self.custom_mode = 0
         self.armed = False
 
-    # -- io ---------------------------------------------------------------------------
+    # -- receive ------------------------------------------------------------------------
     def _log(self, buf: bytes) -> None:
         if self._tlog is not None:
             self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + buf)
 
-    def poll(self, timeout: float = 0.0) -> list[Any]:
-        """Read every pending message (waiting up to ``timeout`` for the first)."""
-        out: list[Any] = []
+    def poll(self, timeout: float = 0.0) -> None:
+        """Read every pending datagram (waiting up to ``timeout`` for the first)."""
+        if self.sock is None:
+            self._poll_mavutil(timeout)
+            return
+        if timeout > 0 and not select.select([self.sock], [], [], timeout)[0]:
+            return
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(MAX_DATAGRAM)
+            except BlockingIOError:
+                return
+            except OSError as exc:  # ICMP errors surface here on some kernels
+                if exc.errno in (errno.ECONNREFUSED, errno.EINTR):
+                    continue
+                raise
+            self._datagram(data, addr)
+
+    def _reset_parser(self) -> None:
+        """One UDP datagram holds whole frames: never carry bytes from one to the next."""
+        self.mav.buf = bytearray()
+        self.mav.buf_index = 0
+        self.mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+        self.mav.have_prefix_error = False
+
+    def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        now = time.monotonic()
+        if self.peer is not None and addr != self.peer:
+            self.drops.drop("foreign address", f"datagram from {addr[0]}:{addr[1]}", now)
+            return
+        self._reset_parser()
+        try:
+            msgs = self.mav.parse_buffer(data) or []
+        except PARSE_ERRORS as exc:
+            self.drops.drop("malformed", f"{type(exc).__name__} from {addr}", now)
+            return
+        for msg in msgs:
+            self._accept(msg, addr, now)
+
+    def _poll_mavutil(self, timeout: float) -> None:
         if timeout > 0 and not self.conn.select(timeout):
-            return out
+            return
         while True:
             try:
                 msg = self.conn.recv_msg()
-            except (OSError, ValueError, struct.error, IndexError, TypeError):
-                self.bad_packets += 1
+            except PARSE_ERRORS as exc:
+                self.drops.drop("malformed", type(exc).__name__, time.monotonic())
                 continue
             if msg is None:
-                break
-            if msg.get_type() == "BAD_DATA":
-                self.bad_packets += 1
-                continue
-            if msg.get_srcSystem() != self.agent_id:
-                continue
-            self._log(msg.get_msgbuf())
-            self._handle(msg)
-            out.append(msg)
-        return out
+                return
+            self._accept(msg, None, time.monotonic())
 
-    def _handle(self, msg: Any) -> None:
+    def _accept(self, msg: Any, addr: tuple[str, int] | None, now: float) -> None:
         kind = msg.get_type()
-        if kind == "HEARTBEAT" and msg.get_srcComponent() == COMP_AUTOPILOT:
+        if kind == "BAD_DATA":
+            reason = str(getattr(msg, "reason", "bad data"))
+            why = "bad signature" if reason.startswith("Invalid signature") else "bad data"
+            self.drops.drop(why, reason, now)
+            return
+        if msg.get_srcSystem() != self.agent_id or msg.get_srcComponent() != COMP_AUTOPILOT:
+            self.drops.drop("foreign system", f"{kind} from {msg.get_srcSystem()}/"
+                            f"{msg.get_srcComponent()}", now)
+            return
+        if not self.locked:
+            if kind != "HEARTBEAT":
+                self.drops.counts["before lock"] = self.drops.counts.get("before lock", 0) + 1
+                return
+            self.locked = True
+            self.peer = addr
+            where = f"{addr[0]}:{addr[1]}" if addr else self.url
+            log.info("agent %d: link locked to vehicle %d/%d at %s",
+                     self.agent_id, self.agent_id, COMP_AUTOPILOT, where)
+        self._log(msg.get_msgbuf())
+        self._handle(msg, kind, now)
+
+    def _handle(self, msg: Any, kind: str, now: float) -> None:
+        if kind == "HEARTBEAT":
             self.heartbeat = msg
-            self.heartbeat_time = time.monotonic()
+            self.heartbeat_time = now
             self.custom_mode = int(msg.custom_mode)
             self.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         elif kind == "ODOMETRY":
-            q = tuple(float(c) for c in msg.q)
-            self.odometry = Odometry(
-                int(msg.time_usec), msg.x, msg.y, msg.z, time.monotonic(),
-                (q[0], q[1], q[2], q[3]), (float(msg.vx), float(msg.vy), float(msg.vz)),
-            )
+            self._odometry(msg, now)
         elif kind == "COMMAND_ACK":
-            self.acks[int(msg.command)] = msg
+            retry = self.pending.get(int(msg.command))
+            target = int(getattr(msg, "target_system", 0))
+            if retry is not None and target in (0, self.agent_id):
+                retry.on_ack(int(msg.result), now, mavlink.MAV_RESULT_IN_PROGRESS)
         elif kind == "STATUSTEXT":
-            self.statustexts.append(str(msg.text))
+            text = str(msg.text)
+            self.statustexts = [*self.statustexts[-31:], text]
+            if "failsafe" in text.lower():
+                self.failsafe_texts += 1
 
+    def _odometry(self, msg: Any, now: float) -> None:
+        q = tuple(float(c) for c in msg.q)
+        pos = (float(msg.x), float(msg.y), float(msg.z))
+        vel = (float(msg.vx), float(msg.vy), float(msg.vz))
+        why = odometry_fields_ok(pos, q, vel)
+        if why is None:
+            why = self.stamps.check(int(msg.time_usec), now)
+        if why is not None:
+            if why != "duplicate stamp":
+                self.drops.drop(why, f"ODOMETRY time_usec={int(msg.time_usec)}", now)
+            return
+        self.odometry = Odometry(
+            int(msg.time_usec), pos[0], pos[1], pos[2], now, (q[0], q[1], q[2], q[3]), vel,
+        )
+
+    # -- send ---------------------------------------------------------------------------
     def _send(self, msg: Any) -> None:
-        buf = msg.pack(self.conn.mav)
-        self.conn.write(buf)
+        buf = msg.pack(self.mav)
+        if self.sock is None:
+            self.conn.write(buf)
+        elif self.peer is None:
+            return  # nothing goes out before the lock
+        else:
+            try:
+                self.sock.sendto(buf, self.peer)
+            except OSError as exc:  # a full buffer or an ICMP error: the datagram is lost
+                self.drops.drop("send failed", str(exc), time.monotonic())
+                return
+        self.sent += 1
         self._log(buf)
 
-    # -- high level ---------------------------------------------------------------------
     @property
     def in_offboard(self) -> bool:
         return px4.split_mode(self.custom_mode)[0] == px4.MAIN_OFFBOARD
-
-    def wait_heartbeat(self, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while self.heartbeat is None and time.monotonic() < deadline:
-            self.poll(0.1)
-        return self.heartbeat is not None
 
     def send_attitude_target(
         self, time_boot_ms: int, q_wxyz: Iterable[SupportsFloat], thrust_norm: SupportsFloat
@@ -134,59 +270,64 @@ class VehicleLink:
         """SET_ATTITUDE_TARGET (NED/FRD quaternion, normalised thrust, rates ignored)."""
         q = [float(c) for c in q_wxyz]
         msg = mavlink.MAVLink_set_attitude_target_message(
-            int(time_boot_ms) & 0xFFFFFFFF,
-            self.agent_id,
-            COMP_AUTOPILOT,
-            ATT_MASK_IGNORE_RATES,
-            q,
-            0.0,
-            0.0,
-            0.0,
-            float(thrust_norm),
+            int(time_boot_ms) & 0xFFFFFFFF, self.agent_id, COMP_AUTOPILOT,
+            ATT_MASK_IGNORE_RATES, q, 0.0, 0.0, 0.0, float(thrust_norm),
         )
         self._send(msg)
 
-    def command(
-        self, command: int, params: list[float], retries: int = 3, timeout: float = 1.0
-    ) -> int | None:
-        """COMMAND_LONG with retries; returns the MAV_RESULT, or None if never acknowledged."""
+    # -- commands (never blocking) ---------------------------------------------------------
+    def start_command(
+        self, command: int, params: list[float], attempts: int = 3, timeout_s: float = 1.0
+    ) -> None:
+        """Queue COMMAND_LONG ``command`` (replacing one of the same number in flight);
+        :meth:`tick` sends it, :meth:`finished` collects its outcome."""
         p = [float(x) for x in params] + [math.nan] * (7 - len(params))
-        for attempt in range(retries):
-            self.acks.pop(command, None)
-            msg = mavlink.MAVLink_command_long_message(
-                self.agent_id, COMP_AUTOPILOT, command, attempt, *p[:7]
-            )
-            self._send(msg)
-            deadline = time.monotonic() + timeout
-            while time.monotonic() < deadline:
-                self.poll(0.05)
-                ack = self.acks.get(command)
-                if ack is not None:
-                    return int(ack.result)
-        return None
+        self.pending[command] = CommandRetry(command, p[:7], attempts, timeout_s)
+        self.tick()
 
-    def set_offboard(self) -> int | None:
-        return self.command(
-            mavlink.MAV_CMD_DO_SET_MODE,
-            [
-                mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
-                px4.MAIN_OFFBOARD,
-                0,
-            ],
-        )
+    def tick(self) -> None:
+        """Send every command attempt that is due now."""
+        now = time.monotonic()
+        for retry in self.pending.values():
+            if retry.due(now):
+                self._send(mavlink.MAVLink_command_long_message(
+                    self.agent_id, COMP_AUTOPILOT, retry.command, retry.attempt, *retry.params
+                ))
 
-    def set_message_interval(self, msg_id: int, interval_s: float) -> int | None:
-        """MAV_CMD_SET_MESSAGE_INTERVAL on this link (param2 in µs); the MAV_RESULT or None."""
-        return self.command(
-            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [msg_id, round(interval_s * 1e6)]
-        )
+    def busy(self, command: int) -> bool:
+        retry = self.pending.get(command)
+        return retry is not None and not retry.done
 
-    def arm(self) -> int | None:
-        return self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1, 0])  # param1 1 = arm
+    def finished(self, command: int) -> tuple[bool, int | None]:
+        """(True, MAV_RESULT or None when never acknowledged) once ``command`` is over
+        (it is then forgotten); (False, None) while it is in flight or was never sent."""
+        retry = self.pending.get(command)
+        if retry is None or not retry.done:
+            return False, None
+        del self.pending[command]
+        return True, retry.result
+
+    def start_set_mode(self, main: int, sub: int = 0) -> int:
+        params = [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
+                  main, sub]
+        self.start_command(mavlink.MAV_CMD_DO_SET_MODE, params)
+        return int(mavlink.MAV_CMD_DO_SET_MODE)
+
+    def start_arm(self) -> int:
+        self.start_command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1, 0])  # param1 1 = arm
+        return int(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
+
+    def start_message_interval(self, msg_id: int, interval_s: float) -> int:
+        """MAV_CMD_SET_MESSAGE_INTERVAL on this link (param2 in µs)."""
+        self.start_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [msg_id, round(interval_s * 1e6)])
+        return int(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
 
     def close(self) -> None:
         try:
-            self.conn.close()
+            if self.sock is not None:
+                self.sock.close()
+            else:
+                self.conn.close()
         finally:
             if self._tlog is not None:
                 self._tlog.close()

@@ -9,8 +9,11 @@ Receives into Zenoh FIFO channels that the daemon's main thread drains (:meth:`p
 Draining from the main thread means no Python thread and no GIL hand-off per message:
 with Python callbacks every put() stalled behind Zenoh's threads (1.9 ms median), and
 with drain threads plus a condition variable the lockstep run was 1.39× against
-1.55–1.69× polled (docs/performance.md). A payload that fails to decode is counted
-(``bad_payloads``) and dropped. Keys and payloads come from :mod:`swarm_common.wire`.
+1.55–1.69× polled (docs/performance.md). A payload that fails to decode, or that the
+daemon's :class:`offboard.link_guard.PayloadGuard` refuses (id not in the scenario, step
+outside a window around the daemon's own step, time not matching the step, non-finite
+values), is counted by reason in ``drops`` and dropped (docs/security.md). Keys and
+payloads come from :mod:`swarm_common.wire`.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from typing import Any
 
 import zenoh
 
+from offboard.link_guard import DropLog, PayloadGuard
 from swarm_common import wire
 
 log = logging.getLogger(__name__)
@@ -37,8 +41,13 @@ POLL_S = 0.0002  # channel polling period while waiting for data
 class SwarmBus:
     """Typed publish/subscribe of one agent over an open Zenoh session."""
 
-    def __init__(self, session: Any, swarm: str, agent_id: int) -> None:
+    def __init__(
+        self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None
+    ) -> None:
         self.session = session
+        self.guard = guard
+        self.drops = DropLog(f"agent {agent_id}: Zenoh")
+        self.truth_time = 0.0  # monotonic time of the last accepted truth
         self.swarm = swarm
         self.agent_id = agent_id
         self.truth: dict[int, wire.Truth] = {}
@@ -46,7 +55,6 @@ class SwarmBus:
         self.estimates: dict[int, dict[int, wire.Estimate]] = {}  # step -> id -> est
         self.latest_estimate: dict[int, wire.Estimate] = {}
         self.commands: deque[wire.Command] = deque()
-        self.bad_payloads = 0
         self._subs: list[tuple[Any, Callable[[Any], None]]] = []
         for key, handler in (
             (wire.key_truth(swarm), self._on_truth),
@@ -59,26 +67,57 @@ class SwarmBus:
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
 
     # -- handlers (called from pump) ---------------------------------------------------
-    def _decode(self, sample: Any) -> wire.Payload | None:
+    @property
+    def bad_payloads(self) -> int:
+        return self.drops.total
+
+    def _decode(self, sample: Any, kind: type) -> Any:
+        """The payload if it decodes to ``kind`` and passes the guard; else None (counted)."""
+        now = time.monotonic()
         try:
-            return wire.decode(sample.payload.to_bytes())
-        except wire.WireError:
-            self.bad_payloads += 1
+            msg = wire.decode(sample.payload.to_bytes())
+        except wire.WireError as exc:
+            self.drops.drop("undecodable", str(exc), now)
             return None
+        if not isinstance(msg, kind):
+            self.drops.drop("wrong kind", f"{type(msg).__name__} on {sample.key_expr}", now)
+            return None
+        why = None if self.guard is None else self.guard.check(msg)
+        if why is not None:
+            self.drops.drop(type(msg).__name__.lower(), why, now)
+            return None
+        return msg
+
+    def set_reference(self, step: int) -> None:
+        """The daemon's own step (the vehicle's latest ODOMETRY): payloads are judged
+        against it from now on, and anything held beyond its window is forgotten."""
+        if self.guard is None:
+            return
+        self.guard.ref = step
+        ok = self.guard.step_ok
+        if self.latest_truth is not None and not ok(self.latest_truth.step):
+            self.latest_truth = None
+        for j, est in list(self.latest_estimate.items()):
+            if not ok(est.step):
+                del self.latest_estimate[j]
+        for store in (self.truth, self.estimates):
+            for s in [s for s in store if not ok(s)]:
+                del store[s]
 
     def _on_truth(self, sample: Any) -> None:
-        msg = self._decode(sample)
-        if not isinstance(msg, wire.Truth):
+        msg = self._decode(sample, wire.Truth)
+        if msg is None:
             return
         self.truth[msg.step] = msg
+        self.truth_time = time.monotonic()
         if self.latest_truth is None or msg.step >= self.latest_truth.step:
             self.latest_truth = msg
         for old in [s for s in self.truth if s < msg.step - KEEP_STEPS]:
             del self.truth[old]
 
     def _on_estimate(self, sample: Any) -> None:
-        msg = self._decode(sample)
-        if not isinstance(msg, wire.Estimate) or msg.id == self.agent_id:
+        msg = self._decode(sample, wire.Estimate)
+        if msg is None or msg.id == self.agent_id:
             return
         self.estimates.setdefault(msg.step, {})[msg.id] = msg
         prev = self.latest_estimate.get(msg.id)
@@ -88,8 +127,8 @@ class SwarmBus:
             del self.estimates[old]
 
     def _on_command(self, sample: Any) -> None:
-        msg = self._decode(sample)
-        if isinstance(msg, wire.Command) and msg.agent in (0, self.agent_id):
+        msg = self._decode(sample, wire.Command)
+        if msg is not None and msg.agent in (0, self.agent_id):
             self.commands.append(msg)
 
     # -- main-thread API ---------------------------------------------------------------
