@@ -55,7 +55,7 @@ class SigningKeyError(ValueError):
     """A key file or key that cannot be used (one line, never containing the key)."""
 
 
-def signing_timestamp_now() -> int:
+def _timestamp_now() -> int:
     """The current MAVLink signing timestamp (10 µs units since 2015-01-01 UTC)."""
     return int(max(0.0, time.time() - SIGNATURE_EPOCH_UNIX_S) * TIMESTAMP_UNITS_PER_S)
 
@@ -199,7 +199,7 @@ def setup_signing(
     s.secret_key = bytes(key)
     s.sign_outgoing = True
     s.link_id = int(link_id)
-    s.timestamp = max(int(s.timestamp or 0), signing_timestamp_now())
+    s.timestamp = max(int(s.timestamp or 0), _timestamp_now())
     s.allow_unsigned_callback = allow_unsigned_cb
     s.last_reject = ""
     mav.check_signature = types.MethodType(_check_signature, mav)

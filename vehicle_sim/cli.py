@@ -22,6 +22,7 @@ from swarm_common.enums import FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, ScenarioError, load_scenario
+from swarm_common.signing import SigningKeyError, load_key
 from vehicle_sim.options import SimOptions
 
 if TYPE_CHECKING:
@@ -65,6 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
+    ap.add_argument("--signing-key", default=None, metavar="PATH",
+                    help="MAVLink 2 signing key file (gcs keys generate): reject unsigned or "
+                    "wrongly signed frames, sign every frame sent (default: signing off)")
+    ap.add_argument("--unsigned-gcs-link", action="store_true",
+                    help="with --signing-key: let unsigned clients (MAVSDK, QGC) on the GCS "
+                    "port request telemetry; they can never arm, fly or switch modes")
     ap.add_argument(
         "--failsafe",
         type=str.lower,
@@ -105,7 +112,17 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
         raise _Fatal(f"--vehicles {args.vehicles}: must be in [1, {sc.n}]")
     if not 0 <= args.port_offset <= MAX_PORT - HIGHEST_BASE_PORT:
         raise _Fatal(f"--port-offset {args.port_offset}: out of range")
+    key = None
+    if args.signing_key is not None:
+        try:
+            key = load_key(args.signing_key)
+        except SigningKeyError as exc:
+            raise _Fatal(f"--signing-key: {exc}") from None
+    elif args.unsigned_gcs_link:
+        raise _Fatal("--unsigned-gcs-link needs --signing-key (without a key nothing is signed)")
     return SimOptions(
+        signing_key=key,
+        unsigned_gcs=args.unsigned_gcs_link,
         lockstep=args.lockstep,
         seed=args.seed,
         port_offset=args.port_offset,

@@ -50,6 +50,7 @@ class Command:
     p: tuple[float, ...]
     wall: float
     sim_t: float
+    src: Any = None  # (link name, address) of the requester: rate requests are per peer
 
 
 def _arm_disarm(v: Vehicle, c: Command) -> Outcome:
@@ -82,11 +83,19 @@ def _terminate(v: Vehicle, c: Command) -> Outcome:
     return (v.terminate() if on else M.MAV_RESULT_ACCEPTED), None
 
 
+def _peer_key(c: Command) -> Any:
+    """The requester as a stream-schedule key, None when it is not one peer."""
+    src = c.src
+    if isinstance(src, tuple) and len(src) == 2 and isinstance(src[1], tuple):
+        return src
+    return None
+
+
 def _set_interval(v: Vehicle, c: Command) -> Outcome:
     mid, interval_us = finite(c.p[0]), finite(c.p[1])
     if mid is None or interval_us is None or int(mid) not in v.streams:
         return M.MAV_RESULT_UNSUPPORTED, None
-    v.streams.set_interval(int(mid), interval_us, c.wall)
+    v.streams.for_peer(_peer_key(c), create=True).set_interval(int(mid), interval_us, c.wall)
     return M.MAV_RESULT_ACCEPTED, None
 
 
@@ -94,7 +103,8 @@ def _get_interval(v: Vehicle, c: Command) -> Outcome:
     mid = finite(c.p[0])
     if mid is None or int(mid) not in v.streams:
         return M.MAV_RESULT_UNSUPPORTED, None
-    reply = M.MAVLink_message_interval_message(int(mid), v.streams.interval_us(int(mid)))
+    iv = v.streams.for_peer(_peer_key(c)).interval_us(int(mid))
+    reply = M.MAVLink_message_interval_message(int(mid), iv)
     return M.MAV_RESULT_ACCEPTED, reply
 
 
@@ -113,6 +123,14 @@ def _request_capabilities(v: Vehicle, c: Command) -> Outcome:
         return M.MAV_RESULT_ACCEPTED, telemetry.autopilot_version(v, c.sim_t)
     return M.MAV_RESULT_ACCEPTED, None
 
+
+# what a client on an unsigned link may ask (docs/security.md): telemetry only
+TELEMETRY_COMMANDS = frozenset({
+    M.MAV_CMD_SET_MESSAGE_INTERVAL,
+    M.MAV_CMD_GET_MESSAGE_INTERVAL,
+    M.MAV_CMD_REQUEST_MESSAGE,
+    M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+})  # fmt: skip
 
 HANDLERS: dict[int, Callable[[Vehicle, Command], Outcome]] = {
     M.MAV_CMD_COMPONENT_ARM_DISARM: _arm_disarm,

@@ -4,14 +4,24 @@
 * One pymavlink ``MAVLink`` parser per socket; every datagram is parsed on its own
   (a frame never continues into the next datagram: a leftover partial frame is counted
   as ``truncated`` and dropped, like PX4's UDP receiver).
-* Peer tracking: sends go to the default remote (PX4 SITL convention) and to every
-  address that has sent a valid MAVLink frame here ("answers whoever talks to it").
-  Peers that stay silent for ``peer_timeout`` seconds are forgotten, at most
-  ``max_peers`` are kept.
+* Signing (``key`` set, :mod:`swarm_common.signing`): a frame that is unsigned, wrongly
+  signed or replayed is rejected and counted per reason (``rejected_unsigned``,
+  ``rejected_bad_signature``, ``rejected_replay``). On an ``unsigned_ok`` link an unsigned
+  HEARTBEAT, TIMESYNC or COMMAND_LONG/INT is let through marked ``_restricted``: the
+  vehicle answers only telemetry requests from it (docs/security.md).
+* Peer hygiene (docs/security.md): sends go to the default remote (PX4 SITL convention)
+  and to every address that has sent an accepted frame here within ``peer_timeout``
+  seconds. At most ``max_peers`` such peers: a newcomer is refused (``peers_refused``,
+  its frames dropped) while the table is full of peers that still speak, it never evicts
+  one. The default remote is always admitted and never counted.
+* Amplification bound: a peer that is neither the default remote nor authenticated by a
+  valid signature earns ``AMPLIFICATION_LIMIT`` bytes of stream credit per byte it sends;
+  streams to it stop when the credit is spent (:meth:`MavlinkLink.stream_allowed`).
 * Counters (:attr:`stats`): datagrams, messages, ``bad`` (CRC / length / flags errors),
   ``garbage`` (bytes that are not MAVLink at all, parser exceptions), ``truncated``,
   ``foreign`` (a ``target_system`` that is neither 0 nor ours: dropped here),
-  send errors.
+  send errors, the signing rejects, ``peers_refused``, ``throttled`` (stream datagrams
+  withheld by the amplification bound).
 """
 
 from __future__ import annotations
@@ -26,12 +36,28 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from swarm_common import signing
+
 log = logging.getLogger(__name__)
 
 MAX_DATAGRAM = 65535
 RCVBUF_BYTES = 1 << 20
 # what pymavlink's parser raises on pathological input (MAVError; the others defensively)
 PARSE_ERRORS = (mavlink2.MAVError, struct.error, IndexError, ValueError)
+PEER_TIMEOUT_S = 5.0  # a peer silent this long gets no more streams and is forgotten
+MAX_PEERS = 4  # peers per link besides the default remote
+AMPLIFICATION_LIMIT = 10.0  # stream bytes out per byte in, unauthenticated peers
+CREDIT_MAX_BYTES = 20_000.0  # stream credit an unauthenticated peer can bank
+LIVENESS_FREE_S = 1.0  # one HEARTBEAT per second reaches a peer out of credit
+SIGNING_LINK_ID = 0  # link id of the simulator's outgoing signed streams
+# what an unsigned client may send on an ``unsigned_ok`` link (commands checked later)
+UNSIGNED_MSG_IDS = frozenset({
+    mavlink2.MAVLINK_MSG_ID_HEARTBEAT,
+    mavlink2.MAVLINK_MSG_ID_TIMESYNC,
+    mavlink2.MAVLINK_MSG_ID_COMMAND_LONG,
+    mavlink2.MAVLINK_MSG_ID_COMMAND_INT,
+})  # fmt: skip
+_REJECT_PREFIX = signing.INVALID_SIGNATURE_REASON + ": "
 
 
 class LinkError(OSError):
@@ -49,6 +75,15 @@ class LinkStats:
     foreign: int = 0
     sent: int = 0
     send_errors: int = 0
+    rejected_unsigned: int = 0
+    rejected_bad_signature: int = 0
+    rejected_replay: int = 0
+    peers_refused: int = 0
+    throttled: int = 0
+
+    @property
+    def rejected(self) -> int:
+        return self.rejected_unsigned + self.rejected_bad_signature + self.rejected_replay
 
     def as_dict(self) -> dict[str, int]:
         return dict(self.__dict__)
@@ -60,6 +95,9 @@ class Peer:
     last_seen: float
     sysid: int = 0
     compid: int = 0
+    authenticated: bool = False  # has sent a frame with a valid signature
+    credit: float = 0.0  # stream bytes it may still be sent (unauthenticated peers)
+    free_liveness_at: float = -1e9  # when it last got a HEARTBEAT without credit
 
 
 @dataclass
@@ -71,8 +109,10 @@ class MavlinkLink:
     port: int
     default_remote: tuple[str, int] | None
     bind_host: str = "127.0.0.1"
-    peer_timeout: float = 10.0
-    max_peers: int = 8
+    peer_timeout: float = PEER_TIMEOUT_S
+    max_peers: int = MAX_PEERS
+    key: bytes | None = None
+    unsigned_ok: bool = False
     stats: LinkStats = field(default_factory=LinkStats)
 
     def __post_init__(self) -> None:
@@ -94,7 +134,14 @@ class MavlinkLink:
             None, srcSystem=self.sysid, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1
         )
         self.mav.robust_parsing = True
+        if self.key is not None:
+            allow = self._allow_unsigned if self.unsigned_ok else None
+            signing.setup_signing(self.mav, self.key, SIGNING_LINK_ID, allow)
         self.peers: dict[tuple[str, int], Peer] = {}
+
+    @staticmethod
+    def _allow_unsigned(_mav: object, msg_id: int) -> bool:
+        return msg_id in UNSIGNED_MSG_IDS
 
     # -- receive ------------------------------------------------------------------
     def fileno(self) -> int:
@@ -132,46 +179,73 @@ class MavlinkLink:
             if mav.buf_len() > 0:
                 st.truncated += 1
                 self._reset_parser()
-            good = False
+            good, signed, accepted = False, False, []
             for m in msgs:
                 mid = m.get_msgId()
                 if mid < 0:  # MAVLink_bad_data (BAD_DATA / UNKNOWN)
-                    if getattr(m, "reason", "") == "Bad prefix":
-                        st.garbage += 1
-                    else:
-                        st.bad += 1
+                    self._count_bad(m)
                     continue
+                good = True  # a real MAVLink peer (perhaps not talking to us)
                 tgt = getattr(m, "target_system", 0)
                 if tgt not in (0, self.sysid):
                     st.foreign += 1
-                    good = True  # a real MAVLink peer, just not talking to us
                     continue
-                st.messages += 1
                 m._peer = addr
-                out.append(m)
-                good = True
-            if good:
-                self._touch_peer(addr, now, msgs)
+                m._restricted = self.key is not None and not m.get_signed()
+                signed = signed or (self.key is not None and m.get_signed())
+                accepted.append(m)
+            if good and self._admit(addr, now, msgs, signed, len(data)):
+                st.messages += len(accepted)
+                out.extend(accepted)
         return out
 
-    def _touch_peer(self, addr: tuple[str, int], now: float, msgs: Iterable) -> None:
+    def _count_bad(self, m: object) -> None:
+        reason = str(getattr(m, "reason", ""))
+        st = self.stats
+        if reason == "Bad prefix":
+            st.garbage += 1
+        elif reason.startswith(_REJECT_PREFIX):
+            why = reason[len(_REJECT_PREFIX) :]
+            if why == signing.REJECT_UNSIGNED:
+                st.rejected_unsigned += 1
+            elif why == signing.REJECT_REPLAY:
+                st.rejected_replay += 1
+            else:
+                st.rejected_bad_signature += 1
+        else:
+            st.bad += 1
+
+    def _admit(
+        self, addr: tuple[str, int], now: float, msgs: Iterable, signed: bool, nbytes: int
+    ) -> bool:
+        """Track the sender of an accepted datagram; False (frames dropped) for a newcomer
+        while ``max_peers`` peers that still speak fill the table."""
         p = self.peers.get(addr)
         if p is None:
-            if len(self.peers) >= self.max_peers:
-                oldest = min(self.peers.values(), key=lambda q: q.last_seen)
-                del self.peers[oldest.addr]
+            self._forget_silent(now)
+            counted = [a for a in self.peers if a != self.default_remote]
+            if addr != self.default_remote and len(counted) >= self.max_peers:
+                self.stats.peers_refused += 1
+                return False
             p = self.peers[addr] = Peer(addr, now)
         p.last_seen = now
+        p.authenticated = p.authenticated or signed
+        p.credit = min(CREDIT_MAX_BYTES, p.credit + AMPLIFICATION_LIMIT * nbytes)
         for m in msgs:
             if m.get_msgId() >= 0:
                 p.sysid, p.compid = m.get_srcSystem(), m.get_srcComponent()
                 break
+        return True
 
-    # -- send ---------------------------------------------------------------------
-    def destinations(self, now: float) -> list[tuple[str, int]]:
+    def _forget_silent(self, now: float) -> None:
         dead = [a for a, p in self.peers.items() if now - p.last_seen > self.peer_timeout]
         for a in dead:
             del self.peers[a]
+
+    # -- send ---------------------------------------------------------------------
+    def destinations(self, now: float) -> list[tuple[str, int]]:
+        """The default remote and every peer that has spoken within ``peer_timeout``."""
+        self._forget_silent(now)
         dests = list(self.peers)
         if self.default_remote is not None and self.default_remote not in self.peers:
             dests.append(self.default_remote)
@@ -185,6 +259,24 @@ class MavlinkLink:
                 self.stats.sent += 1
             except OSError:
                 self.stats.send_errors += 1
+
+    def stream_allowed(
+        self, addr: tuple[str, int], nbytes: int, now: float, liveness: bool = False
+    ) -> bool:
+        """Whether a stream datagram of ``nbytes`` may go to ``addr`` (and spend its
+        credit): always for the default remote and authenticated peers; a ``liveness``
+        datagram (HEARTBEAT) once per ``LIVENESS_FREE_S`` without credit."""
+        p = self.peers.get(addr)
+        if addr == self.default_remote or p is None or p.authenticated:
+            return True
+        if liveness and now - p.free_liveness_at >= LIVENESS_FREE_S:
+            p.free_liveness_at = now
+            return True
+        if p.credit < nbytes:
+            self.stats.throttled += 1
+            return False
+        p.credit -= nbytes
+        return True
 
     def close(self) -> None:
         try:

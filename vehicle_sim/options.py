@@ -28,6 +28,8 @@ class SimOptions:
     duration: float | None = None
     vehicles: int | None = None
     stats_out: str | None = None
+    signing_key: bytes | None = field(default=None, repr=False)  # never printed
+    unsigned_gcs: bool = False  # GCS link: unsigned telemetry requests allowed
 
 
 def restrict(sc: Scenario, k: int | None) -> Scenario:

@@ -9,7 +9,11 @@ Per control step k (t_k = k / control_hz), in both clock modes:
    answers (SET_ATTITUDE_TARGET with ``time_boot_ms == round(t_k·1000)``) of every active
    vehicle, or ``step_timeout`` wall seconds. Real time: the loop waits for the wall clock.
 
-Telemetry streams (HEARTBEAT 1 Hz etc.) run on the wall clock in both modes.
+Telemetry streams (HEARTBEAT 1 Hz etc.) run on the wall clock in both modes, per peer
+(:mod:`vehicle_sim.streams`), to the default remotes and the peers that spoke within
+``mavlink_link.PEER_TIMEOUT_S``. With ``--signing-key`` every link verifies signatures and
+every frame sent is signed; rejected frames are reported by a STATUSTEXT at most every
+``REJECT_REPORT_S`` per vehicle, and in the stats (docs/security.md).
 """
 
 from __future__ import annotations
@@ -23,22 +27,23 @@ import time
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
-from swarm_common import wire
+from swarm_common import signing, wire
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import Scenario
 from vehicle_sim import stats
 from vehicle_sim.clock import LockstepClock, RealTimeClock
 from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.mavlink_link import MavlinkLink
+from vehicle_sim.mavlink_link import SIGNING_LINK_ID, MavlinkLink
 from vehicle_sim.options import SimOptions, restrict
 from vehicle_sim.truth import TruthPublisher
-from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle, VehicleConfig
+from vehicle_sim.vehicle import MSG_ODOMETRY, STATUSTEXT_LEN, Vehicle, VehicleConfig
 
 log = logging.getLogger(__name__)
 
 LOCKSTEP_SUSPEND_AFTER = 5  # consecutive step timeouts before we stop waiting for a vehicle
 LOCKSTEP_RESEND_S = 0.1  # re-send ODOMETRY t_k to a vehicle that has not answered yet
 ERRORS_LOGGED = 10  # per-packet errors logged before only counting them
+REJECT_REPORT_S = 5.0  # at most one "rejected frames" STATUSTEXT per vehicle this often
 PACK_ERRORS = (struct.error, ValueError, TypeError, OverflowError)  # field out of wire range
 # STATUSTEXT severity -> logging level of the same event in the simulator's own log
 _LOG_LEVEL = {
@@ -51,6 +56,12 @@ _LOG_LEVEL = {
     M.MAV_SEVERITY_INFO: logging.INFO,
     M.MAV_SEVERITY_DEBUG: logging.DEBUG,
 }
+
+
+def _signing_time_now() -> int:
+    """The MAVLink signing timestamp of now (10 µs units since 2015-01-01)."""
+    unix = time.time() - signing.SIGNATURE_EPOCH_UNIX_S
+    return int(max(0.0, unix) * signing.TIMESTAMP_UNITS_PER_S)
 
 
 class SimServer:
@@ -76,6 +87,7 @@ class SimServer:
         self._min_dist = self.dyn.min_pair_distance() if self.dyn.n >= 2 else float("inf")
         self._last_resend: dict[int, float] = {}
         self._prestart_next = 0.0
+        self._rejects_reported: dict[int, tuple[int, float]] = {}
         opened = False
         try:
             self._open_links()
@@ -98,15 +110,19 @@ class SimServer:
                 port_offset=o.port_offset,
             )
             v = Vehicle(aid, idx, self.dyn, cfg)
+            if o.signing_key is not None:
+                signing.setup_signing(v.enc, o.signing_key, SIGNING_LINK_ID)
             self.vehicles.append(v)
             ports = vehicle_ports(aid, o.port_offset)
             api = MavlinkLink(
-                "api", aid, ports.api_local, (o.remote_host, ports.api_remote), o.bind_host
-            )
+                "api", aid, ports.api_local, (o.remote_host, ports.api_remote), o.bind_host,
+                key=o.signing_key,
+            )  # fmt: skip
             self.links.append(api)
             gcs = MavlinkLink(
-                "gcs", aid, ports.gcs_local, (o.remote_host, ports.gcs_remote), o.bind_host
-            )
+                "gcs", aid, ports.gcs_local, (o.remote_host, ports.gcs_remote), o.bind_host,
+                key=o.signing_key, unsigned_ok=o.unsigned_gcs,
+            )  # fmt: skip
             self.links.append(gcs)
             self.vlinks[aid] = {"api": api, "gcs": gcs}
             self.sel.register(api.sock, selectors.EVENT_READ, (v, api))
@@ -271,19 +287,16 @@ class SimServer:
     # -- I/O --------------------------------------------------------------------------
     def flush(self, now: float) -> None:
         for v in self.vehicles:
-            if not v.outbox:
+            if not v.outbox and not v.stream_out:
                 continue
+            if self.opts.signing_key is not None:  # signing time never lags the wall clock
+                v.enc.signing.timestamp = max(v.enc.signing.timestamp, _signing_time_now())
             links = self.vlinks[v.id]
             dests = {name: ln.destinations(now) for name, ln in links.items()}
             out, v.outbox = v.outbox, []
             for msg, dest in out:
-                try:
-                    buf = v.pack(msg)
-                except PACK_ERRORS as exc:  # a field out of its wire range: drop, count
-                    self.handler_errors += 1
-                    if self.handler_errors <= ERRORS_LOGGED:
-                        self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}",
-                                 logging.ERROR)  # fmt: skip
+                buf = self._pack(v, msg)
+                if buf is None:
                     continue
                 if dest is None:
                     for name, ln in links.items():
@@ -292,7 +305,56 @@ class SimServer:
                     links[dest[0]].send_bytes(buf, dests[dest[0]])
                 else:
                     links[dest[0]].send_bytes(buf, [], dest[1])
+            self._flush_streams(v, now, dests)
         self.log_events()
+
+    def _flush_streams(self, v: Vehicle, now: float, dests: dict[str, list]) -> None:
+        """Telemetry: the default schedule to every destination without its own, each
+        peer's own schedule to it; unauthenticated peers within their credit."""
+        links = self.vlinks[v.id]
+        out, v.stream_out = v.stream_out, []
+        custom = {name: v.streams.custom(name) for name in links}
+        for msg, key in out:
+            buf = self._pack(v, msg)
+            if buf is None:
+                continue
+            hb = msg.get_msgId() == M.MAVLINK_MSG_ID_HEARTBEAT
+            targets = (
+                [(n, d) for n in links for d in dests[n] if d not in custom[n]]
+                if key is None
+                else [key]
+            )
+            for name, addr in targets:
+                if links[name].stream_allowed(addr, len(buf), now, hb):
+                    links[name].send_bytes(buf, [], addr)
+
+    def _pack(self, v: Vehicle, msg: M.MAVLink_message) -> bytes | None:
+        try:
+            return v.pack(msg)
+        except PACK_ERRORS as exc:  # a field out of its wire range: drop, count
+            self.handler_errors += 1
+            if self.handler_errors <= ERRORS_LOGGED:
+                self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}", logging.ERROR)
+            return None
+
+    def live_peers(self, v: Vehicle) -> list[tuple[str, tuple[str, int]]]:
+        return [(name, a) for name, ln in self.vlinks[v.id].items() for a in ln.peers]
+
+    def report_rejects(self, now: float) -> None:
+        """A STATUSTEXT (and log line) when a vehicle's links rejected frames since the
+        last report, at most every ``REJECT_REPORT_S``."""
+        for v in self.vehicles:
+            sts = [ln.stats for ln in self.vlinks[v.id].values()]
+            total = sum(st.rejected for st in sts)
+            last, at = self._rejects_reported.get(v.id, (0, -REJECT_REPORT_S))
+            if total == last or now - at < REJECT_REPORT_S:
+                continue
+            self._rejects_reported[v.id] = (total, now)
+            u = sum(st.rejected_unsigned for st in sts)
+            b = sum(st.rejected_bad_signature for st in sts)
+            r = sum(st.rejected_replay for st in sts)
+            text = f"rejected {u} unsigned {b} badsig {r} replay"
+            v.event(text[:STATUSTEXT_LEN], M.MAV_SEVERITY_WARNING)
 
     def log_events(self) -> None:
         for v in self.vehicles:
@@ -353,8 +415,10 @@ class SimServer:
                 else:
                     self.lockstep_poll(now)
                 t = self.clock.t()
+                if o.signing_key is not None:
+                    self.report_rejects(now)
                 for v in self.vehicles:
-                    v.periodic(now, t, skip)
+                    v.periodic(now, t, skip, self.live_peers(v))
                 self.flush(now)
                 if o.duration is not None and t >= o.duration - 1e-9:
                     self.log(f"duration {o.duration} s reached")

@@ -3,6 +3,10 @@
 The summary is the last line the process writes to stderr (docs/conventions.md)::
 
     stats: steps=… collisions=… lockstep_timeouts=… handler_errors=… truth=… messages=…
+
+The link counters include the signing rejects per reason (``rejected_unsigned``,
+``rejected_bad_signature``, ``rejected_replay``), ``peers_refused`` and ``throttled``
+(docs/security.md).
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ log = logging.getLogger(__name__)
 SUMMARY_KEYS = (
     "messages", "bad", "garbage", "truncated", "foreign", "setpoints", "setpoints_rejected",
     "setpoints_stale", "commands", "commands_unsupported", "commands_foreign", "failsafes",
+    "rejected_unsigned", "rejected_bad_signature", "rejected_replay",
+    "commands_unsigned_refused", "peers_refused", "throttled",
 )  # fmt: skip
 LATENCY_PERCENTILES = (50, 90, 99)
 
@@ -62,6 +68,16 @@ def summary(sim: SimServer) -> str:
     )
 
 
+def _link_totals(sim: SimServer) -> dict[str, int]:
+    """Every link counter summed over the vehicles (signing rejects per reason, peers
+    refused, streams throttled by the amplification bound, ...)."""
+    tot: dict[str, int] = {}
+    for link in sim.links:
+        for k, val in link.stats.as_dict().items():
+            tot[k] = tot.get(k, 0) + val
+    return tot
+
+
 def write_stats(sim: SimServer, path: str) -> None:
     """``--stats-out``: mode, steps, timeouts, collisions, latency and the summary line."""
     doc = {
@@ -71,6 +87,8 @@ def write_stats(sim: SimServer, path: str) -> None:
         "collisions": sim.dyn.collisions,
         "latency": latency_stats(sim.vehicles, sim.dt),
         "relocks": getattr(sim.clock, "relocks", 0),
+        "signing": sim.opts.signing_key is not None,
+        "links": _link_totals(sim),
         "summary": summary(sim),
     }
     try:

@@ -2,15 +2,25 @@
 
 Intervals are wall-clock seconds (0 = off). Every stream starts at its default rate
 (``telemetry.DEFAULT_RATES``, ODOMETRY at ``odometry_hz``); SET_MESSAGE_INTERVAL changes
-one (-1 µs: off, 0: back to the default, else clamped to [1 ms, 2000 s]). HEARTBEAT is the
-link's liveness: never off, at least 1 Hz, at most 50 Hz.
+one (-1 µs: off, 0: back to the default, else clamped to [10 ms, 2000 s]: no stream
+faster than 100 Hz, whatever is asked). HEARTBEAT is the link's liveness: never off, at
+least 1 Hz, at most 50 Hz.
+
+Rates are per peer, as in PX4 (:class:`PeerStreams`): a rate request changes the
+schedule of the peer that sent it only; every other destination keeps the defaults, and a
+peer's schedule is forgotten with the peer, so the next client starts from the defaults.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from pymavlink.dialects.v20 import common as M
 
-MIN_INTERVAL_S = 1e-3
+# a destination with its own schedule: (link name, (host, port))
+PeerKey = tuple[str, tuple[str, int]]
+
+MIN_INTERVAL_S = 0.01  # 100 Hz at most per stream and destination
 MAX_INTERVAL_S = 2000.0  # fits the int32 µs of MESSAGE_INTERVAL
 HEARTBEAT_MIN_S, HEARTBEAT_MAX_S = 0.02, 1.0
 DUE_SLACK_S = 1e-3  # a stream due within this much is sent now
@@ -67,4 +77,43 @@ class StreamSchedule:
                 if due < wall:
                     due = wall + iv
             self._next_due[mid] = due
+        return out
+
+
+class PeerStreams:
+    """The default schedule (every destination without requests of its own) and one
+    schedule per peer that asked for a rate."""
+
+    def __init__(self, rates: dict[int, float], odometry_hz: float) -> None:
+        self.rates = dict(rates)
+        self.odometry_hz = odometry_hz
+        self.default = StreamSchedule(self.rates, odometry_hz)
+        self.peers: dict[PeerKey, StreamSchedule] = {}
+
+    def __contains__(self, mid: int) -> bool:
+        return mid in self.default
+
+    def for_peer(self, key: PeerKey | None, create: bool = False) -> StreamSchedule:
+        """The schedule of ``key`` (a fresh default one if ``create``); default if None."""
+        if key is None:
+            return self.default
+        if create and key not in self.peers:
+            self.peers[key] = StreamSchedule(self.rates, self.odometry_hz)
+        return self.peers.get(key, self.default)
+
+    def custom(self, link: str) -> set[tuple[str, int]]:
+        """Addresses on ``link`` that have their own schedule (not on the default one)."""
+        return {addr for name, addr in self.peers if name == link}
+
+    def forget(self, live: Iterable[PeerKey]) -> None:
+        """Drop the schedules of peers that are gone."""
+        keep = set(live)
+        for key in [k for k in self.peers if k not in keep]:
+            del self.peers[key]
+
+    def due(self, wall: float, skip: tuple[int, ...] = ()) -> list[tuple[PeerKey | None, int]]:
+        """(destination or None for the default schedule, message id) due at ``wall``."""
+        out: list[tuple[PeerKey | None, int]] = [(None, m) for m in self.default.due(wall, skip)]
+        for key, sched in self.peers.items():
+            out.extend((key, m) for m in sched.due(wall, skip))
         return out

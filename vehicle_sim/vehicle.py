@@ -34,7 +34,7 @@ from swarm_common.enums import FailsafeAction, VehicleMode
 from vehicle_sim import commands, telemetry
 from vehicle_sim.commands import Command
 from vehicle_sim.failsafe_controller import FailsafeController
-from vehicle_sim.streams import StreamSchedule
+from vehicle_sim.streams import PeerKey, PeerStreams
 from vehicle_sim.telemetry import TM_ATT_IGNORE, TM_RATES_IGNORE, TM_THRUST_IGNORE
 
 CUSTOM_MODE = px4.CUSTOM_MODE  # re-exported: the short mode names -> PX4 custom_mode
@@ -75,6 +75,7 @@ class VehicleCounters:
     commands: int = 0
     commands_unsupported: int = 0
     commands_foreign: int = 0
+    commands_unsigned_refused: int = 0  # flight commands on an unsigned link: DENIED
     lockstep_timeouts: int = 0
     failsafes: int = 0
 
@@ -92,6 +93,8 @@ class Vehicle:
         self.cfg = cfg or VehicleConfig()
         self.ctr = VehicleCounters()
         self.outbox: list[tuple[M.MAVLink_message, Dest]] = []
+        # telemetry streams: None = every destination on the default schedule
+        self.stream_out: list[tuple[M.MAVLink_message, PeerKey | None]] = []
         self.events: list[tuple[int, str]] = []  # (MAV_SEVERITY, line) for the server's log
         self.enc = M.MAVLink(None, srcSystem=self.id, srcComponent=COMPONENT_AUTOPILOT)
 
@@ -123,7 +126,7 @@ class Vehicle:
         self.fs = FailsafeController(dyn.mass, dyn.g, dyn.tilt_max, dyn.f_max)
         self.fs.engage(FailsafeAction.HOLD, dyn.p[idx], float(dyn.att[idx, 2]))
         self.home_ned = frames.enu_to_ned(np.array([dyn.p[idx, 0], dyn.p[idx, 1], 0.0]))
-        self.streams = StreamSchedule(self.cfg.rates, self.cfg.odometry_hz)
+        self.streams = PeerStreams(self.cfg.rates, self.cfg.odometry_hz)
         self.uid = self.cfg.uid_base | ((self.cfg.port_offset & 0xFFFF) << 8) | self.id
         self._handlers: dict[int, Callable[[Any, Dest, float, float], None]] = {
             M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self._on_setpoint,
@@ -263,12 +266,12 @@ class Vehicle:
     def _on_command_long(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
         if self._for_autopilot(m):
             p = (m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7)
-            self._on_command(m, src, Command(m.command, p, wall, sim_t))
+            self._on_command(m, src, Command(m.command, p, wall, sim_t, src))
 
     def _on_command_int(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
         if self._for_autopilot(m):
             p = (m.param1, m.param2, m.param3, m.param4, m.x * 1e-7, m.y * 1e-7, m.z)
-            self._on_command(m, src, Command(m.command, p, wall, sim_t))
+            self._on_command(m, src, Command(m.command, p, wall, sim_t, src))
 
     def _on_set_mode(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
         if m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
@@ -283,6 +286,10 @@ class Vehicle:
 
     def _on_command(self, m: Any, src: Dest, c: Command) -> None:
         self.ctr.commands += 1
+        if getattr(m, "_restricted", False) and c.cmd not in commands.TELEMETRY_COMMANDS:
+            self.ctr.commands_unsigned_refused += 1  # unsigned link: telemetry requests only
+            self._ack(src, c.cmd, M.MAV_RESULT_DENIED, m)
+            return
         res, reply = commands.execute(self, c)
         if res == M.MAV_RESULT_UNSUPPORTED:
             self.ctr.commands_unsupported += 1
@@ -393,12 +400,17 @@ class Vehicle:
         """Build message ``mid`` from the current state (None if not supported)."""
         return telemetry.build(self, mid, sim_t)
 
-    def periodic(self, wall: float, sim_t: float, skip: tuple[int, ...] = ()) -> None:
-        """Queue every stream whose interval has elapsed on the wall clock."""
-        for mid in self.streams.due(wall, skip):
+    def periodic(
+        self, wall: float, sim_t: float, skip: tuple[int, ...] = (), live: Any = None
+    ) -> None:
+        """Queue every stream whose interval has elapsed on the wall clock (to
+        :attr:`stream_out`); ``live``: the peers still there (others lose their rates)."""
+        if live is not None:
+            self.streams.forget(live)
+        for key, mid in self.streams.due(wall, skip):
             msg = telemetry.build(self, mid, sim_t)
             if msg is not None:
-                self.outbox.append((msg, None))
+                self.stream_out.append((msg, key))
 
     def pack(self, msg: M.MAVLink_message) -> bytes:
         """Encode with this vehicle's sequence counter (sysid = agent id, compid 1)."""

@@ -133,9 +133,10 @@ def test_vehicle_state_machine_fuzz():
                     dyn.release(v.idx)
                 dyn.set_command(v.idx, *v.command(0.02))
                 v.periodic(t, t)
-                for msg, _ in v.outbox:
+                for msg, _ in [*v.outbox, *v.stream_out]:
                     v.pack(msg)
                 v.outbox.clear()
+                v.stream_out.clear()
             dyn.advance(4)
             t += 0.02
         for arr in (dyn.p, dyn.v, dyn.att, dyn.thrust, dyn.cmd_att, dyn.cmd_thrust):
