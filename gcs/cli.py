@@ -55,6 +55,7 @@ def _load(path: str, allow_infeasible: bool) -> Scenario:
 
 def cmd_mission_run(args: argparse.Namespace) -> int:
     sc = _load(args.scenario, args.allow_infeasible)
+    _check_run_args(args, sc, "mission run")
     if not args.inproc:
         from gcs.mission import cli_run
 
@@ -90,7 +91,11 @@ def _gain_lines(sc: Scenario) -> list[str]:
 def cmd_router(args: argparse.Namespace) -> int:
     from gcs.router import run_router
 
-    return run_router(args.listen)
+    sc = None if args.scenario is None else _load(args.scenario, args.allow_infeasible)
+    if (sc is None) != (args.secure_dir is None):
+        print("gcs router: --scenario and --secure-dir go together", file=sys.stderr)
+        return EXIT_USAGE
+    return run_router(args.listen, sc, args.secure_dir, args.swarm)
 
 
 def add_keys(sub: argparse._SubParsersAction) -> None:
@@ -103,6 +108,12 @@ def add_router_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="run a Zenoh router (multi-machine setups)")
     p.add_argument("--listen", nargs="+", default=[default_endpoint()], metavar="EP",
                    help=f"endpoints to listen on (default {default_endpoint()})")
+    p.add_argument("--scenario", default=None,
+                   help="authenticate and apply this swarm's ACL (docs/security.md)")
+    p.add_argument("--secure-dir", type=Path, default=None, metavar="DIR",
+                   help="credentials + ACL: generated here (0700/0600) unless present")
+    p.add_argument("--swarm", default=None, help="swarm name (default: the scenario name)")
+    _add_allow_infeasible(p)
     p.set_defaults(func=cmd_router)
 
 
@@ -171,6 +182,7 @@ def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[s
 
 def cmd_mission_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario, args.allow_infeasible)
+    _check_run_args(args, sc, "mission compare")
     from gcs.report import compare_table, safety_table, write_report
     from gcs.sweep_report import seeds_table
     from offboard.bearing import formation_from_scenario
@@ -209,8 +221,55 @@ def _seconds(text: str, allow_zero: bool) -> float:
     return v
 
 
+MAX_DURATION_S = 3600.0  # as scenario.duration_s: the recorder preallocates the run
+
+
 def _positive_seconds(text: str) -> float:
     return _seconds(text, allow_zero=False)
+
+
+def _duration(text: str) -> float:
+    v = _seconds(text, allow_zero=False)
+    if v > MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"{text!r}: at most {MAX_DURATION_S:g} s")
+    return v
+
+
+def _int_in(lo: int, hi: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{text!r}: must be in {lo}..{hi}")
+        return v
+
+    return parse
+
+
+def _port_offset(text: str) -> int:
+    from gcs.launch_spec import MAX_PORT_OFFSET
+
+    return _int_in(0, MAX_PORT_OFFSET)(text)
+
+
+_seed = _int_in(0, 2**32 - 1)
+
+
+def _check_run_args(args: argparse.Namespace, sc: Scenario, cmd: str) -> None:
+    """Flags that need the scenario or the file system: exit 2 with one line."""
+    from gcs.run_output import out_dir_problem
+
+    problem = None
+    if args.duration is not None and args.duration < sc.control_dt:
+        problem = (f"--duration {args.duration:g}: shorter than one control step "
+                   f"({sc.control_dt:g} s)")
+    elif args.out and out_dir_problem(Path(args.out)):
+        problem = out_dir_problem(Path(args.out))
+    if problem:
+        print(f"gcs {cmd}: {problem}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE)
 
 
 def _non_negative_seconds(text: str) -> float:
@@ -230,8 +289,8 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("scenario")
     r.add_argument("--inproc", action="store_true", help="all in one process (no MAVLink)")
     r.add_argument("--method", choices=METHODS, default=None)
-    r.add_argument("--seed", type=int, default=None)
-    r.add_argument("--duration", type=_positive_seconds, default=None,
+    r.add_argument("--seed", type=_seed, default=None)
+    r.add_argument("--duration", type=_duration, default=None,
                    help="seconds (default: scenario)")
     r.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
@@ -239,7 +298,8 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="coordinated land-all at mission time T s (docs/lifecycle.md)")
     d = r.add_argument_group("distributed runs (without --inproc)")
     d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
-    d.add_argument("--port-offset", type=int, default=0, help="added to every UDP/TCP port")
+    d.add_argument("--port-offset", type=_port_offset, default=0,
+                   help="added to every UDP/TCP port")
     d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
@@ -248,12 +308,15 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")
     c.add_argument("scenario")
     c.add_argument("--inproc", action="store_true")
-    c.add_argument("--seed", type=int, default=None)
-    c.add_argument("--duration", type=_positive_seconds, default=None)
-    c.add_argument("--seeds", type=int, default=0, help="also sweep N seeds per method")
-    c.add_argument("--jobs", type=int, default=2, help="parallel processes for the sweep")
+    c.add_argument("--seed", type=_seed, default=None)
+    c.add_argument("--duration", type=_duration, default=None)
+    c.add_argument("--seeds", type=_int_in(0, 100_000), default=0,
+                   help="also sweep N seeds per method")
+    c.add_argument("--jobs", type=_int_in(1, 256), default=2,
+                   help="parallel processes for the sweep")
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
-    c.add_argument("--port-offset", type=int, default=0, help="distributed: shift every port")
+    c.add_argument("--port-offset", type=_port_offset, default=0,
+                   help="distributed: shift every port")
     _add_allow_infeasible(c)
     c.set_defaults(func=cmd_mission_compare)
     from gcs.sweep import add_sweep_parser

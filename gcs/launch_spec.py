@@ -18,13 +18,26 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from gcs.procs import python_entry
-from swarm_common.ports import GCS_PORT, port_free, vehicle_ports
-from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
-from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
+from swarm_common.ports import GCS_PORT, MAX_ID, port_free, vehicle_ports
+from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, swarm_name_problem
+from swarm_common.zenoh_session import (
+    DEFAULT_ZENOH_PORT,
+    SIM_USER,
+    ZENOH_CONFIG_ENV,
+    SwarmSecurity,
+    agent_user,
+)
 
 LOCALHOST = "127.0.0.1"
 # > the daemons' neighbour timeout (0.45 s): in lockstep a dead agent costs one wait
 LOCKSTEP_STEP_TIMEOUT_S = 1.0
+
+
+def _max_port_offset() -> int:
+    vp = [vehicle_ports(i, 0) for i in range(1, MAX_ID + 1)]
+    highest = max(max(p.api_local, p.api_remote, p.gcs_local, p.gcs_remote) for p in vp)
+    highest = max(highest, DEFAULT_ZENOH_PORT + 1, GCS_PORT)
+    return 65535 - highest
 
 
 class LaunchError(RuntimeError):
@@ -52,6 +65,14 @@ class LaunchSpec:
     manual_start: bool = False
     run_dir: Path | None = None
     sim_duration: float | None = None
+    zenoh_security: SwarmSecurity | None = None
+
+    def __post_init__(self) -> None:
+        problem = swarm_name_problem(self.swarm_name)
+        if problem is not None:
+            raise LaunchError(f"swarm name {self.swarm_name!r}: {problem}")
+        if self.port_offset < 0 or self.port_offset > MAX_PORT_OFFSET:
+            raise LaunchError(f"port offset {self.port_offset}: must be 0..{MAX_PORT_OFFSET}")
 
     @property
     def swarm_name(self) -> str:
@@ -141,6 +162,16 @@ class LaunchSpec:
             argv.append("--manual-start")
         return argv + self._common_args()
 
+    def child_env(self, name: str) -> dict[str, str]:
+        """Extra environment of child ``name``: with :attr:`zenoh_security`, the path of
+        its own Zenoh config (credentials) in ``$SWARM_ZENOH_CONFIG``, read by
+        :func:`~swarm_common.zenoh_session.open_session`; the password never appears in
+        an argv or a log."""
+        if self.zenoh_security is None:
+            return {}
+        user = SIM_USER if name == "vehicle-sim" else agent_user(int(name.split("-")[-1]))
+        return {ZENOH_CONFIG_ENV: str(self.zenoh_security.config_for(user))}
+
     def processes(self, daemons: bool = True) -> list[tuple[str, list[str]]]:
         """``(name, argv)`` of every child, simulator first; the daemons (which need Zenoh)
         unless ``daemons`` is False."""
@@ -153,3 +184,6 @@ class LaunchSpec:
         """``--seed`` if set; ``--allow-infeasible`` if the scenario was loaded with it."""
         argv = [] if self.seed is None else ["--seed", str(self.seed)]
         return argv + ([ALLOW_INFEASIBLE_FLAG] if self.sc.allow_infeasible else [])
+
+
+MAX_PORT_OFFSET = _max_port_offset()

@@ -16,11 +16,11 @@ from __future__ import annotations
 import json
 import logging
 import resource
+import shutil
 import sys
-import threading
+import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,13 +31,14 @@ from gcs.launch_spec import LaunchError, LaunchSpec
 from gcs.metrics import Series, compute_metrics
 from gcs.procs import ProcessGroup
 from gcs.progress import Progress
+from gcs.recorder import Recorder
 from gcs.router import open_router
 from gcs.run_output import (
     empty_series,
     print_result,
+    run_dir_inside,
     run_document,
     safety_spec,
-    set_agent_row,
     set_truth_row,
     write_run,
 )
@@ -45,6 +46,7 @@ from offboard.bearing import formation_from_scenario
 from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common import wire
 from swarm_common.scenario import Scenario
+from swarm_common.zenoh_session import write_swarm_security
 from vehicle_sim.dynamics import SwarmDynamics
 
 log = logging.getLogger(__name__)
@@ -55,59 +57,8 @@ class MissionError(RuntimeError):
     names the culprit."""
 
 
-@dataclass
-class Recorder:
-    """Collects the Zenoh traffic of a run, indexed by control step."""
-
-    sc: Scenario
-    steps: int
-    truth: dict[int, wire.Truth] = field(default_factory=dict)
-    est: dict[int, dict[int, wire.Estimate]] = field(default_factory=dict)
-    status: dict[int, dict[int, wire.Status]] = field(default_factory=dict)
-    last_status: dict[int, wire.Status] = field(default_factory=dict)
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    max_step: int = -1
-    seed: int | None = None
-    raw: list[bytes] = field(default_factory=list)
-
-    def subscribe(self, session: Any, swarm: str) -> list[Any]:
-        """Declare the truth, estimate and status subscribers on ``session``."""
-        return [
-            session.declare_subscriber(wire.key_truth(swarm), self.on_truth),
-            session.declare_subscriber(wire.key_estimate(swarm, "*"), self.on_estimate),
-            session.declare_subscriber(wire.key_status(swarm, "*"), self.on_status),
-        ]
-
-    def on_truth(self, sample: Any) -> None:
-        try:
-            msg = wire.decode(sample.payload.to_bytes())
-        except wire.WireError:
-            return
-        if isinstance(msg, wire.Truth) and 0 <= msg.step <= self.steps:
-            with self.lock:
-                self.truth[msg.step] = msg
-                self.max_step = max(self.max_step, msg.step)
-
-    def on_estimate(self, sample: Any) -> None:
-        # kept raw and decoded after the run: the recorder shares two cores with the
-        # swarm, and decoding 16 payloads per step here cost ~2 ms of CPU per step
-        self.raw.append(sample.payload.to_bytes())
-
-    on_status = on_estimate
-
-    def finalize(self) -> None:
-        """Decode what was kept raw (arrival order; a re-sent estimate is identical)."""
-        raw, self.raw = self.raw, []
-        for data in raw:
-            try:
-                msg = wire.decode(data)
-            except wire.WireError:
-                continue
-            if isinstance(msg, wire.Estimate):
-                self.est.setdefault(msg.step, {})[msg.id] = msg
-            elif isinstance(msg, wire.Status):
-                self.status.setdefault(msg.step, {})[msg.id] = msg
-                self.last_status[msg.id] = msg
+AbortHook = Callable[[Recorder, dict[str, Any], str], None]
+CHECKPOINT_EVERY_S = 10.0  # wall: metrics.json + series.npz so far, marked aborted
 
 
 def run_distributed(
@@ -123,48 +74,69 @@ def run_distributed(
     show_progress: bool = True,
     stall_timeout: float = 20.0,
     land_at: float | None = None,
+    on_abort: AbortHook | None = None,
+    secure: bool = True,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
     ``land_at``: publish a Zenoh land-all command (``wire.Command`` kind "land", at_s =
-    land_at) until the run passes that mission time (docs/lifecycle.md).
+    land_at) until the run passes that mission time (docs/lifecycle.md). ``secure``: the
+    router authenticates every process (fresh per-run credentials) and enforces the ACL
+    (docs/security.md). ``on_abort(rec, facts, reason)``: called after every child has
+    stopped when the run ends early (Ctrl-C, SIGTERM, the simulator's death, a stall),
+    and every :data:`CHECKPOINT_EVERY_S` during the run (reason "checkpoint").
 
     Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
-    busy, :class:`MissionError` when a child dies or the run stalls. Every child is
-    stopped on the way out, whatever ends the run (Ctrl-C included).
+    busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
+    death is recorded in ``facts["failed_agents"]`` and the run goes on. Every child is
+    stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
+    sec_dir = Path(tempfile.mkdtemp(prefix="swarm-zenoh-")) if secure else None
+    sec = None if sec_dir is None else write_swarm_security(sec_dir, _swarm(sc), sc.ids)
     spec = LaunchSpec(
         sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
-        sim_duration=duration + 1.0,
+        sim_duration=duration + 1.0, zenoh_security=sec,
     )
-    spec.check_ports()
     try:
-        router = open_router([spec.router_endpoint])
+        spec.check_ports()
+        router = open_router([spec.router_endpoint],
+                             config_file=None if sec is None else sec.router)
     except (RuntimeError, ValueError) as exc:
+        _remove(sec_dir)
         raise LaunchError(str(exc)) from None
-    steps = int(round(duration * sc.run.control_hz))
-    rec = Recorder(sc, steps, seed=seed)
+    rec = Recorder(sc, int(round(duration * sc.run.control_hz)), seed=seed)
     subs = rec.subscribe(router, spec.swarm_name)
     group = ProcessGroup(out_dir)
-    facts: dict[str, Any] = {"failed_agents": [], "killed_agents": []}
+    facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False}
     t_wall0 = time.monotonic()
     cpu0 = time.process_time()
+    reason = ""
     try:
         for name, argv in spec.processes():
-            group.start(name, argv)
+            group.start(name, argv, env=spec.child_env(name))
         bar = Progress(duration, label=str(method)) if show_progress else None
         on_step = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
                                                              sc.control_dt)
+        checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
         facts.update(
             _supervise(rec, group, sc.control_dt, kill_agent, kill_at, bar,
-                       stall_timeout, out_dir, on_step)
+                       stall_timeout, out_dir, on_step, facts, checkpoint)
         )
         facts["processes"] = group.usage()
         facts["processes"]["gcs (router + recorder)"] = {
             "cpu_s": time.process_time() - cpu0,
             "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         }
+    except KeyboardInterrupt:
+        reason = "interrupted (SIGINT)"
+        raise
+    except SystemExit as exc:
+        reason = f"terminated (exit {exc.code})"
+        raise
+    except MissionError as exc:
+        reason = str(exc).splitlines()[0]
+        raise
     finally:
         group.stop()
         for s in subs:
@@ -173,16 +145,30 @@ def run_distributed(
             except zenoh.ZError as exc:
                 log.debug("undeclare subscriber: %s", exc)
         router.close()
+        _remove(sec_dir)
         rec.finalize()
-    facts["wall_s"] = time.monotonic() - t_wall0
+        facts["wall_s"] = time.monotonic() - t_wall0
+        if reason and on_abort is not None:
+            facts["aborted"], facts["abort_reason"] = True, reason
+            on_abort(rec, facts, reason)
     stats_path = spec.sim_stats_path
     if stats_path is not None and stats_path.exists():
         try:
             facts["simulator"] = json.loads(stats_path.read_text())
         except ValueError as exc:
             log.warning("%s: not JSON (%s); run facts without simulator stats", stats_path, exc)
-    facts["failed_agents"] = list(facts["killed_agents"])
+    facts["recorder_dropped"] = rec.dropped
     return rec, facts
+
+
+def _swarm(sc: Scenario) -> str:
+    return sc.name
+
+
+def _remove(path: Path | None) -> None:
+    """Delete the run's credential directory (the passwords die with the run)."""
+    if path is not None:
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def _land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callable[[int], None]:
@@ -211,20 +197,28 @@ def _supervise(
     bar: Progress | None,
     stall_timeout: float,
     out_dir: Path,
-    on_step: Callable[[int], None] | None = None,
+    on_step: Callable[[int], None] | None,
+    facts: dict[str, Any],
+    checkpoint: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
-    """Watch a started run until step ``rec.steps``: show progress, kill ``kill_agent``
-    at ``kill_at`` (s), raise :class:`MissionError` on a death or a stall. Returns the
-    timing facts (``run_wall_s``, ``stepping_wall_s``, ``stepping_realtime_factor``)."""
-    facts: dict[str, Any] = {"killed_agents": []}
+    """Watch a started run until step ``rec.steps``: drain the recorder, show progress,
+    kill ``kill_agent`` at ``kill_at`` (s), add a dead daemon's agent to
+    ``facts["failed_agents"]`` (the others fly on), raise :class:`MissionError` when the
+    simulator dies or the run stalls, call ``checkpoint`` every
+    :data:`CHECKPOINT_EVERY_S` (or 20 times its own cost, if longer). Returns the timing
+    facts (``run_wall_s``, ``stepping_wall_s``, ``stepping_realtime_factor``)."""
+    out: dict[str, Any] = {}
     victim = None if kill_agent is None else f"offboard-{kill_agent}"
+    failed: list[int] = facts["failed_agents"]
     last_k = -1
-    last_change = t_run0 = time.monotonic()
+    last_change = t_run0 = next_ckpt = time.monotonic()
+    next_ckpt += CHECKPOINT_EVERY_S
     t_first: float | None = None
     k_first = 0
     try:
         while True:
             time.sleep(0.05)
+            rec.drain()
             with rec.lock:
                 k = rec.max_step
             if k >= 1 and t_first is None:
@@ -240,26 +234,41 @@ def _supervise(
             if victim is not None and not facts["killed_agents"] and k * dt >= (kill_at or 0.0):
                 group.kill(victim)
                 facts["killed_agents"].append(kill_agent)
-            for child in group.dead():
-                if child.name == victim and facts["killed_agents"]:
-                    continue
-                raise MissionError(
-                    f"{child.name} exited with code {child.proc.returncode}; "
-                    f"last lines of {child.log_path}:\n{group.tail(child)}"
-                )
+            _check_children(group, failed, k * dt)
             if time.monotonic() - last_change > stall_timeout:
                 raise MissionError(
                     f"run stalled at step {k} for {stall_timeout:.0f} s; see logs in {out_dir}"
                 )
+            if checkpoint is not None and time.monotonic() >= next_ckpt:
+                t0 = time.monotonic()
+                checkpoint()
+                next_ckpt = time.monotonic() + max(CHECKPOINT_EVERY_S,
+                                                   20.0 * (time.monotonic() - t0))
     finally:
         if bar is not None:
             bar.close()
-    facts["run_wall_s"] = time.monotonic() - t_run0
+    out["run_wall_s"] = time.monotonic() - t_run0
     if t_first is not None:
         stepping = time.monotonic() - t_first
-        facts["stepping_wall_s"] = stepping
-        facts["stepping_realtime_factor"] = (rec.steps - k_first) * dt / stepping
-    return facts
+        out["stepping_wall_s"] = stepping
+        out["stepping_realtime_factor"] = (rec.steps - k_first) * dt / stepping
+    return out
+
+
+def _check_children(group: ProcessGroup, failed: list[int], t: float) -> None:
+    """A dead daemon: its agent joins ``failed`` (once, with a warning naming its log); a
+    dead simulator ends the run (:class:`MissionError`)."""
+    for child in group.dead():
+        if not child.name.startswith("offboard-"):
+            raise MissionError(
+                f"{child.name} exited with code {child.proc.returncode}; "
+                f"last lines of {child.log_path}:\n{group.tail(child)}"
+            )
+        aid = int(child.name.removeprefix("offboard-"))
+        if aid not in failed:
+            failed.append(aid)
+            log.warning("agent %d's daemon exited (code %s) at t = %.2f s; the run goes on "
+                        "without it (see %s)", aid, child.proc.returncode, t, child.log_path)
 
 
 def recorder_series(rec: Recorder, sc: Scenario) -> Series:
@@ -269,24 +278,23 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
     statuses of step k and the minimum pair distance over (t_k, t_k+1] (carried by
     truth(k+1)). Rows use the float32 values that crossed the wire, as in-process.
     """
+    rec.drain()
     form = formation_from_scenario(sc)
-    steps = [k for k in range(rec.steps) if k in rec.truth]
-    idx = {a.id: i for i, a in enumerate(sc.agents)}
-    ser = empty_series(np.array([rec.truth[k].t for k in steps]), sc.n, fill=np.nan)
+    steps = np.flatnonzero(rec.have_truth[: rec.steps])
+    ser = empty_series(rec.t[steps].copy(), sc.n, fill=np.nan)
     for r, k in enumerate(steps):
-        tr = rec.truth[k]
-        set_truth_row(ser, r, form, tr.p, tr.v, tr.lumped, tr.thrust, tr.att)
-        nxt = rec.truth.get(k + 1)
-        ser.min_dist[r] = nxt.min_dist if nxt is not None else np.nan
-        for aid, e in rec.est.get(k - 1, {}).items():
-            if aid in idx:
-                ser.z1[r, idx[aid]], ser.z2[r, idx[aid]] = e.z1, e.z2
-        for aid, st in rec.status.get(k, {}).items():
-            if aid in idx:
-                set_agent_row(
-                    ser, r, idx[aid], st.u, st.lumped, st.h_min, st.qp_solve_us, st.qp_status,
-                    st.input_clipped,
-                )
+        set_truth_row(ser, r, form, rec.p[k].astype(float), rec.v[k].astype(float),
+                      rec.lumped_true[k].astype(float), rec.thrust[k].astype(float),
+                      rec.att[k].astype(float))
+    nxt = steps + 1
+    ser.min_dist[:] = np.where(rec.have_truth[nxt], rec.min_dist[nxt], np.nan)
+    prev = np.maximum(steps - 1, 0)
+    has_prev = (steps >= 1)[:, None, None]
+    ser.z1[:] = np.where(has_prev, rec.z1[prev], np.nan)
+    ser.z2[:] = np.where(has_prev, rec.z2[prev], np.nan)
+    ser.u[:], ser.lumped_est[:] = rec.u[steps], rec.lumped_est[steps]
+    ser.h_min[:], ser.solve_us[:] = rec.h_min[steps], rec.solve_us[steps]
+    ser.fallback[:], ser.input_clipped[:] = rec.degraded[steps], rec.clipped[steps]
     # Real time: an agent may skip a stamp (late cycle), leaving a row without its
     # message; hold the last value (lockstep runs have none missing).
     for arr in (ser.z1, ser.z2, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
@@ -306,11 +314,10 @@ def recorded_metrics(
     ser = recorder_series(rec, sc)
     form = formation_from_scenario(sc)
     veh = sc.vehicle
-    last = rec.truth[max(rec.truth)] if rec.truth else None
+    truth = rec.truth
+    last = truth[max(truth)] if len(truth) else None
     zeta_true = SwarmDynamics(sc, seed=rec.seed).zeta  # the simulator's seeded draw of ζ
-    zeta_est = np.zeros((sc.n, 6))
-    for a_id, e in rec.est.get(rec.steps - 1, {}).items():
-        zeta_est[sc.index_of(a_id)] = e.zeta
+    zeta_est = rec.zeta_last.copy()
     fallbacks = sum(st.fallbacks for st in rec.last_status.values())
     valid = ~np.isnan(ser.min_dist)
     if not np.all(valid):  # a run cut short: drop the incomplete tail
@@ -325,8 +332,26 @@ def recorded_metrics(
     return metrics, ser
 
 
-def default_out_dir(sc: Scenario, method: str) -> Path:
-    return Path("runs") / f"{sc.name}-{method}-{time.strftime('%Y%m%d-%H%M%S')}"
+def default_out_dir(sc: Scenario, method: str, parent: Path = Path("runs")) -> Path:
+    """``runs/<scenario>-<method>-<time>``, always inside ``parent``."""
+    return run_dir_inside(parent, f"{sc.name}-{method}-{time.strftime('%Y%m%d-%H%M%S')}")
+
+
+def _score(
+    rec: Recorder, sc: Scenario, facts: dict[str, Any], method: str, seed: int | None,
+    realtime: bool, land_at: float | None, duration: float,
+) -> tuple[dict[str, Any], Series]:
+    """The run document and series of what was recorded (possibly a part of the run)."""
+    if len(rec.truth) >= 2:
+        metrics, ser = recorded_metrics(rec, sc, facts.get("wall_s", 0.0), duration, land_at)
+    else:  # stopped before the second step: nothing to score
+        metrics, ser = {}, empty_series(np.zeros(0), sc.n)
+    doc = run_document(
+        sc.name, method, sc.seed if seed is None else seed, metrics,
+        mode="realtime" if realtime else "lockstep", aborted=bool(facts.get("aborted")),
+        run=facts,
+    )
+    return doc, ser
 
 
 def run_and_score(
@@ -342,16 +367,26 @@ def run_and_score(
     show_progress: bool = True,
     land_at: float | None = None,
 ) -> dict[str, Any]:
-    """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document."""
+    """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
+
+    The files are also written every :data:`CHECKPOINT_EVERY_S` during the run and when it
+    ends early, with ``"aborted": true`` (what ran so far), so a run killed even with
+    SIGKILL leaves its last checkpoint behind."""
+
+    def write_partial(rec: Recorder, facts: dict[str, Any], reason: str) -> None:
+        part = {**facts, "aborted": True, "abort_reason": reason}
+        try:
+            doc, ser = _score(rec, sc, part, method, seed, realtime, land_at, duration)
+            write_run(out_dir, doc, ser)
+        except (OSError, ValueError) as exc:
+            log.warning("could not write the %s metrics to %s: %s", reason, out_dir, exc)
+
     rec, facts = run_distributed(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
+        on_abort=write_partial,
     )
-    metrics, ser = recorded_metrics(rec, sc, facts["wall_s"], duration, land_at)
-    doc = run_document(
-        sc.name, method, sc.seed if seed is None else seed, metrics,
-        mode="realtime" if realtime else "lockstep", run=facts,
-    )
+    doc, ser = _score(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
     return doc
 
@@ -368,7 +403,11 @@ def cli_run(args: Any, sc: Scenario) -> int:
     if args.kill_at is not None and args.kill_agent is None:
         print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
         return 2
-    out = Path(args.out) if args.out else default_out_dir(sc, method)
+    try:
+        out = Path(args.out) if args.out else default_out_dir(sc, method)
+    except ValueError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 2
     try:
         doc = run_and_score(
             sc, out, method, args.seed, duration, realtime=args.realtime,

@@ -2,17 +2,38 @@
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
 log = logging.getLogger(__name__)
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
+
+
+def _die_with_parent(parent_pid: int) -> Callable[[], None]:
+    """``preexec_fn``: the child gets SIGKILL when the runner's thread that started it
+    dies, however it dies (kill -9 included); if the runner is already gone, exit now.
+    Only async-signal-safe work here (a prctl call and getppid)."""
+    prctl = None if _LIBC is None else _LIBC.prctl
+
+    def setup() -> None:
+        if prctl is not None:
+            prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+    return setup
+
 
 @dataclass
 class Child:
@@ -39,8 +60,11 @@ class ProcessGroup:
         full_env.setdefault("OMP_NUM_THREADS", "1")
         if env:
             full_env.update(env)
+        # own process group: a terminal's Ctrl-C reaches the runner only, which stops the
+        # children in order; PDEATHSIG: no child outlives the runner, even after kill -9
         proc = subprocess.Popen(
-            argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=full_env
+            argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=full_env,
+            process_group=0, preexec_fn=_die_with_parent(os.getpid()),
         )
         child = Child(name, proc, log_path, f)
         self.children.append(child)

@@ -11,21 +11,50 @@ import logging
 import signal
 import sys
 import threading
+from pathlib import Path
 from typing import Any
 
-from swarm_common.zenoh_session import open_session
+from swarm_common.scenario import Scenario, swarm_name_problem
+from swarm_common.zenoh_session import open_session, write_swarm_security
 
 log = logging.getLogger(__name__)
 
 
-def open_router(listen: list[str]) -> Any:
-    """Open a router session listening on ``listen`` (raises RuntimeError, one line)."""
-    return open_session(mode="router", listen=listen)
+def open_router(listen: list[str], config_file: Path | None = None) -> Any:
+    """Open a router session listening on ``listen`` (raises RuntimeError or ValueError,
+    one line); ``config_file``: the ``router.json5`` of
+    :func:`~swarm_common.zenoh_session.write_swarm_security` (authentication + ACL)."""
+    return open_session(mode="router", listen=listen, config_file=config_file)
 
 
-def run_router(listen: list[str]) -> int:
+def run_router(
+    listen: list[str], sc: Scenario | None = None, secure_dir: Path | None = None,
+    swarm: str | None = None,
+) -> int:
+    """Serve until SIGINT/SIGTERM. With ``sc`` and ``secure_dir``: authenticate and apply
+    the swarm's ACL; the credentials are generated into ``secure_dir`` (0700, files
+    0600) unless its ``router.json5`` exists already, for the operator to copy each
+    process's ``<user>.json5`` to its machine."""
+    cfg: Path | None = None
+    if sc is not None and secure_dir is not None:
+        name = swarm or sc.name
+        problem = swarm_name_problem(name)
+        if problem is not None:
+            print(f"gcs router: swarm name {name!r}: {problem}", file=sys.stderr)
+            return 2
+        cfg = secure_dir / "router.json5"
+        try:
+            if not cfg.exists():
+                write_swarm_security(secure_dir, name, sc.ids)
+                log.info("wrote credentials and ACL for swarm %s to %s/", name, secure_dir)
+        except OSError as exc:
+            print(f"gcs router: {secure_dir}: {exc.strerror}", file=sys.stderr)
+            return 2
+    else:
+        log.warning("no --scenario/--secure-dir: anyone who reaches %s may publish",
+                    ", ".join(listen))
     try:
-        session = open_router(listen)
+        session = open_router(listen, cfg)
     except (RuntimeError, ValueError) as exc:
         print(f"gcs router: {exc}", file=sys.stderr)
         return 2

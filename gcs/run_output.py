@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -116,12 +117,37 @@ def json_default(x: Any) -> Any:
     raise TypeError(f"{type(x).__name__} is not JSON serializable")
 
 
+def run_dir_inside(parent: Path, leaf: str) -> Path:
+    """``parent/leaf``, refused (``ValueError``, one line) unless it stays inside ``parent``
+    (no separator, ``..`` or absolute path in ``leaf``, no symlink out)."""
+    if not leaf or leaf in (".", "..") or "/" in leaf or "\\" in leaf or "\0" in leaf:
+        raise ValueError(f"run directory name {leaf!r}: must be one plain path component")
+    base = parent.resolve()
+    out = (base / leaf).resolve()
+    if out.parent != base:
+        raise ValueError(f"run directory {parent / leaf}: resolves outside {parent}")
+    return parent / leaf
+
+
+def out_dir_problem(out: Path) -> str | None:
+    """Why ``out`` cannot be a run directory (it exists and is not a directory), or None."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: exists and is not a directory"
+    return None
+
+
 def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
-    """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``."""
+    """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``,
+    each through a temporary file renamed over the old one, so a reader (or a run killed
+    while writing) never sees half a file."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
     arrays: dict[str, Any] = series.as_dict()
-    np.savez_compressed(out_dir / "series.npz", **arrays)
+    tmp = out_dir / ".series.tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, out_dir / "series.npz")
+    tmp = out_dir / ".metrics.json.tmp"
+    tmp.write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
+    os.replace(tmp, out_dir / "metrics.json")
 
 
 def print_result(doc: Mapping[str, Any], as_json: bool) -> None:

@@ -1,0 +1,173 @@
+"""The recorder of a distributed run: Zenoh truth, estimates and statuses per control step.
+
+Memory is allocated once, at the start, for the run's ``steps`` (float32: the values that
+crossed the wire are float32, so nothing is lost), and never grows with the run: the
+Zenoh callbacks only append raw payloads to a short list, which the runner's loop drains
+(:meth:`Recorder.drain`) into the preallocated arrays every few tens of milliseconds.
+A payload that does not decode, names an agent outside the scenario, carries a step
+outside the run or non-finite values is dropped and counted (``dropped``).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator, Mapping
+from typing import Any
+
+import numpy as np
+
+from swarm_common import wire
+from swarm_common.enums import QPStatus
+from swarm_common.scenario import Scenario
+
+F32 = np.float32
+
+
+class TruthView(Mapping[int, wire.Truth]):
+    """``step -> wire.Truth`` over the recorder's arrays (the steps that arrived)."""
+
+    def __init__(self, rec: Recorder) -> None:
+        self._rec = rec
+
+    def __getitem__(self, k: int) -> wire.Truth:
+        r = self._rec
+        if not (0 <= k < len(r.have_truth)) or not r.have_truth[k]:
+            raise KeyError(k)
+        return wire.Truth(
+            step=k, t=float(r.t[k]), ids=list(r.sc.ids), p=r.p[k].astype(float),
+            v=r.v[k].astype(float), att=r.att[k].astype(float),
+            thrust=r.thrust[k].astype(float), lumped=r.lumped_true[k].astype(float),
+            collisions=int(r.collisions[k]), min_dist=float(r.min_dist[k]),
+        )
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(np.flatnonzero(self._rec.have_truth).tolist())
+
+    def __len__(self) -> int:
+        return int(np.count_nonzero(self._rec.have_truth))
+
+
+class Recorder:
+    """Collects the Zenoh traffic of a run, indexed by control step (0..steps)."""
+
+    def __init__(self, sc: Scenario, steps: int, seed: int | None = None) -> None:
+        self.sc, self.steps, self.seed = sc, steps, seed
+        self.idx = {a.id: i for i, a in enumerate(sc.agents)}
+        n, rows = sc.n, steps + 2
+
+        def arr(*shape: int) -> np.ndarray:
+            return np.full((rows, *shape), np.nan, F32)
+
+        self.t = np.full(rows, np.nan)
+        self.min_dist = np.full(rows, np.nan)
+        self.collisions = np.zeros(rows, np.int32)
+        self.have_truth = np.zeros(rows, bool)
+        self.p, self.v, self.att, self.lumped_true = arr(n, 3), arr(n, 3), arr(n, 3), arr(n, 3)
+        self.thrust = arr(n)
+        self.z1, self.z2 = arr(n, 3), arr(n, 3)  # estimates published at step k
+        self.u, self.lumped_est = arr(n, 3), arr(n, 3)  # statuses of step k
+        self.h_min, self.solve_us = arr(n), arr(n)
+        self.degraded = np.zeros((rows, n), bool)
+        self.clipped = np.zeros((rows, n), bool)
+        self.have_status = np.zeros((rows, n), bool)
+        self.zeta_last = np.zeros((n, 6))  # ζ̂ of the estimates of step steps-1
+        self.last_status: dict[int, wire.Status] = {}
+        self.lock = threading.Lock()
+        self.max_step = -1
+        self.dropped = 0
+        self._raw: list[bytes] = []
+
+    @property
+    def truth(self) -> TruthView:
+        return TruthView(self)
+
+    def subscribe(self, session: Any, swarm: str) -> list[Any]:
+        """Declare the truth, estimate and status subscribers on ``session``."""
+        return [
+            session.declare_subscriber(wire.key_truth(swarm), self.on_truth),
+            session.declare_subscriber(wire.key_estimate(swarm, "*"), self.on_raw),
+            session.declare_subscriber(wire.key_status(swarm, "*"), self.on_raw),
+        ]
+
+    def on_truth(self, sample: Any) -> None:
+        try:
+            msg = wire.decode(sample.payload.to_bytes())
+        except wire.WireError:
+            with self.lock:
+                self.dropped += 1
+            return
+        with self.lock:
+            if not isinstance(msg, wire.Truth) or not self._put_truth(msg):
+                self.dropped += 1
+
+    def on_raw(self, sample: Any) -> None:
+        # kept raw and decoded by drain() off the Zenoh thread: cheap here
+        data = sample.payload.to_bytes()
+        with self.lock:
+            self._raw.append(data)
+
+    def _put_truth(self, m: wire.Truth) -> bool:
+        k = m.step
+        if not (0 <= k <= self.steps) or list(m.ids) != self.sc.ids:
+            return False
+        arrays = (m.p, m.v, m.att, m.lumped, m.thrust)
+        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.isfinite(m.t):
+            return False
+        self.t[k], self.min_dist[k], self.collisions[k] = m.t, m.min_dist, m.collisions
+        self.p[k], self.v[k], self.att[k], self.lumped_true[k] = m.p, m.v, m.att, m.lumped
+        self.thrust[k] = m.thrust
+        self.have_truth[k] = True
+        self.max_step = max(self.max_step, k)
+        return True
+
+    def drain(self) -> None:
+        """Decode the payloads kept raw since the last call into the arrays."""
+        with self.lock:
+            raw, self._raw = self._raw, []
+        dropped = 0
+        for data in raw:
+            try:
+                msg = wire.decode(data)
+            except wire.WireError:
+                dropped += 1
+                continue
+            i = self.idx.get(getattr(msg, "id", -1))
+            k = getattr(msg, "step", -1)
+            if i is None or not (0 <= k <= self.steps):
+                dropped += 1
+            elif isinstance(msg, wire.Estimate):
+                dropped += not self._put_estimate(msg, k, i)
+            elif isinstance(msg, wire.Status):
+                dropped += not self._put_status(msg, k, i)
+            else:
+                dropped += 1
+        with self.lock:
+            self.dropped += dropped
+
+    def _put_estimate(self, e: wire.Estimate, k: int, i: int) -> bool:
+        if not (np.all(np.isfinite(e.z1)) and np.all(np.isfinite(e.z2))):
+            return False
+        self.z1[k, i], self.z2[k, i] = e.z1, e.z2
+        if k == self.steps - 1 and np.all(np.isfinite(e.zeta)):
+            self.zeta_last[i] = e.zeta
+        return True
+
+    def _put_status(self, st: wire.Status, k: int, i: int) -> bool:
+        try:
+            degraded = QPStatus(st.qp_status).degraded
+        except ValueError:
+            return False
+        self.u[k, i], self.lumped_est[k, i] = st.u, st.lumped
+        self.h_min[k, i], self.solve_us[k, i] = st.h_min, st.qp_solve_us
+        self.degraded[k, i], self.clipped[k, i] = degraded, bool(st.input_clipped)
+        self.have_status[k, i] = True
+        self.last_status[st.id] = st
+        return True
+
+    def finalize(self) -> None:
+        """Decode whatever is still raw (end of the run)."""
+        self.drain()
+
+    def nbytes(self) -> int:
+        """Bytes held by the preallocated arrays."""
+        return sum(a.nbytes for a in vars(self).values() if isinstance(a, np.ndarray))
