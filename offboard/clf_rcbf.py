@@ -15,9 +15,10 @@ Anti-windup (docs/saturation.md §2): given the input box ``[lo, hi]`` the same 
 ``u_nom = f + fb`` with the feed-forward ``f = â* − w`` and ``fb = −k_v (e2 − v_r)``,
 ``k_v = λ + k_s``, ``v_r = −c e1``, ``c = (k_s λ + k_p/k_d)/k_v``; per axis the feed-forward
 is served first (clipped to the box shrunk by :data:`AW_RESERVE`), the feedback gets what
-is left ``[−b⁻, b⁺]``, and the error-velocity reference is limited so that stopping from it
-needs at most a share :data:`AW_BRAKE_SHARE` of the braking budget:
-``|v_r| ≤ sqrt(2 β b_brake |e1|)``. Inside the box and for small errors it is the law above.
+is left ``[−b⁻, b⁺]``, and the error-velocity reference is limited (its direction kept) so
+that stopping from it needs at most a share :data:`AW_BRAKE_SHARE` of the braking budget
+``b_e`` along e1: ``‖v_r‖ ≤ sqrt(2 β b_e ‖e1‖)``. Inside the box and for small errors it is
+the law above.
 
 RCBF (Departure 12): ``h = ‖Δp‖² + 2τ Δvᵀ Δp − D²`` (§2.3, Δ = i − j) and the reciprocal
 condition ``L_fB + L_gB u − γ/B ≤ 0`` with B = 1/h, which equals ``ḣ ≥ −γ h³``::
@@ -109,21 +110,28 @@ def anti_windup_control(
     brake_share: float = AW_BRAKE_SHARE,
     reserve: float = AW_RESERVE,
 ) -> np.ndarray:
-    """``u = f_c + clip(−k_v (e2 − v_r), −b⁻, b⁺)`` per axis (docs/saturation.md §2).
+    """``u = f_c + clip(−k_v (e2 − v_r), −b⁻, b⁺)`` (docs/saturation.md §2).
 
     ``ff`` (m/s²): the feed-forward the reference needs; ``f_c`` it clipped into the box
-    shrunk by ``reserve`` of each half-range; ``b⁺ = hi − f_c``, ``b⁻ = f_c − lo``;
-    ``v_r = −sign(e1) min(c|e1|, sqrt(2 β b_brake |e1|))`` with b_brake = b⁺ for e1 > 0
-    (returning needs a positive deceleration), b⁻ for e1 < 0. Without saturation and for
-    ``|e1| ≤ 2βb/c²`` this is ``ff − k_v (e2 + c e1)``, the unsaturated nominal law.
+    shrunk by ``reserve`` of each half-range; per axis ``b⁺ = hi − f_c``, ``b⁻ = f_c − lo``.
+    The error-velocity reference ``v_r = −c e1 · min(1, sqrt(2 β b_e ‖e1‖) / (c‖e1‖))``
+    keeps the direction of e1; ``b_e`` is the budget along ``e1/‖e1‖``, the direction of the
+    deceleration that stops the return (the largest s with ``f_c + s e1/‖e1‖`` in the
+    box). Without saturation and for ``‖e1‖ ≤ 2βb_e/c²`` this is ``ff − k_v (e2 + c e1)``,
+    the unsaturated nominal law.
     """
     lo, hi = box
     m = reserve * 0.5 * (hi - lo)
     f_c = np.minimum(np.maximum(ff, lo + m), hi - m)
     b_hi, b_lo = hi - f_c, f_c - lo
-    mag = np.abs(e1)
-    b_brake = np.where(e1 > 0.0, b_hi, b_lo)
-    v_r = -np.sign(e1) * np.minimum(c * mag, np.sqrt(2.0 * brake_share * b_brake * mag))
+    v_r = -c * e1
+    n = float(np.sqrt(e1 @ e1))
+    if n > 1e-12:
+        d = e1 / n
+        room = np.where(d > 0.0, b_hi, b_lo)
+        nz = np.abs(d) > 1e-12
+        b_e = float(np.min(room[nz] / np.abs(d[nz])))
+        v_r *= min(1.0, math.sqrt(2.0 * brake_share * b_e * n) / (c * n))
     fb = -k_v * (e2 - v_r)
     return f_c + np.minimum(np.maximum(fb, -b_lo), b_hi)
 

@@ -33,7 +33,6 @@ from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
-from swarm_common.feasibility import InputLimits
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -99,8 +98,12 @@ class FollowerAgent(AgentBase):
         if isinstance(dcbf, DcbfFilter):
             dcbf.configure(self.veh, self.dt)
         self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX)
-        self.aw_box = {m: (self.u_lo, self.u_hi) for m in Method}
-        self.aw_box[Method.DCBF] = dcbf_box(sc)
+        # anti-windup box of the nominal law per method (docs/saturation.md §2): the box of
+        # the box methods; none for dcbf, whose polytope the governor's reserve keeps free
+        self.aw_box: dict[Method, tuple[np.ndarray, np.ndarray] | None] = {
+            m: (self.u_lo, self.u_hi) for m in Method
+        }
+        self.aw_box[Method.DCBF] = None
         self.u_prev = np.zeros(3)
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
@@ -298,15 +301,6 @@ class FollowerAgent(AgentBase):
         return NeighbourEstimate(
             self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False
         )
-
-
-def dcbf_box(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis bounds (m/s²) of the dcbf input polytope for the nominal law's anti-windup
-    (docs/saturation.md §2): each horizontal axis alone reaches the tilt cone at hover,
-    ``min(u_max, g tan θ cos(π/K))``; vertically ``[u_z,min, u_z,max]``."""
-    lim = InputLimits.of(sc)
-    uh = float(lim.horizontal(np.asarray(0.0), 0.0))
-    return np.array([-uh, -uh, lim.uz_min]), np.array([uh, uh, lim.uz_max])
 
 
 def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
