@@ -395,15 +395,17 @@ class OffboardDaemon:
                          self.id, self.id, self.cfg.mavlink_url, now - start)
         return self.link.locked
 
-    def _on_odometry(self) -> None:
-        """One control step per new ODOMETRY stamp (both modes)."""
+    def _vehicle_clock(self) -> None:
+        """The vehicle's step from its latest ODOMETRY: the reference of the Zenoh guard."""
         odo = self.link.odometry
-        if odo is None:
-            return
-        k = int(round(odo.time_usec * 1e-6 * self.control_hz))
-        if k != self.vehicle_step:
+        k = -1 if odo is None else int(round(odo.time_usec * 1e-6 * self.control_hz))
+        if k != self.vehicle_step and k >= 0:
             self.vehicle_step = k
             self.bus.set_reference(k)
+
+    def _on_odometry(self) -> None:
+        """One control step per new ODOMETRY stamp (both modes)."""
+        k = self.vehicle_step
         if k > self.last_step:
             t = k / self.control_hz
             if self.control_step(k, t, int(round(t * 1000))):
@@ -442,6 +444,7 @@ class OffboardDaemon:
                 self.keeper.fault(now)
                 log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
             self.link.poll(0.001)  # ODOMETRY wakes it at once
+            self._vehicle_clock()
             self.bus.pump()
             now = time.monotonic()
             if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:

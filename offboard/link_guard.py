@@ -324,6 +324,7 @@ class OffboardKeeper:
         self.manual_start = manual_start
         self.startup_done = manual_start
         self.offboard_acked = False
+        self.arm_acked = False
         self.seen_offboard = False
         self.left_at: float | None = None
         self.fault_at = -math.inf
@@ -340,7 +341,9 @@ class OffboardKeeper:
     def decide(self, now: float, v: VehicleView) -> str | None:
         """"offboard", "arm" or None: what to ask the vehicle for now."""
         if not self.startup_done:
-            return self._startup(now, v)
+            want = self._startup(now, v)
+            if not self.startup_done:
+                return want
         if v.in_offboard:
             if self.recovering:
                 self.recoveries += 1
@@ -377,7 +380,7 @@ class OffboardKeeper:
             return None
         if not (v.in_offboard or self.offboard_acked):
             return "offboard"
-        if not v.armed:
+        if not (v.armed or self.arm_acked):
             return "arm"
         self.startup_done = True
         return None
@@ -387,6 +390,7 @@ class OffboardKeeper:
         if not self.startup_done:
             if accepted:
                 self.offboard_acked = self.offboard_acked or what == "offboard"
+                self.arm_acked = self.arm_acked or what == "arm"
                 self.startup_backoff.reset()
             else:
                 self.startup_backoff.failed(now)
