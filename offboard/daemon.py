@@ -442,6 +442,7 @@ class OffboardDaemon:
             now = time.monotonic()
             if now - last_iter > LOOP_STALL_S:  # stopped, swapped out: the stream had a gap
                 self.keeper.fault(now)
+                self.streaming = False  # the vehicle must see the stream again first
                 log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
             self.link.poll(0.001)  # ODOMETRY wakes it at once
             self._vehicle_clock()

@@ -29,7 +29,7 @@ from swarm_common import wire
 log = logging.getLogger(__name__)
 
 MAX_JUMP_PERIODS = 5  # an ODOMETRY stamp may skip this many control periods at once
-REALTIME_RATE_SLACK = 1.25  # real time: sim time advances at most 1.25x wall time
+REALTIME_AHEAD_S = 0.5  # real time: a stamp may lead the wall-clock prediction this much
 REANCHOR_COUNT = 3  # consecutive, mutually consistent too-far stamps that re-anchor
 MAX_FIRST_STAMP_S = 1.0e7  # s (~115 days): a first stamp beyond this is implausible
 MAX_ABS_POSITION_M = 1.0e5  # m: |ODOMETRY position| beyond this is not a vehicle here
@@ -91,25 +91,28 @@ def odometry_fields_ok(
 class StampGuard:
     """Accepts an ODOMETRY stamp (µs) when it is later than the last accepted one by at
     most ``MAX_JUMP_PERIODS`` control periods (lockstep: the simulator waits for the
-    daemon, so its clock cannot run away), or by that plus ``REALTIME_RATE_SLACK`` times
-    the wall time since the last accepted stamp (real time). An equal stamp is a
-    duplicate, an earlier one non-monotonic. ``REANCHOR_COUNT`` consecutive too-far
-    stamps that follow each other within the jump bound re-anchor the clock (a real
-    restart or a long stall of the simulator; one forged datagram never does)."""
+    daemon, so its clock cannot run away); in real time when it leads the wall clock by
+    at most ``REALTIME_AHEAD_S`` more than any accepted stamp did (the vehicle's clock
+    runs at wall-clock rate; delays only make stamps lag, so the largest lead seen is
+    its offset). An equal stamp is a duplicate, an earlier one non-monotonic.
+    ``REANCHOR_COUNT`` consecutive too-far stamps that follow each other within the jump
+    bound re-anchor the clock (a restart or a long stall of the simulator; one forged
+    datagram never does)."""
 
     def __init__(self, control_hz: float, lockstep: bool) -> None:
         self.dt_us = 1e6 / float(control_hz)
         self.lockstep = lockstep
         self.last_us: int | None = None
         self.last_at = 0.0
+        self.lead_s = -math.inf  # real time: the largest (stamp - wall clock) accepted
         self._candidates: list[int] = []
         self.reanchors = 0
 
-    def _max_jump_us(self, now: float) -> float:
-        jump = MAX_JUMP_PERIODS * self.dt_us
-        if not self.lockstep:
-            jump += REALTIME_RATE_SLACK * max(0.0, now - self.last_at) * 1e6
-        return jump
+    def _plausible(self, stamp_us: int, now: float) -> bool:
+        if self.lockstep:
+            return stamp_us - (self.last_us or 0) <= MAX_JUMP_PERIODS * self.dt_us
+        lead = stamp_us * 1e-6 - now
+        return lead <= self.lead_s + MAX_JUMP_PERIODS * self.dt_us * 1e-6 + REALTIME_AHEAD_S
 
     def check(self, stamp_us: int, now: float) -> str | None:
         """None (accepted, becomes the last stamp) or the reason it is dropped."""
@@ -124,7 +127,7 @@ class StampGuard:
             return "duplicate stamp"
         if stamp_us < self.last_us:
             return "non-monotonic stamp"
-        if stamp_us - self.last_us <= self._max_jump_us(now):
+        if self._plausible(stamp_us, now):
             self._accept(stamp_us, now)
             return None
         return self._candidate(stamp_us, now)
@@ -145,6 +148,7 @@ class StampGuard:
     def _accept(self, stamp_us: int, now: float) -> None:
         self.last_us = stamp_us
         self.last_at = now
+        self.lead_s = max(self.lead_s, stamp_us * 1e-6 - now)
         self._candidates.clear()
 
 
