@@ -59,3 +59,80 @@ def test_infeasible_scenario_exits_2_unless_allowed(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "WARNING" in r.stderr and "leader_trajectory.frequency_hz = 0.4" in r.stderr
     assert r.stdout.strip().startswith("{")
+
+
+def _one_line_exit_2(r: subprocess.CompletedProcess[str], *expect: str) -> None:
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert "Traceback" not in r.stderr
+    assert lines, r.stderr
+    for e in expect:
+        assert e in lines[-1], (e, lines[-1])
+    # argparse prints its usage first; everything else is exactly one line
+    if not lines[0].startswith("usage:"):
+        assert len(lines) == 1, r.stderr
+
+
+def _variant(tmp_path, old: str, new: str):
+    text = (ROOT / "scenarios" / "cube8.toml").read_text()
+    assert old in text
+    p = tmp_path / "v.toml"
+    p.write_text(text.replace(old, new, 1))
+    return str(p)
+
+
+def test_bad_scenario_files_exit_2(tmp_path):
+    import os
+
+    nonutf = tmp_path / "bin.toml"
+    nonutf.write_bytes(b"\xff\xfe[scenario]\n")
+    deep = tmp_path / "deep.toml"
+    deep.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")
+    fifo = tmp_path / "fifo.toml"
+    os.mkfifo(fifo)
+    cases = [
+        (str(nonutf), "not UTF-8"),
+        (str(deep), "nested deeper"),
+        ("/dev/zero", "not a regular file"),
+        (str(fifo), "not a regular file"),
+        (_variant(tmp_path, "leaders = [1, 2]", "leaders = [1, 1]"), "duplicate agent id"),
+    ]
+    for path, expect in cases:
+        _one_line_exit_2(_gcs("mission", "run", path, "--inproc", "--duration", "0.1"), expect)
+
+
+@pytest.mark.parametrize("name", ["", "**", "x$*y", "../../x", "a?b", "a//b"])
+def test_bad_swarm_names_exit_2(tmp_path, name):
+    p = _variant(tmp_path, 'name = "cube8"', f'name = "{name}"')
+    _one_line_exit_2(_gcs("mission", "run", p, "--inproc", "--duration", "0.1"),
+                     "scenario.name")
+
+
+@pytest.mark.parametrize(
+    ("argv", "expect"),
+    [
+        (["--duration", "0.001"], "shorter than one control step"),
+        (["--duration", "1e308"], "--duration"),
+        (["--port-offset", "-1"], "--port-offset"),
+        (["--port-offset", "70000"], "--port-offset"),
+        (["--seed", "-1"], "--seed"),
+    ],
+)
+def test_bad_run_flags_exit_2(argv, expect):
+    _one_line_exit_2(_gcs("mission", "run", CUBE8, *argv), expect)
+
+
+def test_out_that_is_a_file_exits_2(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    _one_line_exit_2(_gcs("mission", "run", CUBE8, "--inproc", "--duration", "0.1",
+                          "--out", str(f)), "not a directory")
+
+
+def test_compare_jobs_0_exits_2():
+    _one_line_exit_2(_gcs("mission", "compare", CUBE8, "--inproc", "--jobs", "0"), "--jobs")
+
+
+def test_router_needs_scenario_and_dir_together(tmp_path):
+    _one_line_exit_2(_gcs("router", "--listen", "tcp/127.0.0.1:1", "--secure-dir",
+                          str(tmp_path)), "go together")
