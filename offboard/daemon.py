@@ -240,8 +240,10 @@ class OffboardDaemon:
         self.last_send = now
 
     def _check_stream(self, now: float) -> None:
-        """Stop (and say so) when the setpoint is stale: the vehicle's failsafe acts."""
-        if self.streaming and not self._answer_fresh(now) and now - self.last_send > 0.1:
+        """Say so when the vehicle's clock has moved on for 0.1 s without a new setpoint
+        (the stale one is no longer sent): the vehicle's failsafe acts."""
+        behind = self.vehicle_step > self.answer_step or self.truth_lost
+        if self.streaming and behind and now - self.last_send > 0.1:
             self.streaming = False
             self.keeper.fault(now)
             log.warning("agent %d: no valid step since step %d (vehicle at step %d): "
@@ -379,22 +381,6 @@ class OffboardDaemon:
         elif want == "arm":
             link.start_arm()
 
-    def _wait_heartbeat(self) -> bool:
-        """Wait for the vehicle's first heartbeat (the link lock), saying what it waits
-        for every WAIT_LOG_S; False on timeout or a stop signal."""
-        start = time.monotonic()
-        said = start
-        while not self.stop and not self.link.locked:
-            self.link.poll(0.1)
-            now = time.monotonic()
-            if now - start > self.cfg.heartbeat_timeout:
-                return False
-            if now - said >= WAIT_LOG_S:
-                said = now
-                log.info("agent %d: waiting for the HEARTBEAT of vehicle %d on %s (%.0f s)",
-                         self.id, self.id, self.cfg.mavlink_url, now - start)
-        return self.link.locked
-
     def _vehicle_clock(self) -> None:
         """The vehicle's step from its latest ODOMETRY: the reference of the Zenoh guard."""
         odo = self.link.odometry
@@ -416,7 +402,7 @@ class OffboardDaemon:
         signal.signal(signal.SIGINT, self._on_signal)
         cfg = self.cfg
         try:
-            if not self._wait_heartbeat():
+            if not self.link.wait_lock(cfg.heartbeat_timeout, lambda: self.stop, WAIT_LOG_S):
                 if not self.stop:
                     log.error("agent %d: no heartbeat from vehicle on %s", self.id,
                               cfg.mavlink_url)

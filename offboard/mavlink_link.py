@@ -32,7 +32,7 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, BinaryIO, SupportsFloat
 
@@ -243,6 +243,21 @@ class VehicleLink:
         self.odometry = Odometry(
             int(msg.time_usec), pos[0], pos[1], pos[2], now, (q[0], q[1], q[2], q[3]), vel,
         )
+
+    def wait_lock(self, timeout: float, stopped: Callable[[], bool], say_every: float) -> bool:
+        """Wait for the vehicle's first heartbeat (the link lock), saying what it waits for
+        every ``say_every`` s; False on timeout or once ``stopped()``."""
+        start = said = time.monotonic()
+        while not stopped() and not self.locked:
+            self.poll(0.1)
+            now = time.monotonic()
+            if now - start > timeout:
+                return False
+            if now - said >= say_every:
+                said = now
+                log.info("agent %d: waiting for the HEARTBEAT of vehicle %d on %s (%.0f s)",
+                         self.agent_id, self.agent_id, self.url, now - start)
+        return self.locked
 
     # -- send ---------------------------------------------------------------------------
     def _send(self, msg: Any) -> None:
