@@ -10,12 +10,15 @@ from __future__ import annotations
 import argparse
 import ctypes
 import ctypes.util
+import logging
 import os
 import signal
 import sys
+import threading
 import time
+from typing import Any
 
-from offboard.daemon import DaemonConfig, OffboardDaemon
+from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
 from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
@@ -28,6 +31,7 @@ from swarm_common.zenoh_session import default_endpoint, open_session
 OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
 MAVLINK_SCHEMES = ("udpin:", "udpout:", "udp:", "tcp:", "tcpin:")
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
+log = logging.getLogger("offboard.cli")
 
 
 def die_with_parent() -> str | None:
@@ -42,6 +46,30 @@ def die_with_parent() -> str | None:
     if os.getppid() != parent:  # the parent died before the prctl took effect
         os.kill(os.getpid(), signal.SIGTERM)
     return None
+
+
+def open_session_saying(mode: str, connect: list[str], listen: list[str]) -> Any:
+    """open_session in a helper thread (a client blocks until its router is up), logging
+    what it waits for every WAIT_LOG_S; the main thread stays free for signals."""
+    box: dict[str, Any] = {}
+
+    def opener() -> None:
+        try:
+            box["session"] = open_session(mode=mode, connect=connect, listen=listen)
+        except OPEN_ERRORS as exc:
+            box["error"] = exc
+
+    th = threading.Thread(target=opener, name="zenoh-open", daemon=True)
+    start = time.monotonic()
+    th.start()
+    while th.is_alive():
+        th.join(WAIT_LOG_S)
+        if th.is_alive():
+            log.info("waiting for the Zenoh router at %s (%.0f s)",
+                     ", ".join(connect) or "no endpoint", time.monotonic() - start)
+    if "error" in box:
+        raise box["error"]
+    return box["session"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -119,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
         signing_key=key,
     )
     try:
-        session = open_session(mode=cfg.zenoh_mode, connect=connect, listen=cfg.zenoh_listen)
+        session = open_session_saying(cfg.zenoh_mode, connect, cfg.zenoh_listen)
     except OPEN_ERRORS as exc:
         print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
         return 2
@@ -144,5 +172,14 @@ def main(argv: list[str] | None = None) -> int:
         session.close()
 
 
+def exit_now(rc: int) -> None:
+    """Exit without the interpreter's teardown, once everything is closed: Zenoh's
+    runtime makes that teardown take seconds, and a stopped daemon should be gone."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(rc)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_now(main())
