@@ -202,7 +202,7 @@ class PayloadGuard:
     def _estimate(self, m: wire.Estimate) -> str | None:
         if m.id not in self.ids:
             return f"estimate id {m.id} not in the scenario"
-        if not self.step_ok(m.step):
+        if m.step != -1 and not self.step_ok(m.step):  # -1: the initial estimate, any time
             return f"estimate step {m.step} implausible (own step {self.ref})"
         # the estimate of step k is valid at t_k+1 (the initial one, step -1, at t_0)
         if not self._time_ok(m.step, m.t, 1):

@@ -10,6 +10,8 @@ import os
 import re
 import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -20,13 +22,14 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from conftest import CUBE8, free_port_offset  # noqa: E402
+from conftest import CUBE8, free_port_offset, free_tcp_port  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from gcs.mission import recorded_metrics, run_distributed  # noqa: E402
 from swarm_common import wire  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.scenario import Scenario, load_scenario  # noqa: E402
+from swarm_common.signing import generate_key  # noqa: E402
 from swarm_common.zenoh_session import default_endpoint, open_session  # noqa: E402
 
 pytestmark = pytest.mark.timeout(180)
@@ -237,3 +240,40 @@ def test_stopped_daemon_gets_its_vehicle_back_into_offboard(tmp_path: Path) -> N
     _safe_and_normal(tmp_path, sc, rec, facts, dur)  # ... and it is back in OFFBOARD
     text = (tmp_path / f"offboard-{victim}.log").read_text()
     assert "back in OFFBOARD after a failsafe" in text
+
+
+def _daemon(tmp: Path, off: int, key: Path, name: str) -> subprocess.Popen[bytes]:
+    """One daemon (agent 1) of a real-time swarm, Zenoh as a lone listening peer."""
+    zen = f"tcp/127.0.0.1:{free_tcp_port()}"
+    argv = [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", "1",
+            "--port-offset", str(off), "--realtime", "--zenoh-mode", "peer",
+            "--zenoh-listen", zen, "--zenoh-connect", "--signing-key", str(key)]
+    log = (tmp / f"{name}.log").open("wb")
+    return subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
+
+
+def test_signed_vehicle_link(tmp_path: Path, sim_factory: Any) -> None:
+    """vehicle-sim and a daemon with the same key lock their link and the vehicle sees
+    signed setpoints; a daemon with another key drops every frame as badly signed and
+    never locks (nor sends anything)."""
+    good, bad = tmp_path / "good.key", tmp_path / "bad.key"
+    generate_key(good)
+    generate_key(bad)
+    off = free_port_offset()
+    sim = sim_factory(["--signing-key", str(good), "--no-zenoh", "--vehicles", "1"],
+                      offset=off)
+    stop = threading.Event()
+    for key, name, want in ((bad, "wrong", "bad signature"), (good, "right", "link locked")):
+        proc = _daemon(tmp_path, off, key, name)
+        try:
+            assert _wait_text(tmp_path / f"{name}.log", want, 40.0, stop), name
+            time.sleep(1.0)
+            text = (tmp_path / f"{name}.log").read_text()
+            if name == "wrong":
+                assert "link locked" not in text
+            else:  # its signed SET_MESSAGE_INTERVAL was acknowledged as accepted
+                assert "bad signature" not in text and "not accepted" not in text
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            assert proc.wait(20) == 0
+    assert sim.proc.poll() is None

@@ -123,6 +123,7 @@ def test_payload_guard_windows_around_own_step() -> None:
     assert g.check(_truth(2**40)) is not None
     assert g.check(_est(1, 99)) is None
     assert g.check(_est(1, 2**40)) is not None
+    assert g.check(_est(1, -1)) is None  # the initial estimate of a late starter
 
 
 def test_payload_guard_fields() -> None:
