@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offboard.bearing import Formation, formation_from_scenario
+from offboard.governor import governor_for
 from offboard.reference import LeaderTrajectory, xi_a, xi_p, xi_v
 from offboard.takeoff import TAU_R, leader_origin, ramped_travel
 from swarm_common.scenario import Scenario
@@ -83,7 +84,8 @@ def planned_positions(sc: Scenario, t_land: float, form: Formation | None = None
     form = form if form is not None else formation_from_scenario(sc)
     lt = sc.leader_trajectory
     lead = np.array([
-        LeaderTrajectory(leader_origin(sc, i), np.array(lt.amplitude_m), lt.frequency_hz)
+        LeaderTrajectory(leader_origin(sc, i), np.array(lt.amplitude_m),
+                         governor_for(sc).frequency_hz)
         .state(t_land)[0:3]
         for i in form.leader_idx
     ])
