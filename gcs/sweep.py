@@ -159,13 +159,20 @@ def _one_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}".replace("\n", " ")[:500]
 
 
-def run_sweep(jobs: list[Job], workers: int, show_progress: bool = True) -> list[dict[str, Any]]:
-    """Run every job on ``workers`` processes; one row per job, whatever happens to it."""
+def run_sweep(
+    jobs: list[Job], workers: int, show_progress: bool = True,
+    rows: list[dict[str, Any]] | None = None,
+) -> list[dict[str, Any]]:
+    """Run every job on ``workers`` processes; one row per finished job, appended to
+    ``rows`` as it finishes (so an interrupted sweep keeps what ran). On SIGINT/SIGTERM
+    (KeyboardInterrupt/SystemExit) the pending jobs are cancelled and the workers
+    terminated before the exception propagates."""
     total = sum(j.duration_s for j in jobs)
     bar = Progress(total, label=f"sweep {len(jobs)} runs") if show_progress else None
-    rows: list[dict[str, Any]] = []
+    rows = [] if rows is None else rows
     done_s, crashed = 0.0, 0
-    with ProcessPoolExecutor(max_workers=workers) as ex:
+    ex = ProcessPoolExecutor(max_workers=workers)
+    try:
         futs: dict[Future[dict[str, Any]], Job] = {ex.submit(run_job, j): j for j in jobs}
         for fut in as_completed(futs):
             job = futs[fut]
@@ -180,8 +187,17 @@ def run_sweep(jobs: list[Job], workers: int, show_progress: bool = True) -> list
             done_s += job.duration_s
             if bar is not None:
                 bar.update(done_s, f"{len(rows)}/{len(jobs)} runs, {crashed} crashed")
-    if bar is not None:
-        bar.close()
+    except BaseException:
+        procs = list(getattr(ex, "_processes", {}).values())
+        ex.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.terminate()
+        raise
+    else:
+        ex.shutdown(wait=True)
+    finally:
+        if bar is not None:
+            bar.close()
     return rows
 
 
@@ -201,8 +217,15 @@ def cmd_mission_sweep(args: argparse.Namespace) -> int:
     jobs = make_jobs(scenarios, methods, seeds, duration)
     log.info("sweep: %d runs on %d workers -> %s", len(jobs), workers, out)
     t0 = time.monotonic()
-    rows = run_sweep(jobs, workers)
+    rows: list[dict[str, Any]] = []
     specs = {sc.name: sc for _, sc in scenarios}
+    try:
+        run_sweep(jobs, workers, rows=rows)
+    except (KeyboardInterrupt, SystemExit):
+        if rows:  # an interrupted sweep keeps the runs that finished
+            write_outputs(out, rows, specs, methods, wall_s=time.monotonic() - t0)
+            log.warning("interrupted: %d of %d runs written to %s", len(rows), len(jobs), out)
+        raise
     write_outputs(out, rows, specs, methods, wall_s=time.monotonic() - t0)
     n_bad = sum(r["status"] != "ok" for r in rows)
     if n_bad:

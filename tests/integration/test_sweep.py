@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import csv
 import math
+import os
+import re
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -80,3 +84,54 @@ def test_unknown_scenario_exits_2(tmp_path: Path) -> None:
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "nope.toml" in lines[0]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return Path(f"/proc/{pid}").exists() and "Z" not in _state(pid)
+
+
+def _state(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return ""
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        kids = (task / "children").read_text().split()
+        out += [int(k) for k in kids]
+    return out
+
+
+def test_sigterm_stops_workers_and_keeps_finished_runs(tmp_path: Path) -> None:
+    """SIGTERM mid-sweep: exit 143, no worker left, the finished runs written."""
+    proc = subprocess.Popen(
+        [*GCS, "mission", "sweep", CUBE8, "--seeds", "1-40", "--methods", "none",
+         "--jobs", "2", "--duration", "1", "--out", str(tmp_path)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    workers: list[int] = []
+    err = proc.stderr
+    assert err is not None
+    for line in err:  # progress lines "[sweep 40 runs] ... N/40 runs, 0 crashed"
+        workers = _children(proc.pid) or workers
+        m = re.search(r"(\d+)/40 runs", line)
+        if m and int(m.group(1)) >= 1:
+            break
+    assert proc.poll() is None, "the sweep ended before it could be interrupted"
+    proc.send_signal(signal.SIGTERM)
+    _, err_text = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err_text
+    deadline = time.monotonic() + 10
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert workers and not any(_alive(w) for w in workers)
+    with (tmp_path / "runs.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert 1 <= len(rows) < 40 and all(r["status"] == "ok" for r in rows)
