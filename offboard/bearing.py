@@ -55,8 +55,18 @@ def build_edges(
 
 
 def bearing_laplacian(vertices: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray:
-    """(3N, 3N) bearing Laplacian of the desired bearings (§2.1), dense."""
-    return graphs.sparse_laplacian(np.asarray(vertices, dtype=float), edges).toarray()
+    """(3N, 3N) bearing Laplacian of the desired bearings (§2.1), dense (the rigidity check
+    uses the sparse one, :func:`graphs.sparse_laplacian`)."""
+    v = np.asarray(vertices, dtype=float)
+    n = len(v)
+    lap = np.zeros((3 * n, 3 * n))
+    for i, j in edges:
+        pij = projector(bearing(v[i], v[j]))
+        lap[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] -= pij
+        lap[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] -= pij
+        lap[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += pij
+        lap[3 * j : 3 * j + 3, 3 * j : 3 * j + 3] += pij
+    return lap
 
 
 def _blocks(idx: list[int]) -> np.ndarray:
@@ -154,12 +164,13 @@ def build_formation(
     for i, j in edges:
         nbrs[i].append(j)
         nbrs[j].append(i)
-    diff = v[None, :, :] - v[:, None, :]  # v_j − v_i
-    dist = np.linalg.norm(diff, axis=2)
-    np.fill_diagonal(dist, 1.0)
-    g_star = diff / dist[:, :, None]
-    p_star = np.eye(3) - np.einsum("ija,ijb->ijab", g_star, g_star)
-    p_star[np.arange(n), np.arange(n)] = 0.0
+    g_star = np.zeros((n, n, 3))
+    p_star = np.zeros((n, n, 3, 3))
+    for i in range(n):
+        for j in range(n):
+            if i != j:
+                g_star[i, j] = bearing(v[i], v[j])
+                p_star[i, j] = projector(g_star[i, j])
     fb, lb = _blocks(follower_idx), _blocks(leader_idx)
     l_ff = lap[np.ix_(fb, fb)]
     return Formation(

@@ -14,7 +14,13 @@ leaders' states as known inputs)::
     ξ̂̇_i = (S⊗I₃) ξ̂_i − L Σ_j (I₄⊗P*_ij)(ξ̂_i − ξ̂_j)
 
 Per eigen-channel λ of L_ff the error matrix is S − Lλ I (S commutes with I), so every
-channel decays at rate Lλ ≥ L λ_min. Over one period the neighbours' ξ̂_j are propagated
+channel decays at rate Lλ ≥ L λ_min.
+
+Only bearing-graph neighbours enter (``form.neighbours``; the leaders' ξ only where a leader
+is a neighbour), so the observer works on any graph that passes the rigidity check
+(λ_min(L_ff) > 0, docs/graphs.md): on a sparse graph the leaders' motion reaches a follower
+over several hops and the slowest channel, L λ_min, is what :attr:`rate` reports. Data
+handed in for a non-neighbour is ignored. Over one period the neighbours' ξ̂_j are propagated
 by the exosystem; with ``c = Σ_j (I₄⊗P*_ij) ξ̂_j`` (ċ = (S⊗I₃) c) the pair (ξ̂_i, c) is
 linear time-invariant and is advanced exactly by one 24×24 matrix exponential.
 """
@@ -137,6 +143,11 @@ class DesiredStateObserver:
         xs = np.array([nbr_xi[j] for j in idx]).reshape(len(idx), 4, 3)
         c = np.einsum("kij,kdj->di", pu, xs).reshape(12)  # Σ (I4 ⊗ P_ij) ξ_j
         self.xi = mx @ self.xi + mc @ c
+
+    @property
+    def rate(self) -> float:
+        """Slowest decay rate L λ_min(L_ff) of the network's estimate error (1/s)."""
+        return self.gain * self.form.lambda_min
 
     @property
     def p(self) -> np.ndarray:

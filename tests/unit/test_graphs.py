@@ -219,6 +219,15 @@ def test_desired_state_observer_neighbours_only_on_sparse_graph(sc27):
     want = f.desired_positions(lead[:, 0:3])
     err = max(np.linalg.norm(o.p - want[i]) for i, o in obs.items())
     assert err < 1e-3
+    i, o = next(iter(obs.items()))
+    assert o.rate == pytest.approx(sc27.observer.reference_gain * f.lambda_min)
+    # data of a non-neighbour (even garbage) is not used
+    xi0 = o.xi.copy()
+    o.update({j: pub[j] for j in f.neighbours[i]})
+    a = o.xi.copy()
+    o.xi = xi0
+    o.update(pub | {j: np.full(12, 1e3) for j in range(sc27.n) if j not in f.neighbours[i]})
+    assert np.array_equal(a, o.xi)
 
 
 def test_build_formation_plain_kinds_still_work():
