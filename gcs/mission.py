@@ -291,10 +291,7 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
                       rec.att[k].astype(float))
     nxt = steps + 1
     ser.min_dist[:] = np.where(rec.have_truth[nxt], rec.min_dist[nxt], np.nan)
-    prev = np.maximum(steps - 1, 0)
-    has_prev = (steps >= 1)[:, None, None]
-    ser.z1[:] = np.where(has_prev, rec.z1[prev], np.nan)
-    ser.z2[:] = np.where(has_prev, rec.z2[prev], np.nan)
+    ser.z1[:], ser.z2[:] = rec.z1[steps], rec.z2[steps]  # estimates valid at t_k
     ser.u[:], ser.lumped_est[:] = rec.u[steps], rec.lumped_est[steps]
     ser.h_min[:], ser.solve_us[:] = rec.h_min[steps], rec.solve_us[steps]
     ser.fallback[:], ser.input_clipped[:] = rec.degraded[steps], rec.clipped[steps]

@@ -38,6 +38,7 @@ class TruthView(Mapping[int, wire.Truth]):
             v=r.v[k].astype(float), att=r.att[k].astype(float),
             thrust=r.thrust[k].astype(float), lumped=r.lumped_true[k].astype(float),
             collisions=int(r.collisions[k]), min_dist=float(r.min_dist[k]),
+            mode=list(r.last_mode) if k == r.max_step else [],
         )
 
     def __iter__(self) -> Iterator[int]:
@@ -64,7 +65,9 @@ class Recorder:
         self.have_truth = np.zeros(rows, bool)
         self.p, self.v, self.att, self.lumped_true = arr(n, 3), arr(n, 3), arr(n, 3), arr(n, 3)
         self.thrust = arr(n)
-        self.z1, self.z2 = arr(n, 3), arr(n, 3)  # estimates published at step k
+        # estimates published at step k in row k + 1 (row 0: the initial ones, step −1),
+        # i.e. row k holds the estimates valid at t_k
+        self.z1, self.z2 = arr(n, 3), arr(n, 3)
         self.u, self.lumped_est = arr(n, 3), arr(n, 3)  # statuses of step k
         self.h_min, self.solve_us = arr(n), arr(n)
         self.degraded = np.zeros((rows, n), bool)
@@ -74,6 +77,7 @@ class Recorder:
         self.last_status: dict[int, wire.Status] = {}
         self.lock = threading.Lock()
         self.max_step = -1
+        self.last_mode: list[str] = []
         self.dropped = 0
         self._raw: list[bytes] = []
 
@@ -117,6 +121,8 @@ class Recorder:
         self.p[k], self.v[k], self.att[k], self.lumped_true[k] = m.p, m.v, m.att, m.lumped
         self.thrust[k] = m.thrust
         self.have_truth[k] = True
+        if k >= self.max_step:  # the vehicles' modes of the newest truth (not kept per step)
+            self.last_mode = [str(x) for x in m.mode]
         self.max_step = max(self.max_step, k)
         return True
 
@@ -133,7 +139,9 @@ class Recorder:
                 continue
             i = self.idx.get(getattr(msg, "id", -1))
             k = getattr(msg, "step", -1)
-            if i is None or not (0 <= k <= self.steps):
+            if isinstance(msg, wire.Estimate) and i is not None and k == -1:
+                dropped += not self._put_estimate(msg, k, i)  # the initial estimates
+            elif i is None or not (0 <= k <= self.steps):
                 dropped += 1
             elif isinstance(msg, wire.Estimate):
                 dropped += not self._put_estimate(msg, k, i)
@@ -147,7 +155,7 @@ class Recorder:
     def _put_estimate(self, e: wire.Estimate, k: int, i: int) -> bool:
         if not (np.all(np.isfinite(e.z1)) and np.all(np.isfinite(e.z2))):
             return False
-        self.z1[k, i], self.z2[k, i] = e.z1, e.z2
+        self.z1[k + 1, i], self.z2[k + 1, i] = e.z1, e.z2
         if k == self.steps - 1 and np.all(np.isfinite(e.zeta)):
             self.zeta_last[i] = e.zeta
         return True
