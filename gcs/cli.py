@@ -282,6 +282,19 @@ def _add_allow_infeasible(p: argparse.ArgumentParser) -> None:
                    "with a warning")
 
 
+def add_signing_flags(g: Any) -> None:
+    """``--signing-key``, ``--no-signing``, ``--unsigned-gcs-link`` (docs/security.md,
+    "Defaults"): a launched swarm's MAVLink links are signed unless ``--no-signing``."""
+    g.add_argument("--signing-key", default=None, metavar="PATH",
+                   help="MAVLink 2 signing key file (gcs keys generate; default: a fresh "
+                   "per-run key)")
+    g.add_argument("--no-signing", action="store_true",
+                   help="no MAVLink signing (debugging, or unsigned third-party clients)")
+    g.add_argument("--unsigned-gcs-link", action="store_true",
+                   help="let unsigned clients (MAVSDK, QGC) request telemetry on the GCS port; "
+                   "they can never arm, fly or switch modes")
+
+
 def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("mission", help="run or compare missions")
     msub = p.add_subparsers(dest="mission_cmd", required=True)
@@ -303,6 +316,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
+    add_signing_flags(d)
     _add_allow_infeasible(r)
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")

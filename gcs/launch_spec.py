@@ -14,12 +14,15 @@ arms and starts). Topology, for port offset ``o``:
 from __future__ import annotations
 
 import socket
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from gcs.procs import python_entry
 from swarm_common.ports import GCS_PORT, MAX_ID, port_free, vehicle_ports
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, swarm_name_problem
+from swarm_common.signing import generate_key, load_key
 from swarm_common.zenoh_session import (
     DEFAULT_ZENOH_PORT,
     SIM_USER,
@@ -44,6 +47,67 @@ class LaunchError(RuntimeError):
     """The swarm cannot start here: a port is busy or an endpoint is refused (exit 2)."""
 
 
+RUN_KEY_NAME = "mavlink.key"  # the per-run signing key, inside the run's secure directory
+
+
+def secure_dir() -> Path:
+    """A fresh private directory (mode 0700) for one run's Zenoh credentials and signing
+    key; the caller deletes it when the run ends."""
+    return Path(tempfile.mkdtemp(prefix="swarm-secure-"))
+
+
+@dataclass(frozen=True)
+class SigningChoice:
+    """MAVLink 2 signing of a launched swarm (docs/security.md, "Defaults").
+
+    ``enabled`` (default): every vehicle link is signed; with ``key`` (a key file made by
+    ``gcs keys generate``) that key, else a fresh per-run key written into the run's
+    secure directory. ``unsigned_gcs_link``: the simulator's GCS port also serves unsigned
+    telemetry requests (MAVSDK, QGroundControl), never flight commands.
+    """
+
+    enabled: bool = True
+    key: Path | None = None
+    unsigned_gcs_link: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.enabled and self.key is not None:
+            raise LaunchError("--no-signing and --signing-key exclude each other")
+        if not self.enabled and self.unsigned_gcs_link:
+            raise LaunchError("--unsigned-gcs-link needs signing (drop --no-signing)")
+
+    @classmethod
+    def from_args(cls, args: Any) -> SigningChoice:
+        """From ``--no-signing``, ``--signing-key PATH``, ``--unsigned-gcs-link``."""
+        key = getattr(args, "signing_key", None)
+        return cls(
+            enabled=not getattr(args, "no_signing", False),
+            key=None if key is None else Path(key).absolute(),
+            unsigned_gcs_link=bool(getattr(args, "unsigned_gcs_link", False)),
+        )
+
+    def key_file(self, directory: Path | None) -> Path | None:
+        """The key file the children get: None when signing is off; the user's file (checked
+        now, so a bad one stops the launch with one line); else a fresh key generated as
+        ``directory/mavlink.key`` (0600). Raises ``SigningKeyError`` (a ValueError)."""
+        if not self.enabled:
+            return None
+        if self.key is not None:
+            load_key(self.key)
+            return self.key
+        if directory is None:
+            raise LaunchError("signing needs a private directory for the per-run key")
+        path = directory / RUN_KEY_NAME
+        generate_key(path)
+        return path
+
+    def describe(self) -> str:
+        """For the run facts: ``off``, ``per-run key`` or ``key file`` (never the key)."""
+        if not self.enabled:
+            return "off"
+        return "per-run key" if self.key is None else "key file"
+
+
 @dataclass(frozen=True)
 class LaunchSpec:
     """Ports, endpoints and argv of one launched swarm.
@@ -53,6 +117,10 @@ class LaunchSpec:
     leave arming and OFFBOARD to the operator (dashboard). ``run_dir``: where each
     daemon writes its ``vehicle_<id>.tlog`` and the simulator its statistics.
     ``sim_duration``: the simulator exits after this much simulated time (s).
+    ``zenoh_security``: the router's credentials, one file per child (docs/security.md).
+    ``signing_key``: the MAVLink 2 signing key file given to the simulator and every daemon
+    (``--signing-key``); ``unsigned_gcs_link``: the simulator's GCS link also serves
+    unsigned telemetry requests (MAVSDK, QGroundControl without a key).
     """
 
     sc: Scenario
@@ -66,6 +134,8 @@ class LaunchSpec:
     run_dir: Path | None = None
     sim_duration: float | None = None
     zenoh_security: SwarmSecurity | None = None
+    signing_key: Path | None = None
+    unsigned_gcs_link: bool = False
 
     def __post_init__(self) -> None:
         problem = swarm_name_problem(self.swarm_name)
@@ -73,6 +143,8 @@ class LaunchSpec:
             raise LaunchError(f"swarm name {self.swarm_name!r}: {problem}")
         if self.port_offset < 0 or self.port_offset > MAX_PORT_OFFSET:
             raise LaunchError(f"port offset {self.port_offset}: must be 0..{MAX_PORT_OFFSET}")
+        if self.unsigned_gcs_link and self.signing_key is None:
+            raise LaunchError("--unsigned-gcs-link needs signing (without a key nothing is signed)")
 
     @property
     def swarm_name(self) -> str:
@@ -140,7 +212,9 @@ class LaunchSpec:
             argv += ["--stats-out", str(self.sim_stats_path)]
         if self.lockstep:
             argv += ["--step-timeout", f"{LOCKSTEP_STEP_TIMEOUT_S}", "--lockstep"]
-        return argv + self._common_args()
+        if self.unsigned_gcs_link:
+            argv.append("--unsigned-gcs-link")
+        return argv + self._signing_args() + self._common_args()
 
     def daemon_argv(self, agent_id: int) -> list[str]:
         """The ``offboard`` daemon of one agent, dialling the router."""
@@ -151,6 +225,7 @@ class LaunchSpec:
             "--port-offset", str(self.port_offset),
             "--swarm", self.swarm_name,
             "--zenoh-connect", self.router_endpoint,
+            "--die-with-parent",
         ]  # fmt: skip
         if self.method:
             argv += ["--method", str(self.method)]
@@ -160,7 +235,7 @@ class LaunchSpec:
             argv.append("--realtime")
         if self.manual_start:
             argv.append("--manual-start")
-        return argv + self._common_args()
+        return argv + self._signing_args() + self._common_args()
 
     def child_env(self, name: str) -> dict[str, str]:
         """Extra environment of child ``name``: with :attr:`zenoh_security`, the path of
@@ -179,6 +254,11 @@ class LaunchSpec:
         if daemons and self.zenoh:
             out += [(f"offboard-{a.id}", self.daemon_argv(a.id)) for a in self.sc.agents]
         return out
+
+    def _signing_args(self) -> list[str]:
+        """``--signing-key PATH`` when the swarm's MAVLink links are signed (the path, never
+        the key, is in the argv)."""
+        return [] if self.signing_key is None else ["--signing-key", str(self.signing_key)]
 
     def _common_args(self) -> list[str]:
         """``--seed`` if set; ``--allow-infeasible`` if the scenario was loaded with it."""

@@ -18,7 +18,6 @@ import logging
 import resource
 import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -27,7 +26,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from gcs.launch_spec import LaunchError, LaunchSpec
+from gcs.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
 from gcs.metrics import Series, compute_metrics
 from gcs.procs import ProcessGroup
 from gcs.progress import Progress
@@ -77,13 +76,15 @@ def run_distributed(
     land_at: float | None = None,
     on_abort: AbortHook | None = None,
     secure: bool = True,
+    signing: SigningChoice | None = None,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
     ``land_at``: publish a Zenoh land-all command (``wire.Command`` kind "land", at_s =
     land_at) until the run passes that mission time (docs/lifecycle.md). ``secure``: the
     router authenticates every process (fresh per-run credentials) and enforces the ACL
-    (docs/security.md). ``on_abort(rec, facts, reason)``: called after every child has
+    (docs/security.md). ``signing``: MAVLink 2 signing of every vehicle link (default: on,
+    with a fresh per-run key). ``on_abort(rec, facts, reason)``: called after every child has
     stopped when the run ends early (Ctrl-C, SIGTERM, the simulator's death, a stall),
     and every :data:`CHECKPOINT_EVERY_S` during the run (reason "checkpoint").
 
@@ -92,24 +93,30 @@ def run_distributed(
     death is recorded in ``facts["failed_agents"]`` and the run goes on. Every child is
     stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
+    signing = SigningChoice() if signing is None else signing
     out_dir.mkdir(parents=True, exist_ok=True)
-    sec_dir = Path(tempfile.mkdtemp(prefix="swarm-zenoh-")) if secure else None
-    sec = None if sec_dir is None else write_swarm_security(sec_dir, _swarm(sc), sc.ids)
-    spec = LaunchSpec(
-        sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
-        sim_duration=duration + 1.0, zenoh_security=sec,
-    )
+    sec_dir = secure_dir() if secure or signing.enabled else None
     try:
+        sec = None
+        if secure and sec_dir is not None:
+            sec = write_swarm_security(sec_dir, _swarm(sc), sc.ids)
+        key_path = signing.key_file(sec_dir)
+        spec = LaunchSpec(
+            sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
+            sim_duration=duration + 1.0, zenoh_security=sec, signing_key=key_path,
+            unsigned_gcs_link=signing.unsigned_gcs_link,
+        )
         spec.check_ports()
         router = open_router([spec.router_endpoint],
                              config_file=None if sec is None else sec.router)
-    except (RuntimeError, ValueError) as exc:
+    except (RuntimeError, ValueError, OSError) as exc:  # SigningKeyError is a ValueError
         _remove(sec_dir)
         raise LaunchError(str(exc)) from None
     rec = Recorder(sc, int(round(duration * sc.run.control_hz)), seed=seed)
     subs = rec.subscribe(router, spec.swarm_name)
     group = ProcessGroup(out_dir)
-    facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False}
+    facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False,
+                             "mavlink_signing": signing.describe()}
     t_wall0 = time.monotonic()
     cpu0 = time.process_time()
     reason = ""
@@ -167,7 +174,8 @@ def _swarm(sc: Scenario) -> str:
 
 
 def _remove(path: Path | None) -> None:
-    """Delete the run's credential directory (the passwords die with the run)."""
+    """Delete the run's secure directory (the passwords and the per-run key die with the
+    run)."""
     if path is not None:
         shutil.rmtree(path, ignore_errors=True)
 
@@ -366,6 +374,7 @@ def run_and_score(
     kill_at: float | None = None,
     show_progress: bool = True,
     land_at: float | None = None,
+    signing: SigningChoice | None = None,
 ) -> dict[str, Any]:
     """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
 
@@ -384,7 +393,7 @@ def run_and_score(
     rec, facts = run_distributed(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
-        on_abort=write_partial,
+        on_abort=write_partial, signing=signing,
     )
     doc, ser = _score(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
@@ -405,14 +414,15 @@ def cli_run(args: Any, sc: Scenario) -> int:
         return 2
     try:
         out = Path(args.out) if args.out else default_out_dir(sc, method)
-    except ValueError as exc:
+        signing = SigningChoice.from_args(args)
+    except (ValueError, LaunchError) as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return 2
     try:
         doc = run_and_score(
             sc, out, method, args.seed, duration, realtime=args.realtime,
             port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
-            show_progress=True, land_at=getattr(args, "land_at", None),
+            show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)

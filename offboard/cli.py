@@ -23,9 +23,19 @@ from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
-from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
+from swarm_common.scenario import (
+    ALLOW_INFEASIBLE_FLAG,
+    ScenarioError,
+    load_scenario,
+    swarm_name_problem,
+)
 from swarm_common.signing import SigningKeyError, load_key
-from swarm_common.zenoh_session import default_endpoint, open_session
+from swarm_common.zenoh_session import (
+    ZENOH_CONFIG_ENV,
+    ZENOH_CONFIG_FLAG,
+    default_endpoint,
+    open_session,
+)
 
 # a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
 OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
@@ -48,14 +58,18 @@ def die_with_parent() -> str | None:
     return None
 
 
-def open_session_saying(mode: str, connect: list[str], listen: list[str]) -> Any:
+def open_session_saying(
+    mode: str, connect: list[str], listen: list[str], config_file: str | None = None
+) -> Any:
     """open_session in a helper thread (a client blocks until its router is up), logging
-    what it waits for every WAIT_LOG_S; the main thread stays free for signals."""
+    what it waits for every WAIT_LOG_S; the main thread stays free for signals.
+    ``config_file``: Zenoh credentials (default: ``$SWARM_ZENOH_CONFIG`` if set)."""
     box: dict[str, Any] = {}
 
     def opener() -> None:
         try:
-            box["session"] = open_session(mode=mode, connect=connect, listen=listen)
+            box["session"] = open_session(mode=mode, connect=connect, listen=listen,
+                                          config_file=config_file)
         except OPEN_ERRORS as exc:
             box["error"] = exc
 
@@ -85,6 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zenoh-connect", nargs="*", default=None, metavar="EP")
     ap.add_argument("--zenoh-listen", nargs="*", default=None, metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
+    ap.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
+                    help="Zenoh JSON5 config with this agent's credentials (as written by "
+                    f"gcs router --secure-dir; default: ${ZENOH_CONFIG_ENV} if set)")
     ap.add_argument("--manual-start", action="store_true",
                     help="stream setpoints but leave arming and OFFBOARD to the operator (GCS)")
     ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
@@ -121,6 +138,13 @@ def main(argv: list[str] | None = None) -> int:
         msg = f"offboard: --agent {args.agent}: not an agent of {sc.path} {sc.ids}"
         print(msg, file=sys.stderr)
         return 2
+    if args.swarm is not None and (problem := swarm_name_problem(args.swarm)) is not None:
+        print(f"offboard: --swarm {args.swarm!r}: {problem}", file=sys.stderr)
+        return 2
+    if args.zenoh_config is not None and not os.path.isfile(args.zenoh_config):
+        print(f"offboard: {ZENOH_CONFIG_FLAG} {args.zenoh_config}: not a readable file",
+              file=sys.stderr)
+        return 2
     ports = vehicle_ports(args.agent, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
     if not url.startswith(MAVLINK_SCHEMES):
@@ -147,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
         signing_key=key,
     )
     try:
-        session = open_session_saying(cfg.zenoh_mode, connect, cfg.zenoh_listen)
+        session = open_session_saying(cfg.zenoh_mode, connect, cfg.zenoh_listen,
+                                      args.zenoh_config)
     except OPEN_ERRORS as exc:
         print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
         return 2

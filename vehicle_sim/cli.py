@@ -21,8 +21,15 @@ from typing import TYPE_CHECKING
 from swarm_common.enums import FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
-from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, ScenarioError, load_scenario
+from swarm_common.scenario import (
+    ALLOW_INFEASIBLE_FLAG,
+    Scenario,
+    ScenarioError,
+    load_scenario,
+    swarm_name_problem,
+)
 from swarm_common.signing import SigningKeyError, load_key
+from swarm_common.zenoh_session import ZENOH_CONFIG_ENV, ZENOH_CONFIG_FLAG
 from vehicle_sim.options import SimOptions
 
 if TYPE_CHECKING:
@@ -66,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
+    ap.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
+                    help="Zenoh JSON5 config with this process's credentials (as written by "
+                    f"gcs router --secure-dir; default: ${ZENOH_CONFIG_ENV} if set)")
     ap.add_argument("--signing-key", default=None, metavar="PATH",
                     help="MAVLink 2 signing key file (gcs keys generate): reject unsigned or "
                     "wrongly signed frames, sign every frame sent (default: signing off)")
@@ -112,6 +122,8 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
         raise _Fatal(f"--vehicles {args.vehicles}: must be in [1, {sc.n}]")
     if not 0 <= args.port_offset <= MAX_PORT - HIGHEST_BASE_PORT:
         raise _Fatal(f"--port-offset {args.port_offset}: out of range")
+    if args.swarm is not None and (problem := swarm_name_problem(args.swarm)) is not None:
+        raise _Fatal(f"--swarm {args.swarm!r}: {problem}")
     key = None
     if args.signing_key is not None:
         try:
@@ -153,6 +165,11 @@ def _server(args: argparse.Namespace) -> SimServer:
     except ScenarioError as exc:
         raise _Fatal(str(exc)) from None
     opts = _options(args, sc)
+    if args.zenoh_config is not None:
+        if not os.path.isfile(args.zenoh_config):
+            raise _Fatal(f"{ZENOH_CONFIG_FLAG} {args.zenoh_config}: not a readable file")
+        # read by swarm_common.zenoh_session.make_config when the truth session opens
+        os.environ[ZENOH_CONFIG_ENV] = args.zenoh_config
     try:
         return SimServer(sc, opts)
     except LinkError as exc:
