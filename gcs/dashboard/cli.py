@@ -4,6 +4,12 @@
     gcs dashboard --launch scenarios/cube8.toml [--no-daemons] [--method rcbf]
     gcs dashboard --demo            # the recorded state, no network (docs, trying keys)
 
+``--launch`` secures the swarm as ``gcs mission run`` does (docs/security.md, "Defaults"):
+Zenoh authentication + ACL with fresh credentials, and MAVLink 2 signing with a fresh key
+(or ``--signing-key PATH``; ``--no-signing`` to turn it off) that the dashboard's own GCS
+link signs its commands with. Attached to a running swarm, the GCS link signs when given
+``--signing-key`` and the Zenoh feed authenticates with ``--zenoh-config FILE``.
+
 ``gcs/cli.py`` wires it with::
 
     from gcs.dashboard.cli import add_dashboard_parser, run_dashboard
@@ -22,7 +28,8 @@ from typing import Any
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
-from swarm_common.zenoh_session import default_endpoint
+from swarm_common.signing import load_key
+from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 
@@ -44,6 +51,16 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     )
     p.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
     p.add_argument("--no-zenoh", action="store_true", help="MAVLink only")
+    p.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
+                   help="attached: Zenoh config with the gcs credentials (gcs router --secure-dir)")
+    p.add_argument("--signing-key", default=None, metavar="PATH",
+                   help="MAVLink 2 signing key file: sign commands, accept only signed frames "
+                   "(with --launch: default a fresh per-run key)")
+    p.add_argument("--no-signing", action="store_true",
+                   help="with --launch: no MAVLink signing (debugging, unsigned clients)")
+    p.add_argument("--unsigned-gcs-link", action="store_true",
+                   help="with --launch: unsigned clients (MAVSDK, QGC) may request telemetry on "
+                   "the GCS port, never arm, fly or switch modes")
     p.add_argument(
         "--launch",
         metavar="SCENARIO",
@@ -88,6 +105,8 @@ def _err(msg: str) -> int:
 
 def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     """(app, source, launch, title) from parsed args; raises ValueError/OSError/RuntimeError."""
+    from gcs.launch_spec import SigningChoice
+
     from .app import DashboardApp
     from .commands import LiveCommander
     from .launch import Launch, dashboard_spec
@@ -103,22 +122,27 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     offset = args.port_offset
     launch = None
     link = feed = None
+    signing = SigningChoice.from_args(args)  # LaunchError (a RuntimeError): exit 2
     try:
         swarm = args.swarm or sc.name
+        key_path = signing.key
         if args.launch:
             spec = dashboard_spec(sc, offset, swarm, not args.no_zenoh, args.method)
             log_dir = Path(args.log_dir or tempfile.mkdtemp(prefix="gcs-dashboard-"))
-            launch = Launch(spec, log_dir, daemons=not args.no_daemons).start()
+            launch = Launch(spec, log_dir, daemons=not args.no_daemons, signing=signing).start()
+            key_path = launch.signing_key
             why = launch.wait_sim_up()
             if why:
                 raise RuntimeError(why)
-        link = MavlinkGcs(port_offset=offset).start()
+        key = None if key_path is None else load_key(key_path)  # SigningKeyError: ValueError
+        link = MavlinkGcs(port_offset=offset, signing_key=key).start()
         if not args.no_zenoh:
             if launch is not None:
                 feed = ZenohFeed(swarm, sc.ids, session=launch.router).start()
             else:
                 connect = args.zenoh_connect or [default_endpoint(offset)]
-                feed = ZenohFeed(swarm, sc.ids, connect=connect, mode=args.zenoh_mode).start()
+                feed = ZenohFeed(swarm, sc.ids, connect=connect, mode=args.zenoh_mode,
+                                 config_file=args.zenoh_config).start()
     except BaseException:
         if link is not None:
             link.close()
@@ -128,6 +152,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     source = LiveSource(sc, link, feed, swarm=swarm, procs=launch)
     commander = LiveCommander(link, feed, timeout_s=args.ack_timeout, retries=args.retries)
     title = f"{sc.name} · offset {offset}" + (" · launched" if launch else "")
+    title += " · signed" if link.signed else ""
     return DashboardApp(source, commander, title=title), source, launch, title
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 import threading
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from swarm_common import signing
 from swarm_common.frames import ned_to_enu, rotm_from_quat
 
 from .command_retry import PendingAck
@@ -31,6 +33,9 @@ log = logging.getLogger(__name__)
 
 LOCAL_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_FRD)
 BODY_FRAMES = (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED)
+# vehicle-sim's report of frames its links rejected (totals since start, docs/security.md)
+REJECTED_RE = re.compile(r"^rejected (\d+) unsigned (\d+) badsig (\d+) replay")
+GCS_SIGNING_LINK_ID = 200  # the ground station's signing link id (vehicles use 0, daemons i)
 # what a well-formed message with absurd field values can raise in a handler
 _CONTENT_ERRORS = (ArithmeticError, LookupError, TypeError, ValueError, AttributeError)
 
@@ -63,6 +68,7 @@ class LinkVehicle:
     lost: bool = False
     statustexts: int = 0
     last_statustext: str = ""
+    rejected: int = 0  # frames this vehicle's links rejected (its last "rejected" report)
     # rate bookkeeping
     _rate_t: float = 0.0
     _rate_n: int = 0
@@ -101,6 +107,8 @@ class LinkTracker:
         self._pending: dict[tuple[int, int], PendingAck] = {}
         self.bad_packets = 0
         self.packets = 0
+        self.rejected = 0  # frames that failed signature checks here (signing on)
+        self.signed = False
         self._handlers: dict[str, Callable[[LinkVehicle, Any, float], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "LOCAL_POSITION_NED": self._on_local_position,
@@ -110,6 +118,12 @@ class LinkTracker:
             "STATUSTEXT": self._on_statustext,
             "COMMAND_ACK": self._on_command_ack,
         }
+
+    def enable_signing(self, key: bytes) -> None:
+        """Accept only frames signed with ``key`` (MAVLink 2 signing); the others are
+        counted in :attr:`rejected`."""
+        signing.setup_signing(self._rx, key, GCS_SIGNING_LINK_ID)
+        self.signed = True
 
     # -- parsing -------------------------------------------------------------------
     def feed(self, data: bytes, addr: Addr) -> None:
@@ -132,7 +146,11 @@ class LinkTracker:
         with self._lock:
             for msg in msgs:
                 if msg.get_type() == "BAD_DATA":
-                    self.bad_packets += 1
+                    reason = str(getattr(msg, "reason", ""))
+                    if reason.startswith(signing.INVALID_SIGNATURE_REASON):
+                        self.rejected += 1
+                    else:
+                        self.bad_packets += 1
                     continue
                 self.packets += 1
                 try:
@@ -228,6 +246,9 @@ class LinkTracker:
         text = str(text).rstrip("\x00")
         v.statustexts += 1
         v.last_statustext = text
+        m = REJECTED_RE.match(text)
+        if m is not None:
+            v.rejected = sum(int(g) for g in m.groups())
         self._event(now, v.sysid, "statustext", text, int(msg.severity))
 
     def _on_command_ack(self, v: LinkVehicle, msg: Any, now: float) -> None:

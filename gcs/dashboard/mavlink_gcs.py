@@ -26,10 +26,18 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from swarm_common import signing
 from swarm_common.ports import GCS_PORT
 
 from .command_retry import CommandResult, PendingAck, command_exchange, drive_async, drive_blocking
-from .link_tracker import BODY_FRAMES, LOCAL_FRAMES, LinkEvent, LinkTracker, LinkVehicle
+from .link_tracker import (
+    BODY_FRAMES,
+    GCS_SIGNING_LINK_ID,
+    LOCAL_FRAMES,
+    LinkEvent,
+    LinkTracker,
+    LinkVehicle,
+)
 from .px4modes import CommandSpec
 
 __all__ = [
@@ -45,7 +53,12 @@ log = logging.getLogger(__name__)
 
 
 class MavlinkGcs:
-    """The GCS UDP link. ``start()`` binds and starts the reader thread."""
+    """The GCS UDP link. ``start()`` binds and starts the reader thread.
+
+    ``signing_key`` (32 bytes): every frame sent is signed (MAVLink 2 signing, link id
+    :data:`~.link_tracker.GCS_SIGNING_LINK_ID`) and only frames signed with the key are
+    accepted; the others are counted in :attr:`rejected`.
+    """
 
     def __init__(
         self,
@@ -58,6 +71,7 @@ class MavlinkGcs:
         send_heartbeat: bool = True,
         clock: Callable[[], float] = time.monotonic,
         max_events: int = 2000,
+        signing_key: bytes | None = None,
     ) -> None:
         self.host = host
         self.port = GCS_PORT + port_offset if port is None else port
@@ -66,12 +80,22 @@ class MavlinkGcs:
         self._send_heartbeat = send_heartbeat
         self.tracker = LinkTracker(clock, source_system, source_component, max_events)
         self._tx = mavlink.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        if signing_key is not None:
+            signing.setup_signing(self._tx, signing_key, GCS_SIGNING_LINK_ID)
+            self.tracker.enable_signing(signing_key)
         self._tx_lock = threading.Lock()
         self.sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._last_tick = 0.0
         self._last_gcs_hb = 0.0
+
+    def _keep_signing_time(self) -> None:
+        """Signed: the outgoing signing timestamp never lags the wall clock, so a vehicle
+        that (re)starts later accepts our stream (caller holds ``_tx_lock``)."""
+        if self.signed:
+            now = (time.time() - signing.SIGNATURE_EPOCH_UNIX_S) * signing.TIMESTAMP_UNITS_PER_S
+            self._tx.signing.timestamp = max(int(self._tx.signing.timestamp), int(now))
 
     # -- lifecycle ---------------------------------------------------------------
     def start(self) -> MavlinkGcs:
@@ -136,6 +160,15 @@ class MavlinkGcs:
     def bad_packets(self) -> int:
         return self.tracker.bad_packets
 
+    @property
+    def rejected(self) -> int:
+        """Frames dropped here for a missing, wrong or replayed signature."""
+        return self.tracker.rejected
+
+    @property
+    def signed(self) -> bool:
+        return self.tracker.signed
+
     def vehicles(self) -> dict[int, LinkVehicle]:
         """A consistent copy of every tracked vehicle."""
         return self.tracker.vehicles()
@@ -151,6 +184,7 @@ class MavlinkGcs:
         if self._send_heartbeat and now - self._last_gcs_hb >= 1.0 and self.sock is not None:
             self._last_gcs_hb = now
             with self._tx_lock:
+                self._keep_signing_time()
                 buf = self._tx.heartbeat_encode(
                     mavlink.MAV_TYPE_GCS,
                     mavlink.MAV_AUTOPILOT_INVALID,
@@ -172,6 +206,7 @@ class MavlinkGcs:
             return False
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         with self._tx_lock:
+            self._keep_signing_time()
             buf = self._tx.command_long_encode(sysid, 1, command, conf & 0xFF, *p[:7]).pack(
                 self._tx
             )

@@ -78,6 +78,8 @@ class SwarmView:
     method: str = "?"
     sim_time: float | None = None
     collisions: int = 0
+    signed: bool = False  # the GCS link signs and verifies (MAVLink 2 signing)
+    rejected: int = 0  # frames rejected for their signature: here + reported by vehicles
 
     def row(self, agent_id: int) -> VehicleRow | None:
         for r in self.rows:
@@ -356,5 +358,7 @@ class LiveSource:
             method=method,
             sim_time=truth.t if truth is not None else None,
             collisions=truth.collisions if truth is not None else 0,
+            signed=bool(getattr(self.link, "signed", False)),
+            rejected=int(getattr(self.link, "rejected", 0)) + sum(v.rejected for v in veh.values()),
         )
         return view, events

@@ -86,8 +86,10 @@ class ZenohFeed:
         mode: str = "peer",
         stale_s: float = 1.0,
         clock: Callable[[], float] = time.monotonic,
+        config_file: str | None = None,
     ) -> None:
         self.swarm = swarm
+        self.config_file = config_file  # Zenoh credentials (default: $SWARM_ZENOH_CONFIG)
         self.ids = list(ids)
         self._session = session
         self._own_session = session is None
@@ -110,7 +112,8 @@ class ZenohFeed:
     # -- lifecycle ---------------------------------------------------------------
     def start(self) -> ZenohFeed:
         if self._session is None:
-            self._session = open_session(self.mode, listen=self.listen, connect=self.connect)
+            self._session = open_session(self.mode, listen=self.listen, connect=self.connect,
+                                         config_file=self.config_file)
         s = self._session
         self._subs = [
             s.declare_subscriber(key_truth(self.swarm), self._on_sample),

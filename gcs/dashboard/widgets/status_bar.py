@@ -21,6 +21,8 @@ class StatusBar(Static):
         t.append(f"{target} ", "bold reverse")
         t.append(" mav:", "dim")
         t.append(view.link + " ")
+        if view.signed:
+            t.append("signed ", "green")
         t.append("zenoh:", "dim")
         zstyle = "green" if view.zenoh == "ok" else ("dim" if view.zenoh == "off" else "yellow")
         t.append(view.zenoh + " ", zstyle)
@@ -32,6 +34,9 @@ class StatusBar(Static):
         t.append("bad:", "dim")
         bad = view.bad_packets + view.bad_payloads
         t.append(f"{view.bad_packets}/{view.bad_payloads} ", "yellow" if bad else "")
+        if view.rejected:
+            t.append("rejected:", "dim")
+            t.append(f"{view.rejected} ", "yellow")
         if view.collisions:
             t.append(f"COLLISIONS {view.collisions} ", "bold white on red")
         if view.sim_time is not None:

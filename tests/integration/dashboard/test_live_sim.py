@@ -6,6 +6,7 @@ Random free port offset; every wait bounded; no timing assertions on speed.
 from __future__ import annotations
 
 import argparse
+import stat
 import subprocess
 import sys
 import time
@@ -127,7 +128,14 @@ async def test_launch_sim_with_zenoh(port_offset, tmp_path):
             assert await until(app, pilot, lambda: "outage 0.5 s (all) published" in log_text(app))
             sim = launch.group.children[0]
             assert sim.proc.poll() is None
+            # security defaults: a fresh 0600 key in a private 0700 directory; the GCS link
+            # signs and verifies, and every vehicle frame it received passed the check
+            secure = launch.secure_dir
+            assert secure is not None and stat.S_IMODE(secure.stat().st_mode) == 0o700
+            assert stat.S_IMODE((secure / "mavlink.key").stat().st_mode) == 0o600
+            assert app.view.signed and source.link.signed and source.link.rejected == 0
     finally:
         source.close()
         launch.stop()
     assert launch.group.children[0].proc.poll() is not None  # stopped on exit
+    assert not secure.exists()  # the key and the credentials died with the launch
