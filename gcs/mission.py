@@ -94,7 +94,6 @@ def run_distributed(
     stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
     signing = SigningChoice() if signing is None else signing
-    out_dir.mkdir(parents=True, exist_ok=True)
     sec_dir = secure_dir() if secure or signing.enabled else None
     try:
         sec = None
@@ -107,6 +106,7 @@ def run_distributed(
             unsigned_gcs_link=signing.unsigned_gcs_link,
         )
         spec.check_ports()
+        out_dir.mkdir(parents=True, exist_ok=True)
         router = open_router([spec.router_endpoint],
                              config_file=None if sec is None else sec.router)
     except (RuntimeError, ValueError, OSError) as exc:  # SigningKeyError is a ValueError

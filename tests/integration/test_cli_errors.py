@@ -136,3 +136,38 @@ def test_compare_jobs_0_exits_2():
 def test_router_needs_scenario_and_dir_together(tmp_path):
     _one_line_exit_2(_gcs("router", "--listen", "tcp/127.0.0.1:1", "--secure-dir",
                           str(tmp_path)), "go together")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["vehicle_sim.cli", "--scenario", CUBE8, "--no-zenoh", "--swarm", "a?b"],
+        ["offboard.cli", "--scenario", CUBE8, "--agent", "1", "--swarm", "a?b"],
+        ["vehicle_sim.cli", "--scenario", CUBE8, "--no-zenoh", "--zenoh-config", "/nonexistent"],
+        ["offboard.cli", "--scenario", CUBE8, "--agent", "1", "--zenoh-config", "/nonexistent"],
+    ],
+)
+def test_sim_and_daemon_bad_swarm_or_zenoh_config_exit_2(argv):
+    r = subprocess.run([sys.executable, "-m", *argv], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60)  # fmt: skip
+    _one_line_exit_2(r, argv[-2])
+
+
+@pytest.mark.parametrize(
+    ("argv", "expect"),
+    [
+        (["--no-signing", "--signing-key", "k"], "--no-signing"),
+        (["--no-signing", "--unsigned-gcs-link"], "--unsigned-gcs-link"),
+        (["--signing-key", "/nonexistent/key"], "key file"),
+    ],
+)
+def test_bad_signing_flags_exit_2(argv, expect):
+    _one_line_exit_2(_gcs("mission", "run", CUBE8, "--duration", "0.1", *argv), expect)
+
+
+def test_world_readable_signing_key_exits_2(tmp_path):
+    key = tmp_path / "swarm.key"
+    key.write_text("ab" * 32 + "\n")
+    key.chmod(0o644)
+    _one_line_exit_2(_gcs("mission", "run", CUBE8, "--duration", "0.1", "--signing-key",
+                          str(key)), "chmod 600")
