@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
+from offboard.mavlink_link import Odometry
 from offboard.wire_convert import (
     estimate_from_wire,
     estimate_to_wire,
     measured_state,
     status_to_wire,
 )
-from offboard.mavlink_link import Odometry
 from swarm_common import wire
 from swarm_common.enums import Method, QPStatus
 
