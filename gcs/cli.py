@@ -366,6 +366,9 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.log_level)
     if args.command == "mission":
         signal.signal(signal.SIGTERM, _terminated)
+        # Ctrl-C must stop a run even when the shell that started us ignored SIGINT (a
+        # background job of a non-interactive shell inherits SIG_IGN)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
