@@ -19,10 +19,12 @@ from pathlib import Path
 import numpy as np
 from conftest import CUBE8, MavClient, free_port_offset
 
+from gcs.launch_spec import SigningChoice
 from gcs.mission import recorded_metrics, run_distributed
 from swarm_common import px4
 from swarm_common.ports import GCS_PORT
 from swarm_common.scenario import load_scenario
+from swarm_common.signing import generate_key, load_key, setup_signing
 
 LANDER = 3  # top layer, vertex (0, 0, 1); follower 4 is below it
 CMD_AT_S = 9.0  # mission time of the third party's command (cube8 forms by ~7 s)
@@ -35,9 +37,12 @@ class ThirdParty(threading.Thread):
     """A ground-station-like client: listens on the GCS port, and once vehicle LANDER's
     telemetry says mission time >= CMD_AT_S, sends it DO_SET_MODE AUTO.LAND until acked."""
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, key: bytes) -> None:
         super().__init__(daemon=True)
         self.client = MavClient(port, sysid=THIRD_PARTY_SYSID)
+        # the swarm is signed (the default): the third party is another ground station of
+        # the same operator, holding the swarm key (link id 7: its own stream)
+        setup_signing(self.client.mav, key, 7)
         self.stop = threading.Event()
         self.sent_at_ms: int | None = None
         self.result: int | None = None
@@ -72,11 +77,14 @@ class ThirdParty(threading.Thread):
 def test_third_party_auto_land_of_a_top_follower(tmp_path: Path) -> None:
     sc = load_scenario(CUBE8)
     off = free_port_offset()
-    third = ThirdParty(GCS_PORT + off)
+    key_path = tmp_path / "keys" / "swarm.key"
+    generate_key(key_path)
+    third = ThirdParty(GCS_PORT + off, load_key(key_path))
     third.start()
     try:
         rec, facts = run_distributed(
             sc, tmp_path, "dcbf", None, DURATION_S, port_offset=off, show_progress=False,
+            signing=SigningChoice(key=key_path),
         )
     finally:
         third.stop.set()
