@@ -32,6 +32,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from gcs.launch_spec import add_signing_flags
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
@@ -280,19 +281,6 @@ def _add_allow_infeasible(p: argparse.ArgumentParser) -> None:
     p.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                    help="run a scenario that fails the feasibility check (docs/scenarios.md), "
                    "with a warning")
-
-
-def add_signing_flags(g: Any) -> None:
-    """``--signing-key``, ``--no-signing``, ``--unsigned-gcs-link`` (docs/security.md,
-    "Defaults"): a launched swarm's MAVLink links are signed unless ``--no-signing``."""
-    g.add_argument("--signing-key", default=None, metavar="PATH",
-                   help="MAVLink 2 signing key file (gcs keys generate; default: a fresh "
-                   "per-run key)")
-    g.add_argument("--no-signing", action="store_true",
-                   help="no MAVLink signing (debugging, or unsigned third-party clients)")
-    g.add_argument("--unsigned-gcs-link", action="store_true",
-                   help="let unsigned clients (MAVSDK, QGC) request telemetry on the GCS port; "
-                   "they can never arm, fly or switch modes")
 
 
 def add_mission_parser(sub: argparse._SubParsersAction) -> None:

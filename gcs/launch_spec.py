@@ -267,3 +267,17 @@ class LaunchSpec:
 
 
 MAX_PORT_OFFSET = _max_port_offset()
+
+
+def add_signing_flags(g: Any, launch_note: str = "") -> None:
+    """``--signing-key``, ``--no-signing``, ``--unsigned-gcs-link`` (docs/security.md,
+    "Defaults"): a launched swarm's MAVLink links are signed unless ``--no-signing``.
+    ``launch_note`` prefixes the help of the two launch-only flags (e.g. "with --launch: ")."""
+    g.add_argument("--signing-key", default=None, metavar="PATH",
+                   help="MAVLink 2 signing key file (gcs keys generate): sign commands, accept "
+                   "only signed frames (launched swarm: default a fresh per-run key)")
+    g.add_argument("--no-signing", action="store_true",
+                   help=f"{launch_note}no MAVLink signing (debugging, or unsigned clients)")
+    g.add_argument("--unsigned-gcs-link", action="store_true",
+                   help=f"{launch_note}let unsigned clients (MAVSDK, QGC) request telemetry on "
+                   "the GCS port; they can never arm, fly or switch modes")

@@ -226,3 +226,13 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         layer = Path(str(item.fspath)).relative_to(ROOT / "tests").parts[0]
         if layer in ("unit", "integration"):
             item.add_marker(getattr(pytest.mark, layer))
+
+
+async def settle(app, pilot, pred, tries: int = 100) -> bool:
+    """Let a headless Textual app run its workers until ``pred()`` holds (or give up)."""
+    for _ in range(tries):
+        await app.workers.wait_for_complete()
+        await pilot.pause()
+        if pred():
+            return True
+    return False

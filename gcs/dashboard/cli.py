@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from gcs.launch_spec import add_signing_flags
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
@@ -53,14 +54,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--no-zenoh", action="store_true", help="MAVLink only")
     p.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
                    help="attached: Zenoh config with the gcs credentials (gcs router --secure-dir)")
-    p.add_argument("--signing-key", default=None, metavar="PATH",
-                   help="MAVLink 2 signing key file: sign commands, accept only signed frames "
-                   "(with --launch: default a fresh per-run key)")
-    p.add_argument("--no-signing", action="store_true",
-                   help="with --launch: no MAVLink signing (debugging, unsigned clients)")
-    p.add_argument("--unsigned-gcs-link", action="store_true",
-                   help="with --launch: unsigned clients (MAVSDK, QGC) may request telemetry on "
-                   "the GCS port, never arm, fly or switch modes")
+    add_signing_flags(p, "with --launch: ")
     p.add_argument(
         "--launch",
         metavar="SCENARIO",

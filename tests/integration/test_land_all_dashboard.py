@@ -4,7 +4,7 @@ command at the swarm's mission time + LAND_LEAD_S; otherwise AUTO.LAND per vehic
 from __future__ import annotations
 
 import pytest
-from conftest import free_tcp_port, wait_for  # noqa: E402
+from conftest import free_tcp_port, settle, wait_for  # noqa: E402
 
 from gcs.dashboard.app import LAND_LEAD_S, DashboardApp
 from gcs.dashboard.commands import LiveCommander
@@ -37,15 +37,6 @@ class Commander:
 
     def mission_time(self) -> float | None:
         return self.t
-
-
-async def settle(app, pilot, pred, tries: int = 100) -> bool:
-    for _ in range(tries):
-        await app.workers.wait_for_complete()
-        await pilot.pause()
-        if pred():
-            return True
-    return False
 
 
 @pytest.mark.asyncio

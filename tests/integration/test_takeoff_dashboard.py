@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 import pytest
-from conftest import ROOT, free_port_offset
+from conftest import ROOT, free_port_offset, settle
 
 from gcs.dashboard.app import TAKEOFF_LEAD_S, DashboardApp
 from gcs.dashboard.cli import build, configure_parser
@@ -54,15 +54,6 @@ class Commander:
 
 def log_text(app: DashboardApp) -> str:
     return "\n".join(app.query_one(EventLog).lines_text)
-
-
-async def settle(app, pilot, pred, tries: int = 100) -> bool:
-    for _ in range(tries):
-        await app.workers.wait_for_complete()
-        await pilot.pause()
-        if pred():
-            return True
-    return False
 
 
 @pytest.mark.asyncio
