@@ -37,7 +37,8 @@ V_H = 1.5  # m/s, peak horizontal transit speed
 V_D = 0.6  # m/s, descent speed
 T_H_MIN = 2.0  # s, shortest horizontal transit
 PAD_MARGIN = 0.25  # m, added to 2·D_safe between pads
-LANDED_Z = 0.08  # m, an agent below this after its reference ended is landed
+LANDED_Z = 0.08  # m, an agent below this after its reference ended is landed ...
+LANDED_SETTLE_S = 1.0  # s, ... once the reference has been at rest on the pad this long
 MINJERK_PEAK = 1.875  # peak speed of the min-jerk profile per (distance / duration)
 
 
@@ -198,6 +199,9 @@ def _poly(c: np.ndarray, s: float) -> tuple[float, float, float, float]:
 
 
 def landed(ref: LandingReference | None, t: float, z: float) -> bool:
-    """True once ``ref`` ended and the agent's altitude z (m) is below LANDED_Z."""
-    return ref is not None and ref.ended(t) and z < LANDED_Z
+    """True once ``ref`` has ended LANDED_SETTLE_S ago and the agent's altitude z (m) is
+    below LANDED_Z: the agent first settles on the pad under its controller (the reference
+    ends at rest at z = 0), then idles; idling at the end of the reference dropped a
+    vehicle still a few cm up onto the ground at up to 0.9 m/s."""
+    return ref is not None and ref.ended(t - LANDED_SETTLE_S) and z < LANDED_Z
 
