@@ -116,14 +116,24 @@ def sim_factory():
     procs: list[SimProcess] = []
 
     def start(extra: list[str] | None = None, offset: int | None = None, ready=True, **kw):
-        off = free_port_offset() if offset is None else offset
-        args = ["--scenario", kw.get("scenario", CUBE8), "--port-offset", str(off)]
-        args += extra or []
-        sp = SimProcess(args, off)
-        procs.append(sp)
-        if ready:
-            sp.wait_ready()
-        return sp
+        # a free offset can be taken by another suite between the check and the bind: with
+        # a chosen-here offset, a bind failure retries on a fresh one
+        for attempt in range(3):
+            off = free_port_offset() if offset is None else offset
+            args = ["--scenario", kw.get("scenario", CUBE8), "--port-offset", str(off)]
+            args += extra or []
+            sp = SimProcess(args, off)
+            procs.append(sp)
+            if not ready:
+                return sp
+            try:
+                sp.wait_ready()
+                return sp
+            except RuntimeError as exc:
+                if offset is not None or "already in use" not in str(exc) or attempt == 2:
+                    raise
+                sp.stop()
+        raise AssertionError("unreachable")
 
     yield start
     for sp in procs:
