@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import pytest
 from conftest import free_tcp_port, settle, wait_for  # noqa: E402
+from dashboard_fakes import FakeCommander
 
 from gcs.dashboard.app import LAND_LEAD_S, DashboardApp
 from gcs.dashboard.commands import LiveCommander
-from gcs.dashboard.mavlink_gcs import CommandResult
-from gcs.dashboard.px4modes import COMMANDS
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.zenoh_feed import ZenohFeed
 from offboard.zenoh_link import SwarmBus
@@ -17,31 +16,9 @@ from swarm_common.wire import Command
 from swarm_common.zenoh_session import open_session
 
 
-class Commander:
-    def __init__(self, up: bool, t: float | None = 12.5) -> None:
-        self.up, self.t = up, t
-        self.mav_calls: list[tuple[int, str]] = []
-        self.zenoh_calls: list[Command] = []
-
-    async def mav(self, sysid: int, key: str) -> CommandResult:
-        self.mav_calls.append((sysid, key))
-        spec = COMMANDS[key]
-        return CommandResult(sysid, spec.command, spec.label, 0, 1, 0.01)
-
-    def zenoh(self, cmd: Command) -> str:
-        self.zenoh_calls.append(cmd)
-        return f"swarm/test/cmd/{cmd.kind}"
-
-    def zenoh_up(self) -> bool:
-        return self.up
-
-    def mission_time(self) -> float | None:
-        return self.t
-
-
 @pytest.mark.asyncio
 async def test_land_all_goes_out_as_one_zenoh_command() -> None:
-    cmd = Commander(up=True)
+    cmd = FakeCommander(up=True, t=12.5)
     app = DashboardApp(recorded_source(), cmd)
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("t", "l")
@@ -54,13 +31,13 @@ async def test_land_all_goes_out_as_one_zenoh_command() -> None:
 
 @pytest.mark.asyncio
 async def test_single_vehicle_or_no_zenoh_uses_auto_land() -> None:
-    cmd = Commander(up=True)
+    cmd = FakeCommander(up=True, t=12.5)
     app = DashboardApp(recorded_source(), cmd)
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("down", "down", "l")  # vehicle 3 only
         assert await settle(app, pilot, lambda: bool(cmd.mav_calls))
         assert cmd.mav_calls == [(3, "land")] and cmd.zenoh_calls == []
-    down = Commander(up=False)
+    down = FakeCommander(up=False, t=12.5)
     app = DashboardApp(recorded_source(), down)
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("t", "l")

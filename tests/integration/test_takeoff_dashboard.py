@@ -14,42 +14,17 @@ import time
 import numpy as np
 import pytest
 from conftest import ROOT, free_port_offset, settle
+from dashboard_fakes import FakeCommander
 
 from gcs.dashboard.app import TAKEOFF_LEAD_S, DashboardApp
 from gcs.dashboard.cli import build, configure_parser
-from gcs.dashboard.mavlink_gcs import CommandResult
-from gcs.dashboard.px4modes import COMMANDS
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
 from offboard.takeoff import takeoff_plan
 from swarm_common.scenario import load_scenario
-from swarm_common.wire import Command
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 EARLY_S = 2.5  # s after t0: the plan's climbs are at 1 m/s·(2.5 − 0.5) s = 2 m
-
-
-class Commander:
-    def __init__(self, up: bool = True, t: float | None = 4.0, refuse: int = 0) -> None:
-        self.up, self.t, self.refuse = up, t, refuse
-        self.mav_calls: list[tuple[int, str]] = []
-        self.zenoh_calls: list[Command] = []
-
-    async def mav(self, sysid: int, key: str) -> CommandResult:
-        self.mav_calls.append((sysid, key))
-        spec = COMMANDS[key]
-        result = 4 if sysid == self.refuse and key == "arm" else 0  # 4: MAV_RESULT_FAILED
-        return CommandResult(sysid, spec.command, spec.label, result, 1, 0.01)
-
-    def zenoh(self, cmd: Command) -> str:
-        self.zenoh_calls.append(cmd)
-        return f"swarm/test/cmd/{cmd.kind}"
-
-    def zenoh_up(self) -> bool:
-        return self.up
-
-    def mission_time(self) -> float | None:
-        return self.t
 
 
 def log_text(app: DashboardApp) -> str:
@@ -58,7 +33,7 @@ def log_text(app: DashboardApp) -> str:
 
 @pytest.mark.asyncio
 async def test_takeoff_key_offboard_arm_then_one_zenoh_command() -> None:
-    cmd = Commander()
+    cmd = FakeCommander()
     app = DashboardApp(recorded_source(), cmd)
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("t", "u")
@@ -75,13 +50,13 @@ async def test_takeoff_key_offboard_arm_then_one_zenoh_command() -> None:
 
 @pytest.mark.asyncio
 async def test_takeoff_key_refused_or_not_all() -> None:
-    cmd = Commander(refuse=3)  # vehicle 3 refuses to arm: no take-off command
+    cmd = FakeCommander(refuse=3)  # vehicle 3 refuses to arm: no take-off command
     app = DashboardApp(recorded_source(), cmd)
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("t", "u")
         assert await settle(app, pilot, lambda: "take-off not sent" in log_text(app))
         assert "arm refused by #3" in log_text(app) and cmd.zenoh_calls == []
-    for commander, keys in ((Commander(), ("u",)), (Commander(up=False), ("t", "u"))):
+    for commander, keys in ((FakeCommander(), ("u",)), (FakeCommander(up=False), ("t", "u"))):
         one = DashboardApp(recorded_source(), commander)
         async with one.run_test(size=(80, 24)) as pilot:
             await pilot.press(*keys)  # one vehicle, or all without Zenoh: refused, nothing sent
