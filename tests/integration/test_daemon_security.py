@@ -70,6 +70,22 @@ class Attack(threading.Thread):
             self.error = exc
 
 
+def _run_under_attack(tmp: Path, sc: Scenario, log: Path, action: Callable[[], None],
+                      dur: float, off: int, realtime: bool) -> tuple[Any, dict]:
+    """A distributed rcbf run with ``action`` launched once ``log`` says the daemon armed;
+    asserts the attack ran to its end without error."""
+    attacker = Attack(log, action)
+    attacker.start()
+    try:
+        rec, facts = run_distributed(sc, tmp, "rcbf", None, dur, realtime=realtime,
+                                     port_offset=off, show_progress=False, secure=False)
+    finally:
+        attacker.halt.set()
+        attacker.join(10)
+    assert attacker.error is None and attacker.done
+    return rec, facts
+
+
 MODE_LINE = re.compile(r"vehicle (\d+): mode (\S+) -> (\S+)")
 
 
@@ -137,13 +153,8 @@ def test_forged_odometry_and_sender_flood_change_nothing(tmp_path: Path) -> None
                 pass
             s.close()
 
-    attacker = Attack(tmp_path / "offboard-5.log", attack)
-    attacker.start()
-    rec, facts = run_distributed(sc, tmp_path, "rcbf", None, dur, port_offset=off,
-                                 show_progress=False, secure=False)
-    attacker.halt.set()
-    attacker.join(10)
-    assert attacker.error is None and attacker.done
+    rec, facts = _run_under_attack(tmp_path, sc, tmp_path / "offboard-5.log", attack, dur, off,
+                                   realtime=False)
     assert got_back == []  # not one datagram to a stranger
     _safe_and_normal(tmp_path, sc, rec, facts, dur)
     log3 = (tmp_path / "offboard-3.log").read_text()
@@ -183,13 +194,8 @@ def test_fake_truth_and_estimates_over_zenoh_are_ignored(tmp_path: Path) -> None
         finally:
             sess.close()
 
-    attacker = Attack(tmp_path / "offboard-1.log", attack)
-    attacker.start()
-    rec, facts = run_distributed(sc, tmp_path, "rcbf", None, dur, realtime=True,
-                                 port_offset=off, show_progress=False, secure=False)
-    attacker.halt.set()
-    attacker.join(10)
-    assert attacker.error is None and attacker.done
+    rec, facts = _run_under_attack(tmp_path, sc, tmp_path / "offboard-1.log", attack, dur, off,
+                                   realtime=True)
     _safe_and_normal(tmp_path, sc, rec, facts, dur)
     for aid in sc.ids:
         text = (tmp_path / f"offboard-{aid}.log").read_text()
@@ -229,13 +235,8 @@ def test_stopped_daemon_gets_its_vehicle_back_into_offboard(tmp_path: Path) -> N
         finally:
             os.kill(pid, signal.SIGCONT)
 
-    attacker = Attack(tmp_path / f"offboard-{victim}.log", attack)
-    attacker.start()
-    rec, facts = run_distributed(sc, tmp_path, "rcbf", None, dur, realtime=True,
-                                 port_offset=off, show_progress=False, secure=False)
-    attacker.halt.set()
-    attacker.join(10)
-    assert attacker.error is None and attacker.done
+    log = tmp_path / f"offboard-{victim}.log"
+    rec, facts = _run_under_attack(tmp_path, sc, log, attack, dur, off, realtime=True)
     assert "HOLD" in _modes(tmp_path)[victim]  # the failsafe did trip
     _safe_and_normal(tmp_path, sc, rec, facts, dur)  # ... and it is back in OFFBOARD
     text = (tmp_path / f"offboard-{victim}.log").read_text()
