@@ -34,6 +34,9 @@ from swarm_common.enums import FailsafeAction, VehicleMode
 from vehicle_sim import commands, telemetry
 from vehicle_sim.commands import Command
 from vehicle_sim.failsafe_controller import FailsafeController
+from vehicle_sim.param_defaults import default_param_specs
+from vehicle_sim.params import ParamStore
+from vehicle_sim.services import attach_services
 from vehicle_sim.streams import PeerKey, PeerStreams
 from vehicle_sim.telemetry import TM_ATT_IGNORE, TM_RATES_IGNORE, TM_THRUST_IGNORE
 
@@ -135,6 +138,10 @@ class Vehicle:
             M.MAVLINK_MSG_ID_SET_MODE: self._on_set_mode,
             M.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
         }
+        self.params = ParamStore(default_param_specs(self.id, self.cfg, dyn))
+        self.services = attach_services(self)
+        for svc in self.services:
+            self._handlers.update(svc.handlers())
 
     # ==================================================================================
     # state helpers
@@ -353,6 +360,8 @@ class Vehicle:
     # per control step
     def update(self, sim_t: float) -> None:
         """Offboard-loss failsafe and auto-disarm after landing (call once per step)."""
+        for svc in self.services:
+            svc.update(sim_t)
         if (
             self.mode == VehicleMode.OFFBOARD
             and not self.failsafe
