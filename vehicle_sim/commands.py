@@ -147,7 +147,7 @@ HANDLERS: dict[int, Callable[[Vehicle, Command], Outcome]] = {
 
 def execute(v: Vehicle, c: Command) -> Outcome:
     """Run one command; UNSUPPORTED for a command the vehicle does not implement."""
-    handler = HANDLERS.get(c.cmd)
+    handler = v.command_handlers.get(c.cmd) or HANDLERS.get(c.cmd)
     if handler is None:
         return M.MAV_RESULT_UNSUPPORTED, None
     return handler(v, c)

@@ -2,14 +2,23 @@
 
 Each service (:class:`vehicle_sim.nav.VehicleService`) owns one MAVLink microservice:
 parameters, missions (mission, fence, rally), and information requests. The vehicle
-merges their message handlers into its own and calls their ``update`` each step.
+merges their message handlers and command handlers into its own and calls their
+``update`` once per step.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from vehicle_sim.info_service import InfoService
+from vehicle_sim.mission_service import MissionService
+from vehicle_sim.param_service import ParamService
+
 
 def attach_services(vehicle: Any) -> list[Any]:
-    """Create every service for ``vehicle`` (the vehicle merges their handlers)."""
-    return []
+    """Create every service for ``vehicle`` and name them on it: ``vehicle.param_service``,
+    ``vehicle.mission``, ``vehicle.info``; returns them in update order."""
+    vehicle.param_service = ParamService(vehicle)
+    vehicle.mission = MissionService(vehicle)
+    vehicle.info = InfoService(vehicle)
+    return [vehicle.param_service, vehicle.mission, vehicle.info]

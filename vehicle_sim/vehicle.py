@@ -140,8 +140,10 @@ class Vehicle:
         }
         self.params = ParamStore(default_param_specs(self.id, self.cfg, dyn))
         self.services = attach_services(self)
+        self.command_handlers: dict[int, Any] = {}
         for svc in self.services:
             self._handlers.update(svc.handlers())
+            self.command_handlers.update(svc.command_handlers())
 
     # ==================================================================================
     # state helpers

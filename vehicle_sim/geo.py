@@ -1,0 +1,37 @@
+"""Geodetic <-> local conversion around the simulator's geodetic origin (flat earth).
+
+The world origin (ENU 0, 0, 0) is at ``(home_lat, home_lon, home_alt)`` of the
+:class:`~vehicle_sim.vehicle.VehicleConfig` for every vehicle, so all vehicles share one
+map. Local offsets here are NED (north, east, down, metres), the MAVLink side; turn them
+into our ENU maths frame with :func:`swarm_common.frames.ned_to_enu`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+EARTH_R = 6378137.0  # m, WGS-84 equatorial radius
+
+
+def latlon_e7(cfg: Any, ned: np.ndarray) -> tuple[int, int]:
+    """(lat, lon) in degE7 of a NED offset (m) from the geodetic origin."""
+    lat = cfg.home_lat + math.degrees(float(ned[0]) / EARTH_R)
+    lon = cfg.home_lon + math.degrees(
+        float(ned[1]) / (EARTH_R * math.cos(math.radians(cfg.home_lat)))
+    )
+    return int(round(lat * 1e7)), int(round(lon * 1e7))
+
+
+def ned_from_latlon(cfg: Any, lat_deg: float, lon_deg: float) -> tuple[float, float]:
+    """(north, east) in metres of a latitude/longitude (degrees) from the origin."""
+    north = math.radians(lat_deg - cfg.home_lat) * EARTH_R
+    east = math.radians(lon_deg - cfg.home_lon) * EARTH_R * math.cos(math.radians(cfg.home_lat))
+    return north, east
+
+
+def down_from_amsl(cfg: Any, alt_amsl_m: float) -> float:
+    """NED down (m) of an altitude above mean sea level (the ground is at ``home_alt``)."""
+    return float(cfg.home_alt - alt_amsl_m)
