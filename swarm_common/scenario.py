@@ -13,19 +13,34 @@ Vectors are in the paper's world frame (ENU-style, z up); see docs/conventions.m
 from __future__ import annotations
 
 import logging
-import os
-import re
-import stat
 import tomllib
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from swarm_common import graphs
-from swarm_common.enums import GraphKind, Role, StartMode
-from swarm_common.feasibility import feasibility_problem
+from swarm_common import faults
+from swarm_common.enums import Role, StartMode
+from swarm_common.faults import FaultError, FaultPlan
+from swarm_common.scenario_checks import (
+    check_feasible,
+    check_pads,
+    check_separation,
+    graph_problem,
+)
+from swarm_common.scenario_io import (
+    ALLOW_INFEASIBLE_FLAG,
+    MAX_SCENARIO_BYTES,
+    MAX_TOML_NESTING,
+    SWARM_NAME_RE,
+    SWARM_NAME_RULE,
+    InfeasibleScenarioError,
+    ScenarioError,
+    dump_toml,
+    read_scenario_text,
+    swarm_name_problem,
+)
 from swarm_common.scenario_schema import (
     AGENT_SCHEMA,
     OPTIONAL_SECTIONS,
@@ -49,7 +64,17 @@ from swarm_common.scenario_schema import (
 )
 
 __all__ = [
+    "ALLOW_INFEASIBLE_FLAG",
+    "MAX_SCENARIO_BYTES",
+    "MAX_TOML_NESTING",
     "SCHEMA",
+    "SWARM_NAME_RULE",
+    "FaultPlan",
+    "check_feasible",
+    "dump_toml",
+    "graph_problem",
+    "read_scenario_text",
+    "swarm_name_problem",
     "AgentSpec",
     "CommunicationConfig",
     "ControllerConfig",
@@ -72,18 +97,6 @@ __all__ = [
 
 
 log = logging.getLogger(__name__)
-
-ALLOW_INFEASIBLE_FLAG = "--allow-infeasible"
-
-
-class ScenarioError(ValueError):
-    """A scenario file is missing, unreadable or invalid. ``str()`` is one line."""
-
-
-class InfeasibleScenarioError(ScenarioError):
-    """A valid scenario that the vehicles cannot fly (:mod:`swarm_common.feasibility`);
-    ``--allow-infeasible`` turns it into a warning."""
-
 
 # ---------------------------------------------------------------------------
 # Typed view
@@ -120,6 +133,8 @@ class Scenario:
     controller: ControllerConfig
     agents: tuple[AgentSpec, ...]
     lifecycle: LifecycleConfig = LifecycleConfig()
+    # [faults] (optional, docs/faults.md): injected transport faults, none by default
+    faults: FaultPlan = field(default_factory=FaultPlan)
     # loaded with the feasibility check waived (--allow-infeasible); children inherit it
     allow_infeasible: bool = False
 
@@ -143,6 +158,8 @@ class Scenario:
             }
             for a in self.agents
         ]
+        if self.faults.active:
+            data["faults"] = self.faults.as_toml()
         return data
 
     # Convenience accessors used everywhere --------------------------------
@@ -225,10 +242,9 @@ def parse_scenario(
         return ScenarioError(f"{path}: {msg}")
 
     for section in data:
-        if section != "agent" and section not in SCHEMA:
-            raise fail(
-                f"unknown section [{section}]; allowed: {', '.join(sorted([*SCHEMA, 'agent']))}"
-            )
+        if section not in ("agent", "faults") and section not in SCHEMA:
+            allowed = ", ".join(sorted([*SCHEMA, "agent", "faults"]))
+            raise fail(f"unknown section [{section}]; allowed: {allowed}")
     raw: dict[str, dict[str, Any]] = {}
     for section, keys in SCHEMA.items():
         given = data.get(section)
@@ -320,16 +336,18 @@ def parse_scenario(
                 raise fail(
                     f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
                 )
-    _check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
+    check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
     if raw["lifecycle"]["start"] == StartMode.GROUND:
-        _check_pads(agents, float(raw["controller"]["d_safe_m"]), fail)
+        check_pads(agents, float(raw["controller"]["d_safe_m"]), fail)
+    plan = _parse_faults(data.get("faults", {}), seen, fail)
     typed = {
         ("run" if name == "scenario" else name): cls(
             **{f.name: typed_value(f, raw[name][f.name]) for f in fields(cls)}
         )
         for name, cls in SECTIONS.items()
     }
-    scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible, **typed)
+    scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible,
+                    faults=plan, **typed)
     problem = graph_problem(scen)
     if problem is not None:
         raise fail(problem)
@@ -337,180 +355,24 @@ def parse_scenario(
     return scen
 
 
-def check_feasible(sc: Scenario) -> None:
-    """Raise :class:`InfeasibleScenarioError` (one line: file, key, numbers) if the vehicles
-    cannot fly ``sc`` (:func:`swarm_common.feasibility.feasibility_problem`); with
-    ``sc.allow_infeasible`` log it as a warning instead (docs/scenarios.md)."""
-    problem = feasibility_problem(sc)
-    if problem is None:
-        return
-    if sc.allow_infeasible:
-        log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)
-        return
-    raise InfeasibleScenarioError(
-        f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway"
-    )
-
-
-def graph_problem(sc: Scenario) -> str | None:
-    """One line naming the ``[formation]`` key if the neighbour graph is unusable, else None
-    (docs/graphs.md): ``formation.edges`` listing an unknown id, a self-loop or a pair twice,
-    or given with another graph kind; ``knn_k`` ≥ N; an edge longer than
-    ``sensing_range_m`` in the desired formation (never sensed there); leaders that do not
-    fix every follower or a graph that is not bearing rigid (:func:`graphs.rigidity_problem`)."""
-    fm = sc.formation
-    if fm.edges and fm.graph is not GraphKind.EDGES:
-        return f'formation.edges: only read with formation.graph = "edges" (not "{fm.graph}")'
-    if fm.graph is GraphKind.EDGES and not fm.edges:
-        return 'formation.edges = []: formation.graph = "edges" needs at least one pair'
-    if fm.graph is GraphKind.KNN and fm.knn_k >= sc.n:
-        return f"formation.knn_k = {fm.knn_k}: must be below the number of agents ({sc.n})"
-    lead = [sc.index_of(i) for i in sc.leader_ids]
-    v = sc.vertices()
-    spec = graphs.graph_spec(fm, sc.initial_positions(), v, lead)
+def _parse_faults(table: object, ids: set[int], fail: Any) -> FaultPlan:
+    """The ``[faults]`` table (:class:`swarm_common.faults.FaultPlan`), per-agent tables
+    naming agents of this scenario only."""
     try:
-        edges = graphs.build_edges(v, spec, sc.ids)
-    except ValueError as exc:
-        return str(exc)
-    far = graphs.long_edges(v, edges, spec.range_vu)
-    if far:
-        i, j, d = far[0]
-        return (
-            f"formation.sensing_range_m = {fm.sensing_range_m:g}: {spec.describe()} links ids "
-            f"{sc.ids[i]} and {sc.ids[j]}, {d * spec.scale:.2f} m apart in the desired "
-            f"formation, never sensed there ({len(far)} edge(s) in all)"
-        )
-    problem = graphs.rigidity_problem(v, edges, sc.ids, lead)
-    return None if problem is None else f"{spec.describe()}: {problem}"
-
-
-def _check_separation(
-    agents: list[AgentSpec], leaders: list[int], d_safe: float, fail: Any
-) -> None:
-    """Refuse a scenario that is unsafe before it starts: two agents starting closer than
-    ``controller.d_safe_m``, or a formation whose vertices, scaled by the leaders'
-    separation (Departure 1), put two agents closer than that."""
-    p = np.array([a.position for a in agents])
-    v = np.array([a.vertex for a in agents])
-    k1, k2 = (next(k for k, a in enumerate(agents) if a.id == lid) for lid in leaders[:2])
-    scale = float(np.linalg.norm(p[k1] - p[k2]) / np.linalg.norm(v[k1] - v[k2]))
-    for i in range(len(agents)):
-        for j in range(i + 1, len(agents)):
-            d0 = float(np.linalg.norm(p[i] - p[j]))
-            if d0 < d_safe:
-                raise fail(
-                    f"agent[{j}].position = {p[j].tolist()}: starts {d0:.3f} m from agent id "
-                    f"{agents[i].id}, closer than controller.d_safe_m = {d_safe:g}"
-                )
-            dv = scale * float(np.linalg.norm(v[i] - v[j]))
-            if dv < d_safe:
-                raise fail(
-                    f"agent[{j}].vertex = {v[j].tolist()}: {dv:.3f} m from agent id "
-                    f"{agents[i].id}'s vertex at the leaders' scale, closer than "
-                    f"controller.d_safe_m = {d_safe:g}"
-                )
-
-
-def _check_pads(agents: list[AgentSpec], d_safe: float, fail: Any) -> None:
-    """lifecycle.start = "ground": every ``position`` is a pad on the ground (z = 0) and the
-    pads are at least 2·``controller.d_safe_m`` apart (the climb columns, offboard.takeoff)."""
-    for k, a in enumerate(agents):
-        if abs(float(a.position[2])) > 1e-9:
-            raise fail(
-                f"agent[{k}].position = {a.position.tolist()}: with lifecycle.start = 'ground' "
-                f"the position is a pad and its z must be 0"
-            )
-    for i in range(len(agents)):
-        for j in range(i + 1, len(agents)):
-            d = float(np.linalg.norm(agents[i].position[:2] - agents[j].position[:2]))
-            if d < 2.0 * d_safe - 1e-9:
-                raise fail(
-                    f"agent[{j}].position = {agents[j].position.tolist()}: pad {d:.3f} m from "
-                    f"agent id {agents[i].id}'s, closer than 2 * controller.d_safe_m = "
-                    f"{2.0 * d_safe:g} (lifecycle.start = 'ground')"
-                )
-
-
-# The scenario name is the swarm name in every Zenoh key (``swarm/<name>/...``) and part of
-# the default run directory: no wildcard (``*``, ``$*``), separator (``/``), ``..``, ``?``
-# or ``#`` may reach a key expression or a path.
-SWARM_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
-SWARM_NAME_RULE = "1-64 characters of A-Z a-z 0-9 _ -, starting with a letter or digit"
-MAX_SCENARIO_BYTES = 1 << 20  # 1 MiB: the shipped scenarios are a few kB
-MAX_TOML_NESTING = 32  # arrays/tables deeper than this are refused before tomllib sees them
-
-
-def swarm_name_problem(name: object) -> str | None:
-    """None if ``name`` is a valid swarm/scenario name, else what is wrong (one phrase)."""
-    if not isinstance(name, str) or not SWARM_NAME_RE.fullmatch(name):
-        return f"must be {SWARM_NAME_RULE}"
-    return None
-
-
-def _nesting_problem(text: str) -> str | None:
-    """Bracket depth outside strings and comments, counted before parsing: ``tomllib`` is
-    recursive and a file nested thousands deep would raise ``RecursionError``."""
-    depth = 0
-    quote = ""
-    i, n = 0, len(text)
-    while i < n:
-        c = text[i]
-        if quote:
-            if c == "\\" and quote in ('"', '"""'):
-                i += 2
-                continue
-            if text.startswith(quote, i):
-                i += len(quote)
-                quote = ""
-                continue
-        elif c == "#":
-            j = text.find("\n", i)
-            i = n if j < 0 else j
-            continue
-        elif c in "\"'":
-            quote = c * 3 if text.startswith(c * 3, i) else c
-            i += len(quote)
-            continue
-        elif c in "[{":
-            depth += 1
-            if depth > MAX_TOML_NESTING:
-                return f"arrays or tables nested deeper than {MAX_TOML_NESTING}"
-        elif c in "]}":
-            depth = max(0, depth - 1)
-        i += 1
-    return None
-
-
-def read_scenario_text(p: Path) -> str:
-    """The file's text: a regular file (not a FIFO, device or directory) of at most
-    :data:`MAX_SCENARIO_BYTES`, UTF-8, nested at most :data:`MAX_TOML_NESTING` deep."""
-    try:
-        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise ScenarioError(f"{p}: cannot read scenario file (not a regular file)")
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(MAX_SCENARIO_BYTES + 1)
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
-    finally:
-        os.close(fd)
-    if len(data) > MAX_SCENARIO_BYTES:
-        raise ScenarioError(f"{p}: scenario file larger than {MAX_SCENARIO_BYTES} bytes")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(f"{p}: not UTF-8 (byte {exc.start})") from None
-    problem = _nesting_problem(text)
-    if problem is not None:
-        raise ScenarioError(f"{p}: not a valid scenario ({problem})")
-    return text
+        plan = FaultPlan.parse(table)
+    except FaultError as exc:
+        raise fail(str(exc)) from None
+    for aid in plan.agents:
+        if aid not in ids:
+            raise fail(f"faults.agent.{aid}: {aid} is not an [[agent]] id")
+    return plan
 
 
 def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
-    """Read and validate a scenario TOML file (``allow_infeasible``: :func:`parse_scenario`)."""
+    """Read and validate a scenario TOML file (``allow_infeasible``: :func:`parse_scenario`).
+
+    Its ``[faults]`` plan becomes this process's (:func:`swarm_common.faults.install`): the
+    MAVLink and Zenoh links the process opens afterwards inject those faults."""
     p = Path(path)
     text = read_scenario_text(p)
     try:
@@ -519,4 +381,6 @@ def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
         raise ScenarioError(f"{p}: not valid TOML ({exc})") from None
     except RecursionError:
         raise ScenarioError(f"{p}: not a valid scenario (nested too deep)") from None
-    return parse_scenario(data, str(p), allow_infeasible)
+    sc = parse_scenario(data, str(p), allow_infeasible)
+    faults.install(sc.faults, sc.seed)  # the transports this process opens apply it
+    return sc
