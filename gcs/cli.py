@@ -5,6 +5,8 @@
 ``--inproc``; the seed sweep of ``compare --seeds N`` and ``mission sweep``
 (:mod:`gcs.sweep`) always run in process.
 ``gcs --log-level {debug,info,warning,error} ...`` sets the diagnostics level.
+``mission run --fault-drop P --fault-delay-ms MS ... --fault-link mavlink|zenoh|both``
+injects transport faults in a distributed run (docs/faults.md).
 
 Exit codes (every command):
 
@@ -32,6 +34,7 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from gcs.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.launch_spec import add_signing_flags
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
@@ -57,6 +60,13 @@ def _load(path: str, allow_infeasible: bool) -> Scenario:
 def cmd_mission_run(args: argparse.Namespace) -> int:
     sc = _load(args.scenario, args.allow_infeasible)
     _check_run_args(args, sc, "mission run")
+    try:
+        faulted = write_fault_scenario(args, sc)
+    except ValueError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if faulted is not None:
+        sc = _load(str(faulted), sc.allow_infeasible)
     if not args.inproc:
         from gcs.mission import cli_run
 
@@ -305,6 +315,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
     add_signing_flags(d)
+    add_fault_flags(d)
     _add_allow_infeasible(r)
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")

@@ -17,6 +17,11 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
 * **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
   dropped and counted.
 
+Fault injection (docs/faults.md): with a ``[faults]`` plan for this agent's ``mavlink``
+link, every datagram sent goes through a seeded :class:`swarm_common.faults.FaultInjector`
+(drop, delay, duplicate, reorder; the ``.tlog`` records what the daemon sent, before the
+faults) and received datagrams may be discarded (``drop_in``); without one nothing changes.
+
 Every drop is counted by reason in :attr:`VehicleLink.drops` and logged rate-limited.
 Every accepted and sent message is appended to a ``.tlog`` when one is given (8-byte
 big-endian µs timestamp + the raw packet: pymavlink's tools read it).
@@ -40,7 +45,9 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from offboard.link_guard import CommandRetry, DropLog, StampGuard, odometry_fields_ok  # noqa: E402
+from swarm_common import faults as fault_plan  # noqa: E402
 from swarm_common import px4  # noqa: E402
+from swarm_common.faults import FaultInjector  # noqa: E402
 from swarm_common.signing import setup_signing  # noqa: E402
 
 mavlink = mavutil.mavlink
@@ -95,7 +102,10 @@ class VehicleLink:
         lockstep: bool,
         tlog: str | None = None,
         signing_key: bytes | None = None,
+        faults: FaultInjector | None = None,
     ) -> None:
+        """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
+        process loaded (:func:`swarm_common.faults.injector_for`)."""
         self.agent_id = agent_id
         self.url = url
         self.conn: Any = None
@@ -129,6 +139,7 @@ class VehicleLink:
         self.sent = 0
         self.custom_mode = 0
         self.armed = False
+        self.faults = faults or fault_plan.injector_for(fault_plan.MAVLINK, agent_id, "offboard")
 
     # -- receive ------------------------------------------------------------------------
     def _log(self, buf: bytes) -> None:
@@ -161,6 +172,8 @@ class VehicleLink:
         self.mav.have_prefix_error = False
 
     def _datagram(self, data: bytes, addr: tuple[str, int]) -> None:
+        if self.faults is not None and self.faults.drop_inbound():
+            return
         now = time.monotonic()
         if self.peer is not None and addr != self.peer:
             self.drops.drop("foreign address", f"datagram from {addr[0]}:{addr[1]}", now)
@@ -266,14 +279,21 @@ class VehicleLink:
             self.conn.write(buf)
         elif self.peer is None:
             return  # nothing goes out before the lock
-        else:
-            try:
-                self.sock.sendto(buf, self.peer)
-            except OSError as exc:  # a full buffer or an ICMP error: the datagram is lost
-                self.drops.drop("send failed", str(exc), time.monotonic())
-                return
+        elif self.faults is not None:
+            self.faults.send((buf, self.peer), self._sendto)
+        elif not self._sendto((buf, self.peer)):
+            return
         self.sent += 1
         self._log(buf)
+
+    def _sendto(self, frame: tuple[bytes, tuple[str, int]]) -> bool:
+        assert self.sock is not None
+        try:
+            self.sock.sendto(frame[0], frame[1])
+        except OSError as exc:  # a full buffer or an ICMP error: the datagram is lost
+            self.drops.drop("send failed", str(exc), time.monotonic())
+            return False
+        return True
 
     @property
     def in_offboard(self) -> bool:
@@ -338,6 +358,8 @@ class VehicleLink:
         return int(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
 
     def close(self) -> None:
+        if self.faults is not None:
+            self.faults.close()
         try:
             if self.sock is not None:
                 self.sock.close()

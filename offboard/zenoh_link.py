@@ -14,6 +14,12 @@ daemon's :class:`offboard.link_guard.PayloadGuard` refuses (id not in the scenar
 outside a window around the daemon's own step, time not matching the step, non-finite
 values), is counted by reason in ``drops`` and dropped (docs/security.md). Keys and
 payloads come from :mod:`swarm_common.wire`.
+
+Fault injection (docs/faults.md): with a ``[faults]`` plan for this agent's ``zenoh`` link,
+the estimates and statuses it publishes go through a seeded
+:class:`swarm_common.faults.FaultInjector` (drop, delay, duplicate, reorder) and every
+sample it receives (truth, estimates, commands) may be discarded (``drop_in``); without
+one nothing changes.
 """
 
 from __future__ import annotations
@@ -27,7 +33,9 @@ from typing import Any
 import zenoh
 
 from offboard.link_guard import DropLog, PayloadGuard
+from swarm_common import faults as fault_plan
 from swarm_common import wire
+from swarm_common.faults import FaultInjector
 
 log = logging.getLogger(__name__)
 
@@ -42,9 +50,13 @@ class SwarmBus:
     """Typed publish/subscribe of one agent over an open Zenoh session."""
 
     def __init__(
-        self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None
+        self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None,
+        faults: FaultInjector | None = None,
     ) -> None:
+        """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
+        process loaded (:func:`swarm_common.faults.injector_for`)."""
         self.session = session
+        self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
         self.guard = guard
         self.drops = DropLog(f"agent {agent_id}: Zenoh")
         self.truth_time = 0.0  # monotonic time of the last accepted truth
@@ -143,6 +155,8 @@ class SwarmBus:
                     break
                 if sample is None:
                     break
+                if self.faults is not None and self.faults.drop_inbound():
+                    continue
                 handler(sample)
                 n += 1
         return n
@@ -167,12 +181,27 @@ class SwarmBus:
         return out
 
     def publish_estimate(self, est: wire.Estimate) -> None:
-        self._pub_est.put(wire.encode(est))
+        self._put(self._pub_est, wire.encode(est))
 
     def publish_status(self, status: wire.Status) -> None:
-        self._pub_status.put(wire.encode(status))
+        self._put(self._pub_status, wire.encode(status))
+
+    def _put(self, pub: Any, payload: bytes) -> None:
+        if self.faults is None:
+            pub.put(payload)
+        else:
+            self.faults.send(payload, lambda data: self._late_put(pub, data))
+
+    def _late_put(self, pub: Any, payload: bytes) -> None:
+        """A delayed put from the fault timer: the publisher may be gone by then."""
+        try:
+            pub.put(payload)
+        except ZENOH_ERRORS as exc:
+            log.debug("agent %d: delayed publish lost: %s", self.agent_id, exc)
 
     def close(self) -> None:
+        if self.faults is not None:
+            self.faults.close()
         for sub, _ in self._subs:
             try:
                 sub.undeclare()

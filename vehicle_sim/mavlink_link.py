@@ -22,6 +22,11 @@
   ``foreign`` (a ``target_system`` that is neither 0 nor ours: dropped here),
   send errors, the signing rejects, ``peers_refused``, ``throttled`` (stream datagrams
   withheld by the amplification bound).
+* Fault injection (docs/faults.md): with a ``[faults]`` plan for this vehicle's
+  ``mavlink`` link, every outgoing datagram goes through a seeded
+  :class:`swarm_common.faults.FaultInjector` (drop, delay, duplicate, reorder) and received
+  datagrams may be discarded (``drop_in``) before they are counted; without one nothing
+  changes.
 """
 
 from __future__ import annotations
@@ -36,7 +41,9 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from swarm_common import faults as fault_plan
 from swarm_common import signing
+from swarm_common.faults import FaultInjector
 
 log = logging.getLogger(__name__)
 
@@ -114,6 +121,8 @@ class MavlinkLink:
     key: bytes | None = None
     unsigned_ok: bool = False
     stats: LinkStats = field(default_factory=LinkStats)
+    # injected faults (docs/faults.md); None: the plan of the scenario this process loaded
+    faults: FaultInjector | None = None
 
     def __post_init__(self) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -138,6 +147,10 @@ class MavlinkLink:
             allow = self._allow_unsigned if self.unsigned_ok else None
             signing.setup_signing(self.mav, self.key, SIGNING_LINK_ID, allow)
         self.peers: dict[tuple[str, int], Peer] = {}
+        if self.faults is None:
+            self.faults = fault_plan.injector_for(
+                fault_plan.MAVLINK, self.sysid, f"vehicle.{self.name}"
+            )
 
     @staticmethod
     def _allow_unsigned(_mav: object, msg_id: int) -> bool:
@@ -167,6 +180,8 @@ class MavlinkLink:
                 continue
             except OSError:
                 break
+            if self.faults is not None and self.faults.drop_inbound():
+                continue
             st.datagrams += 1
             st.bytes += len(data)
             try:
@@ -254,11 +269,17 @@ class MavlinkLink:
     def send_bytes(self, buf: bytes, dests: list[tuple[str, int]], addr=None) -> None:
         """Send an already packed frame to ``dests`` (or only ``addr``)."""
         for d in (addr,) if addr is not None else dests:
-            try:
-                self.sock.sendto(buf, d)
-                self.stats.sent += 1
-            except OSError:
-                self.stats.send_errors += 1
+            if self.faults is None:
+                self._sendto((buf, d))
+            else:
+                self.faults.send((buf, d), self._sendto)
+
+    def _sendto(self, frame: tuple[bytes, tuple[str, int]]) -> None:
+        try:
+            self.sock.sendto(frame[0], frame[1])
+            self.stats.sent += 1
+        except OSError:
+            self.stats.send_errors += 1
 
     def stream_allowed(
         self, addr: tuple[str, int], nbytes: int, now: float, liveness: bool = False
@@ -279,6 +300,8 @@ class MavlinkLink:
         return True
 
     def close(self) -> None:
+        if self.faults is not None:
+            self.faults.close()
         try:
             self.sock.close()
         except OSError as exc:
