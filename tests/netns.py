@@ -60,15 +60,25 @@ class Lan:
         the pid of the Popen is the program's own)."""
         return ["ip", "netns", "exec", self.hosts[host], *argv]
 
-    def deliver_udp_locally(self, host: int, dst_ip: str, ports: range) -> None:
-        """In host ``host``, UDP datagrams sent to ``dst_ip`` on ``ports`` are delivered to
-        this host's own sockets instead of leaving it (a policy rule and a local route, as
-        for any-IP). Lets one process that sends every stream to one remote address (the
-        simulator's ``--remote-host``) serve receivers on two hosts."""
-        ns = self.hosts[host]
-        _ip("-n", ns, "route", "add", "local", dst_ip, "dev", "lo", "table", "100")
-        _ip("-n", ns, "rule", "add", "pref", "10", "to", dst_ip, "ipproto", "udp",
-            "dport", f"{ports.start}-{ports.stop - 1}", "lookup", "100")  # fmt: skip
+    def keep_udp_local(self, host: int, peer_ip: str, ports: range) -> None:
+        """In host ``host``, UDP between this host and ``peer_ip`` on local ports ``ports``
+        stays on this host, both ways: datagrams sent to ``peer_ip`` on those ports are
+        delivered to this host's own sockets, and datagrams sent *from* those ports to this
+        host's address carry ``peer_ip`` as their source. A process that sends every
+        stream to one remote address (the simulator's ``--remote-host``) then serves
+        receivers on two hosts, and cannot tell the local ones from the remote ones.
+        Policy rules (table 100) ahead of the ``local`` table; nothing else changes."""
+        ns, own = self.hosts[host], self.ips[host]
+        dports = f"{ports.start}-{ports.stop - 1}"
+        _ip("-n", ns, "route", "add", "local", peer_ip, "dev", "lo", "table", "100")
+        _ip("-n", ns, "route", "add", "local", own, "dev", "lo", "src", peer_ip,
+            "table", "100")  # fmt: skip
+        _ip("-n", ns, "rule", "add", "pref", "10", "to", peer_ip, "ipproto", "udp",
+            "dport", dports, "lookup", "100")  # fmt: skip
+        _ip("-n", ns, "rule", "add", "pref", "11", "to", own, "ipproto", "udp",
+            "sport", dports, "lookup", "100")  # fmt: skip
+        _ip("-n", ns, "rule", "add", "pref", "100", "lookup", "local")
+        _ip("-n", ns, "rule", "del", "pref", "0")
 
 
 def _subnet() -> str:
