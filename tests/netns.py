@@ -5,7 +5,8 @@ each host gets ``eth0`` (a veth to the bridge) with a private address on one /24
 ``lo`` up. Names carry the pid and a counter (``swt<pid>x<k>h<i>``), so two copies of the
 suite side by side never clash; the /24 is chosen from the pid too (inside namespaces
 addresses cannot clash anyway, but a leak is then easy to attribute). Everything is
-deleted on the way out, even when the body raises. Literal IPv4 addresses only.
+deleted on the way out, even when the body raises; namespaces left by a run killed with
+-9 are deleted by the next run once their pid is gone. Literal IPv4 addresses only.
 
 :func:`netns_unavailable` says why namespaces cannot be made here (not root, no ``ip``,
 the kernel refuses), for a skip message.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import re
 import shutil
 import subprocess
 from collections.abc import Iterator, Sequence
@@ -81,6 +83,16 @@ class Lan:
         _ip("-n", ns, "rule", "del", "pref", "0")
 
 
+def _reap_stale() -> None:
+    """Delete the namespaces of earlier runs whose process is gone (a test killed with -9
+    cannot clean up; its namespaces are named after its pid)."""
+    out = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, timeout=30)
+    for line in out.stdout.splitlines():
+        m = re.match(r"(swt(\d+)x\d+(?:sw|h\d+))\b", line)
+        if m and int(m.group(2)) != os.getpid() and not os.path.exists(f"/proc/{m.group(2)}"):
+            subprocess.run(["ip", "netns", "del", m.group(1)], capture_output=True, timeout=30)
+
+
 def _subnet() -> str:
     """``10.a.b`` from the pid: a /24 that differs between processes."""
     pid = os.getpid()
@@ -97,6 +109,7 @@ def netns_lan(n: int) -> Iterator[Lan]:
     net = _subnet()
     ips = [f"{net}.{i + 1}" for i in range(n)]
     made: list[str] = []
+    _reap_stale()
     try:
         for ns in (switch, *hosts):
             _ip("netns", "add", ns)
