@@ -19,6 +19,7 @@ import time
 from typing import Any
 
 from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
+from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
@@ -86,6 +87,18 @@ def open_session_saying(
     return box["session"]
 
 
+def loss_land_after(text: object) -> float | None:
+    """``--loss-land-after``: 0 or a finite number of seconds in MIN_LAND_AFTER_S..3600;
+    None when it is not."""
+    try:
+        value = float(str(text))
+    except ValueError:
+        return None
+    if value == 0.0 or MIN_LAND_AFTER_S <= value <= 3600.0:
+        return value
+    return None
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="offboard", description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", required=True, help="scenario TOML file")
@@ -110,6 +123,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--signing-key", default=None, metavar="PATH",
                     help="MAVLink 2 signing key file (0600): sign everything sent to the "
                          "vehicle, drop unsigned or wrongly signed frames")
+    ap.add_argument("--loss-land-after", default=LAND_AFTER_S, metavar="S",
+                    help="real time: when the runner or router is lost, land on the "
+                    f"coordinated plan S s after the last truth (default {LAND_AFTER_S:g}, at "
+                    f"least {MIN_LAND_AFTER_S:g}; 0 = hold until truth is back)")
     ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                     help="run a scenario that fails the feasibility check, with a warning")
     add_log_level_argument(ap)
@@ -145,6 +162,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: {ZENOH_CONFIG_FLAG} {args.zenoh_config}: not a readable file",
               file=sys.stderr)
         return 2
+    land_after = loss_land_after(args.loss_land_after)
+    if land_after is None:
+        print(f"offboard: --loss-land-after {args.loss_land_after!r}: must be 0 or a number "
+              f"of seconds in {MIN_LAND_AFTER_S:g}..3600", file=sys.stderr)
+        return 2
     ports = vehicle_ports(args.agent, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
     if not url.startswith(MAVLINK_SCHEMES):
@@ -169,6 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         zenoh_mode=args.zenoh_mode,
         manual_start=args.manual_start,
         signing_key=key,
+        loss_land_after=land_after,
     )
     try:
         session = open_session_saying(cfg.zenoh_mode, connect, cfg.zenoh_listen,

@@ -18,8 +18,10 @@ link hygiene and failsafes"): a setpoint is re-sent only while it answers the ve
 current step (lockstep) or for one control period (real time), so with no valid step the
 stream stops and the vehicle's offboard-loss failsafe acts; in real time, truth more than
 ``RUNNER_LOST_PERIODS`` behind the vehicle's clock (runner or router lost) stops the
-stream too (the vehicle holds); after a failsafe HOLD the daemon asks for OFFBOARD again
-(:class:`offboard.link_guard.OffboardKeeper`). A neighbour that stays
+stream too (the vehicle holds), and ``loss_land_after`` s after the last truth the daemon
+lands its vehicle on its slot of the coordinated landing plan from its own ODOMETRY
+(:mod:`offboard.runner_loss`); after a failsafe HOLD the daemon asks for OFFBOARD again
+(:mod:`offboard.mode_requests`). A neighbour that stays
 silent for ``neighbour_timeout`` seconds is declared lost and no longer waited for
 (its data is then predicted by the agent, then dropped); it rejoins when it speaks.
 In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, but uses
@@ -32,7 +34,6 @@ station's take-off command (docs/lifecycle.md).
 from __future__ import annotations
 
 import logging
-import math
 import signal
 import time
 from dataclasses import dataclass, field
@@ -45,10 +46,11 @@ from offboard.agent import (
     LeaderAgent,
     make_agent,
 )
-from offboard.landing import landing_plan
-from offboard.link_guard import OffboardKeeper, PayloadGuard, VehicleView
+from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
+from offboard.link_guard import OffboardKeeper, PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
-from offboard.safety_filter import parse_method
+from offboard.mode_requests import ModeRequests
+from offboard.runner_loss import LAND_AFTER_S, RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.wire_convert import (
     estimate_from_wire,
     estimate_to_wire,
@@ -62,11 +64,10 @@ from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
-TAKEOFF_LATE_S = 1.0  # s, a take-off command's at_s may lie this far behind the step time
-TAKEOFF_LEAD_S = 60.0  # s, ... and at most this far ahead of it
-RUNNER_LOST_PERIODS = 25  # real time: truth this many steps behind the vehicle -> hold
 LOOP_STALL_S = 0.25  # s: a main-loop iteration this late is a fault of the daemon
 WAIT_LOG_S = 3.0  # s: start-up waits say what they wait for this often
+__all__ = ["RUNNER_LOST_PERIODS", "TAKEOFF_LATE_S", "TAKEOFF_LEAD_S", "DaemonConfig",
+           "OffboardDaemon"]
 
 
 @dataclass
@@ -92,10 +93,13 @@ class DaemonConfig:
     # HEARTBEAT period asked of the vehicle (s): how soon a third party's mode change is seen
     heartbeat_interval: float = 0.1
     signing_key: bytes | None = None  # MAVLink 2 signing of the vehicle link (32 bytes)
+    # real time: land this long (s) after the last truth when the runner/router is lost
+    # (offboard.runner_loss; 0 = hold until truth is back)
+    loss_land_after: float = LAND_AFTER_S
 
 
-class OffboardDaemon:
-    """One agent's offboard process."""
+class OffboardDaemon(DaemonCommands):
+    """One agent's offboard process (ground-station commands: offboard.daemon_commands)."""
 
     def __init__(self, cfg: DaemonConfig, session: Any) -> None:
         self.cfg = cfg
@@ -120,9 +124,11 @@ class OffboardDaemon:
         self.last_send = 0.0
         self.stream_since = 0.0  # start of the current gap-free setpoint stream
         self.streaming = False
-        self.truth_lost = False
         self.said_waiting = 0.0
         self.keeper = OffboardKeeper(cfg.stream_before_offboard, cfg.manual_start)
+        self.modes = ModeRequests(self.link, self.keeper, cfg.agent_id)
+        self.loss = RunnerLoss(self.control_hz, cfg.loss_land_after)
+        self.loss_flight = LossFlight(sc, self.agent.index, cfg.agent_id, self.loss)
         self.last_estimate: wire.Estimate | None = None
         self.prev_estimate: wire.Estimate | None = None
         self.last_est_pub = 0.0
@@ -136,72 +142,10 @@ class OffboardDaemon:
             log.info("agent %d: on its pad until the take-off command", self.id)
 
     # -- helpers ----------------------------------------------------------------------
-    def comm_ok(self, t: float) -> bool:
-        for a, b in (*self.sc.outages, *self.extra_outages):
-            if a <= t < b:
-                return False
-        return True
-
-    def _apply_commands(self, t: float) -> None:
-        for cmd in self.bus.pop_commands():
-            if cmd.kind == "method":
-                try:
-                    method = parse_method(cmd.method)
-                except ValueError as exc:
-                    log.warning("agent %d: command ignored: %s", self.id, exc)
-                    continue
-                self.agent.set_method(method)
-                log.info("agent %d: method -> %s", self.id, method)
-            elif cmd.kind == "outage" and cmd.duration_s > 0:
-                self.extra_outages.append((t, t + cmd.duration_s))
-                log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
-            elif cmd.kind == "land" and self.land_at is None:
-                self._land_command(cmd, t)
-            elif cmd.kind == "takeoff":
-                self._takeoff_command(cmd, t)
-
-    def _bad_command(self, cmd: wire.Command, why: str) -> None:
-        self.bad_commands += 1
-        log.warning("agent %d: %s command dropped: %s", self.id, cmd.kind, why)
-
-    def _land_command(self, cmd: wire.Command, t: float) -> None:
-        """Coordinated land-all at ``at_s`` (negative: now); ignored while on the pad."""
-        if not math.isfinite(cmd.at_s):
-            self._bad_command(cmd, f"at_s = {cmd.at_s!r}")
-        elif not self.agent.takeoff_held:
-            self.land_at = cmd.at_s if cmd.at_s >= 0.0 else t
-            log.info("agent %d: land-all at t=%.2f s", self.id, self.land_at)
-
-    def _takeoff_command(self, cmd: wire.Command, t: float) -> None:
-        """Coordinated take-off with the climbs at ``at_s`` (negative: now) if held on the
-        pad; ``at_s`` finite, at most TAKEOFF_LATE_S behind t and TAKEOFF_LEAD_S ahead."""
-        t0 = cmd.at_s if cmd.at_s >= 0.0 else t
-        if not (math.isfinite(cmd.at_s) and -TAKEOFF_LATE_S <= t0 - t <= TAKEOFF_LEAD_S):
-            self._bad_command(cmd, f"at_s = {cmd.at_s!r} at t = {t:.2f} s")
-        elif self.agent.start_takeoff(t0):
-            log.info("agent %d: take-off at t=%.2f s", self.id, t0)
-
-    def _maybe_start_landing(self, t: float) -> None:
-        """From the first step at or after ``land_at``: the common plan of offboard.landing,
-        computed for t_L = ``land_at`` (the same on every agent, no communication)."""
-        if self.land_at is not None and t >= self.land_at and self.agent.landing is None:
-            plan = landing_plan(self.sc, self.land_at)
-            self.agent.start_landing(plan)
-            log.info("agent %d: landing at t=%.2f s (transit %.2f s)", self.id, t, plan.t_h)
-
-    def _maybe_start_trajectory(self, t: float) -> None:
-        """Real time: hold p_L(0) until flying in OFFBOARD, then start the trajectory at
-        the next whole period (both leaders pick the same instant)."""
-        assert isinstance(self.agent, LeaderAgent)
-        if self.trajectory_started:
-            return
-        if self.link.armed and self.link.in_offboard:
-            period = 1.0 / float(self.sc.leader_trajectory.frequency_hz)
-            self.agent.start_time = math.ceil(t / period) * period
-            self.trajectory_started = True
-            log.info("agent %d: trajectory starts at t = %.2f s", self.id, self.agent.start_time)
-        else:
-            self.agent.start_time = math.inf
+    @property
+    def truth_lost(self) -> bool:
+        """Real time: the runner or router is lost (offboard.runner_loss)."""
+        return self.loss.lost
 
     def _zeta(self) -> np.ndarray | None:
         return self.agent.deso.zeta if isinstance(self.agent, FollowerAgent) else None
@@ -223,7 +167,7 @@ class OffboardDaemon:
     def _answer_fresh(self, now: float) -> bool:
         """A setpoint may go out while it answers the vehicle's current step (lockstep:
         the vehicle's clock waits for it) or for one control period (real time)."""
-        if self.answer is None or self.truth_lost:
+        if self.answer is None or (self.truth_lost and not self.loss.landing):
             return False
         if self.cfg.lockstep:
             return self.vehicle_step <= self.answer_step
@@ -242,7 +186,8 @@ class OffboardDaemon:
     def _check_stream(self, now: float) -> None:
         """Say so when the vehicle's clock has moved on for 0.1 s without a new setpoint
         (the stale one is no longer sent): the vehicle's failsafe acts."""
-        behind = self.vehicle_step > self.answer_step or self.truth_lost
+        behind = self.vehicle_step > self.answer_step or (
+            self.truth_lost and not self.loss.landing)
         if self.streaming and behind and now - self.last_send > 0.1:
             self.streaming = False
             self.keeper.fault(now)
@@ -285,25 +230,50 @@ class OffboardDaemon:
         """The simulator's truth of step k (lockstep: waited for), or the latest one if
         it is at most RUNNER_LOST_PERIODS behind (real time; else the runner is lost)."""
         if not self.cfg.lockstep:
-            truth = self.bus.latest_truth
-            if truth is None and time.monotonic() - self.said_waiting >= WAIT_LOG_S:
-                self.said_waiting = time.monotonic()
-                log.info("agent %d: waiting for truth on Zenoh (%s)", self.id,
-                         ", ".join(self.cfg.zenoh_connect) or "no endpoint")
-            lost = truth is None or k - truth.step > RUNNER_LOST_PERIODS
-            if lost != self.truth_lost and (truth is not None or self.truth_lost):
-                self.truth_lost = lost
-                if lost:
-                    self.keeper.fault(time.monotonic())
-                    log.error("agent %d: truth lost at step %d (runner or router gone?): "
-                              "setpoints stopped, the vehicle holds", self.id, k)
-                else:
-                    log.info("agent %d: truth back at step %d", self.id, k)
-            return None if lost else truth
+            return self._latest_truth(k)
         if not self.bus.wait(lambda: self.stop or k in self.bus.truth, self.cfg.truth_timeout):
             log.warning("agent %d: no truth for step %d", self.id, k)
             return None
         return self.bus.truth.get(k)
+
+    def _latest_truth(self, k: int) -> wire.Truth | None:
+        """Real time: the latest truth unless the runner or router is lost (then None)."""
+        truth = self.bus.latest_truth
+        if truth is None and time.monotonic() - self.said_waiting >= WAIT_LOG_S:
+            self.said_waiting = time.monotonic()
+            log.info("agent %d: waiting for truth on Zenoh (%s)", self.id,
+                     ", ".join(self.cfg.zenoh_connect) or "no endpoint")
+        change = self.loss.observe(k, None if truth is None else truth.step)
+        if change == "lost":
+            self.keeper.fault(time.monotonic())
+            t_land = self.loss.t_land
+            log.error("agent %d: truth lost at step %d (runner or router gone?): setpoints "
+                      "stopped, the vehicle holds; %s", self.id, k,
+                      "no landing (--loss-land-after 0)" if t_land is None
+                      else f"landing at t={t_land:.2f} s unless truth is back first")
+        elif change == "back":
+            log.info("agent %d: truth back at step %d", self.id, k)
+        return None if self.loss.lost else truth
+
+    def _loss_step(self, k: int, t: float, time_boot_ms: int) -> bool:
+        """Runner or router lost (real time): the setpoint of offboard.runner_loss's
+        LossFlight from the vehicle's own ODOMETRY (none before the commit)."""
+        if self.cfg.lockstep or not self.loss.lost:
+            return False
+        odo = self.link.odometry
+        got = None if odo is None else measured_state(odo, 0.0)
+        sp = None if got is None else self.loss_flight.setpoint(t, *got)
+        if got is None or sp is None:
+            return False
+        self.answer = (time_boot_ms, sp.q_ned, sp.thrust_norm)
+        self.answer_step, self.answer_at = k, time.monotonic()
+        # the lost runner is a standing fault: a failsafe HOLD on the way down (a stalled
+        # host) is taken back to OFFBOARD even when the vehicle's STATUSTEXT was missed
+        self.keeper.fault(self.answer_at)
+        self._send_answer()
+        if self.loss_flight.disarm_due(t, float(got[0][2]), self.link.armed):
+            self.modes.disarm()
+        return True
 
     def control_step(self, k: int, t: float, time_boot_ms: int) -> bool:
         truth = self._truth_for(k)
@@ -352,35 +322,6 @@ class OffboardDaemon:
         return est
 
     # -- main loop ----------------------------------------------------------------------
-    def _mode_requests(self, now: float) -> None:
-        """Start-up and failsafe recovery: OFFBOARD / arm requests, never blocking."""
-        link = self.link
-        for what, cmd in (("offboard", mavlink.MAV_CMD_DO_SET_MODE),
-                          ("arm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM)):
-            done, res = link.finished(cmd)
-            if done:
-                ok = res == mavlink.MAV_RESULT_ACCEPTED
-                self.keeper.result(what, ok, now)
-                (log.info if ok else log.warning)(
-                    "agent %d: %s %s (result %s)", self.id, what.upper(),
-                    "accepted" if ok else "not accepted", res)
-        if self.answer is None or link.busy(mavlink.MAV_CMD_DO_SET_MODE) or link.busy(
-                mavlink.MAV_CMD_COMPONENT_ARM_DISARM):
-            return
-        main, sub = px4.split_mode(link.custom_mode)
-        view = VehicleView(
-            in_offboard=link.in_offboard,
-            hold=(main, sub) == (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER),
-            armed=link.armed,
-            failsafe_texts=link.failsafe_texts,
-            streaming_s=now - self.stream_since if self.streaming else 0.0,
-        )
-        want = self.keeper.decide(now, view)
-        if want == "offboard":
-            link.start_set_mode(px4.MAIN_OFFBOARD)
-        elif want == "arm":
-            link.start_arm()
-
     def _vehicle_clock(self) -> None:
         """The vehicle's step from its latest ODOMETRY: the reference of the Zenoh guard."""
         odo = self.link.odometry
@@ -394,7 +335,8 @@ class OffboardDaemon:
         k = self.vehicle_step
         if k > self.last_step:
             t = k / self.control_hz
-            if self.control_step(k, t, int(round(t * 1000))):
+            ms = int(round(t * 1000))
+            if self.control_step(k, t, ms) or self._loss_step(k, t, ms):
                 self.last_step = k
 
     def run(self) -> int:
@@ -442,13 +384,15 @@ class OffboardDaemon:
             if self.answer is not None and now - self.last_send > 0.05:
                 self._send_answer()  # lockstep: the vehicle may have missed it
             self._check_stream(now)
-            if self.last_estimate is not None and now - self.last_est_pub > 0.1:
+            if (self.last_estimate is not None and now - self.last_est_pub > 0.1
+                    and not self.loss.landing):
                 self._republish_estimates()  # for late joiners / lost datagrams
             done, res = self.link.finished(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
             if done and res != mavlink.MAV_RESULT_ACCEPTED:  # its default (1 Hz) still works
                 log.warning("agent %d: HEARTBEAT interval %.2f s not accepted (result %s)",
                             self.id, cfg.heartbeat_interval, res)
-            self._mode_requests(now)
+            streaming_s = now - self.stream_since if self.streaming else 0.0
+            self.modes.request(now, self.answer is not None, streaming_s)
             self.link.tick()
             last_iter = time.monotonic()  # between iterations: not our own waits
         log.info("agent %d: stopped; dropped MAVLink %s, Zenoh %s", self.id,

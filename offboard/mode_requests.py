@@ -1,0 +1,74 @@
+"""The daemon's mode requests to its vehicle: start-up OFFBOARD / arm, OFFBOARD again after
+a failsafe (the policy of offboard.link_guard.OffboardKeeper, docs/security.md "Commands
+never block; OFFBOARD after a failsafe"), and the disarm after a loss landing. Every
+request is a non-blocking COMMAND_LONG with retries (offboard.mavlink_link); this module
+only decides and collects outcomes, once per main-loop iteration."""
+
+from __future__ import annotations
+
+import logging
+
+from offboard.link_guard import OffboardKeeper, VehicleView
+from offboard.mavlink_link import VehicleLink, mavlink
+from swarm_common import px4
+
+log = logging.getLogger(__name__)
+
+MODE_COMMANDS = (("offboard", mavlink.MAV_CMD_DO_SET_MODE),
+                 ("arm", mavlink.MAV_CMD_COMPONENT_ARM_DISARM))
+
+
+class ModeRequests:
+    """OFFBOARD / arm requests of agent ``agent_id`` over ``link``, as ``keeper`` decides."""
+
+    def __init__(self, link: VehicleLink, keeper: OffboardKeeper, agent_id: int) -> None:
+        self.link = link
+        self.keeper = keeper
+        self.id = agent_id
+        self.disarming = False  # a disarm is in flight (then arm results are not the keeper's)
+
+    def collect(self, now: float) -> None:
+        """Hand finished OFFBOARD / arm commands to the keeper, logging each outcome."""
+        for what, cmd in MODE_COMMANDS:
+            done, res = self.link.finished(cmd)
+            if not done:
+                continue
+            ok = res == mavlink.MAV_RESULT_ACCEPTED
+            if what == "arm" and self.disarming:
+                self.disarming = False
+                (log.info if ok else log.warning)(
+                    "agent %d: DISARM %s (result %s)", self.id,
+                    "accepted" if ok else "not accepted", res)
+                continue
+            self.keeper.result(what, ok, now)
+            (log.info if ok else log.warning)(
+                "agent %d: %s %s (result %s)", self.id, what.upper(),
+                "accepted" if ok else "not accepted", res)
+
+    def request(self, now: float, have_answer: bool, streaming_s: float) -> None:
+        """Collect outcomes, then ask for what the keeper wants (nothing while a request is
+        in flight or before the first setpoint). ``streaming_s``: how long fresh setpoints
+        have streamed without a gap (0 when not streaming)."""
+        self.collect(now)
+        link = self.link
+        if not have_answer or any(link.busy(cmd) for _, cmd in MODE_COMMANDS):
+            return
+        main, sub = px4.split_mode(link.custom_mode)
+        view = VehicleView(
+            in_offboard=link.in_offboard,
+            hold=(main, sub) == (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER),
+            armed=link.armed,
+            failsafe_texts=link.failsafe_texts,
+            streaming_s=streaming_s,
+        )
+        want = self.keeper.decide(now, view)
+        if want == "offboard":
+            link.start_set_mode(px4.MAIN_OFFBOARD)
+        elif want == "arm":
+            link.start_arm()
+
+    def disarm(self) -> None:
+        """A normal (not forced) disarm: the vehicle refuses it unless on the ground."""
+        if not self.link.busy(mavlink.MAV_CMD_COMPONENT_ARM_DISARM):
+            self.disarming = True
+            self.link.start_command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [0, 0])

@@ -1,0 +1,221 @@
+"""Runner or router lost (real time): hold, then the coordinated landing on odometry alone.
+
+Policy (docs/security.md, "Losing the runner or the router"; docs/lifecycle.md, "Landing
+after losing the router"), in the vehicle's clock (mission time from its ODOMETRY stamps;
+one simulator or one GPS time base, so the same on every vehicle):
+
+1. **Lost.** Truth more than ``RUNNER_LOST_PERIODS`` control steps behind the vehicle's
+   step: the daemon stops stepping its agent and streaming, and the vehicle's offboard-loss
+   failsafe puts it in HOLD (0.5 s later).
+2. **Land time.** t_L = t_s + ``land_after_s``, t_s = the time of the last truth step this
+   daemon saw. Every daemon loses the router at the same instant, so their t_s differ only
+   by the truth steps in flight when it died (one or two control periods); see
+   :func:`loss_landing_plan` for why that disagreement is harmless and why it is not
+   quantised.
+3. **Commit.** From t_L − ``LEAD_S`` on the daemon streams its own setpoints again: a PD +
+   feed-forward hold at the vehicle's measured position (:class:`OdometryLander`), so the
+   OFFBOARD recovery policy (offboard.link_guard.OffboardKeeper) asks for OFFBOARD back
+   after 0.6 s of stream; the vehicle is in OFFBOARD before t_L. Truth coming back before
+   the commit: normal flight resumes. After the commit the landing is finished whatever
+   happens on Zenoh.
+4. **Landing.** From t_L the same reference flies this agent's slot of the coordinated
+   landing plan (offboard.landing): its pad and its descent delay, lowest first.
+5. **Landed.** Once the reference ended ``LANDED_SETTLE_S`` ago and the vehicle is below
+   ``LANDED_Z``: idle command, then a (non-forced) disarm.
+
+Lockstep runs do not use this: their simulator cannot move without its controllers.
+Positions ENU, z up (m, s, m/s²).
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+from dataclasses import replace
+
+import numpy as np
+
+from offboard.agent_base import control_box
+from offboard.attitude import Setpoint, setpoint_from_accel
+from offboard.landing import LandingPlan, LandingReference, landed, landing_plan
+from offboard.reference import xi_a, xi_at_rest, xi_j, xi_p, xi_v
+from swarm_common.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+RUNNER_LOST_PERIODS = 25  # real time: truth this many steps behind the vehicle -> hold
+LAND_AFTER_S = 3.0  # s after the last truth: the default land time t_L − t_s
+LEAD_S = 1.0  # s before t_L the daemon streams again (OFFBOARD needs 0.6 s of stream)
+MIN_LAND_AFTER_S = 2.0  # s: lost (0.5 s) + the vehicle's failsafe (0.5 s) + LEAD_S
+DISARM_AFTER_S = 1.0  # s of landed idle before the disarm (retried every 2 s while armed)
+
+
+class LossPhase(enum.Enum):
+    """Internal state of :class:`RunnerLoss` (never on a wire or in a file)."""
+
+    FLYING = "flying"  # truth fresh: the agent steps
+    HOLDING = "holding"  # truth lost: no setpoints, the vehicle's failsafe holds it
+    LANDING = "landing"  # committed: the daemon flies OdometryLander to the ground
+
+
+def loss_landing_plan(sc: Scenario, t_s: float, t_land: float) -> LandingPlan:
+    """The coordinated landing plan of offboard.landing for pads planned at t_s (where the
+    formation was when truth stopped; the vehicles hold near it) and timing from t_land.
+
+    Why t_s is not quantised: a grid makes daemons whose t_s straddle a grid line disagree
+    by a whole grid step, while the raw t_s disagree only by the truth steps in flight when
+    the router died (δ, one or two control periods). Each agent's pad is its own footprint
+    at t_s (+ the plan's outward offset for upper agents), so a disagreement δ moves each
+    pad by at most the formation's speed × δ (cube8: < 1 m/s × 0.04 s), far inside the
+    pads' 0.25 m margin over 2·D_safe; the descent delays (lower agents first, upper ones
+    only once past the pad below, ≥ 1.5 s) dwarf δ. Not covered: scenarios whose stack or
+    altitude order changes within δ (two agents at nearly equal planned altitude, or
+    footprints at nearly the pad separation), where two daemons may rank them differently.
+    """
+    return replace(landing_plan(sc, t_s), t_land=t_land)
+
+
+class RunnerLoss:
+    """Detection of a lost runner/router and the land time (module docstring).
+
+    ``land_after_s`` = 0: never land (hold until truth is back, the behaviour before)."""
+
+    def __init__(self, control_hz: int, land_after_s: float = LAND_AFTER_S) -> None:
+        if land_after_s != 0.0 and not (MIN_LAND_AFTER_S <= land_after_s <= 3600.0):
+            raise ValueError(f"land_after_s = {land_after_s!r}: 0 (never) or "
+                             f"{MIN_LAND_AFTER_S}..3600 s")
+        self.control_hz = control_hz
+        self.land_after_s = land_after_s
+        self.phase = LossPhase.FLYING
+        self.t_s: float | None = None  # time of the last truth step seen when lost
+
+    @property
+    def lost(self) -> bool:
+        return self.phase is not LossPhase.FLYING
+
+    @property
+    def landing(self) -> bool:
+        return self.phase is LossPhase.LANDING
+
+    @property
+    def t_land(self) -> float | None:
+        if self.t_s is None or self.land_after_s == 0.0:
+            return None
+        return self.t_s + self.land_after_s
+
+    def observe(self, k: int, truth_step: int | None) -> str | None:
+        """The vehicle is at step ``k``, the latest truth is of ``truth_step`` (None: none
+        yet). Returns "lost" or "back" on a change, else None; once landing, None."""
+        if self.phase is LossPhase.LANDING:
+            return None
+        lost = truth_step is None or k - truth_step > RUNNER_LOST_PERIODS
+        if lost and self.phase is LossPhase.FLYING and truth_step is not None:
+            self.phase = LossPhase.HOLDING
+            self.t_s = truth_step / self.control_hz
+            return "lost"
+        if not lost and self.phase is LossPhase.HOLDING:
+            self.phase, self.t_s = LossPhase.FLYING, None
+            return "back"
+        return None
+
+    def commit_due(self, t: float) -> bool:
+        """Holding and t ≥ t_L − LEAD_S: time to start the landing (then call commit)."""
+        t_land = self.t_land
+        return self.phase is LossPhase.HOLDING and t_land is not None and t >= t_land - LEAD_S
+
+    def commit(self) -> None:
+        self.phase = LossPhase.LANDING
+
+
+class OdometryLander:
+    """PD + feed-forward of one agent on its slot of the loss landing plan, with the
+    vehicle's own ODOMETRY as the only state source (no truth, no neighbours).
+
+    Reference: offboard.landing.LandingReference started at rest at ``p_hold`` (m), the
+    vehicle's measured position at the commit, with t0 = t_L (held there before t_L).
+    Control (ENU, m/s²), as the leaders' (docs/architecture.md, offboard.leader):
+    u = a* + τ j* − d̂ + k_p (p* − p) + k_d (v* − v), clipped to the control box, with a
+    velocity ESO d̂ for the disturbance and ground effect (double pole at −5 rad/s);
+    idle (lowest vertical acceleration, no tilt) once landed (offboard.landing.landed)."""
+
+    L1, L2 = 10.0, 25.0  # velocity ESO gains (as offboard.leader)
+
+    def __init__(self, sc: Scenario, index: int, t_s: float, t_land: float,
+                 p_hold: np.ndarray) -> None:
+        plan = loss_landing_plan(sc, t_s, t_land)
+        self.ref = LandingReference(plan, index, xi_at_rest(p_hold))
+        self.veh = sc.vehicle
+        self.kp, self.kd = sc.controller.leader_kp, sc.controller.leader_kd
+        self.u_lo, self.u_hi = control_box(sc)
+        self.dt = sc.control_dt
+        self.v_hat: np.ndarray | None = None
+        self.d_hat = np.zeros(3)
+        self.u_prev = np.zeros(3)
+
+    @property
+    def pad(self) -> np.ndarray:
+        return np.array(self.ref.p1[:2])
+
+    def landed(self, t: float, z: float) -> bool:
+        return landed(self.ref, t, z)
+
+    def command(self, t: float, p: np.ndarray, v: np.ndarray) -> tuple[Setpoint, np.ndarray]:
+        """The setpoint (and its u) for the measured position p and velocity v at t."""
+        self._update_eso(v)
+        ref = self.ref.xi(t)
+        a_ff = xi_a(ref) + self.veh.tau_rollpitch_s * xi_j(ref)
+        u = a_ff - self.d_hat + self.kp * (xi_p(ref) - p) + self.kd * (xi_v(ref) - v)
+        u = np.clip(u, self.u_lo, self.u_hi)
+        if self.landed(t, float(p[2])):
+            u = np.array([0.0, 0.0, self.u_lo[2]])
+        self.u_prev = u
+        return setpoint_from_accel(u, 0.0, self.veh), u
+
+    def _update_eso(self, v: np.ndarray) -> None:
+        """v̂' = u + d̂ + l1 (v − v̂), d̂' = l2 (v − v̂) over one period (Euler, u held)."""
+        if self.v_hat is None:
+            self.v_hat = np.array(v, dtype=float)
+            return
+        err = v - self.v_hat
+        self.v_hat = self.v_hat + self.dt * (self.u_prev + self.d_hat + self.L1 * err)
+        self.d_hat = self.d_hat + self.dt * self.L2 * err
+        if not (np.all(np.isfinite(self.d_hat)) and np.all(np.isfinite(self.v_hat))):
+            self.v_hat, self.d_hat = np.array(v, dtype=float), np.zeros(3)
+
+
+class LossFlight:
+    """What a daemon flies once its runner or router is lost (module docstring): nothing
+    until the commit, then :class:`OdometryLander`, then idle and a disarm."""
+
+    def __init__(self, sc: Scenario, index: int, agent_id: int, loss: RunnerLoss) -> None:
+        self.sc, self.index, self.id = sc, index, agent_id
+        self.loss = loss
+        self.lander: OdometryLander | None = None
+        self.idle_since: float | None = None  # vehicle clock (s) of the landed idle
+
+    def setpoint(self, t: float, p: np.ndarray, v: np.ndarray) -> Setpoint | None:
+        """The setpoint at vehicle time t for the measured p, v; None before the commit."""
+        if self.lander is None:
+            t_s, t_land = self.loss.t_s, self.loss.t_land
+            if not self.loss.commit_due(t) or t_s is None or t_land is None:
+                return None
+            self.loss.commit()
+            self.lander = OdometryLander(self.sc, self.index, t_s, t_land, p)
+            pad = self.lander.pad
+            log.warning("agent %d: runner/router lost since t=%.2f s: landing on odometry, "
+                        "t_L=%.2f s, pad (%.2f, %.2f)", self.id, t_s, t_land, pad[0], pad[1])
+        return self.lander.command(t, p, v)[0]
+
+    def disarm_due(self, t: float, z: float, armed: bool) -> bool:
+        """True when a disarm should be asked for now: landed idle for DISARM_AFTER_S
+        (again every 2 s while the vehicle stays armed)."""
+        if self.lander is None or not self.lander.landed(t, z):
+            self.idle_since = None
+            return False
+        if self.idle_since is None:
+            self.idle_since = t
+            log.info("agent %d: landed at t=%.2f s (z=%.3f m): idle", self.id, t, z)
+        if armed and t - self.idle_since >= DISARM_AFTER_S:
+            self.idle_since = t + 1.0
+            return True
+        return False
