@@ -33,6 +33,7 @@ from swarm_common.scenario import load_scenario  # noqa: E402
 pytestmark = pytest.mark.timeout(240)
 
 MIN_DIST_M = 0.5
+ARMED_FLAG = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 LANDED_Z_M = 0.1
 FLY_BEFORE_KILL_S = 8.0  # mission time at which the router is killed
 LAND_TIMEOUT_S = 90.0  # wall s after the kill (landing ≈ 3 s hold + 13 s on a loaded host)
@@ -68,7 +69,7 @@ class Observer(threading.Thread):
                 continue
             with self.lock:
                 if m.get_type() == "HEARTBEAT":
-                    self.armed[sysid] = bool(m.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+                    self.armed[sysid] = bool(m.base_mode & ARMED_FLAG)
                 else:
                     self.pos[sysid] = (m.time_boot_ms * 1e-3, np.array([m.x, m.y, m.z]),
                                        np.array([m.vx, m.vy, m.vz]))

@@ -1,0 +1,153 @@
+"""offboard.runner_loss: loss detection, the land time, the commit, and the odometry
+lander flying its slot of the landing plan down to idle (a point-mass model, no I/O)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from offboard.landing import landing_plan
+from offboard.runner_loss import (
+    LEAD_S,
+    RUNNER_LOST_PERIODS,
+    LossFlight,
+    OdometryLander,
+    RunnerLoss,
+    loss_landing_plan,
+)
+from swarm_common.scenario import load_scenario
+
+CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+HZ = 50
+
+
+def test_lost_after_the_threshold_and_back_before_the_commit() -> None:
+    loss = RunnerLoss(HZ, 3.0)
+    assert loss.observe(100, None) is None and not loss.lost  # no truth yet: not a loss
+    assert loss.observe(100 + RUNNER_LOST_PERIODS, 100) is None and not loss.lost
+    assert loss.observe(101 + RUNNER_LOST_PERIODS, 100) == "lost" and loss.lost
+    assert loss.t_s == pytest.approx(2.0) and loss.t_land == pytest.approx(5.0)
+    assert not loss.commit_due(5.0 - LEAD_S - 0.02)
+    assert loss.observe(200, 199) == "back" and not loss.lost and loss.t_land is None
+
+
+def test_after_the_commit_truth_coming_back_changes_nothing() -> None:
+    loss = RunnerLoss(HZ, 3.0)
+    loss.observe(200, 150)
+    assert loss.commit_due(3.0 + 3.0 - LEAD_S)
+    loss.commit()
+    assert loss.landing and loss.observe(400, 400) is None and loss.lost
+
+
+def test_zero_never_lands_and_bad_values_are_refused() -> None:
+    loss = RunnerLoss(HZ, 0.0)
+    loss.observe(200, 100)
+    assert loss.lost and loss.t_land is None and not loss.commit_due(1e6)
+    for bad in (1.0, -3.0, float("nan"), float("inf"), 4000.0):
+        with pytest.raises(ValueError):
+            RunnerLoss(HZ, bad)
+
+
+def test_plan_pads_from_t_s_timing_from_t_land() -> None:
+    sc = load_scenario(str(CUBE8))
+    plan = loss_landing_plan(sc, 8.1, 11.1)
+    ref = landing_plan(sc, 8.1)
+    assert plan.t_land == 11.1 and np.array_equal(plan.pads, ref.pads)
+    # a disagreement of two control periods moves no pad by more than 5 cm
+    near = loss_landing_plan(sc, 8.1 + 2.0 / HZ, 11.1)
+    assert float(np.max(np.linalg.norm(near.pads - plan.pads, axis=1))) < 0.05
+
+
+def _fly(lander: OdometryLander, p: np.ndarray, t0: float, t1: float, dt: float,
+         ) -> tuple[np.ndarray, float | None]:
+    """Point mass under the lander's u with a constant 0.3 m/s² push (ground at z = 0)."""
+    v = np.zeros(3)
+    landed_at = None
+    t = t0
+    while t < t1:
+        _, u = lander.command(t, p, v)
+        a = u + np.array([0.3, 0.0, 0.3])
+        v = v + a * dt
+        p = p + v * dt
+        if p[2] <= 0.0:
+            p[2], v = 0.0, np.zeros(3)
+        if landed_at is None and lander.landed(t, float(p[2])):
+            landed_at = t
+        t += dt
+    return p, landed_at
+
+
+def test_lander_holds_then_lands_on_its_pad_and_idles() -> None:
+    sc = load_scenario(str(CUBE8))
+    index = sc.index_of(3)  # a top-layer follower: its pad is moved outward
+    p_hold = np.array([2.0, 0.4, 5.1])
+    lander = OdometryLander(sc, index, 8.1, 11.1, p_hold)
+    p, _ = _fly(lander, p_hold.copy(), 10.1, 11.1, 0.02)  # before t_L: hold
+    assert float(np.linalg.norm(p - p_hold)) < 0.15
+    p, landed_at = _fly(lander, p, 11.1, 40.0, 0.02)
+    assert landed_at is not None and landed_at >= lander.ref.t_end
+    assert p[2] == 0.0 and float(np.linalg.norm(p[:2] - lander.pad)) < 0.2
+    _, u = lander.command(45.0, p, np.zeros(3))
+    assert u[0] == 0.0 and u[1] == 0.0 and u[2] == lander.u_lo[2]  # idle
+
+
+def test_loss_flight_commits_once_and_asks_to_disarm_when_landed() -> None:
+    sc = load_scenario(str(CUBE8))
+    loss = RunnerLoss(HZ, 3.0)
+    loss.observe(500, 400)
+    flight = LossFlight(sc, sc.index_of(4), 4, loss)
+    assert flight.setpoint(9.0, np.array([2.0, 0.4, 2.9]), np.zeros(3)) is None
+    assert flight.setpoint(10.0, np.array([2.0, 0.4, 2.9]), np.zeros(3)) is not None
+    assert loss.landing and flight.lander is not None
+    t_end = flight.lander.ref.t_end
+    ground = flight.lander.ref.xi(t_end)[:3]
+    assert not flight.disarm_due(t_end + 0.5, 0.0, True)  # not settled yet
+    assert not flight.disarm_due(t_end + 1.0, 0.0, True)  # landed: idle starts
+    assert flight.disarm_due(t_end + 2.0, 0.0, True)
+    assert not flight.disarm_due(t_end + 2.5, 0.0, True)  # retried 2 s later
+    assert not flight.disarm_due(t_end + 5.0, 0.0, False)  # disarmed
+    assert ground[2] == pytest.approx(0.0)
+
+
+class _Link:
+    """The few VehicleLink members ModeRequests uses (unit test of one class)."""
+
+    def __init__(self) -> None:
+        self.custom_mode, self.in_offboard, self.armed, self.failsafe_texts = 0, False, True, 0
+        self.sent: list[tuple[int, list[float]]] = []
+        self.results: dict[int, int] = {}
+
+    def finished(self, cmd: int) -> tuple[bool, int | None]:
+        return (True, self.results.pop(cmd)) if cmd in self.results else (False, None)
+
+    def busy(self, cmd: int) -> bool:
+        return False
+
+    def start_command(self, cmd: int, params: list[float]) -> None:
+        self.sent.append((cmd, params))
+
+
+def test_disarm_outcome_is_not_taken_for_an_arm() -> None:
+    from offboard.link_guard import OffboardKeeper
+    from offboard.mavlink_link import mavlink
+    from offboard.mode_requests import ModeRequests
+
+    link = _Link()
+    keeper = OffboardKeeper(0.6, manual_start=True)
+    modes = ModeRequests(link, keeper, 3)  # type: ignore[arg-type]
+    modes.disarm()
+    assert link.sent == [(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [0, 0])] and modes.disarming
+    link.results[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = mavlink.MAV_RESULT_DENIED
+    modes.collect(1.0)
+    assert not modes.disarming and not keeper.arm_acked
+
+
+@pytest.mark.parametrize(("text", "value"), [("3", 3.0), ("0", 0.0), ("2", 2.0), ("1", None),
+                                             ("nan", None), ("inf", None), ("x", None),
+                                             ("-3", None), ("3601", None)])
+def test_loss_land_after_flag(text: str, value: float | None) -> None:
+    from offboard.cli import loss_land_after
+
+    assert loss_land_after(text) == value
