@@ -23,32 +23,23 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import zenoh
 
 from gcs.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
-from gcs.metrics import Series, compute_metrics
+from gcs.mission_score import default_out_dir, recorded_metrics, recorder_series, score_run
 from gcs.procs import ProcessGroup
 from gcs.progress import Progress
 from gcs.recorder import Recorder
 from gcs.router import open_router
-from gcs.run_output import (
-    empty_series,
-    print_result,
-    run_dir_inside,
-    run_document,
-    safety_spec,
-    set_truth_row,
-    write_run,
-)
-from offboard.bearing import formation_from_scenario
-from offboard.takeoff import is_ground_start, takeoff_plan
+from gcs.run_output import print_result, write_run
 from swarm_common import wire
 from swarm_common.scenario import Scenario
 from swarm_common.zenoh_session import write_swarm_security
-from vehicle_sim.dynamics import SwarmDynamics
 
 log = logging.getLogger(__name__)
+# scoring lives in gcs.mission_score; these names stay importable from here
+__all__ = ["MissionError", "cli_run", "default_out_dir", "recorded_metrics", "recorder_series",
+           "run_and_score", "run_distributed"]
 
 
 class MissionError(RuntimeError):
@@ -282,86 +273,6 @@ def _check_children(group: ProcessGroup, failed: list[int], t: float) -> None:
                         "without it (see %s)", aid, child.proc.returncode, t, child.log_path)
 
 
-def recorder_series(rec: Recorder, sc: Scenario) -> Series:
-    """The recorded run as the in-process runner's :class:`~gcs.metrics.Series`.
-
-    Row k holds truth(k), the estimates valid at t_k (published at step k−1), the
-    statuses of step k and the minimum pair distance over (t_k, t_k+1] (carried by
-    truth(k+1)). Rows use the float32 values that crossed the wire, as in-process.
-    """
-    rec.drain()
-    form = formation_from_scenario(sc)
-    steps = np.flatnonzero(rec.have_truth[: rec.steps])
-    ser = empty_series(rec.t[steps].copy(), sc.n, fill=np.nan)
-    for r, k in enumerate(steps):
-        set_truth_row(ser, r, form, rec.p[k].astype(float), rec.v[k].astype(float),
-                      rec.lumped_true[k].astype(float), rec.thrust[k].astype(float),
-                      rec.att[k].astype(float))
-    nxt = steps + 1
-    ser.min_dist[:] = np.where(rec.have_truth[nxt], rec.min_dist[nxt], np.nan)
-    ser.z1[:], ser.z2[:] = rec.z1[steps], rec.z2[steps]  # estimates valid at t_k
-    ser.u[:], ser.lumped_est[:] = rec.u[steps], rec.lumped_est[steps]
-    ser.h_min[:], ser.solve_us[:] = rec.h_min[steps], rec.solve_us[steps]
-    ser.fallback[:], ser.input_clipped[:] = rec.degraded[steps], rec.clipped[steps]
-    # Real time: an agent may skip a stamp (late cycle), leaving a row without its
-    # message; hold the last value (lockstep runs have none missing).
-    for arr in (ser.z1, ser.z2, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
-        for r in range(1, len(steps)):
-            gap = np.isnan(arr[r])
-            if np.any(gap):
-                arr[r][gap] = arr[r - 1][gap]
-    ser.u[np.isnan(ser.u)] = 0.0  # before a daemon's first status: no command known
-    return ser
-
-
-def recorded_metrics(
-    rec: Recorder, sc: Scenario, wall_s: float, duration: float, land_at: float | None = None
-) -> tuple[dict[str, Any], Series]:
-    """Metrics of a distributed run, computed by the same function as in process
-    (``land_at``: the land-all time, s, bounds the "landing" phase)."""
-    ser = recorder_series(rec, sc)
-    form = formation_from_scenario(sc)
-    veh = sc.vehicle
-    truth = rec.truth
-    last = truth[max(truth)] if len(truth) else None
-    zeta_true = SwarmDynamics(sc, seed=rec.seed).zeta  # the simulator's seeded draw of ζ
-    zeta_est = rec.zeta_last.copy()
-    fallbacks = sum(st.fallbacks for st in rec.last_status.values())
-    valid = ~np.isnan(ser.min_dist)
-    if not np.all(valid):  # a run cut short: drop the incomplete tail
-        ser = Series(**{k: v[valid] for k, v in ser.as_dict().items()})
-    metrics = compute_metrics(
-        ser, form.follower_idx, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
-        last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
-        safety_spec(sc, bool(rec.last_status)),
-        takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
-        land_at_s=land_at,
-    )
-    return metrics, ser
-
-
-def default_out_dir(sc: Scenario, method: str, parent: Path = Path("runs")) -> Path:
-    """``runs/<scenario>-<method>-<time>``, always inside ``parent``."""
-    return run_dir_inside(parent, f"{sc.name}-{method}-{time.strftime('%Y%m%d-%H%M%S')}")
-
-
-def _score(
-    rec: Recorder, sc: Scenario, facts: dict[str, Any], method: str, seed: int | None,
-    realtime: bool, land_at: float | None, duration: float,
-) -> tuple[dict[str, Any], Series]:
-    """The run document and series of what was recorded (possibly a part of the run)."""
-    if len(rec.truth) >= 2:
-        metrics, ser = recorded_metrics(rec, sc, facts.get("wall_s", 0.0), duration, land_at)
-    else:  # stopped before the second step: nothing to score
-        metrics, ser = {}, empty_series(np.zeros(0), sc.n)
-    doc = run_document(
-        sc.name, method, sc.seed if seed is None else seed, metrics,
-        mode="realtime" if realtime else "lockstep", aborted=bool(facts.get("aborted")),
-        run=facts,
-    )
-    return doc, ser
-
-
 def run_and_score(
     sc: Scenario,
     out_dir: Path,
@@ -385,7 +296,7 @@ def run_and_score(
     def write_partial(rec: Recorder, facts: dict[str, Any], reason: str) -> None:
         part = {**facts, "aborted": True, "abort_reason": reason}
         try:
-            doc, ser = _score(rec, sc, part, method, seed, realtime, land_at, duration)
+            doc, ser = score_run(rec, sc, part, method, seed, realtime, land_at, duration)
             write_run(out_dir, doc, ser)
         except (OSError, ValueError) as exc:
             log.warning("could not write the %s metrics to %s: %s", reason, out_dir, exc)
@@ -395,7 +306,7 @@ def run_and_score(
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
         on_abort=write_partial, signing=signing,
     )
-    doc, ser = _score(rec, sc, facts, method, seed, realtime, land_at, duration)
+    doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
     return doc
 
