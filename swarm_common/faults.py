@@ -340,6 +340,8 @@ class FaultInjector:
             self._cv.notify()
         if self._thread is not None:
             self._thread.join(1.0)
+        log.info("%s faults: %s", self.link, " ".join(f"{k}={v}" for k, v in
+                                                        self.stats.as_dict().items()))
 
     # -- inbound ----------------------------------------------------------------------
     def drop_inbound(self) -> bool:
