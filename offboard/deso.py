@@ -377,6 +377,16 @@ class DESO:
         self._f_hat = model_accel(self.z1, self.z2, self.zeta, self.h)
         return self.z3 + self._f_hat
 
+    def coast(self, u_sub: np.ndarray) -> None:
+        """Dead-reckon one control period with the model (z3 and ζ held): a period
+        with no relative information, or one the daemon missed (u_sub: (substeps, 3),
+        m/s²)."""
+        self._f_hat = None
+        for s in range(self.substeps):
+            acc = self.z3 + model_accel(self.z1, self.z2, self.zeta, self.h) + u_sub[s]
+            self.z1 = self.z1 + self.delta * self.z2 + 0.5 * self.delta**2 * acc
+            self.z2 = self.z2 + self.delta * acc
+
     def update(
         self,
         rel_pos: np.ndarray,
@@ -397,10 +407,7 @@ class DESO:
         self.n_used = len(used)
         if not used:  # no relative information: dead-reckon with the model
             self.converged_s = 0.0
-            for s in range(self.substeps):
-                acc = self.z3 + model_accel(self.z1, self.z2, self.zeta, self.h) + u_sub[s]
-                self.z1 = self.z1 + self.delta * self.z2 + 0.5 * self.delta**2 * acc
-                self.z2 = self.z2 + self.delta * acc
+            self.coast(u_sub)
             return
         a_s, g, dmat = self._matrices(used)
         idx = list(used)

@@ -38,6 +38,7 @@ from swarm_common.scenario import Scenario
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
 CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as input_clipped
+MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s at 50 Hz)
 
 
 @dataclass
@@ -105,6 +106,8 @@ class FollowerAgent(AgentBase):
         }
         self.aw_box[Method.DCBF] = None
         self.u_prev = np.zeros(3)
+        self.last_k: int | None = None  # the step of the previous call (coasting, above)
+        self.last_sp: Setpoint | None = None
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
         self.ids = sc.ids
@@ -141,6 +144,7 @@ class FollowerAgent(AgentBase):
         neighbours: dict[int, NeighbourEstimate],
         comm_ok: bool = True,
     ) -> AgentOutput:
+        self._coast_missed(k, t)
         meas = self.sensor.measure(np.asarray(truth_p, float), np.asarray(truth_v, float))
         rel_p = meas.rel_pos()  # p_j − p_i
         rel_v = meas.rel_vel()
@@ -163,6 +167,7 @@ class FollowerAgent(AgentBase):
         status.input_clipped = input_clipped(sp, u, self.veh.mass_kg, self.veh.gravity_mps2)
         # --- observers to t_{k+1} ---------------------------------------------------
         u_sub = self.inner.run(sp, self.substeps)
+        self.last_sp = sp
         self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), u_sub.mean(axis=0)
         self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
         self.ref.update(peers.xi)
@@ -170,6 +175,24 @@ class FollowerAgent(AgentBase):
         return self._output(sp, u, self._estimate(t + self.dt), status, w_raw)
 
     # -- the named parts of the step --------------------------------------------------
+    def _coast_missed(self, k: int, t: float) -> None:
+        """Advance the observers over control periods that had no step (a lost ODOMETRY
+        in real time: step k follows step k − m, m > 1). The DESO and the desired-state
+        observer each advance exactly one period per step, so without this every lost
+        stamp left them a period behind the vehicle. For each missed period the inner-loop
+        model applies the last setpoint (what the vehicle kept flying), the DESO
+        dead-reckons with it (:meth:`~offboard.deso.DESO.coast`) and ξ̂ is advanced with
+        the neighbours' predictions for that period. In process and in lockstep k always
+        follows k − 1, so this never runs there (bit-identical runs)."""
+        last, self.last_k = self.last_k, k
+        if last is None or self.last_sp is None or k <= last + 1:
+            return
+        missed = min(k - last - 1, MAX_COAST_PERIODS)
+        for m in range(missed, 0, -1):
+            u_sub = self.inner.run(self.last_sp, self.substeps)
+            self.deso.coast(u_sub)
+            self.ref.update(self._predict_peers(t - m * self.dt).xi)
+
     def _predict_peers(self, t: float) -> _Peers:
         """Neighbours' (and, for the anchor and the RCBF, leaders') data predicted to t."""
         out = _Peers()

@@ -380,6 +380,8 @@ class OffboardKeeper:
         return None
 
     def _startup(self, now: float, v: VehicleView) -> str | None:
+        if v.in_offboard:  # a failsafe HOLD from here on is recovered (decide)
+            self.seen_offboard, self.texts_ref = True, v.failsafe_texts
         if v.streaming_s < self.stream_s or not self.startup_backoff.ready(now):
             return None
         if not (v.in_offboard or self.offboard_acked):
@@ -387,6 +389,9 @@ class OffboardKeeper:
         if not (v.armed or self.arm_acked):
             return "arm"
         self.startup_done = True
+        # OFFBOARD was accepted: a failsafe HOLD that came before the heartbeat showed it
+        # (texts_ref still counts every failsafe since start) is recovered as well
+        self.seen_offboard = self.seen_offboard or self.offboard_acked
         return None
 
     def result(self, what: str, accepted: bool, now: float) -> None:

@@ -240,3 +240,18 @@ def test_recovery_stops_when_a_third_party_lands_it() -> None:
     assert k.decide(5.5, _view(False, hold=False, texts=1)) is None
     assert not k.recovering
     assert k.decide(9.0, _view(False, hold=True, texts=2)) is None  # still respected
+
+
+def test_failsafe_between_offboard_and_arm_is_recovered() -> None:
+    """OFFBOARD accepted, then the offboard-loss failsafe put the vehicle in HOLD before
+    the arm was accepted: once armed, OFFBOARD is asked for again (it was never
+    recovered before: the keeper had not 'seen' OFFBOARD)."""
+    k = OffboardKeeper(stream_s=0.6, manual_start=False)
+    assert k.decide(1.0, _view(False, armed=False)) == "offboard"
+    k.result("offboard", True, 1.0)
+    # the failsafe hits before any heartbeat shows OFFBOARD
+    assert k.decide(1.1, _view(False, hold=True, texts=1, armed=False)) == "arm"
+    k.result("arm", True, 1.1)
+    k.decide(1.2, _view(False, hold=True, texts=1))
+    assert k.startup_done and k.recovering
+    assert k.decide(1.3, _view(False, hold=True, texts=1)) == "offboard"
