@@ -58,12 +58,18 @@ class FailsafeAction(StrEnum):
 
 
 class VehicleMode(StrEnum):
-    """The flight modes ``vehicle-sim`` implements, by the short names it reports."""
+    """The flight modes ``vehicle-sim`` implements, by the short names it reports
+    (docs/px4/modes.md). HOLD is PX4's AUTO.LOITER; the AUTO sub-modes otherwise carry
+    pymavlink's names."""
 
     POSCTL = "POSCTL"
     OFFBOARD = "OFFBOARD"
     HOLD = "HOLD"
     LAND = "LAND"
+    ALTCTL = "ALTCTL"
+    TAKEOFF = "TAKEOFF"
+    RTL = "RTL"
+    MISSION = "MISSION"
 
 
 class StartMode(StrEnum):

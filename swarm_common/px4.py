@@ -77,14 +77,18 @@ CUSTOM_MODE: dict[VehicleMode, int] = {
     VehicleMode.OFFBOARD: custom_mode(MAIN_OFFBOARD),
     VehicleMode.HOLD: custom_mode(MAIN_AUTO, SUB_AUTO_LOITER),
     VehicleMode.LAND: custom_mode(MAIN_AUTO, SUB_AUTO_LAND),
+    VehicleMode.ALTCTL: custom_mode(MAIN_ALTCTL),
+    VehicleMode.TAKEOFF: custom_mode(MAIN_AUTO, SUB_AUTO_TAKEOFF),
+    VehicleMode.RTL: custom_mode(MAIN_AUTO, SUB_AUTO_RTL),
+    VehicleMode.MISSION: custom_mode(MAIN_AUTO, SUB_AUTO_MISSION),
 }
 _SHORT_NAME = {v: k for k, v in CUSTOM_MODE.items()}
 
 
 def vehicle_mode(main: int, sub: int = 0) -> VehicleMode | None:
     """The simulator's mode for a PX4 (main, sub) pair; None when it does not implement it
-    (OFFBOARD and POSCTL ignore ``sub``, as PX4 does)."""
-    if main in (MAIN_OFFBOARD, MAIN_POSCTL):
+    (OFFBOARD, POSCTL and ALTCTL ignore ``sub``, as PX4 does)."""
+    if main in (MAIN_OFFBOARD, MAIN_POSCTL, MAIN_ALTCTL):
         sub = 0
     if not (0 <= main <= 0xFF and 0 <= sub <= 0xFF):
         return None

@@ -16,7 +16,8 @@ def test_short_names() -> None:
     for name, cm in px4.CUSTOM_MODE.items():
         assert px4.short_name(cm) == name
     assert px4.short_name(px4.custom_mode(px4.MAIN_ALTCTL)) == "ALTCTL"
-    assert px4.short_name(px4.custom_mode(px4.MAIN_AUTO, 4)) == "AUTO"  # AUTO.MISSION
+    assert px4.short_name(px4.custom_mode(px4.MAIN_AUTO, 4)) == "MISSION"
+    assert px4.short_name(px4.custom_mode(px4.MAIN_AUTO, 7)) == "AUTO"  # AUTO.FOLLOW
     assert px4.short_name(px4.custom_mode(42)) == "MODE42"
 
 
@@ -31,6 +32,8 @@ def test_numbers_are_pymavlinks_px4_modes() -> None:
 def test_vehicle_mode_of_main_sub() -> None:
     assert px4.vehicle_mode(px4.MAIN_OFFBOARD, 7) == VehicleMode.OFFBOARD  # sub ignored
     assert px4.vehicle_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LAND) == VehicleMode.LAND
-    assert px4.vehicle_mode(px4.MAIN_AUTO, px4.SUB_AUTO_MISSION) is None
+    assert px4.vehicle_mode(px4.MAIN_AUTO, px4.SUB_AUTO_MISSION) == VehicleMode.MISSION
+    assert px4.vehicle_mode(px4.MAIN_ALTCTL, 3) == VehicleMode.ALTCTL
+    assert px4.vehicle_mode(px4.MAIN_AUTO, px4.SUB_AUTO_FOLLOW_TARGET) is None
     assert px4.vehicle_mode(px4.MAIN_OFFBOARD + 256) is None  # not a uint8: not masked
     assert px4.vehicle_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LOITER + 256) is None
