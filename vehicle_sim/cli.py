@@ -106,6 +106,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PATH",
         help="write run statistics (setpoint latency, timeouts) as JSON at exit",
     )
+    ap.add_argument(
+        "--params-file",
+        default=None,
+        metavar="PATH",
+        help="PX4 parameters per vehicle (JSON, docs/px4/params.md): loaded at start, "
+        "rewritten on every accepted PARAM_SET; created if missing",
+    )
     return ap
 
 
@@ -152,6 +159,7 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
         duration=args.duration,
         vehicles=args.vehicles,
         stats_out=args.stats_out,
+        params_file=args.params_file,
     )
 
 
@@ -171,11 +179,62 @@ def _server(args: argparse.Namespace) -> SimServer:
         # read by swarm_common.zenoh_session.make_config when the truth session opens
         os.environ[ZENOH_CONFIG_ENV] = args.zenoh_config
     try:
-        return SimServer(sc, opts)
+        server = SimServer(sc, opts)
     except LinkError as exc:
         raise _Fatal(str(exc.strerror)) from None
     except (RuntimeError, ValueError) as exc:
         raise _Fatal(str(exc).splitlines()[0]) from None
+    try:
+        _attach_params_file(server, opts.params_file)
+    except _Fatal:
+        server.close()
+        raise
+    for line in port_map_lines(opts, [v.id for v in server.vehicles]):
+        log.info("%s", line)
+    return server
+
+
+def _attach_params_file(server: SimServer, path: str | None) -> None:
+    """``--params-file``: validate it, apply it to every vehicle, save on every change."""
+    if path is None or not server.vehicles:
+        return
+    from vehicle_sim.params import ParamFile, ParamFileError, read_param_file
+
+    try:
+        stored = read_param_file(path, server.vehicles[0].params)
+    except ParamFileError as exc:
+        raise _Fatal(f"--params-file {path}: {exc}") from None
+    pf = ParamFile(path, stored)
+    for v in server.vehicles:
+        pf.attach(v.id, v.params)
+    log.info("parameters: %s (%d vehicles with saved values)", path, len(stored))
+
+
+def port_map_lines(opts: SimOptions, ids: list[int]) -> list[str]:
+    """The ports to connect to (PX4 SITL-style map, swarm_common.ports), one line each."""
+    from swarm_common.ports import vehicle_ports
+    from swarm_common.zenoh_session import default_endpoint
+
+    host = opts.bind_host
+    lines = ["port map (vehicle: sim binds -> streams to):"]
+    for aid in ids:
+        p = vehicle_ports(aid, opts.port_offset)
+        lines.append(
+            f"  vehicle {aid} (sysid {aid}): API/offboard udp {host}:{p.api_local} -> "
+            f"{opts.remote_host}:{p.api_remote}, GCS udp {host}:{p.gcs_local} -> "
+            f"{opts.remote_host}:{p.gcs_remote}"
+        )
+    if not opts.zenoh:
+        lines.append("  zenoh: off (--no-zenoh)")
+    else:
+        listen = list(opts.zenoh_listen)
+        if not listen and not opts.zenoh_connect and opts.zenoh_mode != "client":
+            listen = [default_endpoint(opts.port_offset)]
+        lines.append(
+            f"  zenoh ({opts.zenoh_mode}): listen {', '.join(listen) or '-'}; "
+            f"connect {', '.join(opts.zenoh_connect) or '-'}"
+        )
+    return lines
 
 
 def _run(server: SimServer) -> int:

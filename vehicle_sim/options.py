@@ -28,6 +28,7 @@ class SimOptions:
     duration: float | None = None
     vehicles: int | None = None
     stats_out: str | None = None
+    params_file: str | None = None  # --params-file: per-vehicle PX4 parameters (JSON)
     signing_key: bytes | None = field(default=None, repr=False)  # never printed
     unsigned_gcs: bool = False  # GCS link: unsigned telemetry requests allowed
 
