@@ -84,11 +84,6 @@ def test_safe(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     assert m["min_distance_m"] >= 0.5
 
 
-@pytest.mark.xfail(
-    reason="a failsafe HOLD that trips during start-up (after OFFBOARD is accepted, before "
-    "the ARM is) is never recovered: offboard.link_guard.OffboardKeeper only learns that the "
-    "vehicle was in OFFBOARD after start-up (docs/faults.md, 'Measured')", strict=False,
-)
 def test_never_stuck_in_failsafe(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     out, _ = lossy_run
     sim_log = (out / "vehicle-sim.log").read_text()
@@ -99,11 +94,6 @@ def test_never_stuck_in_failsafe(lossy_run: tuple[Path, dict[str, Any]]) -> None
     assert all(d <= MAX_OUT_OF_OFFBOARD_S for d in longest.values()), longest
 
 
-@pytest.mark.xfail(
-    reason="measured 0.25-0.33 m with 20 % loss (0.12 m without faults) over the 25 s run: "
-    "a lost ODOMETRY skips a control step and the agent's observers advance one period per "
-    "step, so they fall behind (docs/faults.md, 'Measured')", strict=False,
-)
 def test_tracking_after_formation(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     """The run's own tracking metric (RMS of the followers' ‖p − p_des‖ over
     [formation_deadline_s, end], docs/metrics.md) under 20 % loss."""
