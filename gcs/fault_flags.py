@@ -14,6 +14,7 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
+from swarm_common.enums import FaultLinkChoice
 from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -23,7 +24,7 @@ FAULT_FLAGS = {
     "fault_drop": "drop", "fault_drop_in": "drop_in", "fault_delay_ms": "delay_ms",
     "fault_jitter_ms": "jitter_ms", "fault_duplicate": "duplicate", "fault_reorder": "reorder",
 }
-FAULT_LINK_CHOICES = ("mavlink", "zenoh", "both")
+FAULT_LINK_CHOICES = tuple(c.value for c in FaultLinkChoice)
 
 
 def _fault_value(key: str) -> Callable[[str], float]:
@@ -74,7 +75,7 @@ def write_fault_scenario(args: argparse.Namespace, sc: Scenario) -> Path | None:
         return None
     from gcs.mission import default_out_dir
 
-    links = LINKS if args.fault_link in (None, "both") else (args.fault_link,)
+    links = LINKS if args.fault_link in (None, FaultLinkChoice.BOTH) else (args.fault_link,)
     doc = sc.to_toml_dict()
     doc["faults"] = sc.faults.with_link_values(links, values).as_toml()
     out = Path(args.out) if args.out else default_out_dir(sc, str(args.method or

@@ -77,3 +77,18 @@ class StartMode(StrEnum):
 
     AIRBORNE = "airborne"  # agents start at their ``position`` in the air (the paper's setup)
     GROUND = "ground"  # ``position`` is a pad on the ground; coordinated take-off first
+
+
+class FaultLink(StrEnum):
+    """A transport that fault injection applies to (``[faults.<link>]``, docs/faults.md)."""
+
+    MAVLINK = "mavlink"
+    ZENOH = "zenoh"
+
+
+class FaultLinkChoice(StrEnum):
+    """``gcs mission run --fault-link``: one transport or both."""
+
+    MAVLINK = "mavlink"
+    ZENOH = "zenoh"
+    BOTH = "both"

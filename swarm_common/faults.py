@@ -37,11 +37,13 @@ from typing import Any
 
 import numpy as np
 
+from swarm_common.enums import FaultLink
+
 log = logging.getLogger(__name__)
 
-MAVLINK = "mavlink"
-ZENOH = "zenoh"
-LINKS = (MAVLINK, ZENOH)
+MAVLINK = FaultLink.MAVLINK.value
+ZENOH = FaultLink.ZENOH.value
+LINKS = tuple(link.value for link in FaultLink)
 REORDER_MAX_HOLD_S = 0.1  # s: a held-back message goes out at the latest this much later
 MAX_DELAY_MS = 10_000.0
 MAX_PENDING = 100_000  # messages waiting in one injector's timer queue; beyond: dropped
