@@ -27,6 +27,7 @@ def default_param_specs(agent_id: int, cfg: Any, dyn: Any) -> list[ParamSpec]:
     hover = float(dyn.hold_thrust()) / float(dyn.f_max)
     tilt_deg = math.degrees(float(dyn.tilt_max))
     obl = OBL_ACT_LAND if cfg.failsafe == FailsafeAction.LAND else OBL_ACT_HOLD
+    # fmt: off
     return [
         # identity values: read by clients on connect, read-only here
         ParamSpec("SYS_AUTOSTART", INT32, 10016, 0, 9_999_999,
@@ -70,3 +71,4 @@ def default_param_specs(agent_id: int, cfg: Any, dyn: Any) -> list[ParamSpec]:
         ParamSpec("GF_MAX_VER_DIST", REAL32, 0.0, 0.0, 10_000.0,
                   "behaviour: max height above home, m (0: off)"),
     ]
+    # fmt: on

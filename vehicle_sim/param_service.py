@@ -58,9 +58,7 @@ def decode_set(spec: ParamSpec, param_type: int, param_value: float) -> float:
     """The value a PARAM_SET asks for, or :class:`ParamError` (type mismatch)."""
     if param_type != spec.ptype:
         want = "INT32" if spec.ptype == INT32 else "REAL32"
-        raise ParamError(
-            M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, f"{spec.name}: type must be {want}"
-        )
+        raise ParamError(M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, f"{spec.name}: type must be {want}")
     if spec.ptype == INT32:
         return float(wire_to_int32(param_value))
     return float(param_value)
@@ -109,9 +107,7 @@ class ParamService:
         """PARAM_VALUE of parameter ``i``."""
         spec = self.store.specs[i]
         v = wire_value(spec, self.store.values[i])
-        return M.MAVLink_param_value_message(
-            spec.name.encode(), v, spec.ptype, len(self.store), i
-        )
+        return M.MAVLink_param_value_message(spec.name.encode(), v, spec.ptype, len(self.store), i)
 
     def _refuse(self, m: Any, src: Any, name: str, index: int, exc: ParamError) -> None:
         """PARAM_ERROR and a STATUSTEXT to the requester (and the server's log)."""
@@ -180,4 +176,3 @@ class ParamService:
         log.info("vehicle %d: %s = %g", self.vehicle.id, name, changed)
         for n in self.store.linked(name):
             self.vehicle.outbox.append((self.value_msg(self.store.index[n]), None))
-
