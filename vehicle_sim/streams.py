@@ -6,9 +6,19 @@ one (-1 µs: off, 0: back to the default, else clamped to [10 ms, 2000 s]: no st
 faster than 100 Hz, whatever is asked). HEARTBEAT is the link's liveness: never off, at
 least 1 Hz, at most 50 Hz.
 
-Rates are per peer, as in PX4 (:class:`PeerStreams`): a rate request changes the
-schedule of the peer that sent it only; every other destination keeps the defaults, and a
-peer's schedule is forgotten with the peer, so the next client starts from the defaults.
+Rates are per peer (:class:`PeerStreams`): a rate request (SET_MESSAGE_INTERVAL,
+REQUEST_DATA_STREAM) changes the schedule of the peer that sent it only; every other
+destination keeps the defaults. A peer's schedule lives as long as the link counts the
+peer as present (it spoke within ``mavlink_link.PEER_TIMEOUT_S``): once it falls silent
+its schedule is dropped, so the next client, even one on the same address, starts from
+the defaults again. PX4 keeps requested rates for the life of its MAVLink instance, which
+on a UDP link outlives the client that asked; resetting on silence is the choice that
+stops one client's rates from leaking into the next one's (docs/px4/streams.md).
+
+Defaults differ per link: a link named in ``telemetry.LINK_RATE_CAPS`` runs some streams
+slower. Peers on such a link get their own schedule from those capped rates as soon as
+they are present; destinations on other links (and a default remote that has not
+spoken yet) share the default schedule.
 """
 
 from __future__ import annotations
@@ -16,6 +26,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import common as M
+
+from vehicle_sim.telemetry import LINK_RATE_CAPS
 
 # a destination with its own schedule: (link name, (host, port))
 PeerKey = tuple[str, tuple[str, int]]
@@ -81,35 +93,58 @@ class StreamSchedule:
 
 
 class PeerStreams:
-    """The default schedule (every destination without requests of its own) and one
-    schedule per peer that asked for a rate."""
+    """The default schedule (every destination without a schedule of its own) and one
+    schedule per peer that asked for a rate or sits on a link with capped defaults."""
 
-    def __init__(self, rates: dict[int, float], odometry_hz: float) -> None:
+    def __init__(
+        self,
+        rates: dict[int, float],
+        odometry_hz: float,
+        caps: dict[str, dict[int, float]] | None = None,
+    ) -> None:
         self.rates = dict(rates)
         self.odometry_hz = odometry_hz
+        self.caps = LINK_RATE_CAPS if caps is None else caps
         self.default = StreamSchedule(self.rates, odometry_hz)
         self.peers: dict[PeerKey, StreamSchedule] = {}
 
     def __contains__(self, mid: int) -> bool:
         return mid in self.default
 
+    def link_rates(self, link: str) -> dict[int, float]:
+        """The default rates (Hz) of a peer on ``link``: the defaults under its caps."""
+        cap = self.caps.get(link, {})
+        return {mid: min(hz, cap.get(mid, hz)) for mid, hz in self.rates.items()}
+
+    def _fresh(self, link: str) -> StreamSchedule:
+        return StreamSchedule(self.link_rates(link), self.odometry_hz)
+
     def for_peer(self, key: PeerKey | None, create: bool = False) -> StreamSchedule:
-        """The schedule of ``key`` (a fresh default one if ``create``); default if None."""
+        """The schedule of ``key`` (stored if ``create``); default if None. A peer without
+        one gets its link's defaults (a fresh copy, not stored, unless ``create``)."""
         if key is None:
             return self.default
-        if create and key not in self.peers:
-            self.peers[key] = StreamSchedule(self.rates, self.odometry_hz)
-        return self.peers.get(key, self.default)
+        sched = self.peers.get(key)
+        if sched is not None:
+            return sched
+        if create:
+            sched = self.peers[key] = self._fresh(key[0])
+            return sched
+        return self._fresh(key[0]) if key[0] in self.caps else self.default
 
     def custom(self, link: str) -> set[tuple[str, int]]:
         """Addresses on ``link`` that have their own schedule (not on the default one)."""
         return {addr for name, addr in self.peers if name == link}
 
     def forget(self, live: Iterable[PeerKey]) -> None:
-        """Drop the schedules of peers that are gone."""
+        """Drop the schedules of peers that are gone (their rates with them); give every
+        present peer on a capped link its own schedule from that link's defaults."""
         keep = set(live)
         for key in [k for k in self.peers if k not in keep]:
             del self.peers[key]
+        for key in keep:
+            if key[0] in self.caps and key not in self.peers:
+                self.peers[key] = self._fresh(key[0])
 
     def due(self, wall: float, skip: tuple[int, ...] = ()) -> list[tuple[PeerKey | None, int]]:
         """(destination or None for the default schedule, message id) due at ``wall``."""

@@ -3,8 +3,10 @@
 :data:`BUILDERS` maps a message id (``MAVLINK_MSG_ID_*``) to a function
 ``(vehicle, sim_t) -> message`` that reads the vehicle's state (dynamics row, mode,
 setpoint); :func:`build` looks it up (``None`` for a message the vehicle does not send).
-:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with (Hz, 0 = off); the
-ODOMETRY rate comes from ``VehicleConfig.odometry_hz``.
+:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with (Hz, 0 = off; PX4's
+"normal" link mode, the GCS link); :data:`LINK_RATE_CAPS` caps some of them on other links
+(the API link of the offboard controller stays lean). The ODOMETRY rate comes from
+``VehicleConfig.odometry_hz``. Rates, health bits and the battery: docs/px4/streams.md.
 
 Frames: the dynamics are ENU / FLU (z up); every message is NED / FRD. Time stamps are
 simulation time (``time_boot_ms`` = round(sim_t · 1000), ``time_usec`` = round(sim_t · 1e6)).
@@ -22,6 +24,9 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames
 from swarm_common.enums import VehicleMode
+from vehicle_sim.battery import BatteryModel
+from vehicle_sim.mavlink_extra import MAVLINK_MSG_ID_PROTOCOL_VERSION as MSG_ID_PROTOCOL_VERSION
+from vehicle_sim.mavlink_extra import MAVLink_protocol_version_message
 
 if TYPE_CHECKING:
     from vehicle_sim.vehicle import Vehicle, VehicleConfig
@@ -43,7 +48,9 @@ SENSORS = (
     | M.MAV_SYS_STATUS_AHRS
     | M.MAV_SYS_STATUS_SENSOR_BATTERY
     | M.MAV_SYS_STATUS_PREARM_CHECK
+    | M.MAV_SYS_STATUS_GEOFENCE
 )
+BATTERY_CRITICAL = 0.07  # remaining charge below which the battery bit is unhealthy (PX4)
 
 TM_RATES_IGNORE = (
     M.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
@@ -55,11 +62,13 @@ TM_ATT_IGNORE = M.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 
 EARTH_R = 6378137.0  # m, WGS-84 equatorial radius (flat-earth lat/lon around home)
 MAVLINK_WIRE_VERSION = 3  # HEARTBEAT.mavlink_version
-# SYS_STATUS: a healthy vehicle on a full battery
-SYS_LOAD_PERMILLE = 100
-BATTERY_MV = 16200
-BATTERY_CA = 1000  # cA
-BATTERY_PERCENT = 100
+SYS_LOAD_PERMILLE = 100  # SYS_STATUS.load: 10 %
+TEMPERATURE_UNKNOWN = 32767  # BATTERY_STATUS.temperature: INT16_MAX = not measured
+CELLS_FIELD = 10  # BATTERY_STATUS.voltages: mV per cell, UINT16_MAX where no cell
+UINT16_MAX = 65535
+ENERGY_UNKNOWN = -1
+# PROTOCOL_VERSION: MAVLink 2 active, 1 and 2 supported (version x 100), hashes unknown
+MAVLINK_VERSION_ACTIVE, MAVLINK_VERSION_MIN, MAVLINK_VERSION_MAX = 200, 100, 200
 # GPS_RAW_INT: a good 3D fix
 GPS_EPH_CM, GPS_EPV_CM, GPS_COG_UNKNOWN, GPS_SATELLITES = 80, 120, 65535, 16
 # AUTOPILOT_VERSION: PX4 v1.15.0 official, pid.codes vendor id, "SS" product id
@@ -74,11 +83,24 @@ DEFAULT_RATES: dict[int, float] = {
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
     M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
     M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 20.0,
-    M.MAVLINK_MSG_ID_ATTITUDE: 0.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 15.0,
     M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 20.0,
     M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
-    M.MAVLINK_MSG_ID_HOME_POSITION: 0.2,
+    M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+    M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
     M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.0,
+}
+# per link name: the most a default stream runs there (Hz); the offboard controller's API
+# link needs ODOMETRY only, so the streams added for MAVSDK-like clients stay slow there
+LINK_RATE_CAPS: dict[str, dict[int, float]] = {
+    "api": {
+        M.MAVLINK_MSG_ID_ATTITUDE: 10.0,
+        M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+        M.MAVLINK_MSG_ID_VFR_HUD: 1.0,
+        M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    },
 }
 
 
@@ -124,13 +146,48 @@ def _alt_mm(cfg: VehicleConfig, pn: np.ndarray) -> int:
     return int(round((cfg.home_alt - pn[2]) * 1000))
 
 
+TAKEOFF_MODES = frozenset({"TAKEOFF", "AUTO.TAKEOFF"})  # VehicleMode names that take off
+LANDING_MODES = frozenset({"LAND", "AUTO.LAND"})
+
+
+def _nav_landing(v: Vehicle) -> bool:
+    """The active onboard navigation target (``vehicle.nav_target``, if any) is a landing
+    (the last leg of an RTL or a mission's LAND item)."""
+    target = getattr(v, "nav_target", None)
+    return str(getattr(target, "kind", "")) == "land"
+
+
 def landed_state(v: Vehicle) -> int:
-    """MAV_LANDED_STATE of the vehicle."""
+    """MAV_LANDED_STATE: ON_GROUND, TAKEOFF (armed in a take-off mode), LANDING (armed,
+    in the air, landing) or IN_AIR."""
+    mode = str(v.mode)
+    if v.armed and mode in TAKEOFF_MODES:
+        return M.MAV_LANDED_STATE_TAKEOFF
     if v.on_ground():
         return M.MAV_LANDED_STATE_ON_GROUND
-    if v.armed and v.mode == VehicleMode.LAND:
+    if v.armed and (mode in LANDING_MODES or _nav_landing(v)):
         return M.MAV_LANDED_STATE_LANDING
     return M.MAV_LANDED_STATE_IN_AIR
+
+
+def battery(v: Vehicle) -> BatteryModel:
+    """The vehicle's battery (kept by its information service); a full one if it has none."""
+    b = getattr(getattr(v, "info", None), "battery", None)
+    return b if isinstance(b, BatteryModel) else BatteryModel()
+
+
+def health(v: Vehicle) -> int:
+    """SYS_STATUS.onboard_control_sensors_health: every present sensor healthy except the
+    geofence while breached (``vehicle.mission.fence_breached``), the battery below
+    :data:`BATTERY_CRITICAL`, and the pre-arm check after a flight termination."""
+    bits = SENSORS
+    if getattr(getattr(v, "mission", None), "fence_breached", False):
+        bits &= ~M.MAV_SYS_STATUS_GEOFENCE
+    if battery(v).remaining < BATTERY_CRITICAL:
+        bits &= ~M.MAV_SYS_STATUS_SENSOR_BATTERY
+    if v.terminated:
+        bits &= ~M.MAV_SYS_STATUS_PREARM_CHECK
+    return bits
 
 
 # -- builders ---------------------------------------------------------------------------
@@ -235,17 +292,66 @@ def extended_sys_state(v: Vehicle, sim_t: float) -> M.MAVLink_extended_sys_state
 
 
 def sys_status(v: Vehicle, sim_t: float) -> M.MAVLink_sys_status_message:
+    b = battery(v)
     return M.MAVLink_sys_status_message(
-        SENSORS, SENSORS, SENSORS, SYS_LOAD_PERMILLE, BATTERY_MV, BATTERY_CA, BATTERY_PERCENT,
-        0, 0, 0, 0, 0, 0,
+        SENSORS, SENSORS, health(v), SYS_LOAD_PERMILLE, int(round(b.voltage * 1000)),
+        int(round(b.current_a * 100)), int(round(b.remaining * 100)), 0, 0, 0, 0, 0, 0,
     )  # fmt: skip
+
+
+def battery_status(v: Vehicle, sim_t: float) -> M.MAVLink_battery_status_message:
+    """BATTERY_STATUS of the simulated pack (:mod:`vehicle_sim.battery`)."""
+    b = battery(v)
+    cell_mv = min(UINT16_MAX - 1, int(round(b.cell_voltage * 1000)))
+    cells = [cell_mv] * b.cells + [UINT16_MAX] * (CELLS_FIELD - b.cells)
+    return M.MAVLink_battery_status_message(
+        0, M.MAV_BATTERY_FUNCTION_ALL, M.MAV_BATTERY_TYPE_LIPO, TEMPERATURE_UNKNOWN,
+        cells[:CELLS_FIELD], int(round(b.current_a * 100)), int(round(b.consumed_mah)),
+        ENERGY_UNKNOWN, int(round(b.remaining * 100)), b.time_remaining_s(),
+        M.MAV_BATTERY_CHARGE_STATE_OK if b.remaining >= BATTERY_CRITICAL
+        else M.MAV_BATTERY_CHARGE_STATE_CRITICAL,
+    )  # fmt: skip
+
+
+def vfr_hud(v: Vehicle, sim_t: float) -> M.MAVLink_vfr_hud_message:
+    """VFR_HUD: no wind, so airspeed = ground speed (m/s); throttle = thrust / f_max (%)."""
+    pn, vn = _p_ned(v), _v_ned(v)
+    yaw_ned = math.pi / 2 - float(v.dyn.att[v.idx, 2])
+    heading = int(math.degrees(yaw_ned) % 360.0) % 360
+    gs = float(math.hypot(vn[0], vn[1]))
+    throttle = int(round(100.0 * float(v.dyn.thrust[v.idx]) / v.dyn.f_max))
+    alt = v.cfg.home_alt - float(pn[2])
+    climb = -float(vn[2])
+    return M.MAVLink_vfr_hud_message(gs, gs, heading, max(0, min(100, throttle)), alt, climb)
+
+
+def altitude(v: Vehicle, sim_t: float) -> M.MAVLink_altitude_message:
+    """ALTITUDE (m): flat ground at home altitude, so terrain height = local altitude."""
+    up = -float(_p_ned(v)[2])
+    amsl = v.cfg.home_alt + up
+    rel = up + float(v.home_ned[2])
+    return M.MAVLink_altitude_message(_t_us(sim_t), amsl, amsl, up, rel, up, up)
+
+
+def protocol_version(v: Vehicle, sim_t: float) -> MAVLink_protocol_version_message:
+    """PROTOCOL_VERSION: MAVLink 2 active, versions 1 to 2 understood."""
+    return MAVLink_protocol_version_message(
+        MAVLINK_VERSION_ACTIVE, MAVLINK_VERSION_MIN, MAVLINK_VERSION_MAX, [0] * 8, [0] * 8
+    )
 
 
 def autopilot_version(v: Vehicle, sim_t: float) -> M.MAVLink_autopilot_version_message:
     caps = (
         M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-        | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+        | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT
         | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+        | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+        | M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+        | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+        | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+        | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+        | M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+        | M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
     )
     major, minor, patch = PX4_VERSION
     sw = (major << 24) | (minor << 16) | (patch << 8) | M.FIRMWARE_VERSION_TYPE_OFFICIAL
@@ -278,6 +384,10 @@ BUILDERS: dict[int, Builder] = {
     M.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
     M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
     M.MAVLINK_MSG_ID_ATTITUDE_TARGET: attitude_target,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
+    M.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    M.MAVLINK_MSG_ID_ALTITUDE: altitude,
+    MSG_ID_PROTOCOL_VERSION: protocol_version,
 }
 
 
