@@ -269,11 +269,13 @@ class FollowerAgent(AgentBase):
 
     def _full_share(self, sel: np.ndarray) -> np.ndarray:
         """(M,) True where this agent takes the whole avoidance budget: the other is a
-        leader, or its last estimate says it no longer cooperates (docs/safety.md, A5)."""
+        leader, its last estimate says it no longer cooperates (docs/safety.md, A5), or it
+        is sensed but has never been heard from (a real-time start: its daemon may not be
+        flying it yet, so nothing says it will do its share)."""
         out = self.leader_mask[sel].copy()
         for r, j in enumerate(sel):
             e = self.pred.last.get(self.ids[int(j)])
-            if e is not None and not e.cooperative:
+            if e is None or not e.cooperative:
                 out[r] = True
         return out
 
