@@ -5,6 +5,8 @@ the ``MAV_RESULT_*`` to acknowledge and, for the commands that answer with a mes
 (GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES), that message,
 sent right after the COMMAND_ACK. Any other command is acknowledged UNSUPPORTED.
 Parameters arrive as floats, NaN where unused (MAVSDK sends NaN): :func:`finite`.
+The flight commands (take-off, RTL, land, loiter, reposition, mission start, speed) go
+through :mod:`vehicle_sim.modes`; docs/px4/modes.md lists them with PX4's semantics.
 """
 
 from __future__ import annotations
@@ -14,10 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4
-from vehicle_sim import telemetry
+from vehicle_sim import geo, modes, nav_flight, setpoints, telemetry
+from vehicle_sim.nav import NavKind, NavTarget
 
 if TYPE_CHECKING:
     from vehicle_sim.vehicle import Vehicle
@@ -51,6 +55,7 @@ class Command:
     wall: float
     sim_t: float
     src: Any = None  # (link name, address) of the requester: rate requests are per peer
+    frame: int = M.MAV_FRAME_GLOBAL  # COMMAND_INT's frame; COMMAND_LONG: global, AMSL
 
 
 def _arm_disarm(v: Vehicle, c: Command) -> Outcome:
@@ -76,6 +81,81 @@ def _land(v: Vehicle, c: Command) -> Outcome:
 
 def _loiter(v: Vehicle, c: Command) -> Outcome:
     return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LOITER, c.sim_t), None
+
+
+def _altitude_enu(v: Vehicle, c: Command, alt: float | None) -> float | None:
+    """ENU z (m above the ground/home) of a command's altitude in its frame; None when the
+    altitude is not given. Raises ValueError for a frame without an altitude we know."""
+    if alt is None:
+        return None
+    if c.frame in setpoints.GLOBAL_RELATIVE_FRAMES:
+        return alt
+    if c.frame in setpoints.GLOBAL_AMSL_FRAMES:
+        return -geo.down_from_amsl(v.cfg, alt)
+    raise ValueError(f"frame {c.frame}")
+
+
+def _takeoff(v: Vehicle, c: Command) -> Outcome:
+    """NAV_TAKEOFF: p7 altitude (AMSL; NaN: MIS_TAKEOFF_ALT above home)."""
+    try:
+        alt = _altitude_enu(v, c, finite(c.p[6]))
+    except ValueError:
+        return M.MAV_RESULT_UNSUPPORTED, None
+    return modes.takeoff(v, alt), None
+
+
+def _rtl(v: Vehicle, c: Command) -> Outcome:
+    return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_RTL, c.sim_t), None
+
+
+def _reposition(v: Vehicle, c: Command) -> Outcome:
+    """DO_REPOSITION: p1 ground speed (m/s, < 0 default), p4 yaw (deg NED, NaN keep),
+    p5/p6 latitude/longitude (deg; NaN: here), p7 altitude (frame; NaN: here)."""
+    p = v.p()
+    lat, lon = finite(c.p[4]), finite(c.p[5])
+    try:
+        alt = _altitude_enu(v, c, finite(c.p[6]))
+    except ValueError:
+        return M.MAV_RESULT_UNSUPPORTED, None
+    x, y = float(p[0]), float(p[1])
+    if lat is not None and lon is not None:
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return M.MAV_RESULT_DENIED, None
+        north, east = geo.ned_from_latlon(v.cfg, lat, lon)
+        x, y = east, north  # ENU
+    z = float(p[2]) if alt is None else alt
+    if z < 0.0:
+        return M.MAV_RESULT_DENIED, None
+    speed = finite(c.p[0])
+    yaw_deg = finite(c.p[3])
+    yaw = None if yaw_deg is None else setpoints.yaw_enu_from_ned(math.radians(yaw_deg))
+    spd = speed if speed is not None and speed > 0 else None
+    target = NavTarget(NavKind.GOTO, np.array([x, y, z]), yaw, spd)
+    return modes.reposition(v, target), None
+
+
+def _mission_start(v: Vehicle, c: Command) -> Outcome:
+    return modes.start_mission(v, c.sim_t), None
+
+
+SPEED_RESET = -2.0  # DO_CHANGE_SPEED p2: back to the default (-1: no change)
+
+
+def _change_speed(v: Vehicle, c: Command) -> Outcome:
+    """DO_CHANGE_SPEED: p1 speed type (air or ground speed; climb/descent unsupported),
+    p2 speed m/s (-1 no change, -2 default)."""
+    kind, speed = finite(c.p[0], float(M.SPEED_TYPE_GROUNDSPEED)), finite(c.p[1])
+    if kind not in (M.SPEED_TYPE_AIRSPEED, M.SPEED_TYPE_GROUNDSPEED):
+        return M.MAV_RESULT_UNSUPPORTED, None
+    if speed is None or speed == -1.0:
+        return M.MAV_RESULT_ACCEPTED, None
+    if speed == SPEED_RESET:
+        v.speed_override = None
+        return M.MAV_RESULT_ACCEPTED, None
+    if not 0.0 < speed <= nav_flight.XY_VEL_MAX:
+        return M.MAV_RESULT_DENIED, None
+    v.speed_override = speed
+    return M.MAV_RESULT_ACCEPTED, None
 
 
 def _terminate(v: Vehicle, c: Command) -> Outcome:
@@ -137,6 +217,11 @@ HANDLERS: dict[int, Callable[[Vehicle, Command], Outcome]] = {
     M.MAV_CMD_DO_SET_MODE: _set_mode,
     M.MAV_CMD_NAV_LAND: _land,
     M.MAV_CMD_NAV_LOITER_UNLIM: _loiter,
+    M.MAV_CMD_NAV_TAKEOFF: _takeoff,
+    M.MAV_CMD_NAV_RETURN_TO_LAUNCH: _rtl,
+    M.MAV_CMD_DO_REPOSITION: _reposition,
+    M.MAV_CMD_MISSION_START: _mission_start,
+    M.MAV_CMD_DO_CHANGE_SPEED: _change_speed,
     M.MAV_CMD_DO_FLIGHTTERMINATION: _terminate,
     M.MAV_CMD_SET_MESSAGE_INTERVAL: _set_interval,
     M.MAV_CMD_GET_MESSAGE_INTERVAL: _get_interval,

@@ -8,9 +8,11 @@ is appended to :attr:`Vehicle.outbox` as ``(message, dest)``; ``dest`` is ``None
 "every link, every peer" or ``(link_name, addr)`` for a reply to one requester.
 
 Modes (PX4 custom_mode = main << 16 | sub << 24): POSCTL (default; armed = position hold,
-there are no sticks), OFFBOARD, AUTO.LOITER ("HOLD") and AUTO.LAND ("LAND").
-Offboard rules, failsafe and lockstep: docs/conventions.md. The messages it sends are
-built in :mod:`vehicle_sim.telemetry`, the commands it answers in :mod:`vehicle_sim.commands`.
+there are no sticks), ALTCTL, OFFBOARD, AUTO.TAKEOFF, AUTO.LOITER ("HOLD"), AUTO.MISSION,
+AUTO.RTL and AUTO.LAND ("LAND"); their logic is :mod:`vehicle_sim.modes`, the setpoint
+messages are parsed in :mod:`vehicle_sim.setpoints`. Offboard rules, failsafe and lockstep:
+docs/conventions.md and docs/px4/modes.md. The messages it sends are built in
+:mod:`vehicle_sim.telemetry`, the commands it answers in :mod:`vehicle_sim.commands`.
 
 Times: ``wall`` (monotonic seconds) drives the telemetry schedule; ``sim_t`` (seconds of
 simulation time) drives everything about flight: offboard setpoint freshness and loss,
@@ -24,6 +26,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -31,14 +34,17 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, px4
 from swarm_common.enums import FailsafeAction, VehicleMode
-from vehicle_sim import commands, telemetry
+from vehicle_sim import commands, modes, nav_flight, setpoints, telemetry
 from vehicle_sim.commands import Command
 from vehicle_sim.failsafe_controller import FailsafeController
+from vehicle_sim.mission_service import MissionService
+from vehicle_sim.nav import NavTarget
+from vehicle_sim.nav_flight import RtlPlan
 from vehicle_sim.param_defaults import default_param_specs
 from vehicle_sim.params import ParamStore
+from vehicle_sim.position_control import PositionController, PositionSetpoint, SpeedLimits
 from vehicle_sim.services import attach_services
 from vehicle_sim.streams import PeerKey, PeerStreams
-from vehicle_sim.telemetry import TM_ATT_IGNORE, TM_RATES_IGNORE, TM_THRUST_IGNORE
 
 CUSTOM_MODE = px4.CUSTOM_MODE  # re-exported: the short mode names -> PX4 custom_mode
 MSG_ODOMETRY = M.MAVLINK_MSG_ID_ODOMETRY
@@ -53,6 +59,8 @@ LATENCY_KEEP = 200_000
 
 @dataclass
 class VehicleConfig:
+    # defaults of COM_OF_LOSS_T, COM_OBL_RC_ACT and COM_DISARM_LAND (the vehicle reads
+    # the parameters, which a client may change)
     offboard_timeout: float = 0.5  # s (sim time) without setpoint in OFFBOARD -> failsafe
     failsafe: FailsafeAction = FailsafeAction.HOLD
     odometry_hz: float = 50.0
@@ -86,8 +94,17 @@ class VehicleCounters:
         return dict(self.__dict__)
 
 
+class SetpointKind(StrEnum):
+    """What the last valid offboard setpoint asked for."""
+
+    ATTITUDE = "attitude"  # SET_ATTITUDE_TARGET: attitude + thrust, applied as they are
+    TRAJECTORY = "trajectory"  # SET_POSITION_TARGET_*: the position controller flies it
+
+
 class Vehicle:
     """One simulated PX4 vehicle, reading its state from ``dyn`` row ``idx``."""
+
+    mission: MissionService  # attached by vehicle_sim.services
 
     def __init__(self, agent_id: int, idx: int, dyn: Any, cfg: VehicleConfig | None = None) -> None:
         self.id = int(agent_id)
@@ -107,12 +124,19 @@ class Vehicle:
         self.terminated = False
         self.ever_armed = False
         self.release_requested = False  # server: take it off the spawn fixture
-        self._landed_since: float | None = None
+        self.landed_since: float | None = None
+        # AUTO modes (vehicle_sim.modes): the target the position controller flies
+        self.nav: NavTarget | None = None
+        self.rtl: RtlPlan | None = None
+        self.takeoff_alt: float | None = None  # NAV_TAKEOFF's altitude for the next entry
+        self.speed_override: float | None = None  # DO_CHANGE_SPEED, m/s
 
         # setpoints (ENU/FLU, newtons)
         self.sp_att = np.array([0.0, 0.0, float(dyn.att[idx, 2])])
         self.sp_thrust = float(dyn.hold_thrust())
         self.sp_times: deque[float] = deque(maxlen=64)  # sim time of valid setpoints
+        self.sp_kind = SetpointKind.ATTITUDE
+        self.sp_traj = PositionSetpoint()
         self.last_sp_t: float | None = None
         self.last_sp_ms: int | None = None
         # lockstep
@@ -128,17 +152,24 @@ class Vehicle:
 
         self.fs = FailsafeController(dyn.mass, dyn.g, dyn.tilt_max, dyn.f_max)
         self.fs.engage(FailsafeAction.HOLD, dyn.p[idx], float(dyn.att[idx, 2]))
-        self.home_ned = frames.enu_to_ned(np.array([dyn.p[idx, 0], dyn.p[idx, 1], 0.0]))
+        self.home_enu = np.array([dyn.p[idx, 0], dyn.p[idx, 1], 0.0])
+        self.home_ned = frames.enu_to_ned(self.home_enu)
         self.streams = PeerStreams(self.cfg.rates, self.cfg.odometry_hz)
         self.uid = self.cfg.uid_base | ((self.cfg.port_offset & 0xFFFF) << 8) | self.id
         self._handlers: dict[int, Callable[[Any, Dest, float, float], None]] = {
             M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self._on_setpoint,
+            M.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_position_target,
+            M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT: self._on_position_target,
             M.MAVLINK_MSG_ID_COMMAND_LONG: self._on_command_long,
             M.MAVLINK_MSG_ID_COMMAND_INT: self._on_command_int,
             M.MAVLINK_MSG_ID_SET_MODE: self._on_set_mode,
             M.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
         }
         self.params = ParamStore(default_param_specs(self.id, self.cfg, dyn))
+        self.pc = PositionController(
+            dyn.g, dyn.f_max, dyn.tilt_max, float(self.params.get("MPC_THR_HOVER"))
+        )
+        self.pc.reset(self.yaw())
         self.services = attach_services(self)
         self.command_handlers: dict[int, Any] = {}
         for svc in self.services:
@@ -186,72 +217,29 @@ class Vehicle:
         return n >= self.cfg.setpoint_min_count
 
     # ==================================================================================
-    # modes and arming
-    def _engage_onboard(self) -> None:
-        """Point the onboard hold/land controller at the current mode, from here."""
-        if self.mode in (VehicleMode.HOLD, VehicleMode.POSCTL):
-            self.fs.engage(FailsafeAction.HOLD, self.p(), self.yaw())
-        elif self.mode == VehicleMode.LAND:
-            self.fs.engage(FailsafeAction.LAND, self.p(), self.yaw())
+    # modes and arming (vehicle_sim.modes)
+    @property
+    def landing(self) -> bool:
+        """Armed and descending to land (EXTENDED_SYS_STATE: LANDING)."""
+        return modes.landing(self)
 
-    def _enter_mode(self, mode: VehicleMode, why: str = "") -> None:
-        prev = self.mode
-        self.mode = mode
-        self._engage_onboard()
-        if mode == VehicleMode.LAND:
-            self._landed_since = None
-        if prev != mode or why:
-            self.event(f"mode {prev} -> {mode}{(' (' + why + ')') if why else ''}")
+    @property
+    def taking_off(self) -> bool:
+        """Armed and climbing to a take-off altitude (EXTENDED_SYS_STATE: TAKEOFF)."""
+        return modes.taking_off(self)
 
     def request_mode(self, main: int, sub: int, sim_t: float) -> int:
         """Switch on a PX4 (main, sub) custom mode. Returns a MAV_RESULT."""
-        target = px4.vehicle_mode(main, sub)
-        if target is None:
-            return M.MAV_RESULT_UNSUPPORTED
-        if self.terminated:
-            return M.MAV_RESULT_DENIED
-        if target == VehicleMode.OFFBOARD and not self.setpoints_streaming(sim_t):
-            self.event("OFFBOARD refused: no setpoint stream", M.MAV_SEVERITY_WARNING)
-            return M.MAV_RESULT_TEMPORARILY_REJECTED
-        self.failsafe = False
-        if target != self.mode:
-            self._enter_mode(target)
-        return M.MAV_RESULT_ACCEPTED
+        return modes.request_mode(self, main, sub, sim_t)
 
     def arm(self, sim_t: float) -> int:
-        if self.terminated:
-            self.event("arming denied: flight terminated", M.MAV_SEVERITY_CRITICAL)
-            return M.MAV_RESULT_DENIED
-        if self.armed:
-            return M.MAV_RESULT_ACCEPTED
-        self.armed = True
-        if not self.ever_armed:
-            self.ever_armed = True
-            self.release_requested = True
-        self._engage_onboard()
-        self._landed_since = None
-        self.event("armed")
-        return M.MAV_RESULT_ACCEPTED
+        return modes.arm(self, sim_t)
 
     def disarm(self, force: bool, why: str = "") -> int:
-        if not self.armed:
-            return M.MAV_RESULT_ACCEPTED
-        if not force and not self.on_ground():
-            self.event("disarm denied: not landed", M.MAV_SEVERITY_WARNING)
-            return M.MAV_RESULT_DENIED
-        self.armed = False
-        self.failsafe = False
-        self.release_requested = True  # a forced disarm drops it, fixture or not
-        self.event("disarmed" + (f" ({why})" if why else ""))
-        return M.MAV_RESULT_ACCEPTED
+        return modes.disarm(self, force, why)
 
     def terminate(self) -> int:
-        self.terminated = True
-        self.armed = False
-        self.failsafe = False
-        self.release_requested = True
-        self.event("FLIGHT TERMINATION: motors off", M.MAV_SEVERITY_EMERGENCY)
-        return M.MAV_RESULT_ACCEPTED
+        return modes.terminate(self)
 
     # ==================================================================================
     # message handling
@@ -280,7 +268,7 @@ class Vehicle:
     def _on_command_int(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
         if self._for_autopilot(m):
             p = (m.param1, m.param2, m.param3, m.param4, m.x * 1e-7, m.y * 1e-7, m.z)
-            self._on_command(m, src, Command(m.command, p, wall, sim_t, src))
+            self._on_command(m, src, Command(m.command, p, wall, sim_t, src, int(m.frame)))
 
     def _on_set_mode(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
         if m.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
@@ -306,83 +294,77 @@ class Vehicle:
         if reply is not None:
             self.outbox.append((reply, src))
 
-    def _on_setpoint(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
-        parsed = self._parse_setpoint(m)
-        if parsed is None:
-            return
-        att, thrust = parsed
+    def _accept_setpoint(self, m: Any, sim_t: float) -> bool:
+        """Latency, lockstep echo and freshness of one valid setpoint (any kind); False
+        for a stale lockstep answer (counted, not applied)."""
         w = self.odom_wall.pop(int(m.time_boot_ms), None)
         if w is not None:
             self.latency.append(time.monotonic() - w)
         if self.cfg.lockstep:
             if int(m.time_boot_ms) != self.expect_ms:
                 self.ctr.setpoints_stale += 1
-                return
+                return False
             self.answered_ms = self.expect_ms
             self.ever_answered = True
             self.consecutive_timeouts = 0
             self.wait_suspended = False
         self.ctr.setpoints += 1
-        if att is not None:
-            self.sp_att = np.array(att, dtype=float)
-        if thrust is not None:
-            self.sp_thrust = thrust
+        return True
+
+    def _stamp_setpoint(self, m: Any, sim_t: float) -> None:
         self.sp_times.append(sim_t)
         self.last_sp_t = sim_t
         self.last_sp_ms = int(m.time_boot_ms)
 
-    def _parse_setpoint(self, m: Any) -> tuple[Any, float | None] | None:
-        """(ENU attitude or None, thrust N or None) of a SET_ATTITUDE_TARGET; None (and
-        counted as rejected) when it is invalid or asks for body rates only."""
-        tm = int(m.type_mask)
-        att_ignore = bool(tm & TM_ATT_IGNORE)
-        rates_given = (tm & TM_RATES_IGNORE) != TM_RATES_IGNORE
-        if att_ignore and rates_given:  # pure body-rate control: not supported
+    def _reject(self, exc: setpoints.Rejected) -> None:
+        if exc.unsupported:
             self.ctr.setpoints_unsupported += 1
-            self.ctr.setpoints_rejected += 1
-            return None
-        att = None
-        thrust = None
-        if not att_ignore:
-            q = np.asarray(m.q, dtype=float)
-            if frames.valid_quaternion(q):
-                att = frames.euler_enu_from_quat_ned(q)
-            if att is None or not all(math.isfinite(a) for a in att):
-                self.ctr.setpoints_rejected += 1
-                return None
-        if not tm & TM_THRUST_IGNORE:
-            th = float(m.thrust)
-            if not (math.isfinite(th) and 0.0 <= th <= 1.0):
-                self.ctr.setpoints_rejected += 1
-                return None
-            thrust = frames.norm_to_thrust(th, self.dyn.f_max)
-        return att, thrust
+        self.ctr.setpoints_rejected += 1
+
+    def _on_setpoint(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
+        try:
+            att, thrust = setpoints.parse_attitude(m, self.dyn.f_max)
+        except setpoints.Rejected as exc:
+            self._reject(exc)
+            return
+        if not self._accept_setpoint(m, sim_t):
+            return
+        if att is not None:
+            self.sp_att = np.array(att, dtype=float)
+        if thrust is not None:
+            self.sp_thrust = thrust
+        self.sp_kind = SetpointKind.ATTITUDE
+        self._stamp_setpoint(m, sim_t)
+
+    def _on_position_target(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT (PX4's type_mask rules)."""
+        try:
+            if m.get_msgId() == M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT:
+                sp = setpoints.parse_global_int(m, self.cfg)
+            else:
+                sp = setpoints.parse_local_ned(m, self.p(), self.yaw())
+        except setpoints.Rejected as exc:
+            self._reject(exc)
+            return
+        if not self._accept_setpoint(m, sim_t):
+            return
+        if self.sp_kind != SetpointKind.TRAJECTORY:
+            self.pc.reset(self.yaw())
+        self.sp_kind = SetpointKind.TRAJECTORY
+        self.sp_traj = sp
+        self._stamp_setpoint(m, sim_t)
 
     # ==================================================================================
     # per control step
     def update(self, sim_t: float) -> None:
-        """Offboard-loss failsafe and auto-disarm after landing (call once per step)."""
+        """Services, offboard-loss failsafe, AUTO-mode progress and auto-disarm after
+        landing (call once per step, before :meth:`command`)."""
         for svc in self.services:
             svc.update(sim_t)
-        if (
-            self.mode == VehicleMode.OFFBOARD
-            and not self.failsafe
-            and (self.last_sp_t is None or sim_t - self.last_sp_t > self.cfg.offboard_timeout)
-        ):
-            self.ctr.failsafes += 1
-            land = self.cfg.failsafe == FailsafeAction.LAND
-            target = VehicleMode.LAND if land else VehicleMode.HOLD
-            self.event(f"failsafe: offboard lost, {target.lower()}", M.MAV_SEVERITY_CRITICAL)
-            self._enter_mode(target)
-            self.failsafe = True
-        if self.mode == VehicleMode.LAND and self.armed:
-            if self.on_ground():
-                if self._landed_since is None:
-                    self._landed_since = sim_t
-                elif sim_t - self._landed_since >= self.cfg.land_disarm_delay:
-                    self.disarm(force=False, why="landed")
-            else:
-                self._landed_since = None
+        modes.offboard_loss(self, sim_t)
+        modes.advance_auto(self, sim_t)
+        if self.armed:
+            modes.auto_disarm(self, sim_t)
 
     def command(self, dt: float) -> tuple[float, float, float, float]:
         """(roll, pitch, yaw, thrust N) to apply for the next control step."""
@@ -392,9 +374,22 @@ class Vehicle:
             thrust = 0.0 if (self.ever_armed or self.terminated) else float(self.dyn.hold_thrust())
             return 0.0, 0.0, self.yaw(), thrust
         if self.mode == VehicleMode.OFFBOARD and not self.failsafe:
-            r, pch, y = self.sp_att
-            return float(r), float(pch), float(y), float(self.sp_thrust)
+            if self.sp_kind == SetpointKind.ATTITUDE:
+                r, pch, y = self.sp_att
+                return float(r), float(pch), float(y), float(self.sp_thrust)
+            return self._fly(self.sp_traj, nav_flight.OFFBOARD_LIMITS, dt)
+        if self.nav is not None:
+            sp, lim = nav_flight.nav_setpoint(self.nav, self.params, self.speed_override)
+            return self._fly(sp, lim, dt)
         return self.fs.update(self.dyn.p[i], self.dyn.v[i], dt)
+
+    def _fly(
+        self, sp: PositionSetpoint, lim: SpeedLimits, dt: float
+    ) -> tuple[float, float, float, float]:
+        """The position controller with this step's MPC_TILTMAX_AIR and MPC_THR_HOVER."""
+        tilt = min(math.radians(self.params.get("MPC_TILTMAX_AIR")), float(self.dyn.tilt_max))
+        self.pc.set_limits(tilt, float(self.params.get("MPC_THR_HOVER")))
+        return self.pc.update(sp, self.dyn.p[self.idx], self.dyn.v[self.idx], lim, dt)
 
     # ==================================================================================
     # telemetry (vehicle_sim.telemetry builds the messages)

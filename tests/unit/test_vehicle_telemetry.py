@@ -89,7 +89,7 @@ def test_command_table() -> None:
     assert run(M.MAV_CMD_NAV_LOITER_UNLIM)[0] == M.MAV_RESULT_ACCEPTED
     assert v.mode == VehicleMode.HOLD
     base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-    res, _ = run(M.MAV_CMD_DO_SET_MODE, base, px4.MAIN_AUTO, px4.SUB_AUTO_MISSION)
+    res, _ = run(M.MAV_CMD_DO_SET_MODE, base, px4.MAIN_AUTO, px4.SUB_AUTO_FOLLOW_TARGET)
     assert res == M.MAV_RESULT_UNSUPPORTED
     res, _ = run(M.MAV_CMD_DO_SET_MODE, base, px4.MAIN_OFFBOARD + 256)  # not a uint8 mode
     assert res == M.MAV_RESULT_UNSUPPORTED and v.mode == VehicleMode.HOLD
@@ -97,7 +97,9 @@ def test_command_table() -> None:
     assert res == M.MAV_RESULT_ACCEPTED and reply.interval_us == 20_000
     res, reply = run(M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1)
     assert reply.get_msgId() == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION
-    assert run(M.MAV_CMD_NAV_TAKEOFF) == (M.MAV_RESULT_UNSUPPORTED, None)
+    assert run(M.MAV_CMD_NAV_TAKEOFF) == (M.MAV_RESULT_ACCEPTED, None)
+    assert v.mode == VehicleMode.TAKEOFF
+    assert run(M.MAV_CMD_DO_SET_SERVO) == (M.MAV_RESULT_UNSUPPORTED, None)
     assert run(M.MAV_CMD_REQUEST_MESSAGE, -1) == (M.MAV_RESULT_UNSUPPORTED, None)
 
 
