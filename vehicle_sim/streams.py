@@ -58,7 +58,7 @@ class StreamSchedule:
     def interval_us(self, mid: int) -> int:
         """MESSAGE_INTERVAL.interval_us of a known stream (-1 = off)."""
         iv = self.intervals[mid]
-        return int(iv * 1e6) if iv else -1
+        return int(round(iv * 1e6)) if iv else -1
 
     def set_interval(self, mid: int, interval_us: float, wall: float) -> None:
         """SET_MESSAGE_INTERVAL for a known stream; the next one is due at ``wall``."""

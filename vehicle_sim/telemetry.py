@@ -146,26 +146,28 @@ def _alt_mm(cfg: VehicleConfig, pn: np.ndarray) -> int:
     return int(round((cfg.home_alt - pn[2]) * 1000))
 
 
-TAKEOFF_MODES = frozenset({"TAKEOFF", "AUTO.TAKEOFF"})  # VehicleMode names that take off
-LANDING_MODES = frozenset({"LAND", "AUTO.LAND"})
+TAKEOFF_MODES = frozenset({"TAKEOFF"})  # VehicleMode names that take off
+LANDING_MODES = frozenset({"LAND"})
 
 
-def _nav_landing(v: Vehicle) -> bool:
-    """The active onboard navigation target (``vehicle.nav_target``, if any) is a landing
-    (the last leg of an RTL or a mission's LAND item)."""
-    target = getattr(v, "nav_target", None)
-    return str(getattr(target, "kind", "")) == "land"
+def _nav_kind(v: Vehicle) -> str:
+    """Kind of the onboard navigation target (``vehicle.nav``, a NavTarget) or ""; in
+    OFFBOARD the controller's setpoints fly the vehicle, not that target."""
+    if str(v.mode) == "OFFBOARD":
+        return ""
+    return str(getattr(getattr(v, "nav", None), "kind", ""))
 
 
 def landed_state(v: Vehicle) -> int:
-    """MAV_LANDED_STATE: ON_GROUND, TAKEOFF (armed in a take-off mode), LANDING (armed,
-    in the air, landing) or IN_AIR."""
-    mode = str(v.mode)
-    if v.armed and mode in TAKEOFF_MODES:
+    """MAV_LANDED_STATE: TAKEOFF (armed, climbing to a take-off altitude: AUTO.TAKEOFF, a
+    mission TAKEOFF), ON_GROUND, LANDING (armed, in the air, descending to land: AUTO.LAND,
+    a mission LAND, the last leg of RTL) or IN_AIR."""
+    mode, nav = str(v.mode), _nav_kind(v)
+    if v.armed and (mode in TAKEOFF_MODES or nav == "takeoff"):
         return M.MAV_LANDED_STATE_TAKEOFF
     if v.on_ground():
         return M.MAV_LANDED_STATE_ON_GROUND
-    if v.armed and (mode in LANDING_MODES or _nav_landing(v)):
+    if v.armed and (mode in LANDING_MODES or nav == "land"):
         return M.MAV_LANDED_STATE_LANDING
     return M.MAV_LANDED_STATE_IN_AIR
 
