@@ -78,7 +78,7 @@ def enter_mode(
         v.nav = takeoff_target(v, v.takeoff_alt)
     elif mode == VehicleMode.RTL:
         v.rtl = rtl_plan(v)
-        v.nav = v.rtl.target(v.p())
+        v.nav = v.rtl.target(v.p(), v.dyn.v[v.idx])
     v.takeoff_alt = None
     v.landed_since = None
     if prev != mode or why:
@@ -217,7 +217,7 @@ def advance_auto(v: Vehicle, sim_t: float) -> None:
             loiter = NavTarget(NavKind.LOITER, np.array(v.nav.position_enu, dtype=float))
             enter_mode(v, VehicleMode.HOLD, "takeoff complete", nav=loiter)
     elif v.mode == VehicleMode.RTL and v.rtl is not None:
-        v.nav = v.rtl.target(p)
+        v.nav = v.rtl.target(p, v.dyn.v[v.idx])
     elif v.mode == VehicleMode.MISSION:
         t = v.mission.nav_target(p, v.dyn.v[v.idx], sim_t)
         if t is not None and t.kind == NavKind.RTL:

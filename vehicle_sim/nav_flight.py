@@ -29,7 +29,8 @@ Z_VEL_MAX_DN = 1.5  # m/s, PX4 MPC_Z_VEL_MAX_DN default
 XY_VEL_MAX = 12.0  # m/s, PX4 MPC_XY_VEL_MAX default: the ceiling of offboard velocities
 OFFBOARD_LIMITS = SpeedLimits(XY_VEL_MAX, Z_VEL_MAX_UP, Z_VEL_MAX_DN)
 TAKEOFF_ALT_TOL = 0.3  # m: a take-off is complete this close to its altitude
-ARRIVE_XY_TOL = 0.5  # m: RTL starts descending this close over its destination
+ARRIVE_XY_TOL = 0.5  # m: RTL starts descending this close over its destination …
+ARRIVE_SPEED = 0.5  # m/s: … and this slow horizontally
 CLIMB_ALT_TOL = 0.3  # m: RTL's climb is over this close to the return altitude
 
 
@@ -88,11 +89,13 @@ class RtlPlan:
         self.alt = max(float(p[2]), float(return_alt))
         self.phase = RtlPhase.CLIMB
 
-    def target(self, p: np.ndarray) -> NavTarget:
-        """The target for this step, advancing the phase when one is done."""
+    def target(self, p: np.ndarray, v: np.ndarray) -> NavTarget:
+        """The target for this step (position ``p``, velocity ``v``, ENU), advancing the
+        phase when one is done."""
         if self.phase == RtlPhase.CLIMB and float(p[2]) >= self.alt - CLIMB_ALT_TOL:
             self.phase = RtlPhase.RETURN
-        if self.phase == RtlPhase.RETURN and float(np.hypot(*(self.dest - p[:2]))) <= ARRIVE_XY_TOL:
+        arrived = float(np.hypot(*(self.dest - p[:2]))) <= ARRIVE_XY_TOL
+        if self.phase == RtlPhase.RETURN and arrived and float(np.hypot(*v[:2])) <= ARRIVE_SPEED:
             self.phase = RtlPhase.LAND
         if self.phase == RtlPhase.CLIMB:
             return NavTarget(NavKind.GOTO, np.array([self.start[0], self.start[1], self.alt]))

@@ -22,11 +22,9 @@ landing, time stamps (``time_boot_ms`` = sim time).
 from __future__ import annotations
 
 import math
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -34,7 +32,7 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, px4
 from swarm_common.enums import FailsafeAction, VehicleMode
-from vehicle_sim import commands, modes, nav_flight, setpoints, telemetry
+from vehicle_sim import commands, modes, nav_flight, setpoint_input, telemetry
 from vehicle_sim.commands import Command
 from vehicle_sim.failsafe_controller import FailsafeController
 from vehicle_sim.mission_service import MissionService
@@ -44,6 +42,7 @@ from vehicle_sim.param_defaults import default_param_specs
 from vehicle_sim.params import ParamStore
 from vehicle_sim.position_control import PositionController, PositionSetpoint, SpeedLimits
 from vehicle_sim.services import attach_services
+from vehicle_sim.setpoint_input import SetpointKind
 from vehicle_sim.streams import PeerKey, PeerStreams
 
 CUSTOM_MODE = px4.CUSTOM_MODE  # re-exported: the short mode names -> PX4 custom_mode
@@ -92,13 +91,6 @@ class VehicleCounters:
 
     def as_dict(self) -> dict[str, int]:
         return dict(self.__dict__)
-
-
-class SetpointKind(StrEnum):
-    """What the last valid offboard setpoint asked for."""
-
-    ATTITUDE = "attitude"  # SET_ATTITUDE_TARGET: attitude + thrust, applied as they are
-    TRAJECTORY = "trajectory"  # SET_POSITION_TARGET_*: the position controller flies it
 
 
 class Vehicle:
@@ -294,65 +286,11 @@ class Vehicle:
         if reply is not None:
             self.outbox.append((reply, src))
 
-    def _accept_setpoint(self, m: Any, sim_t: float) -> bool:
-        """Latency, lockstep echo and freshness of one valid setpoint (any kind); False
-        for a stale lockstep answer (counted, not applied)."""
-        w = self.odom_wall.pop(int(m.time_boot_ms), None)
-        if w is not None:
-            self.latency.append(time.monotonic() - w)
-        if self.cfg.lockstep:
-            if int(m.time_boot_ms) != self.expect_ms:
-                self.ctr.setpoints_stale += 1
-                return False
-            self.answered_ms = self.expect_ms
-            self.ever_answered = True
-            self.consecutive_timeouts = 0
-            self.wait_suspended = False
-        self.ctr.setpoints += 1
-        return True
-
-    def _stamp_setpoint(self, m: Any, sim_t: float) -> None:
-        self.sp_times.append(sim_t)
-        self.last_sp_t = sim_t
-        self.last_sp_ms = int(m.time_boot_ms)
-
-    def _reject(self, exc: setpoints.Rejected) -> None:
-        if exc.unsupported:
-            self.ctr.setpoints_unsupported += 1
-        self.ctr.setpoints_rejected += 1
-
     def _on_setpoint(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
-        try:
-            att, thrust = setpoints.parse_attitude(m, self.dyn.f_max)
-        except setpoints.Rejected as exc:
-            self._reject(exc)
-            return
-        if not self._accept_setpoint(m, sim_t):
-            return
-        if att is not None:
-            self.sp_att = np.array(att, dtype=float)
-        if thrust is not None:
-            self.sp_thrust = thrust
-        self.sp_kind = SetpointKind.ATTITUDE
-        self._stamp_setpoint(m, sim_t)
+        setpoint_input.on_attitude_target(self, m, sim_t)
 
     def _on_position_target(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
-        """SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT (PX4's type_mask rules)."""
-        try:
-            if m.get_msgId() == M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT:
-                sp = setpoints.parse_global_int(m, self.cfg)
-            else:
-                sp = setpoints.parse_local_ned(m, self.p(), self.yaw())
-        except setpoints.Rejected as exc:
-            self._reject(exc)
-            return
-        if not self._accept_setpoint(m, sim_t):
-            return
-        if self.sp_kind != SetpointKind.TRAJECTORY:
-            self.pc.reset(self.yaw())
-        self.sp_kind = SetpointKind.TRAJECTORY
-        self.sp_traj = sp
-        self._stamp_setpoint(m, sim_t)
+        setpoint_input.on_position_target(self, m, sim_t)
 
     # ==================================================================================
     # per control step
