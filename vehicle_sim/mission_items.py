@@ -40,6 +40,10 @@ GLOBAL_FRAMES = frozenset({
     M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
 })  # fmt: skip
 RELATIVE_FRAMES = frozenset({M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
+FLOAT_FRAME = {
+    M.MAV_FRAME_GLOBAL_INT: M.MAV_FRAME_GLOBAL,
+    M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+}
 POSITION_FRAMES = GLOBAL_FRAMES | {M.MAV_FRAME_LOCAL_NED}
 ALL_FRAMES = POSITION_FRAMES | {M.MAV_FRAME_MISSION}
 
@@ -124,10 +128,12 @@ def to_int_message(it: Item, target: tuple[int, int]) -> M.MAVLink_mission_item_
 
 
 def to_float_message(it: Item, target: tuple[int, int]) -> M.MAVLink_mission_item_message:
-    """MISSION_ITEM (float x/y) of a stored item, for a client that asks with MISSION_REQUEST."""
+    """MISSION_ITEM (float x/y) of a stored item, for a client that asks with MISSION_REQUEST;
+    a ``*_INT`` frame is named by its float twin there, as PX4 does."""
     scale = LOCAL_SCALE if it.frame == M.MAV_FRAME_LOCAL_NED else DEG_E7
+    frame = FLOAT_FRAME.get(it.frame, it.frame)
     return M.MAVLink_mission_item_message(
-        target[0], target[1], it.seq, it.frame, it.command, it.current, it.autocontinue,
+        target[0], target[1], it.seq, frame, it.command, it.current, it.autocontinue,
         it.param1, it.param2, it.param3, it.param4, it.x / scale, it.y / scale, it.z,
         it.mission_type,
     )  # fmt: skip
