@@ -4,8 +4,9 @@ Contract: :class:`vehicle_sim.nav.VehicleService`. docs/px4/params.md describes 
 behaviour a client sees; in short:
 
 * PARAM_REQUEST_LIST: every parameter as PARAM_VALUE (``param_count`` = table size,
-  ``param_index`` = its position) to the requester, ``LIST_PER_STEP`` per simulation step;
-  a second request from the same peer starts its list again.
+  ``param_index`` = its position) to the requester: at once for a table of at most
+  ``LIST_BURST_MAX`` (the simulator's is), else ``LIST_PER_STEP`` per simulation step; a
+  second request from the same peer starts its list again.
 * PARAM_REQUEST_READ: by name (``param_index`` = -1) or by index, answered to the requester.
 * PARAM_SET: the new value as PARAM_VALUE to every link (MAVLink's rule, so that every
   GCS sees it). A refused write gets, to the requester, PARAM_ERROR (the reason), a
@@ -32,7 +33,10 @@ from vehicle_sim.params import INT32, ParamError, ParamSpec, ParamStore
 
 log = logging.getLogger(__name__)
 
-LIST_PER_STEP = 8  # PARAM_VALUEs of a PARAM_REQUEST_LIST sent per simulation step
+LIST_PER_STEP = 8  # PARAM_VALUEs of a long PARAM_REQUEST_LIST sent per simulation step
+# a table up to this long is answered at once: lockstep time stands still until the
+# controllers run, and a client must be able to read the parameters before that
+LIST_BURST_MAX = 32
 INDEX_BY_NAME = -1  # PARAM_REQUEST_READ.param_index meaning "use param_id"
 PARAM_ID_LEN = 16
 TEXT_LEN = 50  # STATUSTEXT.text
@@ -132,6 +136,9 @@ class ParamService:
         if not self._for_us(m):
             return
         self.pending = deque(p for p in self.pending if p[1] != src)  # restart for src
+        if len(self.store) <= LIST_BURST_MAX:  # short: at once, even while time stands still
+            self.vehicle.outbox.extend((self.value_msg(i), src) for i in range(len(self.store)))
+            return
         self.pending.extend((i, src) for i in range(len(self.store)))
 
     def _on_request_read(self, m: Any, src: Any, wall: float, sim_t: float) -> None:

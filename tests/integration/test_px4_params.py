@@ -104,10 +104,12 @@ def test_mavsdk_bad_name_and_value_are_errors_not_timeouts(mavsdk_system) -> Non
     assert sim.wait_log(r"vehicle 1: param: MPC_THR_HOVER = 5 outside") is not None
 
 
-def test_pymavlink_param_fetch_all_completes_once_per_index(sim_factory, mav_client) -> None:
+@pytest.mark.parametrize("clock", [[], ["--lockstep"]], ids=["real-time", "lockstep"])
+def test_pymavlink_param_fetch_all_completes_once_per_index(sim_factory, mav_client, clock):
     """What MAVProxy's ``param fetch`` does: PARAM_REQUEST_LIST, then PARAM_VALUE until
-    every index of ``param_count`` has come (on the GCS link, as a GCS would)."""
-    sim = sim_factory(ONE)
+    every index of ``param_count`` has come (on the GCS link, as a GCS would); in lockstep
+    too, where simulated time stands still until a controller answers."""
+    sim = sim_factory(ONE + clock)
     c = mav_client(vehicle_ports(1, sim.offset).gcs_remote)
     assert c.recv("HEARTBEAT", 10.0, sysid=1) is not None
     c.conn.target_system, c.conn.target_component = 1, 1

@@ -10,7 +10,12 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common.scenario import load_scenario
 from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.param_service import LIST_PER_STEP, int32_to_wire, wire_to_int32
+from vehicle_sim.param_service import (
+    LIST_BURST_MAX,
+    LIST_PER_STEP,
+    int32_to_wire,
+    wire_to_int32,
+)
 from vehicle_sim.params import (
     FILE_FORMAT,
     INT32,
@@ -18,6 +23,8 @@ from vehicle_sim.params import (
     ParamError,
     ParamFile,
     ParamFileError,
+    ParamSpec,
+    ParamStore,
     parse_param_file,
     read_param_file,
 )
@@ -102,19 +109,25 @@ def test_int32_bytewise_encoding_round_trips_every_int_range_end() -> None:
 
 
 # -- the protocol ----------------------------------------------------------------------
-def test_request_list_is_paced_and_gives_every_index_once_with_the_count() -> None:
+def _long_table(v: Vehicle, extra: int = 40) -> None:
+    """Give ``v`` a table longer than LIST_BURST_MAX (the paced path)."""
+    specs = v.params.specs + [
+        ParamSpec(f"TEST_P{k}", REAL32, 0.0, 0.0, 1.0, "behaviour: test") for k in range(extra)
+    ]
+    v.params = ParamStore(specs)
+
+
+def _list_reply(v: Vehicle) -> list[tuple[object, object]]:
+    return _out(v, M.MAVLINK_MSG_ID_PARAM_VALUE)
+
+
+def test_short_list_comes_at_once_with_every_index_and_the_count() -> None:
     v = _vehicle()
     n = len(v.params)
+    assert n <= LIST_BURST_MAX
     _send(v, M.MAVLink_param_request_list_message(1, 1))
-    assert _out(v, M.MAVLINK_MSG_ID_PARAM_VALUE) == []  # nothing in the handler itself
-    got = []
-    for k in range(n):  # more steps than needed
-        v.outbox.clear()
-        v.param_service.update(k * 0.02)
-        step = _out(v, M.MAVLINK_MSG_ID_PARAM_VALUE)
-        assert len(step) <= LIST_PER_STEP
-        got += step
-    assert sorted(m.param_index for m, _ in got) == list(range(n))
+    got = _list_reply(v)
+    assert [m.param_index for m, _ in got] == list(range(n))
     assert {m.param_count for m, _ in got} == {n}
     assert {d for _, d in got} == {GCS}  # to the requester only
     by_name = {m.param_id: m for m, _ in got}
@@ -123,8 +136,27 @@ def test_request_list_is_paced_and_gives_every_index_once_with_the_count() -> No
     assert by_name["MPC_THR_HOVER"].param_value == pytest.approx(v.params.get("MPC_THR_HOVER"))
 
 
+def test_long_list_is_paced_and_gives_every_index_once() -> None:
+    v = _vehicle()
+    _long_table(v)
+    n = len(v.params)
+    _send(v, M.MAVLink_param_request_list_message(1, 1))
+    assert _list_reply(v) == []  # nothing in the handler itself
+    got = []
+    for k in range(n):  # more steps than needed
+        v.outbox.clear()
+        v.param_service.update(k * 0.02)
+        step = _list_reply(v)
+        assert len(step) <= LIST_PER_STEP
+        got += step
+    assert sorted(m.param_index for m, _ in got) == list(range(n))
+    assert {m.param_count for m, _ in got} == {n}
+    assert {d for _, d in got} == {GCS}
+
+
 def test_a_second_list_request_restarts_that_peer_only() -> None:
     v = _vehicle()
+    _long_table(v)
     n = len(v.params)
     _send(v, M.MAVLink_param_request_list_message(1, 1), GCS)
     _send(v, M.MAVLink_param_request_list_message(1, 1), OTHER)
