@@ -86,7 +86,8 @@ class MAVLink_protocol_version_message(M.MAVLink_message):  # noqa: N801 - pymav
         return bytes(self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1))
 
 
-def register() -> None:
-    """Let pymavlink's decoder (every ``MAVLink`` object of this process) read the
-    messages of this module."""
-    M.mavlink_map[MAVLINK_MSG_ID_PROTOCOL_VERSION] = MAVLink_protocol_version_message
+def register(dialect: Any = M) -> None:
+    """Let a pymavlink dialect module's decoder (every ``MAVLink`` object of this process
+    built from it; ``mavutil`` connections use ``mavutil.mavlink``) read this module's
+    messages."""
+    dialect.mavlink_map[MAVLINK_MSG_ID_PROTOCOL_VERSION] = MAVLink_protocol_version_message
