@@ -15,7 +15,8 @@ Items flown (MAVLink ``MAV_CMD_NAV_*``):
   else ``NAV_ACC_RAD``) and vertically within :data:`ALT_ACCEPT_M`, then after holding
   param1 seconds there.
 * LOITER_TIME: fly to it (lat = lon = 0: here), hold param1 seconds.
-* LAND: descend onto its x/y (lat = lon = 0: here); complete once landed.
+* LAND: descend onto its x/y (lat = lon = 0: here); complete once landed, which ends the
+  mission (its LAND target is still returned, for the touchdown and auto-disarm).
 * RETURN_TO_LAUNCH: hand over to RTL (kind ``RTL``, over home); the mission is over once
   landed. No MISSION_ITEM_REACHED for it, as PX4 (which switches to AUTO.RTL there).
 
@@ -57,6 +58,7 @@ class MissionExecutor:
         self.speed: float | None = None
         self._anchor: np.ndarray | None = None  # the active item's target (ENU, m)
         self._arrived_t: float | None = None  # when the active item's position was reached
+        self._landing: NavTarget | None = None  # a finished mission's last LAND target
 
     # ----------------------------------------------------------------------------------
     def set_current(self, seq: int) -> bool:
@@ -65,6 +67,7 @@ class MissionExecutor:
             return False
         self.current = seq
         self.finished = False
+        self._landing = None
         self._reset_item()
         return True
 
@@ -74,6 +77,7 @@ class MissionExecutor:
             self.current = 0
             self.finished = False
             self.speed = None
+            self._landing = None
         self._reset_item()
 
     def _reset_item(self) -> None:
@@ -82,7 +86,9 @@ class MissionExecutor:
 
     # ----------------------------------------------------------------------------------
     def nav_target(self, p_enu: np.ndarray, v_enu: np.ndarray, sim_t: float) -> NavTarget | None:
-        """The target to fly now (None: the mission is over); completes items on the way."""
+        """The target to fly now; completes items on the way. None once the mission is over,
+        except after a LAND item: its target stays, so that the vehicle's landing logic
+        finishes the touchdown and disarms."""
         p = np.asarray(p_enu, dtype=float)
         v = np.asarray(v_enu, dtype=float)
         while not self.finished and self.current < len(self.items):
@@ -92,13 +98,15 @@ class MissionExecutor:
                 return target
             if it.command != M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
                 self.reached.append(it.seq)
+            if it.command == M.MAV_CMD_NAV_LAND:
+                self._landing = target
             if self.current + 1 >= len(self.items) or it.command in _ENDS_MISSION:
                 self.finished = True
             else:
                 self.current += 1
             self._reset_item()
         self.finished = True
-        return None
+        return self._landing
 
     def _step(
         self, it: Item, p: np.ndarray, v: np.ndarray, t: float

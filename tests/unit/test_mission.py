@@ -187,7 +187,7 @@ def _fly(ex: MissionExecutor, p, dt=0.1, t_end=200.0, speed=2.0):
     kinds, t = [], 0.0
     while t < t_end:
         tgt = ex.nav_target(p, np.zeros(3), t)
-        if tgt is None:
+        if tgt is None or ex.finished:
             return kinds, p, t
         if not kinds or kinds[-1] != tgt.kind:
             kinds.append(tgt.kind)
@@ -217,6 +217,8 @@ def test_executor_flies_takeoff_waypoints_loiter_land() -> None:
     assert p[:2] == pytest.approx([10.0, 10.0], abs=1.1) and p[2] == pytest.approx(0.0)
     # takeoff 6 m at 2 m/s, 10 m, hold 2 s, 10 m, hold 1 s, 6 m down: at least ~17 s
     assert t >= 16.0
+    after = ex.nav_target(p, np.zeros(3), t + 1.0)  # landed: the LAND target stays
+    assert after is not None and after.kind == NavKind.LAND and ex.reached == [0, 1, 2, 3, 4]
     ex.start()  # a finished mission starts again from its first item
     assert ex.current == 0 and not ex.finished
 
