@@ -206,6 +206,10 @@ class MissionService:
             return False
 
     def _home_enu(self) -> np.ndarray:
+        """The vehicle's home (ENU, m): ``home_enu``, else its ``home_ned`` converted."""
+        home = getattr(self.vehicle, "home_enu", None)
+        if home is not None:
+            return np.asarray(home, dtype=float)
         return np.asarray(frames.ned_to_enu(np.asarray(self.vehicle.home_ned, dtype=float)))
 
     def _acc_radius(self) -> float:

@@ -328,3 +328,14 @@ def test_service_fence_breach_acts_once() -> None:
     v.params.set("GF_MAX_VER_DIST", 0.0)
     v.update(0.3)
     assert not v.mission.fence_breached
+
+
+@pytest.mark.parametrize(("action", "mode"), [(3, VehicleMode.RTL), (5, VehicleMode.LAND)])
+def test_service_fence_action_rtl_and_land(action: int, mode: VehicleMode) -> None:
+    v = _vehicle()
+    v.params.set("GF_MAX_HOR_DIST", 0.5)
+    v.home_enu = v.home_enu + np.array([0.0, 10.0, 0.0])  # home 10 m north of the vehicle
+    v.params.set("GF_ACTION", action)
+    v.arm(0.0)
+    v.update(0.0)
+    assert v.mission.fence_breached and v.mode == mode
