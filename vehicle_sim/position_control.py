@@ -24,8 +24,9 @@ the tilt limit (``MPC_TILTMAX_AIR``). The thrust scale is PX4's hover feed-forwa
 parameter's default) that is exact; a wrong ``MPC_THR_HOVER`` gives, as on PX4, a
 vertical transient that the integrator removes.
 
-Gains are the onboard hold controller's (:class:`vehicle_sim.failsafe_controller.HoldGains`),
-so HOLD and a position setpoint at the same point behave alike.
+Gains are the onboard hold controller's (:class:`vehicle_sim.failsafe_controller.HoldGains`)
+except the vertical integral, which is PX4's (``MPC_Z_VEL_I_ACC`` = 2 /s) and clamped
+wide enough to absorb a hover-thrust error of ±30 % (:class:`PositionGains`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,14 @@ from swarm_common import frames
 from vehicle_sim.failsafe_controller import HoldGains
 
 NAN3 = np.full(3, np.nan)
+
+
+@dataclass
+class PositionGains(HoldGains):
+    """HoldGains plus the vertical integral (gain 1/s, clamp m/s²)."""
+
+    ki_z: float = 2.0  # PX4 MPC_Z_VEL_I_ACC default
+    i_max_z: float = 4.0
 
 
 @dataclass(frozen=True)
@@ -71,13 +80,13 @@ class PositionController:
         thrust_max_n: float,
         tilt_max_rad: float,
         hover_norm: float,
-        gains: HoldGains | None = None,
+        gains: PositionGains | None = None,
     ) -> None:
         self.gravity = float(gravity)
         self.thrust_max_n = float(thrust_max_n)
         self.tilt_max_rad = float(tilt_max_rad)
         self.hover_norm = float(hover_norm)
-        self.gains = gains or HoldGains()
+        self.gains = gains or PositionGains()
         self.integ = np.zeros(3)
         self.yaw_ref = 0.0
 
@@ -118,8 +127,10 @@ class PositionController:
         ev = np.where(vel_ctl, v_ref - v, 0.0)
         kd = np.array([g.kd_xy, g.kd_xy, g.kd_z])
         if dt > 0:
-            self.integ += g.ki * ev * dt
-            np.clip(self.integ, -g.i_max, g.i_max, out=self.integ)
+            ki = np.array([g.ki, g.ki, g.ki_z])
+            i_max = np.array([g.i_max, g.i_max, g.i_max_z])
+            self.integ += ki * ev * dt
+            np.clip(self.integ, -i_max, i_max, out=self.integ)
         self.integ[~vel_ctl] = 0.0
         acc_ff = np.where(np.isfinite(sp.acc), sp.acc, 0.0)
         u = np.where(vel_ctl, kd * ev + self.integ, 0.0) + acc_ff

@@ -22,7 +22,10 @@ from vehicle_sim.server import LOCKSTEP_SUSPEND_AFTER
 
 pytestmark = pytest.mark.timeout(120)
 
-POSCTL, OFFBOARD, HOLD, LAND = (px4.CUSTOM_MODE[k] for k in VehicleMode)
+POSCTL, OFFBOARD, HOLD, LAND = (
+    px4.CUSTOM_MODE[k]
+    for k in (VehicleMode.POSCTL, VehicleMode.OFFBOARD, VehicleMode.HOLD, VehicleMode.LAND)
+)
 # DO_SET_MODE param1 as QGC/MAVSDK send it (custom mode enabled | armed)
 BASE = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_SAFETY_ARMED
 MAIN_OFFBOARD, MAIN_POSCTL, MAIN_AUTO = px4.MAIN_OFFBOARD, px4.MAIN_POSCTL, px4.MAIN_AUTO
