@@ -2,7 +2,7 @@
 
 Every entry is one of two kinds, named at the start of its ``doc``: ``behaviour`` (read by
 the vehicle: offboard-loss time and action, take-off altitude, hover thrust and tilt limit
-of the onboard position controller, speeds, RTL altitudes, geofence) or ``identity`` (what
+of the onboard position controller, speeds, RTL altitude, geofence) or ``identity`` (what
 clients read on connect; read-only, PARAM_SET answers MAV_PARAM_ERROR_READ_ONLY).
 PX4 names and units; ``COM_OBL_RC_ACT`` values follow PX4 (docs/px4/params.md lists
 them).
@@ -60,8 +60,6 @@ def default_param_specs(agent_id: int, cfg: Any, dyn: Any) -> list[ParamSpec]:
         ParamSpec("MPC_LAND_SPEED", REAL32, 0.7, 0.3, 3.0, "behaviour: land descent speed, m/s"),
         ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0,
                   "behaviour: RTL altitude above home, m"),
-        ParamSpec("RTL_DESCEND_ALT", REAL32, 10.0, 2.0, 100.0,
-                  "behaviour: RTL loiter altitude, m"),
         ParamSpec("NAV_ACC_RAD", REAL32, 2.0, 0.05, 200.0,
                   "behaviour: waypoint acceptance radius, m"),
         ParamSpec("GF_ACTION", INT32, 1, 0, 5, "behaviour: geofence action: 0 none, 1 warn, "
