@@ -19,7 +19,9 @@ import time
 from typing import Any
 
 from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
+from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
+from offboard.sensing_source import SensingSource
 from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
@@ -40,7 +42,6 @@ from swarm_common.zenoh_session import (
 
 # a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
 OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
-MAVLINK_SCHEMES = ("udpin:", "udpout:", "udp:", "tcp:", "tcpin:")
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 log = logging.getLogger("offboard.cli")
 
@@ -127,6 +128,13 @@ def build_parser() -> argparse.ArgumentParser:
                     help="real time: when the runner or router is lost, land on the "
                     f"coordinated plan S s after the last truth (default {LAND_AFTER_S:g}, at "
                     f"least {MIN_LAND_AFTER_S:g}; 0 = hold until truth is back)")
+    ap.add_argument("--solo", action="store_true",
+                    help="arm and fly without waiting for the rest of the swarm (bench tests "
+                    "of one vehicle; default: wait until every agent has published)")
+    ap.add_argument("--sensing", choices=[s.value for s in SensingSource],
+                    default=SensingSource.TRUTH.value,
+                    help="sensor inputs: the simulator's truth (default) or every vehicle's "
+                    "own odometry published by its daemon (no simulator truth needed)")
     ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                     help="run a scenario that fails the feasibility check, with a warning")
     add_log_level_argument(ap)
@@ -135,6 +143,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.mavlink is not None and (why := mavlink_url_problem(args.mavlink)) is not None:
+        print(f"offboard: --mavlink {args.mavlink!r}: {why}", file=sys.stderr)
+        return 2
     configure_logging(args.log_level)
     if args.die_with_parent and (why := die_with_parent()) is not None:
         print(f"offboard: --die-with-parent: {why}", file=sys.stderr)
@@ -169,10 +180,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     ports = vehicle_ports(args.agent, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
-    if not url.startswith(MAVLINK_SCHEMES):
-        print(f"offboard: --mavlink {url!r}: must start with one of "
-              f"{', '.join(MAVLINK_SCHEMES)} (e.g. udpin:127.0.0.1:14540)", file=sys.stderr)
-        return 2
     connect = args.zenoh_connect
     if connect is None:
         connect = [default_endpoint(args.port_offset)]
@@ -192,7 +199,15 @@ def main(argv: list[str] | None = None) -> int:
         manual_start=args.manual_start,
         signing_key=key,
         loss_land_after=land_after,
+        solo=args.solo,
+        sensing=SensingSource(args.sensing),
     )
+    log.info("agent %d: vehicle link %s (system %d, component %d, signing %s); Zenoh %s "
+             "%s, swarm %r; sensing %s; %s", cfg.agent_id, url, cfg.agent_id, COMP_ONBOARD,
+             "on" if key is not None else "off", cfg.zenoh_mode,
+             " ".join([*(f"connect {ep}" for ep in connect),
+                       *(f"listen {ep}" for ep in cfg.zenoh_listen)]) or "no endpoint",
+             cfg.swarm, cfg.sensing, "--solo" if cfg.solo else "arms once its swarm is ready")
     try:
         session = open_session_saying(cfg.zenoh_mode, connect, cfg.zenoh_listen,
                                       args.zenoh_config)

@@ -5,14 +5,17 @@ same order (docs/architecture.md, "Lockstep, step by step"):
 
 1. the vehicle's ODOMETRY stamped t_k tells the step k (the clock; a follower never
    uses the position in it);
-2. wait for the simulator's ``Truth`` of step k (synthetic sensing) and for every
-   live neighbour's post-update ``Estimate`` of step k-1 (skipped inside the
+2. get the sensor's inputs of step k (:mod:`offboard.sensing_source`: the simulator's
+   ``Truth``, or with ``--sensing odometry`` every vehicle's own published odometry) and
+   every live neighbour's post-update ``Estimate`` of step k-1 (skipped inside the
    scenario's communication outages, which are deterministic);
 3. ``agent.step(...)`` -> SET_ATTITUDE_TARGET with ``time_boot_ms`` = t_k, then publish
    the estimate for t_{k+1} and a status record.
 
 Start-up like a real offboard application: wait for the heartbeat (logging what it waits
-for every few seconds), stream setpoints, switch to OFFBOARD, arm; commands are retried
+for every few seconds), send its own HEARTBEAT at 1 Hz, wait for its swarm (every agent
+heard from, :class:`offboard.mode_requests.SwarmReady`; ``--solo`` skips it), stream
+setpoints, switch to OFFBOARD, arm; commands are retried
 without ever blocking the setpoint stream. Faults (docs/security.md, "Offboard daemon:
 link hygiene and failsafes"): a setpoint is re-sent only while it answers the vehicle's
 current step (lockstep) or for one control period (real time), so with no valid step the
@@ -49,8 +52,9 @@ from offboard.agent import (
 from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
 from offboard.link_guard import OffboardKeeper, PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
-from offboard.mode_requests import ModeRequests
+from offboard.mode_requests import ModeRequests, SwarmReady
 from offboard.runner_loss import LAND_AFTER_S, RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
+from offboard.sensing_source import SensingSource, SwarmSensing
 from offboard.wire_convert import (
     estimate_from_wire,
     estimate_to_wire,
@@ -96,6 +100,8 @@ class DaemonConfig:
     # real time: land this long (s) after the last truth when the runner/router is lost
     # (offboard.runner_loss; 0 = hold until truth is back)
     loss_land_after: float = LAND_AFTER_S
+    solo: bool = False  # fly without waiting for the swarm (offboard.mode_requests.SwarmReady)
+    sensing: SensingSource = SensingSource.TRUTH  # the sensor's inputs (offboard.sensing_source)
 
 
 class OffboardDaemon(DaemonCommands):
@@ -112,7 +118,8 @@ class OffboardDaemon(DaemonCommands):
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, self.control_hz, cfg.lockstep,
                                 tlog=cfg.tlog, signing_key=cfg.signing_key)
         guard = PayloadGuard(list(sc.ids), list(sc.leader_ids), self.control_hz, cfg.agent_id)
-        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard)
+        self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard,
+                            odometry=cfg.sensing is SensingSource.ODOMETRY)
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1
@@ -124,11 +131,19 @@ class OffboardDaemon(DaemonCommands):
         self.last_send = 0.0
         self.stream_since = 0.0  # start of the current gap-free setpoint stream
         self.streaming = False
-        self.said_waiting = 0.0
+        self.odo_pub_step = -1  # the last step whose own odometry went out
         self.keeper = OffboardKeeper(cfg.stream_before_offboard, cfg.manual_start)
         self.modes = ModeRequests(self.link, self.keeper, cfg.agent_id)
         self.loss = RunnerLoss(self.control_hz, cfg.loss_land_after)
         self.loss_flight = LossFlight(sc, self.agent.index, cfg.agent_id, self.loss)
+        self.ready = SwarmReady(cfg.agent_id, self.others, cfg.solo, WAIT_LOG_S)
+        self.sensing = SwarmSensing(
+            cfg.sensing, list(sc.ids), cfg.agent_id, self.bus, self.loss,
+            lockstep=cfg.lockstep, solo=cfg.solo, truth_timeout=cfg.truth_timeout,
+            neighbour_timeout=cfg.neighbour_timeout, startup_timeout=cfg.heartbeat_timeout,
+            sensing_range_m=sc.formation.sensing_range_m, stopped=lambda: self.stop,
+            on_lost=lambda: self.keeper.fault(time.monotonic()),
+        )
         self.last_estimate: wire.Estimate | None = None
         self.prev_estimate: wire.Estimate | None = None
         self.last_est_pub = 0.0
@@ -212,7 +227,9 @@ class OffboardDaemon(DaemonCommands):
 
         # Step 0 waits for every agent's initial estimate as long as start-up may take
         # (the others may still be importing); later a silent neighbour is declared lost.
-        timeout = self.cfg.heartbeat_timeout if k == 0 else self.cfg.neighbour_timeout
+        # (--solo: no start-up wait for neighbours that may never come)
+        startup = k == 0 and not self.cfg.solo
+        timeout = self.cfg.heartbeat_timeout if startup else self.cfg.neighbour_timeout
         complete = self.bus.wait(lambda: self.stop or have_all(), timeout) and not self.stop
         got = self.bus.estimates_at(k - 1)
         if not complete:
@@ -225,35 +242,6 @@ class OffboardDaemon(DaemonCommands):
                 self.lost.discard(j)
                 log.info("agent %d: neighbour %d back", self.id, j)
         return got, True
-
-    def _truth_for(self, k: int) -> wire.Truth | None:
-        """The simulator's truth of step k (lockstep: waited for), or the latest one if
-        it is at most RUNNER_LOST_PERIODS behind (real time; else the runner is lost)."""
-        if not self.cfg.lockstep:
-            return self._latest_truth(k)
-        if not self.bus.wait(lambda: self.stop or k in self.bus.truth, self.cfg.truth_timeout):
-            log.warning("agent %d: no truth for step %d", self.id, k)
-            return None
-        return self.bus.truth.get(k)
-
-    def _latest_truth(self, k: int) -> wire.Truth | None:
-        """Real time: the latest truth unless the runner or router is lost (then None)."""
-        truth = self.bus.latest_truth
-        if truth is None and time.monotonic() - self.said_waiting >= WAIT_LOG_S:
-            self.said_waiting = time.monotonic()
-            log.info("agent %d: waiting for truth on Zenoh (%s)", self.id,
-                     ", ".join(self.cfg.zenoh_connect) or "no endpoint")
-        change = self.loss.observe(k, None if truth is None else truth.step)
-        if change == "lost":
-            self.keeper.fault(time.monotonic())
-            t_land = self.loss.t_land
-            log.error("agent %d: truth lost at step %d (runner or router gone?): setpoints "
-                      "stopped, the vehicle holds; %s", self.id, k,
-                      "no landing (--loss-land-after 0)" if t_land is None
-                      else f"landing at t={t_land:.2f} s unless truth is back first")
-        elif change == "back":
-            log.info("agent %d: truth back at step %d", self.id, k)
-        return None if self.loss.lost else truth
 
     def _loss_step(self, k: int, t: float, time_boot_ms: int) -> bool:
         """Runner or router lost (real time): the setpoint of offboard.runner_loss's
@@ -276,8 +264,8 @@ class OffboardDaemon(DaemonCommands):
         return True
 
     def control_step(self, k: int, t: float, time_boot_ms: int) -> bool:
-        truth = self._truth_for(k)
-        if truth is None:
+        sensed = self.sensing.for_step(k)
+        if sensed is None:
             return False
         self._apply_commands(t)
         self._maybe_start_landing(t)
@@ -285,7 +273,7 @@ class OffboardDaemon(DaemonCommands):
             self._maybe_start_trajectory(t)
         received, comm_ok = self._neighbours_for(k, t)
         neighbours = {j: estimate_from_wire(e) for j, e in received.items()}
-        out = self.agent.step(k, t, truth.p, truth.v, neighbours, comm_ok)
+        out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
         self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
         self.answer_step, self.answer_at = k, time.monotonic()
         self._send_answer()
@@ -330,10 +318,25 @@ class OffboardDaemon(DaemonCommands):
             self.vehicle_step = k
             self.bus.set_reference(k)
 
+    def _publish_odometry(self, k: int) -> None:
+        """Our vehicle's measured state at t_k on Zenoh, once per step (the others'
+        ``--sensing odometry``), and handed to our own sensing source."""
+        odo = self.link.odometry
+        got = None if odo is None or k == self.odo_pub_step else measured_state(odo, 0.0)
+        if got is None:
+            return
+        self.odo_pub_step = k
+        msg = wire.Odometry(self.id, k, k / self.control_hz, wire.f32(got[0]), wire.f32(got[1]))
+        self.sensing.set_own(msg)
+        self.bus.publish_odometry(msg)
+
     def _on_odometry(self) -> None:
-        """One control step per new ODOMETRY stamp (both modes)."""
+        """One control step per new ODOMETRY stamp (both modes), once the swarm is ready
+        (the arming policy: no setpoint, so no OFFBOARD or arm, before)."""
         k = self.vehicle_step
-        if k > self.last_step:
+        if k >= 0:
+            self._publish_odometry(k)
+        if k > self.last_step and self.ready.check(self.bus.heard, time.monotonic()):
             t = k / self.control_hz
             ms = int(round(t * 1000))
             if self.control_step(k, t, ms) or self._loss_step(k, t, ms):
@@ -373,6 +376,7 @@ class OffboardDaemon(DaemonCommands):
                 self.streaming = False  # the vehicle must see the stream again first
                 log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
             self.link.poll(0.001)  # ODOMETRY wakes it at once
+            self.link.send_heartbeat()
             self._vehicle_clock()
             self.bus.pump()
             now = time.monotonic()

@@ -183,6 +183,8 @@ class PayloadGuard:
             return self._estimate(msg)
         if isinstance(msg, wire.Status):
             return self._status(msg)
+        if isinstance(msg, wire.Odometry):
+            return self._odometry(msg)
         return self._command(msg)
 
     def _truth(self, m: wire.Truth) -> str | None:
@@ -219,6 +221,15 @@ class PayloadGuard:
             return f"status id {m.id} not in the scenario"
         if not self.step_ok(m.step) or not self._time_ok(m.step, m.t, 0):
             return f"status step {m.step} / t {m.t!r} implausible"
+        return None
+
+    def _odometry(self, m: wire.Odometry) -> str | None:
+        if m.id not in self.ids:
+            return f"odometry id {m.id} not in the scenario"
+        if m.step < 0 or not self.step_ok(m.step) or not self._time_ok(m.step, m.t, 0):
+            return f"odometry step {m.step} / t {m.t!r} implausible"
+        if not (np.all(np.isfinite(m.p)) and np.all(np.isfinite(m.v))):
+            return "odometry has non-finite values"
         return None
 
     def _command(self, m: wire.Command) -> str | None:

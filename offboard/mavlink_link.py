@@ -1,7 +1,9 @@
 """The offboard daemon's MAVLink link to its own vehicle (the companion-computer side).
 
 Listens where the vehicle streams its API link (``udpin:127.0.0.1:<api_remote>``, PX4's
-14540 for vehicle 1), talks as system = agent id, component 191 (onboard computer).
+14540 for vehicle 1), talks as system = agent id, component 191 (onboard computer): its own
+HEARTBEAT once a second (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) and one
+sequence number per packet sent (docs/px4/offboard-component.md).
 
 Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
 
@@ -81,13 +83,33 @@ class Odometry:
     v_body: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+MAVLINK_SCHEMES = ("udpin", "udpout", "udp", "tcp", "tcpin")
+HEARTBEAT_PERIOD_S = 1.0  # the daemon's own HEARTBEAT (MAVLink microservice: 1 Hz)
+
+
+def mavlink_url_problem(url: str) -> str | None:
+    """Why ``url`` is not a usable ``SCHEME:HOST:PORT`` MAVLink URL (one line), or None.
+    Schemes: :data:`MAVLINK_SCHEMES`; HOST not empty; PORT a decimal 1..65535."""
+    scheme, sep, rest = url.partition(":")
+    if not sep or scheme not in MAVLINK_SCHEMES:
+        return f"unknown scheme {scheme!r}: use one of {', '.join(MAVLINK_SCHEMES)}"
+    host, sep, port = rest.rpartition(":")
+    if not sep or not host:
+        return f"expected {scheme}:HOST:PORT (e.g. udpin:127.0.0.1:14540)"
+    if not port.isascii() or not port.isdigit():
+        return f"port {port!r} is not a number"
+    if not 0 < int(port) < 65536:
+        return f"port {int(port)} out of range 1..65535"
+    return None
+
+
 def parse_udpin(url: str) -> tuple[str, int] | None:
     """``udpin:HOST:PORT`` -> (host, port); None for any other scheme."""
     if not url.startswith("udpin:"):
         return None
+    if (why := mavlink_url_problem(url)) is not None:
+        raise ValueError(f"MAVLink URL {url!r}: {why}")
     host, _, port = url[len("udpin:"):].rpartition(":")
-    if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ValueError(f"MAVLink URL {url!r}: expected udpin:HOST:PORT")
     return host, int(port)
 
 
@@ -137,6 +159,7 @@ class VehicleLink:
         self.statustexts: list[str] = []
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
         self.sent = 0
+        self.heartbeat_sent_at = -math.inf  # monotonic time of our own last HEARTBEAT
         self.custom_mode = 0
         self.armed = False
         self.faults = faults or fault_plan.injector_for(fault_plan.MAVLINK, agent_id, "offboard")
@@ -262,6 +285,7 @@ class VehicleLink:
         every ``say_every`` s; False on timeout or once ``stopped()``."""
         start = said = time.monotonic()
         while not stopped() and not self.locked:
+            self.send_heartbeat()  # udpout/tcp: the vehicle learns of us (udpin: no peer yet)
             self.poll(0.1)
             now = time.monotonic()
             if now - start > timeout:
@@ -274,7 +298,11 @@ class VehicleLink:
 
     # -- send ---------------------------------------------------------------------------
     def _send(self, msg: Any) -> None:
+        """Pack (signed when signing is on) with the link's sequence number, which goes up
+        by one per packed message (mod 256) like ``MAVLink.send`` does, so a receiver's loss
+        count (pymavlink ``mavloss``) is right; then send to the locked vehicle."""
         buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
         if self.sock is None:
             self.conn.write(buf)
         elif self.peer is None:
@@ -309,6 +337,23 @@ class VehicleLink:
             ATT_MASK_IGNORE_RATES, q, 0.0, 0.0, 0.0, float(thrust_norm),
         )
         self._send(msg)
+
+    def send_heartbeat(self, now: float | None = None) -> bool:
+        """Our own HEARTBEAT as an onboard-computer component (MAV_TYPE_ONBOARD_CONTROLLER,
+        MAV_AUTOPILOT_INVALID, system = agent id, component 191) once per
+        :data:`HEARTBEAT_PERIOD_S`; True when one went out. Signed when signing is on.
+        Nothing goes out on a ``udpin`` link before the vehicle's lock (no peer yet)."""
+        now = time.monotonic() if now is None else now
+        if now - self.heartbeat_sent_at < HEARTBEAT_PERIOD_S:
+            return False
+        if self.sock is not None and self.peer is None:
+            return False
+        self.heartbeat_sent_at = now
+        self._send(mavlink.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
+            mavlink.MAV_STATE_ACTIVE,
+        ))
+        return True
 
     # -- commands (never blocking) ---------------------------------------------------------
     def start_command(

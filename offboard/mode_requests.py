@@ -72,3 +72,43 @@ class ModeRequests:
         if not self.link.busy(mavlink.MAV_CMD_COMPONENT_ARM_DISARM):
             self.disarming = True
             self.link.start_command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [0, 0])
+
+
+class SwarmReady:
+    """The arming policy (docs/px4/offboard-component.md, "Arming policy"): the daemon
+    runs no control step, so streams no setpoint and never asks for OFFBOARD or arm,
+    until its swarm is ready, i.e. every other agent of the scenario has published an
+    estimate (its initial one is sent as soon as its daemon has its vehicle's heartbeat).
+    Ready is latched: a neighbour lost later is handled by the agent's prediction, not
+    here. ``solo`` (``--solo``): ready at once. While waiting it says so every
+    ``say_every`` s, naming the agents not heard from."""
+
+    def __init__(self, agent_id: int, others: list[int], solo: bool, say_every: float) -> None:
+        self.id = agent_id
+        self.others = list(others)
+        self.ready = solo or not self.others
+        self.say_every = say_every
+        self.since: float | None = None
+        self.said = 0.0
+        if solo:
+            log.info("agent %d: --solo: flying without waiting for its swarm", agent_id)
+
+    def check(self, heard: set[int], now: float) -> bool:
+        """True once every other agent is in ``heard`` (then always)."""
+        if self.ready:
+            return True
+        missing = [j for j in self.others if j not in heard]
+        if not missing:
+            self.ready = True
+            log.info("agent %d: swarm ready (all %d agents heard from): arming allowed",
+                     self.id, len(self.others) + 1)
+            return True
+        if self.since is None:
+            self.since = now
+        if now - self.said >= self.say_every:
+            self.said = now
+            log.info("agent %d: waiting for its swarm, not arming: %d of %d agents heard "
+                     "from, missing %s (%.0f s; --solo flies alone)", self.id,
+                     len(self.others) - len(missing) + 1, len(self.others) + 1,
+                     missing, now - self.since)
+        return False

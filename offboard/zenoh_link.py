@@ -4,7 +4,11 @@ Receives into Zenoh FIFO channels that the daemon's main thread drains (:meth:`p
 
 * ``Truth`` per control step (from ``vehicle-sim``), kept by step;
 * every agent's post-update ``Estimate`` (kept by sender and step);
-* ground-station ``Command`` payloads (method switch, outage injection).
+* ground-station ``Command`` payloads (method switch, outage injection);
+* with ``odometry=True`` (``--sensing odometry``), every other agent's ``Odometry`` (its
+  vehicle's measured state at t_k), kept by step and latest per sender.
+
+It publishes its agent's estimate, status and its own vehicle's odometry.
 
 Draining from the main thread means no Python thread and no GIL hand-off per message:
 with Python callbacks every put() stalled behind Zenoh's threads (1.9 ms median), and
@@ -51,10 +55,11 @@ class SwarmBus:
 
     def __init__(
         self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None,
-        faults: FaultInjector | None = None,
+        faults: FaultInjector | None = None, odometry: bool = False,
     ) -> None:
         """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
-        process loaded (:func:`swarm_common.faults.injector_for`)."""
+        process loaded (:func:`swarm_common.faults.injector_for`). ``odometry``: subscribe
+        to the other agents' odometry (``--sensing odometry``)."""
         self.session = session
         self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
         self.guard = guard
@@ -67,16 +72,23 @@ class SwarmBus:
         self.estimates: dict[int, dict[int, wire.Estimate]] = {}  # step -> id -> est
         self.latest_estimate: dict[int, wire.Estimate] = {}
         self.commands: deque[wire.Command] = deque()
+        self.heard: set[int] = set()  # agents whose estimate was ever accepted (readiness)
+        self.odometry: dict[int, dict[int, wire.Odometry]] = {}  # step -> id -> odometry
+        self.latest_odometry: dict[int, wire.Odometry] = {}
         self._subs: list[tuple[Any, Callable[[Any], None]]] = []
-        for key, handler in (
+        keys: list[tuple[str, Callable[[Any], None]]] = [
             (wire.key_truth(swarm), self._on_truth),
             (wire.key_estimate(swarm, "*"), self._on_estimate),
             (wire.key_cmd(swarm, "*"), self._on_command),
-        ):
+        ]
+        if odometry:
+            keys.append((wire.key_odometry(swarm, "*"), self._on_odometry))
+        for key, handler in keys:
             sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_DEPTH))
             self._subs.append((sub, handler))
         self._pub_est = session.declare_publisher(wire.key_estimate(swarm, agent_id))
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
+        self._pub_odo = session.declare_publisher(wire.key_odometry(swarm, agent_id))
 
     # -- handlers (called from pump) ---------------------------------------------------
     @property
@@ -112,7 +124,10 @@ class SwarmBus:
         for j, est in list(self.latest_estimate.items()):
             if not ok(est.step):
                 del self.latest_estimate[j]
-        for store in (self.truth, self.estimates):
+        for j, odo in list(self.latest_odometry.items()):
+            if not ok(odo.step):
+                del self.latest_odometry[j]
+        for store in (self.truth, self.estimates, self.odometry):
             for s in [s for s in store if not ok(s)]:
                 del store[s]
 
@@ -131,12 +146,24 @@ class SwarmBus:
         msg = self._decode(sample, wire.Estimate)
         if msg is None or msg.id == self.agent_id:
             return
+        self.heard.add(msg.id)
         self.estimates.setdefault(msg.step, {})[msg.id] = msg
         prev = self.latest_estimate.get(msg.id)
         if prev is None or msg.step >= prev.step:
             self.latest_estimate[msg.id] = msg
         for old in [s for s in self.estimates if s < msg.step - KEEP_STEPS]:
             del self.estimates[old]
+
+    def _on_odometry(self, sample: Any) -> None:
+        msg = self._decode(sample, wire.Odometry)
+        if msg is None or msg.id == self.agent_id:
+            return
+        self.odometry.setdefault(msg.step, {})[msg.id] = msg
+        prev = self.latest_odometry.get(msg.id)
+        if prev is None or msg.step >= prev.step:
+            self.latest_odometry[msg.id] = msg
+        for old in [s for s in self.odometry if s < msg.step - KEEP_STEPS]:
+            del self.odometry[old]
 
     def _on_command(self, sample: Any) -> None:
         msg = self._decode(sample, wire.Command)
@@ -185,6 +212,9 @@ class SwarmBus:
 
     def publish_status(self, status: wire.Status) -> None:
         self._put(self._pub_status, wire.encode(status))
+
+    def publish_odometry(self, odo: wire.Odometry) -> None:
+        self._put(self._pub_odo, wire.encode(odo))
 
     def _put(self, pub: Any, payload: bytes) -> None:
         if self.faults is None:

@@ -8,6 +8,7 @@ key                                    payload                                  
 ``<root>/<swarm>/truth``               :class:`Truth` (all vehicles, one message)  vehicle-sim
 ``<root>/<swarm>/agent/<id>/estimate`` :class:`Estimate` (post-update, for t_k+1)  offboard
 ``<root>/<swarm>/agent/<id>/status``   :class:`Status`                             offboard
+``<root>/<swarm>/agent/<id>/odometry`` :class:`Odometry` (own vehicle, ENU, at t_k) offboard
 ``<root>/<swarm>/cmd/method``          :class:`Command` kind="method"              gcs
 ``<root>/<swarm>/cmd/outage``          :class:`Command` kind="outage"              gcs
 ``<root>/<swarm>/cmd/land``            :class:`Command` kind="land"                gcs
@@ -48,6 +49,10 @@ def key_estimate(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> s
 
 def key_status(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> str:
     return f"{root}/{swarm}/agent/{agent_id}/status"
+
+
+def key_odometry(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> str:
+    return f"{root}/{swarm}/agent/{agent_id}/odometry"
 
 
 def key_cmd(swarm: str, kind: str, root: str = DEFAULT_ROOT) -> str:
@@ -154,6 +159,19 @@ class Status:
     input_clipped: bool = False  # the setpoint conversion changed the commanded u this step
 
 
+@dataclass
+class Odometry:
+    """One vehicle's own measured state at control step ``step`` (time ``t`` = t_k), ENU,
+    from the ODOMETRY its autopilot sends (converted once, in :mod:`swarm_common.frames`);
+    published by that vehicle's daemon, read by the others' ``--sensing odometry``."""
+
+    id: int
+    step: int
+    t: float
+    p: np.ndarray  # (3,) m
+    v: np.ndarray  # (3,) m/s
+
+
 COMMAND_KINDS = ("method", "outage", "land", "takeoff")  # Command.kind; others fail decode
 
 
@@ -172,7 +190,7 @@ class Command:
     at_s: float = -1.0
 
 
-Payload = Truth | Estimate | Status | Command
+Payload = Truth | Estimate | Status | Command | Odometry
 
 
 def encode(obj: Payload) -> bytes:
@@ -232,6 +250,15 @@ def encode(obj: Payload) -> bytes:
             "comm": bool(obj.comm_ok),
             "lump": _pack_vec(obj.lumped),
             "clip": bool(obj.input_clipped),
+        }
+    elif isinstance(obj, Odometry):
+        d = {
+            "v": VERSION,
+            "k": "odo",
+            "id": int(obj.id),
+            "step": int(obj.step),
+            "t": float(obj.t),
+            "x": _pack_vec(np.concatenate([np.ravel(obj.p), np.ravel(obj.v)])),
         }
     elif isinstance(obj, Command):
         d = {
@@ -312,6 +339,10 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 lumped=_unpack_vec(d["lump"], (3,)) if "lump" in d else np.zeros(3),
                 input_clipped=bool(d.get("clip", False)),
             )
+        if kind == "odo":
+            x = _unpack_vec(d["x"], (6,))
+            return Odometry(id=int(d["id"]), step=int(d["step"]), t=float(d["t"]),
+                            p=x[0:3], v=x[3:6])
         if kind == "cmd":
             if d["kind"] not in COMMAND_KINDS:
                 raise WireError(f"unknown command kind {d['kind']!r}")

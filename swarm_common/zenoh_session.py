@@ -121,6 +121,8 @@ _SUB_MESSAGES = [
     "liveliness_query", "query", "declare_queryable", "reply",
 ]  # fmt: skip
 _PUT = ["put", "delete"]
+# what agent i may put, each under <root>/<swarm>/agent/i/ (swarm_common.wire's key_*)
+AGENT_KEYS = ("estimate", "status", "odometry")
 
 
 def agent_user(agent_id: int) -> str:
@@ -142,7 +144,8 @@ class SwarmSecurity:
 def acl_config(swarm: str, root: str, agent_ids: Iterable[int]) -> dict[str, Any]:
     """The router's ``access_control`` section: default deny; every authenticated user may
     subscribe under ``<root>/<swarm>/**``; only ``sim`` may put ``truth``; agent ``i`` only
-    ``agent/i/**`` (its estimate and status); only ``gcs`` may put ``cmd/**``. Messages
+    its own ``agent/i/estimate``, ``agent/i/status`` and ``agent/i/odometry`` (the keys
+    of :data:`AGENT_KEYS`); only ``gcs`` may put ``cmd/**``. Messages
     the router forwards (egress) are allowed, so a subscriber receives what was admitted."""
     base = f"{root}/{swarm}"
     ids = list(agent_ids)
@@ -170,7 +173,8 @@ def acl_config(swarm: str, root: str, agent_ids: Iterable[int]) -> dict[str, Any
     for i in ids:
         u = agent_user(i)
         rules.append({"id": f"put_{u}", "permission": "allow", "flows": ["ingress"],
-                      "messages": _PUT, "key_exprs": [f"{base}/agent/{i}/**"]})
+                      "messages": _PUT,
+                      "key_exprs": [f"{base}/agent/{i}/{key}" for key in AGENT_KEYS]})
         subjects.append({"id": u, "usernames": [u]})
         policies.append({"rules": [f"put_{u}"], "subjects": [u]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
