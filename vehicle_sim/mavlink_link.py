@@ -7,8 +7,10 @@
 * Signing (``key`` set, :mod:`swarm_common.signing`): a frame that is unsigned, wrongly
   signed or replayed is rejected and counted per reason (``rejected_unsigned``,
   ``rejected_bad_signature``, ``rejected_replay``). On an ``unsigned_ok`` link an unsigned
-  HEARTBEAT, TIMESYNC or COMMAND_LONG/INT is let through marked ``_restricted``: the
-  vehicle answers only telemetry requests from it (docs/security.md).
+  HEARTBEAT, TIMESYNC, COMMAND_LONG/INT, PING, REQUEST_DATA_STREAM or parameter / mission
+  protocol message is let through marked ``_restricted``: the vehicle answers only
+  telemetry requests and reads (parameters, mission download) from it, and refuses its
+  writes (docs/security.md).
 * Peer hygiene (docs/security.md): sends go to the default remote (PX4 SITL convention)
   and to every address that has sent an accepted frame here within ``peer_timeout``
   seconds. At most ``max_peers`` such peers: a newcomer is refused (``peers_refused``,
@@ -58,11 +60,25 @@ CREDIT_MAX_BYTES = 20_000.0  # stream credit an unauthenticated peer can bank
 LIVENESS_FREE_S = 1.0  # one HEARTBEAT per second reaches a peer out of credit
 SIGNING_LINK_ID = 0  # link id of the simulator's outgoing signed streams
 # what an unsigned client may send on an ``unsigned_ok`` link (commands checked later)
+# (the services refuse the writes among them: PARAM_SET, mission upload/clear/current)
 UNSIGNED_MSG_IDS = frozenset({
     mavlink2.MAVLINK_MSG_ID_HEARTBEAT,
     mavlink2.MAVLINK_MSG_ID_TIMESYNC,
     mavlink2.MAVLINK_MSG_ID_COMMAND_LONG,
     mavlink2.MAVLINK_MSG_ID_COMMAND_INT,
+    mavlink2.MAVLINK_MSG_ID_PING,
+    mavlink2.MAVLINK_MSG_ID_REQUEST_DATA_STREAM,
+    mavlink2.MAVLINK_MSG_ID_PARAM_REQUEST_LIST,
+    mavlink2.MAVLINK_MSG_ID_PARAM_REQUEST_READ,
+    mavlink2.MAVLINK_MSG_ID_PARAM_SET,
+    mavlink2.MAVLINK_MSG_ID_MISSION_REQUEST_LIST,
+    mavlink2.MAVLINK_MSG_ID_MISSION_REQUEST_INT,
+    mavlink2.MAVLINK_MSG_ID_MISSION_REQUEST,
+    mavlink2.MAVLINK_MSG_ID_MISSION_ACK,
+    mavlink2.MAVLINK_MSG_ID_MISSION_COUNT,
+    mavlink2.MAVLINK_MSG_ID_MISSION_ITEM_INT,
+    mavlink2.MAVLINK_MSG_ID_MISSION_CLEAR_ALL,
+    mavlink2.MAVLINK_MSG_ID_MISSION_SET_CURRENT,
 })  # fmt: skip
 _REJECT_PREFIX = signing.INVALID_SIGNATURE_REASON + ": "
 
