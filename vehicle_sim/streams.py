@@ -15,10 +15,8 @@ the defaults again. PX4 keeps requested rates for the life of its MAVLink instan
 on a UDP link outlives the client that asked; resetting on silence is the choice that
 stops one client's rates from leaking into the next one's (docs/px4/streams.md).
 
-Defaults differ per link: a link named in ``telemetry.LINK_RATE_CAPS`` runs some streams
-slower. Peers on such a link get their own schedule from those capped rates as soon as
-they are present; destinations on other links (and a default remote that has not
-spoken yet) share the default schedule.
+The defaults are the same on both links of a vehicle (API and GCS): one default schedule,
+packed once and sent to every destination that has no schedule of its own.
 """
 
 from __future__ import annotations
@@ -26,8 +24,6 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import common as M
-
-from vehicle_sim.telemetry import LINK_RATE_CAPS
 
 # a destination with its own schedule: (link name, (host, port))
 PeerKey = tuple[str, tuple[str, int]]
@@ -93,58 +89,35 @@ class StreamSchedule:
 
 
 class PeerStreams:
-    """The default schedule (every destination without a schedule of its own) and one
-    schedule per peer that asked for a rate or sits on a link with capped defaults."""
+    """The default schedule (every destination without requests of its own) and one
+    schedule per peer that asked for a rate."""
 
-    def __init__(
-        self,
-        rates: dict[int, float],
-        odometry_hz: float,
-        caps: dict[str, dict[int, float]] | None = None,
-    ) -> None:
+    def __init__(self, rates: dict[int, float], odometry_hz: float) -> None:
         self.rates = dict(rates)
         self.odometry_hz = odometry_hz
-        self.caps = LINK_RATE_CAPS if caps is None else caps
         self.default = StreamSchedule(self.rates, odometry_hz)
         self.peers: dict[PeerKey, StreamSchedule] = {}
 
     def __contains__(self, mid: int) -> bool:
         return mid in self.default
 
-    def link_rates(self, link: str) -> dict[int, float]:
-        """The default rates (Hz) of a peer on ``link``: the defaults under its caps."""
-        cap = self.caps.get(link, {})
-        return {mid: min(hz, cap.get(mid, hz)) for mid, hz in self.rates.items()}
-
-    def _fresh(self, link: str) -> StreamSchedule:
-        return StreamSchedule(self.link_rates(link), self.odometry_hz)
-
     def for_peer(self, key: PeerKey | None, create: bool = False) -> StreamSchedule:
-        """The schedule of ``key`` (stored if ``create``); default if None. A peer without
-        one gets its link's defaults (a fresh copy, not stored, unless ``create``)."""
+        """The schedule of ``key`` (a fresh default one if ``create``); default if None."""
         if key is None:
             return self.default
-        sched = self.peers.get(key)
-        if sched is not None:
-            return sched
-        if create:
-            sched = self.peers[key] = self._fresh(key[0])
-            return sched
-        return self._fresh(key[0]) if key[0] in self.caps else self.default
+        if create and key not in self.peers:
+            self.peers[key] = StreamSchedule(self.rates, self.odometry_hz)
+        return self.peers.get(key, self.default)
 
     def custom(self, link: str) -> set[tuple[str, int]]:
         """Addresses on ``link`` that have their own schedule (not on the default one)."""
         return {addr for name, addr in self.peers if name == link}
 
     def forget(self, live: Iterable[PeerKey]) -> None:
-        """Drop the schedules of peers that are gone (their rates with them); give every
-        present peer on a capped link its own schedule from that link's defaults."""
+        """Drop the schedules of peers that are gone: their rates end with them."""
         keep = set(live)
         for key in [k for k in self.peers if k not in keep]:
             del self.peers[key]
-        for key in keep:
-            if key[0] in self.caps and key not in self.peers:
-                self.peers[key] = self._fresh(key[0])
 
     def due(self, wall: float, skip: tuple[int, ...] = ()) -> list[tuple[PeerKey | None, int]]:
         """(destination or None for the default schedule, message id) due at ``wall``."""

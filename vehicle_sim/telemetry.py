@@ -3,9 +3,8 @@
 :data:`BUILDERS` maps a message id (``MAVLINK_MSG_ID_*``) to a function
 ``(vehicle, sim_t) -> message`` that reads the vehicle's state (dynamics row, mode,
 setpoint); :func:`build` looks it up (``None`` for a message the vehicle does not send).
-:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with (Hz, 0 = off; PX4's
-"normal" link mode, the GCS link); :data:`LINK_RATE_CAPS` caps some of them on other links
-(the API link of the offboard controller stays lean). The ODOMETRY rate comes from
+:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with on both of its links
+(Hz, 0 = off; close to PX4's "normal" link mode). The ODOMETRY rate comes from
 ``VehicleConfig.odometry_hz``. Rates, health bits and the battery: docs/px4/streams.md.
 
 Frames: the dynamics are ENU / FLU (z up); every message is NED / FRD. Time stamps are
@@ -91,16 +90,6 @@ DEFAULT_RATES: dict[int, float] = {
     M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
     M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
     M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.0,
-}
-# per link name: the most a default stream runs there (Hz); the offboard controller's API
-# link needs ODOMETRY only, so the streams added for MAVSDK-like clients stay slow there
-LINK_RATE_CAPS: dict[str, dict[int, float]] = {
-    "api": {
-        M.MAVLINK_MSG_ID_ATTITUDE: 10.0,
-        M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
-        M.MAVLINK_MSG_ID_VFR_HUD: 1.0,
-        M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
-    },
 }
 
 

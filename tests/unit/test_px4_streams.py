@@ -28,7 +28,6 @@ ATT, VFR, ALT, BAT = (
 # MAVLink ids that pymavlink 2.4's common dialect does not define (QGC asks for them)
 MSG_ID_COMPONENT_INFORMATION, MSG_ID_COMPONENT_METADATA = 395, 397
 GCS_PEER = ("gcs", ("127.0.0.1", 40000))
-API_PEER = ("api", ("127.0.0.1", 40001))
 
 
 def _vehicle() -> Vehicle:
@@ -155,15 +154,6 @@ def test_protocol_version_message_round_trips() -> None:
         ("uint8_t", "on_off", 0),
     )
     assert mavlink_extra.crc_extra("DATA_STREAM", fields) == M.MAVLink_data_stream_message.crc_extra
-
-
-def test_api_link_defaults_are_capped_gcs_defaults_are_not() -> None:
-    s = PeerStreams(telemetry.DEFAULT_RATES, 50.0)
-    s.forget([API_PEER, GCS_PEER])
-    assert API_PEER in s.peers and GCS_PEER not in s.peers  # GCS peers share the default
-    assert s.for_peer(API_PEER).interval_us(ATT) == 100_000  # 10 Hz on the API link
-    assert s.for_peer(GCS_PEER).interval_us(ATT) == round(1e6 / 15)
-    assert s.for_peer(("api", ("127.0.0.1", 1))).interval_us(VFR) == 1_000_000  # not stored
 
 
 def test_rate_set_by_a_peer_ends_when_it_goes_silent() -> None:
