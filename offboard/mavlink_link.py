@@ -351,7 +351,7 @@ class VehicleLink:
         self.heartbeat_sent_at = now
         self._send(mavlink.MAVLink_heartbeat_message(
             mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
-            mavlink.MAV_STATE_ACTIVE,
+            mavlink.MAV_STATE_ACTIVE, 3,  # mavlink_version: 3 for MAVLink 1.0 and later
         ))
         return True
 

@@ -1,0 +1,176 @@
+"""The offboard daemon as a MAVLink component (docs/px4/offboard-component.md): a real
+``vehicle-sim`` with one vehicle (agent 1 of cube8), one ``offboard`` daemon and a Zenoh
+router hosted by the test, over 127.0.0.1.
+
+* The daemon's ``.tlog`` (what it sent, as sent) holds its own HEARTBEATs as component 191
+  (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) and pymavlink's loss count
+  (``mavloss``: sequence-number gaps per sender) is 0 for that component.
+* Alone with its vehicle and no neighbours the daemon does not arm (the vehicle's
+  HEARTBEAT on the GCS link stays disarmed) and its log says why; with ``--solo`` it arms.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from conftest import CUBE8, ROOT, MavClient  # noqa: E402
+from pymavlink import mavutil  # noqa: E402
+
+from swarm_common.ports import vehicle_ports  # noqa: E402
+from swarm_common.zenoh_session import default_endpoint, open_session  # noqa: E402
+
+pytestmark = pytest.mark.timeout(120)
+
+M = mavutil.mavlink
+ONBOARD = (1, M.MAV_COMP_ID_ONBOARD_COMPUTER)
+
+
+class Daemon:
+    """``offboard --agent 1`` as a subprocess, its stderr collected."""
+
+    def __init__(self, off: int, tlog: Path, extra: list[str]) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", "1",
+             "--port-offset", str(off), "--realtime", "--sensing", "odometry",
+             "--zenoh-connect", default_endpoint(off), "--tlog", str(tlog), *extra],
+            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, text: str, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if any(text in ln for ln in list(self.lines)):
+                return True
+            if self.proc.poll() is not None:
+                return False
+            time.sleep(0.1)
+        return False
+
+    def stop(self) -> str:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+        self._reader.join(5)
+        return "\n".join(self.lines)
+
+
+@pytest.fixture
+def one_vehicle(sim_factory) -> Iterator[tuple[int, MavClient]]:
+    """(port offset, a GCS listening on vehicle 1's GCS link): ``vehicle-sim --vehicles 1``
+    (real time, no truth) and a Zenoh router on the offset's endpoint."""
+    sim = sim_factory(["--vehicles", "1", "--no-zenoh"])
+    off = sim.offset
+    router = open_session(mode="router", listen=[default_endpoint(off)])
+    gcs = MavClient(vehicle_ports(1, off).gcs_remote)
+    try:
+        yield off, gcs
+    finally:
+        gcs.close()
+        router.close()
+
+
+def _vehicle_armed(gcs: MavClient) -> bool | None:
+    hb = gcs.recv("HEARTBEAT", timeout=5.0, sysid=1,
+                  cond=lambda m: m.get_srcComponent() == M.MAV_COMP_ID_AUTOPILOT1)
+    return None if hb is None else bool(hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def _sent_by_daemon(tlog: Path) -> list[object]:
+    """Every message of component (1, 191) in the tlog, in order."""
+    mlog = mavutil.mavlink_connection(str(tlog))
+    out = []
+    while (m := mlog.recv_match()) is not None:
+        if (m.get_srcSystem(), m.get_srcComponent()) == ONBOARD:
+            out.append(m)
+    return out
+
+
+def _mavloss(msgs: list[object]) -> tuple[int, int]:
+    """(received, lost) by pymavlink mavloss's rule: a gap in the 8-bit sequence."""
+    lost = 0
+    last: int | None = None
+    for m in msgs:
+        seq = m.get_seq()  # type: ignore[attr-defined]
+        if last is not None:
+            lost += (seq - last - 1) % 256
+        last = seq
+    return len(msgs), lost
+
+
+def test_alone_it_waits_and_does_not_arm(one_vehicle, tmp_path: Path) -> None:
+    off, gcs = one_vehicle
+    tlog = tmp_path / "vehicle_1.tlog"
+    d = Daemon(off, tlog, [])
+    try:
+        assert d.wait_for("vehicle link udpin:127.0.0.1:", 30), d.lines
+        assert d.wait_for("waiting for its swarm, not arming", 40), d.lines
+        said = sum("waiting for its swarm" in ln for ln in d.lines)
+        assert d.wait_for("missing [2, 3, 4, 5, 6, 7, 8]", 1)
+        time.sleep(4.0)
+        gcs.drain()
+        assert _vehicle_armed(gcs) is False
+        assert sum("waiting for its swarm" in ln for ln in d.lines) > said  # repeated
+        assert not any("ARM accepted" in ln for ln in d.lines)
+    finally:
+        text = d.stop()
+    print(text)
+    msgs = _sent_by_daemon(tlog)
+    beats = [m for m in msgs if m.get_type() == "HEARTBEAT"]
+    assert len(beats) >= 2
+    assert all(m.type == M.MAV_TYPE_ONBOARD_CONTROLLER  # type: ignore[attr-defined]
+               and m.autopilot == M.MAV_AUTOPILOT_INVALID for m in beats)  # type: ignore[attr-defined]
+    assert not any(m.get_type() == "SET_ATTITUDE_TARGET" for m in msgs)
+
+
+def test_solo_arms_and_loses_no_sequence_number(one_vehicle, tmp_path: Path) -> None:
+    off, gcs = one_vehicle
+    tlog = tmp_path / "vehicle_1.tlog"
+    d = Daemon(off, tlog, ["--solo"])
+    try:
+        assert d.wait_for("ARM accepted", 60), d.lines
+        deadline = time.monotonic() + 10
+        armed = False
+        while not armed and time.monotonic() < deadline:
+            armed = bool(_vehicle_armed(gcs))
+        assert armed
+        time.sleep(4.0)  # a few more seconds of setpoints and heartbeats (seq wraps at 256)
+    finally:
+        text = d.stop()
+    print(text)
+    keep = os.environ.get("KEEP_TLOG")  # developer aid: keep the tlog for mavloss
+    if keep:
+        Path(keep).write_bytes(tlog.read_bytes())
+    msgs = _sent_by_daemon(tlog)
+    received, lost = _mavloss(msgs)
+    assert received > 0
+    assert lost == 0
+    # and pymavlink's own tool, one row per (sysid, compid): "1  191  packets  lost  0.0%"
+    tool = subprocess.run([sys.executable, "-m", "pymavlink.tools.mavloss", str(tlog)],
+                          capture_output=True, text=True, timeout=60, check=True)
+    rows = [ln.split() for ln in tool.stdout.splitlines()]
+    ours = [r for r in rows if r[:2] == ["1", str(M.MAV_COMP_ID_ONBOARD_COMPUTER)]]
+    assert len(ours) == 1 and ours[0][3:] == ["0", "0.0%"], tool.stdout
+    kinds = {m.get_type() for m in msgs}
+    assert {"HEARTBEAT", "SET_ATTITUDE_TARGET", "COMMAND_LONG"} <= kinds
+    assert sum(m.get_type() == "HEARTBEAT" for m in msgs) >= 2
