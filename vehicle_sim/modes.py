@@ -59,6 +59,7 @@ def engage_onboard(v: Vehicle) -> None:
     if v.mode in HOLD_MODES:
         v.fs.engage(FailsafeAction.HOLD, v.p(), v.yaw())
     elif v.mode == VehicleMode.LAND:
+        v.fs.gains.land_speed = float(v.params.get("MPC_LAND_SPEED"))
         v.fs.engage(FailsafeAction.LAND, v.p(), v.yaw())
     v.pc.reset(v.yaw())
 
