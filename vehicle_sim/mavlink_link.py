@@ -303,9 +303,14 @@ class MavlinkLink:
     ) -> bool:
         """Whether a stream datagram of ``nbytes`` may go to ``addr`` (and spend its
         credit): always for the default remote and authenticated peers; a ``liveness``
-        datagram (HEARTBEAT) once per ``LIVENESS_FREE_S`` without credit."""
+        datagram (HEARTBEAT) once per ``LIVENESS_FREE_S`` without credit. An address the
+        link no longer knows (a peer just forgotten) gets nothing."""
+        if addr == self.default_remote:
+            return True
         p = self.peers.get(addr)
-        if addr == self.default_remote or p is None or p.authenticated:
+        if p is None:
+            return False
+        if p.authenticated:
             return True
         if liveness and now - p.free_liveness_at >= LIVENESS_FREE_S:
             p.free_liveness_at = now
