@@ -1,0 +1,139 @@
+"""``offboard --sensing odometry``: the swarm flies without the simulator's truth
+(docs/px4/offboard-component.md, "Sensing sources"). A short lockstep cube8 run with
+``vehicle-sim --no-zenoh`` (no truth published at all) and eight daemons that build
+their sensor inputs from their own and their neighbours' published odometry: no
+collision, the formation error falls, and it ends close to (not identical with) the same
+run sensed from truth."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import CUBE8, ROOT, free_port_offset
+
+from swarm_common import wire
+from swarm_common.scenario import load_scenario
+from swarm_common.zenoh_session import default_endpoint, open_session
+
+pytestmark = pytest.mark.timeout(400)
+
+DURATION_S = 4.0
+SIM_ENDPOINT_SHIFT = 1  # the simulator's own Zenoh listen port: router port + 1
+
+
+class Record:
+    """Every daemon's published odometry and status, by (step, id)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.p: dict[tuple[int, int], np.ndarray] = {}
+        self.p_des: dict[tuple[int, int], np.ndarray] = {}
+
+    def on_sample(self, sample: Any) -> None:
+        try:
+            msg = wire.decode(sample.payload.to_bytes())
+        except wire.WireError:
+            return
+        with self.lock:
+            if isinstance(msg, wire.Odometry):
+                self.p[(msg.step, msg.id)] = msg.p
+            elif isinstance(msg, wire.Status):
+                self.p_des[(msg.step, msg.id)] = msg.p_des
+
+    def formation_error(self, ids: list[int]) -> dict[int, float]:
+        """Mean over agents of |p_i − p*_i| (m), per step where every agent has both."""
+        out: dict[int, float] = {}
+        with self.lock:
+            steps = sorted({k for k, _ in self.p_des})
+            for k in steps:
+                if all((k, i) in self.p and (k, i) in self.p_des for i in ids):
+                    out[k] = float(np.mean([np.linalg.norm(self.p[(k, i)] - self.p_des[(k, i)])
+                                            for i in ids]))
+        return out
+
+
+def _run(tmp: Path, sensing: str) -> tuple[dict[str, Any], dict[int, float], list[float]]:
+    """One lockstep run; (the simulator's stats, formation error per step, minimum pair
+    distance per step from the published odometry)."""
+    sc = load_scenario(CUBE8)
+    off = free_port_offset()
+    router_ep = default_endpoint(off)
+    stats = tmp / f"stats-{sensing}.json"
+    rec = Record()
+    router = open_session(mode="router", listen=[router_ep])
+    subs = [router.declare_subscriber(wire.key_odometry(sc.name, "*"), rec.on_sample),
+            router.declare_subscriber(wire.key_status(sc.name, "*"), rec.on_sample)]
+    sim_args = [sys.executable, "-m", "vehicle_sim.cli", "--scenario", CUBE8,
+                "--port-offset", str(off), "--lockstep", "--step-timeout", "1.0",
+                "--duration", str(DURATION_S), "--stats-out", str(stats), "--quiet"]
+    if sensing == "odometry":
+        sim_args.append("--no-zenoh")  # no truth anywhere
+    else:
+        sim_endpoint = f"tcp/127.0.0.1:{7447 + off + SIM_ENDPOINT_SHIFT}"
+        sim_args += ["--zenoh-listen", sim_endpoint, "--zenoh-connect", router_ep]
+    logs = [open(tmp / f"{sensing}-{name}.log", "w") for name in ("sim", *map(str, sc.ids))]  # noqa: SIM115
+    procs = [subprocess.Popen(sim_args, cwd=ROOT, stderr=logs[0], stdout=subprocess.DEVNULL)]
+    for n, i in enumerate(sc.ids, start=1):
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", str(i),
+             "--port-offset", str(off), "--zenoh-connect", router_ep, "--sensing", sensing],
+            cwd=ROOT, stderr=logs[n], stdout=subprocess.DEVNULL))
+    try:
+        assert procs[0].wait(360) == 0
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+        for p in procs:
+            try:
+                p.wait(15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(5)
+        for s in subs:
+            s.undeclare()
+        router.close()
+        for f in logs:
+            f.close()
+    with rec.lock:
+        steps = sorted({k for k, _ in rec.p})
+        min_d = []
+        for k in steps:
+            pts = [rec.p[(k, i)] for i in sc.ids if (k, i) in rec.p]
+            if len(pts) == len(sc.ids):
+                a = np.array(pts)
+                d = np.linalg.norm(a[:, None] - a[None], axis=2) + np.eye(len(pts)) * 1e9
+                min_d.append(float(d.min()))
+    return json.loads(stats.read_text()), rec.formation_error(list(sc.ids)), min_d
+
+
+def test_swarm_flies_on_odometry_without_truth(tmp_path: Path) -> None:
+    stats_o, err_o, min_o = _run(tmp_path, "odometry")
+    for f in sorted(tmp_path.glob("odometry-*.log")):
+        print(f"--- {f.name}\n{f.read_text()[-1500:]}")
+    assert stats_o["collisions"] == 0
+    assert min_o and min(min_o) > 0.5
+    steps = sorted(err_o)
+    assert len(steps) > 50
+    first, last = err_o[steps[0]], float(np.mean([err_o[k] for k in steps[-10:]]))
+    print(f"odometry: formation error {first:.3f} m -> {last:.3f} m, min distance "
+          f"{min(min_o):.2f} m")
+    assert last < 0.5 * first
+
+    stats_t, err_t, min_t = _run(tmp_path, "truth")
+    assert stats_t["collisions"] == 0
+    common = sorted(set(err_o) & set(err_t))
+    assert len(common) > 50
+    diff = [abs(err_o[k] - err_t[k]) for k in common]
+    last_t = float(np.mean([err_t[k] for k in common[-10:]]))
+    print(f"truth: final formation error {last_t:.3f} m; |odometry - truth| max "
+          f"{max(diff):.4f} m")
+    assert max(diff) > 0.0  # two sources: not the same numbers
+    assert abs(last - last_t) < 0.1 + 0.2 * last_t  # but the same flight
