@@ -135,28 +135,15 @@ def _alt_mm(cfg: VehicleConfig, pn: np.ndarray) -> int:
     return int(round((cfg.home_alt - pn[2]) * 1000))
 
 
-TAKEOFF_MODES = frozenset({"TAKEOFF"})  # VehicleMode names that take off
-LANDING_MODES = frozenset({"LAND"})
-
-
-def _nav_kind(v: Vehicle) -> str:
-    """Kind of the onboard navigation target (``vehicle.nav``, a NavTarget) or ""; in
-    OFFBOARD the controller's setpoints fly the vehicle, not that target."""
-    if str(v.mode) == "OFFBOARD":
-        return ""
-    return str(getattr(getattr(v, "nav", None), "kind", ""))
-
-
 def landed_state(v: Vehicle) -> int:
     """MAV_LANDED_STATE: TAKEOFF (armed, climbing to a take-off altitude: AUTO.TAKEOFF, a
     mission TAKEOFF), ON_GROUND, LANDING (armed, in the air, descending to land: AUTO.LAND,
     a mission LAND, the last leg of RTL) or IN_AIR."""
-    mode, nav = str(v.mode), _nav_kind(v)
-    if v.armed and (mode in TAKEOFF_MODES or nav == "takeoff"):
+    if v.armed and v.taking_off:
         return M.MAV_LANDED_STATE_TAKEOFF
     if v.on_ground():
         return M.MAV_LANDED_STATE_ON_GROUND
-    if v.armed and (mode in LANDING_MODES or nav == "land"):
+    if v.armed and v.landing:
         return M.MAV_LANDED_STATE_LANDING
     return M.MAV_LANDED_STATE_IN_AIR
 
@@ -188,7 +175,7 @@ def heartbeat(v: Vehicle, sim_t: float = 0.0) -> M.MAVLink_heartbeat_message:
         | M.MAV_MODE_FLAG_STABILIZE_ENABLED
         | M.MAV_MODE_FLAG_GUIDED_ENABLED
     )
-    if v.mode == VehicleMode.POSCTL:
+    if v.mode in (VehicleMode.POSCTL, VehicleMode.ALTCTL):
         base |= M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
     else:
         base |= M.MAV_MODE_FLAG_AUTO_ENABLED
