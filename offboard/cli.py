@@ -21,9 +21,8 @@ from typing import Any
 from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
 from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
-from offboard.sensing_source import SensingSource
 from offboard.zenoh_link import ZENOH_ERRORS
-from swarm_common.enums import Method
+from swarm_common.enums import Method, SensingSource
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import (

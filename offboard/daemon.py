@@ -54,7 +54,7 @@ from offboard.link_guard import OffboardKeeper, PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.mode_requests import ModeRequests, SwarmReady
 from offboard.runner_loss import LAND_AFTER_S, RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
-from offboard.sensing_source import SensingSource, SwarmSensing
+from offboard.sensing_source import SwarmSensing
 from offboard.wire_convert import (
     estimate_from_wire,
     estimate_to_wire,
@@ -63,7 +63,7 @@ from offboard.wire_convert import (
 )
 from offboard.zenoh_link import SwarmBus
 from swarm_common import px4, wire
-from swarm_common.enums import Method
+from swarm_common.enums import Method, SensingSource
 from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)

@@ -24,25 +24,18 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from enum import StrEnum
 
 import numpy as np
 
 from offboard.runner_loss import RUNNER_LOST_PERIODS, RunnerLoss
 from offboard.zenoh_link import SwarmBus
 from swarm_common import wire
+from swarm_common.enums import SensingSource
 
 log = logging.getLogger(__name__)
 
 WAIT_LOG_S = 3.0  # s: how often a start-up wait says what it waits for
 FAR_FACTOR = 10.0  # an unseen neighbour's row: this many sensing ranges away (not sensed)
-
-
-class SensingSource(StrEnum):
-    """``--sensing``: where the sensor's positions and velocities come from."""
-
-    TRUTH = "truth"
-    ODOMETRY = "odometry"
 
 
 class SwarmSensing:

@@ -92,3 +92,11 @@ class FaultLinkChoice(StrEnum):
     MAVLINK = "mavlink"
     ZENOH = "zenoh"
     BOTH = "both"
+
+
+class SensingSource(StrEnum):
+    """``offboard --sensing``: where a daemon's sensor takes positions and velocities from
+    (docs/px4/offboard-component.md)."""
+
+    TRUTH = "truth"  # the simulator's truth topic
+    ODOMETRY = "odometry"  # every vehicle's own ODOMETRY, shared by its daemon over Zenoh
