@@ -1,5 +1,6 @@
 """``gcs`` command line: ``gcs mission run|compare|sweep SCENARIO``, ``gcs router``,
-``gcs dashboard``, ``gcs keys generate --out PATH`` (a MAVLink signing key, :mod:`gcs.keys`).
+``gcs dashboard``, ``gcs keys generate --out PATH`` (a MAVLink signing key, :mod:`gcs.keys`),
+``gcs scenario grid|ring|sphere|helix ...`` (a generated formation, :mod:`gcs.scenario_gen`).
 
 ``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
 ``--inproc``; the seed sweep of ``compare --seeds N`` and ``mission sweep``
@@ -126,6 +127,12 @@ def add_router_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--swarm", default=None, help="swarm name (default: the scenario name)")
     _add_allow_infeasible(p)
     p.set_defaults(func=cmd_router)
+
+
+def add_scenario(sub: argparse._SubParsersAction) -> None:
+    from gcs.scenario_gen import add_scenario_parser
+
+    add_scenario_parser(sub)
 
 
 def add_dashboard(sub: argparse._SubParsersAction) -> None:
@@ -342,6 +349,7 @@ COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
     "router": add_router_parser,
     "dashboard": add_dashboard,
     "keys": add_keys,
+    "scenario": add_scenario,
 }
 
 

@@ -1,0 +1,266 @@
+"""``gcs scenario grid|ring|sphere|helix``: formations of any size as scenario files.
+
+``gcs scenario grid --agents 64 --leaders 4 --scramble 1 > grid64.toml`` writes a scenario
+that :func:`swarm_common.scenario.load_scenario` accepts (docs/scenarios.md, "Generated
+formations"):
+
+* **vertices** of the shape, in metres, scaled so that the closest two are ``--spacing`` m
+  apart, the lowest ``BASE_ALT_M`` above the ground;
+* **leaders** (ids 1..L) spread over the shape by farthest-point sampling, starting on
+  their own vertices, so the leaders' separation is the formation's scale (Departure 1);
+* a **sparse graph** (``--graph knn`` by default): without ``--k`` the smallest
+  ``knn_k`` ≥ ``DEFAULT_K`` whose graph passes the loader's rigidity and observability
+  check (docs/graphs.md); the sensing range is the longest edge plus ``RANGE_MARGIN``;
+* **follower starts**: the follower vertices permuted by ``--scramble SEED`` (a fraction
+  ``--mix`` of them, the rest on their own vertex), each moved by a seeded jitter of at
+  most ``JITTER`` · spacing per axis. Two starts are then at least
+  (1 − 2√3·``JITTER``) · spacing apart (0.65 spacing ≥ ``controller.d_safe_m``).
+
+Everything else (vehicle, observer and controller gains, the leaders' trajectory) is the
+tuned set of ``scenarios/grid27_knn.toml``. Bad flags: one line on stderr, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from swarm_common.enums import GraphKind, Role
+from swarm_common.scenario import ScenarioError, dump_toml, parse_scenario
+
+EXIT_USAGE = 2
+BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
+JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
+RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this
+DEFAULT_K = 6  # first knn_k tried when --k is not given
+MAX_AGENTS = 250  # MAVLink system ids 1..250 leave room for the GCS and companions
+HELIX_PER_TURN = 8  # vertices per helix turn
+
+
+class Shape(StrEnum):
+    """Formation shapes of ``gcs scenario``."""
+
+    GRID = "grid"  # near-cubic box, filled layer by layer from the bottom
+    RING = "ring"  # one horizontal circle
+    SPHERE = "sphere"  # Fibonacci lattice on a sphere
+    HELIX = "helix"  # HELIX_PER_TURN vertices per turn, one spacing between turns
+
+
+GRAPHS = (GraphKind.KNN, GraphKind.RANGE, GraphKind.COMPLETE)
+
+
+class GenError(ValueError):
+    """A flag or flag combination that cannot give a valid scenario (one line)."""
+
+
+def shape_vertices(shape: Shape, n: int) -> np.ndarray:
+    """(n, 3) unscaled vertices of ``shape`` (any units; :func:`vertices` rescales)."""
+    if shape is Shape.GRID:
+        nx = math.ceil(n ** (1 / 3) - 1e-9)
+        ny = math.ceil(math.sqrt(n / nx) - 1e-9)
+        pts = [(x, y, z) for z in range(math.ceil(n / (nx * ny)))
+               for y in range(ny) for x in range(nx)]
+        return np.array(pts[:n], dtype=float)
+    k = np.arange(n, dtype=float)
+    if shape is Shape.RING:
+        a = 2 * math.pi * k / n
+        return np.stack([np.cos(a), np.sin(a), np.zeros(n)], axis=1)
+    if shape is Shape.SPHERE:
+        z = 1 - 2 * (k + 0.5) / n
+        r = np.sqrt(1 - z**2)
+        a = math.pi * (3 - math.sqrt(5)) * k  # golden angle
+        return np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
+    a = 2 * math.pi * k / HELIX_PER_TURN
+    radius = 1 / (2 * math.sin(math.pi / HELIX_PER_TURN))  # neighbours 1 apart on the circle
+    return np.stack([radius * np.cos(a), radius * np.sin(a), k / HELIX_PER_TURN], axis=1)
+
+
+def vertices(shape: Shape, n: int, spacing: float) -> np.ndarray:
+    """Vertices in metres: closest pair ``spacing`` apart, centred in x/y, lowest at
+    ``BASE_ALT_M``; rounded to the millimetre."""
+    v = shape_vertices(shape, n)
+    d = np.linalg.norm(v[:, None] - v[None], axis=2)
+    v = v * (spacing / float(d[np.triu_indices(n, 1)].min()))
+    v[:, :2] -= v[:, :2].mean(axis=0)
+    v[:, 2] += BASE_ALT_M - v[:, 2].min()
+    return np.round(v, 3)
+
+
+def pick_leaders(v: np.ndarray, n_leaders: int) -> list[int]:
+    """Farthest-point sampling from vertex 0: indices of ``n_leaders`` spread vertices."""
+    chosen = [0]
+    dmin = np.linalg.norm(v - v[0], axis=1)
+    while len(chosen) < n_leaders:
+        k = int(np.argmax(dmin))
+        chosen.append(k)
+        dmin = np.minimum(dmin, np.linalg.norm(v - v[k], axis=1))
+    return chosen
+
+
+def scrambled_starts(v: np.ndarray, n_leaders: int, seed: int, mix: float,
+                     spacing: float) -> np.ndarray:
+    """Start positions (m): leaders (rows < n_leaders) on their vertices; a seeded fraction
+    ``mix`` of the followers on each other's vertices (a random permutation of that subset),
+    every follower jittered by at most ``JITTER``·spacing per axis."""
+    rng = np.random.default_rng(seed)
+    p = v.copy()
+    f = np.arange(n_leaders, len(v))
+    moved = rng.choice(f, size=int(round(mix * len(f))), replace=False)
+    p[moved] = v[rng.permutation(moved)]
+    p[f] += rng.uniform(-JITTER * spacing, JITTER * spacing, size=(len(f), 3))
+    return np.round(p, 3)
+
+
+def _template(name: str, seed: int, duration: float, deadline: float) -> dict[str, Any]:
+    """Every section but [formation] and the agents: the tuned set of grid27_knn."""
+    return {
+        "scenario": {"name": name, "seed": seed, "duration_s": duration, "physics_hz": 200,
+                     "control_hz": 50, "formation_deadline_s": deadline},
+        "vehicle": {"mass_kg": 1.8, "gravity_mps2": 9.81, "thrust_max_n": 52.92,
+                    "tilt_max_deg": 30.0, "tau_rollpitch_s": 0.15, "tau_yaw_s": 0.15,
+                    "tau_thrust_s": 0.03, "collision_radius_m": 0.3},
+        "disturbance": {"amplitude_n": 0.2, "omega_rad_s": 1.0},
+        "unmodeled": {"zeta_nominal": [0.05, 0.10, 0.03, 0.01, 0.50, 0.05],
+                      "zeta_spread": 0.2, "ground_effect_height_m": 0.8},
+        "leader_trajectory": {"frequency_hz": 0.2, "amplitude_m": [0.8, 0.4, 0.2]},
+        "sensing": {"bearing_noise_rad": 0.001, "bearing_rate_noise_radps": 0.002,
+                    "distance_noise_m": 0.005, "range_rate_noise_mps": 0.005,
+                    "dropout_prob": 0.0},
+        "communication": {"outages_s": [[5.0, 5.5], [15.0, 15.5], [40.0, 40.5]],
+                          "max_age_s": 1.0},
+        "observer": {"beta": [24.0, 108.0, 108.0], "mu": 0.005, "sigma": 0.15, "substeps": 4,
+                     "reference_gain": 4.0, "init_pos_error_m": 0.3,
+                     "init_vel_error_mps": 0.1, "leader_anchor": 1.0,
+                     "velocity_gain": [1.0, 4.0]},
+        "controller": {"method": "dcbf", "kp": 0.5, "kd": 0.1, "clf_lambda": 1.0,
+                       "clf_c": 1.0, "rho": 10.0, "u_max_mps2": 8.0, "gamma": 0.6,
+                       "tau_safe_s": 0.8, "d_safe_m": 0.5, "apf_gain": 4.0,
+                       "apf_velocity_gain": 1.0, "apf_radius_m": 1.5, "leader_kp": 4.0,
+                       "leader_kd": 3.0, "ks": 2.0, "deadlock_gain": 1.0,
+                       "deadlock_h_m2": 3.0, "dcbf_gamma_lin": 0.3, "dcbf_gamma_cubic": 0.05,
+                       "dcbf_accel_error_mps2": 2.0, "dcbf_cone_sides": 8,
+                       "dcbf_ground_clearance_m": 0.5},
+    }
+
+
+def _longest_edge(v: np.ndarray, graph: GraphKind, k: int) -> float:
+    from swarm_common import graphs
+
+    spec = graphs.GraphSpec(kind=str(graph), knn_k=k)
+    edges = graphs.build_edges(v, spec, list(range(1, len(v) + 1)))
+    return max(float(np.linalg.norm(v[i] - v[j])) for i, j in edges)
+
+
+def _formation(v: np.ndarray, n_leaders: int, graph: GraphKind, k: int,
+               range_m: float | None) -> dict[str, Any]:
+    fm: dict[str, Any] = {"leaders": list(range(1, n_leaders + 1)), "graph": str(graph)}
+    if graph is GraphKind.KNN:
+        fm["knn_k"] = k
+    if range_m is None:  # every graph edge sensed in the formation, with a margin
+        range_m = math.ceil(_longest_edge(v, graph, k) * RANGE_MARGIN * 10) / 10
+    fm["sensing_range_m"] = range_m
+    return fm
+
+
+def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
+    """The scenario document of the flags and the knn_k used (validated: it loads)."""
+    n, n_lead = args.agents, args.leaders
+    if n < 3:
+        raise GenError(f"--agents {n}: need at least 3 (2 leaders and a follower)")
+    if n > MAX_AGENTS:
+        raise GenError(f"--agents {n}: at most {MAX_AGENTS}")
+    if n_lead < 2:
+        raise GenError(f"--leaders {n_lead}: need at least 2 (they fix the formation's scale)")
+    if n_lead >= n:
+        raise GenError(f"--leaders {n_lead}: must be below --agents {n} (need a follower)")
+    if args.graph is not GraphKind.KNN and args.k is not None:
+        raise GenError(f"--k: only read with --graph knn (not {args.graph})")
+    if args.k is not None and not 1 <= args.k < n:
+        raise GenError(f"--k {args.k}: must be in 1..{n - 1} (below --agents)")
+    base = vertices(args.shape, n, args.spacing)
+    lead = pick_leaders(base, n_lead)
+    v = base[lead + [i for i in range(n) if i not in lead]]  # leaders first: ids 1..L
+    starts = scrambled_starts(v, n_lead, args.scramble, args.mix, args.spacing)
+    ks = [args.k] if args.k is not None or args.graph is not GraphKind.KNN else \
+        list(range(min(DEFAULT_K, n - 1), n))
+    name = args.name or f"{args.shape}{n}"
+    doc = _template(name, args.scramble, args.duration, args.deadline)
+    doc["agent"] = [{"id": i + 1, "role": str(Role.LEADER if i < n_lead else Role.FOLLOWER),
+                     "position": starts[i].tolist(), "velocity": [0.0, 0.0, 0.0],
+                     "vertex": v[i].tolist()} for i in range(n)]
+    problem = ""
+    for k in ks:
+        doc["formation"] = _formation(v, n_lead, args.graph, k or DEFAULT_K, args.range)
+        try:
+            parse_scenario(doc, f"{args.shape} --agents {n}")
+        except ScenarioError as exc:
+            problem = str(exc)
+            if "formation." not in problem:  # not the graph's fault: no larger k helps
+                break
+            continue
+        return doc, k or 0
+    raise GenError(problem)
+
+
+def _header(args: argparse.Namespace, k: int) -> str:
+    flags = (f"gcs scenario {args.shape} --agents {args.agents} --leaders {args.leaders} "
+             f"--scramble {args.scramble} --spacing {args.spacing:g} --mix {args.mix:g} "
+             f"--graph {args.graph}" + (f" --k {k}" if args.graph is GraphKind.KNN else ""))
+    return (f"# Generated by: {flags}\n"
+            "# Vertices in metres (closest pair --spacing apart); leaders are ids 1..L on their\n"
+            "# vertices; followers start on seeded permuted vertices with jitter "
+            "(docs/scenarios.md).\n"
+            "# Frames: every vector here is ENU-style world frame, z up (the paper's frame).\n\n")
+
+
+def _number(lo: float, hi: float, integer: bool) -> Any:
+    def parse(text: str) -> float | int:
+        try:
+            v: float | int = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise argparse.ArgumentTypeError(f"{text!r}: must be in [{lo:g}, {hi:g}]")
+        return v
+
+    return parse
+
+
+def cmd_scenario(args: argparse.Namespace) -> int:
+    """Write the generated scenario on stdout; exit 2 with one line on a bad flag."""
+    try:
+        doc, k = build(args)
+    except GenError as exc:
+        print(f"gcs scenario: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    sys.stdout.write(_header(args, k) + dump_toml(doc))
+    return 0
+
+
+def add_scenario_parser(sub: argparse._SubParsersAction) -> None:
+    """``gcs scenario SHAPE --agents N --leaders L --scramble SEED [...]``."""
+    p = sub.add_parser("scenario", help="write a generated formation scenario on stdout")
+    p.add_argument("shape", type=Shape, choices=list(Shape))
+    p.add_argument("--agents", type=_number(-1e9, 1e9, True), required=True, metavar="N")
+    p.add_argument("--leaders", type=_number(-1e9, 1e9, True), required=True, metavar="L")
+    p.add_argument("--scramble", type=_number(0, 2**32 - 1, True), required=True,
+                   metavar="SEED", help="seed of the start permutation and jitter (>= 0)")
+    p.add_argument("--spacing", type=_number(1.0, 50.0, False), default=3.0, metavar="M",
+                   help="metres between the closest two vertices (default 3)")
+    p.add_argument("--mix", type=_number(0.0, 1.0, False), default=1.0, metavar="F",
+                   help="fraction of the followers whose starts are permuted (default 1)")
+    p.add_argument("--graph", type=GraphKind, choices=list(GRAPHS), default=GraphKind.KNN)
+    p.add_argument("--k", type=int, default=None, metavar="K",
+                   help="knn_k (default: the smallest >= 6 that passes the rigidity check)")
+    p.add_argument("--range", type=_number(0.1, 1000.0, False), default=None, metavar="M",
+                   help="formation.sensing_range_m (default: longest edge x 1.2)")
+    p.add_argument("--duration", type=_number(1.0, 3600.0, False), default=60.0, metavar="S")
+    p.add_argument("--deadline", type=_number(0.0, 3600.0, False), default=30.0, metavar="S",
+                   help="formation_deadline_s: tracking metrics from this time (default 30)")
+    p.add_argument("--name", default=None, help="scenario.name (default SHAPE + N)")
+    p.set_defaults(func=cmd_scenario)
