@@ -1,0 +1,128 @@
+"""Scaling benchmark: in-process runs of generated grids of 8 / 27 / 64 / 125 agents.
+
+    python bench/bench_scaling.py [--sizes 8,27,64,125] [--duration 4] [--repeats 2]
+                                  [--leaders 4] [--scramble 1] [--mix 1] [--method dcbf]
+
+Each run is a fresh child process (so its peak RSS is its own): the scenario comes from
+``gcs scenario grid --agents N --leaders L --scramble SEED --mix F`` (sparse ``knn`` graph,
+the smallest rigid ``knn_k`` ≥ 6), then ``run_inproc`` for ``--duration`` simulated seconds.
+Prints, with no assertions (figures for docs/performance.md, "Scaling (issue 11)"):
+
+* setup: wall seconds to build the agents (run wall − stepping wall; loading excluded);
+* stepping wall (s), whole-process CPU (s, user + system), peak RSS (MiB);
+* × real time of the stepping (simulated s / stepping wall s);
+* µs per agent-step: stepping wall / (control steps × N);
+* OSQP fallbacks, minimum distance, collisions (the run is a mission, not a micro-kernel);
+* the exponent a of a least-squares fit cost ∝ N^a, for the stepping wall per control
+  step and for the setup wall (a = 1: linear in the number of agents).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def child(opts: argparse.Namespace) -> dict[str, Any]:
+    """One run in this process; returns its figures."""
+    from gcs.inproc import run_inproc
+    from gcs.scenario_gen import add_scenario_parser, build
+    from swarm_common.scenario import parse_scenario
+
+    ap = argparse.ArgumentParser()
+    add_scenario_parser(ap.add_subparsers())
+    gen = ap.parse_args(["scenario", "grid", "--agents", str(opts.child),
+                         "--leaders", str(opts.leaders), "--scramble", str(opts.scramble),
+                         "--mix", str(opts.mix)])
+    doc, k = build(gen)
+    sc = parse_scenario(doc, f"grid{opts.child}")
+    t0 = time.perf_counter()
+    res = run_inproc(sc, opts.method, duration=opts.duration)
+    total = time.perf_counter() - t0
+    m = res.metrics
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    steps = int(round(opts.duration / sc.control_dt))
+    return {
+        "n": sc.n, "knn_k": k, "setup_s": total - m["wall_s"], "wall_s": m["wall_s"],
+        "cpu_s": ru.ru_utime + ru.ru_stime, "rss_mib": ru.ru_maxrss / 1024.0,
+        "xrt": opts.duration / m["wall_s"],
+        "us_agent_step": m["wall_s"] / (steps * sc.n) * 1e6,
+        "fallbacks": m["qp_fallbacks"], "min_dist_m": m["min_distance_m"],
+        "collisions": m["collisions"],
+    }
+
+
+def fit_exponent(n: list[float], cost: list[float]) -> float:
+    """Slope of log(cost) against log(n) (least squares): cost ∝ n^slope."""
+    return float(np.polyfit(np.log(n), np.log(cost), 1)[0])
+
+
+def _rng(vals: list[float], fmt: str) -> str:
+    lo, hi = min(vals), max(vals)
+    return format(lo, fmt) if math.isclose(lo, hi, rel_tol=0.02) else \
+        f"{format(lo, fmt)}–{format(hi, fmt)}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="8,27,64,125")
+    ap.add_argument("--duration", type=float, default=4.0, help="simulated seconds per run")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--leaders", type=int, default=4)
+    ap.add_argument("--scramble", type=int, default=1)
+    ap.add_argument("--mix", type=float, default=1.0)
+    ap.add_argument("--method", default="dcbf")
+    ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
+    opts = ap.parse_args()
+    if opts.child is not None:
+        print(json.dumps(child(opts)))
+        return
+    sizes = [int(s) for s in opts.sizes.split(",")]
+    runs: dict[int, list[dict[str, Any]]] = {n: [] for n in sizes}
+    for rep in range(opts.repeats):
+        for n in sizes:
+            cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(opts.duration),
+                   "--leaders", str(opts.leaders), "--scramble", str(opts.scramble),
+                   "--mix", str(opts.mix), "--method", opts.method]
+            out = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT)
+            runs[n].append(json.loads(out.stdout.strip().splitlines()[-1]))
+            r = runs[n][-1]
+            print(f"# repeat {rep + 1} N={n}: stepping {r['wall_s']:.1f} s, "
+                  f"setup {r['setup_s']:.1f} s", file=sys.stderr, flush=True)
+    print(f"grid, {opts.leaders} leaders, knn graph, --scramble {opts.scramble} --mix "
+          f"{opts.mix:g}, {opts.method}, {opts.duration:g} s simulated, {opts.repeats} run(s)")
+    print("| N | knn_k | setup s | stepping wall s | CPU s | peak RSS MiB | × real time "
+          "| µs / agent-step | OSQP fallbacks | min dist m | collisions |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for n in sizes:
+        rs = runs[n]
+        col = {key: [float(r[key]) for r in rs] for key in rs[0]}
+        print(f"| {n} | {rs[0]['knn_k']} | {_rng(col['setup_s'], '.1f')} "
+              f"| {_rng(col['wall_s'], '.1f')} | {_rng(col['cpu_s'], '.1f')} "
+              f"| {_rng(col['rss_mib'], '.0f')} | {_rng(col['xrt'], '.2f')} "
+              f"| {_rng(col['us_agent_step'], '.0f')} | {_rng(col['fallbacks'], '.0f')} "
+              f"| {min(col['min_dist_m']):.2f} | {max(col['collisions']):.0f} |")
+    if len(sizes) >= 2:
+        med = {key: [float(np.median([r[key] for r in runs[n]])) for n in sizes]
+               for key in ("wall_s", "setup_s", "rss_mib")}
+        ns = [float(n) for n in sizes]
+        print(f"stepping wall per control step ∝ N^{fit_exponent(ns, med['wall_s']):.2f}; "
+              f"setup ∝ N^{fit_exponent(ns, med['setup_s']):.2f}; "
+              f"peak RSS ∝ N^{fit_exponent(ns, med['rss_mib']):.2f} (medians, least squares "
+              "in log-log)")
+
+
+if __name__ == "__main__":
+    main()

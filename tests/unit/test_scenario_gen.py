@@ -1,0 +1,119 @@
+"""gcs.scenario_gen: every shape gives a scenario the loader accepts, seeded starts, bad flags."""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+
+import numpy as np
+import pytest
+
+from gcs.scenario_gen import (
+    JITTER,
+    GenError,
+    Shape,
+    add_scenario_parser,
+    build,
+    cmd_scenario,
+    pick_leaders,
+    vertices,
+)
+from swarm_common.enums import GraphKind
+from swarm_common.scenario import dump_toml, parse_scenario
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    ap = argparse.ArgumentParser()
+    add_scenario_parser(ap.add_subparsers(dest="command"))
+    return ap.parse_args(["scenario", *argv])
+
+
+def _load(text: str):
+    return parse_scenario(tomllib.loads(text), "generated")
+
+
+@pytest.mark.parametrize("shape", list(Shape))
+@pytest.mark.parametrize(("n", "n_lead"), [(3, 2), (8, 2), (20, 3), (30, 4)])
+def test_every_shape_loads(shape: Shape, n: int, n_lead: int) -> None:
+    doc, k = build(_args(str(shape), "--agents", str(n), "--leaders", str(n_lead),
+                         "--scramble", "3"))
+    sc = _load(dump_toml(doc))  # the written text, not the dict, passes every check
+    assert sc.n == n and sc.leader_ids == list(range(1, n_lead + 1))
+    assert sc.formation.graph is GraphKind.KNN and sc.formation.knn_k == k
+    v, p = sc.vertices(), sc.initial_positions()
+    d = np.linalg.norm(v[:, None] - v[None], axis=2)[np.triu_indices(n, 1)]
+    assert d.min() == pytest.approx(3.0, abs=2e-3)  # default spacing
+    assert v[:, 2].min() == pytest.approx(2.0)
+    np.testing.assert_array_equal(p[:n_lead], v[:n_lead])  # leaders on their vertices
+    dp = np.linalg.norm(p[:, None] - p[None], axis=2)[np.triu_indices(n, 1)]
+    assert dp.min() >= (1 - 2 * np.sqrt(3) * JITTER) * 3.0 - 2e-3
+
+
+def test_grid_sizes_and_leaders_spread() -> None:
+    v = vertices(Shape.GRID, 64, 3.0)
+    assert len({tuple(x) for x in v}) == 64
+    assert np.ptp(v, axis=0).tolist() == [9.0, 9.0, 9.0]  # 4 x 4 x 4
+    lead = pick_leaders(v, 2)
+    assert np.linalg.norm(v[lead[0]] - v[lead[1]]) == pytest.approx(9.0 * np.sqrt(3))
+
+
+def test_scramble_is_seeded() -> None:
+    a = _args("grid", "--agents", "27", "--leaders", "4", "--scramble", "7")
+    b = _args("grid", "--agents", "27", "--leaders", "4", "--scramble", "8")
+    assert dump_toml(build(a)[0]) == dump_toml(build(a)[0])
+    sa, sb = (_load(dump_toml(build(x)[0])) for x in (a, b))
+    assert not np.allclose(sa.initial_positions(), sb.initial_positions())
+    np.testing.assert_array_equal(sa.vertices(), sb.vertices())
+
+
+def test_mix_zero_keeps_followers_near_their_vertices() -> None:
+    sc = _load(dump_toml(build(_args("ring", "--agents", "12", "--leaders", "2",
+                                     "--scramble", "1", "--mix", "0"))[0]))
+    err = np.abs(sc.initial_positions() - sc.vertices())
+    assert err.max() <= JITTER * 3.0 + 1e-3
+    full = _load(dump_toml(build(_args("ring", "--agents", "12", "--leaders", "2",
+                                       "--scramble", "1"))[0]))
+    assert np.abs(full.initial_positions() - full.vertices()).max() > 1.0
+
+
+def test_explicit_k_and_range_graph() -> None:
+    doc, k = build(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1",
+                         "--k", "8"))
+    assert k == 8 and doc["formation"]["knn_k"] == 8
+    doc, _ = build(_args("sphere", "--agents", "20", "--leaders", "3", "--scramble", "1",
+                         "--graph", "range", "--range", "7"))
+    assert _load(dump_toml(doc)).formation.graph is GraphKind.RANGE
+
+
+@pytest.mark.parametrize(
+    ("argv", "expect"),
+    [
+        (["grid", "--agents", "2", "--leaders", "1"], "--agents 2"),
+        (["grid", "--agents", "8", "--leaders", "8"], "--leaders 8"),
+        (["grid", "--agents", "8", "--leaders", "1"], "--leaders 1"),
+        (["grid", "--agents", "300", "--leaders", "4"], "--agents 300"),
+        (["grid", "--agents", "27", "--leaders", "4", "--k", "3"], "knn_k"),
+        (["grid", "--agents", "8", "--leaders", "2", "--k", "8"], "--k 8"),
+        (["grid", "--agents", "8", "--leaders", "2", "--graph", "range", "--k", "4"], "--k"),
+        (["grid", "--agents", "27", "--leaders", "4", "--range", "1"], "sensing_range_m"),
+    ],
+)
+def test_bad_flags_one_line(argv: list[str], expect: str, capsys) -> None:
+    args = _args(*argv, "--scramble", "1")
+    with pytest.raises(GenError, match=expect.replace("-", r"\-")):
+        build(args)
+    assert cmd_scenario(args) == 2
+    err = capsys.readouterr()
+    assert err.out == "" and len(err.err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["cone", "--agents", "8", "--leaders", "2", "--scramble", "1"],
+     ["grid", "--agents", "8", "--leaders", "2", "--scramble", "-1"],
+     ["grid", "--agents", "8", "--leaders", "2", "--scramble", "1", "--spacing", "0.2"]],
+)
+def test_bad_flag_values_exit_2(argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        _args(*argv)
+    assert exc.value.code == 2
