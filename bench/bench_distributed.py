@@ -1,9 +1,12 @@
 """Distributed cube8: lockstep × real time, CPU and RSS per process; real-time latency.
 
     .venv/bin/python bench/bench_distributed.py [--duration 20] [--port-offset 900]
+        [--processes N] [--skip-realtime]
 
 Prints (no assertions): the lockstep stepping rate (sim seconds per wall second, start-up
-excluded), CPU seconds and peak RSS of every process, and for a real-time run the
+excluded), CPU seconds, CPU ms per step and peak RSS of every process (with
+``--processes N`` the daemons packed into N processes: also per agent, and RSS / agents),
+the daemons' mean CPU ms per agent-step, and for a real-time run the
 setpoint-to-odometry latency distribution and the fraction of late cycles (> one
 control period) measured by vehicle-sim.
 """
@@ -16,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 from gcs.mission import run_and_score
+from offboard.daemon_agents import parse_agents
 from swarm_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,20 +31,21 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--port-offset", type=int, default=900)
     ap.add_argument("--skip-realtime", action="store_true")
+    ap.add_argument("--processes", type=int, default=None,
+                    help="pack the daemons into N processes (default: one per agent)")
     args = ap.parse_args()
     sc = load_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as tmp:
         doc = run_and_score(sc, Path(tmp) / "lockstep", "rcbf", None, args.duration,
-                            port_offset=args.port_offset, show_progress=False)
+                            port_offset=args.port_offset, show_progress=False,
+                            processes=args.processes)
         run = doc["run"]
-        print(f"lockstep cube8 {args.duration:.0f} s: stepping "
+        layout = ("one process per agent" if args.processes is None
+                  else f"{args.processes} daemon processes")
+        print(f"lockstep {sc.name} {args.duration:.0f} s, {layout}: stepping "
               f"{run['stepping_realtime_factor']:.2f}x real time "
               f"(whole run incl. start-up {args.duration / run['wall_s']:.2f}x)")
-        steps = args.duration * sc.run.control_hz
-        print(f"{'process':14s} {'cpu_s':>7s} {'ms/step':>8s} {'peak RSS MiB':>13s}")
-        for name, u in run["processes"].items():
-            print(f"{name:14s} {u['cpu_s']:7.2f} {1000 * u['cpu_s'] / steps:8.2f} "
-                  f"{u['peak_rss_mib']:13.1f}")
+        print_processes(run["processes"], args.duration * sc.run.control_hz)
         m = doc["metrics"]
         print(f"min_distance_m {m['min_distance_m']:.3f}  collisions {m['collisions']}")
         if not args.skip_realtime:
@@ -52,6 +57,23 @@ def main() -> None:
             m = doc["metrics"]
             print(f"real-time min_distance_m {m['min_distance_m']:.3f}  "
                   f"collisions {m['collisions']}")
+
+
+def print_processes(procs: dict[str, dict[str, float]], steps: float) -> None:
+    """CPU and RSS per process; per agent for the daemons (packed or not)."""
+    print(f"{'process':24s} {'agents':>6s} {'cpu_s':>7s} {'ms/step':>8s} {'ms/agent-step':>14s} "
+          f"{'peak RSS MiB':>13s} {'MiB/agent':>10s}")
+    daemon_cpu, agents = 0.0, 0
+    for name, u in procs.items():
+        n = len(parse_agents(name.removeprefix("offboard-"))) if name.startswith("offboard-") else 0
+        per = 1000 * u["cpu_s"] / steps
+        print(f"{name:24s} {n:6d} {u['cpu_s']:7.2f} {per:8.2f} "
+              f"{per / n if n else float('nan'):14.2f} {u['peak_rss_mib']:13.1f} "
+              f"{u['peak_rss_mib'] / n if n else float('nan'):10.1f}")
+        if n:
+            daemon_cpu, agents = daemon_cpu + u["cpu_s"], agents + n
+    if agents:
+        print(f"daemons: {1000 * daemon_cpu / steps / agents:.2f} ms CPU per agent-step")
 
 
 if __name__ == "__main__":

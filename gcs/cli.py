@@ -321,6 +321,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
+    d.add_argument("--processes", type=_int_in(1, 10_000), default=None, metavar="N",
+                   help="pack the agents' daemons into N processes (default: one per agent; "
+                   "packed runs go without Zenoh authentication)")
     add_signing_flags(d)
     add_fault_flags(d)
     _add_allow_infeasible(r)

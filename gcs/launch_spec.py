@@ -7,7 +7,9 @@ arms and starts). Topology, for port offset ``o``:
 * the ``gcs`` process hosts the Zenoh router on ``tcp/127.0.0.1:7447+o``
   (:data:`~swarm_common.zenoh_session.DEFAULT_ZENOH_PORT`);
 * ``vehicle-sim`` listens on ``7448+o`` and dials the router;
-* one ``offboard`` daemon per agent dials the router in client mode;
+* one ``offboard`` daemon per agent dials the router in client mode, or with
+  ``processes`` = P the agents packed into P ``offboard --agents A-B`` processes
+  (contiguous ids, as even as possible; :mod:`offboard.daemon_host`);
 * MAVLink runs over the UDP ports of :mod:`swarm_common.ports`.
 """
 
@@ -20,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs.procs import python_entry
+from offboard.daemon_agents import format_agents
 from swarm_common.ports import GCS_PORT, MAX_ID, port_free, vehicle_ports
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, swarm_name_problem
 from swarm_common.signing import generate_key, load_key
@@ -69,7 +72,6 @@ class SigningChoice:
     enabled: bool = True
     key: Path | None = None
     unsigned_gcs_link: bool = False
-
     def __post_init__(self) -> None:
         if not self.enabled and self.key is not None:
             raise LaunchError("--no-signing and --signing-key exclude each other")
@@ -121,6 +123,9 @@ class LaunchSpec:
     ``signing_key``: the MAVLink 2 signing key file given to the simulator and every daemon
     (``--signing-key``); ``unsigned_gcs_link``: the simulator's GCS link also serves
     unsigned telemetry requests (MAVSDK, QGroundControl without a key).
+    ``daemon_processes``: pack the daemons into this many processes (None: one per agent, the
+    realistic layout); packed processes hold one Zenoh session for several agents, so they
+    run without per-agent Zenoh credentials (``zenoh_security`` must be None).
     """
 
     sc: Scenario
@@ -136,8 +141,16 @@ class LaunchSpec:
     zenoh_security: SwarmSecurity | None = None
     signing_key: Path | None = None
     unsigned_gcs_link: bool = False
+    daemon_processes: int | None = None
 
     def __post_init__(self) -> None:
+        n, procs = len(self.sc.ids), self.daemon_processes
+        if procs is not None:
+            if not 1 <= procs <= n:
+                raise LaunchError(f"--processes {procs}: must be 1..{n} (the number of agents)")
+            if self.zenoh_security is not None and procs < n:
+                raise LaunchError("packed daemons (--processes) share one Zenoh session and "
+                                  "cannot use per-agent Zenoh credentials")
         problem = swarm_name_problem(self.swarm_name)
         if problem is not None:
             raise LaunchError(f"swarm name {self.swarm_name!r}: {problem}")
@@ -216,12 +229,34 @@ class LaunchSpec:
             argv.append("--unsigned-gcs-link")
         return argv + self._signing_args() + self._common_args()
 
-    def daemon_argv(self, agent_id: int) -> list[str]:
-        """The ``offboard`` daemon of one agent, dialling the router."""
+    def packs(self) -> list[list[int]]:
+        """The agents of each daemon process: one each, or :attr:`daemon_processes` contiguous
+        groups whose sizes differ by at most one."""
+        ids = list(self.sc.ids)
+        n = len(ids) if self.daemon_processes is None else self.daemon_processes
+        size, extra = divmod(len(ids), n)
+        out, at = [], 0
+        for p in range(n):
+            take = size + (1 if p < extra else 0)
+            out.append(ids[at:at + take])
+            at += take
+        return out
+
+    @staticmethod
+    def daemon_name(ids: list[int]) -> str:
+        """``offboard-3`` for one agent, ``offboard-3-8`` for a packed process."""
+        return f"offboard-{format_agents(ids)}"
+
+    def daemon_argv(self, agent_id: int | list[int]) -> list[str]:
+        """The ``offboard`` process of one agent (or of several packed), dialling the
+        router."""
+        ids = [agent_id] if isinstance(agent_id, int) else list(agent_id)
+        who = ["--agent", str(ids[0])] if len(ids) == 1 else ["--agents", format_agents(ids)]
+        tlog = f"vehicle_{ids[0]}.tlog" if len(ids) == 1 else "vehicle_{id}.tlog"
         argv = [
             *python_entry("offboard.cli"),
             "--scenario", self.sc.path,
-            "--agent", str(agent_id),
+            *who,
             "--port-offset", str(self.port_offset),
             "--swarm", self.swarm_name,
             "--zenoh-connect", self.router_endpoint,
@@ -230,7 +265,7 @@ class LaunchSpec:
         if self.method:
             argv += ["--method", str(self.method)]
         if self.run_dir is not None:
-            argv += ["--tlog", str(self.run_dir / f"vehicle_{agent_id}.tlog")]
+            argv += ["--tlog", str(self.run_dir / tlog)]
         if not self.lockstep:
             argv.append("--realtime")
         if self.manual_start:
@@ -252,7 +287,7 @@ class LaunchSpec:
         unless ``daemons`` is False."""
         out = [("vehicle-sim", self.sim_argv())]
         if daemons and self.zenoh:
-            out += [(f"offboard-{a.id}", self.daemon_argv(a.id)) for a in self.sc.agents]
+            out += [(self.daemon_name(ids), self.daemon_argv(ids)) for ids in self.packs()]
         return out
 
     def _signing_args(self) -> list[str]:

@@ -32,6 +32,7 @@ from gcs.progress import Progress
 from gcs.recorder import Recorder
 from gcs.router import open_router
 from gcs.run_output import print_result, write_run
+from offboard.daemon_agents import parse_agents
 from swarm_common import wire
 from swarm_common.scenario import Scenario
 from swarm_common.zenoh_session import write_swarm_security
@@ -68,6 +69,7 @@ def run_distributed(
     on_abort: AbortHook | None = None,
     secure: bool = True,
     signing: SigningChoice | None = None,
+    processes: int | None = None,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
@@ -78,6 +80,9 @@ def run_distributed(
     with a fresh per-run key). ``on_abort(rec, facts, reason)``: called after every child has
     stopped when the run ends early (Ctrl-C, SIGTERM, the simulator's death, a stall),
     and every :data:`CHECKPOINT_EVERY_S` during the run (reason "checkpoint").
+    ``processes``: pack the daemons into this many processes (None: one per agent;
+    :class:`~gcs.launch_spec.LaunchSpec`); a packed process holds one Zenoh session for
+    several agents, so packed runs go without Zenoh authentication (``secure`` ignored).
 
     Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
     busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
@@ -85,6 +90,10 @@ def run_distributed(
     stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
     signing = SigningChoice() if signing is None else signing
+    if processes is not None and processes < len(sc.ids) and secure:
+        log.info("packed daemons (%d processes): Zenoh without per-agent credentials",
+                 processes)
+        secure = False
     sec_dir = secure_dir() if secure or signing.enabled else None
     try:
         sec = None
@@ -94,7 +103,7 @@ def run_distributed(
         spec = LaunchSpec(
             sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
             sim_duration=duration + 1.0, zenoh_security=sec, signing_key=key_path,
-            unsigned_gcs_link=signing.unsigned_gcs_link,
+            unsigned_gcs_link=signing.unsigned_gcs_link, daemon_processes=processes,
         )
         spec.check_ports()
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -107,7 +116,8 @@ def run_distributed(
     subs = rec.subscribe(router, spec.swarm_name)
     group = ProcessGroup(out_dir)
     facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False,
-                             "mavlink_signing": signing.describe()}
+                             "mavlink_signing": signing.describe(),
+                             "daemon_processes": len(spec.packs())}
     t_wall0 = time.monotonic()
     cpu0 = time.process_time()
     reason = ""
@@ -118,8 +128,10 @@ def run_distributed(
         on_step = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
                                                              sc.control_dt)
         checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
+        victim = None if kill_agent is None else next(
+            spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
         facts.update(
-            _supervise(rec, group, sc.control_dt, kill_agent, kill_at, bar,
+            _supervise(rec, group, sc.control_dt, victim, kill_agent, kill_at, bar,
                        stall_timeout, out_dir, on_step, facts, checkpoint)
         )
         facts["processes"] = group.usage()
@@ -192,6 +204,7 @@ def _supervise(
     rec: Recorder,
     group: ProcessGroup,
     dt: float,
+    victim: str | None,
     kill_agent: int | None,
     kill_at: float | None,
     bar: Progress | None,
@@ -202,13 +215,12 @@ def _supervise(
     checkpoint: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
     """Watch a started run until step ``rec.steps``: drain the recorder, show progress,
-    kill ``kill_agent`` at ``kill_at`` (s), add a dead daemon's agent to
-    ``facts["failed_agents"]`` (the others fly on), raise :class:`MissionError` when the
-    simulator dies or the run stalls, call ``checkpoint`` every
+    kill the process ``victim`` (the one of ``kill_agent``) at ``kill_at`` (s), add a dead
+    daemon's agents to ``facts["failed_agents"]`` (the others fly on), raise
+    :class:`MissionError` when the simulator dies or the run stalls, call ``checkpoint`` every
     :data:`CHECKPOINT_EVERY_S` (or 20 times its own cost, if longer). Returns the timing
     facts (``run_wall_s``, ``stepping_wall_s``, ``stepping_realtime_factor``)."""
     out: dict[str, Any] = {}
-    victim = None if kill_agent is None else f"offboard-{kill_agent}"
     failed: list[int] = facts["failed_agents"]
     last_k = -1
     last_change = t_run0 = next_ckpt = time.monotonic()
@@ -266,11 +278,12 @@ def _check_children(group: ProcessGroup, failed: list[int], t: float) -> None:
                 f"{child.name} exited with code {child.proc.returncode}; "
                 f"last lines of {child.log_path}:\n{group.tail(child)}"
             )
-        aid = int(child.name.removeprefix("offboard-"))
-        if aid not in failed:
-            failed.append(aid)
-            log.warning("agent %d's daemon exited (code %s) at t = %.2f s; the run goes on "
-                        "without it (see %s)", aid, child.proc.returncode, t, child.log_path)
+        for aid in parse_agents(child.name.removeprefix("offboard-")):
+            if aid not in failed:
+                failed.append(aid)
+                log.warning("agent %d's daemon exited (code %s) at t = %.2f s; the run goes "
+                            "on without it (see %s)", aid, child.proc.returncode, t,
+                            child.log_path)
 
 
 def run_and_score(
@@ -286,6 +299,7 @@ def run_and_score(
     show_progress: bool = True,
     land_at: float | None = None,
     signing: SigningChoice | None = None,
+    processes: int | None = None,
 ) -> dict[str, Any]:
     """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
 
@@ -304,7 +318,7 @@ def run_and_score(
     rec, facts = run_distributed(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
-        on_abort=write_partial, signing=signing,
+        on_abort=write_partial, signing=signing, processes=processes,
     )
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
@@ -334,6 +348,7 @@ def cli_run(args: Any, sc: Scenario) -> int:
             sc, out, method, args.seed, duration, realtime=args.realtime,
             port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
             show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
+            processes=getattr(args, "processes", None),
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)

@@ -1,6 +1,8 @@
 """``offboard --scenario S --agent ID [--mavlink URL] [--zenoh-connect EP ...]``.
 
-One daemon per agent (deployable on each vehicle's companion computer). Defaults
+One daemon per agent (deployable on each vehicle's companion computer), or with
+``--agents 3-8`` several agents packed in one process (:mod:`offboard.daemon_host`: one
+Zenoh session and one event loop, each agent its own MAVLink link). Defaults
 match the simulator's port scheme (swarm_common/ports.py) and a local Zenoh router
 started by ``gcs mission run`` or ``gcs router`` on tcp/127.0.0.1:7447+offset.
 """
@@ -18,7 +20,10 @@ import threading
 import time
 from typing import Any
 
+from offboard.bearing import formation_from_scenario
 from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
+from offboard.daemon_agents import parse_agents
+from offboard.daemon_host import DaemonHost
 from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.zenoh_link import ZENOH_ERRORS
@@ -27,6 +32,7 @@ from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import (
     ALLOW_INFEASIBLE_FLAG,
+    Scenario,
     ScenarioError,
     load_scenario,
     swarm_name_problem,
@@ -102,8 +108,13 @@ def loss_land_after(text: object) -> float | None:
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="offboard", description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", required=True, help="scenario TOML file")
-    ap.add_argument("--agent", type=int, required=True, help="agent id (= MAVLink system id)")
-    ap.add_argument("--mavlink", default=None, help="MAVLink URL (default udpin on the API port)")
+    who = ap.add_mutually_exclusive_group(required=True)
+    who.add_argument("--agent", type=int, help="agent id (= MAVLink system id)")
+    who.add_argument("--agents", default=None, metavar="IDS",
+                     help="several agents in this process: a range 3-8 or a list 1,2,5 "
+                     "(one Zenoh session, one event loop, one MAVLink link per agent)")
+    ap.add_argument("--mavlink", default=None,
+                    help="MAVLink URL (default udpin on the API port; --agent only)")
     ap.add_argument("--port-offset", type=int, default=0, help="shift every port by N")
     ap.add_argument("--swarm", default=None, help="swarm name in Zenoh keys (default: scenario)")
     ap.add_argument("--method", choices=[m.value for m in Method], default=None)
@@ -117,7 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
                     f"gcs router --secure-dir; default: ${ZENOH_CONFIG_ENV} if set)")
     ap.add_argument("--manual-start", action="store_true",
                     help="stream setpoints but leave arming and OFFBOARD to the operator (GCS)")
-    ap.add_argument("--tlog", default=None, help="write this vehicle's MAVLink .tlog here")
+    ap.add_argument("--tlog", default=None,
+                    help="write this vehicle's MAVLink .tlog here (--agents: a path with "
+                    "{id}, replaced by each agent's id)")
     ap.add_argument("--die-with-parent", action="store_true",
                     help="exit when the parent process (the mission runner) dies (Linux)")
     ap.add_argument("--signing-key", default=None, metavar="PATH",
@@ -161,9 +174,9 @@ def main(argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         print(f"offboard: {exc}", file=sys.stderr)
         return 2
-    if args.agent not in sc.ids:
-        msg = f"offboard: --agent {args.agent}: not an agent of {sc.path} {sc.ids}"
-        print(msg, file=sys.stderr)
+    ids = agent_ids(args, sc.ids)
+    if isinstance(ids, str):
+        print(f"offboard: {ids}", file=sys.stderr)
         return 2
     if args.swarm is not None and (problem := swarm_name_problem(args.swarm)) is not None:
         print(f"offboard: --swarm {args.swarm!r}: {problem}", file=sys.stderr)
@@ -177,21 +190,56 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: --loss-land-after {args.loss_land_after!r}: must be 0 or a number "
               f"of seconds in {MIN_LAND_AFTER_S:g}..3600", file=sys.stderr)
         return 2
-    ports = vehicle_ports(args.agent, args.port_offset)
-    url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
     connect = args.zenoh_connect
     if connect is None:
         connect = [default_endpoint(args.port_offset)]
+    cfgs = [daemon_config(args, sc, i, connect, key, land_after) for i in ids]
+    try:
+        session = open_session_saying(cfgs[0].zenoh_mode, connect, cfgs[0].zenoh_listen,
+                                      args.zenoh_config)
+    except OPEN_ERRORS as exc:
+        print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
+        return 2
+    try:
+        return run_daemons(cfgs, session, "-".join(str(i) for i in ids))
+    finally:
+        session.close()
+
+
+def agent_ids(args: argparse.Namespace, ids: list[int]) -> list[int] | str:
+    """The agents this process runs (``--agent`` or ``--agents``), or a one-line error."""
+    if args.agent is not None:
+        if args.agent not in ids:
+            return f"--agent {args.agent}: not an agent of the scenario {ids}"
+        return [args.agent]
+    try:
+        chosen = parse_agents(args.agents)
+    except ValueError as exc:
+        return f"--agents {args.agents!r}: {exc}"
+    if bad := [i for i in chosen if i not in ids]:
+        return f"--agents {args.agents!r}: {bad} not agents of the scenario {ids}"
+    if args.mavlink is not None:
+        return "--mavlink names one vehicle: use it with --agent (--agents: default ports)"
+    if args.tlog is not None and "{id}" not in args.tlog:
+        return f"--tlog {args.tlog!r}: with --agents the path needs {{id}}"
+    return chosen
+
+
+def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect: list[str],
+                  key: bytes | None, land_after: float) -> DaemonConfig:
+    """One agent's :class:`DaemonConfig` from the checked command line."""
+    ports = vehicle_ports(agent_id, args.port_offset)
+    url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
     method = Method(args.method) if args.method else sc.controller.method
     cfg = DaemonConfig(
         scenario=sc,
-        agent_id=args.agent,
+        agent_id=agent_id,
         mavlink_url=url,
         swarm=args.swarm or sc.name,
         method=method,
         seed=args.seed,
         lockstep=not args.realtime,
-        tlog=args.tlog,
+        tlog=None if args.tlog is None else args.tlog.replace("{id}", str(agent_id)),
         zenoh_connect=connect,
         zenoh_listen=args.zenoh_listen or [],
         zenoh_mode=args.zenoh_mode,
@@ -207,31 +255,34 @@ def main(argv: list[str] | None = None) -> int:
              " ".join([*(f"connect {ep}" for ep in connect),
                        *(f"listen {ep}" for ep in cfg.zenoh_listen)]) or "no endpoint",
              cfg.swarm, cfg.sensing, "--solo" if cfg.solo else "arms once its swarm is ready")
-    try:
-        session = open_session_saying(cfg.zenoh_mode, connect, cfg.zenoh_listen,
-                                      args.zenoh_config)
-    except OPEN_ERRORS as exc:
-        print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
-        return 2
-    try:
-        daemon = OffboardDaemon(cfg, session)
-    except (OSError, ValueError) as exc:
-        print(f"offboard: cannot open MAVLink {url}: {exc}", file=sys.stderr)
-        session.close()
-        return 2
-    prof_path = os.environ.get("OFFBOARD_PROFILE")
-    try:
-        if prof_path:  # developer aid: cProfile of the whole daemon run
-            import cProfile
+    return cfg
 
-            prof = cProfile.Profile(time.process_time)
-            try:
-                return prof.runcall(daemon.run)
-            finally:
-                prof.dump_stats(f"{prof_path}.{args.agent}")
-        return daemon.run()
+
+def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
+    """Build the daemons on ``session`` and run them: alone (``--agent``) or packed
+    (:class:`offboard.daemon_host.DaemonHost`). ``$OFFBOARD_PROFILE``: a developer aid,
+    cProfile (CPU time) of the whole run written to ``$OFFBOARD_PROFILE.<name>``."""
+    form = formation_from_scenario(cfgs[0].scenario)
+    daemons: list[OffboardDaemon] = []
+    for cfg in cfgs:
+        try:
+            daemons.append(OffboardDaemon(cfg, session, form))
+        except (OSError, ValueError) as exc:
+            print(f"offboard: cannot open MAVLink {cfg.mavlink_url}: {exc}", file=sys.stderr)
+            for d in daemons:
+                d.close()
+            return 2
+    run = daemons[0].run if len(daemons) == 1 else DaemonHost(daemons).run
+    prof_path = os.environ.get("OFFBOARD_PROFILE")
+    if not prof_path:
+        return run()
+    import cProfile
+
+    prof = cProfile.Profile(time.process_time)
+    try:
+        return int(prof.runcall(run))
     finally:
-        session.close()
+        prof.dump_stats(f"{prof_path}.{name}")
 
 
 def exit_now(rc: int) -> None:

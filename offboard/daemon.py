@@ -49,7 +49,9 @@ from offboard.agent import (
     LeaderAgent,
     make_agent,
 )
+from offboard.bearing import Formation, formation_from_scenario
 from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
+from offboard.daemon_peers import peer_ids
 from offboard.link_guard import OffboardKeeper, PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.mode_requests import ModeRequests, SwarmReady
@@ -69,6 +71,11 @@ from swarm_common.scenario import Scenario
 log = logging.getLogger(__name__)
 
 LOOP_STALL_S = 0.25  # s: a main-loop iteration this late is a fault of the daemon
+RESEND_S = 0.05  # s: re-send the current setpoint this often (lockstep: a lost datagram)
+REPUBLISH_S = 0.1  # s: re-publish the last two estimates this often (late joiners)
+# s: the longest wait for the vehicle's next datagram; every timer above is a multiple of
+# it, and the ODOMETRY that starts a step wakes the loop at once
+WAIT_CAP_S = 0.01
 WAIT_LOG_S = 3.0  # s: start-up waits say what they wait for this often
 __all__ = ["RUNNER_LOST_PERIODS", "TAKEOFF_LATE_S", "TAKEOFF_LEAD_S", "DaemonConfig",
            "OffboardDaemon"]
@@ -107,19 +114,22 @@ class DaemonConfig:
 class OffboardDaemon(DaemonCommands):
     """One agent's offboard process (ground-station commands: offboard.daemon_commands)."""
 
-    def __init__(self, cfg: DaemonConfig, session: Any) -> None:
+    def __init__(self, cfg: DaemonConfig, session: Any, form: Formation | None = None) -> None:
+        """``session``: an open Zenoh session (shared by the daemons of a packed process);
+        ``form``: the scenario's formation when the caller already built it."""
         self.cfg = cfg
         sc = cfg.scenario
         self.sc = sc
         self.id = cfg.agent_id
-        self.others = [i for i in sc.ids if i != cfg.agent_id]
-        self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed)
+        form = formation_from_scenario(sc) if form is None else form
+        self.others = peer_ids(form, cfg.agent_id)  # whose estimates it reads and awaits
+        self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed, form=form)
         self.control_hz = int(sc.run.control_hz)
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, self.control_hz, cfg.lockstep,
                                 tlog=cfg.tlog, signing_key=cfg.signing_key)
         guard = PayloadGuard(list(sc.ids), list(sc.leader_ids), self.control_hz, cfg.agent_id)
         self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard,
-                            odometry=cfg.sensing is SensingSource.ODOMETRY)
+                            odometry=cfg.sensing is SensingSource.ODOMETRY, peers=self.others)
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1
@@ -343,65 +353,86 @@ class OffboardDaemon(DaemonCommands):
                 self.last_step = k
 
     def run(self) -> int:
+        """The whole life of a daemon alone in its process (``offboard --agent``)."""
         signal.signal(signal.SIGTERM, self._on_signal)
         signal.signal(signal.SIGINT, self._on_signal)
-        cfg = self.cfg
         try:
-            if not self.link.wait_lock(cfg.heartbeat_timeout, lambda: self.stop, WAIT_LOG_S):
-                if not self.stop:
-                    log.error("agent %d: no heartbeat from vehicle on %s", self.id,
-                              cfg.mavlink_url)
-                return 0 if self.stop else 2
-            log.info("agent %d: vehicle heartbeat received (%s)", self.id, cfg.mavlink_url)
-            self.link.start_message_interval(
-                mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval
-            )
-            if isinstance(self.agent, FollowerAgent):
-                for line in self.agent.gains.lines():
-                    log.info("agent %d: %s", self.id, line)
-            self._publish_estimate(
-                estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
-            return self._loop()
+            rc = self.start()
+            if rc is not None:
+                return rc
+            last_iter = time.monotonic()
+            while not self.stop:
+                rc = self.iterate(last_iter, WAIT_CAP_S)
+                if rc is not None:
+                    return rc
+                last_iter = time.monotonic()  # between iterations: not our own waits
+            self.say_stopped()
+            return 0
         finally:
-            self.link.close()
-            self.bus.close()
+            self.close()
 
-    def _loop(self) -> int:
+    def start(self) -> int | None:
+        """Wait for the vehicle's heartbeat (the link lock), ask for its HEARTBEAT rate and
+        publish the initial estimate; None when the main loop may begin, else the exit
+        status (0 when stopped meanwhile, 2 when no vehicle answered)."""
         cfg = self.cfg
-        last_iter = time.monotonic()
-        while not self.stop:
-            now = time.monotonic()
-            if now - last_iter > LOOP_STALL_S:  # stopped, swapped out: the stream had a gap
-                self.keeper.fault(now)
-                self.streaming = False  # the vehicle must see the stream again first
-                log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
-            self.link.poll(0.001)  # ODOMETRY wakes it at once
-            self.link.send_heartbeat()
-            self._vehicle_clock()
-            self.bus.pump()
-            now = time.monotonic()
-            if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:
-                log.error("agent %d: vehicle heartbeat lost", self.id)
-                return 3
-            self._on_odometry()
-            now = time.monotonic()
-            if self.answer is not None and now - self.last_send > 0.05:
-                self._send_answer()  # lockstep: the vehicle may have missed it
-            self._check_stream(now)
-            if (self.last_estimate is not None and now - self.last_est_pub > 0.1
-                    and not self.loss.landing):
-                self._republish_estimates()  # for late joiners / lost datagrams
+        if not self.link.wait_lock(cfg.heartbeat_timeout, lambda: self.stop, WAIT_LOG_S):
+            if not self.stop:
+                log.error("agent %d: no heartbeat from vehicle on %s", self.id, cfg.mavlink_url)
+            return 0 if self.stop else 2
+        log.info("agent %d: vehicle heartbeat received (%s)", self.id, cfg.mavlink_url)
+        self.link.start_message_interval(mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval)
+        if isinstance(self.agent, FollowerAgent):
+            for line in self.agent.gains.lines():
+                log.info("agent %d: %s", self.id, line)
+        self._publish_estimate(estimate_to_wire(self.agent.initial_estimate(), -1, self._zeta()))
+        return None
+
+    def iterate(self, last_iter: float, poll_s: float = 0.0) -> int | None:
+        """One pass of the main loop: read the vehicle (waiting up to ``poll_s`` for a
+        datagram; ODOMETRY wakes it at once), pump Zenoh, step on a new ODOMETRY stamp,
+        keep the setpoint stream, estimates and commands going. ``last_iter``: the end of
+        the previous pass of this process's loop (a later start is a stall). None while
+        running, else the exit status (3: vehicle heartbeat lost)."""
+        cfg = self.cfg
+        now = time.monotonic()
+        if now - last_iter > LOOP_STALL_S:  # stopped, swapped out: the stream had a gap
+            self.keeper.fault(now)
+            self.streaming = False  # the vehicle must see the stream again first
+            log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
+        self.link.poll(poll_s)
+        self.link.send_heartbeat()
+        self._vehicle_clock()
+        self.bus.pump()
+        now = time.monotonic()
+        if now - self.link.heartbeat_time > cfg.vehicle_lost_timeout:
+            log.error("agent %d: vehicle heartbeat lost", self.id)
+            return 3
+        self._on_odometry()
+        now = time.monotonic()
+        if self.answer is not None and now - self.last_send > RESEND_S:
+            self._send_answer()  # lockstep: the vehicle may have missed it
+        self._check_stream(now)
+        if (self.last_estimate is not None and now - self.last_est_pub > REPUBLISH_S
+                and not self.loss.landing):
+            self._republish_estimates()  # for late joiners / lost datagrams
+        if self.link.pending:
             done, res = self.link.finished(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
             if done and res != mavlink.MAV_RESULT_ACCEPTED:  # its default (1 Hz) still works
                 log.warning("agent %d: HEARTBEAT interval %.2f s not accepted (result %s)",
                             self.id, cfg.heartbeat_interval, res)
-            streaming_s = now - self.stream_since if self.streaming else 0.0
-            self.modes.request(now, self.answer is not None, streaming_s)
-            self.link.tick()
-            last_iter = time.monotonic()  # between iterations: not our own waits
+        streaming_s = now - self.stream_since if self.streaming else 0.0
+        self.modes.request(now, self.answer is not None, streaming_s)
+        self.link.tick()
+        return None
+
+    def say_stopped(self) -> None:
         log.info("agent %d: stopped; dropped MAVLink %s, Zenoh %s", self.id,
                  self.link.drops.counts, self.bus.drops.counts)
-        return 0
+
+    def close(self) -> None:
+        self.link.close()
+        self.bus.close()
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         self.stop = True

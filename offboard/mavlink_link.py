@@ -169,6 +169,10 @@ class VehicleLink:
         if self._tlog is not None:
             self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + buf)
 
+    def fileno(self) -> int | None:
+        """The socket a ``select`` may wait on (``udpin``); None for pymavlink transports."""
+        return None if self.sock is None else self.sock.fileno()
+
     def poll(self, timeout: float = 0.0) -> None:
         """Read every pending datagram (waiting up to ``timeout`` for the first)."""
         if self.sock is None:

@@ -3,7 +3,8 @@
 Receives into Zenoh FIFO channels that the daemon's main thread drains (:meth:`pump`):
 
 * ``Truth`` per control step (from ``vehicle-sim``), kept by step;
-* every agent's post-update ``Estimate`` (kept by sender and step);
+* its peers' post-update ``Estimate`` (kept by sender and step): one subscriber per peer
+  key (:mod:`offboard.daemon_peers`), never a wildcard over the swarm;
 * ground-station ``Command`` payloads (method switch, outage injection);
 * with ``odometry=True`` (``--sensing odometry``), every other agent's ``Odometry`` (its
   vehicle's measured state at t_k), kept by step and latest per sender.
@@ -17,7 +18,9 @@ with drain threads plus a condition variable the lockstep run was 1.39× against
 daemon's :class:`offboard.link_guard.PayloadGuard` refuses (id not in the scenario, step
 outside a window around the daemon's own step, time not matching the step, non-finite
 values), is counted by reason in ``drops`` and dropped (docs/security.md). Keys and
-payloads come from :mod:`swarm_common.wire`.
+payloads come from :mod:`swarm_common.wire`. Several daemons packed in one process
+(``offboard --agents``) share one session; a payload they all receive (the truth, a
+common peer's estimate) is decoded once (:class:`DecodeCache`) and guarded by each.
 
 Fault injection (docs/faults.md): with a ``[faults]`` plan for this agent's ``zenoh`` link,
 the estimates and statuses it publishes go through a seeded
@@ -48,6 +51,30 @@ ZENOH_ERRORS: tuple[type[Exception], ...] = (zenoh.ZError, RuntimeError)
 KEEP_STEPS = 64
 FIFO_DEPTH = 1024
 POLL_S = 0.0002  # channel polling period while waiting for data
+CACHE_ENTRIES = 256  # decoded payloads kept per process (a few steps of a packed swarm)
+
+
+class DecodeCache:
+    """Decoded payloads by their bytes, shared by the daemons of one process: a packed
+    process receives the same truth and estimate bytes once per daemon. Decoded records
+    hold read-only arrays, so sharing them is safe. Forgets everything when full."""
+
+    def __init__(self, entries: int = CACHE_ENTRIES) -> None:
+        self.entries = entries
+        self._got: dict[bytes, wire.Payload] = {}
+
+    def decode(self, data: bytes) -> wire.Payload:
+        """``wire.decode(data)`` (raises ``wire.WireError`` like it), remembered."""
+        msg = self._got.get(data)
+        if msg is None:
+            msg = wire.decode(data)
+            if len(self._got) >= self.entries:
+                self._got.clear()
+            self._got[data] = msg
+        return msg
+
+
+PROCESS_CACHE = DecodeCache()
 
 
 class SwarmBus:
@@ -56,10 +83,15 @@ class SwarmBus:
     def __init__(
         self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None,
         faults: FaultInjector | None = None, odometry: bool = False,
+        peers: list[int] | None = None, cache: DecodeCache | None = None,
     ) -> None:
         """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
         process loaded (:func:`swarm_common.faults.injector_for`). ``odometry``: subscribe
-        to the other agents' odometry (``--sensing odometry``)."""
+        to the other agents' odometry (``--sensing odometry``, which senses every agent).
+        ``peers``: the agents whose estimates to receive (None: every agent, one wildcard
+        subscriber). ``cache``: decoded payloads shared with the process's other daemons
+        (default :data:`PROCESS_CACHE`)."""
+        self.cache = PROCESS_CACHE if cache is None else cache
         self.session = session
         self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
         self.guard = guard
@@ -78,9 +110,10 @@ class SwarmBus:
         self._subs: list[tuple[Any, Callable[[Any], None]]] = []
         keys: list[tuple[str, Callable[[Any], None]]] = [
             (wire.key_truth(swarm), self._on_truth),
-            (wire.key_estimate(swarm, "*"), self._on_estimate),
             (wire.key_cmd(swarm, "*"), self._on_command),
         ]
+        est_keys = ["*"] if peers is None else [str(j) for j in peers if j != agent_id]
+        keys += [(wire.key_estimate(swarm, j), self._on_estimate) for j in est_keys]
         if odometry:
             keys.append((wire.key_odometry(swarm, "*"), self._on_odometry))
         for key, handler in keys:
@@ -99,7 +132,7 @@ class SwarmBus:
         """The payload if it decodes to ``kind`` and passes the guard; else None (counted)."""
         now = time.monotonic()
         try:
-            msg = wire.decode(sample.payload.to_bytes())
+            msg = self.cache.decode(sample.payload.to_bytes())
         except wire.WireError as exc:
             self.drops.drop("undecodable", str(exc), now)
             return None
@@ -128,8 +161,9 @@ class SwarmBus:
             if not ok(odo.step):
                 del self.latest_odometry[j]
         for store in (self.truth, self.estimates, self.odometry):
-            for s in [s for s in store if not ok(s)]:
-                del store[s]
+            if store and not (ok(min(store)) and ok(max(store))):
+                for s in [s for s in store if not ok(s)]:
+                    del store[s]
 
     def _on_truth(self, sample: Any) -> None:
         msg = self._decode(sample, wire.Truth)
@@ -139,7 +173,8 @@ class SwarmBus:
         self.truth_time = time.monotonic()
         if self.latest_truth is None or msg.step >= self.latest_truth.step:
             self.latest_truth = msg
-        for old in [s for s in self.truth if s < msg.step - KEEP_STEPS]:
+        for old in ([s for s in self.truth if s < msg.step - KEEP_STEPS]
+                    if min(self.truth) < msg.step - KEEP_STEPS else ()):
             del self.truth[old]
 
     def _on_estimate(self, sample: Any) -> None:
@@ -151,7 +186,8 @@ class SwarmBus:
         prev = self.latest_estimate.get(msg.id)
         if prev is None or msg.step >= prev.step:
             self.latest_estimate[msg.id] = msg
-        for old in [s for s in self.estimates if s < msg.step - KEEP_STEPS]:
+        for old in ([s for s in self.estimates if s < msg.step - KEEP_STEPS]
+                    if min(self.estimates) < msg.step - KEEP_STEPS else ()):
             del self.estimates[old]
 
     def _on_odometry(self, sample: Any) -> None:
@@ -162,7 +198,8 @@ class SwarmBus:
         prev = self.latest_odometry.get(msg.id)
         if prev is None or msg.step >= prev.step:
             self.latest_odometry[msg.id] = msg
-        for old in [s for s in self.odometry if s < msg.step - KEEP_STEPS]:
+        for old in ([s for s in self.odometry if s < msg.step - KEEP_STEPS]
+                    if min(self.odometry) < msg.step - KEEP_STEPS else ()):
             del self.odometry[old]
 
     def _on_command(self, sample: Any) -> None:

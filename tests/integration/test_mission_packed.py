@@ -1,0 +1,59 @@
+"""Agents packed per process (``offboard --agents``, ``gcs mission run --processes N``):
+a lockstep packed run equals the in-process run as the one-process-per-agent run does."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import CUBE8, ROOT, free_port_offset
+
+from gcs.inproc import run_inproc
+from gcs.mission import recorded_metrics, run_distributed
+from swarm_common.scenario import load_scenario
+
+pytestmark = pytest.mark.timeout(240)
+
+
+def test_lockstep_packed_run_matches_inproc(tmp_path: Path) -> None:
+    """cube8 in two daemon processes of four agents: same numbers as in process (float32
+    wire rounding only, the tolerances of test_mission_distributed's equality test)."""
+    sc = load_scenario(CUBE8)
+    dur = 3.0
+    ref = run_inproc(sc, "rcbf", duration=dur)
+    rec, facts = run_distributed(sc, tmp_path, "rcbf", None, dur, port_offset=free_port_offset(),
+                                 show_progress=False, processes=2)
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
+    assert facts["daemon_processes"] == 2
+    assert {"offboard-1-4", "offboard-5-8"} <= set(facts["processes"])
+    assert len(ser.t) == len(ref.series.t) == int(dur * 50)
+    assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
+    assert np.array_equal(ser.input_clipped, ref.series.input_clipped)
+    assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
+    np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)
+    assert m["collisions"] == ref.metrics["collisions"] == 0
+    assert facts["failed_agents"] == []
+    # every packed agent kept its own MAVLink link and wrote its own .tlog
+    for i in sc.ids:
+        assert (tmp_path / f"vehicle_{i}.tlog").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("extra", "expect"),
+    [
+        (["--agents", "3-x"], "--agents '3-x': '3-x' is not an id"),
+        (["--agents", "7-3"], "--agents '7-3': '7-3': ids are >= 1"),
+        (["--agents", "3-9"], "[9] not agents of the scenario"),
+        (["--agents", "1-2", "--mavlink", "udpin:127.0.0.1:14540"], "--mavlink names one"),
+        (["--agents", "1-2", "--tlog", "/tmp/x.tlog"], "the path needs {id}"),
+    ],
+)
+def test_offboard_agents_bad_input_one_line(extra: list[str], expect: str) -> None:
+    out = subprocess.run([sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, *extra],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2
+    assert expect in out.stderr.strip().splitlines()[-1]
+    assert "Traceback" not in out.stderr

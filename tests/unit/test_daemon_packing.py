@@ -1,0 +1,66 @@
+"""Packed daemons: the --agents text, the process split, peers and the decode cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gcs.launch_spec import LaunchError, LaunchSpec
+from offboard.bearing import formation_from_scenario
+from offboard.daemon_agents import format_agents, parse_agents
+from offboard.daemon_peers import peer_ids
+from offboard.zenoh_link import DecodeCache
+from swarm_common import wire
+from swarm_common.scenario import load_scenario
+
+SCEN = Path(__file__).resolve().parents[2] / "scenarios"
+
+
+def test_parse_and_format_agents() -> None:
+    assert parse_agents("3-8") == [3, 4, 5, 6, 7, 8]
+    assert parse_agents("1,2,5") == [1, 2, 5]
+    assert parse_agents("1-3,2,7") == [1, 2, 3, 7]
+    assert format_agents([3, 4, 5]) == "3-5"
+    assert format_agents([1, 2, 5]) == "1,2,5"
+    assert format_agents([4]) == "4"
+    for bad in ("", "x", "5-3", "0", "1-", "-2"):
+        with pytest.raises(ValueError):
+            parse_agents(bad)
+
+
+def test_launch_spec_packs_contiguous_and_balanced() -> None:
+    sc = load_scenario(str(SCEN / "cube8.toml"))
+    assert LaunchSpec(sc).packs() == [[i] for i in sc.ids]
+    spec = LaunchSpec(sc, daemon_processes=3)
+    assert spec.packs() == [[1, 2, 3], [4, 5, 6], [7, 8]]
+    names = [name for name, _ in spec.processes()]
+    assert names == ["vehicle-sim", "offboard-1-3", "offboard-4-6", "offboard-7-8"]
+    argv = spec.daemon_argv([4, 5, 6])
+    assert argv[argv.index("--agents") + 1] == "4-6" and "--agent" not in argv
+    with pytest.raises(LaunchError, match="--processes 9"):
+        LaunchSpec(sc, daemon_processes=9)
+
+
+def test_peers_all_on_cube8_few_on_a_sparse_grid() -> None:
+    sc = load_scenario(str(SCEN / "cube8.toml"))
+    form = formation_from_scenario(sc)
+    assert all(peer_ids(form, i) == [j for j in sc.ids if j != i] for i in sc.ids)
+    sc = load_scenario(str(SCEN / "grid27_knn.toml"))
+    form = formation_from_scenario(sc)
+    for i in sc.ids:
+        peers = peer_ids(form, i)
+        assert i not in peers and set(sc.leader_ids) - {i} <= set(peers)
+        assert {form.ids[j] for j in form.neighbours[form.index_of(i)]} <= set(peers)
+    assert min(len(peer_ids(form, i)) for i in sc.ids) < len(sc.ids) - 1
+
+
+def test_decode_cache_returns_the_decoded_payload_and_rejects_garbage() -> None:
+    cache = DecodeCache(entries=2)
+    cmd = wire.Command("method", 0, method="apf")
+    data = wire.encode(cmd)
+    first = cache.decode(data)
+    assert isinstance(first, wire.Command) and first.method == "apf"
+    assert cache.decode(data) is first
+    with pytest.raises(wire.WireError):
+        cache.decode(b"\x00garbage")
