@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import selectors
-import struct
 import sys
 import time
 
@@ -33,38 +32,20 @@ from swarm_common.scenario import Scenario
 from vehicle_sim import stats
 from vehicle_sim.clock import LockstepClock, RealTimeClock
 from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.mavlink_link import SIGNING_LINK_ID, MavlinkLink
+from vehicle_sim.mavlink_link import MavlinkLink
 from vehicle_sim.options import SimOptions, restrict
+from vehicle_sim.server_io import ServerIO
 from vehicle_sim.truth import TruthPublisher
-from vehicle_sim.vehicle import MSG_ODOMETRY, STATUSTEXT_LEN, Vehicle, VehicleConfig
+from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle, VehicleConfig
 
 log = logging.getLogger(__name__)
 
 LOCKSTEP_SUSPEND_AFTER = 5  # consecutive step timeouts before we stop waiting for a vehicle
 LOCKSTEP_RESEND_S = 0.1  # re-send ODOMETRY t_k to a vehicle that has not answered yet
-ERRORS_LOGGED = 10  # per-packet errors logged before only counting them
-REJECT_REPORT_S = 5.0  # at most one "rejected frames" STATUSTEXT per vehicle this often
-PACK_ERRORS = (struct.error, ValueError, TypeError, OverflowError)  # field out of wire range
-# STATUSTEXT severity -> logging level of the same event in the simulator's own log
-_LOG_LEVEL = {
-    M.MAV_SEVERITY_EMERGENCY: logging.CRITICAL,
-    M.MAV_SEVERITY_ALERT: logging.CRITICAL,
-    M.MAV_SEVERITY_CRITICAL: logging.CRITICAL,
-    M.MAV_SEVERITY_ERROR: logging.ERROR,
-    M.MAV_SEVERITY_WARNING: logging.WARNING,
-    M.MAV_SEVERITY_NOTICE: logging.INFO,
-    M.MAV_SEVERITY_INFO: logging.INFO,
-    M.MAV_SEVERITY_DEBUG: logging.DEBUG,
-}
+LINK_NAMES = ("api", "gcs")  # a vehicle's links; link i signs with signing link id i
 
 
-def _signing_time_now() -> int:
-    """The MAVLink signing timestamp of now (10 µs units since 2015-01-01)."""
-    unix = time.time() - signing.SIGNATURE_EPOCH_UNIX_S
-    return int(max(0.0, unix) * signing.TIMESTAMP_UNITS_PER_S)
-
-
-class SimServer:
+class SimServer(ServerIO):
     def __init__(self, sc: Scenario, opts: SimOptions) -> None:
         self.opts = opts
         self.sc = restrict(sc, opts.vehicles)
@@ -82,6 +63,7 @@ class SimServer:
         self.links: list[MavlinkLink] = []
         self.vehicles: list[Vehicle] = []
         self.vlinks: dict[int, dict[str, MavlinkLink]] = {}
+        self.forwarded: dict[tuple[int, int], float] = {}  # (vehicle, component) -> last
         self.sel = selectors.DefaultSelector()
         self._collisions_seen = 0
         self._min_dist = self.dyn.min_pair_distance() if self.dyn.n >= 2 else float("inf")
@@ -111,7 +93,7 @@ class SimServer:
             )
             v = Vehicle(aid, idx, self.dyn, cfg)
             if o.signing_key is not None:
-                signing.setup_signing(v.enc, o.signing_key, SIGNING_LINK_ID)
+                v.sign_links(o.signing_key, LINK_NAMES, signing.setup_signing)
             self.vehicles.append(v)
             ports = vehicle_ports(aid, o.port_offset)
             api = MavlinkLink(
@@ -283,99 +265,6 @@ class SimServer:
             if v.consecutive_timeouts >= LOCKSTEP_SUSPEND_AFTER and not v.wait_suspended:
                 v.wait_suspended = True
                 v.event(f"lockstep: no answer for {v.consecutive_timeouts} steps, not waiting")
-
-    # -- I/O --------------------------------------------------------------------------
-    def flush(self, now: float) -> None:
-        for v in self.vehicles:
-            if not v.outbox and not v.stream_out:
-                continue
-            if self.opts.signing_key is not None:  # signing time never lags the wall clock
-                v.enc.signing.timestamp = max(v.enc.signing.timestamp, _signing_time_now())
-            links = self.vlinks[v.id]
-            dests = {name: ln.destinations(now) for name, ln in links.items()}
-            out, v.outbox = v.outbox, []
-            for msg, dest in out:
-                buf = self._pack(v, msg)
-                if buf is None:
-                    continue
-                if dest is None:
-                    for name, ln in links.items():
-                        ln.send_bytes(buf, dests[name])
-                elif dest[1] is None:  # every destination of one link
-                    links[dest[0]].send_bytes(buf, dests[dest[0]])
-                else:
-                    links[dest[0]].send_bytes(buf, [], dest[1])
-            self._flush_streams(v, now, dests)
-        self.log_events()
-
-    def _flush_streams(self, v: Vehicle, now: float, dests: dict[str, list]) -> None:
-        """Telemetry: the default schedule to every destination without its own, each
-        peer's own schedule to it; unauthenticated peers within their credit."""
-        links = self.vlinks[v.id]
-        out, v.stream_out = v.stream_out, []
-        custom = {name: v.streams.custom(name) for name in links}
-        for msg, key in out:
-            buf = self._pack(v, msg)
-            if buf is None:
-                continue
-            hb = msg.get_msgId() == M.MAVLINK_MSG_ID_HEARTBEAT
-            targets = (
-                [(n, d) for n in links for d in dests[n] if d not in custom[n]]
-                if key is None
-                else [key]
-            )
-            for name, addr in targets:
-                if links[name].stream_allowed(addr, len(buf), now, hb):
-                    links[name].send_bytes(buf, [], addr)
-
-    def _pack(self, v: Vehicle, msg: M.MAVLink_message) -> bytes | None:
-        try:
-            return v.pack(msg)
-        except PACK_ERRORS as exc:  # a field out of its wire range: drop, count
-            self.handler_errors += 1
-            if self.handler_errors <= ERRORS_LOGGED:
-                self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}", logging.ERROR)
-            return None
-
-    def live_peers(self, v: Vehicle) -> list[tuple[str, tuple[str, int]]]:
-        return [(name, a) for name, ln in self.vlinks[v.id].items() for a in ln.peers]
-
-    def report_rejects(self, now: float) -> None:
-        """A STATUSTEXT (and log line) when a vehicle's links rejected frames since the
-        last report, at most every ``REJECT_REPORT_S``."""
-        for v in self.vehicles:
-            sts = [ln.stats for ln in self.vlinks[v.id].values()]
-            total = sum(st.rejected for st in sts)
-            last, at = self._rejects_reported.get(v.id, (0, -REJECT_REPORT_S))
-            if total == last or now - at < REJECT_REPORT_S:
-                continue
-            self._rejects_reported[v.id] = (total, now)
-            u = sum(st.rejected_unsigned for st in sts)
-            b = sum(st.rejected_bad_signature for st in sts)
-            r = sum(st.rejected_replay for st in sts)
-            text = f"rejected {u} unsigned {b} badsig {r} replay"
-            v.event(text[:STATUSTEXT_LEN], M.MAV_SEVERITY_WARNING)
-
-    def log_events(self) -> None:
-        for v in self.vehicles:
-            for severity, line in v.events:
-                self.log(line, _LOG_LEVEL.get(severity, logging.INFO))
-            v.events.clear()
-
-    def receive(self, timeout: float) -> None:
-        now = time.monotonic()
-        t = self.clock.t()
-        for key, _ in self.sel.select(max(0.0, timeout)):
-            v, link = key.data
-            for m in link.receive(now):
-                try:
-                    v.handle(m, (link.name, m._peer), now, t)
-                except Exception as exc:  # noqa: BLE001 - logged and counted: a hostile
-                    # message must never take the simulator down (handler_errors=0 in tests)
-                    self.handler_errors += 1
-                    if self.handler_errors <= ERRORS_LOGGED:
-                        self.log(f"vehicle {v.id}: error handling {m.get_type()}: {exc!r}",
-                                 logging.ERROR)  # fmt: skip
 
     def next_wakeup(self, now: float) -> float:
         if isinstance(self.clock, RealTimeClock):

@@ -108,7 +108,7 @@ class Vehicle:
         # telemetry streams: None = every destination on the default schedule
         self.stream_out: list[tuple[M.MAVLink_message, PeerKey | None]] = []
         self.events: list[tuple[int, str]] = []  # (MAV_SEVERITY, line) for the server's log
-        self.enc = M.MAVLink(None, srcSystem=self.id, srcComponent=COMPONENT_AUTOPILOT)
+        self.encs: dict[str, M.MAVLink] = {}  # per link (encoder())
 
         self.armed = False
         self.mode = VehicleMode.POSCTL
@@ -356,8 +356,26 @@ class Vehicle:
             if msg is not None:
                 self.stream_out.append((msg, key))
 
-    def pack(self, msg: M.MAVLink_message) -> bytes:
-        """Encode with this vehicle's sequence counter (sysid = agent id, compid 1)."""
-        buf = msg.pack(self.enc)
-        self.enc.seq = (self.enc.seq + 1) % 256
+    def encoder(self, link: str = "api") -> M.MAVLink:
+        """The encoder of one link: its own sequence counter, as PX4 keeps one per MAVLink
+        instance (a client's loss count, e.g. pymavlink's ``mavloss``, sees every frame of
+        its link in order), and its own signing stream (:meth:`sign_links`)."""
+        enc = self.encs.get(link)
+        if enc is None:
+            enc = M.MAVLink(None, srcSystem=self.id, srcComponent=COMPONENT_AUTOPILOT)
+            self.encs[link] = enc
+        return enc
+
+    def sign_links(self, key: bytes, links: tuple[str, ...], setup: Any) -> None:
+        """Sign every link's frames with ``key``, link ``i`` with signing link id ``i``
+        (``setup``: :func:`swarm_common.signing.setup_signing`)."""
+        for i, name in enumerate(links):
+            setup(self.encoder(name), key, i)
+
+    def pack(self, msg: M.MAVLink_message, link: str = "api") -> bytes:
+        """Encode for ``link`` with that link's sequence counter (sysid = agent id,
+        compid 1)."""
+        enc = self.encoder(link)
+        buf = msg.pack(enc)
+        enc.seq = (enc.seq + 1) % 256
         return buf
