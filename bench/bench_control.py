@@ -1,11 +1,17 @@
-"""Control-step benchmark: per-agent step (sensing + DESO + reference observer + QP) and the
-in-process cube8 mission's real-time factor.
+"""Control-core benchmark: per-agent step and the in-process mission's real-time factor.
 
-    python bench/bench_control.py [--duration 60] [--profile-s 20]
+    python bench/bench_control.py [--scenario scenarios/cube8.toml] [--duration 20]
+                                  [--profile-s 20] [--repeats 2] [--methods dcbf,rcbf,apf]
 
-Timings wrap the real methods during an in-process RCBF run (time.perf_counter), so they
-include Python call overhead. "QP (OSQP called)" is SafetyQP.solve when the nominal input
-violates a constraint; otherwise the exact shortcut returns in a few µs ("QP all").
+Prints, with no assertions (figures for docs/performance.md, "Control core"):
+
+1. in-process mission × real time per method (``run_inproc``, no instrumentation), each
+   run ``--repeats`` times (the 2-core machine is shared: give the range);
+2. per-agent step (``FollowerAgent.step`` and ``LeaderAgent.step``, wrapped with
+   time.perf_counter, so Python call overhead is included) in µs, median and p99, over
+   the steps where OSQP was not called (the nominal input already satisfied every row:
+   exact shortcut), over all steps (OSQP calls included) and over the OSQP steps alone;
+3. the follower step's parts: sensing, DESO update, desired-state observer.
 """
 
 from __future__ import annotations
@@ -13,7 +19,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -21,82 +29,98 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gcs.inproc import run_inproc  # noqa: E402
-from offboard import agent as agent_mod  # noqa: E402
-from offboard.clf_rcbf import SafetyQP  # noqa: E402
+from offboard.agent import FollowerAgent  # noqa: E402
 from offboard.deso import DESO  # noqa: E402
+from offboard.leader import LeaderAgent  # noqa: E402
 from offboard.reference import DesiredStateObserver  # noqa: E402
 from offboard.sensing import Sensor  # noqa: E402
-from swarm_common.enums import Method  # noqa: E402
-from swarm_common.scenario import load_scenario  # noqa: E402
+from swarm_common.enums import QPStatus  # noqa: E402
+from swarm_common.scenario import Scenario, load_scenario  # noqa: E402
+
+Store = dict[str, list[float]]
 
 
-def _wrap(cls, name, store, key):
+def _wrap(cls: Any, name: str, store: Store, key: str) -> Callable[..., Any]:
+    """Replace ``cls.name`` by a timed wrapper appending µs to ``store[key]``; returns the
+    original. Agent steps also record whether OSQP ran (``key + ":osqp"``: 1.0 / 0.0)."""
     orig = getattr(cls, name)
 
-    def timed(self, *a, **k):
+    def timed(self: Any, *a: Any, **k: Any) -> Any:
         t0 = time.perf_counter()
         out = orig(self, *a, **k)
         store.setdefault(key, []).append((time.perf_counter() - t0) * 1e6)
+        st = getattr(out, "status", None)
+        if st is not None:
+            osqp = getattr(st, "qp_status", QPStatus.INACTIVE) != QPStatus.INACTIVE
+            store.setdefault(key + ":osqp", []).append(1.0 if osqp else 0.0)
         return out
 
     setattr(cls, name, timed)
     return orig
 
 
-def stats(x: list[float]) -> str:
-    a = np.asarray(x)
-    return f"median {np.median(a):7.1f} µs  p99 {np.percentile(a, 99):7.1f} µs  (n = {len(a)})"
+def stats(x: list[float] | np.ndarray) -> str:
+    a = np.asarray(x, dtype=float)
+    if a.size == 0:
+        return "(no samples)"
+    return f"median {np.median(a):7.1f} µs  p99 {np.percentile(a, 99):7.1f} µs  (n = {a.size})"
+
+
+def realtime(sc: Scenario, method: str, duration: float, repeats: int) -> None:
+    """Print wall time and × real time of ``repeats`` uninstrumented in-process runs."""
+    xs = []
+    for _ in range(repeats):
+        r = run_inproc(sc, method, duration=duration)
+        xs.append(r.metrics["realtime_factor"])
+        print(f"in-process {sc.name} {duration:.0f} s [{method}]: wall "
+              f"{r.metrics['wall_s']:.2f} s, {r.metrics['realtime_factor']:.1f}x real time")
+    print(f"  -> {sc.name} [{method}]: {min(xs):.1f}-{max(xs):.1f}x real time")
+
+
+def per_agent(sc: Scenario, method: str, duration: float) -> None:
+    """Print the instrumented per-agent figures of one in-process run."""
+    store: Store = {}
+    targets = [(FollowerAgent, "step", "follower"), (LeaderAgent, "step", "leader"),
+               (Sensor, "measure", "sensing"), (DESO, "update", "deso"),
+               (DesiredStateObserver, "update", "ref")]
+    saved = [(cls, name, _wrap(cls, name, store, key)) for cls, name, key in targets]
+    try:
+        run_inproc(sc, method, duration=duration)
+    finally:
+        for cls, name, orig in saved:
+            setattr(cls, name, orig)
+    f = np.asarray(store.get("follower", []))
+    osqp = np.asarray(store.get("follower:osqp", []), dtype=bool)
+    lead = store.get("leader", [])
+    print(f"per-agent control step [{method}], {sc.name}, {duration:.0f} s:")
+    print(f"  follower, OSQP not called  {stats(f[~osqp])}")
+    print(f"  follower, all steps        {stats(f)}")
+    print(f"  follower, OSQP called      {stats(f[osqp])}  ({osqp.mean() * 100:.1f} % of steps)"
+          if osqp.size else "  follower, OSQP called      (no samples)")
+    print(f"  leader                     {stats(lead)}")
+    print(f"  sensing                    {stats(store.get('sensing', []))}")
+    print(f"  DESO update                {stats(store.get('deso', []))}")
+    print(f"  desired-state observer     {stats(store.get('ref', []))}")
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "cube8.toml"))
-    ap.add_argument("--duration", type=float, default=60.0)
-    ap.add_argument("--profile-s", type=float, default=20.0)
+    ap.add_argument("--duration", type=float, default=20.0, help="s per real-time run")
+    ap.add_argument("--profile-s", type=float, default=20.0, help="s of the timed run")
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--methods", default="dcbf,rcbf,apf")
     a = ap.parse_args()
-    sc = load_scenario(a.scenario)
-    # 1. real-time factor, no instrumentation
-    for m in Method:
-        r = run_inproc(sc, m, duration=a.duration)
-        print(f"in-process {sc.name} {a.duration:.0f} s [{m}]: wall {r.metrics['wall_s']:.2f} s, "
-              f"{r.metrics['realtime_factor']:.1f}x real time")
-    # 2. per-component timings (instrumented RCBF run)
-    store: dict[str, list[float]] = {}
-    saved = [
-        (agent_mod.FollowerAgent, "step", _wrap(agent_mod.FollowerAgent, "step", store, "total")),
-        (Sensor, "measure", _wrap(Sensor, "measure", store, "sensing")),
-        (DESO, "update", _wrap(DESO, "update", store, "deso")),
-        (DesiredStateObserver, "update", _wrap(DesiredStateObserver, "update", store, "ref")),
-    ]
-    r = run_inproc(sc, "rcbf", duration=a.profile_s)
-    for cls, name, orig in saved:
-        setattr(cls, name, orig)
-    s = r.series
-    f = [i for i, ag in enumerate(sc.agents) if not ag.is_leader]
-    solve = s.solve_us[:, f]
-    osqp_called = solve[(s.fallback[:, f]) | (solve > 0)]
-    print(f"per-agent control step (follower, rcbf, {a.profile_s:.0f} s):")
-    print(f"  total step      {stats(store['total'])}")
-    print(f"  sensing         {stats(store['sensing'])}")
-    print(f"  DESO            {stats(store['deso'])}")
-    print(f"  reference obs.  {stats(store['ref'])}")
-    print(f"  QP all steps    {stats(list(solve.reshape(-1)))}")
-    del osqp_called
-    # OSQP-only timing on the active steps: re-time SafetyQP.solve calls that reach OSQP
-    active: list[float] = []
-    orig = SafetyQP.solve
-
-    def timed(self, *args, **kw):
-        res = orig(self, *args, **kw)
-        if res.status != "inactive":
-            active.append(res.solve_us)
-        return res
-
-    SafetyQP.solve = timed
-    run_inproc(sc, "rcbf", duration=a.profile_s)
-    SafetyQP.solve = orig
-    if active:
-        print(f"  QP, OSQP called {stats(active)}")
+    try:
+        sc = load_scenario(a.scenario)
+    except (OSError, ValueError) as exc:
+        print(f"bench_control: {exc}", file=sys.stderr)
+        return 2
+    methods = [m.strip() for m in a.methods.split(",") if m.strip()]
+    for m in methods:
+        realtime(sc, m, a.duration, max(1, a.repeats))
+    for m in methods:
+        per_agent(sc, m, a.profile_s)
     return 0
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -120,6 +121,16 @@ class LagCoefficients:
         iia = tau * t - tau * ia
         return cls(t, 1.0 - e, t - ia, 0.5 * t * t - iia, e, ia, iia)
 
+    @cached_property
+    def sens(self) -> np.ndarray:
+        """(3, 2, 1, 3): the (Δp̂, Δv̂, Δâ) sensitivities [p|v|a][error|command][·][axis]
+        for :func:`dcbf_rows`: a constant acceleration error (T²/2, T, 1 per axis) and
+        the command (cp, cv, ca); computed once per horizon."""
+        one = np.ones(3)
+        err = (0.5 * self.T**2 * one, self.T * one, one)
+        cmd = (self.cp, self.cv, self.ca)
+        return np.array([[[e], [c]] for e, c in zip(err, cmd, strict=True)])
+
 
 @dataclass
 class Prediction:
@@ -187,17 +198,21 @@ def dcbf_rows(
     """
     pr = predict(dp, dv, a0, u_ref, a_other, lag, tau_s, d_safe)
     h0 = np.einsum("ij,ij->i", dp, dp) + 2.0 * tau_s * np.einsum("ij,ij->i", dv, dp) - d_safe**2
-    one = np.ones(3)
-    # a constant relative-acceleration error e over [0, T] moves Δv̂ by eT, Δp̂ by eT²/2
-    e_hd, e_h = _grads(pr, 0.5 * lag.T**2 * one, lag.T * one, one, tau_s)
-    u_hd, u_h = _grads(pr, lag.cp, lag.cv, lag.ca, tau_s)
+    # both sensitivities at once (lag.sens, element by element as two _grads calls):
+    # [0] a constant relative-acceleration error e over [0, T] (moves Δv̂ by eT, Δp̂ by
+    # eT²/2), [1] the command u through the lag
+    sens = lag.sens
+    hd_both, h_both = _grads(pr, sens[0], sens[1], sens[2], tau_s)
+    e_hd, u_hd = hd_both[0], hd_both[1]
+    e_h, u_h = h_both[0], h_both[1]
     # α is increasing: α(h_T) ≥ α(ĥ_T − ‖∂ĥ_T/∂a‖ē) exactly (no linearisation of α)
-    h_lo = pr.h - _norm(e_h) * accel_err
+    m_h = _norm(e_h) * accel_err
+    h_lo = pr.h - m_h
     k_h = (gamma1 + 3.0 * gamma3 * h_lo**2)[:, None]
     c1 = pr.hdot - _norm(e_hd) * accel_err + gamma1 * h_lo + gamma3 * h_lo**3
     drop = lag.T * (gamma1 * h0 + gamma3 * h0**3)
     drop = np.where(h0 > 0.0, np.minimum(drop, 0.5 * h0), drop)  # keep ≥ half of h > 0
-    c2 = pr.h - _norm(e_h) * accel_err - (h0 - drop)
+    c2 = pr.h - m_h - (h0 - drop)
     g = np.vstack([u_hd + k_h * u_h, u_h])
     c = np.concatenate([c1, c2])
     sh = np.concatenate([share, share])

@@ -57,8 +57,14 @@ class DcbfFilter(SafetyFilter):
         self.lag: LagCoefficients | None = None
         self.brake_gain = 2.0
         self.dt = 0.0
-        self._prev_dv: dict[int, np.ndarray] = {}
-        self._rel_acc: dict[int, np.ndarray] = {}
+        n = len(leader_mask)
+        # per scenario index j: Δv sensed the step before (valid where _prev_ok) and the
+        # low-passed relative acceleration (valid where _rel_ok); arrays, not dicts, so
+        # _other_term is a handful of vector operations (same values element by element)
+        self._prev_dv = np.zeros((n, 3))
+        self._prev_ok = np.zeros(n, dtype=bool)
+        self._rel_acc = np.zeros((n, 3))
+        self._rel_ok = np.zeros(n, dtype=bool)
 
     def configure(self, veh: VehicleConfig, dt: float) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
@@ -82,20 +88,24 @@ class DcbfFilter(SafetyFilter):
         n = len(x.pairs)
         out = np.zeros((n, 3)) if x.other_acc is None else x.other_acc.copy()
         out -= saturate_norm(x.w, W_SAFE)[None, :]
-        prev, self._prev_dv = self._prev_dv, {}
-        for r in range(n):
-            j = int(x.pairs[r])
-            if x.predicted is not None and x.predicted[r]:
-                continue  # not sensed now: the broadcast-velocity estimate, no history
-            self._prev_dv[j] = x.dv[r].copy()
-            if j not in prev:
-                self._rel_acc.pop(j, None)
-                continue
-            da = (x.dv[r] - prev[j]) / self.dt
-            old = self._rel_acc.get(j)
-            da = da if old is None else REL_ACC_SMOOTH * old + (1.0 - REL_ACC_SMOOTH) * da
-            self._rel_acc[j] = da
-            out[r] = x.a_mean - da
+        # rows sensed now (predicted rows: the broadcast-velocity estimate, no history)
+        rows = np.arange(n) if x.predicted is None else np.flatnonzero(~x.predicted)
+        js = np.asarray(x.pairs, dtype=np.intp)[rows]
+        have = self._prev_ok[js]
+        self._rel_ok[js[~have]] = False  # a pair seen again after a gap starts afresh
+        r_h, j_h = rows[have], js[have]
+        if len(r_h):
+            da = (x.dv[r_h] - self._prev_dv[j_h]) / self.dt
+            old_ok = self._rel_ok[j_h]
+            if old_ok.any():
+                smooth = REL_ACC_SMOOTH * self._rel_acc[j_h] + (1.0 - REL_ACC_SMOOTH) * da
+                da = np.where(old_ok[:, None], smooth, da)
+            self._rel_acc[j_h] = da
+            self._rel_ok[j_h] = True
+            out[r_h] = x.a_mean[None, :] - da
+        self._prev_ok[:] = False
+        self._prev_ok[js] = True
+        self._prev_dv[js] = x.dv[rows]
         return out
 
     def apply(self, x: SafetyInput) -> SafetyOutput:

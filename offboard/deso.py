@@ -338,6 +338,7 @@ class DESO:
         self.z3 = np.zeros(3)
         self.zeta = np.zeros(N_ZETA)
         self._cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._pu_cache: dict[tuple[int, ...], np.ndarray] = {}
         self.last_e1 = np.zeros(3)
         self.last_e2 = np.zeros(3)
         self.n_used = 0
@@ -348,8 +349,8 @@ class DESO:
         """Advance the convergence timer with this period's innovations; True once
         ‖e1‖ ≤ GATE_E1 and ‖e2‖ ≤ GATE_E2 have held for GATE_HOLD_S (docs/estimation.md).
         Start-up transients, outages and lost neighbours freeze ζ̂ instead of driving it."""
-        e1 = float(np.linalg.norm(self.last_e1))
-        e2 = float(np.linalg.norm(self.last_e2))
+        e1 = math.sqrt(float(self.last_e1.dot(self.last_e1)))  # = np.linalg.norm
+        e2 = math.sqrt(float(self.last_e2.dot(self.last_e2)))
         if e1 <= GATE_E1 and e2 <= GATE_E2:
             self.converged_s += self.dt
         else:
@@ -371,6 +372,14 @@ class DESO:
             m = (a_s, g, dmat)
             self._cache[used] = m
         return m
+
+    def _stacked_weights(self, used: tuple[int, ...]) -> np.ndarray:
+        """(k,3,3) W_ij of the neighbours ``used``, in that order (cached per set)."""
+        pu = self._pu_cache.get(used)
+        if pu is None:
+            pu = np.array([self.weights[j] for j in used])
+            self._pu_cache[used] = pu
+        return pu
 
     def lumped(self) -> np.ndarray:
         """Estimate of the lumped disturbance acceleration Φζ + d/m: f̂ + z3."""
@@ -411,7 +420,7 @@ class DESO:
             return
         a_s, g, dmat = self._matrices(used)
         idx = list(used)
-        pu = np.array([self.weights[j] for j in idx])  # (k,3,3) W_ij
+        pu = self._stacked_weights(used)  # (k,3,3) W_ij
         zp = np.array([nbr_p[j] for j in idx])
         zv = np.array([nbr_v[j] for j in idx])
         b1 = np.einsum("kij,kj->i", pu, zp - rel_pos[idx])

@@ -113,9 +113,11 @@ class DesiredStateObserver:
         self.nbrs = list(form.neighbours[index])
         self.xi = np.array(xi0, dtype=float)
         self.exo = exo_propagator(self.omega, self.dt)
-        self._cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
+        self._cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
-    def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(M_x (12×12), M_c (12×12), the stacked (k,3,3) P*_ij) for this neighbour set
+        (cached: computed once per set)."""
         m = self._cache.get(used)
         if m is None:
             dmat = np.zeros((3, 3))
@@ -127,7 +129,8 @@ class DesiredStateObserver:
             a[:12, 12:] = self.gain * np.eye(12)
             a[12:, 12:] = sk
             full = expm(a * self.dt)
-            m = (full[:12, :12].copy(), full[:12, 12:].copy())
+            pu = self.form.p_star[self.index, list(used)]  # (k,3,3), symmetric
+            m = (full[:12, :12].copy(), full[:12, 12:].copy(), pu)
             self._cache[used] = m
         return m
 
@@ -137,10 +140,8 @@ class DesiredStateObserver:
         if not used:
             self.xi = self.exo @ self.xi
             return
-        mx, mc = self._matrices(used)
-        idx = list(used)
-        pu = self.form.p_star[self.index, idx]  # (k,3,3), symmetric
-        xs = np.array([nbr_xi[j] for j in idx]).reshape(len(idx), 4, 3)
+        mx, mc, pu = self._matrices(used)
+        xs = np.array([nbr_xi[j] for j in used]).reshape(len(used), 4, 3)
         c = np.einsum("kij,kdj->di", pu, xs).reshape(12)  # Σ (I4 ⊗ P_ij) ξ_j
         self.xi = mx @ self.xi + mc @ c
 

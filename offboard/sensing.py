@@ -63,6 +63,7 @@ class Sensor:
             ],
             dtype=float,
         )
+        self._sig = tuple(float(x) for x in self.sig)  # plain floats: no numpy scalars
         self.dropout = float(sensing.dropout_prob)
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
 
@@ -79,7 +80,7 @@ class Sensor:
         g_dot = (relv - g * gd[:, None]) / d[:, None]
         noise = self.rng.standard_normal((self.n, 8))
         drop = self.rng.random(self.n)
-        sb, sr, sd, sdd = self.sig
+        sb, sr, sd, sdd = self._sig
         # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
         gm = g + noise[:, 0:3] * sb
         gm /= np.sqrt(np.einsum("ij,ij->i", gm, gm))[:, None]
