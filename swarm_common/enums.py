@@ -100,3 +100,14 @@ class SensingSource(StrEnum):
 
     TRUTH = "truth"  # the simulator's truth topic
     ODOMETRY = "odometry"  # every vehicle's own ODOMETRY, shared by its daemon over Zenoh
+
+
+class NavKind(StrEnum):
+    """What the simulated vehicle's own position controller does with a
+    :class:`vehicle_sim.nav.NavTarget` (AUTO modes, missions, RTL)."""
+
+    TAKEOFF = "takeoff"  # climb vertically to position_enu[2] above the current x, y
+    GOTO = "goto"  # fly to position_enu and hold there
+    LOITER = "loiter"  # hold position_enu (a waypoint's hold time is the executor's job)
+    LAND = "land"  # descend at the land speed onto (x, y) of position_enu, then disarm
+    RTL = "rtl"  # climb to the return altitude, fly over home, land

@@ -10,20 +10,13 @@ scenario's origin, which is also the MAVLink home's horizontal reference).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import StrEnum
 from typing import Any, Protocol
 
 import numpy as np
 
+from swarm_common.enums import NavKind
 
-class NavKind(StrEnum):
-    """What the position controller does with a :class:`NavTarget`."""
-
-    TAKEOFF = "takeoff"  # climb vertically to position_enu[2] above the current x, y
-    GOTO = "goto"  # fly to position_enu and hold there
-    LOITER = "loiter"  # hold position_enu (a waypoint's hold time is the executor's job)
-    LAND = "land"  # descend at the land speed onto (x, y) of position_enu, then disarm
-    RTL = "rtl"  # climb to the return altitude, fly over home, land
+__all__ = ["NavKind", "NavSource", "NavTarget", "VehicleService"]
 
 
 @dataclass(frozen=True)
