@@ -347,13 +347,15 @@ class NeighbourAccel:
 
     def ingest(self, neighbours: dict[int, NeighbourEstimate]) -> None:
         """Update from the estimates received this step (by agent id)."""
+        last, acc = self.last, self.acc
         for aid, e in neighbours.items():
-            prev = self.last.get(aid)
-            if prev is not None and e.t > prev[0] + 1e-9:
-                a = (np.asarray(e.z2, float) - prev[1]) / (e.t - prev[0])
-                self.acc[aid] = saturate_norm(a, self.a_max)
-            if prev is None or e.t > prev[0] + 1e-9:
-                self.last[aid] = (float(e.t), np.asarray(e.z2, float).copy())
+            prev = last.get(aid)
+            if prev is not None and not e.t > prev[0] + 1e-9:
+                continue
+            z2 = np.array(e.z2, dtype=float)  # a copy
+            if prev is not None:
+                acc[aid] = saturate_norm((z2 - prev[1]) / (e.t - prev[0]), self.a_max)
+            last[aid] = (float(e.t), z2)
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(M,3) estimates for scenario indices ``idx`` (zero where none yet)."""
