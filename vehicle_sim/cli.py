@@ -81,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "wrongly signed frames, sign every frame sent (default: signing off)")
     ap.add_argument("--unsigned-gcs-link", action="store_true",
                     help="with --signing-key: let unsigned clients (MAVSDK, QGC) on the GCS "
-                    "port request telemetry; they can never arm, fly or switch modes")
+                    "port read telemetry, parameters and missions; they can never arm, fly, "
+                    "switch modes or write")
     ap.add_argument(
         "--failsafe",
         type=str.lower,
