@@ -34,6 +34,7 @@ pytestmark = pytest.mark.timeout(240)
 
 MIN_DIST_M = 0.5
 ARMED_FLAG = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+AUTOPILOT = mavutil.mavlink.MAV_COMP_ID_AUTOPILOT1
 LANDED_Z_M = 0.1
 FLY_BEFORE_KILL_S = 8.0  # mission time at which the router is killed
 LAND_TIMEOUT_S = 90.0  # wall s after the kill (landing ≈ 3 s hold + 13 s on a loaded host)
@@ -65,8 +66,8 @@ class Observer(threading.Thread):
             if m is None:
                 continue
             sysid = m.get_srcSystem()
-            if sysid not in self.ids:
-                continue
+            if sysid not in self.ids or m.get_srcComponent() != AUTOPILOT:
+                continue  # the daemons' own HEARTBEATs (component 191) are forwarded too
             with self.lock:
                 if m.get_type() == "HEARTBEAT":
                     self.armed[sysid] = bool(m.base_mode & ARMED_FLAG)
