@@ -31,7 +31,7 @@ from swarm_common.zenoh_session import (
     SIM_USER,
     ZENOH_CONFIG_ENV,
     SwarmSecurity,
-    agent_user,
+    pack_user,
 )
 
 LOCALHOST = "127.0.0.1"
@@ -57,6 +57,19 @@ def secure_dir() -> Path:
     """A fresh private directory (mode 0700) for one run's Zenoh credentials and signing
     key; the caller deletes it when the run ends."""
     return Path(tempfile.mkdtemp(prefix="swarm-secure-"))
+
+
+def split_packs(ids: list[int], processes: int | None) -> list[list[int]]:
+    """``ids`` in ``processes`` contiguous groups whose sizes differ by at most one (None:
+    one group per agent)."""
+    n = len(ids) if processes is None else processes
+    size, extra = divmod(len(ids), n)
+    out, at = [], 0
+    for p in range(n):
+        take = size + (1 if p < extra else 0)
+        out.append(ids[at:at + take])
+        at += take
+    return out
 
 
 @dataclass(frozen=True)
@@ -124,8 +137,9 @@ class LaunchSpec:
     (``--signing-key``); ``unsigned_gcs_link``: the simulator's GCS link also serves
     unsigned telemetry requests (MAVSDK, QGroundControl without a key).
     ``daemon_processes``: pack the daemons into this many processes (None: one per agent, the
-    realistic layout); packed processes hold one Zenoh session for several agents, so they
-    run without per-agent Zenoh credentials (``zenoh_security`` must be None).
+    realistic layout); a packed process holds one Zenoh session for several agents and
+    authenticates as one user allowed to publish its own agents' keys only
+    (:func:`~swarm_common.zenoh_session.pack_user`).
     """
 
     sc: Scenario
@@ -148,9 +162,6 @@ class LaunchSpec:
         if procs is not None:
             if not 1 <= procs <= n:
                 raise LaunchError(f"--processes {procs}: must be 1..{n} (the number of agents)")
-            if self.zenoh_security is not None and procs < n:
-                raise LaunchError("packed daemons (--processes) share one Zenoh session and "
-                                  "cannot use per-agent Zenoh credentials")
         problem = swarm_name_problem(self.swarm_name)
         if problem is not None:
             raise LaunchError(f"swarm name {self.swarm_name!r}: {problem}")
@@ -232,15 +243,7 @@ class LaunchSpec:
     def packs(self) -> list[list[int]]:
         """The agents of each daemon process: one each, or :attr:`daemon_processes` contiguous
         groups whose sizes differ by at most one."""
-        ids = list(self.sc.ids)
-        n = len(ids) if self.daemon_processes is None else self.daemon_processes
-        size, extra = divmod(len(ids), n)
-        out, at = [], 0
-        for p in range(n):
-            take = size + (1 if p < extra else 0)
-            out.append(ids[at:at + take])
-            at += take
-        return out
+        return split_packs(list(self.sc.ids), self.daemon_processes)
 
     @staticmethod
     def daemon_name(ids: list[int]) -> str:
@@ -279,7 +282,10 @@ class LaunchSpec:
         an argv or a log."""
         if self.zenoh_security is None:
             return {}
-        user = SIM_USER if name == "vehicle-sim" else agent_user(int(name.split("-")[-1]))
+        if name == "vehicle-sim":
+            user = SIM_USER
+        else:
+            user = next(pack_user(ids) for ids in self.packs() if self.daemon_name(ids) == name)
         return {ZENOH_CONFIG_ENV: str(self.zenoh_security.config_for(user))}
 
     def processes(self, daemons: bool = True) -> list[tuple[str, list[str]]]:

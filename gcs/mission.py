@@ -25,7 +25,7 @@ from typing import Any
 
 import zenoh
 
-from gcs.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
+from gcs.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
 from gcs.mission_score import default_out_dir, recorded_metrics, recorder_series, score_run
 from gcs.procs import ProcessGroup
 from gcs.progress import Progress
@@ -81,8 +81,8 @@ def run_distributed(
     stopped when the run ends early (Ctrl-C, SIGTERM, the simulator's death, a stall),
     and every :data:`CHECKPOINT_EVERY_S` during the run (reason "checkpoint").
     ``processes``: pack the daemons into this many processes (None: one per agent;
-    :class:`~gcs.launch_spec.LaunchSpec`); a packed process holds one Zenoh session for
-    several agents, so packed runs go without Zenoh authentication (``secure`` ignored).
+    :class:`~gcs.launch_spec.LaunchSpec`); a packed process authenticates as one Zenoh
+    user that may publish its own agents' keys only.
 
     Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
     busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
@@ -90,15 +90,12 @@ def run_distributed(
     stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
     signing = SigningChoice() if signing is None else signing
-    if processes is not None and processes < len(sc.ids) and secure:
-        log.info("packed daemons (%d processes): Zenoh without per-agent credentials",
-                 processes)
-        secure = False
     sec_dir = secure_dir() if secure or signing.enabled else None
     try:
         sec = None
         if secure and sec_dir is not None:
-            sec = write_swarm_security(sec_dir, _swarm(sc), sc.ids)
+            packs = split_packs(list(sc.ids), processes) if processes else None
+            sec = write_swarm_security(sec_dir, _swarm(sc), sc.ids, packs=packs)
         key_path = signing.key_file(sec_dir)
         spec = LaunchSpec(
             sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,

@@ -129,6 +129,27 @@ def agent_user(agent_id: int) -> str:
     return f"agent{agent_id}"
 
 
+def pack_user(agent_ids: Sequence[int]) -> str:
+    """The Zenoh user of one daemon process: ``agent<i>`` for one agent, ``agents<i>_<j>_..``
+    for several packed in one process (``offboard --agents``)."""
+    ids = list(agent_ids)
+    if len(ids) == 1:
+        return agent_user(ids[0])
+    return "agents" + "_".join(str(i) for i in ids)
+
+
+def _packs(agent_ids: Iterable[int], packs: Sequence[Sequence[int]] | None) -> list[list[int]]:
+    """``packs`` (validated: every agent exactly once) or one pack per agent."""
+    ids = list(agent_ids)
+    if packs is None:
+        return [[i] for i in ids]
+    out = [list(p) for p in packs]
+    flat = [i for p in out for i in p]
+    if sorted(flat) != sorted(ids) or any(not p for p in out):
+        raise ValueError(f"packs {out} must hold every agent of {ids} exactly once")
+    return out
+
+
 @dataclass(frozen=True)
 class SwarmSecurity:
     """Where one swarm's generated Zenoh security files are: ``router`` (router config:
@@ -141,15 +162,20 @@ class SwarmSecurity:
         return self.directory / f"{user}.json5"
 
 
-def acl_config(swarm: str, root: str, agent_ids: Iterable[int]) -> dict[str, Any]:
+def acl_config(
+    swarm: str, root: str, agent_ids: Iterable[int],
+    packs: Sequence[Sequence[int]] | None = None,
+) -> dict[str, Any]:
     """The router's ``access_control`` section: default deny; every authenticated user may
     subscribe under ``<root>/<swarm>/**``; only ``sim`` may put ``truth``; agent ``i`` only
     its own ``agent/i/estimate``, ``agent/i/status`` and ``agent/i/odometry`` (the keys
-    of :data:`AGENT_KEYS`); only ``gcs`` may put ``cmd/**``. Messages
-    the router forwards (egress) are allowed, so a subscriber receives what was admitted."""
+    of :data:`AGENT_KEYS`); only ``gcs`` may put ``cmd/**``. With ``packs`` (agents packed
+    into one daemon process), the process's user (:func:`pack_user`) may put the keys of
+    its own agents only. Messages the router forwards (egress) are allowed, so a
+    subscriber receives what was admitted."""
     base = f"{root}/{swarm}"
-    ids = list(agent_ids)
-    users = [GCS_USER, SIM_USER, *(agent_user(i) for i in ids)]
+    groups = _packs(agent_ids, packs)
+    users = [GCS_USER, SIM_USER, *(pack_user(g) for g in groups)]
     rules: list[dict[str, Any]] = [
         {"id": "subscribe", "permission": "allow", "flows": ["ingress", "egress"],
          "messages": _SUB_MESSAGES, "key_exprs": [f"{base}/**"]},
@@ -170,11 +196,11 @@ def acl_config(swarm: str, root: str, agent_ids: Iterable[int]) -> dict[str, Any
         {"rules": ["put_truth"], "subjects": [SIM_USER]},
         {"rules": ["put_cmd"], "subjects": [GCS_USER]},
     ]
-    for i in ids:
-        u = agent_user(i)
+    for g in groups:
+        u = pack_user(g)
         rules.append({"id": f"put_{u}", "permission": "allow", "flows": ["ingress"],
                       "messages": _PUT,
-                      "key_exprs": [f"{base}/agent/{i}/{key}" for key in AGENT_KEYS]})
+                      "key_exprs": [f"{base}/agent/{i}/{key}" for i in g for key in AGENT_KEYS]})
         subjects.append({"id": u, "usernames": [u]})
         policies.append({"rules": [f"put_{u}"], "subjects": [u]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
@@ -190,17 +216,20 @@ def _write_private(path: Path, text: str) -> None:
 
 
 def write_swarm_security(
-    directory: Path, swarm: str, agent_ids: Iterable[int], root: str = "swarm"
+    directory: Path, swarm: str, agent_ids: Iterable[int], root: str = "swarm",
+    packs: Sequence[Sequence[int]] | None = None,
 ) -> SwarmSecurity:
-    """Generate fresh random passwords for ``gcs``, ``sim`` and ``agent<i>`` and write, in
+    """Generate fresh random passwords for ``gcs``, ``sim`` and ``agent<i>`` (or, with
+    ``packs``, one user per daemon process: :func:`pack_user`) and write, in
     ``directory`` (created 0700): ``users`` (the router's dictionary, ``user:password``
     lines), ``router.json5`` (router: its credentials, the dictionary, :func:`acl_config`)
     and ``<user>.json5`` per process (its own credentials only). Every file is 0600.
     Passwords are never logged; processes get the path of their file."""
     ids = list(agent_ids)
+    groups = _packs(ids, packs)
     directory.mkdir(mode=0o700, parents=True, exist_ok=True)
     os.chmod(directory, 0o700)
-    users = [GCS_USER, SIM_USER, *(agent_user(i) for i in ids)]
+    users = [GCS_USER, SIM_USER, *(pack_user(g) for g in groups)]
     pw = {u: secrets.token_urlsafe(24) for u in users}
     dictionary = directory / "users"
     _write_private(dictionary, "".join(f"{u}:{pw[u]}\n" for u in users))
@@ -208,7 +237,7 @@ def write_swarm_security(
     router_cfg = {
         "transport": {"auth": {"usrpwd": {"user": GCS_USER, "password": pw[GCS_USER],
                                           "dictionary_file": str(dictionary)}}},
-        "access_control": acl_config(swarm, root, ids),
+        "access_control": acl_config(swarm, root, ids, groups),
     }
     _write_private(sec.router, json.dumps(router_cfg, indent=1))
     for u in users:
