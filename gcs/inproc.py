@@ -37,6 +37,7 @@ from gcs.run_output import (
 )
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.bearing import formation_from_scenario
+from offboard.daemon_peers import peer_ids
 from offboard.landing import landing_plan
 from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
@@ -136,6 +137,8 @@ def run_inproc(
         for line in gains:
             log.info("%s", line)
     published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
+    # each agent reads its peers' estimates only, as its daemon subscribes to them only
+    peers = {ag.id: frozenset(peer_ids(form, ag.id)) for ag in agents}
     n = sc.n
     ser = empty_series(np.arange(n_steps) * dt, n)
     md_run = math.inf
@@ -154,7 +157,8 @@ def run_inproc(
         for i, ag in enumerate(agents):
             e = published[ag.id]
             ser.z1[k, i], ser.z2[k, i] = e.z1, e.z2
-            nb = {j: v for j, v in published.items() if j != ag.id} if comm else {}
+            mine = peers[ag.id]
+            nb = {j: v for j, v in published.items() if j in mine} if comm else {}
             out = ag.step(k, t, tp, tv, nb, comm)
             roll, pitch, yaw, fn = wire_to_command(out.q_ned, out.thrust_norm, f_max)
             dyn.set_command(i, roll, pitch, yaw, fn)
