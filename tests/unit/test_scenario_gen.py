@@ -46,7 +46,7 @@ def test_every_shape_loads(shape: Shape, n: int, n_lead: int) -> None:
     assert v[:, 2].min() == pytest.approx(2.0)
     np.testing.assert_array_equal(p[:n_lead], v[:n_lead])  # leaders on their vertices
     dp = np.linalg.norm(p[:, None] - p[None], axis=2)[np.triu_indices(n, 1)]
-    assert dp.min() >= (1 - 2 * np.sqrt(3) * JITTER) * 3.0 - 2e-3
+    assert dp.min() >= (1 - 0.15 - 2 * np.sqrt(3) * JITTER) * 3.0 - 2e-3
 
 
 def test_grid_sizes_and_leaders_spread() -> None:
@@ -66,13 +66,19 @@ def test_scramble_is_seeded() -> None:
     np.testing.assert_array_equal(sa.vertices(), sb.vertices())
 
 
-def test_mix_zero_keeps_followers_near_their_vertices() -> None:
+def test_mix_and_shrink() -> None:
     sc = _load(dump_toml(build(_args("ring", "--agents", "12", "--leaders", "2",
-                                     "--scramble", "1", "--mix", "0"))[0]))
+                                     "--scramble", "1", "--shrink", "0"))[0]))
     err = np.abs(sc.initial_positions() - sc.vertices())
-    assert err.max() <= JITTER * 3.0 + 1e-3
+    assert err.max() <= JITTER * 3.0 + 1e-3  # default --mix 0: every follower near its vertex
+    v = sc.vertices()
+    shrunk = _load(dump_toml(build(_args("ring", "--agents", "12", "--leaders", "2",
+                                         "--scramble", "1", "--shrink", "0.3"))[0]))
+    r0 = np.linalg.norm(sc.initial_positions()[2:, :2] - v[:, :2].mean(axis=0), axis=1)
+    r1 = np.linalg.norm(shrunk.initial_positions()[2:, :2] - v[:, :2].mean(axis=0), axis=1)
+    assert np.all(r1 < r0)  # same jitter, pulled toward the centre
     full = _load(dump_toml(build(_args("ring", "--agents", "12", "--leaders", "2",
-                                       "--scramble", "1"))[0]))
+                                       "--scramble", "1", "--mix", "1"))[0]))
     assert np.abs(full.initial_positions() - full.vertices()).max() > 1.0
 
 
@@ -111,7 +117,8 @@ def test_bad_flags_one_line(argv: list[str], expect: str, capsys) -> None:
     "argv",
     [["cone", "--agents", "8", "--leaders", "2", "--scramble", "1"],
      ["grid", "--agents", "8", "--leaders", "2", "--scramble", "-1"],
-     ["grid", "--agents", "8", "--leaders", "2", "--scramble", "1", "--spacing", "0.2"]],
+     ["grid", "--agents", "8", "--leaders", "2", "--scramble", "1", "--spacing", "1.5"],
+     ["grid", "--agents", "8", "--leaders", "2", "--scramble", "1", "--shrink", "0.5"]],
 )
 def test_bad_flag_values_exit_2(argv: list[str]) -> None:
     with pytest.raises(SystemExit) as exc:
