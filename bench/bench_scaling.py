@@ -1,7 +1,7 @@
 """Scaling benchmark: in-process runs of generated grids of 8 / 27 / 64 / 125 agents.
 
     python bench/bench_scaling.py [--sizes 8,27,64,125] [--duration 4] [--repeats 2]
-                                  [--leaders 4] [--scramble 1] [--mix 1] [--method dcbf]
+                                  [--leaders 4] [--scramble 1] [--mix 0] [--method dcbf]
 
 Each run is a fresh child process (so its peak RSS is its own): the scenario comes from
 ``gcs scenario grid --agents N --leaders L --scramble SEED --mix F`` (sparse ``knn`` graph,
@@ -82,7 +82,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--leaders", type=int, default=4)
     ap.add_argument("--scramble", type=int, default=1)
-    ap.add_argument("--mix", type=float, default=1.0)
+    ap.add_argument("--mix", type=float, default=0.0)
     ap.add_argument("--method", default="dcbf")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     opts = ap.parse_args()
