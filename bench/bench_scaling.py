@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import resource
 import subprocess
 import sys
@@ -70,9 +69,8 @@ def fit_exponent(n: list[float], cost: list[float]) -> float:
 
 
 def _rng(vals: list[float], fmt: str) -> str:
-    lo, hi = min(vals), max(vals)
-    return format(lo, fmt) if math.isclose(lo, hi, rel_tol=0.02) else \
-        f"{format(lo, fmt)}–{format(hi, fmt)}"
+    lo, hi = format(min(vals), fmt), format(max(vals), fmt)
+    return lo if lo == hi else f"{lo}–{hi}"
 
 
 def main() -> None:
