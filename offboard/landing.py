@@ -110,6 +110,39 @@ def _stacks(xy: np.ndarray, sep: float) -> list[int]:
     return [root(i) for i in range(n)]
 
 
+def _last_leg(start: np.ndarray, pad: np.ndarray, length: float) -> np.ndarray:
+    """Points on the last ``length`` metres of the straight transit start → pad (where the
+    descent of a stacked agent begins, :func:`landing_plan`'s timing)."""
+    d = pad - start
+    n = float(np.linalg.norm(d))
+    if n < 1e-9:
+        return pad[None, :]
+    s0 = max(0.0, 1.0 - length / n)
+    return start + np.linspace(s0, 1.0, 11)[:, None] * d
+
+
+def _crowded(
+    pad: np.ndarray, start: np.ndarray, i: int, placed: list[int], pads: np.ndarray,
+    xy: np.ndarray, sep: float, clear: float,
+) -> bool:
+    """Whether pad ``pad`` of agent ``i`` is closer than ``sep`` to a placed pad, or the
+    last leg of its transit (where it may already descend) passes closer than ``clear``
+    to a placed pad, or it lies closer than ``clear`` to the last leg of a placed agent's
+    transit. Large sparse formations (grid64: a centre column pushed outward along the
+    same diagonal as a corner column) need the last two: their pads would otherwise sit
+    under another agent's descent."""
+    for j in placed:
+        if np.linalg.norm(pad - pads[j]) < sep:
+            return True
+        if i != j and np.min(np.linalg.norm(_last_leg(start, pad, sep) - pads[j], axis=1)) < clear:
+            return True
+        if np.any(pads[j] != xy[j]):
+            leg = _last_leg(xy[j], pads[j], sep)
+            if np.min(np.linalg.norm(leg - pad, axis=1)) < clear:
+                return True
+    return False
+
+
 def landing_plan(sc: Scenario, t_land: float, form: Formation | None = None) -> LandingPlan:
     """The common landing plan at t_land (module docstring)."""
     p = planned_positions(sc, t_land, form)
@@ -129,7 +162,7 @@ def landing_plan(sc: Scenario, t_land: float, form: Formation | None = None) -> 
         out = out / nrm if nrm > 1e-6 else np.array([1.0, 0.0])
         k = rank[i]
         pad = xy[i] + k * offset * out
-        while any(np.linalg.norm(pad - pads[j]) < sep for j in placed):
+        while _crowded(pad, xy[i], i, placed, pads, xy, sep, 2.0 * d_safe):
             k += 1
             pad = xy[i] + k * offset * out
         pads[i] = pad
