@@ -30,12 +30,11 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
-from swarm_common.enums import GraphKind, Role
+from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.scenario import ScenarioError, dump_toml, parse_scenario
 
 EXIT_USAGE = 2
@@ -45,15 +44,6 @@ RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this
 DEFAULT_K = 6  # first knn_k tried when --k is not given
 MAX_AGENTS = 250  # MAVLink system ids 1..250 leave room for the GCS and companions
 HELIX_PER_TURN = 8  # vertices per helix turn
-
-
-class Shape(StrEnum):
-    """Formation shapes of ``gcs scenario``."""
-
-    GRID = "grid"  # near-cubic box, filled layer by layer from the bottom
-    RING = "ring"  # one horizontal circle
-    SPHERE = "sphere"  # Fibonacci lattice on a sphere
-    HELIX = "helix"  # HELIX_PER_TURN vertices per turn, one spacing between turns
 
 
 GRAPHS = (GraphKind.KNN, GraphKind.RANGE, GraphKind.COMPLETE)

@@ -111,3 +111,12 @@ class NavKind(StrEnum):
     LOITER = "loiter"  # hold position_enu (a waypoint's hold time is the executor's job)
     LAND = "land"  # descend at the land speed onto (x, y) of position_enu, then disarm
     RTL = "rtl"  # climb to the return altitude, fly over home, land
+
+
+class Shape(StrEnum):
+    """Formation shapes of the scenario generator (``gcs scenario SHAPE``; docs/scenarios.md)."""
+
+    GRID = "grid"  # near-cubic box, filled layer by layer from the bottom
+    RING = "ring"  # one horizontal circle
+    SPHERE = "sphere"  # Fibonacci lattice on a sphere
+    HELIX = "helix"  # HELIX_PER_TURN vertices per turn, one spacing between turns
