@@ -12,8 +12,7 @@ import time
 
 import pytest
 from conftest import ROOT, wait_for
-
-from swarm_common.ports import vehicle_ports
+from mavsdk_client import mavsdk_autopilot
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -27,22 +26,15 @@ RTL_ALT = 5.0
 @pytest.fixture
 def drone(sim_factory):
     """(sim, system, telemetry) with an unmodified MAVSDK on vehicle 1's API link."""
-    mavsdk = pytest.importorskip("mavsdk")
+    pytest.importorskip("mavsdk")
     from mavsdk.plugins.telemetry import Telemetry
 
     sim = sim_factory(ONE, scenario=GROUND8)
-    cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
-    m = mavsdk.Mavsdk(cfg)
-    try:
-        m.add_any_connection(f"udpin://127.0.0.1:{vehicle_ports(1, sim.offset).api_remote}")
-        system = m.first_autopilot(10.0)
-        assert system is not None
+    with mavsdk_autopilot(sim) as system:
         tel = Telemetry(system)
         assert wait_for(lambda: tel.health().is_global_position_ok and tel.health().is_armable,
                         10.0), sim.text()  # fmt: skip
         yield sim, system, tel
-    finally:
-        m.destroy()
 
 
 def _rel_alt(tel) -> float:

@@ -10,6 +10,7 @@ import time
 
 import pytest
 from conftest import MavClient
+from mavsdk_client import mavsdk_autopilot
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
@@ -105,16 +106,11 @@ def _collect(c: MavClient, seconds: float) -> list:
 
 
 def test_mavsdk_attitude_euler_is_finite_without_setting_a_rate(sim_factory):
-    mavsdk = pytest.importorskip("mavsdk")
+    pytest.importorskip("mavsdk")
     from mavsdk.plugins.telemetry import Telemetry
 
     sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
-    cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
-    m = mavsdk.Mavsdk(cfg)
-    try:
-        m.add_any_connection(f"udpin://127.0.0.1:{vehicle_ports(1, sim.offset).api_remote}")
-        system = m.first_autopilot(10.0)
-        assert system is not None
+    with mavsdk_autopilot(sim) as system:
         tel = Telemetry(system)
         end = time.monotonic() + 10.0
         e = tel.attitude_euler()
@@ -122,8 +118,6 @@ def test_mavsdk_attitude_euler_is_finite_without_setting_a_rate(sim_factory):
             time.sleep(0.05)
             e = tel.attitude_euler()
         assert all(math.isfinite(x) for x in (e.roll_deg, e.pitch_deg, e.yaw_deg)), e
-    finally:
-        m.destroy()
 
 
 class _Client:

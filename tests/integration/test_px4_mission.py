@@ -8,6 +8,7 @@ import math
 
 import pytest
 from conftest import wait_for
+from mavsdk_client import mavsdk_autopilot
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import common as M
 
@@ -21,22 +22,15 @@ M_PER_DEG = 111_320.0  # metres per degree of latitude (flat earth, for offsets 
 @pytest.fixture
 def mavsdk_system(sim_factory):
     """(sim, system, (lat, lon) of vehicle 1) with an unmodified MAVSDK on its API link."""
-    mavsdk = pytest.importorskip("mavsdk")
+    pytest.importorskip("mavsdk")
     from mavsdk.plugins.telemetry import Telemetry
 
     sim = sim_factory(ONE)
-    cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
-    m = mavsdk.Mavsdk(cfg)
-    try:
-        m.add_any_connection(f"udpin://127.0.0.1:{vehicle_ports(1, sim.offset).api_remote}")
-        system = m.first_autopilot(10.0)
-        assert system is not None
+    with mavsdk_autopilot(sim) as system:
         tel = Telemetry(system)
         assert wait_for(lambda: tel.health().is_global_position_ok, 10.0), sim.text()
         pos = tel.position()
         yield sim, system, (pos.latitude_deg, pos.longitude_deg)
-    finally:
-        m.destroy()
 
 
 def _offset(here: tuple[float, float], north: float, east: float) -> tuple[float, float]:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 from conftest import CUBE8, ROOT, free_port_offset, wait_for
+from mavsdk_client import mavsdk_autopilot
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.ports import vehicle_ports
@@ -34,17 +35,9 @@ def _table(agent_id: int = 1) -> Vehicle:
 @pytest.fixture
 def mavsdk_system(sim_factory):
     """(sim, mavsdk module, system) of an unmodified MAVSDK on vehicle 1's API link."""
-    mavsdk = pytest.importorskip("mavsdk")
     sim = sim_factory(ONE)
-    cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
-    m = mavsdk.Mavsdk(cfg)
-    try:
-        m.add_any_connection(f"udpin://127.0.0.1:{vehicle_ports(1, sim.offset).api_remote}")
-        system = m.first_autopilot(10.0)
-        assert system is not None
+    with mavsdk_autopilot(sim) as system:
         yield sim, system
-    finally:
-        m.destroy()
 
 
 def test_mavsdk_param_get_set_all(mavsdk_system) -> None:

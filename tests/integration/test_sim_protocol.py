@@ -12,6 +12,7 @@ import time
 import numpy as np
 import pytest
 from conftest import CUBE8, HOVER_NORM, MavClient, free_port_offset
+from mavsdk_client import mavsdk_autopilot  # noqa: E402
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4, wire
@@ -486,18 +487,13 @@ def test_duration_realtime_exits_zero(sim_factory):
 # ------------------------------------------------------------------------------------
 # an unchanged MAVSDK client (mavsdk >= 4: the native binding, no mavsdk_server needed)
 def test_mavsdk_client_unchanged(sim_factory):
-    mavsdk = pytest.importorskip("mavsdk")
+    pytest.importorskip("mavsdk")
     from mavsdk.plugins.action import Action
     from mavsdk.plugins.offboard import Attitude, Offboard
     from mavsdk.plugins.telemetry import FlightMode, Telemetry
 
     sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
-    cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
-    m = mavsdk.Mavsdk(cfg)
-    try:
-        m.add_any_connection(f"udpin://127.0.0.1:{vehicle_ports(1, sim.offset).api_remote}")
-        system = m.first_autopilot(10.0)
-        assert system is not None
+    with mavsdk_autopilot(sim) as system:
         tel, act, off = Telemetry(system), Action(system), Offboard(system)
 
         def wait(pred, timeout=5.0):
@@ -524,8 +520,7 @@ def test_mavsdk_client_unchanged(sim_factory):
         assert wait(lambda: tel.position().relative_altitude_m > alt0 + 1.0, 5.0)
         off.stop()  # MAVSDK switches to Hold
         assert wait(lambda: tel.flight_mode() == FlightMode.HOLD, 3.0)
-    finally:
-        m.destroy()
+
 
 
 def test_lockstep_timeouts_suspend_then_failsafe(sim_factory, mav_client):
