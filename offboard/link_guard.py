@@ -320,6 +320,7 @@ class VehicleView:
     armed: bool
     failsafe_texts: int  # STATUSTEXTs from the vehicle that say "failsafe", so far
     streaming_s: float  # how long fresh setpoints have streamed without a gap
+    critical: bool = False  # its HEARTBEAT says MAV_STATE_CRITICAL (a failsafe is active)
 
 
 class OffboardKeeper:
@@ -368,8 +369,8 @@ class OffboardKeeper:
             self.texts_ref = v.failsafe_texts
             self.backoff.reset()
             return None
-        if not self.seen_offboard:
-            return None
+        if not (self.seen_offboard or (self.offboard_acked and v.hold)):
+            return None  # not in OFFBOARD yet (the heartbeat lags the accepted request)
         if self.left_at is None:
             self.left_at = now
         if not (v.hold and v.armed):
@@ -378,7 +379,9 @@ class OffboardKeeper:
             self.recovering, self.respect = False, True
             return None
         if not self.recovering and not self.respect:
-            evidence = (v.failsafe_texts > self.texts_ref
+            # a lost STATUSTEXT (a lossy link) must not hide a failsafe: the HEARTBEAT,
+            # repeated every second, says CRITICAL while the failsafe action is active
+            evidence = (v.failsafe_texts > self.texts_ref or v.critical
                         or self.fault_at >= self.left_at - FAULT_WINDOW_S)
             if evidence:
                 self.recovering = True
@@ -399,11 +402,8 @@ class OffboardKeeper:
             return "offboard"
         if not (v.armed or self.arm_acked):
             return "arm"
-        self.startup_done = True
-        # OFFBOARD was accepted: a failsafe HOLD that came before the heartbeat showed it
-        # (texts_ref still counts every failsafe since start) is recovered as well
-        self.seen_offboard = self.seen_offboard or self.offboard_acked
-        return None
+        self.startup_done = True  # a failsafe HOLD before the heartbeat showed OFFBOARD:
+        return None  # decide() recovers it (offboard_acked and hold)
 
     def result(self, what: str, accepted: bool, now: float) -> None:
         """The outcome of an "offboard" / "arm" request (None result counts as refused)."""

@@ -161,6 +161,7 @@ class VehicleLink:
         self.sent = 0
         self.heartbeat_sent_at = -math.inf  # monotonic time of our own last HEARTBEAT
         self.custom_mode = 0
+        self.critical = False  # the vehicle's HEARTBEAT says a failsafe is active
         self.armed = False
         self.faults = faults or fault_plan.injector_for(fault_plan.MAVLINK, agent_id, "offboard")
 
@@ -255,6 +256,7 @@ class VehicleLink:
             self.heartbeat = msg
             self.heartbeat_time = now
             self.custom_mode = int(msg.custom_mode)
+            self.critical = int(msg.system_status) == mavlink.MAV_STATE_CRITICAL
             self.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         elif kind == "ODOMETRY":
             self._odometry(msg, now)

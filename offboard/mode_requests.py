@@ -60,6 +60,7 @@ class ModeRequests:
             armed=link.armed,
             failsafe_texts=link.failsafe_texts,
             streaming_s=streaming_s,
+            critical=link.critical,
         )
         want = self.keeper.decide(now, view)
         if want == "offboard":

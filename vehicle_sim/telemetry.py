@@ -23,9 +23,11 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames
 from swarm_common.enums import VehicleMode
+from vehicle_sim import geo
 from vehicle_sim.battery import BatteryModel
 from vehicle_sim.mavlink_extra import MAVLINK_MSG_ID_PROTOCOL_VERSION as MSG_ID_PROTOCOL_VERSION
 from vehicle_sim.mavlink_extra import MAVLink_protocol_version_message
+from vehicle_sim.setpoints import TM_RATES_IGNORE
 
 if TYPE_CHECKING:
     from vehicle_sim.vehicle import Vehicle, VehicleConfig
@@ -51,15 +53,6 @@ SENSORS = (
 )
 BATTERY_CRITICAL = 0.07  # remaining charge below which the battery bit is unhealthy (PX4)
 
-TM_RATES_IGNORE = (
-    M.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
-    | M.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
-    | M.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
-)
-TM_THRUST_IGNORE = M.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE
-TM_ATT_IGNORE = M.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
-
-EARTH_R = 6378137.0  # m, WGS-84 equatorial radius (flat-earth lat/lon around home)
 MAVLINK_WIRE_VERSION = 3  # HEARTBEAT.mavlink_version
 SYS_LOAD_PERMILLE = 100  # SYS_STATUS.load: 10 %
 TEMPERATURE_UNKNOWN = 32767  # BATTERY_STATUS.temperature: INT16_MAX = not measured
@@ -124,10 +117,8 @@ def rates_frd(v: Vehicle) -> tuple[float, float, float]:
 
 
 def latlon(cfg: VehicleConfig, ned: np.ndarray) -> tuple[int, int]:
-    """(lat, lon) in degE7 of a NED offset from home (flat earth)."""
-    lat = cfg.home_lat + math.degrees(ned[0] / EARTH_R)
-    lon = cfg.home_lon + math.degrees(ned[1] / (EARTH_R * math.cos(math.radians(cfg.home_lat))))
-    return int(round(lat * 1e7)), int(round(lon * 1e7))
+    """(lat, lon) in degE7 of a NED offset from the geodetic origin (:mod:`vehicle_sim.geo`)."""
+    return geo.latlon_e7(cfg, ned)
 
 
 def _alt_mm(cfg: VehicleConfig, pn: np.ndarray) -> int:
@@ -183,6 +174,8 @@ def heartbeat(v: Vehicle, sim_t: float = 0.0) -> M.MAVLink_heartbeat_message:
         base |= M.MAV_MODE_FLAG_SAFETY_ARMED
     if v.terminated:
         status = M.MAV_STATE_FLIGHT_TERMINATION
+    elif v.failsafe and v.armed:  # as PX4 reports while a failsafe action is active
+        status = M.MAV_STATE_CRITICAL
     else:
         status = M.MAV_STATE_ACTIVE if v.armed else M.MAV_STATE_STANDBY
     return M.MAVLink_heartbeat_message(

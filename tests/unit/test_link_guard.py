@@ -255,3 +255,27 @@ def test_failsafe_between_offboard_and_arm_is_recovered() -> None:
     k.decide(1.2, _view(False, hold=True, texts=1))
     assert k.startup_done and k.recovering
     assert k.decide(1.3, _view(False, hold=True, texts=1)) == "offboard"
+
+
+def test_failsafe_whose_statustext_was_lost_is_recovered_from_the_heartbeat() -> None:
+    """20 % loss can drop the failsafe STATUSTEXT; the HEARTBEAT's MAV_STATE_CRITICAL
+    (repeated every second) is evidence enough, so the HOLD is not taken for a third
+    party's and respected forever."""
+    k = _started()
+    for t in np.arange(5.0, 8.0, 0.1):
+        k.decide(float(t), VehicleView(False, True, True, 0, 5.0, critical=True))
+    assert k.recovering and not k.respect
+
+
+def test_no_warning_while_the_heartbeat_still_shows_the_old_mode(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    k = OffboardKeeper(stream_s=0.6, manual_start=False)
+    assert k.decide(1.0, _view(False, armed=False)) == "offboard"
+    k.result("offboard", True, 1.0)
+    assert k.decide(1.1, _view(False, armed=False)) == "arm"
+    k.result("arm", True, 1.1)
+    with caplog.at_level("WARNING"):
+        for t in (1.2, 1.5, 1.9):  # armed, heartbeat still POSCTL: nothing to judge yet
+            assert k.decide(t, _view(False, hold=False)) is None
+    assert not k.respect and not caplog.records
