@@ -229,6 +229,19 @@ def free_tcp_port() -> int:
     return int(port)
 
 
+def stop_processes(procs: list[subprocess.Popen], grace_s: float = 15.0) -> None:
+    """SIGTERM every process still running, wait ``grace_s`` for each, then SIGKILL."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    for p in procs:
+        try:
+            p.wait(grace_s)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(5)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Mark each test by its layer folder: ``unit`` (pure, seconds) or ``integration``
     (subprocesses, UDP and Zenoh)."""

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
+from conftest import CUBE8, ROOT, free_port_offset, stop_processes  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from gcs.launch_spec import LaunchSpec  # noqa: E402
@@ -133,18 +133,6 @@ def _port_open(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def _stop(procs: list[subprocess.Popen]) -> None:
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-    for p in procs:
-        try:
-            p.wait(15)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait(5)
-
-
 def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
     sc = load_scenario(CUBE8)
     off = free_port_offset()
@@ -172,7 +160,7 @@ def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
         t_landed = obs.time_s()
         assert all(p.poll() is None for p in procs), "a process died"
     finally:
-        _stop(procs)
+        stop_processes(procs)
         if router.poll() is None:
             router.kill()
         obs.close()
