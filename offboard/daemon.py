@@ -52,9 +52,10 @@ from offboard.agent import (
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
 from offboard.daemon_peers import peer_ids
-from offboard.link_guard import OffboardKeeper, PayloadGuard
+from offboard.link_guard import PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.mode_requests import ModeRequests, SwarmReady
+from offboard.offboard_keeper import OffboardKeeper
 from offboard.runner_loss import LAND_AFTER_S, RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.sensing_source import SwarmSensing
 from offboard.wire_convert import (

@@ -1,5 +1,5 @@
 """The daemon's mode requests to its vehicle: start-up OFFBOARD / arm, OFFBOARD again after
-a failsafe (the policy of offboard.link_guard.OffboardKeeper, docs/security.md "Commands
+a failsafe (the policy of offboard.offboard_keeper.OffboardKeeper, docs/security.md "Commands
 never block; OFFBOARD after a failsafe"), and the disarm after a loss landing. Every
 request is a non-blocking COMMAND_LONG with retries (offboard.mavlink_link); this module
 only decides and collects outcomes, once per main-loop iteration."""
@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import logging
 
-from offboard.link_guard import OffboardKeeper, VehicleView
 from offboard.mavlink_link import VehicleLink, mavlink
+from offboard.offboard_keeper import OffboardKeeper, VehicleView
 from swarm_common import px4
 
 log = logging.getLogger(__name__)

@@ -14,7 +14,7 @@ one simulator or one GPS time base, so the same on every vehicle):
    quantised.
 3. **Commit.** From t_L − ``LEAD_S`` on the daemon streams its own setpoints again: a PD +
    feed-forward hold at the vehicle's measured position (:class:`OdometryLander`), so the
-   OFFBOARD recovery policy (offboard.link_guard.OffboardKeeper) asks for OFFBOARD back
+   OFFBOARD recovery policy (offboard.offboard_keeper.OffboardKeeper) asks for OFFBOARD back
    after 0.6 s of stream; the vehicle is in OFFBOARD before t_L. Truth coming back before
    the commit: normal flight resumes. After the commit the landing is finished whatever
    happens on Zenoh.

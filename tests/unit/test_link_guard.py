@@ -12,15 +12,13 @@ from offboard.link_guard import (
     MAX_JUMP_PERIODS,
     REANCHOR_COUNT,
     STEP_AHEAD,
-    Backoff,
     CommandRetry,
     DropLog,
-    OffboardKeeper,
     PayloadGuard,
     StampGuard,
-    VehicleView,
     odometry_fields_ok,
 )
+from offboard.offboard_keeper import Backoff, OffboardKeeper, VehicleView
 from swarm_common import wire
 
 HZ = 50

@@ -130,9 +130,9 @@ class _Link:
 
 
 def test_disarm_outcome_is_not_taken_for_an_arm() -> None:
-    from offboard.link_guard import OffboardKeeper
     from offboard.mavlink_link import mavlink
     from offboard.mode_requests import ModeRequests
+    from offboard.offboard_keeper import OffboardKeeper
 
     link = _Link()
     keeper = OffboardKeeper(0.6, manual_start=True)
