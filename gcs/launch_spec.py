@@ -61,8 +61,10 @@ def secure_dir() -> Path:
 
 def split_packs(ids: list[int], processes: int | None) -> list[list[int]]:
     """``ids`` in ``processes`` contiguous groups whose sizes differ by at most one (None:
-    one group per agent)."""
+    one group per agent); :class:`LaunchError` (one line) unless 1 ≤ processes ≤ agents."""
     n = len(ids) if processes is None else processes
+    if not 1 <= n <= len(ids):
+        raise LaunchError(f"--processes {n}: must be 1..{len(ids)} (the number of agents)")
     size, extra = divmod(len(ids), n)
     out, at = [], 0
     for p in range(n):
@@ -158,10 +160,7 @@ class LaunchSpec:
     daemon_processes: int | None = None
 
     def __post_init__(self) -> None:
-        n, procs = len(self.sc.ids), self.daemon_processes
-        if procs is not None:
-            if not 1 <= procs <= n:
-                raise LaunchError(f"--processes {procs}: must be 1..{n} (the number of agents)")
+        self.packs()  # validates daemon_processes (split_packs)
         problem = swarm_name_problem(self.swarm_name)
         if problem is not None:
             raise LaunchError(f"swarm name {self.swarm_name!r}: {problem}")

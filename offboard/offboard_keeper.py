@@ -58,7 +58,8 @@ class OffboardKeeper:
 
     Recovery policy (docs/security.md): once the mission has had the vehicle in OFFBOARD,
     leaving it is a *failsafe* when the vehicle is armed and in HOLD and either it said
-    "failsafe" (STATUSTEXT) since it was last in OFFBOARD, or the daemon itself had a fault
+    so ("failsafe" in a STATUSTEXT since it was last in OFFBOARD, or MAV_STATE_CRITICAL in
+    its HEARTBEAT, which survives a lost STATUSTEXT), or the daemon itself had a fault
     (:meth:`fault`: a stalled loop, a stopped stream, lost truth) within FAULT_WINDOW_S
     before it left. Then, as soon as setpoints have streamed for ``stream_s`` again,
     OFFBOARD is asked for with exponential backoff (0.5 s doubling to 4 s). Anything else

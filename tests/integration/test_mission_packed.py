@@ -74,3 +74,12 @@ def test_offboard_agents_bad_input_one_line(extra: list[str], expect: str) -> No
     assert out.returncode == 2
     assert expect in out.stderr.strip().splitlines()[-1]
     assert "Traceback" not in out.stderr
+
+
+def test_more_processes_than_agents_exits_2_with_one_line() -> None:
+    r = subprocess.run([sys.executable, "-m", "gcs.cli", "mission", "run", CUBE8,
+                        "--processes", "9", "--duration", "0.1"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert lines == ["gcs mission run: --processes 9: must be 1..8 (the number of agents)"]
