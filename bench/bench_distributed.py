@@ -4,7 +4,8 @@
         [--processes N] [--skip-realtime]
 
 Prints (no assertions): the lockstep stepping rate (sim seconds per wall second, start-up
-excluded), CPU seconds, CPU ms per step and peak RSS of every process (with
+excluded), CPU seconds, CPU ms per step and peak RSS of every process, over the whole run
+and over the stepping alone (CPU from the first step on, start-up excluded) (with
 ``--processes N`` the daemons packed into N processes: also per agent, and RSS / agents),
 the daemons' mean CPU ms per agent-step, and for a real-time run the
 setpoint-to-odometry latency distribution and the fraction of late cycles (> one
@@ -45,7 +46,13 @@ def main() -> None:
         print(f"lockstep {sc.name} {args.duration:.0f} s, {layout}: stepping "
               f"{run['stepping_realtime_factor']:.2f}x real time "
               f"(whole run incl. start-up {args.duration / run['wall_s']:.2f}x)")
+        print("whole run (start-up included):")
         print_processes(run["processes"], args.duration * sc.run.control_hz)
+        first = run.get("processes_at_first_step")
+        if first:
+            print(f"stepping only (CPU from the first step to the end, "
+                  f"{run['steps_from_first']} steps; start-up excluded):")
+            print_processes(stepping_usage(run["processes"], first), run["steps_from_first"])
         m = doc["metrics"]
         print(f"min_distance_m {m['min_distance_m']:.3f}  collisions {m['collisions']}")
         if not args.skip_realtime:
@@ -57,6 +64,14 @@ def main() -> None:
             m = doc["metrics"]
             print(f"real-time min_distance_m {m['min_distance_m']:.3f}  "
                   f"collisions {m['collisions']}")
+
+
+def stepping_usage(
+    end: dict[str, dict[str, float]], first: dict[str, dict[str, float]]
+) -> dict[str, dict[str, float]]:
+    """Each process's CPU spent after the first step (peak RSS as at the end)."""
+    return {name: {"cpu_s": u["cpu_s"] - first[name]["cpu_s"], "peak_rss_mib": u["peak_rss_mib"]}
+            for name, u in end.items() if name in first}
 
 
 def print_processes(procs: dict[str, dict[str, float]], steps: float) -> None:

@@ -140,6 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="real time: when the runner or router is lost, land on the "
                     f"coordinated plan S s after the last truth (default {LAND_AFTER_S:g}, at "
                     f"least {MIN_LAND_AFTER_S:g}; 0 = hold until truth is back)")
+    ap.add_argument("--keep-streams", action="store_true",
+                    help="keep the vehicle's default telemetry on the API link (by default the "
+                         "daemon switches off the streams it does not read)")
     ap.add_argument("--solo", action="store_true",
                     help="arm and fly without waiting for the rest of the swarm (bench tests "
                     "of one vehicle; default: wait until every agent has published)")
@@ -247,6 +250,7 @@ def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect
         signing_key=key,
         loss_land_after=land_after,
         solo=args.solo,
+        keep_streams=args.keep_streams,
         sensing=SensingSource(args.sensing),
     )
     log.info("agent %d: vehicle link %s (system %d, component %d, signing %s); Zenoh %s "

@@ -110,6 +110,7 @@ class DaemonConfig:
     loss_land_after: float = LAND_AFTER_S
     solo: bool = False  # fly without waiting for the swarm (offboard.mode_requests.SwarmReady)
     sensing: SensingSource = SensingSource.TRUTH  # the sensor's inputs (offboard.sensing_source)
+    keep_streams: bool = False  # leave the vehicle's default telemetry on (offboard.stream_trim)
 
 
 class OffboardDaemon(DaemonCommands):
@@ -127,7 +128,8 @@ class OffboardDaemon(DaemonCommands):
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed, form=form)
         self.control_hz = int(sc.run.control_hz)
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, self.control_hz, cfg.lockstep,
-                                tlog=cfg.tlog, signing_key=cfg.signing_key)
+                                tlog=cfg.tlog, signing_key=cfg.signing_key,
+                                trim_streams=not cfg.keep_streams)
         guard = PayloadGuard(list(sc.ids), list(sc.leader_ids), self.control_hz, cfg.agent_id)
         self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard,
                             odometry=cfg.sensing is SensingSource.ODOMETRY, peers=self.others)

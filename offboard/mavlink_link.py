@@ -47,6 +47,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from offboard.link_guard import CommandRetry, DropLog, StampGuard, odometry_fields_ok  # noqa: E402
+from offboard.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
 from swarm_common import faults as fault_plan  # noqa: E402
 from swarm_common import px4  # noqa: E402
 from swarm_common.faults import FaultInjector  # noqa: E402
@@ -125,9 +126,12 @@ class VehicleLink:
         tlog: str | None = None,
         signing_key: bytes | None = None,
         faults: FaultInjector | None = None,
+        trim_streams: bool = True,
     ) -> None:
         """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
-        process loaded (:func:`swarm_common.faults.injector_for`)."""
+        process loaded (:func:`swarm_common.faults.injector_for`). ``trim_streams``: ask
+        the vehicle to stop the telemetry the daemon does not read
+        (:mod:`offboard.stream_trim`)."""
         self.agent_id = agent_id
         self.url = url
         self.conn: Any = None
@@ -164,6 +168,7 @@ class VehicleLink:
         self.critical = False  # the vehicle's HEARTBEAT says a failsafe is active
         self.armed = False
         self.faults = faults or fault_plan.injector_for(fault_plan.MAVLINK, agent_id, "offboard")
+        self.trim = StreamTrim(trim_streams)
 
     # -- receive ------------------------------------------------------------------------
     def _log(self, buf: bytes) -> None:
@@ -250,6 +255,8 @@ class VehicleLink:
                      self.agent_id, self.agent_id, COMP_AUTOPILOT, where)
         self._log(msg.get_msgbuf())
         self._handle(msg, kind, now)
+        if self.trim.on_message(kind, now):
+            self._send(stop_streams_message(self.agent_id))
 
     def _handle(self, msg: Any, kind: str, now: float) -> None:
         if kind == "HEARTBEAT":

@@ -21,6 +21,7 @@ packed once and sent to every destination that has no schedule of its own.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import common as M
@@ -47,6 +48,9 @@ class StreamSchedule:
         self.intervals: dict[int, float] = {mid: _interval(hz) for mid, hz in rates.items()}
         self.intervals[M.MAVLINK_MSG_ID_ODOMETRY] = 1.0 / odometry_hz if odometry_hz else 0
         self._next_due: dict[int, float] = {}
+        # (skip, earliest next due time of the streams a due(…, skip) call considers):
+        # calls before that time return at once (they run on every loop pass)
+        self._quiet: tuple[tuple[int, ...], float] | None = None
 
     def __contains__(self, mid: int) -> bool:
         return mid in self.intervals
@@ -69,10 +73,15 @@ class StreamSchedule:
             iv = iv if iv > 0 else HEARTBEAT_MAX_S
             self.intervals[mid] = min(HEARTBEAT_MAX_S, max(HEARTBEAT_MIN_S, iv))
         self._next_due[mid] = wall
+        self._quiet = None
 
     def due(self, wall: float, skip: tuple[int, ...] = ()) -> list[int]:
         """The streams whose interval has elapsed at ``wall`` (and book their next time)."""
+        quiet = self._quiet
+        if quiet is not None and quiet[0] == skip and wall + DUE_SLACK_S < quiet[1]:
+            return []
         out: list[int] = []
+        earliest = math.inf
         for mid, iv in self.intervals.items():
             if iv <= 0 or mid in skip:
                 continue
@@ -85,6 +94,8 @@ class StreamSchedule:
                 if due < wall:
                     due = wall + iv
             self._next_due[mid] = due
+            earliest = min(earliest, due)
+        self._quiet = (skip, earliest)
         return out
 
 
