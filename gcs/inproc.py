@@ -138,7 +138,8 @@ def run_inproc(
             log.info("%s", line)
     published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
     # each agent reads its peers' estimates only, as its daemon subscribes to them only
-    peers = {ag.id: frozenset(peer_ids(form, ag.id)) for ag in agents}
+    # (in scenario order, as ``published`` is: O(peers) per agent, not O(N))
+    peers = {ag.id: tuple(j for j in sc.ids if j in set(peer_ids(form, ag.id))) for ag in agents}
     n = sc.n
     ser = empty_series(np.arange(n_steps) * dt, n)
     md_run = math.inf
@@ -157,8 +158,7 @@ def run_inproc(
         for i, ag in enumerate(agents):
             e = published[ag.id]
             ser.z1[k, i], ser.z2[k, i] = e.z1, e.z2
-            mine = peers[ag.id]
-            nb = {j: v for j, v in published.items() if j in mine} if comm else {}
+            nb = {j: published[j] for j in peers[ag.id]} if comm else {}
             out = ag.step(k, t, tp, tv, nb, comm)
             roll, pitch, yaw, fn = wire_to_command(out.q_ned, out.thrust_norm, f_max)
             dyn.set_command(i, roll, pitch, yaw, fn)

@@ -41,6 +41,10 @@ CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as inp
 MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s at 50 Hz)
 
 
+# (id(formation), observer gains) -> (that formation, its report): held so the id stays its
+_gain_reports: dict[tuple[object, ...], tuple[Formation, GainReport]] = {}
+
+
 @dataclass
 class _Peers:
     """Neighbour data predicted to t_k, by scenario index."""
@@ -123,13 +127,21 @@ class FollowerAgent(AgentBase):
 
     @property
     def gains(self) -> GainReport:
-        """DESO gain check (Departure 7), computed on first use."""
+        """DESO gain check (Departure 7), computed on first use, once per formation and
+        observer gains in a process (every follower of a formation has the same report;
+        its dense eigenvalue problems cost seconds at 100+ agents)."""
         if self._gains is None:
             obs = self.sc.observer
-            self._gains = gain_report(
-                self.form, tuple(obs.beta), self.dt, obs.substeps, obs.leader_anchor,
-                tuple(obs.velocity_gain),
-            )
+            beta, kappa = tuple(obs.beta), tuple(obs.velocity_gain)
+            key = (id(self.form), beta, self.dt, obs.substeps, obs.leader_anchor, kappa)
+            hit = _gain_reports.get(key)
+            if hit is None or hit[0] is not self.form:
+                hit = (self.form, gain_report(self.form, beta, self.dt, obs.substeps,
+                                              obs.leader_anchor, kappa))
+                if len(_gain_reports) >= 8:
+                    del _gain_reports[next(iter(_gain_reports))]
+                _gain_reports[key] = hit
+            self._gains = hit[1]
         return self._gains
 
     def initial_estimate(self) -> NeighbourEstimate:

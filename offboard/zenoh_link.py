@@ -161,7 +161,10 @@ class SwarmBus:
             if not ok(odo.step):
                 del self.latest_odometry[j]
         for store in (self.truth, self.estimates, self.odometry):
-            if store and not (ok(min(store)) and ok(max(store))):
+            # oldest first, one at a time: usually one step leaves the window per step
+            while store and not ok(oldest := min(store)):
+                del store[oldest]
+            if store and not ok(max(store)):
                 for s in [s for s in store if not ok(s)]:
                     del store[s]
 
