@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import tempfile
 from pathlib import Path
 
@@ -52,7 +53,9 @@ def main() -> None:
         if first:
             print(f"stepping only (CPU from the first step to the end, "
                   f"{run['steps_from_first']} steps; start-up excluded):")
-            print_processes(stepping_usage(run["processes"], first), run["steps_from_first"])
+            stepping = stepping_usage(run["processes"], first)
+            print_processes(stepping, run["steps_from_first"])
+            print_outside_control(stepping, Path(tmp) / "lockstep")
         m = doc["metrics"]
         print(f"min_distance_m {m['min_distance_m']:.3f}  collisions {m['collisions']}")
         if not args.skip_realtime:
@@ -72,6 +75,26 @@ def stepping_usage(
     """Each process's CPU spent after the first step (peak RSS as at the end)."""
     return {name: {"cpu_s": u["cpu_s"] - first[name]["cpu_s"], "peak_rss_mib": u["peak_rss_mib"]}
             for name, u in end.items() if name in first}
+
+
+CONTROL_LINE = re.compile(r"agent (\d+): stopped;.*control CPU ([0-9.]+) s over (\d+) steps")
+
+
+def print_outside_control(stepping: dict[str, dict[str, float]], run_dir: Path) -> None:
+    """Daemon CPU per agent-step outside the control law: stepping CPU of the daemon
+    processes minus the CPU their agents spent in ``agent.step`` (each daemon's last log
+    line), over the control steps they ran."""
+    control, steps = 0.0, 0
+    for log_path in sorted(run_dir.glob("offboard-*.log")):
+        for m in CONTROL_LINE.finditer(log_path.read_text(errors="replace")):
+            control, steps = control + float(m.group(2)), steps + int(m.group(3))
+    total = sum(u["cpu_s"] for name, u in stepping.items() if name.startswith("offboard-"))
+    if steps == 0:
+        print("daemon control CPU: no 'control CPU' lines in the daemons' logs")
+        return
+    print(f"daemons, stepping: {1000 * total / steps:.2f} ms CPU per agent-step, of which "
+          f"control {1000 * control / steps:.2f} ms and outside control "
+          f"{1000 * (total - control) / steps:.2f} ms ({steps} agent-steps)")
 
 
 def print_processes(procs: dict[str, dict[str, float]], steps: float) -> None:

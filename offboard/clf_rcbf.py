@@ -221,6 +221,7 @@ class _ClfRowsQP:
     input-set rows after them."""
 
     m: int
+    limit: int  # the most rows the problem may grow to
     nrow: int
     solver: osqp.OSQP
     q: np.ndarray
@@ -228,6 +229,19 @@ class _ClfRowsQP:
     u: np.ndarray
     _a: np.ndarray
     _mask_t: np.ndarray
+
+    def _setup(self, m: int) -> None:
+        raise NotImplementedError
+
+    def _fit(self, rows: int) -> None:
+        """Grow the problem (doubling, at most to ``limit``) when ``rows`` safety rows do
+        not fit. A problem sized for every other agent of a large swarm would factorise
+        hundreds of unused rows on every solve (125 agents: 250), though a follower senses
+        a dozen or two; it starts small and grows on the first step that needs more. The
+        rebuilt solver starts cold (no warm start) and is deterministic, so in-process and
+        distributed runs stay equal."""
+        if rows > self.m and self.m < self.limit:
+            self._setup(min(self.limit, max(rows, 2 * self.m)))
 
     def _solve_rows(
         self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray, rhs: np.ndarray,
@@ -288,15 +302,24 @@ class SafetyQP(_ClfRowsQP):
         violation_linear: float | None = None,
         eps: float = 1e-4,
         brake_gain: float = 2.0,
+        limit: int | None = None,
     ) -> None:
-        self.m = int(max_pairs)
+        """Room for ``max_pairs`` RCBF rows, grown on demand up to ``limit`` rows (default:
+        ``max_pairs``; :meth:`_ClfRowsQP._fit`)."""
         self.u_lo = np.asarray(u_lo, dtype=float)
         self.u_hi = np.asarray(u_hi, dtype=float)
         self.c = float(clf_c)
         self.brake_gain = brake_gain
         # exact penalty: M must exceed every multiplier, incl. the CLF row's 2ρδ (δ ≤ ~16 m/s²)
         self.lin_sigma = float(violation_linear or max(1e3, 50.0 * rho))
-        m = self.m
+        self._weights = (float(rho), float(violation_weight), float(eps))
+        self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
+        self._setup(int(max_pairs))
+
+    def _setup(self, m: int) -> None:
+        """(Re)build the OSQP problem with room for ``m`` RCBF rows."""
+        self.m = m
+        rho, violation_weight, eps = self._weights
         nrow = 1 + m + 3 + 1
         self.nrow = nrow
         pat = np.zeros((nrow, 5))
@@ -346,6 +369,7 @@ class SafetyQP(_ClfRowsQP):
         if len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all()):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_c, QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0, False)
+        self._fit(len(rhs))
         m = self.m
         k = min(len(rhs), m)
         finite = np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k])) and np.all(

@@ -24,6 +24,9 @@ from offboard.safety_filter import (
 from swarm_common.enums import Method
 from swarm_common.scenario import ControllerConfig, VehicleConfig
 
+# rows the QP is first built with (it grows on demand, offboard.clf_rcbf._ClfRowsQP._fit):
+# 8 pairs and the ground, so up to 9 agents never grow
+QP_INITIAL_ROWS = 18
 REL_ACC_SMOOTH = 0.5
 # ground barrier (offboard.dcbf.ground_rows): its class-K gain (1/s) and the bound on the
 # error of the predicted own vertical acceleration (m/s²): thrust lag τ_F = 0.03 s makes
@@ -70,7 +73,9 @@ class DcbfFilter(SafetyFilter):
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
         the prediction horizon is T = τ_rp + dt."""
         uset = input_set_of(self.ctl, veh)
-        self.qp = DcbfQP(2 * (len(self.leader_mask) - 1) + 2, uset, self.ctl.rho, self.ctl.clf_c)
+        rows = 2 * (len(self.leader_mask) - 1) + 2  # two per other agent, two for the ground
+        self.qp = DcbfQP(min(rows, QP_INITIAL_ROWS), uset, self.ctl.rho, self.ctl.clf_c,
+                         limit=rows)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
         self.dt = dt

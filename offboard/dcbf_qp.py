@@ -31,12 +31,22 @@ class DcbfQP(_ClfRowsQP):
 
     def __init__(
         self, max_pairs: int, uset: InputSet, rho: float, clf_c: float,
-        violation_weight: float = 100.0, eps: float = 1e-5,
+        violation_weight: float = 100.0, eps: float = 1e-5, limit: int | None = None,
     ) -> None:
-        self.m = m = int(max_pairs)
+        """Room for ``max_pairs`` barrier rows, grown on demand up to ``limit`` rows
+        (default: ``max_pairs``; :meth:`_ClfRowsQP._fit`)."""
         self.uset = uset
         self.c = float(clf_c)
         self.lin_sigma = max(1e3, 50.0 * rho)
+        self._weights = (float(rho), float(violation_weight), float(eps))
+        self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
+        self._setup(int(max_pairs))
+
+    def _setup(self, m: int) -> None:
+        """(Re)build the OSQP problem with room for ``m`` barrier rows."""
+        self.m = m
+        rho, violation_weight, eps = self._weights
+        uset = self.uset
         a_u, lo_u, hi_u = uset.rows()
         self.a_u, self.lo_u, self.hi_u = a_u, lo_u, hi_u
         nu = len(lo_u)
@@ -77,6 +87,7 @@ class DcbfQP(_ClfRowsQP):
     ) -> QPResult:
         """Solve for u (always inside the input set); ``brake`` (3,) is the fallback."""
         t0 = time.perf_counter()
+        self._fit(len(rhs))
         k = min(len(rhs), self.m)
         if self._inside(u_nom) and (k == 0 or bool((g[:k] @ u_nom >= rhs[:k]).all())):
             us = (time.perf_counter() - t0) * 1e6

@@ -115,6 +115,7 @@ class FollowerAgent(AgentBase):
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
         self.ids = sc.ids
+        self._index_of = {aid: j for j, aid in enumerate(sc.ids)}
         nb = set(self.form.neighbours[self.index])
         self._peers = [
             (j, j in nb, bool(self.leader_mask[j]))
@@ -251,7 +252,8 @@ class FollowerAgent(AgentBase):
         sensed = set(int(j) for j in sel)
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
-        for j in range(self.sc.n):
+        # only agents heard from can be predicted (the others' get() is None): O(peers)
+        for j in sorted(self._index_of[a] for a in self.pred.last if a in self._index_of):
             if j == self.index or j in sensed:
                 continue
             aid = self.ids[j]

@@ -29,6 +29,7 @@ from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario import ControllerConfig
 
 W_SAFE = 0.5  # m/s², bound on the lumped-disturbance estimate inside the RCBF rows
+QP_INITIAL_PAIRS = 8  # RCBF rows the QP is first built with (grows on demand)
 
 
 def parse_method(method: Method | str) -> Method:
@@ -168,7 +169,9 @@ class RcbfFilter(SafetyFilter):
         self, ctl: ControllerConfig, u_lo: np.ndarray, u_hi: np.ndarray, leader_mask: np.ndarray
     ) -> None:
         super().__init__(ctl, u_lo, u_hi, leader_mask)
-        self.qp = SafetyQP(len(leader_mask) - 1, u_lo, u_hi, ctl.rho, ctl.clf_c)
+        others = len(leader_mask) - 1  # grown on demand (offboard.clf_rcbf._ClfRowsQP._fit)
+        self.qp = SafetyQP(min(others, QP_INITIAL_PAIRS), u_lo, u_hi, ctl.rho, ctl.clf_c,
+                           limit=others)
         if ctl.tau_safe_s <= 0.0:
             raise ValueError("controller.tau_safe_s must be > 0 for the RCBF (relative degree 1)")
 

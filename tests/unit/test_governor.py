@@ -59,3 +59,27 @@ def test_slowed_exosystem_acceleration_fits_the_input_set():
     w = 2.0 * math.pi * 0.4
     assert np.linalg.norm(amp[:2]) * w * w > lim.horizontal(0.0, 0.0)
     assert peak > 0.5 * lim.horizontal(0.0, FEEDBACK_RESERVE)  # slowed, not stopped
+
+
+def test_governor_is_computed_once_per_scenario_object() -> None:
+    from dataclasses import replace
+
+    import offboard.governor as gov_mod
+
+    sc = load_scenario(CUBE8)
+    calls = []
+    real = gov_mod._governor
+
+    def counting(s):  # type: ignore[no-untyped-def]
+        calls.append(s)
+        return real(s)
+
+    gov_mod._governor = counting
+    try:
+        a = governor_for(sc)
+        assert governor_for(sc) is a and len(calls) == 1
+        other = replace(sc, leader_trajectory=replace(sc.leader_trajectory, frequency_hz=0.05))
+        b = governor_for(other)  # another scenario object: computed for it
+        assert len(calls) == 2 and b.nominal_hz == 0.05
+    finally:
+        gov_mod._governor = real

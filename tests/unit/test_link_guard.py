@@ -277,3 +277,17 @@ def test_no_warning_while_the_heartbeat_still_shows_the_old_mode(
         for t in (1.2, 1.5, 1.9):  # armed, heartbeat still POSCTL: nothing to judge yet
             assert k.decide(t, _view(False, hold=False)) is None
     assert not k.respect and not caplog.records
+
+
+def test_all_finite_one_reduction_per_array() -> None:
+    from offboard.link_guard import all_finite
+
+    ok = (np.zeros(3), np.full((4, 3), 3.4e38), np.array([-3.4e38]))
+    assert all_finite(ok)
+    assert all_finite(())
+    for bad in (np.nan, np.inf, -np.inf):
+        arr = np.zeros(9)
+        arr[4] = bad
+        assert not all_finite((np.ones(3), arr))
+    # +inf and -inf in different arrays do not cancel into a finite sum
+    assert not all_finite((np.array([np.inf]), np.array([-np.inf])))
