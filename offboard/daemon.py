@@ -39,7 +39,6 @@ from __future__ import annotations
 import logging
 import signal
 import time
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -51,12 +50,13 @@ from offboard.agent import (
 )
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
+from offboard.daemon_config import DaemonConfig
 from offboard.daemon_peers import peer_ids
 from offboard.link_guard import PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.mode_requests import ModeRequests, SwarmReady
 from offboard.offboard_keeper import OffboardKeeper
-from offboard.runner_loss import LAND_AFTER_S, RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
+from offboard.runner_loss import RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.sensing_source import SwarmSensing
 from offboard.wire_convert import (
     estimate_from_wire,
@@ -66,8 +66,7 @@ from offboard.wire_convert import (
 )
 from offboard.zenoh_link import SwarmBus
 from swarm_common import px4, wire
-from swarm_common.enums import Method, SensingSource
-from swarm_common.scenario import Scenario
+from swarm_common.enums import SensingSource
 
 log = logging.getLogger(__name__)
 
@@ -80,37 +79,6 @@ WAIT_CAP_S = 0.01
 WAIT_LOG_S = 3.0  # s: start-up waits say what they wait for this often
 __all__ = ["RUNNER_LOST_PERIODS", "TAKEOFF_LATE_S", "TAKEOFF_LEAD_S", "DaemonConfig",
            "OffboardDaemon"]
-
-
-@dataclass
-class DaemonConfig:
-    scenario: Scenario
-    agent_id: int
-    mavlink_url: str
-    swarm: str = "cube8"
-    method: Method = Method.RCBF
-    seed: int | None = None
-    lockstep: bool = True
-    tlog: str | None = None
-    heartbeat_timeout: float = 30.0
-    truth_timeout: float = 2.0
-    neighbour_timeout: float = 0.45  # must stay below vehicle-sim --step-timeout (1.0 s)
-    vehicle_lost_timeout: float = 5.0
-    stream_before_offboard: float = 0.6
-    zenoh_connect: list[str] = field(default_factory=list)
-    zenoh_listen: list[str] = field(default_factory=list)
-    zenoh_mode: str = "client"
-    manual_start: bool = False  # leave arming / OFFBOARD to the operator
-    land_at: float | None = None  # mission time (s) of a coordinated land-all
-    # HEARTBEAT period asked of the vehicle (s): how soon a third party's mode change is seen
-    heartbeat_interval: float = 0.1
-    signing_key: bytes | None = None  # MAVLink 2 signing of the vehicle link (32 bytes)
-    # real time: land this long (s) after the last truth when the runner/router is lost
-    # (offboard.runner_loss; 0 = hold until truth is back)
-    loss_land_after: float = LAND_AFTER_S
-    solo: bool = False  # fly without waiting for the swarm (offboard.mode_requests.SwarmReady)
-    sensing: SensingSource = SensingSource.TRUTH  # the sensor's inputs (offboard.sensing_source)
-    keep_streams: bool = False  # leave the vehicle's default telemetry on (offboard.stream_trim)
 
 
 class OffboardDaemon(DaemonCommands):

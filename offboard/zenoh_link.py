@@ -254,6 +254,11 @@ class SwarmBus:
         self._put(self._pub_status, wire.encode(status))
 
     def publish_odometry(self, odo: wire.Odometry) -> None:
+        """Our vehicle's odometry, when anyone subscribes to it (Zenoh's matching status:
+        a swarm flying on truth has no subscriber, and an unmatched put would still cost
+        the encoding and the router's work every step)."""
+        if not self._pub_odo.matching_status.matching:
+            return
         self._put(self._pub_odo, wire.encode(odo))
 
     def _put(self, pub: Any, payload: bytes) -> None:
