@@ -1,7 +1,7 @@
 """Distributed cube8: lockstep × real time, CPU and RSS per process; real-time latency.
 
     .venv/bin/python bench/bench_distributed.py [--duration 20] [--port-offset 900]
-        [--processes N] [--skip-realtime]
+        [--processes N] [--default-streams always|on-contact] [--scenario FILE] [--skip-realtime]
 
 Prints (no assertions): the lockstep stepping rate (sim seconds per wall second, start-up
 excluded), CPU seconds, CPU ms per step and peak RSS of every process, over the whole run
@@ -22,6 +22,7 @@ from pathlib import Path
 
 from gcs.mission import run_and_score
 from offboard.daemon_agents import parse_agents
+from swarm_common.enums import DefaultStreams
 from swarm_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,6 +34,9 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--port-offset", type=int, default=900)
     ap.add_argument("--skip-realtime", action="store_true")
+    ap.add_argument("--default-streams", choices=[d.value for d in DefaultStreams],
+                    default=DefaultStreams.ALWAYS.value,
+                    help="the simulator's default telemetry (gcs mission run --default-streams)")
     ap.add_argument("--processes", type=int, default=None,
                     help="pack the daemons into N processes (default: one per agent)")
     args = ap.parse_args()
@@ -40,10 +44,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         doc = run_and_score(sc, Path(tmp) / "lockstep", "rcbf", None, args.duration,
                             port_offset=args.port_offset, show_progress=False,
-                            processes=args.processes)
+                            processes=args.processes,
+                            default_streams=DefaultStreams(args.default_streams))
         run = doc["run"]
         layout = ("one process per agent" if args.processes is None
                   else f"{args.processes} daemon processes")
+        layout += f", default streams {args.default_streams}"
         print(f"lockstep {sc.name} {args.duration:.0f} s, {layout}: stepping "
               f"{run['stepping_realtime_factor']:.2f}x real time "
               f"(whole run incl. start-up {args.duration / run['wall_s']:.2f}x)")

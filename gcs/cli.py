@@ -37,7 +37,7 @@ from typing import Any
 
 from gcs.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.launch_spec import add_signing_flags
-from swarm_common.enums import Method
+from swarm_common.enums import DefaultStreams, Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
 from swarm_common.zenoh_session import default_endpoint
@@ -323,7 +323,12 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="... at this mission time (s)")
     d.add_argument("--processes", type=_int_in(1, 10_000), default=None, metavar="N",
                    help="pack the agents' daemons into N processes (default: one per agent; "
-                   "packed runs go without Zenoh authentication)")
+                   "each packed process authenticates as one Zenoh user)")
+    d.add_argument("--default-streams", choices=[x.value for x in DefaultStreams],
+                   default=DefaultStreams.ALWAYS.value,
+                   help="the simulator's default telemetry: always (as PX4: to the GCS port "
+                   "whether or not anyone listens) or on-contact (HEARTBEAT only until a "
+                   "ground station there speaks; cheaper for large batch runs)")
     add_signing_flags(d)
     add_fault_flags(d)
     _add_allow_infeasible(r)

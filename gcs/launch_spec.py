@@ -23,6 +23,7 @@ from typing import Any
 
 from gcs.procs import python_entry
 from offboard.daemon_agents import format_agents
+from swarm_common.enums import DefaultStreams
 from swarm_common.ports import GCS_PORT, MAX_ID, port_free, vehicle_ports
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario, swarm_name_problem
 from swarm_common.signing import generate_key, load_key
@@ -141,7 +142,9 @@ class LaunchSpec:
     ``daemon_processes``: pack the daemons into this many processes (None: one per agent, the
     realistic layout); a packed process holds one Zenoh session for several agents and
     authenticates as one user allowed to publish its own agents' keys only
-    (:func:`~swarm_common.zenoh_session.pack_user`).
+    (:func:`~swarm_common.zenoh_session.pack_user`). ``default_streams``: the simulator's
+    ``--default-streams`` (``on-contact``: a lockstep batch run with no ground station
+    listening pays nothing for the vehicles' default telemetry).
     """
 
     sc: Scenario
@@ -158,6 +161,8 @@ class LaunchSpec:
     signing_key: Path | None = None
     unsigned_gcs_link: bool = False
     daemon_processes: int | None = None
+    # the simulator's --default-streams (vehicle_sim: telemetry to a silent default remote)
+    default_streams: DefaultStreams = DefaultStreams.ALWAYS
 
     def __post_init__(self) -> None:
         self.packs()  # validates daemon_processes (split_packs)
@@ -237,6 +242,8 @@ class LaunchSpec:
             argv += ["--step-timeout", f"{LOCKSTEP_STEP_TIMEOUT_S}", "--lockstep"]
         if self.unsigned_gcs_link:
             argv.append("--unsigned-gcs-link")
+        if self.default_streams is not DefaultStreams.ALWAYS:
+            argv += ["--default-streams", self.default_streams.value]
         return argv + self._signing_args() + self._common_args()
 
     def packs(self) -> list[list[int]]:

@@ -34,6 +34,7 @@ from gcs.router import open_router
 from gcs.run_output import print_result, write_run
 from offboard.daemon_agents import parse_agents
 from swarm_common import wire
+from swarm_common.enums import DefaultStreams
 from swarm_common.scenario import Scenario
 from swarm_common.zenoh_session import write_swarm_security
 
@@ -73,6 +74,7 @@ def run_distributed(
     secure: bool = True,
     signing: SigningChoice | None = None,
     processes: int | None = None,
+    default_streams: DefaultStreams = DefaultStreams.ALWAYS,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
@@ -85,7 +87,8 @@ def run_distributed(
     and every :data:`CHECKPOINT_EVERY_S` during the run (reason "checkpoint").
     ``processes``: pack the daemons into this many processes (None: one per agent;
     :class:`~gcs.launch_spec.LaunchSpec`); a packed process authenticates as one Zenoh
-    user that may publish its own agents' keys only.
+    user that may publish its own agents' keys only. ``default_streams``: the simulator's
+    ``--default-streams`` (:class:`~gcs.launch_spec.LaunchSpec`).
 
     Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
     busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
@@ -104,6 +107,7 @@ def run_distributed(
             sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
             sim_duration=duration + 1.0, zenoh_security=sec, signing_key=key_path,
             unsigned_gcs_link=signing.unsigned_gcs_link, daemon_processes=processes,
+            default_streams=default_streams,
         )
         spec.check_ports()
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -311,6 +315,7 @@ def run_and_score(
     land_at: float | None = None,
     signing: SigningChoice | None = None,
     processes: int | None = None,
+    default_streams: DefaultStreams = DefaultStreams.ALWAYS,
 ) -> dict[str, Any]:
     """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
 
@@ -330,6 +335,7 @@ def run_and_score(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
         on_abort=write_partial, signing=signing, processes=processes,
+        default_streams=default_streams,
     )
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
@@ -360,6 +366,7 @@ def cli_run(args: Any, sc: Scenario) -> int:
             port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
             show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
             processes=getattr(args, "processes", None),
+            default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)

@@ -120,3 +120,10 @@ class Shape(StrEnum):
     RING = "ring"  # one horizontal circle
     SPHERE = "sphere"  # Fibonacci lattice on a sphere
     HELIX = "helix"  # HELIX_PER_TURN vertices per turn, one spacing between turns
+
+
+class DefaultStreams(StrEnum):
+    """Where ``vehicle-sim`` sends a link's default telemetry (``--default-streams``)."""
+
+    ALWAYS = "always"  # to the link's default remote whether or not anyone listens (PX4)
+    ON_CONTACT = "on-contact"  # HEARTBEAT only, until a client there speaks

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
 
-from swarm_common.enums import FailsafeAction
+from swarm_common.enums import DefaultStreams, FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
 from swarm_common.scenario import (
@@ -98,6 +98,13 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--vehicles", type=int, default=None, metavar="K",
                     help="simulate only the first K agents of the scenario")  # fmt: skip
     ap.add_argument(
+        "--default-streams", choices=[d.value for d in DefaultStreams],
+        default=DefaultStreams.ALWAYS.value,
+        help="always: stream the default telemetry to each link's default remote as PX4 "
+             "does; on-contact: HEARTBEAT only until a client there speaks (a lockstep "
+             "batch run with no ground station pays nothing for telemetry)",
+    )
+    ap.add_argument(
         "--quiet", action="store_true", help="no event log on stderr (same as --log-level warning)"
     )
     add_log_level_argument(ap)
@@ -143,6 +150,7 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
     return SimOptions(
         signing_key=key,
         unsigned_gcs=args.unsigned_gcs_link,
+        default_streams=DefaultStreams(args.default_streams),
         lockstep=args.lockstep,
         seed=args.seed,
         port_offset=args.port_offset,

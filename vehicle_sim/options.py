@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from swarm_common.enums import FailsafeAction
+from swarm_common.enums import DefaultStreams, FailsafeAction
 from swarm_common.scenario import Scenario
 
 
@@ -31,6 +31,9 @@ class SimOptions:
     params_file: str | None = None  # --params-file: per-vehicle PX4 parameters (JSON)
     signing_key: bytes | None = field(default=None, repr=False)  # never printed
     unsigned_gcs: bool = False  # GCS link: unsigned telemetry requests allowed
+    # --default-streams: a link's default remote gets the telemetry always (PX4) or only
+    # once a client there has spoken (HEARTBEAT before that; vehicle_sim.server_io)
+    default_streams: DefaultStreams = DefaultStreams.ALWAYS
 
 
 def restrict(sc: Scenario, k: int | None) -> Scenario:

@@ -19,6 +19,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import signing
+from swarm_common.enums import DefaultStreams
 from vehicle_sim.mavlink_link import MavlinkLink
 from vehicle_sim.vehicle import STATUSTEXT_LEN, Vehicle
 
@@ -88,10 +89,18 @@ class ServerIO:
         links = self.vlinks[v.id]
         out, v.stream_out = v.stream_out, []
         custom = {name: v.streams.custom(name) for name in links}
+        # --default-streams on-contact: a default remote nobody there has spoken from gets
+        # the HEARTBEAT (so a ground station can find the vehicle) and nothing else
+        silent = (
+            {n: ln.default_remote for n, ln in links.items() if ln.default_remote not in ln.peers}
+            if self.opts.default_streams is DefaultStreams.ON_CONTACT
+            else {}
+        )
         for msg, key in out:
             hb = msg.get_msgId() == M.MAVLINK_MSG_ID_HEARTBEAT
             targets = (
-                [(n, d) for n in links for d in dests[n] if d not in custom[n]]
+                [(n, d) for n in links for d in dests[n]
+                 if d not in custom[n] and (hb or d != silent.get(n))]
                 if key is None
                 else [key]
             )
@@ -111,6 +120,17 @@ class ServerIO:
             if self.handler_errors <= ERRORS_LOGGED:
                 self.log(f"vehicle {v.id}: cannot pack {msg.get_type()}: {exc!r}", logging.ERROR)
             return None
+
+    def heartbeat_only(self, v: Vehicle) -> bool:
+        """``--default-streams on-contact`` and no client on any of ``v``'s links takes its
+        default schedule: the default telemetry is not even built (HEARTBEAT still goes)."""
+        if self.opts.default_streams is not DefaultStreams.ON_CONTACT:
+            return False
+        for name, ln in self.vlinks[v.id].items():
+            custom = v.streams.custom(name)
+            if any(p not in custom for p in ln.peers):
+                return False
+        return True
 
     def live_peers(self, v: Vehicle) -> list[tuple[str, tuple[str, int]]]:
         return [(name, a) for name, ln in self.vlinks[v.id].items() for a in ln.peers]

@@ -345,13 +345,18 @@ class Vehicle:
         return telemetry.build(self, mid, sim_t)
 
     def periodic(
-        self, wall: float, sim_t: float, skip: tuple[int, ...] = (), live: Any = None
+        self, wall: float, sim_t: float, skip: tuple[int, ...] = (), live: Any = None,
+        heartbeat_only: bool = False,
     ) -> None:
         """Queue every stream whose interval has elapsed on the wall clock (to
-        :attr:`stream_out`); ``live``: the peers still there (others lose their rates)."""
+        :attr:`stream_out`); ``live``: the peers still there (others lose their rates);
+        ``heartbeat_only``: nobody takes the default schedule but its HEARTBEAT
+        (``--default-streams on-contact``), so nothing else of it is built."""
         if live is not None:
             self.streams.forget(live)
         for key, mid in self.streams.due(wall, skip):
+            if heartbeat_only and key is None and mid != M.MAVLINK_MSG_ID_HEARTBEAT:
+                continue
             msg = telemetry.build(self, mid, sim_t)
             if msg is not None:
                 self.stream_out.append((msg, key))

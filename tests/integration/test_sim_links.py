@@ -68,3 +68,45 @@ def test_component_heartbeat_forwarded_and_gcs_sequence_contiguous(sim_factory) 
     gaps = sum((b - a) % 256 != 1 for a, b in zip(seqs, seqs[1:], strict=False))
     assert gaps == 0, seqs[:40]
     assert sim.stop() == 0
+
+
+def _kinds(sock: socket.socket, parser: M.MAVLink, seconds: float) -> set[str]:
+    """Message types received on ``sock`` during ``seconds``."""
+    kinds: set[str] = set()
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            data = sock.recv(65535)
+        except TimeoutError:
+            continue
+        kinds.update(m.get_type() for m in parser.parse_buffer(data) or [])
+    return kinds
+
+
+def test_default_streams_on_contact_heartbeat_until_a_client_speaks(sim_factory) -> None:
+    """``--default-streams on-contact``: a silent listener on the default remotes gets the
+    HEARTBEAT (to find the vehicle) and no telemetry stream; once it speaks it gets the
+    default telemetry (ATTITUDE at 15 Hz)."""
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1", "--default-streams", "on-contact"])
+    ports = vehicle_ports(1, sim.offset)
+    gcs = _sock(ports.gcs_remote)
+    api = _sock(ports.api_remote)
+    parser = M.MAVLink(None)
+    parser.robust_parsing = True
+    gmav = M.MAVLink(None, srcSystem=255, srcComponent=190)
+    try:
+        silent = _kinds(gcs, parser, 2.5) | _kinds(api, parser, 0.5)
+        assert "HEARTBEAT" in silent
+        assert not silent & {"ATTITUDE", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED",
+                             "VFR_HUD", "SYS_STATUS", "BATTERY_STATUS"}, silent
+        got: set[str] = set()
+        end = time.monotonic() + 15.0
+        while "ATTITUDE" not in got and time.monotonic() < end:
+            g = gmav.heartbeat_encode(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            gcs.sendto(g.pack(gmav), (LOCALHOST, ports.gcs_local))
+            gmav.seq = (gmav.seq + 1) % 256
+            got |= _kinds(gcs, parser, 0.5)
+        assert "ATTITUDE" in got
+    finally:
+        gcs.close()
+        api.close()
