@@ -20,12 +20,14 @@ import numpy as np
 
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 D_FRD_FLU = np.diag([1.0, -1.0, -1.0])
+_SWAP_XY = np.array([1, 0, 2])
 
 
 def enu_to_ned(v: np.ndarray) -> np.ndarray:
     """Vector(s) (..., 3) from ENU to NED (the map is its own inverse)."""
-    v = np.asarray(v, dtype=float)
-    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+    out = np.asarray(v, dtype=float)[..., _SWAP_XY]  # a copy: (y, x, z)
+    np.negative(out[..., 2], out=out[..., 2])  # the same -z as a negation, not a stack
+    return out
 
 
 def ned_to_enu(v: np.ndarray) -> np.ndarray:
