@@ -222,6 +222,7 @@ class _ClfRowsQP:
 
     m: int
     limit: int  # the most rows the problem may grow to
+    _weights: tuple[float, float, float]  # rho, violation weight, eps (for _setup)
     nrow: int
     solver: osqp.OSQP
     q: np.ndarray
@@ -229,6 +230,15 @@ class _ClfRowsQP:
     u: np.ndarray
     _a: np.ndarray
     _mask_t: np.ndarray
+
+    def _start(
+        self, max_pairs: int, limit: int | None, rho: float, violation_weight: float, eps: float
+    ) -> None:
+        """Keep the weights, set the growth limit (default ``max_pairs``), build the problem
+        with room for ``max_pairs`` rows."""
+        self._weights = (float(rho), float(violation_weight), float(eps))
+        self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
+        self._setup(int(max_pairs))
 
     def _setup(self, m: int) -> None:
         raise NotImplementedError
@@ -312,9 +322,7 @@ class SafetyQP(_ClfRowsQP):
         self.brake_gain = brake_gain
         # exact penalty: M must exceed every multiplier, incl. the CLF row's 2ρδ (δ ≤ ~16 m/s²)
         self.lin_sigma = float(violation_linear or max(1e3, 50.0 * rho))
-        self._weights = (float(rho), float(violation_weight), float(eps))
-        self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
-        self._setup(int(max_pairs))
+        self._start(max_pairs, limit, rho, violation_weight, eps)
 
     def _setup(self, m: int) -> None:
         """(Re)build the OSQP problem with room for ``m`` RCBF rows."""

@@ -38,9 +38,7 @@ class DcbfQP(_ClfRowsQP):
         self.uset = uset
         self.c = float(clf_c)
         self.lin_sigma = max(1e3, 50.0 * rho)
-        self._weights = (float(rho), float(violation_weight), float(eps))
-        self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
-        self._setup(int(max_pairs))
+        self._start(max_pairs, limit, rho, violation_weight, eps)
 
     def _setup(self, m: int) -> None:
         """(Re)build the OSQP problem with room for ``m`` barrier rows."""
