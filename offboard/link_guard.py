@@ -165,6 +165,19 @@ def all_finite(arrays: tuple[np.ndarray, ...]) -> bool:
     return math.isfinite(total)
 
 
+def payload_finite(msg: wire.Payload) -> bool:
+    """Every float array of ``msg`` finite (truth, estimate, odometry; True for the rest).
+    A property of the payload alone: a packed process computes it once per payload
+    (``offboard.zenoh_link.DecodeCache``), not once per daemon."""
+    if isinstance(msg, wire.Estimate):
+        return all_finite((msg.z1, msg.z2, msg.z3, msg.xi, msg.zeta))
+    if isinstance(msg, wire.Truth):
+        return all_finite((msg.p, msg.v, msg.att, msg.thrust, msg.lumped))
+    if isinstance(msg, wire.Odometry):
+        return all_finite((msg.p, msg.v))
+    return True
+
+
 class PayloadGuard:
     """Receiver-side validation of Zenoh payloads for one daemon: ids of the scenario,
     steps within [ref - STEP_BEHIND, ref + STEP_AHEAD] of the daemon's own step ``ref``
@@ -189,31 +202,35 @@ class PayloadGuard:
         """``t`` finite and within two periods of ``(step + offset_steps) * dt``."""
         return math.isfinite(t) and abs(t - (step + offset_steps) * self.dt) <= 2 * self.dt
 
-    def check(self, msg: wire.Payload) -> str | None:
+    def check(self, msg: wire.Payload, finite: bool | None = None) -> str | None:
+        """None if ``msg`` is acceptable now, else why not. ``finite``: the payload's
+        :func:`payload_finite`, when the caller already knows it."""
+        if finite is None:
+            finite = payload_finite(msg)
         if isinstance(msg, wire.Truth):
-            return self._truth(msg)
+            return self._truth(msg, finite)
         if isinstance(msg, wire.Estimate):
-            return self._estimate(msg)
+            return self._estimate(msg, finite)
         if isinstance(msg, wire.Status):
             return self._status(msg)
         if isinstance(msg, wire.Odometry):
-            return self._odometry(msg)
+            return self._odometry(msg, finite)
         return self._command(msg)
 
-    def _truth(self, m: wire.Truth) -> str | None:
+    def _truth(self, m: wire.Truth, finite: bool) -> str | None:
         if m.ids != self.ids:
             return "truth ids are not the scenario's"
         if not self.step_ok(m.step) or m.step < 0:
             return f"truth step {m.step} implausible (own step {self.ref})"
         if not self._time_ok(m.step, m.t, 0):
             return f"truth t {m.t!r} does not match step {m.step}"
-        if not all_finite((m.p, m.v, m.att, m.thrust, m.lumped)) or math.isnan(m.min_dist):
+        if not finite or math.isnan(m.min_dist):
             return "truth has non-finite values"
         if len(m.armed) != len(self.ids) or len(m.mode) != len(self.ids) or m.collisions < 0:
             return "truth fields inconsistent"
         return None
 
-    def _estimate(self, m: wire.Estimate) -> str | None:
+    def _estimate(self, m: wire.Estimate, finite: bool) -> str | None:
         if m.id not in self.ids:
             return f"estimate id {m.id} not in the scenario"
         if m.step != -1 and not self.step_ok(m.step):  # -1: the initial estimate, any time
@@ -223,7 +240,7 @@ class PayloadGuard:
             return f"estimate t {m.t!r} does not match step {m.step}"
         if (m.role == "leader") != (m.id in self.leaders):
             return f"estimate role {m.role!r} is not agent {m.id}'s"
-        if not all_finite((m.z1, m.z2, m.z3, m.xi, m.zeta)):
+        if not finite:
             return "estimate has non-finite values"
         return None
 
@@ -234,12 +251,12 @@ class PayloadGuard:
             return f"status step {m.step} / t {m.t!r} implausible"
         return None
 
-    def _odometry(self, m: wire.Odometry) -> str | None:
+    def _odometry(self, m: wire.Odometry, finite: bool) -> str | None:
         if m.id not in self.ids:
             return f"odometry id {m.id} not in the scenario"
         if m.step < 0 or not self.step_ok(m.step) or not self._time_ok(m.step, m.t, 0):
             return f"odometry step {m.step} / t {m.t!r} implausible"
-        if not all_finite((m.p, m.v)):
+        if not finite:
             return "odometry has non-finite values"
         return None
 

@@ -39,7 +39,7 @@ from typing import Any
 
 import zenoh
 
-from offboard.link_guard import DropLog, PayloadGuard
+from offboard.link_guard import DropLog, PayloadGuard, payload_finite
 from swarm_common import faults as fault_plan
 from swarm_common import wire
 from swarm_common.faults import FaultInjector
@@ -61,17 +61,22 @@ class DecodeCache:
 
     def __init__(self, entries: int = CACHE_ENTRIES) -> None:
         self.entries = entries
-        self._got: dict[bytes, wire.Payload] = {}
+        self._got: dict[bytes, tuple[wire.Payload, bool]] = {}
 
     def decode(self, data: bytes) -> wire.Payload:
         """``wire.decode(data)`` (raises ``wire.WireError`` like it), remembered."""
-        msg = self._got.get(data)
-        if msg is None:
+        return self.decode_checked(data)[0]
+
+    def decode_checked(self, data: bytes) -> tuple[wire.Payload, bool]:
+        """(payload, every float finite) of ``data``, both computed once per payload."""
+        got = self._got.get(data)
+        if got is None:
             msg = wire.decode(data)
+            got = (msg, payload_finite(msg))
             if len(self._got) >= self.entries:
                 self._got.clear()
-            self._got[data] = msg
-        return msg
+            self._got[data] = got
+        return got
 
 
 PROCESS_CACHE = DecodeCache()
@@ -132,14 +137,14 @@ class SwarmBus:
         """The payload if it decodes to ``kind`` and passes the guard; else None (counted)."""
         now = time.monotonic()
         try:
-            msg = self.cache.decode(sample.payload.to_bytes())
+            msg, finite = self.cache.decode_checked(sample.payload.to_bytes())
         except wire.WireError as exc:
             self.drops.drop("undecodable", str(exc), now)
             return None
         if not isinstance(msg, kind):
             self.drops.drop("wrong kind", f"{type(msg).__name__} on {sample.key_expr}", now)
             return None
-        why = None if self.guard is None else self.guard.check(msg)
+        why = None if self.guard is None else self.guard.check(msg, finite)
         if why is not None:
             self.drops.drop(type(msg).__name__.lower(), why, now)
             return None

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gcs.launch_spec import LaunchError, LaunchSpec
@@ -64,3 +65,24 @@ def test_decode_cache_returns_the_decoded_payload_and_rejects_garbage() -> None:
     assert cache.decode(data) is first
     with pytest.raises(wire.WireError):
         cache.decode(b"\x00garbage")
+
+
+def test_decode_cache_judges_finiteness_once_per_payload() -> None:
+    from offboard.link_guard import PayloadGuard
+
+    cache = DecodeCache()
+    good = wire.Estimate(id=3, step=-1, t=0.0, role="follower", z1=np.ones(3),
+                         z2=np.zeros(3), z3=np.zeros(3), xi=np.zeros(12), zeta=np.zeros(6))
+    bad = wire.Estimate(id=3, step=-1, t=0.0, role="follower",
+                        z1=np.array([0.0, np.nan, 0.0]), z2=np.zeros(3), z3=np.zeros(3),
+                        xi=np.zeros(12), zeta=np.zeros(6))
+    msg, finite = cache.decode_checked(wire.encode(good))
+    assert finite and cache.decode_checked(wire.encode(good))[0] is msg
+    bad_msg, bad_finite = cache.decode_checked(wire.encode(bad))
+    assert not bad_finite
+    # two packed daemons' guards on the one decoded payload: same verdicts
+    for own in (3, 4):
+        g = PayloadGuard([1, 2, 3, 4], [1, 2], 50.0, own_id=own)
+        assert g.check(msg, finite) is None
+        assert g.check(bad_msg, bad_finite) == "estimate has non-finite values"
+        assert g.check(bad_msg) == "estimate has non-finite values"  # computed when absent
