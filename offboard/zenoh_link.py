@@ -127,6 +127,12 @@ class SwarmBus:
         self._pub_est = session.declare_publisher(wire.key_estimate(swarm, agent_id))
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
         self._pub_odo = session.declare_publisher(wire.key_odometry(swarm, agent_id))
+        # whether anyone subscribes to our odometry, kept by Zenoh's matching listener (a
+        # matching_status query per step cost as much as the put it saves, more with 64
+        # agents in the network)
+        self.odometry_matched = False
+        self._odo_listener = self._pub_odo.declare_matching_listener(self._on_odo_matching)
+        self.odometry_matched = bool(self._pub_odo.matching_status.matching)
 
     # -- handlers (called from pump) ---------------------------------------------------
     @property
@@ -258,11 +264,15 @@ class SwarmBus:
     def publish_status(self, status: wire.Status) -> None:
         self._put(self._pub_status, wire.encode(status))
 
+    def _on_odo_matching(self, status: Any) -> None:
+        """Zenoh's callback (its own thread): subscribers to our odometry came or went."""
+        self.odometry_matched = bool(status.matching)
+
     def publish_odometry(self, odo: wire.Odometry) -> None:
         """Our vehicle's odometry, when anyone subscribes to it (Zenoh's matching status:
         a swarm flying on truth has no subscriber, and an unmatched put would still cost
         the encoding and the router's work every step)."""
-        if not self._pub_odo.matching_status.matching:
+        if not self.odometry_matched:
             return
         self._put(self._pub_odo, wire.encode(odo))
 
@@ -282,7 +292,7 @@ class SwarmBus:
     def close(self) -> None:
         if self.faults is not None:
             self.faults.close()
-        for sub, _ in self._subs:
+        for sub in [self._odo_listener, *(sub for sub, _ in self._subs)]:
             try:
                 sub.undeclare()
             except ZENOH_ERRORS as exc:  # closing is best effort

@@ -25,10 +25,10 @@ def test_odometry_is_published_only_while_matched() -> None:
     try:
         for step in range(20):  # nobody listens: nothing is put
             bus.publish_odometry(odo(step))
-        assert not bus._pub_odo.matching_status.matching
+        assert not bus.odometry_matched
         sub = other.declare_subscriber(wire.key_odometry("odo", 3),
                                        lambda s: got.append(s.payload.to_bytes()))
-        assert wait_for(lambda: bool(bus._pub_odo.matching_status.matching))
+        assert wait_for(lambda: bus.odometry_matched)
 
         def published() -> bool:  # delivery is asynchronous: keep publishing until one lands
             bus.publish_odometry(odo(20))
@@ -38,7 +38,7 @@ def test_odometry_is_published_only_while_matched() -> None:
         first = wire.decode(got[0])
         assert isinstance(first, wire.Odometry) and first.id == 3 and first.step == 20
         sub.undeclare()
-        assert wait_for(lambda: not bus._pub_odo.matching_status.matching)
+        assert wait_for(lambda: not bus.odometry_matched)
     finally:
         bus.close()
         other.close()
