@@ -73,6 +73,12 @@ def round_estimate(e: NeighbourEstimate) -> NeighbourEstimate:
     return NeighbourEstimate(e.id, e.t, f32(e.z1), f32(e.z2), f32(e.z3), f32(e.xi), e.is_leader)
 
 
+def _in_order(ids: list[int] | tuple[int, ...], subset: list[int]) -> tuple[int, ...]:
+    """The ids of ``subset`` in the order of ``ids``."""
+    keep = set(subset)
+    return tuple(j for j in ids if j in keep)
+
+
 def in_outage(t: float, outages: tuple[tuple[float, float], ...]) -> bool:
     return any(a <= t < b for a, b in outages)
 
@@ -139,7 +145,7 @@ def run_inproc(
     published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
     # each agent reads its peers' estimates only, as its daemon subscribes to them only
     # (in scenario order, as ``published`` is: O(peers) per agent, not O(N))
-    peers = {ag.id: tuple(j for j in sc.ids if j in set(peer_ids(form, ag.id))) for ag in agents}
+    peers = {ag.id: _in_order(sc.ids, peer_ids(form, ag.id)) for ag in agents}
     n = sc.n
     ser = empty_series(np.arange(n_steps) * dt, n)
     md_run = math.inf

@@ -20,6 +20,7 @@ from offboard.clf_rcbf import ClfTerms, clf_terms
 from offboard.dcbf_filter import DcbfFilter
 from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
+from offboard.identity_memo import IdentityMemo
 from offboard.predictor import NeighbourPredictor
 from offboard.reference import (
     DesiredStateObserver,
@@ -41,8 +42,8 @@ CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as inp
 MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s at 50 Hz)
 
 
-# (id(formation), observer gains) -> (that formation, its report): held so the id stays its
-_gain_reports: dict[tuple[object, ...], tuple[Formation, GainReport]] = {}
+# the DESO gain report of a formation and observer gains, once per process
+_gain_reports: IdentityMemo[GainReport] = IdentityMemo()
 
 
 @dataclass
@@ -133,16 +134,11 @@ class FollowerAgent(AgentBase):
         its dense eigenvalue problems cost seconds at 100+ agents)."""
         if self._gains is None:
             obs = self.sc.observer
-            beta, kappa = tuple(obs.beta), tuple(obs.velocity_gain)
-            key = (id(self.form), beta, self.dt, obs.substeps, obs.leader_anchor, kappa)
-            hit = _gain_reports.get(key)
-            if hit is None or hit[0] is not self.form:
-                hit = (self.form, gain_report(self.form, beta, self.dt, obs.substeps,
-                                              obs.leader_anchor, kappa))
-                if len(_gain_reports) >= 8:
-                    del _gain_reports[next(iter(_gain_reports))]
-                _gain_reports[key] = hit
-            self._gains = hit[1]
+            params = (tuple(obs.beta), self.dt, obs.substeps, obs.leader_anchor,
+                      tuple(obs.velocity_gain))
+            self._gains = _gain_reports.get(
+                self.form, params, lambda: gain_report(self.form, *params)
+            )
         return self._gains
 
     def initial_estimate(self) -> NeighbourEstimate:

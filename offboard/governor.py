@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from offboard.identity_memo import IdentityMemo
 from swarm_common.feasibility import (
     FEEDBACK_RESERVE,
     InputLimits,
@@ -41,12 +42,6 @@ from swarm_common.scenario import Scenario
 log = logging.getLogger(__name__)
 
 BISECT_STEPS = 40  # κ to 1e-12 of its bracket
-CACHE_SIZE = 8  # scenarios whose governor is kept (one process builds every agent of one)
-
-# id(scenario) -> (that scenario, its governor): every agent of a scenario in one process
-# (the in-process runner, a packed daemon) gets the governor computed once. The entry holds
-# the scenario itself, so its id cannot be reused while cached; Scenario is frozen.
-_cache: dict[int, tuple[Scenario, Governor]] = {}
 
 
 @dataclass(frozen=True)
@@ -102,14 +97,7 @@ def governor_for(sc: Scenario) -> Governor:
     """The governed frequency of ``sc`` (module docstring): κ = 1 when the trajectory fits,
     else the largest κ < 1 (bisection) at which it does. Computed once per scenario object
     and process (its cost is a dense formation map per check: 30 ms at 64 agents)."""
-    hit = _cache.get(id(sc))
-    if hit is not None and hit[0] is sc:
-        return hit[1]
-    gov = _governor(sc)
-    if len(_cache) >= CACHE_SIZE:
-        del _cache[next(iter(_cache))]
-    _cache[id(sc)] = (sc, gov)
-    return gov
+    return _governors.get(sc, (), lambda: _governor(sc))
 
 
 def _governor(sc: Scenario) -> Governor:
@@ -139,6 +127,10 @@ def _governor(sc: Scenario) -> Governor:
         else:
             hi = mid
     return Governor(lo, lo * f, f)
+
+
+# every agent of a scenario in one process gets its governor computed once
+_governors: IdentityMemo[Governor] = IdentityMemo()
 
 
 def log_governor(gov: Governor, agent_id: int) -> None:

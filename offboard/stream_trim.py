@@ -12,7 +12,7 @@ MAVProxy uses for the same purpose. It touches the requester's link only (the GC
 keeps its defaults) and never HEARTBEAT or ODOMETRY, which are not in any group. The
 vehicle answers it with DATA_STREAM, so the request needs no COMMAND_ACK bookkeeping.
 
-Self-healing rather than acknowledged: whenever a message the daemon does not read
+Self-healing rather than acknowledged: whenever a message of a stream group still
 arrives, the request is sent again, at most once per :data:`RETRY_S`. That covers a lost
 request, a vehicle that forgot the requester's rates (our simulator resets them when a
 peer falls silent; PX4 keeps them only for the life of its MAVLink instance) and a

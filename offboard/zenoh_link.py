@@ -130,7 +130,6 @@ class SwarmBus:
         # whether anyone subscribes to our odometry, kept by Zenoh's matching listener (a
         # matching_status query per step cost as much as the put it saves, more with 64
         # agents in the network)
-        self.odometry_matched = False
         self._odo_listener = self._pub_odo.declare_matching_listener(self._on_odo_matching)
         self.odometry_matched = bool(self._pub_odo.matching_status.matching)
 
