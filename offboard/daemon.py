@@ -20,11 +20,11 @@ without ever blocking the setpoint stream. Faults (docs/security.md, "Offboard d
 link hygiene and failsafes"): a setpoint is re-sent only while it answers the vehicle's
 current step (lockstep) or for one control period (real time), so with no valid step the
 stream stops and the vehicle's offboard-loss failsafe acts; in real time, truth more than
-``RUNNER_LOST_PERIODS`` behind the vehicle's clock (runner or router lost) stops the
-stream too (the vehicle holds), and ``loss_land_after`` s after the last truth the daemon
-lands its vehicle on its slot of the coordinated landing plan from its own ODOMETRY
-(:mod:`offboard.runner_loss`); after a failsafe HOLD the daemon asks for OFFBOARD again
-(:mod:`offboard.mode_requests`). A neighbour that stays
+``RUNNER_LOST_PERIODS`` behind the vehicle's clock (runner or router lost) replaces the
+agent's step by a brake-and-hold on the vehicle's own ODOMETRY, and ``loss_land_after`` s
+after the last truth the daemon lands its vehicle on its slot of the coordinated landing
+plan from its own ODOMETRY (:mod:`offboard.runner_loss`); after a failsafe HOLD the
+daemon asks for OFFBOARD again (:mod:`offboard.mode_requests`). A neighbour that stays
 silent for ``neighbour_timeout`` seconds is declared lost and no longer waited for
 (its data is then predicted by the agent, then dropped); it rejoins when it speaks.
 In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, but uses
@@ -112,6 +112,7 @@ class OffboardDaemon(DaemonCommands):
         self.last_step = -1
         # (time_boot_ms, q_ned float32 (4,), normalised thrust float32)
         self.answer: tuple[int, np.ndarray, np.float32] | None = None
+        self.answer_from_loss = False  # the answer is runner_loss's (valid while lost)
         self.answer_step = -1  # the vehicle step the answer is for
         self.answer_at = 0.0  # monotonic time it was computed
         self.vehicle_step = -1  # step of the vehicle's latest accepted ODOMETRY
@@ -175,7 +176,7 @@ class OffboardDaemon(DaemonCommands):
     def _answer_fresh(self, now: float) -> bool:
         """A setpoint may go out while it answers the vehicle's current step (lockstep:
         the vehicle's clock waits for it) or for one control period (real time)."""
-        if self.answer is None or (self.truth_lost and not self.loss.landing):
+        if self.answer is None or (self.truth_lost and not self.answer_from_loss):
             return False
         if self.cfg.lockstep:
             return self.vehicle_step <= self.answer_step
@@ -195,7 +196,7 @@ class OffboardDaemon(DaemonCommands):
         """Say so when the vehicle's clock has moved on for 0.1 s without a new setpoint
         (the stale one is no longer sent): the vehicle's failsafe acts."""
         behind = self.vehicle_step > self.answer_step or (
-            self.truth_lost and not self.loss.landing)
+            self.truth_lost and not self.answer_from_loss)
         if self.streaming and behind and now - self.last_send > 0.1:
             self.streaming = False
             self.keeper.fault(now)
@@ -238,7 +239,7 @@ class OffboardDaemon(DaemonCommands):
 
     def _loss_step(self, k: int, t: float, time_boot_ms: int) -> bool:
         """Runner or router lost (real time): the setpoint of offboard.runner_loss's
-        LossFlight from the vehicle's own ODOMETRY (none before the commit)."""
+        LossFlight from the vehicle's own ODOMETRY (brake and hold, then the landing)."""
         if self.cfg.lockstep or not self.loss.lost:
             return False
         odo = self.link.odometry
@@ -246,7 +247,7 @@ class OffboardDaemon(DaemonCommands):
         sp = None if got is None else self.loss_flight.setpoint(t, *got)
         if got is None or sp is None:
             return False
-        self.answer = (time_boot_ms, sp.q_ned, sp.thrust_norm)
+        self.answer, self.answer_from_loss = (time_boot_ms, sp.q_ned, sp.thrust_norm), True
         self.answer_step, self.answer_at = k, time.monotonic()
         # the lost runner is a standing fault: a failsafe HOLD on the way down (a stalled
         # host) is taken back to OFFBOARD even when the vehicle's STATUSTEXT was missed
@@ -270,7 +271,7 @@ class OffboardDaemon(DaemonCommands):
         out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
         self.control_cpu_s += time.process_time() - cpu0
         self.control_steps += 1
-        self.answer = (time_boot_ms, out.q_ned, out.thrust_norm)
+        self.answer, self.answer_from_loss = (time_boot_ms, out.q_ned, out.thrust_norm), False
         self.answer_step, self.answer_at = k, time.monotonic()
         self._send_answer()
         est = estimate_to_wire(out.estimate, k, self._zeta())

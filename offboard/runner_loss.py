@@ -1,24 +1,29 @@
-"""Runner or router lost (real time): hold, then the coordinated landing on odometry alone.
+"""Runner or router lost (real time): brake and hold, then the coordinated landing on
+odometry alone.
 
 Policy (docs/security.md, "Losing the runner or the router"; docs/lifecycle.md, "Landing
 after losing the router"), in the vehicle's clock (mission time from its ODOMETRY stamps;
 one simulator or one GPS time base, so the same on every vehicle):
 
-1. **Lost.** Truth more than ``RUNNER_LOST_PERIODS`` control steps behind the vehicle's
-   step: the daemon stops stepping its agent and streaming, and the vehicle's offboard-loss
-   failsafe puts it in HOLD (0.5 s later).
+1. **Lost.** Truth more than ``RUNNER_LOST_PERIODS`` control steps (0.2 s at 50 Hz)
+   behind the vehicle's step: the daemon stops stepping its agent on the stale truth and at
+   once streams a brake-and-hold from its vehicle's own ODOMETRY (:class:`OdometryFlight`
+   on a :class:`HoldReference` at the position measured at that step). The vehicle stays
+   in OFFBOARD: it is never left on its last setpoint until its offboard-loss failsafe
+   (before, 25 stale steps + 0.5 s of the last attitude setpoint + PX4's HOLD took 1 s
+   with nobody steering, and two vehicles met in it on a loaded host).
 2. **Land time.** t_L = t_s + ``land_after_s``, t_s = the time of the last truth step this
    daemon saw. Every daemon loses the router at the same instant, so their t_s differ only
    by the truth steps in flight when it died (one or two control periods); see
    :func:`loss_landing_plan` for why that disagreement is harmless and why it is not
    quantised.
-3. **Commit.** From t_L − ``LEAD_S`` on the daemon streams its own setpoints again: a PD +
-   feed-forward hold at the vehicle's measured position (:class:`OdometryLander`), so the
-   OFFBOARD recovery policy (offboard.offboard_keeper.OffboardKeeper) asks for OFFBOARD back
-   after 0.6 s of stream; the vehicle is in OFFBOARD before t_L. Truth coming back before
-   the commit: normal flight resumes. After the commit the landing is finished whatever
-   happens on Zenoh.
-4. **Landing.** From t_L the same reference flies this agent's slot of the coordinated
+3. **Commit.** From t_L − ``LEAD_S`` on, the landing is decided: the same PD +
+   feed-forward controller (its disturbance estimate kept) now flies a landing reference
+   that starts at rest at the vehicle's measured position. Truth coming back before the
+   commit: normal flight resumes. After the commit the landing is finished whatever
+   happens on Zenoh. A failsafe HOLD on the way (a stalled host) is taken back to OFFBOARD
+   by the recovery policy (offboard.offboard_keeper.OffboardKeeper).
+4. **Landing.** From t_L the reference flies this agent's slot of the coordinated
    landing plan (offboard.landing): its pad and its descent delay, lowest first.
 5. **Landed.** Once the reference ended ``LANDED_SETTLE_S`` ago and the vehicle is below
    ``LANDED_Z``: idle command, then a (non-forced) disarm.
@@ -43,10 +48,10 @@ from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
-RUNNER_LOST_PERIODS = 25  # real time: truth this many steps behind the vehicle -> hold
+RUNNER_LOST_PERIODS = 10  # real time: truth this many steps behind the vehicle -> brake, hold
 LAND_AFTER_S = 3.0  # s after the last truth: the default land time t_L − t_s
-LEAD_S = 1.0  # s before t_L the daemon streams again (OFFBOARD needs 0.6 s of stream)
-MIN_LAND_AFTER_S = 2.0  # s: lost (0.5 s) + the vehicle's failsafe (0.5 s) + LEAD_S
+LEAD_S = 1.0  # s before t_L the landing is committed
+MIN_LAND_AFTER_S = 2.0  # s: lost (0.2 s) + settling in the hold + LEAD_S
 DISARM_AFTER_S = 1.0  # s of landed idle before the disarm (retried every 2 s while armed)
 
 
@@ -54,8 +59,8 @@ class LossPhase(enum.Enum):
     """Internal state of :class:`RunnerLoss` (never on a wire or in a file)."""
 
     FLYING = "flying"  # truth fresh: the agent steps
-    HOLDING = "holding"  # truth lost: no setpoints, the vehicle's failsafe holds it
-    LANDING = "landing"  # committed: the daemon flies OdometryLander to the ground
+    HOLDING = "holding"  # truth lost: the daemon brakes and holds on its own odometry
+    LANDING = "landing"  # committed: the daemon flies its landing slot to the ground
 
 
 def loss_landing_plan(sc: Scenario, t_s: float, t_land: float) -> LandingPlan:
@@ -127,12 +132,32 @@ class RunnerLoss:
         self.phase = LossPhase.LANDING
 
 
-class OdometryLander:
-    """PD + feed-forward of one agent on its slot of the loss landing plan, with the
-    vehicle's own ODOMETRY as the only state source (no truth, no neighbours).
+def landing_reference(sc: Scenario, index: int, t_s: float, t_land: float,
+                      p_hold: np.ndarray) -> LandingReference:
+    """Agent ``index``'s slot of the loss landing plan, started at rest at ``p_hold``."""
+    return LandingReference(loss_landing_plan(sc, t_s, t_land), index, xi_at_rest(p_hold))
 
-    Reference: offboard.landing.LandingReference started at rest at ``p_hold`` (m), the
-    vehicle's measured position at the commit, with t0 = t_L (held there before t_L).
+
+class HoldReference:
+    """ξ(t) at rest at ``p`` (m, ENU) for ever: the brake-and-hold before the commit."""
+
+    t_end = float("inf")
+
+    def __init__(self, p: np.ndarray) -> None:
+        self.xi0 = xi_at_rest(p)
+
+    def xi(self, t: float) -> np.ndarray:
+        return self.xi0
+
+    def ended(self, t: float) -> bool:
+        return False
+
+
+class OdometryFlight:
+    """PD + feed-forward of one agent on a reference (a :class:`HoldReference`, then its
+    slot of the loss landing plan), with the vehicle's own ODOMETRY as the only state
+    source (no truth, no neighbours).
+
     Control (ENU, m/s²), as the leaders' (docs/architecture.md, offboard.leader):
     u = a* + τ j* − d̂ + k_p (p* − p) + k_d (v* − v), clipped to the control box, with a
     velocity ESO d̂ for the disturbance and ground effect (double pole at −5 rad/s);
@@ -140,10 +165,8 @@ class OdometryLander:
 
     L1, L2 = 10.0, 25.0  # velocity ESO gains (as offboard.leader)
 
-    def __init__(self, sc: Scenario, index: int, t_s: float, t_land: float,
-                 p_hold: np.ndarray) -> None:
-        plan = loss_landing_plan(sc, t_s, t_land)
-        self.ref = LandingReference(plan, index, xi_at_rest(p_hold))
+    def __init__(self, sc: Scenario, ref: LandingReference | HoldReference) -> None:
+        self.ref = ref
         self.veh = sc.vehicle
         self.kp, self.kd = sc.controller.leader_kp, sc.controller.leader_kd
         self.u_lo, self.u_hi = control_box(sc)
@@ -152,12 +175,21 @@ class OdometryLander:
         self.d_hat = np.zeros(3)
         self.u_prev = np.zeros(3)
 
+    @classmethod
+    def landing(cls, sc: Scenario, index: int, t_s: float, t_land: float,
+                p_hold: np.ndarray) -> OdometryFlight:
+        """Agent ``index``'s slot of the loss landing plan (t_s, t_land), its reference
+        started at rest at ``p_hold`` with t0 = t_L (held there before t_L)."""
+        return cls(sc, landing_reference(sc, index, t_s, t_land, p_hold))
+
     @property
     def pad(self) -> np.ndarray:
+        """The landing pad (x, y) (m); only for a landing reference."""
+        assert isinstance(self.ref, LandingReference)
         return np.array(self.ref.p1[:2])
 
     def landed(self, t: float, z: float) -> bool:
-        return landed(self.ref, t, z)
+        return isinstance(self.ref, LandingReference) and landed(self.ref, t, z)
 
     def command(self, t: float, p: np.ndarray, v: np.ndarray) -> tuple[Setpoint, np.ndarray]:
         """The setpoint (and its u) for the measured position p and velocity v at t."""
@@ -184,27 +216,38 @@ class OdometryLander:
 
 
 class LossFlight:
-    """What a daemon flies once its runner or router is lost (module docstring): nothing
-    until the commit, then :class:`OdometryLander`, then idle and a disarm."""
+    """What a daemon flies once its runner or router is lost (module docstring): at once a
+    brake-and-hold at the position measured when the loss was seen, from the commit on its
+    slot of the landing plan, then idle and a disarm."""
 
     def __init__(self, sc: Scenario, index: int, agent_id: int, loss: RunnerLoss) -> None:
         self.sc, self.index, self.id = sc, index, agent_id
         self.loss = loss
-        self.lander: OdometryLander | None = None
+        self.flight: OdometryFlight | None = None
+        self.flight_t_s: float | None = None  # the loss (its t_s) the flight belongs to
         self.idle_since: float | None = None  # vehicle clock (s) of the landed idle
 
+    @property
+    def lander(self) -> OdometryFlight | None:
+        """The committed landing flight (None before the commit)."""
+        return self.flight if self.loss.landing else None
+
     def setpoint(self, t: float, p: np.ndarray, v: np.ndarray) -> Setpoint | None:
-        """The setpoint at vehicle time t for the measured p, v; None before the commit."""
-        if self.lander is None:
-            t_s, t_land = self.loss.t_s, self.loss.t_land
-            if not self.loss.commit_due(t) or t_s is None or t_land is None:
-                return None
+        """The setpoint at vehicle time t for the measured p, v; None while not lost."""
+        t_s, t_land = self.loss.t_s, self.loss.t_land
+        if not self.loss.lost or t_s is None:
+            return None
+        if self.flight is None or self.flight_t_s != t_s:  # a new loss: brake and hold here
+            self.flight, self.flight_t_s = OdometryFlight(self.sc, HoldReference(p)), t_s
+            log.warning("agent %d: truth lost since t=%.2f s: braking to hold at "
+                        "(%.2f, %.2f, %.2f) on odometry", self.id, t_s, *p)
+        if self.loss.commit_due(t) and t_land is not None:
             self.loss.commit()
-            self.lander = OdometryLander(self.sc, self.index, t_s, t_land, p)
-            pad = self.lander.pad
+            self.flight.ref = landing_reference(self.sc, self.index, t_s, t_land, p)
+            pad = self.flight.pad
             log.warning("agent %d: runner/router lost since t=%.2f s: landing on odometry, "
                         "t_L=%.2f s, pad (%.2f, %.2f)", self.id, t_s, t_land, pad[0], pad[1])
-        return self.lander.command(t, p, v)[0]
+        return self.flight.command(t, p, v)[0]
 
     def disarm_due(self, t: float, z: float, armed: bool) -> bool:
         """True when a disarm should be asked for now: landed idle for DISARM_AFTER_S

@@ -13,7 +13,7 @@ from offboard.runner_loss import (
     LEAD_S,
     RUNNER_LOST_PERIODS,
     LossFlight,
-    OdometryLander,
+    OdometryFlight,
     RunnerLoss,
     loss_landing_plan,
 )
@@ -60,10 +60,10 @@ def test_plan_pads_from_t_s_timing_from_t_land() -> None:
     assert float(np.max(np.linalg.norm(near.pads - plan.pads, axis=1))) < 0.05
 
 
-def _fly(lander: OdometryLander, p: np.ndarray, t0: float, t1: float, dt: float,
-         ) -> tuple[np.ndarray, float | None]:
+def _fly(lander: OdometryFlight, p: np.ndarray, t0: float, t1: float, dt: float,
+         v0: np.ndarray | None = None) -> tuple[np.ndarray, float | None]:
     """Point mass under the lander's u with a constant 0.3 m/s² push (ground at z = 0)."""
-    v = np.zeros(3)
+    v = np.zeros(3) if v0 is None else np.array(v0, dtype=float)
     landed_at = None
     t = t0
     while t < t1:
@@ -83,7 +83,7 @@ def test_lander_holds_then_lands_on_its_pad_and_idles() -> None:
     sc = load_scenario(str(CUBE8))
     index = sc.index_of(3)  # a top-layer follower: its pad is moved outward
     p_hold = np.array([2.0, 0.4, 5.1])
-    lander = OdometryLander(sc, index, 8.1, 11.1, p_hold)
+    lander = OdometryFlight.landing(sc, index, 8.1, 11.1, p_hold)
     p, _ = _fly(lander, p_hold.copy(), 10.1, 11.1, 0.02)  # before t_L: hold
     assert float(np.linalg.norm(p - p_hold)) < 0.15
     p, landed_at = _fly(lander, p, 11.1, 40.0, 0.02)
@@ -98,7 +98,8 @@ def test_loss_flight_commits_once_and_asks_to_disarm_when_landed() -> None:
     loss = RunnerLoss(HZ, 3.0)
     loss.observe(500, 400)
     flight = LossFlight(sc, sc.index_of(4), 4, loss)
-    assert flight.setpoint(9.0, np.array([2.0, 0.4, 2.9]), np.zeros(3)) is None
+    assert flight.setpoint(9.0, np.array([2.0, 0.4, 2.9]), np.zeros(3)) is not None  # hold
+    assert not loss.landing and flight.lander is None
     assert flight.setpoint(10.0, np.array([2.0, 0.4, 2.9]), np.zeros(3)) is not None
     assert loss.landing and flight.lander is not None
     t_end = flight.lander.ref.t_end
@@ -151,3 +152,36 @@ def test_loss_land_after_flag(text: str, value: float | None) -> None:
     from offboard.cli import loss_land_after
 
     assert loss_land_after(text) == value
+
+
+def test_loss_flight_brakes_at_once_and_holds_where_the_loss_was_seen() -> None:
+    """Lost at 2 m/s: the very first loss step already decelerates, and the point mass
+    (with a constant push) stops within 0.75 m of where the loss was seen and stays there;
+    no setpoint while truth is fresh, and a new loss holds at its own position."""
+    sc = load_scenario(str(CUBE8))
+    loss = RunnerLoss(HZ, 3.0)
+    flight = LossFlight(sc, sc.index_of(5), 5, loss)
+    p0, v0 = np.array([1.0, 2.0, 3.0]), np.array([2.0, 0.0, 0.0])
+    assert flight.setpoint(1.0, p0, v0) is None  # not lost: the agent flies
+    loss.observe(100, 100 - RUNNER_LOST_PERIODS - 1)
+    assert flight.setpoint(1.8, p0, v0) is not None
+    hold = flight.flight
+    assert hold is not None and flight.lander is None
+    _, u = hold.command(1.82, p0, v0)
+    assert u[0] < -1.0  # braking against the motion from the first step
+    samples = []
+    p, v, t, dt = p0.copy(), v0.copy(), 1.84, 0.02
+    while t < 4.5:
+        _, u = hold.command(t, p, v)
+        v = v + (u + np.array([0.3, 0.0, 0.0])) * dt
+        p = p + v * dt
+        samples.append(p.copy())
+        t += dt
+    dist = np.linalg.norm(np.array(samples) - p0, axis=1)
+    assert float(dist.max()) < 0.75 and float(dist[-1]) < 0.1
+    assert loss.observe(200, 199) == "back" and flight.setpoint(4.0, p, v) is None
+    loss.observe(300, 300 - RUNNER_LOST_PERIODS - 1)
+    p1 = np.array([4.0, 4.0, 2.0])
+    flight.setpoint(6.0, p1, np.zeros(3))
+    assert flight.flight is not hold and flight.flight is not None
+    assert np.allclose(flight.flight.ref.xi(6.0)[:3], p1)
