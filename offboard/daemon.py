@@ -417,8 +417,9 @@ class OffboardDaemon(DaemonCommands):
         """The last line: drops, and the CPU the control law took (bench_distributed reads
         it to tell the control from the plumbing)."""
         log.info("agent %d: stopped; dropped MAVLink %s, Zenoh %s; control CPU %.3f s over "
-                 "%d steps", self.id, self.link.drops.counts, self.bus.drops.counts,
-                 self.control_cpu_s, self.control_steps)
+                 "%d steps; truth lag at most %d periods", self.id, self.link.drops.counts,
+                 self.bus.drops.counts, self.control_cpu_s, self.control_steps,
+                 self.loss.max_lag)
 
     def close(self) -> None:
         self.link.close()

@@ -93,6 +93,7 @@ class RunnerLoss:
         self.land_after_s = land_after_s
         self.phase = LossPhase.FLYING
         self.t_s: float | None = None  # time of the last truth step seen when lost
+        self.max_lag = 0  # the largest k − truth step seen while flying (periods)
 
     @property
     def lost(self) -> bool:
@@ -114,6 +115,8 @@ class RunnerLoss:
         if self.phase is LossPhase.LANDING:
             return None
         lost = truth_step is None or k - truth_step > RUNNER_LOST_PERIODS
+        if truth_step is not None and not lost:
+            self.max_lag = max(self.max_lag, k - truth_step)
         if lost and self.phase is LossPhase.FLYING and truth_step is not None:
             self.phase = LossPhase.HOLDING
             self.t_s = truth_step / self.control_hz
