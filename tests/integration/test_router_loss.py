@@ -151,7 +151,8 @@ def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
         _wait(lambda: all(p.exists() and "ARM accepted" in p.read_text() for p in logs), 90,
               "every daemon to arm")
         _wait(lambda: obs.time_s() >= FLY_BEFORE_KILL_S, 60, "the swarm to fly")
-        assert all(obs.armed.get(i) for i in sc.ids)
+        # the observer learns of an arm from the next 1 Hz HEARTBEAT, after the daemon's log
+        _wait(lambda: all(obs.armed.get(i) for i in sc.ids), 30, "every HEARTBEAT to say armed")
         before, before_at = obs.reset_min()
         router.send_signal(signal.SIGKILL)
         router.wait(10)
