@@ -5,13 +5,17 @@ Policy (docs/security.md, "Losing the runner or the router"; docs/lifecycle.md, 
 after losing the router"), in the vehicle's clock (mission time from its ODOMETRY stamps;
 one simulator or one GPS time base, so the same on every vehicle):
 
-1. **Lost.** Truth more than ``RUNNER_LOST_PERIODS`` control steps (0.2 s at 50 Hz)
+1. **Stalled.** Truth more than ``STALLED_PERIODS`` control steps (0.2 s at 50 Hz)
    behind the vehicle's step: the daemon stops stepping its agent on the stale truth and at
    once streams a brake-and-hold from its vehicle's own ODOMETRY (:class:`OdometryFlight`
    on a :class:`HoldReference` at the position measured at that step). The vehicle stays
-   in OFFBOARD: it is never left on its last setpoint until its offboard-loss failsafe
-   (before, 25 stale steps + 0.5 s of the last attitude setpoint + PX4's HOLD took 1 s
-   with nobody steering, and two vehicles met in it on a loaded host).
+   in OFFBOARD. Truth within ``STALLED_PERIODS`` again: the agent steps again (a loaded
+   host may stall truth for a moment; the hold is the safe answer to that too).
+   **Lost.** More than ``RUNNER_LOST_PERIODS`` (0.5 s) behind: the runner or router is
+   gone; the hold goes on and the land time is set. Before, the daemon flew the stale truth
+   for the whole 0.5 s and then stopped streaming, leaving the vehicle on its last attitude
+   setpoint until its offboard-loss failsafe (0.5 s more) and PX4's HOLD: about a second
+   with nobody steering, in which two vehicles met on a loaded host.
 2. **Land time.** t_L = t_s + ``land_after_s``, t_s = the time of the last truth step this
    daemon saw. Every daemon loses the router at the same instant, so their t_s differ only
    by the truth steps in flight when it died (one or two control periods); see
@@ -48,7 +52,8 @@ from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
-RUNNER_LOST_PERIODS = 10  # real time: truth this many steps behind the vehicle -> brake, hold
+STALLED_PERIODS = 10  # real time: truth this many steps behind the vehicle -> brake, hold
+RUNNER_LOST_PERIODS = 25  # ... this many: the runner or router is lost -> land at t_L
 LAND_AFTER_S = 3.0  # s after the last truth: the default land time t_L − t_s
 LEAD_S = 1.0  # s before t_L the landing is committed
 MIN_LAND_AFTER_S = 2.0  # s: lost (0.2 s) + settling in the hold + LEAD_S
@@ -59,7 +64,8 @@ class LossPhase(enum.Enum):
     """Internal state of :class:`RunnerLoss` (never on a wire or in a file)."""
 
     FLYING = "flying"  # truth fresh: the agent steps
-    HOLDING = "holding"  # truth lost: the daemon brakes and holds on its own odometry
+    STALLED = "stalled"  # truth late: the daemon brakes and holds on its own odometry
+    HOLDING = "holding"  # truth lost: that hold goes on, the land time is set
     LANDING = "landing"  # committed: the daemon flies its landing slot to the ground
 
 
@@ -81,7 +87,7 @@ def loss_landing_plan(sc: Scenario, t_s: float, t_land: float) -> LandingPlan:
 
 
 class RunnerLoss:
-    """Detection of a lost runner/router and the land time (module docstring).
+    """Detection of a stalled or lost runner/router and the land time (module docstring).
 
     ``land_after_s`` = 0: never land (hold until truth is back, the behaviour before)."""
 
@@ -93,10 +99,12 @@ class RunnerLoss:
         self.land_after_s = land_after_s
         self.phase = LossPhase.FLYING
         self.t_s: float | None = None  # time of the last truth step seen when lost
+        self.episode = 0  # count of stalls (each one holds where it began)
         self.max_lag = 0  # the largest k − truth step seen while flying (periods)
 
     @property
     def lost(self) -> bool:
+        """Not flying on truth: stalled, lost or landing (the daemon flies LossFlight)."""
         return self.phase is not LossPhase.FLYING
 
     @property
@@ -111,19 +119,26 @@ class RunnerLoss:
 
     def observe(self, k: int, truth_step: int | None) -> str | None:
         """The vehicle is at step ``k``, the latest truth is of ``truth_step`` (None: none
-        yet). Returns "lost" or "back" on a change, else None; once landing, None."""
-        if self.phase is LossPhase.LANDING:
+        yet). Returns "stalled", "lost" or "back" on a change, else None; once landing,
+        None."""
+        if self.phase is LossPhase.LANDING or truth_step is None:
             return None
-        lost = truth_step is None or k - truth_step > RUNNER_LOST_PERIODS
-        if truth_step is not None and not lost:
-            self.max_lag = max(self.max_lag, k - truth_step)
-        if lost and self.phase is LossPhase.FLYING and truth_step is not None:
+        lag = k - truth_step
+        if lag <= STALLED_PERIODS:
+            self.max_lag = max(self.max_lag, lag)
+            if self.phase is LossPhase.FLYING:
+                return None
+            self.phase, self.t_s = LossPhase.FLYING, None
+            return "back"
+        if lag > RUNNER_LOST_PERIODS and self.phase is not LossPhase.HOLDING:
+            self.episode += self.phase is LossPhase.FLYING
             self.phase = LossPhase.HOLDING
             self.t_s = truth_step / self.control_hz
             return "lost"
-        if not lost and self.phase is LossPhase.HOLDING:
-            self.phase, self.t_s = LossPhase.FLYING, None
-            return "back"
+        if self.phase is LossPhase.FLYING:
+            self.phase = LossPhase.STALLED
+            self.episode += 1
+            return "stalled"
         return None
 
     def commit_due(self, t: float) -> bool:
@@ -227,7 +242,7 @@ class LossFlight:
         self.sc, self.index, self.id = sc, index, agent_id
         self.loss = loss
         self.flight: OdometryFlight | None = None
-        self.flight_t_s: float | None = None  # the loss (its t_s) the flight belongs to
+        self.flight_episode = 0  # the stall (RunnerLoss.episode) the flight belongs to
         self.idle_since: float | None = None  # vehicle clock (s) of the landed idle
 
     @property
@@ -236,15 +251,16 @@ class LossFlight:
         return self.flight if self.loss.landing else None
 
     def setpoint(self, t: float, p: np.ndarray, v: np.ndarray) -> Setpoint | None:
-        """The setpoint at vehicle time t for the measured p, v; None while not lost."""
-        t_s, t_land = self.loss.t_s, self.loss.t_land
-        if not self.loss.lost or t_s is None:
+        """The setpoint at vehicle time t for the measured p, v; None while flying."""
+        if not self.loss.lost:
             return None
-        if self.flight is None or self.flight_t_s != t_s:  # a new loss: brake and hold here
-            self.flight, self.flight_t_s = OdometryFlight(self.sc, HoldReference(p)), t_s
-            log.warning("agent %d: truth lost since t=%.2f s: braking to hold at "
-                        "(%.2f, %.2f, %.2f) on odometry", self.id, t_s, *p)
-        if self.loss.commit_due(t) and t_land is not None:
+        if self.flight is None or self.flight_episode != self.loss.episode:  # a new stall
+            self.flight = OdometryFlight(self.sc, HoldReference(p))
+            self.flight_episode = self.loss.episode
+            log.warning("agent %d: truth late at t=%.2f s: braking to a hold at "
+                        "(%.2f, %.2f, %.2f) on odometry", self.id, t, *p)
+        t_s, t_land = self.loss.t_s, self.loss.t_land
+        if self.loss.commit_due(t) and t_s is not None and t_land is not None:
             self.loss.commit()
             self.flight.ref = landing_reference(self.sc, self.index, t_s, t_land, p)
             pad = self.flight.pad

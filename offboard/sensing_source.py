@@ -11,7 +11,7 @@
   ``wire.Odometry``); row j is what agent j's daemon published for its vehicle. Lockstep:
   waits for every live neighbour's odometry of step k (a neighbour silent for
   ``neighbour_timeout`` is lost and no longer awaited until it speaks again); real time:
-  the latest one. A neighbour whose latest odometry is more than ``NEIGHBOUR_MAX_AGE_PERIODS``
+  the latest one. A neighbour whose latest odometry is more than ``RUNNER_LOST_PERIODS``
   steps old (or never heard) is put out of sensing range: the sensor then reports no
   measurement of it, exactly like a dropout. With no neighbour odometry newer than that
   (real time), the router counts as lost, the same rule as for truth.
@@ -27,14 +27,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from offboard.runner_loss import RunnerLoss
+from offboard.runner_loss import RUNNER_LOST_PERIODS, RunnerLoss
 from offboard.zenoh_link import SwarmBus
 from swarm_common import wire
 from swarm_common.enums import SensingSource
 
 log = logging.getLogger(__name__)
-
-NEIGHBOUR_MAX_AGE_PERIODS = 25  # real time: older neighbour odometry counts as no measurement
 
 WAIT_LOG_S = 3.0  # s: how often a start-up wait says what it waits for
 FAR_FACTOR = 10.0  # an unseen neighbour's row: this many sensing ranges away (not sensed)
@@ -136,13 +134,13 @@ class SwarmSensing:
         latest: dict[int, wire.Odometry],
     ) -> tuple[np.ndarray, np.ndarray]:
         """(p, v) (N,3): own row, each neighbour's odometry of step k, else its latest one
-        at most NEIGHBOUR_MAX_AGE_PERIODS steps old, else a row out of sensing range at rest."""
+        at most RUNNER_LOST_PERIODS steps old, else a row out of sensing range at rest."""
         n = len(self.ids)
         p = np.zeros((n, 3))
         v = np.zeros((n, 3))
         for row, j in enumerate(self.ids):
             odo = own if j == self.id else at_k.get(j) or latest.get(j)
-            if odo is not None and 0 <= k - odo.step <= NEIGHBOUR_MAX_AGE_PERIODS:
+            if odo is not None and 0 <= k - odo.step <= RUNNER_LOST_PERIODS:
                 p[row], v[row] = odo.p, odo.v
             else:  # not seen: far away along +x (the sensor reports it out of range)
                 p[row] = own.p + np.array([self.far * (row + 1), 0.0, 0.0])
@@ -151,13 +149,13 @@ class SwarmSensing:
     # -- shared --------------------------------------------------------------------------
     def _observe(self, k: int, ref_step: int | None, what: str) -> bool:
         """Real time: feed the runner-loss detector with the newest step of ``what``;
-        True while it is not lost."""
+        True while it is neither stalled nor lost (a stall is logged by LossFlight)."""
         change = self.loss.observe(k, ref_step)
         if change == "lost":
             self.on_lost()
             t_land = self.loss.t_land
-            log.error("agent %d: %s lost at step %d (runner or router gone?): braking to "
-                      "a hold on odometry; %s", self.id, what, k,
+            log.error("agent %d: %s lost at step %d (runner or router gone?): holding on "
+                      "odometry; %s", self.id, what, k,
                       "no landing (--loss-land-after 0)" if t_land is None
                       else f"landing at t={t_land:.2f} s unless {what} is back first")
         elif change == "back":

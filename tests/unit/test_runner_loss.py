@@ -12,6 +12,7 @@ from offboard.landing import landing_plan
 from offboard.runner_loss import (
     LEAD_S,
     RUNNER_LOST_PERIODS,
+    STALLED_PERIODS,
     LossFlight,
     OdometryFlight,
     RunnerLoss,
@@ -26,7 +27,10 @@ HZ = 50
 def test_lost_after_the_threshold_and_back_before_the_commit() -> None:
     loss = RunnerLoss(HZ, 3.0)
     assert loss.observe(100, None) is None and not loss.lost  # no truth yet: not a loss
-    assert loss.observe(100 + RUNNER_LOST_PERIODS, 100) is None and not loss.lost
+    assert loss.observe(100 + STALLED_PERIODS, 100) is None and not loss.lost
+    assert loss.observe(101 + STALLED_PERIODS, 100) == "stalled" and loss.lost
+    assert loss.t_land is None and not loss.commit_due(1e6)  # a stall sets no land time
+    assert loss.observe(100 + RUNNER_LOST_PERIODS, 100) is None and loss.episode == 1
     assert loss.observe(101 + RUNNER_LOST_PERIODS, 100) == "lost" and loss.lost
     assert loss.t_s == pytest.approx(2.0) and loss.t_land == pytest.approx(5.0)
     assert not loss.commit_due(5.0 - LEAD_S - 0.02)
@@ -163,7 +167,7 @@ def test_loss_flight_brakes_at_once_and_holds_where_the_loss_was_seen() -> None:
     flight = LossFlight(sc, sc.index_of(5), 5, loss)
     p0, v0 = np.array([1.0, 2.0, 3.0]), np.array([2.0, 0.0, 0.0])
     assert flight.setpoint(1.0, p0, v0) is None  # not lost: the agent flies
-    loss.observe(100, 100 - RUNNER_LOST_PERIODS - 1)
+    assert loss.observe(100, 100 - STALLED_PERIODS - 1) == "stalled"
     assert flight.setpoint(1.8, p0, v0) is not None
     hold = flight.flight
     assert hold is not None and flight.lander is None
@@ -179,8 +183,11 @@ def test_loss_flight_brakes_at_once_and_holds_where_the_loss_was_seen() -> None:
         t += dt
     dist = np.linalg.norm(np.array(samples) - p0, axis=1)
     assert float(dist.max()) < 0.75 and float(dist[-1]) < 0.1
+    assert loss.observe(120, 100 - STALLED_PERIODS - 1) == "lost"  # the stall goes on
+    flight.setpoint(2.2, p, v)
+    assert flight.flight is hold and loss.t_land is not None  # same hold, a land time now
     assert loss.observe(200, 199) == "back" and flight.setpoint(4.0, p, v) is None
-    loss.observe(300, 300 - RUNNER_LOST_PERIODS - 1)
+    assert loss.observe(300, 300 - RUNNER_LOST_PERIODS - 1) == "lost"  # a new stall
     p1 = np.array([4.0, 4.0, 2.0])
     flight.setpoint(6.0, p1, np.zeros(3))
     assert flight.flight is not hold and flight.flight is not None
