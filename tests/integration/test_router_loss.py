@@ -177,3 +177,52 @@ def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
           f"landed and disarmed by t={t_landed:.2f} s; min distance {obs.min_dist:.3f} m "
           f"over {obs.samples} snapshots after the kill ({before:.3f} m at t={before_at:.2f} s "
           "before it); collisions 0")
+
+
+STALL_S = 0.4  # wall s the router is stopped: past the stall threshold, short of the loss
+
+
+def test_router_stall_brakes_then_flies_on(tmp_path: Path) -> None:
+    """SIGSTOP of the router for 0.4 s (truth 10–25 periods late on every daemon): each
+    daemon brakes to a hold on its own odometry, then flies on when truth is back; nobody
+    lands, nobody collides, and the formation flies on well apart."""
+    sc = load_scenario(CUBE8)
+    off = free_port_offset()
+    spec = LaunchSpec(sc, port_offset=off, lockstep=False, run_dir=tmp_path, method="dcbf")
+    obs = Observer(GCS_PORT + off, list(sc.ids))
+    obs.start()
+    router = _start([sys.executable, "-m", "gcs.cli", "router", "--listen",
+                     spec.router_endpoint], tmp_path / "router.log")
+    procs: list[subprocess.Popen] = []
+    try:
+        _wait(lambda: _port_open(spec.router_port) or router.poll() is not None, 30, "router")
+        assert router.poll() is None, (tmp_path / "router.log").read_text()
+        for name, argv in spec.processes():
+            procs.append(_start(argv, tmp_path / f"{name}.log"))
+        logs = [tmp_path / f"offboard-{i}.log" for i in sc.ids]
+        _wait(lambda: all(p.exists() and "ARM accepted" in p.read_text() for p in logs), 90,
+              "every daemon to arm")
+        _wait(lambda: obs.time_s() >= FLY_BEFORE_KILL_S, 60, "the swarm to fly")
+        router.send_signal(signal.SIGSTOP)
+        time.sleep(STALL_S)
+        router.send_signal(signal.SIGCONT)
+        t_stall = obs.time_s()
+        _wait(lambda: all("truth back" in p.read_text() for p in logs), 30,
+              "every daemon to fly on")
+        _wait(lambda: obs.time_s() >= t_stall + 4.0, 60, "4 s more of flight")
+        assert all(p.poll() is None for p in procs), "a process died"
+        assert all(obs.armed.get(i) for i in sc.ids)
+    finally:
+        stop_processes(procs)
+        router.kill()
+        router.wait(10)
+        obs.close()
+    texts = [p.read_text() for p in logs]
+    assert all("braking to a hold" in t for t in texts)
+    assert not any("landing on odometry" in t for t in texts)
+    sim_log = (tmp_path / "vehicle-sim.log").read_text(errors="replace")
+    collisions = re.findall(r"collisions=(\d+)", sim_log)
+    assert collisions and int(collisions[-1]) == 0, sim_log[-2000:]
+    assert obs.samples > 100 and obs.min_dist >= MIN_DIST_M, obs.min_dist
+    print(f"router stopped {STALL_S} s at t={t_stall:.2f} s: every daemon braked and flew "
+          f"on; min distance {obs.min_dist:.3f} m over {obs.samples} snapshots")
