@@ -54,6 +54,7 @@ import numpy as np
 import osqp
 from scipy import sparse
 
+from offboard.osqp_call import update_solve
 from swarm_common.enums import QPStatus
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
@@ -275,11 +276,9 @@ class _ClfRowsQP:
         self.l[1 : 1 + k] = rhs[:k]
         self.l[1 + k : 1 + m] = -np.inf
         self.q[0:3] = -u_nom
-        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
-        res = self.solver.solve(raise_error=False)
-        sv = int(res.info.status_val)
-        x = res.x
-        if res.info.status_val in SOLVED and x is not None and np.all(np.isfinite(x)):
+        status, x = update_solve(self.solver, self.q, self.l, self.u, a.T[self._mask_t])
+        sv = int(status)
+        if status in SOLVED and x is not None and np.all(np.isfinite(x)):
             return sv, np.asarray(x, dtype=float)
         self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
         return sv, None
