@@ -179,7 +179,7 @@ def run_inproc(
             md = math.inf
             for _ in range(nsub):
                 dyn.step()
-                md = min(md, dyn.min_pair_distance())
+                md = min(md, dyn.step_min_distance())
             ser.min_dist[k] = md
             md_run = min(md_run, md)
             if bar is not None:
