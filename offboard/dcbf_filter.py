@@ -134,7 +134,7 @@ class DcbfFilter(SafetyFilter):
                 float(x.z1[2]), float(x.z2[2]), float(x.a_real[2]), wz, x.floor_m, self.lag,
                 ctl.tau_safe_s, GROUND_GAMMA, GROUND_ACCEL_ERR,
             )
-            g, rhs = np.vstack([g, gg]), np.concatenate([rhs, rg])
+            g, rhs = np.concatenate([g, gg]), np.concatenate([rhs, rg])
         brake = -x.w - self.brake_gain * x.z2
         res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min, brake)
         return SafetyOutput(

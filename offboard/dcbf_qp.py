@@ -91,8 +91,8 @@ class DcbfQP(_ClfRowsQP):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
                             False)
-        finite = bool(np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k]))
-                      and np.all(np.isfinite(g[:k])) and np.all(np.isfinite(clf.lgv))
+        finite = bool(np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all()
+                      and np.isfinite(g[:k]).all() and np.isfinite(clf.lgv).all()
                       and math.isfinite(clf.lfv) and math.isfinite(clf.V))
         if not finite:
             u = self.uset.project(np.nan_to_num(brake, posinf=0.0, neginf=0.0))

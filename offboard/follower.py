@@ -34,6 +34,7 @@ from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
+from swarm_common.fastnp import norm
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -229,7 +230,7 @@ class FollowerAgent(AgentBase):
             idx, pp, pv, pm = self._predicted_pairs(t, sel)
             if len(idx):
                 sel = np.concatenate([sel, idx])
-                dp, dv = np.vstack([dp, pp]), np.vstack([dv, pv])
+                dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
                 margin = np.concatenate([margin, pm])
                 predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
         return SafetyInput(
@@ -257,7 +258,7 @@ class FollowerAgent(AgentBase):
             if got is None:
                 continue
             dp = self.deso.z1 - got[0]
-            if float(np.linalg.norm(dp)) > rng:
+            if norm(dp) > rng:
                 continue
             b = self.pred.bound(aid, t) or 0.0
             rows.append((j, dp, self.deso.z2 - got[1], b + tau * self.pred.velocity_bound(aid, t)))
@@ -317,7 +318,7 @@ class FollowerAgent(AgentBase):
             self.fallbacks += 1
         status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
         status.slack, status.violation = res.slack, res.violation
-        if not np.all(np.isfinite(u)):
+        if not np.isfinite(u).all():
             u = np.clip(np.nan_to_num(-x.w), self.u_lo, self.u_hi)
             self.fallbacks += 1
         status.fallbacks = self.fallbacks

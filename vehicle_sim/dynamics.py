@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from swarm_common.fastnp import einsum
 from swarm_common.scenario import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
@@ -128,7 +129,7 @@ class SwarmDynamics:
         # Φ(p, v) ζ written out per column (same sum as regressor(...) @ ζ, without
         # building the (N,3,6) array: this runs at every physics step)
         v, z = self.v, self.zeta
-        speed = np.sqrt(np.einsum("ij,ij->i", v, v))[:, None]
+        speed = np.sqrt(einsum("ij,ij->i", v, v))[:, None]
         f = z[:, 0:1] - (z[:, 1:2] + z[:, 2:3] * speed) * v - z[:, 3:4] * v**3
         f[:, 2] += z[:, 4] * np.exp(-np.maximum(self.p[:, 2], 0.0) / self.ge_height)
         f[:, 0] -= z[:, 5] * v[:, 1]
