@@ -178,7 +178,10 @@ class FollowerAgent(AgentBase):
         # --- observers to t_{k+1} ---------------------------------------------------
         u_sub = self.inner.run(sp, self.substeps)
         self.last_sp = sp
-        self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), u_sub.mean(axis=0)
+        # mean over the sub-steps as ndarray.mean computes it (sum, then divide by the
+        # count), without its Python wrapper
+        a_mean = np.add.reduce(u_sub, axis=0) / len(u_sub)
+        self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), a_mean
         self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
         self.ref.update(peers.xi)
         status.n_used = self.deso.n_used
