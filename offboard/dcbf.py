@@ -79,7 +79,13 @@ class InputSet:
         a, lo, hi = self.rows()
         y = a @ u
         s = self.shrink + tol
-        return bool(np.all(y <= hi + s) and np.all(y >= lo - s))
+        return bool((y <= hi + s).all() and (y >= lo - s).all())
+
+    @cached_property
+    def _cone_dirs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cos, sin) of the K cone-side angles 2πk/K (computed once per set)."""
+        ang = 2.0 * math.pi * np.arange(self.sides) / self.sides
+        return np.cos(ang), np.sin(ang)
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """A point of the (shrunk) set near ``u``: u_z clipped, then u_h scaled inward."""
@@ -90,8 +96,8 @@ class InputSet:
         k = self.sides
         c = self.tan_tilt * math.cos(math.pi / k)
         r = (self.g + out[2]) * c - s
-        ang = 2.0 * math.pi * np.arange(k) / k
-        worst = float(np.max(np.cos(ang) * out[0] + np.sin(ang) * out[1]))
+        cos_a, sin_a = self._cone_dirs
+        worst = float((cos_a * out[0] + sin_a * out[1]).max())
         if worst > r:
             out[0:2] *= max(r, 0.0) / worst
         return out

@@ -77,7 +77,7 @@ class DcbfQP(_ClfRowsQP):
 
     def _inside(self, u: np.ndarray) -> bool:
         y = self.a_u @ u
-        return bool(np.all(y <= self.hi_u) and np.all(y >= self.lo_u))
+        return bool((y <= self.hi_u).all() and (y >= self.lo_u).all())
 
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,

@@ -345,7 +345,7 @@ class FollowerAgent(AgentBase):
 def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
     """True if the setpoint realises an acceleration farther than CLIP_TOL from ``u``."""
     real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, mass, g)
-    return bool(np.max(np.abs(real - u)) > CLIP_TOL)
+    return bool(np.abs(real - u).max() > CLIP_TOL)
 
 
 class NeighbourAccel:
