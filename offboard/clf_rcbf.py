@@ -127,12 +127,12 @@ def anti_windup_control(
     f_c = np.minimum(np.maximum(ff, lo + m), hi - m)
     b_hi, b_lo = hi - f_c, f_c - lo
     v_r = -c * e1
-    n = float(np.sqrt(e1 @ e1))
+    n = math.sqrt(float(e1 @ e1))  # = float(np.sqrt(e1 @ e1)): both correctly rounded
     if n > 1e-12:
         d = e1 / n
         room = np.where(d > 0.0, b_hi, b_lo)
         nz = np.abs(d) > 1e-12
-        b_e = float(np.min(room[nz] / np.abs(d[nz])))
+        b_e = float((room[nz] / np.abs(d[nz])).min())
         v_r *= min(1.0, math.sqrt(2.0 * brake_share * b_e * n) / (c * n))
     fb = -k_v * (e2 - v_r)
     return f_c + np.minimum(np.maximum(fb, -b_lo), b_hi)
