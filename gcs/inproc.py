@@ -40,6 +40,7 @@ from offboard.bearing import formation_from_scenario
 from offboard.daemon_peers import peer_ids
 from offboard.landing import landing_plan
 from offboard.takeoff import is_ground_start, takeoff_plan
+from swarm_common.blas import single_thread_blas
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
@@ -131,59 +132,61 @@ def run_inproc(
     veh = sc.vehicle
     f_max = veh.thrust_max_n
     form = formation_from_scenario(sc)
-    dyn = SwarmDynamics(sc, seed=seed)
-    agents = [make_agent(sc, a.id, method=method, seed=seed, form=form) for a in sc.agents]
-    gains: list[str] = []
-    for ag in agents:
-        if isinstance(ag, FollowerAgent):
-            gains = ag.gains.lines()
-            break
-    bar = Progress(dur, label=method) if progress else None
-    if progress:
-        for line in gains:
-            log.info("%s", line)
-    published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
-    # each agent reads its peers' estimates only, as its daemon subscribes to them only
-    # (in scenario order, as ``published`` is: O(peers) per agent, not O(N))
-    peers = {ag.id: _in_order(sc.ids, peer_ids(form, ag.id)) for ag in agents}
-    n = sc.n
-    ser = empty_series(np.arange(n_steps) * dt, n)
-    md_run = math.inf
-    t_wall = time.perf_counter()
-    for k in range(n_steps):
-        t = k * dt
-        if land_at is not None and t >= land_at and agents[0].landing is None:
-            plan = landing_plan(sc, land_at, form)  # t_L = land_at, as in offboard.daemon
-            log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
-            for ag in agents:
-                ag.start_landing(plan)
-        tp, tv = f32(dyn.p), f32(dyn.v)
-        comm = not in_outage(t, sc.outages)
-        set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)
-        new_pub: dict[int, NeighbourEstimate] = {}
-        for i, ag in enumerate(agents):
-            e = published[ag.id]
-            ser.z1[k, i], ser.z2[k, i] = e.z1, e.z2
-            nb = {j: published[j] for j in peers[ag.id]} if comm else {}
-            out = ag.step(k, t, tp, tv, nb, comm)
-            roll, pitch, yaw, fn = wire_to_command(out.q_ned, out.thrust_norm, f_max)
-            dyn.set_command(i, roll, pitch, yaw, fn)
-            new_pub[ag.id] = round_estimate(out.estimate)
-            st = out.status
-            set_agent_row(ser, k, i, out.u, out.lumped, st.h_min, st.solve_us, st.qp_status,
-                          getattr(st, "input_clipped", False))
-        published = new_pub
-        md = math.inf
-        for _ in range(nsub):
-            dyn.step()
-            md = min(md, dyn.min_pair_distance())
-        ser.min_dist[k] = md
-        md_run = min(md_run, md)
+    # tiny matrices only: BLAS worker threads cost, never help (swarm_common.blas)
+    with single_thread_blas():
+        dyn = SwarmDynamics(sc, seed=seed)
+        agents = [make_agent(sc, a.id, method=method, seed=seed, form=form) for a in sc.agents]
+        gains: list[str] = []
+        for ag in agents:
+            if isinstance(ag, FollowerAgent):
+                gains = ag.gains.lines()
+                break
+        bar = Progress(dur, label=method) if progress else None
+        if progress:
+            for line in gains:
+                log.info("%s", line)
+        published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
+        # each agent reads its peers' estimates only, as its daemon subscribes to them only
+        # (in scenario order, as ``published`` is: O(peers) per agent, not O(N))
+        peers = {ag.id: _in_order(sc.ids, peer_ids(form, ag.id)) for ag in agents}
+        n = sc.n
+        ser = empty_series(np.arange(n_steps) * dt, n)
+        md_run = math.inf
+        t_wall = time.perf_counter()
+        for k in range(n_steps):
+            t = k * dt
+            if land_at is not None and t >= land_at and agents[0].landing is None:
+                plan = landing_plan(sc, land_at, form)  # t_L = land_at, as in offboard.daemon
+                log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
+                for ag in agents:
+                    ag.start_landing(plan)
+            tp, tv = f32(dyn.p), f32(dyn.v)
+            comm = not in_outage(t, sc.outages)
+            set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)
+            new_pub: dict[int, NeighbourEstimate] = {}
+            for i, ag in enumerate(agents):
+                e = published[ag.id]
+                ser.z1[k, i], ser.z2[k, i] = e.z1, e.z2
+                nb = {j: published[j] for j in peers[ag.id]} if comm else {}
+                out = ag.step(k, t, tp, tv, nb, comm)
+                roll, pitch, yaw, fn = wire_to_command(out.q_ned, out.thrust_norm, f_max)
+                dyn.set_command(i, roll, pitch, yaw, fn)
+                new_pub[ag.id] = round_estimate(out.estimate)
+                st = out.status
+                set_agent_row(ser, k, i, out.u, out.lumped, st.h_min, st.solve_us, st.qp_status,
+                              getattr(st, "input_clipped", False))
+            published = new_pub
+            md = math.inf
+            for _ in range(nsub):
+                dyn.step()
+                md = min(md, dyn.step_min_distance())
+            ser.min_dist[k] = md
+            md_run = min(md_run, md)
+            if bar is not None:
+                bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
         if bar is not None:
-            bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
-    if bar is not None:
-        bar.close()
-    wall = time.perf_counter() - t_wall
+            bar.close()
+        wall = time.perf_counter() - t_wall
     zeta_est = np.zeros((n, 6))
     fallbacks = 0
     for i, ag in enumerate(agents):

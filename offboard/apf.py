@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from swarm_common.fastnp import einsum
+
 
 def apf_term(
     dp: np.ndarray, d_dot: np.ndarray, gain: float, vgain: float, radius: float
@@ -25,7 +27,7 @@ def apf_term(
     """
     if len(dp) == 0:
         return np.zeros(3)
-    d = np.sqrt(np.einsum("ij,ij->i", dp, dp))
+    d = np.sqrt(einsum("ij,ij->i", dp, dp))
     d = np.maximum(d, 1e-3)
     act = d < radius
     if not np.any(act):

@@ -54,7 +54,9 @@ import numpy as np
 import osqp
 from scipy import sparse
 
+from offboard.osqp_call import update_solve
 from swarm_common.enums import QPStatus
+from swarm_common.fastnp import einsum
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
@@ -125,12 +127,12 @@ def anti_windup_control(
     f_c = np.minimum(np.maximum(ff, lo + m), hi - m)
     b_hi, b_lo = hi - f_c, f_c - lo
     v_r = -c * e1
-    n = float(np.sqrt(e1 @ e1))
+    n = math.sqrt(float(e1 @ e1))  # = float(np.sqrt(e1 @ e1)): both correctly rounded
     if n > 1e-12:
         d = e1 / n
         room = np.where(d > 0.0, b_hi, b_lo)
         nz = np.abs(d) > 1e-12
-        b_e = float(np.min(room[nz] / np.abs(d[nz])))
+        b_e = float((room[nz] / np.abs(d[nz])).min())
         v_r *= min(1.0, math.sqrt(2.0 * brake_share * b_e * n) / (c * n))
     fb = -k_v * (e2 - v_r)
     return f_c + np.minimum(np.maximum(fb, -b_lo), b_hi)
@@ -139,7 +141,7 @@ def anti_windup_control(
 def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
     """h_ij for rows of Δp = p_i − p_j, Δv = v_i − v_j (§2.3, §4.3)."""
     return (
-        np.einsum("ij,ij->i", dp, dp) + 2.0 * tau * np.einsum("ij,ij->i", dv, dp) - d_safe**2
+        einsum("ij,ij->i", dp, dp) + 2.0 * tau * einsum("ij,ij->i", dv, dp) - d_safe**2
     )
 
 
@@ -164,13 +166,13 @@ def rcbf_rows(
     """
     if h is None:
         h = barrier(dp, dv, tau, d_safe)
-    base = 2.0 * np.einsum("ij,ij->i", dp, dv) + 2.0 * tau * np.einsum("ij,ij->i", dv, dv)
+    base = 2.0 * einsum("ij,ij->i", dp, dv) + 2.0 * tau * einsum("ij,ij->i", dv, dv)
     base += gamma * h**3
-    nrm = np.sqrt(np.einsum("ij,ij->i", dp, dp))
+    nrm = np.sqrt(einsum("ij,ij->i", dp, dp))
     nrm = np.maximum(nrm, 1e-6)
     n_hat = dp / nrm[:, None]
     # 2τΔpᵀ(u + w_i − a_j) ≥ −share·base   →   n̂ᵀu ≥ −share·base/(2τ‖Δp‖) − n̂ᵀ(w_i − a_j)
-    rhs = -share * base / (2.0 * tau * nrm) - np.einsum("ij,ij->i", n_hat, w_i[None, :] - a_other)
+    rhs = -share * base / (2.0 * tau * nrm) - einsum("ij,ij->i", n_hat, w_i[None, :] - a_other)
     return n_hat, rhs + margin, h
 
 
@@ -275,11 +277,9 @@ class _ClfRowsQP:
         self.l[1 : 1 + k] = rhs[:k]
         self.l[1 + k : 1 + m] = -np.inf
         self.q[0:3] = -u_nom
-        self.solver.update(q=self.q, l=self.l, u=self.u, Ax=a.T[self._mask_t])
-        res = self.solver.solve(raise_error=False)
-        sv = int(res.info.status_val)
-        x = res.x
-        if res.info.status_val in SOLVED and x is not None and np.all(np.isfinite(x)):
+        status, x = update_solve(self.solver, self.q, self.l, self.u, a.T[self._mask_t])
+        sv = int(status)
+        if status in SOLVED and x is not None and np.isfinite(x).all():
             return sv, np.asarray(x, dtype=float)
         self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
         return sv, None
@@ -380,8 +380,8 @@ class SafetyQP(_ClfRowsQP):
         self._fit(len(rhs))
         m = self.m
         k = min(len(rhs), m)
-        finite = np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k])) and np.all(
-            np.isfinite(clf.lgv)) and np.isfinite(clf.lfv) and np.isfinite(clf.V)
+        finite = np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all() and np.isfinite(
+            clf.lgv).all() and np.isfinite(clf.lfv) and np.isfinite(clf.V)
         if not finite:
             u = np.clip(np.nan_to_num(brake, posinf=0.0, neginf=0.0), self.u_lo, self.u_hi)
             us = (time.perf_counter() - t0) * 1e6

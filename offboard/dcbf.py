@@ -33,6 +33,8 @@ from functools import cached_property
 
 import numpy as np
 
+from swarm_common.fastnp import einsum
+
 
 @dataclass(frozen=True)
 class InputSet:
@@ -77,7 +79,13 @@ class InputSet:
         a, lo, hi = self.rows()
         y = a @ u
         s = self.shrink + tol
-        return bool(np.all(y <= hi + s) and np.all(y >= lo - s))
+        return bool((y <= hi + s).all() and (y >= lo - s).all())
+
+    @cached_property
+    def _cone_dirs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(cos, sin) of the K cone-side angles 2πk/K (computed once per set)."""
+        ang = 2.0 * math.pi * np.arange(self.sides) / self.sides
+        return np.cos(ang), np.sin(ang)
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """A point of the (shrunk) set near ``u``: u_z clipped, then u_h scaled inward."""
@@ -88,8 +96,8 @@ class InputSet:
         k = self.sides
         c = self.tan_tilt * math.cos(math.pi / k)
         r = (self.g + out[2]) * c - s
-        ang = 2.0 * math.pi * np.arange(k) / k
-        worst = float(np.max(np.cos(ang) * out[0] + np.sin(ang) * out[1]))
+        cos_a, sin_a = self._cone_dirs
+        worst = float((cos_a * out[0] + sin_a * out[1]).max())
         if worst > r:
             out[0:2] *= max(r, 0.0) / worst
         return out
@@ -156,10 +164,10 @@ def predict(
     pv = dv + own_v[None, :] - a_other * t
     pp = dp + dv * t + own_p[None, :] - 0.5 * a_other * t * t
     pa = own_a[None, :] - a_other
-    vp = np.einsum("ij,ij->i", pv, pp)
-    h = np.einsum("ij,ij->i", pp, pp) + 2.0 * tau_s * vp - d_safe**2
+    vp = einsum("ij,ij->i", pv, pp)
+    h = einsum("ij,ij->i", pp, pp) + 2.0 * tau_s * vp - d_safe**2
     hdot = 2.0 * vp + 2.0 * tau_s * (
-        np.einsum("ij,ij->i", pv, pv) + np.einsum("ij,ij->i", pp, pa)
+        einsum("ij,ij->i", pv, pv) + einsum("ij,ij->i", pp, pa)
     )
     return Prediction(pp, pv, pa, h, hdot)
 
@@ -175,7 +183,7 @@ def _grads(pr: Prediction, cp: np.ndarray, cv: np.ndarray, ca: np.ndarray,
 
 
 def _norm(x: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("ij,ij->i", x, x))
+    return np.sqrt(einsum("ij,ij->i", x, x))
 
 
 def dcbf_rows(
@@ -197,7 +205,7 @@ def dcbf_rows(
     the error of the assumed relative acceleration over [0, T] (model, estimates).
     """
     pr = predict(dp, dv, a0, u_ref, a_other, lag, tau_s, d_safe)
-    h0 = np.einsum("ij,ij->i", dp, dp) + 2.0 * tau_s * np.einsum("ij,ij->i", dv, dp) - d_safe**2
+    h0 = einsum("ij,ij->i", dp, dp) + 2.0 * tau_s * einsum("ij,ij->i", dv, dp) - d_safe**2
     # both sensitivities at once (lag.sens, element by element as two _grads calls):
     # [0] a constant relative-acceleration error e over [0, T] (moves Δv̂ by eT, Δp̂ by
     # eT²/2), [1] the command u through the lag
@@ -213,7 +221,7 @@ def dcbf_rows(
     drop = lag.T * (gamma1 * h0 + gamma3 * h0**3)
     drop = np.where(h0 > 0.0, np.minimum(drop, 0.5 * h0), drop)  # keep ≥ half of h > 0
     c2 = pr.h - m_h - (h0 - drop)
-    g = np.vstack([u_hd + k_h * u_h, u_h])
+    g = np.concatenate([u_hd + k_h * u_h, u_h])
     c = np.concatenate([c1, c2])
     sh = np.concatenate([share, share])
     nrm = np.maximum(_norm(g), 1e-9)

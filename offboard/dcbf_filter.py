@@ -80,7 +80,7 @@ class DcbfFilter(SafetyFilter):
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
         self.dt = dt
 
-    def _other_term(self, x: SafetyInput) -> np.ndarray:
+    def _other_term(self, x: SafetyInput, w_safe: np.ndarray) -> np.ndarray:
         """(M,3) ``a_j − w_i`` for :func:`~offboard.dcbf.dcbf_rows` (own lumped disturbance
         is not lagged, so it enters as an offset of the other's acceleration).
 
@@ -88,13 +88,14 @@ class DcbfFilter(SafetyFilter):
         ``Δa = (Δv_k − Δv_{k−1})/dt = a_i − a_j`` over the last period with
         ``a_i = ā_i + w_i`` (ā_i the inner-loop model's mean realised control), so
         ``a_j − w_i = ā_i − Δa`` (low-passed, no disturbance estimate needed). Otherwise the
-        other's broadcast-velocity estimate minus the saturated own estimate.
+        other's broadcast-velocity estimate minus the saturated own estimate ``w_safe``
+        (``saturate_norm(x.w, W_SAFE)``, computed once per step by :meth:`apply`).
         """
         n = len(x.pairs)
         out = np.zeros((n, 3)) if x.other_acc is None else x.other_acc.copy()
-        out -= saturate_norm(x.w, W_SAFE)[None, :]
+        out -= w_safe
         # rows sensed now (predicted rows: the broadcast-velocity estimate, no history)
-        rows = np.arange(n) if x.predicted is None else np.flatnonzero(~x.predicted)
+        rows = np.arange(n) if x.predicted is None else (~x.predicted).nonzero()[0]
         js = np.asarray(x.pairs, dtype=np.intp)[rows]
         have = self._prev_ok[js]
         self._rel_ok[js[~have]] = False  # a pair seen again after a gap starts afresh
@@ -104,10 +105,10 @@ class DcbfFilter(SafetyFilter):
             old_ok = self._rel_ok[j_h]
             if old_ok.any():
                 smooth = REL_ACC_SMOOTH * self._rel_acc[j_h] + (1.0 - REL_ACC_SMOOTH) * da
-                da = np.where(old_ok[:, None], smooth, da)
+                da = smooth if old_ok.all() else np.where(old_ok[:, None], smooth, da)
             self._rel_acc[j_h] = da
             self._rel_ok[j_h] = True
-            out[r_h] = x.a_mean[None, :] - da
+            out[r_h] = x.a_mean - da
         self._prev_ok[:] = False
         self._prev_ok[js] = True
         self._prev_dv[js] = x.dv[rows]
@@ -123,18 +124,19 @@ class DcbfFilter(SafetyFilter):
         lm = self.leader_mask[x.pairs] if x.full_share is None else x.full_share
         share = np.where(lm, 1.0, 0.5)
         d_safe = ctl.d_safe_m if x.margin is None else ctl.d_safe_m + x.margin
+        w_safe = saturate_norm(x.w, W_SAFE)
         g, rhs, _ = dcbf_rows(
-            x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x), share, self.lag,
+            x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x, w_safe), share, self.lag,
             ctl.tau_safe_s, d_safe, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2,
         )
         if x.floor_m is not None and x.z1 is not None:  # airborne: the ground barrier
-            wz = float(saturate_norm(x.w, W_SAFE)[2])
+            wz = float(w_safe[2])
             gg, rg = ground_rows(
                 float(x.z1[2]), float(x.z2[2]), float(x.a_real[2]), wz, x.floor_m, self.lag,
                 ctl.tau_safe_s, GROUND_GAMMA, GROUND_ACCEL_ERR,
             )
-            g, rhs = np.vstack([g, gg]), np.concatenate([rhs, rg])
+            g, rhs = np.concatenate([g, gg]), np.concatenate([rhs, rg])
         brake = -x.w - self.brake_gain * x.z2
         res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min, brake)
         return SafetyOutput(

@@ -77,7 +77,7 @@ class DcbfQP(_ClfRowsQP):
 
     def _inside(self, u: np.ndarray) -> bool:
         y = self.a_u @ u
-        return bool(np.all(y <= self.hi_u) and np.all(y >= self.lo_u))
+        return bool((y <= self.hi_u).all() and (y >= self.lo_u).all())
 
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
@@ -91,8 +91,8 @@ class DcbfQP(_ClfRowsQP):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
                             False)
-        finite = bool(np.all(np.isfinite(u_nom)) and np.all(np.isfinite(rhs[:k]))
-                      and np.all(np.isfinite(g[:k])) and np.all(np.isfinite(clf.lgv))
+        finite = bool(np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all()
+                      and np.isfinite(g[:k]).all() and np.isfinite(clf.lgv).all()
                       and math.isfinite(clf.lfv) and math.isfinite(clf.V))
         if not finite:
             u = self.uset.project(np.nan_to_num(brake, posinf=0.0, neginf=0.0))

@@ -52,6 +52,7 @@ from offboard.deso_adaptive import (  # noqa: F401 (re-exported)
     model_accel,
     regressor_t_times,
 )
+from swarm_common.fastnp import einsum
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
 GATE_E1 = 0.3  # m, adaptation runs only while ‖e1‖ ≤ GATE_E1 ...
@@ -360,8 +361,8 @@ class DESO:
         pu = self._stacked_weights(used)  # (k,3,3) W_ij
         zp = np.array([nbr_p[j] for j in idx])
         zv = np.array([nbr_v[j] for j in idx])
-        b1 = np.einsum("kij,kj->i", pu, zp - rel_pos[idx])
-        b1d = np.einsum("kij,kj->i", pu, zv - rel_vel[idx])
+        b1 = einsum("kij,kj->i", pu, zp - rel_pos[idx])
+        b1d = einsum("kij,kj->i", pu, zv - rel_vel[idx])
         b2 = b1d  # Σ P*(ẑ_j2 − ṙ_ij)
         z1, z2 = self.z1, self.z2
         f_hat = f_cached if f_cached is not None else model_accel(z1, z2, self.zeta, self.h)

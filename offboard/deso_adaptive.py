@@ -80,6 +80,6 @@ def adapt_step(
     and ζ̂ never leaves the box.
     """
     step = phte / (1.0 + fro2) + sigma * zeta
-    if not np.all(np.isfinite(step)):
+    if not np.isfinite(step).all():
         return zeta
     return np.clip(zeta - dt * mu * step, ZETA_LO, ZETA_HI)

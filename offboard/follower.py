@@ -34,6 +34,7 @@ from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
+from swarm_common.fastnp import norm
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -177,7 +178,10 @@ class FollowerAgent(AgentBase):
         # --- observers to t_{k+1} ---------------------------------------------------
         u_sub = self.inner.run(sp, self.substeps)
         self.last_sp = sp
-        self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), u_sub.mean(axis=0)
+        # mean over the sub-steps as ndarray.mean computes it (sum, then divide by the
+        # count), without its Python wrapper
+        a_mean = np.add.reduce(u_sub, axis=0) / len(u_sub)
+        self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), a_mean
         self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
         self.ref.update(peers.xi)
         status.n_used = self.deso.n_used
@@ -229,7 +233,7 @@ class FollowerAgent(AgentBase):
             idx, pp, pv, pm = self._predicted_pairs(t, sel)
             if len(idx):
                 sel = np.concatenate([sel, idx])
-                dp, dv = np.vstack([dp, pp]), np.vstack([dv, pv])
+                dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
                 margin = np.concatenate([margin, pm])
                 predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
         return SafetyInput(
@@ -257,7 +261,7 @@ class FollowerAgent(AgentBase):
             if got is None:
                 continue
             dp = self.deso.z1 - got[0]
-            if float(np.linalg.norm(dp)) > rng:
+            if norm(dp) > rng:
                 continue
             b = self.pred.bound(aid, t) or 0.0
             rows.append((j, dp, self.deso.z2 - got[1], b + tau * self.pred.velocity_bound(aid, t)))
@@ -317,7 +321,7 @@ class FollowerAgent(AgentBase):
             self.fallbacks += 1
         status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
         status.slack, status.violation = res.slack, res.violation
-        if not np.all(np.isfinite(u)):
+        if not np.isfinite(u).all():
             u = np.clip(np.nan_to_num(-x.w), self.u_lo, self.u_hi)
             self.fallbacks += 1
         status.fallbacks = self.fallbacks
@@ -341,7 +345,7 @@ class FollowerAgent(AgentBase):
 def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
     """True if the setpoint realises an acceleration farther than CLIP_TOL from ``u``."""
     real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, mass, g)
-    return bool(np.max(np.abs(real - u)) > CLIP_TOL)
+    return bool(np.abs(real - u).max() > CLIP_TOL)
 
 
 class NeighbourAccel:

@@ -95,7 +95,7 @@ class LeaderAgent(AgentBase):
         sp = setpoint_from_accel(u, self.yaw, self.veh)
         u_sub = self.inner.run(sp, self.substeps)
         self._update_eso(v, u_sub)
-        a = u_sub.mean(axis=0) + self.d_hat
+        a = np.add.reduce(u_sub, axis=0) / len(u_sub) + self.d_hat  # = u_sub.mean(axis=0)
         est = NeighbourEstimate(
             self.id, t + self.dt, p + v * self.dt + 0.5 * a * self.dt**2, v + a * self.dt,
             self.d_hat.copy(), self.current_reference(t + self.dt), True,
@@ -103,7 +103,7 @@ class LeaderAgent(AgentBase):
         status = AgentStatus(method=self.method, comm_ok=comm_ok)
         real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, self.veh.mass_kg,
                                    self.veh.gravity_mps2)
-        status.input_clipped = bool(np.max(np.abs(real - u)) > 1e-3)
+        status.input_clipped = bool(np.abs(real - u).max() > 1e-3)
         return self._output(sp, u, est, status, self.d_hat.copy())
 
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from offboard.bearing import Formation
+from swarm_common.fastnp import einsum
 
 XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
 
@@ -142,7 +143,7 @@ class DesiredStateObserver:
             return
         mx, mc, pu = self._matrices(used)
         xs = np.array([nbr_xi[j] for j in used]).reshape(len(used), 4, 3)
-        c = np.einsum("kij,kdj->di", pu, xs).reshape(12)  # Σ (I4 ⊗ P_ij) ξ_j
+        c = einsum("kij,kdj->di", pu, xs).reshape(12)  # Σ (I4 ⊗ P_ij) ξ_j
         self.xi = mx @ self.xi + mc @ c
 
     @property

@@ -26,6 +26,7 @@ import numpy as np
 from offboard.apf import apf_control, none_control
 from offboard.clf_rcbf import ClfTerms, SafetyQP, barrier, rcbf_rows, tangential_term
 from swarm_common.enums import Method, QPStatus
+from swarm_common.fastnp import einsum
 from swarm_common.scenario import ControllerConfig
 
 W_SAFE = 0.5  # m/s², bound on the lumped-disturbance estimate inside the RCBF rows
@@ -149,8 +150,8 @@ class ApfFilter(SafetyFilter):
         h = self._barrier(x)
         side = self._sidestep(x, h)
         dp, dv = x.dp, x.dv
-        dd = np.einsum("ij,ij->i", dp, dv) / np.maximum(
-            np.sqrt(np.einsum("ij,ij->i", dp, dp)), 1e-6
+        dd = einsum("ij,ij->i", dp, dv) / np.maximum(
+            np.sqrt(einsum("ij,ij->i", dp, dp)), 1e-6
         )  # range rate ḋ_ij (negative when closing)
         u = apf_control(
             x.clf.u_nom, dp, dd, side, ctl.apf_gain,

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarm_common.fastnp import einsum
 from swarm_common.scenario import SensingConfig
 
 
@@ -72,18 +73,18 @@ class Sensor:
         i = self.index
         rel = p - p[i]
         relv = v - v[i]
-        d = np.sqrt(np.einsum("ij,ij->i", rel, rel))
+        d = np.sqrt(einsum("ij,ij->i", rel, rel))
         d[i] = 1.0
         g = rel / d[:, None]
         g[i, 0] = 1.0  # placeholder row for itself (marked invalid)
-        gd = np.einsum("ij,ij->i", g, relv)
+        gd = einsum("ij,ij->i", g, relv)
         g_dot = (relv - g * gd[:, None]) / d[:, None]
         noise = self.rng.standard_normal((self.n, 8))
         drop = self.rng.random(self.n)
         sb, sr, sd, sdd = self._sig
         # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
         gm = g + noise[:, 0:3] * sb
-        gm /= np.sqrt(np.einsum("ij,ij->i", gm, gm))[:, None]
+        gm /= np.sqrt(einsum("ij,ij->i", gm, gm))[:, None]
         gdm = g_dot + noise[:, 3:6] * sr
         dm = d + noise[:, 6] * sd
         ddm = gd + noise[:, 7] * sdd

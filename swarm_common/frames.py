@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 
+from swarm_common.fastnp import norm
+
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 D_FRD_FLU = np.diag([1.0, -1.0, -1.0])
 _SWAP_XY = np.array([1, 0, 2])
@@ -99,7 +101,7 @@ def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray
 def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
     """NED/FRD quaternion [w, x, y, z] -> ENU/FLU Euler (roll, pitch, yaw)."""
     qa = np.asarray(q, dtype=float)
-    qa = qa / np.linalg.norm(qa)
+    qa = qa / norm(qa)
     r_enu = T_ENU_NED @ rotm_from_quat(qa) @ D_FRD_FLU
     return euler_from_rotm(r_enu)
 
@@ -142,7 +144,7 @@ def accel_to_attitude(
     if h > hmax:
         ah *= hmax / h
     a = np.array([ah[0], ah[1], az])
-    f = mass * float(np.linalg.norm(a))
+    f = mass * norm(a)
     if f > thrust_max_n:
         a *= thrust_max_n / f
         f = thrust_max_n

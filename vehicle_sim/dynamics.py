@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from swarm_common.fastnp import einsum
 from swarm_common.scenario import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
@@ -73,6 +74,7 @@ class SwarmDynamics:
         self.collision_pairs: list[tuple[float, int, int]] = []
         self._in_contact = np.zeros((self.n, self.n), dtype=bool)
         self._iu = np.triu_indices(self.n, 1)
+        self._step_dist = self.pair_distances()  # of the last step (step_min_distance)
 
     # -- commands ---------------------------------------------------------------
     def set_command(self, idx: int, roll: float, pitch: float, yaw: float, thrust_n: float) -> None:
@@ -102,10 +104,18 @@ class SwarmDynamics:
     # -- integration --------------------------------------------------------------
     def thrust_accel(self) -> np.ndarray:
         """(N,3) acceleration from thrust alone, R e3 F / m."""
-        r, p, y = self.att[:, 0], self.att[:, 1], self.att[:, 2]
-        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-        b3 = np.stack([cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr], axis=1)
-        return b3 * (self.thrust / self.mass)[:, None]
+        att = self.att
+        # one cos and one sin over (N,3): the same values as per column (numpy's
+        # elementwise loops do not depend on stride or length; checked bit for bit)
+        c, s = np.cos(att), np.sin(att)
+        cr, cp, cy = c[:, 0], c[:, 1], c[:, 2]
+        sr, sp, sy = s[:, 0], s[:, 1], s[:, 2]
+        b3 = np.empty((len(att), 3))  # filled column by column: no np.stack
+        b3[:, 0] = cy * sp * cr + sy * sr
+        b3[:, 1] = sy * sp * cr - cy * sr
+        b3[:, 2] = cp * cr
+        b3 *= (self.thrust / self.mass)[:, None]
+        return b3
 
     def virtual_control(self) -> np.ndarray:
         """(N,3) the paper's u = R[0,0,F]/m − g e_z realised by the vehicles."""
@@ -119,29 +129,42 @@ class SwarmDynamics:
         # Φ(p, v) ζ written out per column (same sum as regressor(...) @ ζ, without
         # building the (N,3,6) array: this runs at every physics step)
         v, z = self.v, self.zeta
-        speed = np.sqrt(np.einsum("ij,ij->i", v, v))[:, None]
+        speed = np.sqrt(einsum("ij,ij->i", v, v))[:, None]
         f = z[:, 0:1] - (z[:, 1:2] + z[:, 2:3] * speed) * v - z[:, 3:4] * v**3
         f[:, 2] += z[:, 4] * np.exp(-np.maximum(self.p[:, 2], 0.0) / self.ge_height)
         f[:, 0] -= z[:, 5] * v[:, 1]
         f[:, 1] += z[:, 5] * v[:, 0]
-        return f + external_disturbance(tt, self.dist_amp, self.dist_omega)[None, :] / self.mass
+        # d(t)/m of external_disturbance, in plain floats: the same roundings
+        # ((A·cos ωt)/m per component) without building two small arrays
+        amp, m, wt = self.dist_amp, self.mass, self.dist_omega * tt
+        dc, ds = amp * math.cos(wt) / m, amp * math.sin(wt) / m
+        f += (dc, ds, ds)
+        return f
 
     def step(self) -> None:
         """Advance one physics step of ``dt``."""
         dt = self.dt
-        self.att = self.cmd_att + (self.att - self.cmd_att) * self._a_att
-        self.thrust = self.cmd_thrust + (self.thrust - self.cmd_thrust) * self._a_f
-        acc = self.virtual_control() + self.lumped_accel()
-        free = ~self.held
-        v_new = self.v + acc * dt
-        p_new = self.p + v_new * dt
+        cmd_att, cmd_thrust = self.cmd_att, self.cmd_thrust
+        self.att = cmd_att + (self.att - cmd_att) * self._a_att
+        self.thrust = cmd_thrust + (self.thrust - cmd_thrust) * self._a_f
+        acc = self.virtual_control()
+        acc += self.lumped_accel()
+        acc *= dt
+        v_new = self.v + acc
+        p_new = v_new * dt
+        p_new += self.p
         ground = p_new[:, 2] < 0.0
-        if np.any(ground):
+        if ground.any():
             p_new[ground, 2] = 0.0
             v_new[ground, 2] = np.maximum(v_new[ground, 2], 0.0)
             v_new[ground, :2] *= 0.0  # friction: a landed vehicle stops
-        self.v = np.where(free[:, None], v_new, self.v)
-        self.p = np.where(free[:, None], p_new, self.p)
+        held = self.held
+        if held.any():
+            free = ~held
+            self.v = np.where(free[:, None], v_new, self.v)
+            self.p = np.where(free[:, None], p_new, self.p)
+        else:
+            self.v, self.p = v_new, p_new
         self.t = (self.step_count + 1) * dt
         self.step_count += 1
         self._update_collisions()
@@ -152,20 +175,31 @@ class SwarmDynamics:
 
     # -- geometry -----------------------------------------------------------------
     def pair_distances(self) -> np.ndarray:
-        """(N,N) distance matrix of true positions."""
-        d = self.p[:, None, :] - self.p[None, :, :]
-        return np.linalg.norm(d, axis=-1)
+        """(N,N) distance matrix of true positions (np.linalg.norm(d, axis=-1)'s own
+        arithmetic, without its dispatch)."""
+        p = self.p
+        d = p[:, None, :] - p[None, :, :]
+        d *= d
+        return np.sqrt(np.add.reduce(d, axis=-1))
 
     def min_pair_distance(self) -> float:
         return float(self.pair_distances()[self._iu].min())
 
+    def step_min_distance(self) -> float:
+        """:meth:`min_pair_distance` right after :meth:`step`, from the distances its
+        collision check computed (not recomputed: call it before p changes again)."""
+        return float(self._step_dist[self._iu].min())
+
     def _update_collisions(self) -> None:
-        contact = self.pair_distances() < self.collision_radius
+        dist = self.pair_distances()
+        self._step_dist = dist
+        contact = dist < self.collision_radius
         np.fill_diagonal(contact, False)
         new = contact & ~self._in_contact
-        for i, j in zip(*np.nonzero(np.triu(new, 1)), strict=True):
-            self.collisions += 1
-            self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
+        if new.any():
+            for i, j in zip(*np.nonzero(np.triu(new, 1)), strict=True):
+                self.collisions += 1
+                self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
         self._in_contact = contact
 
     def on_ground(self) -> np.ndarray:

@@ -176,7 +176,7 @@ class SimServer(ServerIO):
         for _ in range(self.substeps):  # min pair distance over (t_k, t_k+1] for Truth
             self.dyn.step()
             if self.dyn.n >= 2:
-                md = min(md, self.dyn.min_pair_distance())
+                md = min(md, self.dyn.step_min_distance())
         self._min_dist = md
         self.clock.advance(time.monotonic())
         self._check_collisions()
