@@ -27,6 +27,7 @@ from offboard.daemon_host import DaemonHost
 from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.zenoh_link import ZENOH_ERRORS
+from swarm_common.blas import single_thread_blas
 from swarm_common.enums import Method, SensingSource
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
@@ -266,6 +267,7 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
     """Build the daemons on ``session`` and run them: alone (``--agent``) or packed
     (:class:`offboard.daemon_host.DaemonHost`). ``$OFFBOARD_PROFILE``: a developer aid,
     cProfile (CPU time) of the whole run written to ``$OFFBOARD_PROFILE.<name>``."""
+    single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
     form = formation_from_scenario(cfgs[0].scenario)
     daemons: list[OffboardDaemon] = []
     for cfg in cfgs:

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
 
+from swarm_common.blas import single_thread_blas
 from swarm_common.enums import DefaultStreams, FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
@@ -255,6 +256,7 @@ def _run(server: SimServer) -> int:
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
     prof_path = os.environ.get("VEHICLE_SIM_PROFILE")
     try:
         if prof_path:
