@@ -15,6 +15,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from itertools import combinations
 from pathlib import Path
 from typing import IO
@@ -133,7 +136,20 @@ def _port_open(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
+@dataclass
+class Swarm:
+    """A flying real-time swarm: its observer, router process, daemons' processes and logs."""
+
+    obs: Observer
+    router: subprocess.Popen
+    procs: list[subprocess.Popen]
+    logs: list[Path]
+
+
+@contextmanager
+def _flying_swarm(tmp_path: Path) -> Iterator[Swarm]:
+    """``gcs router``, ``vehicle-sim`` and eight ``offboard --realtime`` daemons (cube8,
+    dcbf), flying and armed past FLY_BEFORE_KILL_S; everything stopped afterwards."""
     sc = load_scenario(CUBE8)
     off = free_port_offset()
     spec = LaunchSpec(sc, port_offset=off, lockstep=False, run_dir=tmp_path, method="dcbf")
@@ -153,24 +169,37 @@ def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
         _wait(lambda: obs.time_s() >= FLY_BEFORE_KILL_S, 60, "the swarm to fly")
         # the observer learns of an arm from the next 1 Hz HEARTBEAT, after the daemon's log
         _wait(lambda: all(obs.armed.get(i) for i in sc.ids), 30, "every HEARTBEAT to say armed")
-        before, before_at = obs.reset_min()
-        router.send_signal(signal.SIGKILL)
-        router.wait(10)
-        t_kill = obs.time_s()
-        _wait(obs.landed, LAND_TIMEOUT_S, "every vehicle landed and disarmed")
-        t_landed = obs.time_s()
-        assert all(p.poll() is None for p in procs), "a process died"
+        yield Swarm(obs, router, procs, logs)
     finally:
         stop_processes(procs)
         if router.poll() is None:
+            router.send_signal(signal.SIGCONT)
             router.kill()
+        router.wait(10)
         obs.close()
+
+
+def _collisions(tmp_path: Path) -> int:
     sim_log = (tmp_path / "vehicle-sim.log").read_text(errors="replace")
-    collisions = re.findall(r"collisions=(\d+)", sim_log)
-    assert collisions and int(collisions[-1]) == 0, sim_log[-2000:]
+    counts = re.findall(r"collisions=(\d+)", sim_log)
+    assert counts, sim_log[-2000:]
+    return int(counts[-1])
+
+
+def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
+    with _flying_swarm(tmp_path) as sw:
+        obs = sw.obs
+        before, before_at = obs.reset_min()
+        sw.router.send_signal(signal.SIGKILL)
+        sw.router.wait(10)
+        t_kill = obs.time_s()
+        _wait(obs.landed, LAND_TIMEOUT_S, "every vehicle landed and disarmed")
+        t_landed = obs.time_s()
+        assert all(p.poll() is None for p in sw.procs), "a process died"
+    assert _collisions(tmp_path) == 0
     assert obs.samples > 100 and obs.min_dist >= MIN_DIST_M, obs.min_dist
-    plans = [PLAN_LINE.search(p.read_text()) for p in logs]
-    assert all(plans), [p.name for p, m in zip(logs, plans, strict=True) if m is None]
+    plans = [PLAN_LINE.search(p.read_text()) for p in sw.logs]
+    assert all(plans), [p.name for p, m in zip(sw.logs, plans, strict=True) if m is None]
     t_l = [float(m.group(2)) for m in plans if m is not None]
     assert max(t_l) - min(t_l) <= 0.5  # one land time (within a few steps), no communication
     print(f"router killed at t={t_kill:.2f} s, t_L={min(t_l):.2f}..{max(t_l):.2f} s, all "
@@ -186,43 +215,21 @@ def test_router_stall_brakes_then_flies_on(tmp_path: Path) -> None:
     """SIGSTOP of the router for 0.4 s (truth 10–25 periods late on every daemon): each
     daemon brakes to a hold on its own odometry, then flies on when truth is back; nobody
     lands, nobody collides, and the formation flies on well apart."""
-    sc = load_scenario(CUBE8)
-    off = free_port_offset()
-    spec = LaunchSpec(sc, port_offset=off, lockstep=False, run_dir=tmp_path, method="dcbf")
-    obs = Observer(GCS_PORT + off, list(sc.ids))
-    obs.start()
-    router = _start([sys.executable, "-m", "gcs.cli", "router", "--listen",
-                     spec.router_endpoint], tmp_path / "router.log")
-    procs: list[subprocess.Popen] = []
-    try:
-        _wait(lambda: _port_open(spec.router_port) or router.poll() is not None, 30, "router")
-        assert router.poll() is None, (tmp_path / "router.log").read_text()
-        for name, argv in spec.processes():
-            procs.append(_start(argv, tmp_path / f"{name}.log"))
-        logs = [tmp_path / f"offboard-{i}.log" for i in sc.ids]
-        _wait(lambda: all(p.exists() and "ARM accepted" in p.read_text() for p in logs), 90,
-              "every daemon to arm")
-        _wait(lambda: obs.time_s() >= FLY_BEFORE_KILL_S, 60, "the swarm to fly")
-        router.send_signal(signal.SIGSTOP)
+    with _flying_swarm(tmp_path) as sw:
+        obs = sw.obs
+        sw.router.send_signal(signal.SIGSTOP)
         time.sleep(STALL_S)
-        router.send_signal(signal.SIGCONT)
+        sw.router.send_signal(signal.SIGCONT)
         t_stall = obs.time_s()
-        _wait(lambda: all("truth back" in p.read_text() for p in logs), 30,
+        _wait(lambda: all("truth back" in p.read_text() for p in sw.logs), 30,
               "every daemon to fly on")
         _wait(lambda: obs.time_s() >= t_stall + 4.0, 60, "4 s more of flight")
-        assert all(p.poll() is None for p in procs), "a process died"
-        assert all(obs.armed.get(i) for i in sc.ids)
-    finally:
-        stop_processes(procs)
-        router.kill()
-        router.wait(10)
-        obs.close()
-    texts = [p.read_text() for p in logs]
+        assert all(p.poll() is None for p in sw.procs), "a process died"
+        assert all(obs.armed.get(i) for i in obs.ids)
+    texts = [p.read_text() for p in sw.logs]
     assert all("braking to a hold" in t for t in texts)
     assert not any("landing on odometry" in t for t in texts)
-    sim_log = (tmp_path / "vehicle-sim.log").read_text(errors="replace")
-    collisions = re.findall(r"collisions=(\d+)", sim_log)
-    assert collisions and int(collisions[-1]) == 0, sim_log[-2000:]
+    assert _collisions(tmp_path) == 0
     assert obs.samples > 100 and obs.min_dist >= MIN_DIST_M, obs.min_dist
     print(f"router stopped {STALL_S} s at t={t_stall:.2f} s: every daemon braked and flew "
           f"on; min distance {obs.min_dist:.3f} m over {obs.samples} snapshots")
