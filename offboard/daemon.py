@@ -318,6 +318,8 @@ class OffboardDaemon(DaemonCommands):
     def _publish_odometry(self, k: int) -> None:
         """Our vehicle's measured state at t_k on Zenoh, once per step (the others'
         ``--sensing odometry``), and handed to our own sensing source."""
+        if self.cfg.sensing is SensingSource.TRUTH and not self.bus.odometry_matched:
+            return  # nobody reads it: neither our sensing (truth) nor a subscriber
         odo = self.link.odometry
         got = None if odo is None or k == self.odo_pub_step else measured_state(odo, 0.0)
         if got is None:
