@@ -159,8 +159,6 @@ def landing_reference(sc: Scenario, index: int, t_s: float, t_land: float,
 class HoldReference:
     """ξ(t) at rest at ``p`` (m, ENU) for ever: the brake-and-hold before the commit."""
 
-    t_end = float("inf")
-
     def __init__(self, p: np.ndarray) -> None:
         self.xi0 = xi_at_rest(p)
 
