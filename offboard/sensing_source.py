@@ -34,6 +34,8 @@ from swarm_common.enums import SensingSource
 
 log = logging.getLogger(__name__)
 
+OWN_REPUT_S = 0.2  # s: lockstep, waiting for the others' odometry: our own is put again
+
 WAIT_LOG_S = 3.0  # s: how often a start-up wait says what it waits for
 FAR_FACTOR = 10.0  # an unseen neighbour's row: this many sensing ranges away (not sensed)
 
@@ -62,6 +64,7 @@ class SwarmSensing:
         self.stopped = stopped
         self.on_lost = on_lost
         self.own: wire.Odometry | None = None
+        self.own_put_at = 0.0  # monotonic s of the last put of ``own``
         self.silent: set[int] = set()  # odometry senders declared silent (not awaited)
         self.said_waiting = 0.0
 
@@ -69,6 +72,19 @@ class SwarmSensing:
         """The agent's own vehicle's odometry of the step about to run (published by the
         daemon before it waits for the others')."""
         self.own = odo
+        self.own_put_at = time.monotonic()
+
+    def _put_own_again(self) -> None:
+        """While waiting for the others' odometry of step k (lockstep), put our own of k
+        again every ``OWN_REPUT_S``: a put made before a peer's subscription reached us is
+        lost (Zenoh keeps no history), and that peer, waiting for it, would otherwise sit
+        out the whole start-up timeout at step 0 (seen on a loaded host: 30 s, after which
+        it flew its first steps without two neighbours). Receivers store by (step, id), so
+        a repeat changes nothing."""
+        now = time.monotonic()
+        if self.own is not None and now - self.own_put_at >= OWN_REPUT_S:
+            self.own_put_at = now
+            self.bus.publish_odometry(self.own)
 
     def for_step(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(p, v), (N,3) ENU in scenario order, for step k; None: no usable data (lockstep:
@@ -105,6 +121,7 @@ class SwarmSensing:
             want = [j for j in others if j not in self.silent]
 
             def have_all() -> bool:
+                self._put_own_again()
                 got = bus.odometry.get(k, {})
                 return all(j in got for j in want)
 
