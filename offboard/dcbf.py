@@ -33,6 +33,7 @@ from functools import cached_property
 
 import numpy as np
 
+from offboard.dcbf_kernel import dcbf_rows_kernel
 from swarm_common.fastnp import einsum
 
 
@@ -139,6 +140,18 @@ class LagCoefficients:
         cmd = (self.cp, self.cv, self.ca)
         return np.array([[[e], [c]] for e, c in zip(err, cmd, strict=True)])
 
+    @cached_property
+    def sens3(self) -> np.ndarray:
+        """:attr:`sens` as a (3, 2, 3) contiguous array, for the compiled rows."""
+        return np.ascontiguousarray(self.sens.reshape(3, 2, 3))
+
+    @cached_property
+    def table(self) -> np.ndarray:
+        """(6, 3) rows ca, cv, cp, ea, ia, iia, for the compiled rows."""
+        return np.ascontiguousarray(
+            np.stack([self.ca, self.cv, self.cp, self.ea, self.ia, self.iia]), dtype=float
+        )
+
 
 @dataclass
 class Prediction:
@@ -172,61 +185,38 @@ def predict(
     return Prediction(pp, pv, pa, h, hdot)
 
 
-def _grads(pr: Prediction, cp: np.ndarray, cv: np.ndarray, ca: np.ndarray,
-           tau_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """(∂ḣ_T/∂x, ∂h_T/∂x), each (M,3), for per-axis sensitivities of (Δp̂, Δv̂, Δâ) to x."""
-    dh_dot = 2.0 * (cp * pr.dv + cv * pr.dp) + 2.0 * tau_s * (
-        2.0 * cv * pr.dv + cp * pr.da + ca * pr.dp
-    )
-    dh = 2.0 * cp * pr.dp + 2.0 * tau_s * (cv * pr.dp + cp * pr.dv)
-    return dh_dot, dh
-
-
-def _norm(x: np.ndarray) -> np.ndarray:
-    return np.sqrt(einsum("ij,ij->i", x, x))
-
-
 def dcbf_rows(
     dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u_ref: np.ndarray, a_other: np.ndarray,
     share: np.ndarray, lag: LagCoefficients, tau_s: float, d_safe: float | np.ndarray,
     gamma1: float, gamma3: float, accel_err: float,
-) -> tuple[np.ndarray, np.ndarray, Prediction]:
-    """Rows ``gᵀu ≥ r`` (2M of them, g unit length, r in m/s²) and the prediction at u_ref.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``gᵀu ≥ r`` (2M of them, g unit length, r in m/s²): first the M (C1) rows, then
+    the M (C2) rows, pair by pair in the order of ``dp``.
 
     With α(h) = γ1 h + γ3 h³ and h0 the barrier now, two conditions per pair:
 
     * (C1) ``f(u) = ḣ_T − ‖∂ḣ_T/∂a‖ ē + α(ĥ_T − ‖∂ĥ_T/∂a‖ ē) ≥ 0`` (the CBF condition at
-      x̂_T; α increasing, so the error enters α exactly, not through α'(ĥ_T), which for
-      the cubic term made every pair within ≈ 2.9 m repel: docs/safety.md §4);
+      x̂_T of :func:`predict`; α increasing, so the error enters α exactly, not through
+      α'(ĥ_T), which for the cubic term made every pair within ≈ 2.9 m repel:
+      docs/safety.md §4);
     * (C2) ``ĥ_T − ‖∂ĥ_T/∂a‖ ē ≥ h0 − min(T α(h0), h0/2)`` (h0 > 0; ``h0 − T α(h0)``
       for h0 ≤ 0, which demands growth): h does not dip over the horizon.
 
     Each linearised at ``u_ref``: ``gᵀ(u − u_ref) ≥ −share·c(u_ref)``. ``ē`` (m/s²) bounds
-    the error of the assumed relative acceleration over [0, T] (model, estimates).
+    the error of the assumed relative acceleration over [0, T] (model, estimates). The
+    sensitivities are those of ``lag.sens``: [0] a constant relative-acceleration error e
+    over [0, T] (moves Δv̂ by eT, Δp̂ by eT²/2), [1] the command u through the lag.
+    Computed by the compiled :func:`offboard.dcbf_kernel.dcbf_rows_kernel`.
     """
-    pr = predict(dp, dv, a0, u_ref, a_other, lag, tau_s, d_safe)
-    h0 = einsum("ij,ij->i", dp, dp) + 2.0 * tau_s * einsum("ij,ij->i", dv, dp) - d_safe**2
-    # both sensitivities at once (lag.sens, element by element as two _grads calls):
-    # [0] a constant relative-acceleration error e over [0, T] (moves Δv̂ by eT, Δp̂ by
-    # eT²/2), [1] the command u through the lag
-    sens = lag.sens
-    hd_both, h_both = _grads(pr, sens[0], sens[1], sens[2], tau_s)
-    e_hd, u_hd = hd_both[0], hd_both[1]
-    e_h, u_h = h_both[0], h_both[1]
-    # α is increasing: α(h_T) ≥ α(ĥ_T − ‖∂ĥ_T/∂a‖ē) exactly (no linearisation of α)
-    m_h = _norm(e_h) * accel_err
-    h_lo = pr.h - m_h
-    k_h = (gamma1 + 3.0 * gamma3 * h_lo**2)[:, None]
-    c1 = pr.hdot - _norm(e_hd) * accel_err + gamma1 * h_lo + gamma3 * h_lo**3
-    drop = lag.T * (gamma1 * h0 + gamma3 * h0**3)
-    drop = np.where(h0 > 0.0, np.minimum(drop, 0.5 * h0), drop)  # keep ≥ half of h > 0
-    c2 = pr.h - m_h - (h0 - drop)
-    g = np.concatenate([u_hd + k_h * u_h, u_h])
-    c = np.concatenate([c1, c2])
-    sh = np.concatenate([share, share])
-    nrm = np.maximum(_norm(g), 1e-9)
-    rhs = (g @ u_ref - sh * c) / nrm
-    return g / nrm[:, None], rhs, pr
+    m = len(dp)
+    d = np.broadcast_to(np.asarray(d_safe, dtype=float), (m,))
+    return dcbf_rows_kernel(
+        np.ascontiguousarray(dp, dtype=float), np.ascontiguousarray(dv, dtype=float),
+        np.ascontiguousarray(a0, dtype=float), np.ascontiguousarray(u_ref, dtype=float),
+        np.ascontiguousarray(a_other, dtype=float), np.ascontiguousarray(share, dtype=float),
+        np.ascontiguousarray(d), lag.table, lag.sens3, lag.T, float(tau_s), float(gamma1),
+        float(gamma3), float(accel_err),
+    )
 
 
 def ground_rows(

@@ -125,7 +125,7 @@ class DcbfFilter(SafetyFilter):
         share = np.where(lm, 1.0, 0.5)
         d_safe = ctl.d_safe_m if x.margin is None else ctl.d_safe_m + x.margin
         w_safe = saturate_norm(x.w, W_SAFE)
-        g, rhs, _ = dcbf_rows(
+        g, rhs = dcbf_rows(
             x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x, w_safe), share, self.lag,
             ctl.tau_safe_s, d_safe, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2,

@@ -90,7 +90,7 @@ def test_row_gradient_matches_finite_difference_of_prediction() -> None:
         pr = predict(dp, dv, a0, u, oth, lag, CTL.tau_safe_s, CTL.d_safe_m)
         return float(pr.hdot[0] + g1 * pr.h[0] + g3 * pr.h[0] ** 3)
 
-    g, _, _ = dcbf_rows(dp, dv, a0, u0, oth, np.ones(1), lag, CTL.tau_safe_s, CTL.d_safe_m,
+    g, _ = dcbf_rows(dp, dv, a0, u0, oth, np.ones(1), lag, CTL.tau_safe_s, CTL.d_safe_m,
                         g1, g3, 0.0)
     eps = 1e-5
     fd = np.array([(f(u0 + eps * e) - f(u0 - eps * e)) / (2 * eps) for e in np.eye(3)])
@@ -145,7 +145,7 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
             dp, dv = (p[i] - p[j])[None], (v[i] - v[j])[None]
             a_j = ((v[j] - v_old[j]) / DT)[None]
             u_nom = uset.project(-dp[0] / np.linalg.norm(dp[0]) * 20.0)  # at the limit
-            g, rhs, _ = dcbf_rows(dp, dv, a_real[i], u_prev[i], a_j, np.array([0.5]), lag,
+            g, rhs = dcbf_rows(dp, dv, a_real[i], u_prev[i], a_j, np.array([0.5]), lag,
                                   CTL.tau_safe_s, CTL.d_safe_m, CTL.dcbf_gamma_lin,
                                   CTL.dcbf_gamma_cubic, CTL.dcbf_accel_error_mps2)
             h = float(barrier(dp, dv, CTL.tau_safe_s, CTL.d_safe_m)[0])
@@ -191,12 +191,12 @@ def test_error_margin_does_not_repel_a_pair_at_rest_outside_the_safe_distance() 
     lag = LagCoefficients.of(TAU, VEH.tau_rollpitch_s + DT)
     dp, dv = np.array([[2.0, 2.0, 0.0]]), np.zeros((1, 3))
     zero = np.zeros(3)
-    g, rhs, _ = dcbf_rows(dp, dv, zero, zero, np.zeros((1, 3)), np.array([0.5]), lag,
+    g, rhs = dcbf_rows(dp, dv, zero, zero, np.zeros((1, 3)), np.array([0.5]), lag,
                           CTL.tau_safe_s, CTL.d_safe_m, CTL.dcbf_gamma_lin,
                           CTL.dcbf_gamma_cubic, 2.0)
     assert np.all(g @ zero >= rhs)
     # ... while a pair at rest near D still has to be pushed apart
-    g, rhs, _ = dcbf_rows(np.array([[0.6, 0.0, 0.0]]), dv, zero, zero, np.zeros((1, 3)),
+    g, rhs = dcbf_rows(np.array([[0.6, 0.0, 0.0]]), dv, zero, zero, np.zeros((1, 3)),
                           np.array([0.5]), lag, CTL.tau_safe_s, CTL.d_safe_m,
                           CTL.dcbf_gamma_lin, CTL.dcbf_gamma_cubic, 2.0)
     assert not np.all(g @ zero >= rhs)

@@ -1,0 +1,91 @@
+"""Compiled barrier rows of the sampled-data CBF (``Method.DCBF``; docs/safety.md §4).
+
+:func:`dcbf_rows_kernel` is :func:`offboard.dcbf.dcbf_rows` pair by pair in one compiled
+loop: the prediction T ahead (:func:`offboard.dcbf.predict`), the sensitivities of
+``ḣ_T`` and ``ĥ_T`` to a constant acceleration error and to the command, and the two rows
+(C1), (C2) per pair. The operations and their order are those of the numpy formulation
+it replaced, but for two: cubes are products (numpy's ``**3`` is its own vectorised
+power) and gᵀu_ref is summed left to right (numpy's ``@`` went to BLAS). The rows agree
+with that formulation to rounding (``tests/unit/test_dcbf_kernel.py``, random pairs), and
+every process that runs the kernel computes the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_common.jit import kernel
+
+
+@kernel
+def _dot3(a: np.ndarray, b: np.ndarray) -> float:
+    """a·b of two 3-vectors, summed left to right (m², m²/s, …)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@kernel
+def dcbf_rows_kernel(
+    dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u_ref: np.ndarray, a_other: np.ndarray,
+    share: np.ndarray, d_safe: np.ndarray, lag: np.ndarray, sens: np.ndarray,
+    horizon: float, tau_s: float, gamma1: float, gamma3: float, accel_err: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``gᵀu ≥ r`` of :func:`offboard.dcbf.dcbf_rows`: (g (2M,3) unit rows, r (2M,)).
+
+    dp, dv (M,3) relative position (m) and velocity (m/s) now; a0, u_ref (3,) realised
+    acceleration and linearisation command (m/s²); a_other (M,3) the other agent's assumed
+    acceleration (m/s²); share (M,); d_safe (M,) safety distance (m); lag (6,3) the rows
+    ca, cv, cp, ea, ia, iia of :class:`offboard.dcbf.LagCoefficients`; sens (3,2,3) its
+    sensitivities (p|v|a, error|command, axis); horizon T (s); tau_s look-ahead τ (s);
+    gamma1 (1/s), gamma3 (1/(m⁴ s)) of α(h) = γ1 h + γ3 h³; accel_err ē (m/s²).
+    """
+    m = dp.shape[0]
+    t = horizon
+    ca, cv, cp, ea, ia, iia = lag[0], lag[1], lag[2], lag[3], lag[4], lag[5]
+    own_v = ia * a0 + cv * u_ref
+    own_p = iia * a0 + cp * u_ref
+    own_a = ea * a0 + ca * u_ref
+    g = np.empty((2 * m, 3))
+    rhs = np.empty(2 * m)
+    pv = np.empty(3)
+    pp = np.empty(3)
+    pa = np.empty(3)
+    hd = np.empty((2, 3))
+    hh = np.empty((2, 3))
+    two_tau = 2.0 * tau_s
+    for i in range(m):
+        for k in range(3):
+            pv[k] = dv[i, k] + own_v[k] - a_other[i, k] * t
+            pp[k] = dp[i, k] + dv[i, k] * t + own_p[k] - 0.5 * a_other[i, k] * t * t
+            pa[k] = own_a[k] - a_other[i, k]
+        dd = d_safe[i] ** 2
+        vp = _dot3(pv, pp)
+        h = _dot3(pp, pp) + two_tau * vp - dd
+        hdot = 2.0 * vp + two_tau * (_dot3(pv, pv) + _dot3(pp, pa))
+        for s in range(2):  # [0] acceleration error, [1] command (offboard.dcbf._grads)
+            for k in range(3):
+                sp, sv, sa = sens[0, s, k], sens[1, s, k], sens[2, s, k]
+                hd[s, k] = 2.0 * (sp * pv[k] + sv * pp[k]) + two_tau * (
+                    2.0 * sv * pv[k] + sp * pa[k] + sa * pp[k]
+                )
+                hh[s, k] = 2.0 * sp * pp[k] + two_tau * (sv * pp[k] + sp * pv[k])
+        m_h = math.sqrt(_dot3(hh[0], hh[0])) * accel_err
+        h_lo = h - m_h
+        k_h = gamma1 + 3.0 * gamma3 * h_lo**2
+        c1 = hdot - math.sqrt(_dot3(hd[0], hd[0])) * accel_err + gamma1 * h_lo
+        c1 = c1 + gamma3 * (h_lo * h_lo * h_lo)
+        h0 = _dot3(dp[i], dp[i]) + two_tau * _dot3(dv[i], dp[i]) - dd
+        drop = t * (gamma1 * h0 + gamma3 * (h0 * h0 * h0))
+        if h0 > 0.0:
+            drop = min(drop, 0.5 * h0)
+        c2 = h - m_h - (h0 - drop)
+        for k in range(3):
+            g[i, k] = hd[1, k] + k_h * hh[1, k]
+            g[m + i, k] = hh[1, k]
+        for r, c in ((i, c1), (m + i, c2)):
+            nrm = max(math.sqrt(_dot3(g[r], g[r])), 1e-9)
+            rhs[r] = (_dot3(g[r], u_ref) - share[i] * c) / nrm
+            for k in range(3):
+                g[r, k] = g[r, k] / nrm
+    return g, rhs
