@@ -55,8 +55,9 @@ import osqp
 from scipy import sparse
 
 from offboard.osqp_call import update_solve
+from offboard.pair_kernel import barrier_kernel, tangential_kernel
 from swarm_common.enums import QPStatus
-from swarm_common.fastnp import einsum
+from swarm_common.fastnp import einsum, rows3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
@@ -139,10 +140,9 @@ def anti_windup_control(
 
 
 def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
-    """h_ij for rows of Δp = p_i − p_j, Δv = v_i − v_j (§2.3, §4.3)."""
-    return (
-        einsum("ij,ij->i", dp, dp) + 2.0 * tau * einsum("ij,ij->i", dv, dp) - d_safe**2
-    )
+    """h_ij for rows of Δp = p_i − p_j, Δv = v_i − v_j (§2.3, §4.3):
+    ``‖Δp‖² + 2τ ΔvᵀΔp − D²`` (m²), compiled (:func:`offboard.pair_kernel.barrier_kernel`)."""
+    return barrier_kernel(rows3(dp), rows3(dv), float(tau), float(d_safe))
 
 
 def rcbf_rows(
@@ -181,24 +181,12 @@ def tangential_term(dp: np.ndarray, h: np.ndarray, gain: float, h_on: float) -> 
 
     ``t̂ = n̂ × a / ‖·‖`` with a = e_z (e_x when Δp is nearly vertical); for the other agent
     of the pair Δp changes sign and so does t̂, so the two sidestep in opposite directions.
+    Compiled (:func:`offboard.pair_kernel.tangential_kernel`).
     """
-    out = np.zeros(3)
     if gain <= 0.0 or len(h) == 0:
-        return out
-    act = np.nonzero(h < h_on)[0]
-    for k in act:
-        wgt = min(1.0 - float(h[k]) / h_on, 1.0)
-        n = dp[k]
-        nx, ny, nz = float(n[0]), float(n[1]), float(n[2])
-        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if nn < 1e-9:
-            continue
-        if abs(nz) > 0.9 * nn:  # t = n × e_x
-            t = np.array([0.0, nz, -ny])
-        else:  # t = n × e_z
-            t = np.array([ny, -nx, 0.0])
-        out += (gain * wgt / max(float(np.sqrt(t @ t)), 1e-9)) * t
-    return out
+        return np.zeros(3)
+    return tangential_kernel(rows3(dp), np.ascontiguousarray(h, dtype=float), float(gain),
+                             float(h_on))
 
 
 @dataclass

@@ -209,7 +209,8 @@ def dcbf_rows(
     Computed by the compiled :func:`offboard.dcbf_kernel.dcbf_rows_kernel`.
     """
     m = len(dp)
-    d = np.broadcast_to(np.asarray(d_safe, dtype=float), (m,))
+    d = (np.full(m, float(d_safe)) if isinstance(d_safe, float | int)
+         else np.asarray(d_safe, dtype=float))
     return dcbf_rows_kernel(
         np.ascontiguousarray(dp, dtype=float), np.ascontiguousarray(dv, dtype=float),
         np.ascontiguousarray(a0, dtype=float), np.ascontiguousarray(u_ref, dtype=float),

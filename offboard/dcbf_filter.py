@@ -12,6 +12,7 @@ import numpy as np
 
 from offboard.clf_rcbf import barrier
 from offboard.dcbf import InputSet, LagCoefficients, dcbf_rows, ground_rows
+from offboard.dcbf_kernel import other_term_kernel
 from offboard.dcbf_qp import DcbfQP
 from offboard.safety_filter import (
     W_SAFE,
@@ -22,6 +23,7 @@ from offboard.safety_filter import (
     saturate_norm,
 )
 from swarm_common.enums import Method
+from swarm_common.fastnp import rows3
 from swarm_common.scenario import ControllerConfig, VehicleConfig
 
 # rows the QP is first built with (it grows on demand, offboard.clf_rcbf._ClfRowsQP._fit):
@@ -90,29 +92,17 @@ class DcbfFilter(SafetyFilter):
         ``a_j − w_i = ā_i − Δa`` (low-passed, no disturbance estimate needed). Otherwise the
         other's broadcast-velocity estimate minus the saturated own estimate ``w_safe``
         (``saturate_norm(x.w, W_SAFE)``, computed once per step by :meth:`apply`).
+        Compiled: :func:`offboard.dcbf_kernel.other_term_kernel`.
         """
         n = len(x.pairs)
-        out = np.zeros((n, 3)) if x.other_acc is None else x.other_acc.copy()
-        out -= w_safe
-        # rows sensed now (predicted rows: the broadcast-velocity estimate, no history)
-        rows = np.arange(n) if x.predicted is None else (~x.predicted).nonzero()[0]
-        js = np.asarray(x.pairs, dtype=np.intp)[rows]
-        have = self._prev_ok[js]
-        self._rel_ok[js[~have]] = False  # a pair seen again after a gap starts afresh
-        r_h, j_h = rows[have], js[have]
-        if len(r_h):
-            da = (x.dv[r_h] - self._prev_dv[j_h]) / self.dt
-            old_ok = self._rel_ok[j_h]
-            if old_ok.any():
-                smooth = REL_ACC_SMOOTH * self._rel_acc[j_h] + (1.0 - REL_ACC_SMOOTH) * da
-                da = smooth if old_ok.all() else np.where(old_ok[:, None], smooth, da)
-            self._rel_acc[j_h] = da
-            self._rel_ok[j_h] = True
-            out[r_h] = x.a_mean - da
-        self._prev_ok[:] = False
-        self._prev_ok[js] = True
-        self._prev_dv[js] = x.dv[rows]
-        return out
+        other = np.zeros((n, 3)) if x.other_acc is None else x.other_acc
+        predicted = np.zeros(n, dtype=bool) if x.predicted is None else x.predicted
+        return other_term_kernel(
+            np.asarray(x.pairs, dtype=np.int64), np.asarray(predicted, dtype=np.bool_),
+            rows3(x.dv), rows3(other), w_safe, np.asarray(x.a_mean, dtype=float),
+            self.dt, REL_ACC_SMOOTH, self._prev_dv, self._prev_ok, self._rel_acc,
+            self._rel_ok,
+        )
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
         if self.qp is None or self.lag is None:

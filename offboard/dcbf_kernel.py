@@ -5,7 +5,8 @@ loop: the prediction T ahead (:func:`offboard.dcbf.predict`), the sensitivities 
 ``ḣ_T`` and ``ĥ_T`` to a constant acceleration error and to the command, and the two rows
 (C1), (C2) per pair. The operations and their order are those of the numpy formulation
 it replaced, but for two: cubes are products (numpy's ``**3`` is its own vectorised
-power) and gᵀu_ref is summed left to right (numpy's ``@`` went to BLAS). The rows agree
+power) and dot products are summed left to right (numpy's ``einsum`` and ``@`` sum in
+their own orders). The rows agree
 with that formulation to rounding (``tests/unit/test_dcbf_kernel.py``, random pairs), and
 every process that runs the kernel computes the same bits.
 """
@@ -89,3 +90,69 @@ def dcbf_rows_kernel(
             for k in range(3):
                 g[r, k] = g[r, k] / nrm
     return g, rhs
+
+
+@kernel
+def other_term_kernel(
+    pairs: np.ndarray, predicted: np.ndarray, dv: np.ndarray, other_acc: np.ndarray,
+    w_safe: np.ndarray, a_mean: np.ndarray, dt: float, smooth: float,
+    prev_dv: np.ndarray, prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray,
+) -> np.ndarray:
+    """(M,3) ``a_j − w_i`` (m/s²) of :meth:`offboard.dcbf_filter.DcbfFilter._other_term`.
+
+    pairs (M,) scenario index j per row; predicted (M,) rows from prediction (no sensed
+    history); dv (M,3) Δv = v_i − v_j now (m/s); other_acc (M,3) the other's broadcast
+    acceleration estimate (m/s²); w_safe (3,) own saturated disturbance; a_mean (3,) own
+    mean realised control over the last period (m/s²); dt (s); smooth the low-pass weight
+    of the previous relative acceleration. The per-index state prev_dv (N,3), prev_ok
+    (N,), rel_acc (N,3), rel_ok (N,) is read and updated in place.
+    """
+    m = pairs.shape[0]
+    out = np.empty((m, 3))
+    for r in range(m):
+        for k in range(3):
+            out[r, k] = other_acc[r, k] - w_safe[k]
+    keep = 1.0 - smooth
+    da = np.empty(3)
+    for r in range(m):
+        if predicted[r]:
+            continue
+        j = pairs[r]
+        if not prev_ok[j]:
+            rel_ok[j] = False  # a pair seen again after a gap starts afresh
+            continue
+        for k in range(3):
+            da[k] = (dv[r, k] - prev_dv[j, k]) / dt
+        if rel_ok[j]:
+            for k in range(3):
+                da[k] = smooth * rel_acc[j, k] + keep * da[k]
+        for k in range(3):
+            rel_acc[j, k] = da[k]
+            out[r, k] = a_mean[k] - da[k]
+        rel_ok[j] = True
+    prev_ok[:] = False
+    for r in range(m):
+        if predicted[r]:
+            continue
+        j = pairs[r]
+        prev_ok[j] = True
+        for k in range(3):
+            prev_dv[j, k] = dv[r, k]
+    return out
+
+
+@kernel
+def rows_hold_kernel(
+    a_u: np.ndarray, lo_u: np.ndarray, hi_u: np.ndarray, g: np.ndarray, rhs: np.ndarray,
+    k: int, u: np.ndarray,
+) -> bool:
+    """True if ``u`` (3,) is inside the input set ``lo_u ≤ A_U u ≤ hi_u`` and satisfies the
+    first k barrier rows ``gᵀu ≥ r``: the QP's exact shortcut (its solution is then u)."""
+    for r in range(a_u.shape[0]):
+        y = a_u[r, 0] * u[0] + a_u[r, 1] * u[1] + a_u[r, 2] * u[2]
+        if not (y <= hi_u[r] and y >= lo_u[r]):
+            return False
+    for r in range(k):
+        if not (g[r, 0] * u[0] + g[r, 1] * u[1] + g[r, 2] * u[2] >= rhs[r]):
+            return False
+    return True

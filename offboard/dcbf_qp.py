@@ -23,6 +23,7 @@ from scipy import sparse
 
 from offboard.clf_rcbf import ClfTerms, QPResult, _ClfRowsQP
 from offboard.dcbf import InputSet
+from offboard.dcbf_kernel import rows_hold_kernel
 from swarm_common.enums import QPStatus
 
 
@@ -75,10 +76,6 @@ class DcbfQP(_ClfRowsQP):
             verbose=False, max_iter=4000,
         )
 
-    def _inside(self, u: np.ndarray) -> bool:
-        y = self.a_u @ u
-        return bool((y <= self.hi_u).all() and (y >= self.lo_u).all())
-
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
         h_min: float, brake: np.ndarray,
@@ -87,7 +84,7 @@ class DcbfQP(_ClfRowsQP):
         t0 = time.perf_counter()
         self._fit(len(rhs))
         k = min(len(rhs), self.m)
-        if self._inside(u_nom) and (k == 0 or bool((g[:k] @ u_nom >= rhs[:k]).all())):
+        if rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u_nom):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
                             False)

@@ -39,3 +39,11 @@ einsum: Callable[..., Any] = _c_einsum()
 def norm(x: np.ndarray) -> float:
     """``float(np.linalg.norm(x))`` for a 1-D float64 array (same dot, same sqrt)."""
     return math.sqrt(float(x.dot(x)))
+
+
+def rows3(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 (M,3) array for a compiled kernel (the same array,
+    no copy, when it already is one)."""
+    if x.dtype == np.float64 and x.ndim == 2 and x.flags.c_contiguous:
+        return x
+    return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
