@@ -70,8 +70,10 @@ def wire_to_command(
 
 
 def round_estimate(e: NeighbourEstimate) -> NeighbourEstimate:
-    """A published estimate as the receivers see it (float32 vectors; t kept exact)."""
-    return NeighbourEstimate(e.id, e.t, f32(e.z1), f32(e.z2), f32(e.z3), f32(e.xi), e.is_leader)
+    """A published estimate as the receivers see it (float32 vectors; t kept exact).
+    The four vectors are rounded in one array (the same float32 value per element)."""
+    x = f32(np.concatenate((e.z1, e.z2, e.z3, e.xi)))
+    return NeighbourEstimate(e.id, e.t, x[0:3], x[3:6], x[6:9], x[9:], e.is_leader)
 
 
 def _in_order(ids: list[int] | tuple[int, ...], subset: list[int]) -> tuple[int, ...]:

@@ -351,31 +351,38 @@ def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
 class NeighbourAccel:
     """Other agents' actual accelerations (m/s²), finite differences of their successive
     broadcast velocities z2 (leaders: their predicted true velocity), norm-bounded by
-    ``a_max``; held while no new data arrives (docs/safety.md §3)."""
+    ``a_max``; held while no new data arrives (docs/safety.md §3). Kept in arrays by
+    scenario index, so the rows of a step are one gather."""
 
     def __init__(self, ids: list[int] | tuple[int, ...], a_max: float) -> None:
         self.ids = list(ids)
         self.a_max = a_max
-        self.last: dict[int, tuple[float, np.ndarray]] = {}
-        self.acc: dict[int, np.ndarray] = {}
+        self._index_of = {aid: j for j, aid in enumerate(self.ids)}
+        n = len(self.ids)
+        self._last_t = np.full(n, -math.inf)  # time of the last estimate used (s)
+        self._seen = np.zeros(n, dtype=bool)
+        self._last_z2 = np.zeros((n, 3))
+        self._acc = np.zeros((n, 3))  # zero until two estimates arrived
 
     def ingest(self, neighbours: dict[int, NeighbourEstimate]) -> None:
-        """Update from the estimates received this step (by agent id)."""
-        last, acc = self.last, self.acc
+        """Update from the estimates received this step (by agent id; ids outside the
+        scenario are ignored)."""
         for aid, e in neighbours.items():
-            prev = last.get(aid)
-            if prev is not None and not e.t > prev[0] + 1e-9:
+            j = self._index_of.get(aid)
+            if j is None:
                 continue
-            z2 = np.array(e.z2, dtype=float)  # a copy
-            if prev is not None:
-                acc[aid] = saturate_norm((z2 - prev[1]) / (e.t - prev[0]), self.a_max)
-            last[aid] = (float(e.t), z2)
+            seen = bool(self._seen[j])
+            t_prev = float(self._last_t[j])
+            if seen and not e.t > t_prev + 1e-9:
+                continue
+            z2 = np.asarray(e.z2, dtype=float)
+            if seen:
+                self._acc[j] = saturate_norm((z2 - self._last_z2[j]) / (e.t - t_prev),
+                                             self.a_max)
+            self._last_z2[j] = z2
+            self._last_t[j] = e.t
+            self._seen[j] = True
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(M,3) estimates for scenario indices ``idx`` (zero where none yet)."""
-        out = np.zeros((len(idx), 3))
-        for r, j in enumerate(idx):
-            a = self.acc.get(self.ids[int(j)])
-            if a is not None:
-                out[r] = a
-        return out
+        return self._acc[np.asarray(idx, dtype=np.intp)]

@@ -33,7 +33,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from offboard.bearing import Formation
-from swarm_common.fastnp import einsum
+from swarm_common.jit import kernel
 
 XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
 
@@ -94,6 +94,36 @@ def exo_propagator(omega: float, dt: float) -> np.ndarray:
     return expm(np.kron(exo_matrix(omega), np.eye(3)) * dt)
 
 
+@kernel
+def observer_step(
+    mx: np.ndarray, mc: np.ndarray, pu: np.ndarray, xs: np.ndarray, xi: np.ndarray
+) -> np.ndarray:
+    """One period of the desired-state observer (§4.1), compiled:
+    ``ξ̂⁺ = M_x ξ̂ + M_c c`` with ``c = Σ_j (I₄ ⊗ P*_ij) ξ̂_j``.
+
+    mx, mc (12,12) the exact one-period maps of :meth:`DesiredStateObserver._matrices`;
+    pu (k,3,3) the P*_ij of the k neighbours used; xs (k,12) their ξ̂_j (m, m/s, m/s²,
+    m/s³); xi (12,) own ξ̂. Sums run left to right over neighbours, then components."""
+    c = np.zeros(12)
+    for n in range(pu.shape[0]):
+        for d in range(4):
+            for i in range(3):
+                acc = 0.0
+                for j in range(3):
+                    acc += pu[n, i, j] * xs[n, 3 * d + j]
+                c[3 * d + i] += acc
+    out = np.empty(12)
+    for r in range(12):
+        acc = 0.0
+        for q in range(12):
+            acc += mx[r, q] * xi[q]
+        acc2 = 0.0
+        for q in range(12):
+            acc2 += mc[r, q] * c[q]
+        out[r] = acc + acc2
+    return out
+
+
 class DesiredStateObserver:
     """Estimate ξ̂_i of follower ``index``'s desired state (§4.1)."""
 
@@ -142,9 +172,8 @@ class DesiredStateObserver:
             self.xi = self.exo @ self.xi
             return
         mx, mc, pu = self._matrices(used)
-        xs = np.array([nbr_xi[j] for j in used]).reshape(len(used), 4, 3)
-        c = einsum("kij,kdj->di", pu, xs).reshape(12)  # Σ (I4 ⊗ P_ij) ξ_j
-        self.xi = mx @ self.xi + mc @ c
+        xs = np.array([nbr_xi[j] for j in used], dtype=float)
+        self.xi = observer_step(mx, mc, pu, xs, self.xi)
 
     @property
     def rate(self) -> float:

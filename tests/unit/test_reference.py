@@ -49,3 +49,24 @@ def test_desired_state_observer_converges(sc):
         want = f.desired_positions(lead[:, 3 * d : 3 * d + 3])
         for i, o in obs.items():
             assert np.allclose(o.xi[3 * d : 3 * d + 3], want[i], atol=2e-3), (i, d)
+
+
+def test_compiled_observer_step_equals_numpy_formulation(sc):
+    """observer_step against the numpy update it replaced (einsum of the stacked P*_ij,
+    two BLAS matrix-vector products): equal to rounding, for every neighbour subset."""
+    from offboard.reference import observer_step
+
+    f = formation_from_scenario(sc)
+    i = f.follower_idx[0]
+    obs = DesiredStateObserver(f, i, 0.5, 4.0, 0.02, np.zeros(12))
+    rng = np.random.default_rng(9)
+    nbrs = obs.nbrs
+    for trial in range(200):
+        used = tuple(j for j in nbrs if rng.random() < 0.7) or (nbrs[0],)
+        mx, mc, pu = obs._matrices(used)
+        xs = rng.normal(0.0, 3.0, (len(used), 12))
+        xi = rng.normal(0.0, 3.0, 12)
+        c = np.einsum("kij,kdj->di", pu, xs.reshape(len(used), 4, 3)).reshape(12)
+        want = mx @ xi + mc @ c
+        got = observer_step(mx, mc, pu, xs, xi)
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-12), trial
