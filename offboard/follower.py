@@ -351,38 +351,48 @@ def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
 class NeighbourAccel:
     """Other agents' actual accelerations (m/s²), finite differences of their successive
     broadcast velocities z2 (leaders: their predicted true velocity), norm-bounded by
-    ``a_max``; held while no new data arrives (docs/safety.md §3). Kept in arrays by
-    scenario index, so the rows of a step are one gather."""
+    ``a_max``; held while no new data arrives (docs/safety.md §3).
+
+    :meth:`ingest` only keeps the last two estimates per agent; the difference is formed
+    when :meth:`rows` asks for that agent (the safety filter's pairs, a few of the
+    neighbours heard), once per new estimate."""
 
     def __init__(self, ids: list[int] | tuple[int, ...], a_max: float) -> None:
         self.ids = list(ids)
         self.a_max = a_max
-        self._index_of = {aid: j for j, aid in enumerate(self.ids)}
-        n = len(self.ids)
-        self._last_t = np.full(n, -math.inf)  # time of the last estimate used (s)
-        self._seen = np.zeros(n, dtype=bool)
-        self._last_z2 = np.zeros((n, 3))
-        self._acc = np.zeros((n, 3))  # zero until two estimates arrived
+        self.last: dict[int, tuple[float, np.ndarray]] = {}  # newest (t, z2) per agent id
+        self.prev: dict[int, tuple[float, np.ndarray]] = {}  # the one before it
+        self.acc: dict[int, np.ndarray] = {}  # difference of the two, once formed
 
     def ingest(self, neighbours: dict[int, NeighbourEstimate]) -> None:
-        """Update from the estimates received this step (by agent id; ids outside the
-        scenario are ignored)."""
+        """Update from the estimates received this step (by agent id)."""
+        last = self.last
         for aid, e in neighbours.items():
-            j = self._index_of.get(aid)
-            if j is None:
-                continue
-            seen = bool(self._seen[j])
-            t_prev = float(self._last_t[j])
-            if seen and not e.t > t_prev + 1e-9:
-                continue
-            z2 = np.asarray(e.z2, dtype=float)
-            if seen:
-                self._acc[j] = saturate_norm((z2 - self._last_z2[j]) / (e.t - t_prev),
-                                             self.a_max)
-            self._last_z2[j] = z2
-            self._last_t[j] = e.t
-            self._seen[j] = True
+            old = last.get(aid)
+            if old is not None:
+                if not e.t > old[0] + 1e-9:
+                    continue
+                self.prev[aid] = old
+                self.acc.pop(aid, None)
+            last[aid] = (float(e.t), np.array(e.z2, dtype=float))  # a copy
+
+    def accel(self, aid: int) -> np.ndarray | None:
+        """The estimate for agent ``aid`` (m/s²), None before its second estimate."""
+        a = self.acc.get(aid)
+        if a is None:
+            prev = self.prev.get(aid)
+            if prev is None:
+                return None
+            t1, z1 = self.last[aid]
+            a = saturate_norm((z1 - prev[1]) / (t1 - prev[0]), self.a_max)
+            self.acc[aid] = a
+        return a
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(M,3) estimates for scenario indices ``idx`` (zero where none yet)."""
-        return self._acc[np.asarray(idx, dtype=np.intp)]
+        out = np.zeros((len(idx), 3))
+        for r, j in enumerate(idx):
+            a = self.accel(self.ids[int(j)])
+            if a is not None:
+                out[r] = a
+        return out
