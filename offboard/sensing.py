@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarm_common.fastnp import einsum
+from offboard.sensing_kernel import hold_kernel, measure_kernel
 from swarm_common.scenario import SensingConfig
 
 
@@ -69,27 +69,19 @@ class Sensor:
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
 
     def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:
-        """Measurements from ground-truth (N,3) ENU positions and velocities."""
-        i = self.index
-        rel = p - p[i]
-        relv = v - v[i]
-        d = np.sqrt(einsum("ij,ij->i", rel, rel))
-        d[i] = 1.0
-        g = rel / d[:, None]
-        g[i, 0] = 1.0  # placeholder row for itself (marked invalid)
-        gd = einsum("ij,ij->i", g, relv)
-        g_dot = (relv - g * gd[:, None]) / d[:, None]
+        """Measurements from ground-truth (N,3) ENU positions (m) and velocities (m/s).
+
+        The noise is drawn here (N×8 standard normals, then N uniforms: the same draws for
+        the same seed); the geometry, the noisy measurements and the validity mask are the
+        compiled :func:`offboard.sensing_kernel.measure_kernel`.
+        """
         noise = self.rng.standard_normal((self.n, 8))
         drop = self.rng.random(self.n)
         sb, sr, sd, sdd = self._sig
-        # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
-        gm = g + noise[:, 0:3] * sb
-        gm /= np.sqrt(einsum("ij,ij->i", gm, gm))[:, None]
-        gdm = g_dot + noise[:, 3:6] * sr
-        dm = d + noise[:, 6] * sd
-        ddm = gd + noise[:, 7] * sdd
-        valid = (d <= self.range) & (drop >= self.dropout)
-        valid[i] = False
+        valid, gm, gdm, dm, ddm = measure_kernel(
+            np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(v, dtype=float),
+            self.index, noise, drop, sb, sr, sd, sdd, self.range, self.dropout,
+        )
         return Measurements(valid=valid, g=gm, g_dot=gdm, d=dm, d_dot=ddm)
 
 
@@ -98,7 +90,8 @@ class DropoutHold:
 
     A pair dropped this step but sensed within ``hold_s`` is extrapolated with its last
     measured relative velocity (dropouts must not switch a barrier off). ``enabled`` is
-    False when the scenario has no dropouts (then nothing is tracked).
+    False when the scenario has no dropouts (then nothing is tracked). The bookkeeping is
+    the compiled :func:`offboard.sensing_kernel.hold_kernel`.
     """
 
     def __init__(self, n: int, index: int, hold_s: float, enabled: bool) -> None:
@@ -114,17 +107,13 @@ class DropoutHold:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(sel, rp, rv): indices of the pairs to constrain at ``t`` (s) and the (N,3)
         relative positions p_j − p_i (m) / velocities (m/s) to use for them."""
-        held = None
-        if self.enabled:
-            self._last_seen[valid] = t
-            self._last_rp[valid] = rel_p[valid]
-            self._last_rv[valid] = rel_v[valid]
-            held = ~valid & (t - self._last_seen <= self.hold_s)
-            held[self.index] = False
-        if held is None or not held.any():
+        if not self.enabled:
             return np.nonzero(valid)[0], rel_p, rel_v
-        age = (t - self._last_seen[held])[:, None]
-        rp_s, rv_s = rel_p.copy(), rel_v.copy()
-        rp_s[held] = self._last_rp[held] + age * self._last_rv[held]
-        rv_s[held] = self._last_rv[held]
-        return np.nonzero(valid | held)[0], rp_s, rv_s
+        sel, rp_s, rv_s, n_held = hold_kernel(
+            float(t), np.ascontiguousarray(valid, dtype=np.bool_),
+            np.ascontiguousarray(rel_p, dtype=float), np.ascontiguousarray(rel_v, dtype=float),
+            self._last_seen, self._last_rp, self._last_rv, self.index, float(self.hold_s),
+        )
+        if n_held == 0:
+            return sel, rel_p, rel_v
+        return sel, rp_s, rv_s

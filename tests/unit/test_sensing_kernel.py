@@ -1,0 +1,166 @@
+"""The compiled sensing (offboard.sensing_kernel) against the numpy formulation it replaced,
+on random swarms: the same measurements (bit for bit where numpy's einsum sums rows of
+three as the kernel does, ``(a0 b0 + a2 b2) + a1 b1``; else to rounding), the same
+validity masks, and the same draws from the seeded generator (same shapes, same order), so
+a seed gives the same noise.
+
+The oracles below are the previous numpy implementations of ``Sensor.measure`` and
+``DropoutHold.pairs``, kept verbatim but for taking the draws / state as arguments.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from offboard.sensing import DropoutHold, Sensor
+from swarm_common.scenario import SensingConfig
+
+
+def _dots(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _einsum_order_is_kernels() -> bool:
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(1000, 3)), rng.normal(size=(1000, 3))
+    p = x * y
+    return bool(np.array_equal(_dots(x, y), (p[:, 0] + p[:, 2]) + p[:, 1]))
+
+
+EXACT = _einsum_order_is_kernels()
+
+
+def measure_numpy(
+    p: np.ndarray, v: np.ndarray, i: int, rng: np.random.Generator, sig: tuple[float, ...],
+    rng_m: float, dropout: float,
+) -> tuple[np.ndarray, ...]:
+    n = len(p)
+    rel = p - p[i]
+    relv = v - v[i]
+    d = np.sqrt(_dots(rel, rel))
+    d[i] = 1.0
+    with np.errstate(invalid="ignore"):  # a coincident agent: 0/0, as the kernel does
+        g = rel / d[:, None]
+    g[i, 0] = 1.0  # placeholder row for itself (marked invalid)
+    gd = _dots(g, relv)
+    g_dot = (relv - g * gd[:, None]) / d[:, None]
+    noise = rng.standard_normal((n, 8))
+    drop = rng.random(n)
+    sb, sr, sd, sdd = sig
+    gm = g + noise[:, 0:3] * sb
+    gm /= np.sqrt(_dots(gm, gm))[:, None]
+    gdm = g_dot + noise[:, 3:6] * sr
+    dm = d + noise[:, 6] * sd
+    ddm = gd + noise[:, 7] * sdd
+    valid = (d <= rng_m) & (drop >= dropout)
+    valid[i] = False
+    return valid, gm, gdm, dm, ddm
+
+
+class HoldNumpy:
+    def __init__(self, n: int, index: int, hold_s: float) -> None:
+        self.index, self.hold_s = index, hold_s
+        self._last_seen = np.full(n, -np.inf)
+        self._last_rp = np.zeros((n, 3))
+        self._last_rv = np.zeros((n, 3))
+
+    def pairs(
+        self, t: float, valid: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        self._last_seen[valid] = t
+        self._last_rp[valid] = rel_p[valid]
+        self._last_rv[valid] = rel_v[valid]
+        held = ~valid & (t - self._last_seen <= self.hold_s)
+        held[self.index] = False
+        if not held.any():
+            return np.nonzero(valid)[0], rel_p, rel_v
+        age = (t - self._last_seen[held])[:, None]
+        rp_s, rv_s = rel_p.copy(), rel_v.copy()
+        rp_s[held] = self._last_rp[held] + age * self._last_rv[held]
+        rv_s[held] = self._last_rv[held]
+        return np.nonzero(valid | held)[0], rp_s, rv_s
+
+
+def _config(rng: np.random.Generator, dropout: float) -> SensingConfig:
+    return SensingConfig(
+        bearing_noise_rad=float(rng.uniform(0.0, 0.02)),
+        bearing_rate_noise_radps=float(rng.uniform(0.0, 0.05)),
+        distance_noise_m=float(rng.uniform(0.0, 0.1)),
+        range_rate_noise_mps=float(rng.uniform(0.0, 0.1)),
+        dropout_prob=dropout,
+    )
+
+
+@pytest.mark.parametrize("dropout", [0.0, 0.3])
+def test_compiled_measure_equals_numpy(dropout: float) -> None:
+    rng = np.random.default_rng(21)
+    for trial in range(300):
+        n = int(rng.integers(1, 14))
+        i = int(rng.integers(0, n))
+        p = rng.normal(0.0, 4.0, (n, 3))
+        if n > 2 and trial % 5 == 0:
+            p[(i + 1) % n] = p[i]  # a coincident agent: d = 0 (nan bearing), as before
+        v = rng.normal(0.0, 2.0, (n, 3))
+        cfg = _config(rng, dropout)
+        rng_m = float(rng.uniform(1.0, 10.0))
+        seed, aid = int(rng.integers(0, 1000)), int(rng.integers(0, 50))
+        sensor = Sensor(i, aid, n, cfg, rng_m, seed)
+        got = sensor.measure(p, v)
+        ref = measure_numpy(p, v, i, np.random.default_rng([seed, aid, 0x5E]),
+                            tuple(float(x) for x in sensor.sig), rng_m, dropout)
+        assert np.array_equal(got.valid, ref[0]), trial
+        for a, b in zip((got.g, got.g_dot, got.d, got.d_dot), ref[1:], strict=True):
+            assert a.shape == b.shape, trial
+            if EXACT:
+                assert np.array_equal(a, b, equal_nan=True), trial
+            assert np.allclose(a, b, rtol=1e-12, atol=1e-12, equal_nan=True), trial
+        # the generator moved by exactly the same draws
+        after = np.random.default_rng([seed, aid, 0x5E])
+        after.standard_normal((n, 8))
+        after.random(n)
+        assert sensor.rng.random() == after.random(), trial
+
+
+@pytest.mark.skipif(not EXACT, reason="this numpy's einsum sums rows of three otherwise")
+def test_compiled_measure_is_bitwise_on_a_swarm() -> None:
+    """The kernel gives numpy's bits (same operations, same order)."""
+    rng = np.random.default_rng(3)
+    p, v = rng.normal(0.0, 3.0, (9, 3)), rng.normal(0.0, 1.0, (9, 3))
+    cfg = _config(rng, 0.1)
+    got = Sensor(4, 5, 9, cfg, 6.0, 17).measure(p, v)
+    sig = (cfg.bearing_noise_rad, cfg.bearing_rate_noise_radps, cfg.distance_noise_m,
+           cfg.range_rate_noise_mps)
+    ref = measure_numpy(p, v, 4, np.random.default_rng([17, 5, 0x5E]), sig, 6.0, 0.1)
+    for a, b in zip((got.valid, got.g, got.g_dot, got.d, got.d_dot), ref, strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_compiled_hold_equals_numpy() -> None:
+    rng = np.random.default_rng(5)
+    for trial in range(40):
+        n = int(rng.integers(2, 10))
+        index = int(rng.integers(0, n))
+        hold_s = float(rng.uniform(0.05, 0.5))
+        new, old = DropoutHold(n, index, hold_s, enabled=True), HoldNumpy(n, index, hold_s)
+        for k in range(60):
+            t = 0.02 * k
+            valid = rng.random(n) < 0.6
+            valid[index] = False
+            rp, rv = rng.normal(0.0, 3.0, (n, 3)), rng.normal(0.0, 1.0, (n, 3))
+            sel, rp_s, rv_s = new.pairs(t, valid, rp, rv)
+            sel0, rp0, rv0 = old.pairs(t, valid, rp, rv)
+            assert sel.dtype == sel0.dtype and np.array_equal(sel, sel0), (trial, k)
+            assert np.array_equal(rp_s, rp0) and np.array_equal(rv_s, rv0), (trial, k)
+            assert (rp_s is rp) == (rp0 is rp) and (rv_s is rv) == (rv0 is rv), (trial, k)
+        assert np.array_equal(new._last_seen, old._last_seen)
+        assert np.array_equal(new._last_rp, old._last_rp)
+        assert np.array_equal(new._last_rv, old._last_rv)
+
+
+def test_disabled_hold_passes_valid_pairs_through() -> None:
+    hold = DropoutHold(4, 1, 0.2, enabled=False)
+    valid = np.array([True, False, False, True])
+    rp, rv = np.ones((4, 3)), np.zeros((4, 3))
+    sel, rp_s, rv_s = hold.pairs(0.0, valid, rp, rv)
+    assert sel.tolist() == [0, 3] and rp_s is rp and rv_s is rv
