@@ -19,12 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from swarm_common.frames import (
-    accel_to_attitude,
-    euler_enu_from_quat_ned,
-    norm_to_thrust,
-    thrust_to_norm,
+from offboard.attitude_kernel import (
+    accel_from_attitude_kernel,
+    inner_loop_kernel,
+    quat_ned_kernel,
+    setpoint_kernel,
 )
+from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
 from swarm_common.scenario import VehicleConfig
 
 
@@ -40,39 +41,14 @@ class Setpoint:
     thrust_norm: np.float32
 
 
-_S2 = math.sqrt(0.5)
-
-
-def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
 def quat_ned_fast(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """Closed form of :func:`swarm_common.frames.quat_ned_from_euler_enu` (w ≥ 0).
 
     ``q_ned = q_T ⊗ q_zyx(roll, pitch, yaw) ⊗ q_D`` with T (ENU→NED) a half turn about
     (1,1,0)/√2 and D (FRD→FLU) a half turn about x; equal to the frames version to ~1e-16.
+    Compiled: :func:`offboard.attitude_kernel.quat_ned_kernel`.
     """
-    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-    q = (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
-    q = _qmul(_qmul((0.0, _S2, _S2, 0.0), q), (0.0, 1.0, 0.0, 0.0))
-    if q[0] < 0:
-        q = (-q[0], -q[1], -q[2], -q[3])
-    return np.array(q)
+    return quat_ned_kernel(float(roll), float(pitch), float(yaw))
 
 
 def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> tuple[float, ...]:
@@ -89,13 +65,19 @@ def setpoint_from_accel(
 
     Angles/thrust are the commanded values, or (``decode=True``) the values decoded from the
     float32 wire form (differ by ~1e-7; the agent's inner-loop model does not need them).
+    The conversion (:func:`swarm_common.frames.accel_to_attitude`, the quaternion of
+    :func:`quat_ned_fast`, :func:`swarm_common.frames.thrust_to_norm`) is the compiled
+    :func:`offboard.attitude_kernel.setpoint_kernel`.
     """
+    ua = np.ascontiguousarray(u, dtype=float)
+    if ua.shape != (3,):
+        raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
     f_max = veh.thrust_max_n
-    roll, pitch, yaw_c, f = accel_to_attitude(
-        u, yaw, veh.gravity_mps2, veh.mass_kg, math.radians(veh.tilt_max_deg), f_max
+    roll, pitch, yaw_c, f, q, tn_f = setpoint_kernel(
+        ua, float(yaw), float(veh.gravity_mps2), float(veh.mass_kg),
+        math.radians(veh.tilt_max_deg), float(f_max),
     )
-    q = quat_ned_fast(roll, pitch, yaw_c).astype(np.float32)
-    tn = np.float32(thrust_to_norm(f, f_max))
+    tn = np.float32(tn_f)
     if decode:
         roll, pitch, yaw_c, f = decode_wire(q, float(tn), f_max)
     return Setpoint(roll, pitch, yaw_c, f, q, tn)
@@ -104,13 +86,13 @@ def setpoint_from_accel(
 def accel_from_attitude(
     roll: float, pitch: float, yaw: float, thrust_n: float, mass: float, g: float
 ) -> np.ndarray:
-    """Virtual control realised by an attitude/thrust: R e3 F/m − g e_z (ENU)."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    k = thrust_n / mass
-    return np.array(
-        [(cy * sp * cr + sy * sr) * k, (sy * sp * cr - cy * sr) * k, cp * cr * k - g]
+    """Virtual control realised by an attitude/thrust: R e3 F/m − g e_z (ENU).
+
+    Angles in rad, thrust in N, mass in kg, g in m/s²; the result (3,) in m/s² (compiled:
+    :func:`offboard.attitude_kernel.accel_from_attitude_kernel`).
+    """
+    return accel_from_attitude_kernel(
+        float(roll), float(pitch), float(yaw), float(thrust_n), float(mass), float(g)
     )
 
 
@@ -118,10 +100,10 @@ class InnerLoopModel:
     """First-order attitude (τ_rp, τ_ψ) and thrust (τ_F) lags, exact per sub-step."""
 
     def __init__(self, veh: VehicleConfig, dt_sub: float) -> None:
-        self.m = veh.mass_kg
-        self.g = veh.gravity_mps2
+        self.m = float(veh.mass_kg)
+        self.g = float(veh.gravity_mps2)
         self.tilt = math.radians(veh.tilt_max_deg)
-        self.f_max = veh.thrust_max_n
+        self.f_max = float(veh.thrust_max_n)
         self.a_rp = math.exp(-dt_sub / veh.tau_rollpitch_s)
         self.a_y = math.exp(-dt_sub / veh.tau_yaw_s)
         self.a_f = math.exp(-dt_sub / veh.tau_thrust_s)
@@ -129,26 +111,18 @@ class InnerLoopModel:
         self.f = self.m * self.g
 
     def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
-        """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u at each sub-step end."""
+        """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u (m/s²) at each
+        sub-step end. The command is clipped to the tilt and thrust limits; the sub-steps
+        are the compiled :func:`offboard.attitude_kernel.inner_loop_kernel`."""
         lim = self.tilt
         rc = min(lim, max(-lim, sp.roll))
         pc = min(lim, max(-lim, sp.pitch))
-        yc = sp.yaw
         fc = min(self.f_max, max(0.0, sp.thrust_n))
-        rows = []
         r, p, y = self.att
-        f = self.f
-        m, g = self.m, self.g
-        cos, sin = math.cos, math.sin
-        for _ in range(n_sub):
-            r = rc + (r - rc) * self.a_rp
-            p = pc + (p - pc) * self.a_rp
-            y = yc + (y - yc) * self.a_y
-            f = fc + (f - fc) * self.a_f
-            cr, sr, cp, sp_, cy, sy = cos(r), sin(r), cos(p), sin(p), cos(y), sin(y)
-            k = f / m
-            rows.append(((cy * sp_ * cr + sy * sr) * k, (sy * sp_ * cr - cy * sr) * k,
-                         cp * cr * k - g))
+        rows, r, p, y, f = inner_loop_kernel(
+            float(r), float(p), float(y), float(self.f), float(rc), float(pc), float(sp.yaw),
+            float(fc), self.a_rp, self.a_y, self.a_f, self.m, self.g, int(n_sub),
+        )
         self.att = [r, p, y]
         self.f = f
-        return np.array(rows)
+        return rows

@@ -18,7 +18,11 @@ import math
 
 import numpy as np
 
-from swarm_common.fastnp import norm
+from swarm_common.frames_kernel import (
+    accel_to_attitude_kernel,
+    euler_enu_from_quat_ned_kernel,
+    rotm_from_quat_kernel,
+)
 
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 D_FRD_FLU = np.diag([1.0, -1.0, -1.0])
@@ -81,15 +85,9 @@ def quat_from_rotm(r: np.ndarray) -> np.ndarray:
 
 
 def rotm_from_quat(q: np.ndarray) -> np.ndarray:
-    """Unit quaternion [w, x, y, z] -> rotation matrix."""
+    """Unit quaternion [w, x, y, z] -> rotation matrix (compiled: frames_kernel)."""
     w, x, y, z = (float(c) for c in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return rotm_from_quat_kernel(w, x, y, z)
 
 
 def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -99,11 +97,15 @@ def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray
 
 
 def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
-    """NED/FRD quaternion [w, x, y, z] -> ENU/FLU Euler (roll, pitch, yaw)."""
-    qa = np.asarray(q, dtype=float)
-    qa = qa / norm(qa)
-    r_enu = T_ENU_NED @ rotm_from_quat(qa) @ D_FRD_FLU
-    return euler_from_rotm(r_enu)
+    """NED/FRD quaternion [w, x, y, z] -> ENU/FLU Euler (roll, pitch, yaw).
+
+    Normalised, ``R_enu = T_ENU_NED R(q) D_FRD_FLU``, then :func:`euler_from_rotm`
+    (compiled: :func:`swarm_common.frames_kernel.euler_enu_from_quat_ned_kernel`).
+    """
+    qa = np.ascontiguousarray(q, dtype=float)
+    if qa.shape != (4,):
+        raise ValueError(f"quaternion of shape {qa.shape}, not (4,)")
+    return euler_enu_from_quat_ned_kernel(qa, T_ENU_NED, D_FRD_FLU)
 
 
 def valid_quaternion(q: np.ndarray, tol: float = 0.05) -> bool:
@@ -135,25 +137,15 @@ def accel_to_attitude(
     Limits, in order: the thrust's vertical part is at least ``min_vertical_frac * g``
     (no inverted flight); the tilt is at most ``tilt_max_rad`` (horizontal part scaled,
     vertical part kept); ``F <= thrust_max_n`` (the whole vector scaled).
+    The compiled :func:`swarm_common.frames_kernel.accel_to_attitude_kernel`.
     """
-    a = np.asarray(u, dtype=float) + np.array([0.0, 0.0, gravity])
-    az = max(float(a[2]), min_vertical_frac * gravity)
-    ah = a[:2].copy()
-    h = float(np.hypot(ah[0], ah[1]))
-    hmax = az * math.tan(tilt_max_rad)
-    if h > hmax:
-        ah *= hmax / h
-    a = np.array([ah[0], ah[1], az])
-    f = mass * norm(a)
-    if f > thrust_max_n:
-        a *= thrust_max_n / f
-        f = thrust_max_n
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    ax = cy * a[0] + sy * a[1]  # rotate into the yaw frame
-    ay = -sy * a[0] + cy * a[1]
-    pitch = math.atan2(ax, a[2])
-    roll = math.atan2(-ay, math.hypot(ax, a[2]))
-    return roll, pitch, yaw, f
+    ua = np.ascontiguousarray(u, dtype=float)
+    if ua.shape != (3,):
+        raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
+    return accel_to_attitude_kernel(
+        ua, float(yaw), float(gravity), float(mass),
+        float(tilt_max_rad), float(thrust_max_n), float(min_vertical_frac),
+    )
 
 
 def thrust_accel(roll: float, pitch: float, yaw: float, thrust_n: float, mass: float) -> np.ndarray:

@@ -1,0 +1,111 @@
+"""Compiled conversions of :mod:`swarm_common.frames` (issue 11): the per-step ones.
+
+:mod:`swarm_common.frames` stays the one NED↔ENU conversion boundary: its public functions
+call these kernels, and other compiled code (:mod:`offboard.attitude_kernel`) calls them
+directly. The conventions are those of :mod:`swarm_common.frames` (ENU/FLU inside, NED/FRD
+on the wire, ZYX Euler, quaternions [w, x, y, z]).
+
+The operations and their order are those of the numpy/Python formulation they replaced,
+but for: dot products summed left to right (numpy's BLAS dot) and ``math.hypot`` being the
+C library's, as ``np.hypot`` is (CPython's ``math.hypot`` rounds its own way, within an
+ulp). Results agree to rounding (``tests/unit/test_attitude_kernel.py``), and every
+process (controller and simulator) runs the same kernels.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_common.jit import kernel
+
+
+@kernel
+def py_max(a: float, b: float) -> float:
+    """Python's ``max(a, b)`` of two floats (``b`` only if ``b > a``: NaN as in Python)."""
+    return b if b > a else a
+
+
+@kernel
+def py_min(a: float, b: float) -> float:
+    """Python's ``min(a, b)`` of two floats (``b`` only if ``b < a``: NaN as in Python)."""
+    return b if b < a else a
+
+
+@kernel
+def rotm_from_quat_kernel(w: float, x: float, y: float, z: float) -> np.ndarray:
+    """Unit quaternion [w, x, y, z] → (3,3) rotation matrix (frames.rotm_from_quat)."""
+    r = np.empty((3, 3))
+    r[0, 0] = 1 - 2 * (y * y + z * z)
+    r[0, 1] = 2 * (x * y - w * z)
+    r[0, 2] = 2 * (x * z + w * y)
+    r[1, 0] = 2 * (x * y + w * z)
+    r[1, 1] = 1 - 2 * (x * x + z * z)
+    r[1, 2] = 2 * (y * z - w * x)
+    r[2, 0] = 2 * (x * z - w * y)
+    r[2, 1] = 2 * (y * z + w * x)
+    r[2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+@kernel
+def matmul3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(3,3) product ``a @ b``, each entry summed over k = 0, 1, 2."""
+    c = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            c[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+    return c
+
+
+@kernel
+def euler_enu_from_quat_ned_kernel(
+    q: np.ndarray, t_enu_ned: np.ndarray, d_frd_flu: np.ndarray
+) -> tuple[float, float, float]:
+    """NED/FRD quaternion q (4,) [w, x, y, z] → ENU/FLU ZYX Euler (roll, pitch, yaw) (rad).
+
+    q is normalised (q/‖q‖), ``R_enu_flu = T R_ned_frd(q) D`` with t_enu_ned = T and
+    d_frd_flu = D of :mod:`swarm_common.frames` (the full products: entries of T and D are
+    0 and ±1, so they are exact and give numpy's ``@`` bit for bit, signs of zeros
+    included), then frames.euler_from_rotm of R_enu_flu.
+    """
+    nq = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    r = rotm_from_quat_kernel(q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq)
+    r = matmul3(matmul3(t_enu_ned, r), d_frd_flu)
+    pitch = math.asin(py_max(-1.0, py_min(1.0, -r[2, 0])))
+    roll = math.atan2(r[2, 1], r[2, 2])
+    yaw = math.atan2(r[1, 0], r[0, 0])
+    return roll, pitch, yaw
+
+
+@kernel
+def accel_to_attitude_kernel(
+    u: np.ndarray, yaw: float, gravity: float, mass: float, tilt_max_rad: float,
+    thrust_max_n: float, min_vertical_frac: float,
+) -> tuple[float, float, float, float]:
+    """Virtual control u (3,) m/s² (paper 2.2: ``u = R[0,0,F]/m − g e_z``) → (roll, pitch,
+    yaw (rad), F (N)) within the limits of frames.accel_to_attitude (same order: vertical
+    part ≥ min_vertical_frac·g, tilt ≤ tilt_max_rad, F ≤ thrust_max_n)."""
+    a0, a1, a2 = u[0] + 0.0, u[1] + 0.0, u[2] + gravity
+    az = py_max(a2, min_vertical_frac * gravity)
+    h = math.hypot(a0, a1)
+    hmax = az * math.tan(tilt_max_rad)
+    if h > hmax:
+        s = hmax / h
+        a0 *= s
+        a1 *= s
+    a2 = az
+    f = mass * math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    if f > thrust_max_n:
+        s = thrust_max_n / f
+        a0 *= s
+        a1 *= s
+        a2 *= s
+        f = thrust_max_n
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    ax = cy * a0 + sy * a1  # rotate into the yaw frame
+    ay = -sy * a0 + cy * a1
+    pitch = math.atan2(ax, a2)
+    roll = math.atan2(-ay, math.hypot(ax, a2))
+    return roll, pitch, yaw, f
