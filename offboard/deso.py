@@ -35,7 +35,6 @@ one-period transition, with post-update publishing and with a one-step stale exc
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -52,12 +51,22 @@ from offboard.deso_adaptive import (  # noqa: F401 (re-exported)
     model_accel,
     regressor_t_times,
 )
-from swarm_common.fastnp import einsum
+from offboard.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
+    GATE_E1,
+    GATE_E2,
+    GATE_HOLD_S,
+    OUT_CONVERGED,
+    OUT_E1,
+    OUT_E2,
+    OUT_Z1,
+    OUT_Z2,
+    OUT_Z3,
+    OUT_ZETA,
+    coast_kernel,
+    deso_step_kernel,
+    model_accel_kernel,
+)
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
-
-GATE_E1 = 0.3  # m, adaptation runs only while ‖e1‖ ≤ GATE_E1 ...
-GATE_E2 = 1.0  # m/s, ... and ‖e2‖ ≤ GATE_E2 ...
-GATE_HOLD_S = 1.0  # s, ... have held continuously this long (the observer has converged)
 
 
 def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dict[int, np.ndarray]:
@@ -241,7 +250,12 @@ def gain_report(
 
 
 class DESO:
-    """Observer of follower ``index``; state z1, z2, z3 (3,) and ζ̂ (6,)."""
+    """Observer of follower ``index``; state z1, z2, z3 (3,) and ζ̂ (6,).
+
+    The per-period arithmetic is compiled (:mod:`offboard.deso_kernel`); the class keeps
+    the state, the neighbour bookkeeping and the matrices of each neighbour set (numpy,
+    cached). Each period replaces z1, z2, z3 (and ζ̂ when it adapts) by new arrays.
+    """
 
     def __init__(
         self,
@@ -277,23 +291,18 @@ class DESO:
         self.zeta = np.zeros(N_ZETA)
         self._cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._pu_cache: dict[tuple[int, ...], np.ndarray] = {}
+        # per neighbour set: (A_S, G, D, W (k,3,3), indices (k,) int64), for the kernel
+        self._step_cache: dict[
+            tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+        ] = {}
+        # neighbours' estimates ẑ_j1 (m), ẑ_j2 (m/s) of the period, rows in `used` order
+        self._zp = np.zeros((len(self.nbrs), 3))
+        self._zv = np.zeros((len(self.nbrs), 3))
         self.last_e1 = np.zeros(3)
         self.last_e2 = np.zeros(3)
         self.n_used = 0
         self._f_hat: np.ndarray | None = None  # f̂ at the current state (set by lumped())
         self.converged_s = 0.0  # s for which the innovations have stayed inside the gate
-
-    def _gate_open(self) -> bool:
-        """Advance the convergence timer with this period's innovations; True once
-        ‖e1‖ ≤ GATE_E1 and ‖e2‖ ≤ GATE_E2 have held for GATE_HOLD_S (docs/estimation.md).
-        Start-up transients, outages and lost neighbours freeze ζ̂ instead of driving it."""
-        e1 = math.sqrt(float(self.last_e1.dot(self.last_e1)))  # = np.linalg.norm
-        e2 = math.sqrt(float(self.last_e2.dot(self.last_e2)))
-        if e1 <= GATE_E1 and e2 <= GATE_E2:
-            self.converged_s += self.dt
-        else:
-            self.converged_s = 0.0
-        return self.converged_s >= GATE_HOLD_S - 1e-9
 
     def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(A_S (15×15), G (15×3S), D) for this neighbour set (cached)."""
@@ -319,9 +328,24 @@ class DESO:
             self._pu_cache[used] = pu
         return pu
 
+    def _step_arrays(
+        self, used: tuple[int, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(A_S, G, D, W (k,3,3), indices (k,)) of this neighbour set as contiguous arrays
+        for :func:`~offboard.deso_kernel.deso_step_kernel` (cached per set)."""
+        arrs = self._step_cache.get(used)
+        if arrs is None:
+            a_s, g, dmat = self._matrices(used)
+            c = np.ascontiguousarray
+            arrs = (c(a_s, dtype=np.float64), c(g, dtype=np.float64),
+                    c(dmat, dtype=np.float64), c(self._stacked_weights(used), dtype=np.float64),
+                    np.array(used, dtype=np.int64))
+            self._step_cache[used] = arrs
+        return arrs
+
     def lumped(self) -> np.ndarray:
         """Estimate of the lumped disturbance acceleration Φζ + d/m: f̂ + z3."""
-        self._f_hat = model_accel(self.z1, self.z2, self.zeta, self.h)
+        self._f_hat = model_accel_kernel(self.z1, self.z2, self.zeta, self.h)
         return self.z3 + self._f_hat
 
     def coast(self, u_sub: np.ndarray) -> None:
@@ -329,10 +353,9 @@ class DESO:
         with no relative information, or one the daemon missed (u_sub: (substeps, 3),
         m/s²)."""
         self._f_hat = None
-        for s in range(self.substeps):
-            acc = self.z3 + model_accel(self.z1, self.z2, self.zeta, self.h) + u_sub[s]
-            self.z1 = self.z1 + self.delta * self.z2 + 0.5 * self.delta**2 * acc
-            self.z2 = self.z2 + self.delta * acc
+        u = np.ascontiguousarray(u_sub, dtype=np.float64)
+        self.z1, self.z2 = coast_kernel(self.z1, self.z2, self.z3, self.zeta,
+                                        u[: self.substeps], self.h, self.delta)
 
     def update(
         self,
@@ -350,29 +373,27 @@ class DESO:
         u_sub (substeps, 3): applied virtual control per sub-step.
         """
         f_cached, self._f_hat = self._f_hat, None
-        used = tuple(j for j in self.nbrs if valid[j] and j in nbr_p)
+        used = tuple([j for j in self.nbrs if valid[j] and j in nbr_p])
         self.n_used = len(used)
         if not used:  # no relative information: dead-reckon with the model
             self.converged_s = 0.0
             self.coast(u_sub)
             return
-        a_s, g, dmat = self._matrices(used)
-        idx = list(used)
-        pu = self._stacked_weights(used)  # (k,3,3) W_ij
-        zp = np.array([nbr_p[j] for j in idx])
-        zv = np.array([nbr_v[j] for j in idx])
-        b1 = einsum("kij,kj->i", pu, zp - rel_pos[idx])
-        b1d = einsum("kij,kj->i", pu, zv - rel_vel[idx])
-        b2 = b1d  # Σ P*(ẑ_j2 − ṙ_ij)
-        z1, z2 = self.z1, self.z2
-        f_hat = f_cached if f_cached is not None else model_accel(z1, z2, self.zeta, self.h)
-        self.last_e1 = dmat @ z1 - b1
-        self.last_e2 = dmat @ z2 - b2
-        if self.mu > 0.0 and self._gate_open():
-            phte, fro2 = regressor_t_times(z1, z2, self.last_e2, self.h)
-            self.zeta = adapt_step(self.zeta, phte, fro2, self.mu, self.sigma, self.dt)
-        x = np.concatenate([z1, z2, self.z3, b1, b1d])
-        x = a_s @ x + g @ (np.asarray(u_sub, dtype=float) + f_hat).reshape(-1)
-        self.z1 = x[0:3].copy()
-        self.z2 = x[3:6].copy()
-        self.z3 = x[6:9].copy()
+        a_s, g, dmat, pu, idx = self._step_arrays(used)
+        zp, zv = self._zp, self._zv
+        for k, j in enumerate(used):
+            zp[k] = nbr_p[j]
+            zv[k] = nbr_v[j]
+        f_hat = (f_cached if f_cached is not None
+                 else model_accel_kernel(self.z1, self.z2, self.zeta, self.h))
+        c = np.ascontiguousarray
+        out = deso_step_kernel(
+            a_s, g, dmat, pu, idx, zp, zv, c(rel_pos, dtype=np.float64),
+            c(rel_vel, dtype=np.float64), self.z1, self.z2, self.z3, self.zeta,
+            c(u_sub, dtype=np.float64), f_hat, self.h, self.mu, self.sigma, self.dt,
+            self.converged_s,
+        )
+        # new arrays each period (views of the kernel's one output array)
+        self.z1, self.z2, self.z3 = out[OUT_Z1], out[OUT_Z2], out[OUT_Z3]
+        self.last_e1, self.last_e2, self.zeta = out[OUT_E1], out[OUT_E2], out[OUT_ZETA]
+        self.converged_s = float(out[OUT_CONVERGED])
