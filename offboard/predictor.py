@@ -158,11 +158,14 @@ class NeighbourPredictor:
         e = self.last.get(agent_id)
         if e is None:
             return None
-        if not e.is_leader:
-            b = self.bound(agent_id, t)
-            if t - e.t > self.max_age + 1e-9 or (b is not None and b > self.drop_bound):
+        age = t - e.t
+        if not e.is_leader and age > 0.0:  # current data (age ≤ 0) has bound 0: kept
+            if age > self.max_age + 1e-9:
                 return None
-        n = int(round((t - e.t) / self.dt))
+            b = self.bound(agent_id, t)
+            if b is not None and b > self.drop_bound:
+                return None
+        n = int(round(age / self.dt))
         if n <= 0:
             return e.z1, e.z2, e.xi
         xi = self.exo(n) @ e.xi
