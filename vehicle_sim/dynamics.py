@@ -16,6 +16,8 @@ World frame ENU-style, z up (the paper's frame); body FLU; Euler ZYX. Per vehicl
   a spawn fixture, used by the MAVLink simulator until a vehicle is first armed.
 
 Translational state uses semi-implicit Euler at the physics rate (default 200 Hz).
+The step is compiled (:mod:`vehicle_sim.dynamics_kernel`); this class keeps the state,
+the commands, the seeded ζ and the collision record.
 """
 
 from __future__ import annotations
@@ -24,14 +26,26 @@ import math
 
 import numpy as np
 
-from swarm_common.fastnp import einsum
 from swarm_common.scenario import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
+from vehicle_sim.dynamics_kernel import (
+    lumped_accel_kernel,
+    min_upper_kernel,
+    pair_distances_kernel,
+    step_kernel,
+    thrust_accel_kernel,
+)
 
 
 def external_disturbance(t: float, amplitude_n: float, omega: float) -> np.ndarray:
     """d(t) = A [cos ωt, sin ωt, sin ωt] in newtons (paper §5.1)."""
     return amplitude_n * np.array([math.cos(omega * t), math.sin(omega * t), math.sin(omega * t)])
+
+
+def _f64(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array (itself when it is one already): what the
+    kernels take (one compiled specialisation)."""
+    return np.ascontiguousarray(x, dtype=np.float64)
 
 
 class SwarmDynamics:
@@ -75,6 +89,7 @@ class SwarmDynamics:
         self._in_contact = np.zeros((self.n, self.n), dtype=bool)
         self._iu = np.triu_indices(self.n, 1)
         self._step_dist = self.pair_distances()  # of the last step (step_min_distance)
+        self._step_min = min_upper_kernel(self._step_dist)  # its minimum (m)
 
     # -- commands ---------------------------------------------------------------
     def set_command(self, idx: int, roll: float, pitch: float, yaw: float, thrust_n: float) -> None:
@@ -103,71 +118,44 @@ class SwarmDynamics:
 
     # -- integration --------------------------------------------------------------
     def thrust_accel(self) -> np.ndarray:
-        """(N,3) acceleration from thrust alone, R e3 F / m."""
-        att = self.att
-        # one cos and one sin over (N,3): the same values as per column (numpy's
-        # elementwise loops do not depend on stride or length; checked bit for bit)
-        c, s = np.cos(att), np.sin(att)
-        cr, cp, cy = c[:, 0], c[:, 1], c[:, 2]
-        sr, sp, sy = s[:, 0], s[:, 1], s[:, 2]
-        b3 = np.empty((len(att), 3))  # filled column by column: no np.stack
-        b3[:, 0] = cy * sp * cr + sy * sr
-        b3[:, 1] = sy * sp * cr - cy * sr
-        b3[:, 2] = cp * cr
-        b3 *= (self.thrust / self.mass)[:, None]
-        return b3
+        """(N,3) acceleration from thrust alone, R e3 F / m (m/s²; compiled:
+        :func:`vehicle_sim.dynamics_kernel.thrust_accel_kernel`)."""
+        return thrust_accel_kernel(_f64(self.att), _f64(self.thrust), self.mass)
 
     def virtual_control(self) -> np.ndarray:
-        """(N,3) the paper's u = R[0,0,F]/m − g e_z realised by the vehicles."""
+        """(N,3) the paper's u = R[0,0,F]/m − g e_z realised by the vehicles (m/s²)."""
         a = self.thrust_accel()
         a[:, 2] -= self.g
         return a
 
     def lumped_accel(self, t: float | None = None) -> np.ndarray:
-        """(N,3) true lumped disturbance Φ(p,v)ζ + d(t)/m (m/s²), what the DESO estimates."""
+        """(N,3) true lumped disturbance Φ(p,v)ζ + d(t)/m (m/s²), what the DESO estimates
+        (compiled: :func:`vehicle_sim.dynamics_kernel.lumped_accel_kernel`)."""
         tt = self.t if t is None else t
-        # Φ(p, v) ζ written out per column (same sum as regressor(...) @ ζ, without
-        # building the (N,3,6) array: this runs at every physics step)
-        v, z = self.v, self.zeta
-        speed = np.sqrt(einsum("ij,ij->i", v, v))[:, None]
-        f = z[:, 0:1] - (z[:, 1:2] + z[:, 2:3] * speed) * v - z[:, 3:4] * v**3
-        f[:, 2] += z[:, 4] * np.exp(-np.maximum(self.p[:, 2], 0.0) / self.ge_height)
-        f[:, 0] -= z[:, 5] * v[:, 1]
-        f[:, 1] += z[:, 5] * v[:, 0]
-        # d(t)/m of external_disturbance, in plain floats: the same roundings
-        # ((A·cos ωt)/m per component) without building two small arrays
-        amp, m, wt = self.dist_amp, self.mass, self.dist_omega * tt
-        dc, ds = amp * math.cos(wt) / m, amp * math.sin(wt) / m
-        f += (dc, ds, ds)
-        return f
+        return lumped_accel_kernel(
+            _f64(self.p), _f64(self.v), self.zeta, self.ge_height, self.dist_amp, self.mass,
+            self.dist_omega, float(tt),
+        )
 
     def step(self) -> None:
-        """Advance one physics step of ``dt``."""
+        """Advance one physics step of ``dt`` (compiled:
+        :func:`vehicle_sim.dynamics_kernel.step_kernel`)."""
         dt = self.dt
-        cmd_att, cmd_thrust = self.cmd_att, self.cmd_thrust
-        self.att = cmd_att + (self.att - cmd_att) * self._a_att
-        self.thrust = cmd_thrust + (self.thrust - cmd_thrust) * self._a_f
-        acc = self.virtual_control()
-        acc += self.lumped_accel()
-        acc *= dt
-        v_new = self.v + acc
-        p_new = v_new * dt
-        p_new += self.p
-        ground = p_new[:, 2] < 0.0
-        if ground.any():
-            p_new[ground, 2] = 0.0
-            v_new[ground, 2] = np.maximum(v_new[ground, 2], 0.0)
-            v_new[ground, :2] *= 0.0  # friction: a landed vehicle stops
-        held = self.held
-        if held.any():
-            free = ~held
-            self.v = np.where(free[:, None], v_new, self.v)
-            self.p = np.where(free[:, None], p_new, self.p)
-        else:
-            self.v, self.p = v_new, p_new
+        p, v, att, thrust, dist, contact, new, dmin = step_kernel(
+            _f64(self.p), _f64(self.v), _f64(self.att), _f64(self.thrust),
+            _f64(self.cmd_att), _f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
+            self._a_f, self.mass, self.g, dt, self.ge_height, self.dist_amp,
+            self.dist_omega, self.t, self._in_contact, self.collision_radius,
+        )
+        self.p, self.v, self.att, self.thrust = p, v, att, thrust
         self.t = (self.step_count + 1) * dt
         self.step_count += 1
-        self._update_collisions()
+        self._step_dist = dist
+        self._step_min = dmin
+        self._in_contact = contact
+        for i, j in new:
+            self.collisions += 1
+            self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
 
     def advance(self, n_steps: int) -> None:
         for _ in range(n_steps):
@@ -175,12 +163,9 @@ class SwarmDynamics:
 
     # -- geometry -----------------------------------------------------------------
     def pair_distances(self) -> np.ndarray:
-        """(N,N) distance matrix of true positions (np.linalg.norm(d, axis=-1)'s own
-        arithmetic, without its dispatch)."""
-        p = self.p
-        d = p[:, None, :] - p[None, :, :]
-        d *= d
-        return np.sqrt(np.add.reduce(d, axis=-1))
+        """(N,N) distance matrix of true positions (m; the arithmetic of
+        np.linalg.norm(d, axis=-1), compiled)."""
+        return pair_distances_kernel(_f64(self.p))
 
     def min_pair_distance(self) -> float:
         return float(self.pair_distances()[self._iu].min())
@@ -188,19 +173,9 @@ class SwarmDynamics:
     def step_min_distance(self) -> float:
         """:meth:`min_pair_distance` right after :meth:`step`, from the distances its
         collision check computed (not recomputed: call it before p changes again)."""
-        return float(self._step_dist[self._iu].min())
-
-    def _update_collisions(self) -> None:
-        dist = self.pair_distances()
-        self._step_dist = dist
-        contact = dist < self.collision_radius
-        np.fill_diagonal(contact, False)
-        new = contact & ~self._in_contact
-        if new.any():
-            for i, j in zip(*np.nonzero(np.triu(new, 1)), strict=True):
-                self.collisions += 1
-                self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
-        self._in_contact = contact
+        if self.n < 2:
+            return float(self._step_dist[self._iu].min())  # numpy's error, as before
+        return self._step_min
 
     def on_ground(self) -> np.ndarray:
         return self.p[:, 2] <= 1e-6

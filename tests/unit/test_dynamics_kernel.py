@@ -1,0 +1,196 @@
+"""The compiled physics step (vehicle_sim.dynamics_kernel) against the numpy step it
+replaced: the same step to rounding, from identical states (single steps over random
+states with held vehicles and ground contact) and over short rollouts with random
+commands, so the compiled simulator is the same simulator.
+
+The oracle below is the previous numpy implementation of ``SwarmDynamics.step`` (with its
+``thrust_accel``, ``lumped_accel`` and collision bookkeeping) kept verbatim, as functions
+of a :class:`SwarmDynamics`. The kernel differs from it in the last bit only: the C
+library's ``exp`` against numpy's AVX-512 one, cubes as products against numpy's ``pow``
+(module docstring of vehicle_sim.dynamics_kernel).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from conftest import CUBE8
+
+from swarm_common.fastnp import einsum
+from swarm_common.scenario import load_scenario
+from vehicle_sim.dynamics import SwarmDynamics, regressor
+
+# the oracle: the previous numpy step, verbatim ----------------------------------------
+
+
+def thrust_accel_np(self: SwarmDynamics) -> np.ndarray:
+    att = self.att
+    c, s = np.cos(att), np.sin(att)
+    cr, cp, cy = c[:, 0], c[:, 1], c[:, 2]
+    sr, sp, sy = s[:, 0], s[:, 1], s[:, 2]
+    b3 = np.empty((len(att), 3))
+    b3[:, 0] = cy * sp * cr + sy * sr
+    b3[:, 1] = sy * sp * cr - cy * sr
+    b3[:, 2] = cp * cr
+    b3 *= (self.thrust / self.mass)[:, None]
+    return b3
+
+
+def lumped_accel_np(self: SwarmDynamics, t: float | None = None) -> np.ndarray:
+    tt = self.t if t is None else t
+    v, z = self.v, self.zeta
+    speed = np.sqrt(einsum("ij,ij->i", v, v))[:, None]
+    f = z[:, 0:1] - (z[:, 1:2] + z[:, 2:3] * speed) * v - z[:, 3:4] * v**3
+    f[:, 2] += z[:, 4] * np.exp(-np.maximum(self.p[:, 2], 0.0) / self.ge_height)
+    f[:, 0] -= z[:, 5] * v[:, 1]
+    f[:, 1] += z[:, 5] * v[:, 0]
+    amp, m, wt = self.dist_amp, self.mass, self.dist_omega * tt
+    dc, ds = amp * math.cos(wt) / m, amp * math.sin(wt) / m
+    f += (dc, ds, ds)
+    return f
+
+
+def pair_distances_np(self: SwarmDynamics) -> np.ndarray:
+    p = self.p
+    d = p[:, None, :] - p[None, :, :]
+    d *= d
+    return np.sqrt(np.add.reduce(d, axis=-1))
+
+
+def step_np(self: SwarmDynamics) -> None:
+    dt = self.dt
+    cmd_att, cmd_thrust = self.cmd_att, self.cmd_thrust
+    self.att = cmd_att + (self.att - cmd_att) * self._a_att
+    self.thrust = cmd_thrust + (self.thrust - cmd_thrust) * self._a_f
+    acc = thrust_accel_np(self)
+    acc[:, 2] -= self.g
+    acc += lumped_accel_np(self)
+    acc *= dt
+    v_new = self.v + acc
+    p_new = v_new * dt
+    p_new += self.p
+    ground = p_new[:, 2] < 0.0
+    if ground.any():
+        p_new[ground, 2] = 0.0
+        v_new[ground, 2] = np.maximum(v_new[ground, 2], 0.0)
+        v_new[ground, :2] *= 0.0
+    held = self.held
+    if held.any():
+        free = ~held
+        self.v = np.where(free[:, None], v_new, self.v)
+        self.p = np.where(free[:, None], p_new, self.p)
+    else:
+        self.v, self.p = v_new, p_new
+    self.t = (self.step_count + 1) * dt
+    self.step_count += 1
+    dist = pair_distances_np(self)
+    self._step_dist = dist
+    contact = dist < self.collision_radius
+    np.fill_diagonal(contact, False)
+    new = contact & ~self._in_contact
+    if new.any():
+        for i, j in zip(*np.nonzero(np.triu(new, 1)), strict=True):
+            self.collisions += 1
+            self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
+    self._in_contact = contact
+
+
+# ---------------------------------------------------------------------------------------
+
+TOL = {"rtol": 1e-13, "atol": 1e-13}
+
+
+@pytest.fixture(scope="module")
+def cube8():
+    return load_scenario(CUBE8)
+
+
+def assert_same(new: SwarmDynamics, old: SwarmDynamics, tol: dict[str, float], tag: object
+                ) -> None:
+    for name in ("p", "v", "att", "thrust"):
+        a, b = getattr(new, name), getattr(old, name)
+        assert a.shape == b.shape and a.dtype == b.dtype, (name, tag)
+        assert np.allclose(a, b, **tol), (name, tag, np.max(np.abs(a - b)))
+    assert np.array_equal(new.att, old.att), tag  # the lags: the same operations
+    assert np.array_equal(new.thrust, old.thrust), tag
+    assert np.allclose(new._step_dist, old._step_dist, **tol), tag
+    assert math.isclose(new.step_min_distance(), float(old._step_dist[old._iu].min()),
+                        rel_tol=tol["rtol"], abs_tol=tol["atol"]), tag
+    assert np.array_equal(new._in_contact, old._in_contact), tag
+    assert (new.t, new.step_count, new.collisions) == (old.t, old.step_count, old.collisions)
+    assert new.collision_pairs == old.collision_pairs, tag
+
+
+def random_state(dyn: SwarmDynamics, rng: np.random.Generator) -> None:
+    """Positions from clustered (collisions) to spread, some at or below the ground;
+    velocities, attitudes, thrusts, commands, held flags, contacts at random."""
+    n = dyn.n
+    dyn.p = rng.normal(0.0, 1.0, (n, 3)) * rng.uniform(0.05, 3.0)
+    dyn.p[:, 2] += rng.uniform(-0.02, 2.0, n) * rng.integers(0, 2, n)
+    dyn.v = rng.normal(0.0, 3.0, (n, 3))
+    dyn.att = rng.uniform(-0.6, 0.6, (n, 3)) + rng.uniform(-np.pi, np.pi, (n, 3)) * [0, 0, 1]
+    dyn.thrust = rng.uniform(0.0, dyn.f_max, n)
+    for i in range(n):
+        dyn.set_command(i, *rng.uniform(-1.0, 1.0, 3), rng.uniform(-5.0, 1.2 * dyn.f_max))
+    dyn.held = rng.uniform(size=n) < 0.3
+    c = rng.uniform(size=(n, n)) < 0.2
+    dyn._in_contact = np.triu(c, 1) | np.triu(c, 1).T
+    dyn.t = float(rng.uniform(0.0, 100.0))
+    dyn.step_count = int(round(dyn.t / dyn.dt))
+
+
+def test_single_steps_equal_numpy_step(cube8) -> None:
+    rng = np.random.default_rng(7)
+    for trial in range(2000):
+        new = SwarmDynamics(cube8, seed=trial)
+        random_state(new, rng)
+        old = copy.deepcopy(new)
+        assert np.allclose(new.lumped_accel(), lumped_accel_np(old), **TOL), trial
+        t = float(rng.uniform(0.0, 50.0))
+        assert np.allclose(new.lumped_accel(t), lumped_accel_np(old, t), **TOL), trial
+        assert np.array_equal(new.thrust_accel(), thrust_accel_np(old)), trial
+        assert np.array_equal(new.pair_distances(), pair_distances_np(old)), trial
+        new.step()
+        step_np(old)
+        assert_same(new, old, TOL, trial)
+
+
+def test_lumped_accel_is_the_regressor_sum(cube8) -> None:
+    """Φ(p, v) ζ + d(t)/m with the shared regressor (swarm_common.unmodeled)."""
+    rng = np.random.default_rng(3)
+    dyn = SwarmDynamics(cube8, seed=5)
+    random_state(dyn, rng)
+    f = np.einsum("nij,nj->ni", regressor(dyn.p, dyn.v, dyn.ge_height), dyn.zeta)
+    wt = dyn.dist_omega * dyn.t
+    f += dyn.dist_amp / dyn.mass * np.array([math.cos(wt), math.sin(wt), math.sin(wt)])
+    assert np.allclose(dyn.lumped_accel(), f, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("ground_start", [False, True])
+def test_rollouts_equal_numpy_steps(cube8, ground_start: bool) -> None:
+    """Short rollouts (50 physics steps = 0.25 s, random commands every 4 steps, vehicles
+    released at random, landings) from a common state, 40 of them: 2000 steps each way."""
+    rng = np.random.default_rng(19 + ground_start)
+    new = SwarmDynamics(cube8, seed=3, held=True)
+    if ground_start:
+        new.p[:, 2] = 0.0
+        new.v[:] = 0.0
+    for _ in range(40):
+        old = copy.deepcopy(new)
+        for k in range(50):
+            if k % 4 == 0:
+                for i in range(new.n):
+                    cmd = (*rng.uniform(-0.4, 0.4, 3), rng.uniform(0.0, 1.1 * new.f_max))
+                    new.set_command(i, *cmd)
+                    old.set_command(i, *cmd)
+                if rng.uniform() < 0.2:
+                    i = int(rng.integers(0, new.n))
+                    new.release(i)
+                    old.release(i)
+            new.step()
+            step_np(old)
+            assert_same(new, old, {"rtol": 1e-11, "atol": 1e-11}, k)
+    assert not new.held.all()

@@ -1,0 +1,203 @@
+"""Compiled physics step of the swarm (:class:`vehicle_sim.dynamics.SwarmDynamics`, issue 11).
+
+:func:`step_kernel` is one physics step of all N vehicles in one compiled loop: the
+exact first-order attitude and thrust lags, the thrust acceleration R e3 F / m − g e_z,
+the lumped disturbance Φ(p, v) ζ + d(t)/m (:func:`lumped_accel_kernel`), semi-implicit
+Euler, ground contact, the spawn fixture (held vehicles), and the pair distances with the
+collision bookkeeping. The class around it keeps the state, the commands and the names.
+
+The operations and their order are those of the numpy formulation it replaced, with
+these exceptions, each a last-bit difference at most (``tests/unit/test_dynamics_kernel.py``
+steps the previous numpy step side by side):
+
+* ``exp`` is the C library's (numpy's AVX-512 ``exp`` differs from it in the last bit for
+  a few percent of arguments); ``sin``/``cos`` agree with numpy's bit for bit;
+* cubes are products ``v·v·v`` (numpy's ``v**3`` is its vectorised ``pow``);
+* ‖v‖² is summed as numpy's ``einsum("ij,ij->i")`` does on 3-vectors, (x² + z²) + y²
+  (its SIMD horizontal sum); the pair distances as ``np.add.reduce``, (x² + y²) + z².
+
+No random numbers here (ζ is drawn by the class); no fastmath (swarm_common.jit): every
+process that runs the kernel computes the same bits, so in-process and distributed runs
+stay equal. World frame ENU, z up; body FLU; Euler ZYX (rad).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_common.jit import kernel
+
+
+@kernel
+def thrust_accel_kernel(att: np.ndarray, thrust: np.ndarray, mass: float) -> np.ndarray:
+    """(N,3) acceleration from thrust alone, R(φ,θ,ψ) e3 F / m (m/s²).
+
+    att (N,3) roll, pitch, yaw (rad); thrust (N,) F (N); mass m (kg).
+    """
+    n = att.shape[0]
+    out = np.empty((n, 3))
+    for i in range(n):
+        cr, cp, cy = math.cos(att[i, 0]), math.cos(att[i, 1]), math.cos(att[i, 2])
+        sr, sp, sy = math.sin(att[i, 0]), math.sin(att[i, 1]), math.sin(att[i, 2])
+        k = thrust[i] / mass
+        out[i, 0] = (cy * sp * cr + sy * sr) * k
+        out[i, 1] = (sy * sp * cr - cy * sr) * k
+        out[i, 2] = (cp * cr) * k
+    return out
+
+
+@kernel
+def lumped_accel_kernel(
+    p: np.ndarray, v: np.ndarray, zeta: np.ndarray, ge_height: float, amp: float,
+    mass: float, omega: float, t: float,
+) -> np.ndarray:
+    """(N,3) lumped disturbance Φ(p, v) ζ + d(t)/m (m/s²).
+
+    p (N,3) position (m), v (N,3) velocity (m/s), zeta (N,6) the true ζ of
+    :func:`swarm_common.unmodeled.regressor`'s columns (bias m/s², linear drag 1/s,
+    quadratic drag 1/m, cubic damping s/m², ground effect m/s², cross-coupling 1/s);
+    ge_height h (m) of exp(−max(z, 0)/h); d(t) = A [cos ωt, sin ωt, sin ωt] with amp A (N),
+    omega ω (rad/s), t (s); mass m (kg).
+    """
+    n = p.shape[0]
+    out = np.empty((n, 3))
+    wt = omega * t
+    dc = amp * math.cos(wt) / mass
+    ds = amp * math.sin(wt) / mass
+    for i in range(n):
+        _lumped_row(p, v, zeta, ge_height, dc, ds, i, out)
+    return out
+
+
+@kernel
+def _lumped_row(
+    p: np.ndarray, v: np.ndarray, zeta: np.ndarray, ge_height: float, dc: float, ds: float,
+    i: int, out: np.ndarray,
+) -> None:
+    """Row ``i`` of :func:`lumped_accel_kernel` into ``out[i]`` (dc, ds: d(t)/m, m/s²)."""
+    z0, z1, z2, z3, z4, z5 = zeta[i, 0], zeta[i, 1], zeta[i, 2], zeta[i, 3], zeta[i, 4], zeta[i, 5]
+    vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
+    speed = math.sqrt((vx * vx + vz * vz) + vy * vy)
+    lin = z1 + z2 * speed
+    fx = z0 - lin * vx - z3 * (vx * vx * vx)
+    fy = z0 - lin * vy - z3 * (vy * vy * vy)
+    fz = z0 - lin * vz - z3 * (vz * vz * vz)
+    pz = p[i, 2]
+    zc = 0.0 if pz < 0.0 else pz  # np.maximum(z, 0): nan stays nan
+    fz += z4 * math.exp(-zc / ge_height)
+    fx -= z5 * vy
+    fy += z5 * vx
+    out[i, 0] = fx + dc
+    out[i, 1] = fy + ds
+    out[i, 2] = fz + ds
+
+
+@kernel
+def pair_distances_kernel(p: np.ndarray) -> np.ndarray:
+    """(N,N) distance matrix ‖p_i − p_j‖ (m) of positions p (N,3) (m)."""
+    n = p.shape[0]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            dx = p[i, 0] - p[j, 0]
+            dy = p[i, 1] - p[j, 1]
+            dz = p[i, 2] - p[j, 2]
+            out[i, j] = math.sqrt((dx * dx + dy * dy) + dz * dz)
+    return out
+
+
+@kernel
+def min_upper_kernel(d: np.ndarray) -> float:
+    """Minimum of the strict upper triangle of the (N,N) matrix ``d`` (nan if any is nan;
+    +inf for N < 2)."""
+    n = d.shape[0]
+    m = np.inf
+    for i in range(n):
+        for j in range(i + 1, n):
+            x = d[i, j]
+            if x < m or x != x:
+                m = x
+                if x != x:
+                    return m
+    return m
+
+
+@kernel
+def step_kernel(
+    p: np.ndarray, v: np.ndarray, att: np.ndarray, thrust: np.ndarray,
+    cmd_att: np.ndarray, cmd_thrust: np.ndarray, held: np.ndarray, zeta: np.ndarray,
+    a_att: np.ndarray, a_f: float, mass: float, g: float, dt: float, ge_height: float,
+    amp: float, omega: float, t: float, in_contact: np.ndarray, radius: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+           np.ndarray, float]:
+    """One physics step of ``dt`` (s) from time ``t`` (s) for all N vehicles.
+
+    State in: p (N,3) m, v (N,3) m/s, att (N,3) rad, thrust (N,) N; commands cmd_att (N,3)
+    rad (already clamped), cmd_thrust (N,) N; held (N,) bool: the vehicle keeps p, v
+    (its attitude and thrust lags still run); zeta (N,6) true ζ; a_att (3,) = exp(−dt/τ)
+    per Euler axis, a_f = exp(−dt/τ_F); mass (kg), g (m/s²), ge_height (m), amp (N),
+    omega (rad/s) as in :func:`lumped_accel_kernel`; in_contact (N,N) bool, the pairs
+    closer than ``radius`` (m) after the previous step.
+
+    Returns new arrays (p, v, att, thrust, dist (N,N) m, contact (N,N) bool, new_pairs
+    (K,2) int64: pairs i < j entering contact this step, row by row) and the minimum pair
+    distance (m; :func:`min_upper_kernel` of dist)::
+
+        att' = c + (att − c) a_att,  F' = F_c + (F − F_c) a_f
+        v' = v + (R(att') e3 F'/m − g e_z + Φ(p, v) ζ + d(t)/m) dt,  p' = v' dt + p
+        z' < 0: z' = 0, v'_z = max(v'_z, 0), v'_x = v'_x·0, v'_y = v'_y·0
+    """
+    n = p.shape[0]
+    att_n = np.empty((n, 3))
+    thr_n = np.empty(n)
+    for i in range(n):
+        for k in range(3):
+            c = cmd_att[i, k]
+            att_n[i, k] = c + (att[i, k] - c) * a_att[k]
+        thr_n[i] = cmd_thrust[i] + (thrust[i] - cmd_thrust[i]) * a_f
+    acc = thrust_accel_kernel(att_n, thr_n, mass)
+    wt = omega * t
+    dc = amp * math.cos(wt) / mass
+    ds = amp * math.sin(wt) / mass
+    lump = np.empty((n, 3))
+    for i in range(n):
+        _lumped_row(p, v, zeta, ge_height, dc, ds, i, lump)
+    p_n = np.empty((n, 3))
+    v_n = np.empty((n, 3))
+    for i in range(n):
+        acc[i, 2] -= g
+        if held[i]:
+            for k in range(3):
+                v_n[i, k] = v[i, k]
+                p_n[i, k] = p[i, k]
+            continue
+        for k in range(3):
+            vk = v[i, k] + (acc[i, k] + lump[i, k]) * dt
+            v_n[i, k] = vk
+            p_n[i, k] = vk * dt + p[i, k]
+        if p_n[i, 2] < 0.0:
+            p_n[i, 2] = 0.0
+            vz = v_n[i, 2]
+            v_n[i, 2] = 0.0 if vz < 0.0 else vz  # np.maximum(vz, 0): nan stays nan
+            v_n[i, 0] *= 0.0  # friction: a landed vehicle stops
+            v_n[i, 1] *= 0.0
+    dist = pair_distances_kernel(p_n)
+    contact = np.empty((n, n), dtype=np.bool_)
+    n_new = 0
+    for i in range(n):
+        for j in range(n):
+            c = i != j and dist[i, j] < radius
+            contact[i, j] = c
+            if c and j > i and not in_contact[i, j]:
+                n_new += 1
+    new_pairs = np.empty((n_new, 2), dtype=np.int64)
+    r = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            if contact[i, j] and not in_contact[i, j]:
+                new_pairs[r, 0] = i
+                new_pairs[r, 1] = j
+                r += 1
+    return p_n, v_n, att_n, thr_n, dist, contact, new_pairs, min_upper_kernel(dist)
