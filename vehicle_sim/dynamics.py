@@ -98,11 +98,14 @@ class SwarmDynamics:
         Non-finite values are ignored (the previous command is kept). Tilt is clamped
         to ``tilt_max`` per axis, thrust to [0, F_max].
         """
-        vals = (roll, pitch, yaw, thrust_n)
-        if not all(math.isfinite(x) for x in vals):
+        isfinite = math.isfinite
+        if not (isfinite(roll) and isfinite(pitch) and isfinite(yaw) and isfinite(thrust_n)):
             return
         lim = self.tilt_max
-        self.cmd_att[idx] = (min(lim, max(-lim, roll)), min(lim, max(-lim, pitch)), yaw)
+        ca = self.cmd_att  # element by element: no tuple → array conversion (≈ 1 µs)
+        ca[idx, 0] = min(lim, max(-lim, roll))
+        ca[idx, 1] = min(lim, max(-lim, pitch))
+        ca[idx, 2] = yaw
         self.cmd_thrust[idx] = min(self.f_max, max(0.0, thrust_n))
 
     def release(self, idx: int | None = None) -> None:
