@@ -259,3 +259,12 @@ async def settle(app, pilot, pred, tries: int = 100) -> bool:
         if pred():
             return True
     return False
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile the numba kernels before any test starts a daemon or a simulator: from a
+    cold cache (a fresh clone) eight daemons would otherwise compile the same kernels at
+    once on a 2-core machine, inside their start-up timeouts (gcs.warmup)."""
+    from gcs.warmup import compile_kernels
+
+    compile_kernels()
