@@ -26,6 +26,7 @@ from offboard.daemon_agents import parse_agents
 from offboard.daemon_host import DaemonHost
 from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
+from offboard.warmup import warm_kernels
 from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common.blas import single_thread_blas
 from swarm_common.enums import Method, SensingSource
@@ -269,6 +270,7 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
     cProfile (CPU time) of the whole run written to ``$OFFBOARD_PROFILE.<name>``."""
     single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
     form = formation_from_scenario(cfgs[0].scenario)
+    warm_kernels(cfgs[0].scenario, cfgs[0].method, form)  # before any daemon's first step
     daemons: list[OffboardDaemon] = []
     for cfg in cfgs:
         try:
