@@ -27,7 +27,7 @@ import time
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
-from swarm_common import signing, wire
+from swarm_common import frames, signing, wire
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario import Scenario
 from vehicle_sim import stats
@@ -47,11 +47,23 @@ LOCKSTEP_SCAN_S = 0.005  # lockstep: telemetry streams scanned at most this ofte
 LINK_NAMES = ("api", "gcs")  # a vehicle's links; link i signs with signing link id i
 
 
+def load_kernels(sc: Scenario) -> None:
+    """Load the compiled kernels the simulator runs (swarm_common.jit) before its first
+    step: a physics step of a throwaway swarm and the setpoint decode, so the first real
+    step does not pay for loading (or, on a machine's first run, compiling) them."""
+    warm = SwarmDynamics(sc, held=False)
+    warm.step()
+    warm.step_min_distance()
+    warm.lumped_accel()
+    frames.euler_enu_from_quat_ned(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32))
+
+
 class SimServer(ServerIO):
     def __init__(self, sc: Scenario, opts: SimOptions) -> None:
         self.opts = opts
         self.sc = restrict(sc, opts.vehicles)
         self.dyn = SwarmDynamics(self.sc, seed=opts.seed, held=True)
+        load_kernels(self.sc)
         self.substeps = self.sc.substeps_per_control
         self.dt = self.sc.control_dt
         if opts.lockstep:
