@@ -30,8 +30,21 @@ log = logging.getLogger(__name__)
 
 def warm_kernels(sc: Scenario, method: str | None, form: Formation) -> float:
     """Step a throwaway follower and leader of ``sc`` (``method``) for :data:`PERIODS`
-    periods at rest on the initial state; returns the CPU time it took (s)."""
+    periods at rest on the initial state; returns the CPU time it took (s). The warm-up
+    is an optimisation: if it fails, a warning says why and the daemon starts as it
+    would without it (its kernels then load on the first step)."""
     t0 = time.process_time()
+    try:
+        _step_throwaway_agents(sc, method, form)
+    except Exception as exc:  # noqa: BLE001 - never stop a daemon for its warm-up
+        log.warning("kernel warm-up skipped (%s: %s)", type(exc).__name__, exc)
+    cpu = time.process_time() - t0
+    log.debug("kernels loaded in %.2f s of CPU", cpu)
+    return cpu
+
+
+def _step_throwaway_agents(sc: Scenario, method: str | None, form: Formation) -> None:
+    """The warm-up itself (:func:`warm_kernels`)."""
     p = np.array([a.position for a in sc.agents], dtype=float)
     v = np.zeros_like(p)
     lead = set(sc.leader_ids)
@@ -52,6 +65,3 @@ def warm_kernels(sc: Scenario, method: str | None, form: Formation) -> float:
                 agent.step(k, t, p, v, nbrs, True)
     finally:
         logging.disable(previous)
-    cpu = time.process_time() - t0
-    log.debug("kernels loaded in %.2f s of CPU", cpu)
-    return cpu

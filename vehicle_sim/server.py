@@ -52,8 +52,7 @@ def load_kernels(sc: Scenario) -> None:
     step: a physics step of a throwaway swarm and the setpoint decode, so the first real
     step does not pay for loading (or, on a machine's first run, compiling) them."""
     warm = SwarmDynamics(sc, held=False)
-    warm.step()
-    warm.step_min_distance()
+    warm.step()  # computes the pair distances too (none for a single vehicle)
     warm.lumped_accel()
     frames.euler_enu_from_quat_ned(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32))
 

@@ -1,0 +1,41 @@
+"""The daemon's kernel warm-up (offboard.warmup): it steps throwaway agents and leaves
+nothing behind, and a failure in it is a warning, never a daemon that does not start."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import offboard.warmup as warmup
+from offboard.bearing import formation_from_scenario
+from swarm_common.scenario import load_scenario
+
+SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+
+
+def test_warm_up_steps_throwaway_agents_and_mutes_their_logs(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    form = formation_from_scenario(SC)
+    with caplog.at_level(logging.INFO):
+        cpu = warmup.warm_kernels(SC, "dcbf", form)
+    assert cpu >= 0.0
+    assert not [r for r in caplog.records if r.levelno >= logging.INFO]
+    assert logging.root.manager.disable == logging.NOTSET  # logging restored
+
+
+def test_a_failing_warm_up_is_a_warning(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture,
+) -> None:
+    def broken(*_: object, **__: object) -> None:
+        raise np.linalg.LinAlgError("singular")
+
+    monkeypatch.setattr(warmup, "make_agent", broken)
+    with caplog.at_level(logging.WARNING):
+        warmup.warm_kernels(SC, "dcbf", formation_from_scenario(SC))
+    assert any("kernel warm-up skipped (LinAlgError: singular)" in r.getMessage()
+               for r in caplog.records)
+    assert logging.root.manager.disable == logging.NOTSET
