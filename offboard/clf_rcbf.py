@@ -54,6 +54,7 @@ import numpy as np
 import osqp
 from scipy import sparse
 
+from offboard.clf_kernel import clf_kernel
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
 from swarm_common.enums import QPStatus
@@ -89,54 +90,24 @@ def clf_terms(
 ) -> ClfTerms:
     """CLF of Departure 10 and the nominal formation controller (see module docstring);
     with ``box`` = (lo, hi) (m/s², per axis) the nominal control has anti-windup
-    (:func:`anti_windup_control`) and lies in the box."""
-    s = e2 + lam * e1
-    v = kp * float(e1 @ e1) + kd * float(s @ s)
-    drift = w - a_ref + lam * e2
-    lfv = 2.0 * kp * float(e1 @ e2) + 2.0 * kd * float(s @ drift)
-    lgv = 2.0 * kd * s
-    if box is None:
-        u_nom = a_ref - w - lam * e2 - ks * s - (kp / kd) * e1
-    else:
-        k_v = lam + ks
-        u_nom = anti_windup_control(e1, e2, a_ref - w, k_v, (ks * lam + kp / kd) / k_v, box)
-    return ClfTerms(V=v, lfv=lfv, lgv=lgv, u_nom=u_nom)
+    (docs/saturation.md §2) and lies in the box. Compiled:
+    :func:`offboard.clf_kernel.clf_kernel`."""
+    lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
+    out = clf_kernel(
+        _vec3(e1), _vec3(e2), _vec3(w), _vec3(a_ref), float(kp), float(kd), float(lam),
+        float(ks), box is not None, _vec3(lo), _vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
+    )
+    return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
 
 
-def anti_windup_control(
-    e1: np.ndarray,
-    e2: np.ndarray,
-    ff: np.ndarray,
-    k_v: float,
-    c: float,
-    box: tuple[np.ndarray, np.ndarray],
-    brake_share: float = AW_BRAKE_SHARE,
-    reserve: float = AW_RESERVE,
-) -> np.ndarray:
-    """``u = f_c + clip(−k_v (e2 − v_r), −b⁻, b⁺)`` (docs/saturation.md §2).
+_NO_BOX = np.zeros(3)
 
-    ``ff`` (m/s²): the feed-forward the reference needs; ``f_c`` it clipped into the box
-    shrunk by ``reserve`` of each half-range; per axis ``b⁺ = hi − f_c``, ``b⁻ = f_c − lo``.
-    The error-velocity reference ``v_r = −c e1 · min(1, sqrt(2 β b_e ‖e1‖) / (c‖e1‖))``
-    keeps the direction of e1; ``b_e`` is the budget along ``e1/‖e1‖``, the direction of the
-    deceleration that stops the return (the largest s with ``f_c + s e1/‖e1‖`` in the
-    box). Without saturation and for ``‖e1‖ ≤ 2βb_e/c²`` this is ``ff − k_v (e2 + c e1)``,
-    the unsaturated nominal law.
-    """
-    lo, hi = box
-    m = reserve * 0.5 * (hi - lo)
-    f_c = np.minimum(np.maximum(ff, lo + m), hi - m)
-    b_hi, b_lo = hi - f_c, f_c - lo
-    v_r = -c * e1
-    n = math.sqrt(float(e1 @ e1))  # = float(np.sqrt(e1 @ e1)): both correctly rounded
-    if n > 1e-12:
-        d = e1 / n
-        room = np.where(d > 0.0, b_hi, b_lo)
-        nz = np.abs(d) > 1e-12
-        b_e = float((room[nz] / np.abs(d[nz])).min())
-        v_r *= min(1.0, math.sqrt(2.0 * brake_share * b_e * n) / (c * n))
-    fb = -k_v * (e2 - v_r)
-    return f_c + np.minimum(np.maximum(fb, -b_lo), b_hi)
+
+def _vec3(x: np.ndarray) -> np.ndarray:
+    """``x`` as a contiguous float64 (3,) array (the same array when it is one)."""
+    if x.dtype == np.float64 and x.flags.c_contiguous and x.shape == (3,):
+        return x
+    return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
 
 
 def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
