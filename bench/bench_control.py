@@ -9,8 +9,9 @@ Prints, with no assertions (figures for docs/performance.md, "Control core"):
    run ``--repeats`` times (the 2-core machine is shared: give the range);
 2. per-agent step (``FollowerAgent.step`` and ``LeaderAgent.step``, wrapped with
    time.perf_counter, so Python call overhead is included) in µs, median and p99, over
-   the steps where OSQP was not called (the nominal input already satisfied every row:
-   exact shortcut), over all steps (OSQP calls included) and over the OSQP steps alone;
+   the steps where OSQP was not called (the nominal input already satisfied every row,
+   or, dcbf, one row alone was active and solved exactly), over all steps (OSQP calls
+   included) and over the OSQP steps alone;
 3. the follower step's parts: sensing, DESO update, desired-state observer.
 """
 
@@ -29,33 +30,50 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gcs.inproc import run_inproc  # noqa: E402
+from offboard import clf_rcbf  # noqa: E402
 from offboard.agent import FollowerAgent  # noqa: E402
 from offboard.deso import DESO  # noqa: E402
 from offboard.leader import LeaderAgent  # noqa: E402
 from offboard.reference import DesiredStateObserver  # noqa: E402
 from offboard.sensing import Sensor  # noqa: E402
-from swarm_common.enums import QPStatus  # noqa: E402
 from swarm_common.scenario import Scenario, load_scenario  # noqa: E402
 
 Store = dict[str, list[float]]
 
 
+_osqp_calls = [0]  # OSQP solves so far (offboard.clf_rcbf.update_solve, counted)
+
+
 def _wrap(cls: Any, name: str, store: Store, key: str) -> Callable[..., Any]:
     """Replace ``cls.name`` by a timed wrapper appending µs to ``store[key]``; returns the
-    original. Agent steps also record whether OSQP ran (``key + ":osqp"``: 1.0 / 0.0)."""
+    original. Agent steps also record whether OSQP ran during the step (``key + ":osqp"``:
+    1.0 / 0.0): an OSQP solve was made, not merely an active QP (the dcbf QP solves a
+    single active row exactly, without OSQP)."""
     orig = getattr(cls, name)
 
     def timed(self: Any, *a: Any, **k: Any) -> Any:
+        calls = _osqp_calls[0]
         t0 = time.perf_counter()
         out = orig(self, *a, **k)
         store.setdefault(key, []).append((time.perf_counter() - t0) * 1e6)
-        st = getattr(out, "status", None)
-        if st is not None:
-            osqp = getattr(st, "qp_status", QPStatus.INACTIVE) != QPStatus.INACTIVE
-            store.setdefault(key + ":osqp", []).append(1.0 if osqp else 0.0)
+        if getattr(out, "status", None) is not None:
+            store.setdefault(key + ":osqp", []).append(1.0 if _osqp_calls[0] > calls else 0.0)
         return out
 
     setattr(cls, name, timed)
+    return orig
+
+
+def _count_osqp() -> Callable[..., Any]:
+    """Count OSQP solves (the QPs call ``offboard.clf_rcbf.update_solve``); returns the
+    original."""
+    orig = clf_rcbf.update_solve
+
+    def counted(*a: Any, **k: Any) -> Any:
+        _osqp_calls[0] += 1
+        return orig(*a, **k)
+
+    clf_rcbf.update_solve = counted
     return orig
 
 
@@ -84,11 +102,13 @@ def per_agent(sc: Scenario, method: str, duration: float) -> None:
                (Sensor, "measure", "sensing"), (DESO, "update", "deso"),
                (DesiredStateObserver, "update", "ref")]
     saved = [(cls, name, _wrap(cls, name, store, key)) for cls, name, key in targets]
+    solve = _count_osqp()
     try:
         run_inproc(sc, method, duration=duration)
     finally:
         for cls, name, orig in saved:
             setattr(cls, name, orig)
+        clf_rcbf.update_solve = solve
     f = np.asarray(store.get("follower", []))
     osqp = np.asarray(store.get("follower:osqp", []), dtype=bool)
     lead = store.get("leader", [])

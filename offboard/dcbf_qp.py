@@ -97,9 +97,44 @@ class DcbfQP(_ClfRowsQP):
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
         u_c = self.uset.project(u_nom)
         clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
+        u_one = self._one_row_exact(u_nom, clf, clf_rhs, g, rhs, k)
+        if u_one is not None:
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u_one, QPStatus.SOLVED, 0, us, h_min, clf.V, 0.0, 0.0, False)
         sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
         # the solver's answer up to its tolerance; project() is a no-op inside the set
         u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(brake))
         out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out
+
+    def _one_row_exact(
+        self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray,
+        rhs: np.ndarray, k: int,
+    ) -> np.ndarray | None:
+        """The QP's exact solution when one barrier row alone is active, else None.
+
+        If u_nom violates exactly one of the k rows, ``g_jᵀu ≥ r_j`` (g_j unit length), its
+        projection ``u* = u_nom + λ g_j``, ``λ = r_j − g_jᵀu_nom`` (+1e-9 m/s² so rounding
+        cannot leave it a hair outside), satisfies the KKT conditions of the QP (module
+        docstring) with only that row active whenever u* satisfies every other row and
+        the input set (checked), the CLF row with δ = 0 (``L_gV u* ≤ clf_rhs``) and
+        λ ≤ M (the slack's linear weight, so σ = 0 is optimal). It is then the QP's
+        unique minimiser, which OSQP would return to its tolerance; otherwise (several
+        rows, the CLF row or the input set active, or a relaxation) OSQP solves it."""
+        viol = rhs[:k] - g[:k] @ u_nom
+        bad = np.flatnonzero(viol > 0.0)
+        if len(bad) != 1:
+            return None
+        j = int(bad[0])
+        gj = g[j]
+        lam = float(viol[j]) + 1e-9
+        if abs(float(gj @ gj) - 1.0) > 1e-9 or lam > self.lin_sigma:
+            return None
+        u = u_nom + lam * gj
+        if float(clf.lgv @ u) > clf_rhs or not rows_hold_kernel(
+            self.a_u, self.lo_u, self.hi_u, g, rhs, k, u
+        ):
+            return None
+        return u
+

@@ -40,7 +40,7 @@ class QPStatus(StrEnum):
     """Outcome of one safety-filter step (``offboard.clf_rcbf.QPResult.status``)."""
 
     INACTIVE = "inactive"  # no QP was needed (no constraint near, or not rcbf)
-    SOLVED = "solved"  # OSQP solved the QP as posed
+    SOLVED = "solved"  # the QP was solved as posed (OSQP, or exactly: one active row, dcbf)
     RELAXED = "relaxed"  # hard rows were relaxed to regain feasibility
     FALLBACK = "fallback"  # solver failed: documented safe fallback applied
 

@@ -1,0 +1,56 @@
+"""The DCBF QP's exact one-row solution (offboard.dcbf_qp.DcbfQP._one_row_exact) against
+OSQP on the same problems: where it applies, OSQP's answer is the same point to its
+tolerance; where it does not (two rows, the CLF row or the input set active) OSQP runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from offboard.clf_rcbf import ClfTerms
+from offboard.dcbf_filter import input_set_of
+from offboard.dcbf_qp import DcbfQP
+from swarm_common.enums import QPStatus
+from swarm_common.scenario import load_scenario
+
+SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def test_one_active_row_is_solved_exactly_and_matches_osqp() -> None:
+    ctl = SC.controller
+    uset = input_set_of(ctl, SC.vehicle)
+    exact_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c)
+    osqp_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c)
+    rng = np.random.default_rng(14)
+    exact = other = 0
+    for trial in range(400):
+        u_nom = uset.project(rng.normal(0.0, 2.0, 3))
+        m = int(rng.integers(1, 5))
+        g = np.array([_unit(rng.normal(0.0, 1.0, 3)) for _ in range(m)])
+        # rows satisfied by a margin, then one (sometimes two) pushed past u_nom
+        rhs = g @ u_nom - rng.uniform(0.2, 3.0, m)
+        for j in range(1 if trial % 4 else min(2, m)):
+            rhs[j] = float(g[j] @ u_nom) + rng.uniform(0.01, 1.5)
+        clf = ClfTerms(V=1.0, lfv=0.0, lgv=rng.normal(0.0, 0.05, 3), u_nom=u_nom)
+        brake = np.zeros(3)
+        got = exact_qp.solve(u_nom, clf, g, rhs, 1.0, brake)
+        if got.status_val == 0 and got.status is QPStatus.SOLVED:  # the exact path
+            exact += 1
+            u_c = uset.project(u_nom)
+            clf_rhs = max(-clf.lfv - osqp_qp.c * clf.V, float(clf.lgv @ u_c))
+            _, x = osqp_qp._solve_rows(u_nom, clf, clf_rhs, g, rhs, len(rhs))
+            assert x is not None, trial
+            assert np.allclose(got.u, x[0:3], atol=2e-4), (trial, got.u, x[0:3])
+            assert (g @ got.u >= rhs).all(), trial
+            assert uset.contains(got.u), trial
+            viol = rhs - g @ u_nom
+            assert int((viol > 0).sum()) == 1, trial
+        else:
+            other += 1
+            assert got.status in (QPStatus.SOLVED, QPStatus.RELAXED), trial
+    assert exact > 100 and other > 50  # both paths exercised
