@@ -97,10 +97,11 @@ class DcbfQP(_ClfRowsQP):
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
         u_c = self.uset.project(u_nom)
         clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
-        u_one = self._one_row_exact(u_nom, clf, clf_rhs, g, rhs, k)
-        if u_one is not None:
+        exact = self._one_row_exact(u_nom, clf, clf_rhs, g, rhs, k)
+        if exact is not None:
             us = (time.perf_counter() - t0) * 1e6
-            return QPResult(u_one, QPStatus.SOLVED, 0, us, h_min, clf.V, 0.0, 0.0, False)
+            return QPResult(exact[0], QPStatus.SOLVED, 0, us, h_min, clf.V, exact[1], 0.0,
+                            False)
         sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
         # the solver's answer up to its tolerance; project() is a no-op inside the set
         u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(brake))
@@ -111,30 +112,53 @@ class DcbfQP(_ClfRowsQP):
     def _one_row_exact(
         self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray,
         rhs: np.ndarray, k: int,
-    ) -> np.ndarray | None:
-        """The QP's exact solution when one barrier row alone is active, else None.
+    ) -> tuple[np.ndarray, float] | None:
+        """(u, δ): the QP's exact solution when one barrier row is active, alone or with
+        the CLF row; None otherwise (OSQP solves it).
 
-        If u_nom violates exactly one of the k rows, ``g_jᵀu ≥ r_j`` (g_j unit length), its
-        projection ``u* = u_nom + λ g_j``, ``λ = r_j − g_jᵀu_nom`` (+1e-9 m/s² so rounding
-        cannot leave it a hair outside), satisfies the KKT conditions of the QP (module
-        docstring) with only that row active whenever u* satisfies every other row and
-        the input set (checked), the CLF row with δ = 0 (``L_gV u* ≤ clf_rhs``) and
-        λ ≤ M (the slack's linear weight, so σ = 0 is optimal). It is then the QP's
-        unique minimiser, which OSQP would return to its tolerance; otherwise (several
-        rows, the CLF row or the input set active, or a relaxation) OSQP solves it."""
+        If u_nom violates exactly one of the k rows, ``g_jᵀu ≥ r_j`` (g_j unit length),
+        two active sets are tried, each solved from the KKT conditions of the QP (module
+        docstring) and kept only if they hold:
+
+        * the row alone: ``u = u_nom + λ g_j``, ``λ = r_j − g_jᵀu_nom``, δ = 0, if u keeps
+          the CLF row without slack (``L_gV u ≤ clf_rhs``);
+        * the row and the CLF row ``aᵀu − δ ≤ b`` (a = L_gV/‖L_gV‖, b = clf_rhs/‖L_gV‖, as
+          the QP writes it): ``u = u_nom − ν a + λ g_j``, ``δ = ν/(2ρ)``, with
+          ``ν = (aᵀu_nom − b + c (r_j − g_jᵀu_nom)) / (1 + 1/(2ρ) − c²)``, c = aᵀg_j, and
+          ``λ = r_j − g_jᵀu_nom + ν c``; kept if ν ≥ 0.
+
+        Either is kept only if λ ∈ [0, M] (M the slack's linear weight, so σ = 0 is
+        optimal) and u satisfies every other row and the input set (checked); it is then
+        the QP's unique minimiser, which OSQP would return to its tolerance. λ gets 1e-9
+        m/s² more so that rounding cannot leave u a hair outside row j."""
         viol = rhs[:k] - g[:k] @ u_nom
         bad = np.flatnonzero(viol > 0.0)
         if len(bad) != 1:
             return None
         j = int(bad[0])
         gj = g[j]
+        if abs(float(gj @ gj) - 1.0) > 1e-9:
+            return None
         lam = float(viol[j]) + 1e-9
-        if abs(float(gj @ gj) - 1.0) > 1e-9 or lam > self.lin_sigma:
-            return None
         u = u_nom + lam * gj
-        if float(clf.lgv @ u) > clf_rhs or not rows_hold_kernel(
-            self.a_u, self.lo_u, self.hi_u, g, rhs, k, u
-        ):
+        delta = 0.0
+        if float(clf.lgv @ u) > clf_rhs:  # the CLF row is active too
+            nrm = math.sqrt(float(clf.lgv @ clf.lgv))
+            if nrm <= 1e-9:
+                return None
+            a = clf.lgv / nrm
+            c = float(a @ gj)
+            half_inv_rho = 0.5 / self._weights[0]
+            nu = (float(a @ u_nom) - clf_rhs / nrm + c * float(viol[j])) / (
+                1.0 + half_inv_rho - c * c
+            )
+            if not nu >= 0.0:
+                return None
+            lam = float(viol[j]) + nu * c + 1e-9
+            u = u_nom - nu * a + lam * gj
+            delta = nu * half_inv_rho
+        if not 0.0 <= lam <= self.lin_sigma:
             return None
-        return u
-
+        if not rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u):
+            return None
+        return u, delta

@@ -1,6 +1,7 @@
-"""The DCBF QP's exact one-row solution (offboard.dcbf_qp.DcbfQP._one_row_exact) against
-OSQP on the same problems: where it applies, OSQP's answer is the same point to its
-tolerance; where it does not (two rows, the CLF row or the input set active) OSQP runs."""
+"""The DCBF QP's exact solution with one active barrier row, alone or with the CLF row
+(offboard.dcbf_qp.DcbfQP._one_row_exact), against OSQP on the same problems: where it
+applies, OSQP's answer is the same point (and slack) to its tolerance; where it does not
+(two barrier rows, the input set active, a multiplier of the wrong sign) OSQP runs."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ def test_one_active_row_is_solved_exactly_and_matches_osqp() -> None:
     exact_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c)
     osqp_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c)
     rng = np.random.default_rng(14)
-    exact = other = 0
+    exact = other = with_clf = 0
     for trial in range(400):
         u_nom = uset.project(rng.normal(0.0, 2.0, 3))
         m = int(rng.integers(1, 5))
@@ -36,7 +37,8 @@ def test_one_active_row_is_solved_exactly_and_matches_osqp() -> None:
         rhs = g @ u_nom - rng.uniform(0.2, 3.0, m)
         for j in range(1 if trial % 4 else min(2, m)):
             rhs[j] = float(g[j] @ u_nom) + rng.uniform(0.01, 1.5)
-        clf = ClfTerms(V=1.0, lfv=0.0, lgv=rng.normal(0.0, 0.05, 3), u_nom=u_nom)
+        lgv = rng.normal(0.0, 0.05 if trial % 2 else 2.0, 3)  # the CLF row active or not
+        clf = ClfTerms(V=1.0, lfv=0.0, lgv=lgv, u_nom=u_nom)
         brake = np.zeros(3)
         got = exact_qp.solve(u_nom, clf, g, rhs, 1.0, brake)
         if got.status_val == 0 and got.status is QPStatus.SOLVED:  # the exact path
@@ -46,6 +48,8 @@ def test_one_active_row_is_solved_exactly_and_matches_osqp() -> None:
             _, x = osqp_qp._solve_rows(u_nom, clf, clf_rhs, g, rhs, len(rhs))
             assert x is not None, trial
             assert np.allclose(got.u, x[0:3], atol=2e-4), (trial, got.u, x[0:3])
+            assert abs(got.slack - x[3]) < 2e-4, (trial, got.slack, x[3])
+            with_clf += got.slack > 1e-6
             assert (g @ got.u >= rhs).all(), trial
             assert uset.contains(got.u), trial
             viol = rhs - g @ u_nom
@@ -53,4 +57,4 @@ def test_one_active_row_is_solved_exactly_and_matches_osqp() -> None:
         else:
             other += 1
             assert got.status in (QPStatus.SOLVED, QPStatus.RELAXED), trial
-    assert exact > 100 and other > 50  # both paths exercised
+    assert exact > 100 and other > 50 and with_clf > 30  # every path exercised
