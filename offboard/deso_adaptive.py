@@ -17,7 +17,7 @@ from offboard.deso_kernel import (
     ZETA_LO,
     adapt_step_kernel,
     model_accel_kernel,
-    regressor_t_times_kernel,
+    observer_regressor_t_times,
 )
 
 __all__ = [
@@ -43,7 +43,7 @@ def regressor_t_times(
     z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float
 ) -> tuple[np.ndarray, float]:
     """(Φᵀ e (6,), ‖Φ‖_F²) without building Φ (‖v‖ saturated like :func:`model_accel`)."""
-    phte, fro2 = regressor_t_times_kernel(_f64(z1), _f64(z2), _f64(e), float(h))
+    phte, fro2 = observer_regressor_t_times(_f64(z1), _f64(z2), _f64(e), float(h))
     return phte, float(fro2)
 
 

@@ -5,7 +5,7 @@ information: the data sums b1, ḃ1 over the neighbours used, the innovations e1
 Departure 6, the convergence gate, one step of the adaptive law and the exact affine map
 ``X⁺ = A_S X + G (u + f̂)`` of the period. :func:`coast_kernel` is the dead-reckoned period
 (:meth:`~offboard.deso.DESO.coast`), :func:`model_accel_kernel`,
-:func:`regressor_t_times_kernel` and :func:`adapt_step_kernel` the adaptive model of
+:func:`observer_regressor_t_times` and :func:`adapt_step_kernel` the adaptive model of
 :mod:`offboard.deso_adaptive`. The matrices A_S, G, D and the weights W_ij stay numpy
 (matrix exponential, cached per neighbour set in the class); these kernels take them as
 contiguous float64 arrays.
@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from swarm_common.jit import kernel
+from swarm_common.unmodeled import regressor_t_times_kernel, unmodeled_accel_kernel
 
 # Adaptive law (docs/estimation.md): ζ̂ stays in a box of physically meaningful values
 # (bias, drag ≥ 0, cubic damping ≥ 0, ground effect ≥ 0, cross-coupling), m/s² per unit
@@ -57,26 +58,12 @@ def _v_eval(z2: np.ndarray) -> tuple[float, float, float]:
 
 
 @kernel
-def _ground(z1: np.ndarray, h: float) -> float:
-    """Ground-effect factor exp(−max(z, 0)/h) of the regressor (h in m); a nan height stays
-    nan, as Python's ``max(nan, 0.0)``."""
-    z = z1[2]
-    if z < 0.0:
-        z = 0.0
-    return math.exp(-z / h)
-
-
-@kernel
 def model_accel_kernel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
-    """f̂ = Φ(z1, z2) ζ̂ (3,) m/s² without building Φ, ‖v‖ saturated to V_EVAL_MAX and ‖f̂‖
-    to F_HAT_MAX (paper §2.2; z1 m, z2 m/s, h ground-effect height m)."""
+    """f̂ = Φ(z1, z2) ζ̂ (3,) m/s² (:func:`swarm_common.unmodeled.unmodeled_accel_kernel`),
+    ‖v‖ saturated to V_EVAL_MAX and ‖f̂‖ to F_HAT_MAX (paper §2.2; z1 m, z2 m/s, h
+    ground-effect height m)."""
     vx, vy, vz = _v_eval(z2)
-    nv = math.sqrt(vx * vx + vy * vy + vz * vz)
-    ge = _ground(z1, h)
-    k = zeta[1] + zeta[2] * nv
-    fx = zeta[0] - k * vx - zeta[3] * (vx * vx * vx) - zeta[5] * vy
-    fy = zeta[0] - k * vy - zeta[3] * (vy * vy * vy) + zeta[5] * vx
-    fz = zeta[0] - k * vz - zeta[3] * (vz * vz * vz) + zeta[4] * ge
+    fx, fy, fz = unmodeled_accel_kernel(z1[2], vx, vy, vz, zeta, h)
     nf = math.sqrt(fx * fx + fy * fy + fz * fz)
     if nf > F_HAT_MAX:
         s = F_HAT_MAX / nf
@@ -87,27 +74,14 @@ def model_accel_kernel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: floa
 
 
 @kernel
-def regressor_t_times_kernel(
+def observer_regressor_t_times(
     z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float
 ) -> tuple[np.ndarray, float]:
-    """(Φᵀ e (6,), ‖Φ‖_F²) without building Φ, ‖v‖ saturated as in
-    :func:`model_accel_kernel` (e m/s for the e2 of the adaptive law, paper §3)."""
+    """(Φᵀ e (6,), ‖Φ‖_F²) at (z1, z2) with ‖v‖ saturated as in :func:`model_accel_kernel`
+    (:func:`swarm_common.unmodeled.regressor_t_times_kernel`; e m/s for the e2 of the
+    adaptive law, paper §3)."""
     vx, vy, vz = _v_eval(z2)
-    ex, ey, ez = e[0], e[1], e[2]
-    v2 = vx * vx + vy * vy + vz * vz
-    nv = math.sqrt(v2)
-    ve = vx * ex + vy * ey + vz * ez
-    ge = _ground(z1, h)
-    x3, y3, z3 = vx * vx * vx, vy * vy * vy, vz * vz * vz
-    phte = np.empty(6)
-    phte[0] = ex + ey + ez
-    phte[1] = -ve
-    phte[2] = -nv * ve
-    phte[3] = -(x3 * ex + y3 * ey + z3 * ez)
-    phte[4] = ge * ez
-    phte[5] = -vy * ex + vx * ey
-    fro2 = 3.0 + v2 + v2 * v2 + (x3 * x3 + y3 * y3 + z3 * z3) + ge * ge + vx * vx + vy * vy
-    return phte, fro2
+    return regressor_t_times_kernel(z1[2], vx, vy, vz, e, h)
 
 
 @kernel
@@ -229,7 +203,7 @@ def deso_step_kernel(
         else:
             converged_s = 0.0
         if converged_s >= GATE_HOLD_S - 1e-9:
-            phte, fro2 = regressor_t_times_kernel(z1, z2, e2, h)
+            phte, fro2 = observer_regressor_t_times(z1, z2, e2, h)
             new_zeta = adapt_step_kernel(zeta, phte, fro2, mu, sigma, dt)
     for i in range(6):
         out[15 + i] = new_zeta[i]

@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from swarm_common.jit import kernel
+from swarm_common.unmodeled import unmodeled_accel_kernel
 
 
 @kernel
@@ -77,18 +78,7 @@ def _lumped_row(
     i: int, out: np.ndarray,
 ) -> None:
     """Row ``i`` of :func:`lumped_accel_kernel` into ``out[i]`` (dc, ds: d(t)/m, m/s²)."""
-    z0, z1, z2, z3, z4, z5 = zeta[i, 0], zeta[i, 1], zeta[i, 2], zeta[i, 3], zeta[i, 4], zeta[i, 5]
-    vx, vy, vz = v[i, 0], v[i, 1], v[i, 2]
-    speed = math.sqrt((vx * vx + vz * vz) + vy * vy)
-    lin = z1 + z2 * speed
-    fx = z0 - lin * vx - z3 * (vx * vx * vx)
-    fy = z0 - lin * vy - z3 * (vy * vy * vy)
-    fz = z0 - lin * vz - z3 * (vz * vz * vz)
-    pz = p[i, 2]
-    zc = 0.0 if pz < 0.0 else pz  # np.maximum(z, 0): nan stays nan
-    fz += z4 * math.exp(-zc / ge_height)
-    fx -= z5 * vy
-    fy += z5 * vx
+    fx, fy, fz = unmodeled_accel_kernel(p[i, 2], v[i, 0], v[i, 1], v[i, 2], zeta[i], ge_height)
     out[i, 0] = fx + dc
     out[i, 1] = fy + ds
     out[i, 2] = fz + ds
