@@ -375,6 +375,25 @@ def _terminated(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(EXIT_TERMINATED)
 
 
+def interrupt_cause(exc: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or SystemExit inside ``exc``'s cause chain, if any.
+
+    A signal handler that raises (Ctrl-C; SIGTERM → exit 143, :func:`_terminated`) runs at
+    the next Python instruction. When that instruction is a callback of compiled code
+    (numba boxing a kernel's result, swarm_common.jit), numba reports the handler's
+    exception as the cause of a ``SystemError``; :func:`main` unwraps it so the run exits
+    as the signal asked, without a traceback.
+    """
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt | SystemExit):
+            return cur
+        seen.add(id(cur))
+        cur = cur.__cause__ or cur.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``gcs``; returns the exit code (table in the module docstring)."""
     args = build_parser().parse_args(argv)
@@ -385,7 +404,13 @@ def main(argv: list[str] | None = None) -> int:
         # background job of a non-interactive shell inherits SIG_IGN)
         signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        except SystemError as exc:  # a signal's exception wrapped by compiled code
+            cause = interrupt_cause(exc)
+            if cause is None:
+                raise
+            raise cause from None
     except KeyboardInterrupt:
         print(f"gcs {args.command}: interrupted; every process stopped", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from swarm_common.jit import kernel
-from swarm_common.unmodeled import regressor_t_times_kernel, unmodeled_accel_kernel
+from swarm_common.unmodeled_kernel import regressor_t_times_kernel, unmodeled_accel_kernel
 
 # Adaptive law (docs/estimation.md): ζ̂ stays in a box of physically meaningful values
 # (bias, drag ≥ 0, cubic damping ≥ 0, ground effect ≥ 0, cross-coupling), m/s² per unit
@@ -59,7 +59,7 @@ def _v_eval(z2: np.ndarray) -> tuple[float, float, float]:
 
 @kernel
 def model_accel_kernel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
-    """f̂ = Φ(z1, z2) ζ̂ (3,) m/s² (:func:`swarm_common.unmodeled.unmodeled_accel_kernel`),
+    """f̂ = Φ(z1, z2) ζ̂ (3,) m/s² (:func:`swarm_common.unmodeled_kernel.unmodeled_accel_kernel`),
     ‖v‖ saturated to V_EVAL_MAX and ‖f̂‖ to F_HAT_MAX (paper §2.2; z1 m, z2 m/s, h
     ground-effect height m)."""
     vx, vy, vz = _v_eval(z2)
@@ -78,7 +78,7 @@ def observer_regressor_t_times(
     z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float
 ) -> tuple[np.ndarray, float]:
     """(Φᵀ e (6,), ‖Φ‖_F²) at (z1, z2) with ‖v‖ saturated as in :func:`model_accel_kernel`
-    (:func:`swarm_common.unmodeled.regressor_t_times_kernel`; e m/s for the e2 of the
+    (:func:`swarm_common.unmodeled_kernel.regressor_t_times_kernel`; e m/s for the e2 of the
     adaptive law, paper §3)."""
     vx, vy, vz = _v_eval(z2)
     return regressor_t_times_kernel(z1[2], vx, vy, vz, e, h)

@@ -70,3 +70,4 @@ _use_fingerprinted_cache()
 def kernel(fn: F) -> F:
     """``fn`` compiled with the project's settings (module docstring)."""
     return cast(F, njit(cache=True, nogil=True, error_model="numpy")(fn))
+

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from swarm_common.jit import kernel
-from swarm_common.unmodeled import unmodeled_accel_kernel
+from swarm_common.unmodeled_kernel import unmodeled_accel_kernel
 
 
 @kernel

@@ -7,11 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from swarm_common.unmodeled import (
-    regressor,
-    regressor_t_times_kernel,
-    unmodeled_accel_kernel,
-)
+from swarm_common.unmodeled import regressor
+from swarm_common.unmodeled_kernel import regressor_t_times_kernel, unmodeled_accel_kernel
 
 
 def test_products_equal_the_regressor_matrix() -> None:
