@@ -32,6 +32,7 @@ from gcs.progress import Progress
 from gcs.recorder import Recorder
 from gcs.router import open_router
 from gcs.run_output import print_result, write_run
+from gcs.warmup import compile_kernels
 from offboard.daemon_agents import parse_agents
 from swarm_common import wire
 from swarm_common.enums import DefaultStreams
@@ -126,6 +127,9 @@ def run_distributed(
     cpu0 = time.process_time()
     reason = ""
     try:
+        # compile (or load) the kernels here once, so the simulator and the daemons load
+        # them from the cache instead of all compiling them at once (gcs.warmup)
+        log.debug("kernels ready in %.1f s", compile_kernels())
         for name, argv in spec.processes():
             group.start(name, argv, env=spec.child_env(name))
         bar = Progress(duration, label=str(method)) if show_progress else None
