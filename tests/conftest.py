@@ -10,9 +10,10 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -30,24 +31,71 @@ HOVER_NORM = 1.8 * 9.81 / 52.92
 
 
 _used_offsets: set[int] = set()
+# offsets this process holds a claim on until the current test ends (see _claim_offset)
+_claimed: list[int] = []
+CLAIM_DIR = Path(tempfile.gettempdir()) / "bearing-swarm-port-offsets"
+
+
+def _claim_offset(off: int) -> bool:
+    """Claim ``off`` against other test sessions on this machine (a second copy of the
+    suite): a file made with O_EXCL that names this pid; a claim whose process is gone
+    is taken over. Without it two sessions could pick the same free offset at once and
+    one would find its ports taken when it starts (exit 2, "ports in use")."""
+    CLAIM_DIR.mkdir(exist_ok=True)
+    path = CLAIM_DIR / f"{off}.pid"
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                owner = int(path.read_text() or "0")
+                os.kill(owner, 0)  # raises if that process is gone
+            except (ValueError, ProcessLookupError):
+                path.unlink(missing_ok=True)  # a stale claim: take it over
+                continue
+            except OSError:
+                return False
+            return False
+        with os.fdopen(fd, "w") as f:
+            f.write(str(os.getpid()))
+        _claimed.append(off)
+        return True
+    return False
+
+
+def release_port_offsets() -> None:
+    """Give up the claims this process holds (the offsets stay used in this session)."""
+    while _claimed:
+        (CLAIM_DIR / f"{_claimed.pop()}.pid").unlink(missing_ok=True)
 
 
 def free_port_offset(n_vehicles: int = 8) -> int:
-    """A port offset (multiple of 1000, never 0) whose ports are all free right now.
+    """A port offset (multiple of 1000, never 0) whose ports are all free right now,
+    claimed against other test sessions until the current test ends.
 
     Multiples of 1000 keep every port of one offset away from every port of another
     (vehicle ports end in 540-835, 000-244, 570-824; Zenoh's in 447)."""
     rng = random.SystemRandom()
     for _ in range(200):
         off = rng.randrange(1, 46) * 1000 + rng.choice([0, 300])
-        if off in _used_offsets:
+        if off in _used_offsets or not _claim_offset(off):
             continue
         ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
         zenoh_free = port_free(DEFAULT_ZENOH_PORT + off, socket.SOCK_STREAM)
         if all(port_free(p) for p in ports) and zenoh_free:
             _used_offsets.add(off)
             return off
+        (CLAIM_DIR / f"{off}.pid").unlink(missing_ok=True)
+        _claimed.remove(off)
     raise RuntimeError("no free port offset found")
+
+
+@pytest.fixture(autouse=True)
+def _port_offset_claims() -> Iterator[None]:
+    """Release this test's port-offset claims when it ends (its processes are stopped by
+    then: every fixture that starts one stops it in its own teardown, which runs first)."""
+    yield
+    release_port_offsets()
 
 
 class SimProcess:

@@ -1,0 +1,33 @@
+"""Port-offset claims between test sessions (tests/conftest.py): a second copy of the suite
+on the same machine never gets an offset this session holds, and a claim left by a dead
+session is taken over."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import conftest
+import pytest
+
+
+def test_claims_block_live_owners_and_take_over_dead_ones(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(conftest, "CLAIM_DIR", tmp_path)
+    monkeypatch.setattr(conftest, "_claimed", [])
+    assert conftest._claim_offset(7000)
+    assert (tmp_path / "7000.pid").read_text() == str(os.getpid())
+    # held by another live process (pid 1 always exists)
+    (tmp_path / "8000.pid").write_text("1")
+    assert not conftest._claim_offset(8000)
+    # held by a process that has exited: a stale claim, taken over
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / "9000.pid").write_text(str(dead.pid))
+    assert conftest._claim_offset(9000)
+    assert (tmp_path / "9000.pid").read_text() == str(os.getpid())
+    conftest.release_port_offsets()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["8000.pid"]  # not ours to free
