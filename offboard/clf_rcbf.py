@@ -58,7 +58,7 @@ from offboard.clf_kernel import clf_kernel
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
 from swarm_common.enums import QPStatus
-from swarm_common.fastnp import einsum, rows3
+from swarm_common.fastnp import einsum, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
@@ -94,20 +94,13 @@ def clf_terms(
     :func:`offboard.clf_kernel.clf_kernel`."""
     lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
     out = clf_kernel(
-        _vec3(e1), _vec3(e2), _vec3(w), _vec3(a_ref), float(kp), float(kd), float(lam),
-        float(ks), box is not None, _vec3(lo), _vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
+        vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
+        float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
     )
     return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
 
 
 _NO_BOX = np.zeros(3)
-
-
-def _vec3(x: np.ndarray) -> np.ndarray:
-    """``x`` as a contiguous float64 (3,) array (the same array when it is one)."""
-    if x.dtype == np.float64 and x.flags.c_contiguous and x.shape == (3,):
-        return x
-    return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
 
 
 def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:

@@ -34,7 +34,7 @@ from functools import cached_property
 import numpy as np
 
 from offboard.dcbf_kernel import dcbf_rows_kernel
-from swarm_common.fastnp import einsum
+from swarm_common.fastnp import einsum, f64, rows3, vec3
 
 
 @dataclass(frozen=True)
@@ -212,11 +212,9 @@ def dcbf_rows(
     d = (np.full(m, float(d_safe)) if isinstance(d_safe, float | int)
          else np.asarray(d_safe, dtype=float))
     return dcbf_rows_kernel(
-        np.ascontiguousarray(dp, dtype=float), np.ascontiguousarray(dv, dtype=float),
-        np.ascontiguousarray(a0, dtype=float), np.ascontiguousarray(u_ref, dtype=float),
-        np.ascontiguousarray(a_other, dtype=float), np.ascontiguousarray(share, dtype=float),
-        np.ascontiguousarray(d), lag.table, lag.sens3, lag.T, float(tau_s), float(gamma1),
-        float(gamma3), float(accel_err),
+        rows3(dp), rows3(dv), vec3(a0), vec3(u_ref), rows3(a_other), f64(share), f64(d),
+        lag.table, lag.sens3, lag.T, float(tau_s), float(gamma1), float(gamma3),
+        float(accel_err),
     )
 
 

@@ -19,6 +19,7 @@ from offboard.deso_kernel import (
     model_accel_kernel,
     observer_regressor_t_times,
 )
+from swarm_common.fastnp import f64
 
 __all__ = [
     "F_HAT_MAX", "V_EVAL_MAX", "ZETA_BOUND", "ZETA_HI", "ZETA_LO", "adapt_step", "model_accel",
@@ -28,22 +29,17 @@ __all__ = [
 ZETA_BOUND = float(np.linalg.norm(np.maximum(-ZETA_LO, ZETA_HI)))  # ‖ζ̂‖ in the box (2.55)
 
 
-def _f64(x: np.ndarray) -> np.ndarray:
-    """``x`` as a contiguous float64 array (no copy when it already is one)."""
-    return np.ascontiguousarray(x, dtype=np.float64)
-
-
 def model_accel(z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float) -> np.ndarray:
     """f̂ = Φ(z1, z2) ζ̂ without building Φ (fast path of :func:`regressor`), with ‖v‖
     saturated to V_EVAL_MAX and ‖f̂‖ to F_HAT_MAX (m/s²)."""
-    return model_accel_kernel(_f64(z1), _f64(z2), _f64(zeta), float(h))
+    return model_accel_kernel(f64(z1), f64(z2), f64(zeta), float(h))
 
 
 def regressor_t_times(
     z1: np.ndarray, z2: np.ndarray, e: np.ndarray, h: float
 ) -> tuple[np.ndarray, float]:
     """(Φᵀ e (6,), ‖Φ‖_F²) without building Φ (‖v‖ saturated like :func:`model_accel`)."""
-    phte, fro2 = observer_regressor_t_times(_f64(z1), _f64(z2), _f64(e), float(h))
+    phte, fro2 = observer_regressor_t_times(f64(z1), f64(z2), f64(e), float(h))
     return phte, float(fro2)
 
 
@@ -60,5 +56,5 @@ def adapt_step(
     and ζ̂ never leaves the box. A step that is not finite leaves ζ̂ as it is (a copy).
     """
     return adapt_step_kernel(
-        _f64(zeta), _f64(phte), float(fro2), float(mu), float(sigma), float(dt)
+        f64(zeta), f64(phte), float(fro2), float(mu), float(sigma), float(dt)
     )

@@ -47,3 +47,18 @@ def rows3(x: np.ndarray) -> np.ndarray:
     if x.dtype == np.float64 and x.ndim == 2 and x.flags.c_contiguous:
         return x
     return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+
+
+def f64(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array, the one layout a compiled kernel is compiled
+    for (``x`` itself when it is one already)."""
+    return np.ascontiguousarray(x, dtype=np.float64)
+
+
+def vec3(x: np.ndarray) -> np.ndarray:
+    """``x`` as a C-contiguous float64 (3,) array for a compiled kernel (the same array,
+    no copy, when it already is one)."""
+    if x.dtype == np.float64 and x.flags.c_contiguous and x.shape == (3,):
+        return x
+    return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
+

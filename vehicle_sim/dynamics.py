@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from swarm_common.fastnp import f64
 from swarm_common.scenario import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 from vehicle_sim.dynamics_kernel import (
@@ -40,12 +41,6 @@ from vehicle_sim.dynamics_kernel import (
 def external_disturbance(t: float, amplitude_n: float, omega: float) -> np.ndarray:
     """d(t) = A [cos ωt, sin ωt, sin ωt] in newtons (paper §5.1)."""
     return amplitude_n * np.array([math.cos(omega * t), math.sin(omega * t), math.sin(omega * t)])
-
-
-def _f64(x: np.ndarray) -> np.ndarray:
-    """``x`` as a C-contiguous float64 array (itself when it is one already): what the
-    kernels take (one compiled specialisation)."""
-    return np.ascontiguousarray(x, dtype=np.float64)
 
 
 class SwarmDynamics:
@@ -123,7 +118,7 @@ class SwarmDynamics:
     def thrust_accel(self) -> np.ndarray:
         """(N,3) acceleration from thrust alone, R e3 F / m (m/s²; compiled:
         :func:`vehicle_sim.dynamics_kernel.thrust_accel_kernel`)."""
-        return thrust_accel_kernel(_f64(self.att), _f64(self.thrust), self.mass)
+        return thrust_accel_kernel(f64(self.att), f64(self.thrust), self.mass)
 
     def virtual_control(self) -> np.ndarray:
         """(N,3) the paper's u = R[0,0,F]/m − g e_z realised by the vehicles (m/s²)."""
@@ -136,7 +131,7 @@ class SwarmDynamics:
         (compiled: :func:`vehicle_sim.dynamics_kernel.lumped_accel_kernel`)."""
         tt = self.t if t is None else t
         return lumped_accel_kernel(
-            _f64(self.p), _f64(self.v), self.zeta, self.ge_height, self.dist_amp, self.mass,
+            f64(self.p), f64(self.v), self.zeta, self.ge_height, self.dist_amp, self.mass,
             self.dist_omega, float(tt),
         )
 
@@ -145,8 +140,8 @@ class SwarmDynamics:
         :func:`vehicle_sim.dynamics_kernel.step_kernel`)."""
         dt = self.dt
         p, v, att, thrust, dist, contact, new, dmin = step_kernel(
-            _f64(self.p), _f64(self.v), _f64(self.att), _f64(self.thrust),
-            _f64(self.cmd_att), _f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
+            f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
+            f64(self.cmd_att), f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
             self._a_f, self.mass, self.g, dt, self.ge_height, self.dist_amp,
             self.dist_omega, self.t, self._in_contact, self.collision_radius,
         )
@@ -168,7 +163,7 @@ class SwarmDynamics:
     def pair_distances(self) -> np.ndarray:
         """(N,N) distance matrix of true positions (m; the arithmetic of
         np.linalg.norm(d, axis=-1), compiled)."""
-        return pair_distances_kernel(_f64(self.p))
+        return pair_distances_kernel(f64(self.p))
 
     def min_pair_distance(self) -> float:
         return float(self.pair_distances()[self._iu].min())
