@@ -55,9 +55,10 @@ import osqp
 from scipy import sparse
 
 from offboard.clf_kernel import clf_kernel
+from offboard.daqp_call import daqp_solve
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
-from swarm_common.enums import QPStatus
+from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.fastnp import einsum, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
@@ -186,11 +187,15 @@ class _ClfRowsQP:
     _mask_t: np.ndarray
 
     def _start(
-        self, max_pairs: int, limit: int | None, rho: float, violation_weight: float, eps: float
+        self, max_pairs: int, limit: int | None, rho: float, violation_weight: float, eps: float,
+        solver: QPSolver | str = QPSolver.DAQP,
     ) -> None:
-        """Keep the weights, set the growth limit (default ``max_pairs``), build the problem
-        with room for ``max_pairs`` rows."""
+        """Keep the weights and the solver, set the growth limit (default ``max_pairs``),
+        build the problem with room for ``max_pairs`` rows."""
         self._weights = (float(rho), float(violation_weight), float(eps))
+        self.backend = QPSolver(solver)
+        # the objective's Hessian, dense, for DAQP (OSQP gets the same diagonal in _setup)
+        self._h = np.diag([1.0, 1.0, 1.0, 2.0 * float(rho), 2.0 * float(violation_weight)])
         self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
         self._setup(int(max_pairs))
 
@@ -211,8 +216,10 @@ class _ClfRowsQP:
         self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray, rhs: np.ndarray,
         k: int,
     ) -> tuple[int, np.ndarray | None]:
-        """Write the CLF row (``L_gV u − δ ≤ clf_rhs``) and the first k safety rows, solve
-        warm-started; (OSQP status value, x) with x None when OSQP failed."""
+        """Write the CLF row (``L_gV u − δ ≤ clf_rhs``) and the first k safety rows and
+        solve: with DAQP (exact, :mod:`offboard.daqp_call`) when it is the chosen solver,
+        else, or when DAQP reports no optimum, with OSQP warm-started; (OSQP status value,
+        x) with x None when the solve failed (a DAQP optimum reports OSQP's "solved")."""
         a, m = self._a, self.m
         # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
         # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the safety rows)
@@ -229,6 +236,10 @@ class _ClfRowsQP:
         self.l[1 : 1 + k] = rhs[:k]
         self.l[1 + k : 1 + m] = -np.inf
         self.q[0:3] = -u_nom
+        if self.backend is QPSolver.DAQP:
+            x_exact = daqp_solve(self._h, self.q, a, self.l, self.u)
+            if x_exact is not None:
+                return int(osqp.SolverStatus.OSQP_SOLVED), x_exact
         status, x = update_solve(self.solver, self.q, self.l, self.u, a.T[self._mask_t])
         sv = int(status)
         if status in SOLVED and x is not None and np.isfinite(x).all():
@@ -265,16 +276,17 @@ class SafetyQP(_ClfRowsQP):
         eps: float = 1e-4,
         brake_gain: float = 2.0,
         limit: int | None = None,
+        solver: QPSolver | str = QPSolver.DAQP,
     ) -> None:
         """Room for ``max_pairs`` RCBF rows, grown on demand up to ``limit`` rows (default:
-        ``max_pairs``; :meth:`_ClfRowsQP._fit`)."""
+        ``max_pairs``; :meth:`_ClfRowsQP._fit`), solved by ``solver``."""
         self.u_lo = np.asarray(u_lo, dtype=float)
         self.u_hi = np.asarray(u_hi, dtype=float)
         self.c = float(clf_c)
         self.brake_gain = brake_gain
         # exact penalty: M must exceed every multiplier, incl. the CLF row's 2ρδ (δ ≤ ~16 m/s²)
         self.lin_sigma = float(violation_linear or max(1e3, 50.0 * rho))
-        self._start(max_pairs, limit, rho, violation_weight, eps)
+        self._start(max_pairs, limit, rho, violation_weight, eps, solver)
 
     def _setup(self, m: int) -> None:
         """(Re)build the OSQP problem with room for ``m`` RCBF rows."""

@@ -77,7 +77,7 @@ class DcbfFilter(SafetyFilter):
         uset = input_set_of(self.ctl, veh)
         rows = 2 * (len(self.leader_mask) - 1) + 2  # two per other agent, two for the ground
         self.qp = DcbfQP(min(rows, QP_INITIAL_ROWS), uset, self.ctl.rho, self.ctl.clf_c,
-                         limit=rows)
+                         limit=rows, solver=self.ctl.qp_solver)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
         self.dt = dt

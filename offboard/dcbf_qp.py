@@ -1,4 +1,4 @@
-"""The DCBF filter's OSQP problem: CLF + sampled-data CBF rows over the input polytope.
+"""The DCBF filter's QP (DAQP, or OSQP): CLF + sampled-data CBF rows over the input polytope.
 
 Variables x = [u (3), δ, σ] (docs/safety.md §4)::
 
@@ -9,7 +9,7 @@ Variables x = [u (3), δ, σ] (docs/safety.md §4)::
           σ ≥ 0
 
 Unlike the RCBF QP the input rows are never relaxed (σ acts on the barrier rows only), so
-the answer is always realisable; if OSQP fails the fallback brake is projected into the set.
+the answer is always realisable; if the solve fails the fallback brake is projected into the set.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from scipy import sparse
 from offboard.clf_rcbf import ClfTerms, QPResult, _ClfRowsQP
 from offboard.dcbf import InputSet
 from offboard.dcbf_kernel import rows_hold_kernel
-from swarm_common.enums import QPStatus
+from swarm_common.enums import QPSolver, QPStatus
 
 
 class DcbfQP(_ClfRowsQP):
@@ -33,13 +33,14 @@ class DcbfQP(_ClfRowsQP):
     def __init__(
         self, max_pairs: int, uset: InputSet, rho: float, clf_c: float,
         violation_weight: float = 100.0, eps: float = 1e-5, limit: int | None = None,
+        solver: QPSolver | str = QPSolver.DAQP,
     ) -> None:
         """Room for ``max_pairs`` barrier rows, grown on demand up to ``limit`` rows
-        (default: ``max_pairs``; :meth:`_ClfRowsQP._fit`)."""
+        (default: ``max_pairs``; :meth:`_ClfRowsQP._fit`), solved by ``solver``."""
         self.uset = uset
         self.c = float(clf_c)
         self.lin_sigma = max(1e3, 50.0 * rho)
-        self._start(max_pairs, limit, rho, violation_weight, eps)
+        self._start(max_pairs, limit, rho, violation_weight, eps, solver)
 
     def _setup(self, m: int) -> None:
         """(Re)build the OSQP problem with room for ``m`` barrier rows."""

@@ -172,7 +172,7 @@ class RcbfFilter(SafetyFilter):
         super().__init__(ctl, u_lo, u_hi, leader_mask)
         others = len(leader_mask) - 1  # grown on demand (offboard.clf_rcbf._ClfRowsQP._fit)
         self.qp = SafetyQP(min(others, QP_INITIAL_PAIRS), u_lo, u_hi, ctl.rho, ctl.clf_c,
-                           limit=others)
+                           limit=others, solver=ctl.qp_solver)
         if ctl.tau_safe_s <= 0.0:
             raise ValueError("controller.tau_safe_s must be > 0 for the RCBF (relative degree 1)")
 

@@ -50,6 +50,13 @@ class QPStatus(StrEnum):
         return self in (QPStatus.RELAXED, QPStatus.FALLBACK)
 
 
+class QPSolver(StrEnum):
+    """Solver of the followers' safety QPs (``[controller] qp_solver``; docs/safety.md §4b)."""
+
+    DAQP = "daqp"  # dual active-set method: the exact optimum of these small dense QPs
+    OSQP = "osqp"  # operator splitting (ADMM) with polishing: the solver of earlier rounds
+
+
 class FailsafeAction(StrEnum):
     """What a vehicle does when its offboard setpoints stop (PX4 ``COM_OBL_RC_ACT``)."""
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from swarm_common.enums import GraphKind, Method, Role, StartMode
+from swarm_common.enums import GraphKind, Method, QPSolver, Role, StartMode
 
 # ---------------------------------------------------------------------------
 # Schema. Each section is a frozen dataclass; each field carries its spec in its
@@ -172,6 +172,10 @@ class ControllerConfig:
     dcbf_cone_sides: int = _int(3, 64)
     # dcbf: altitude (m) below which an airborne follower may not descend (ground barrier)
     dcbf_ground_clearance_m: float = _num(0.0, 100.0)
+    # solver of the rcbf and dcbf QPs (optional; docs/safety.md §4b)
+    qp_solver: QPSolver = field(
+        default=QPSolver.DAQP, metadata={"spec": ("str", tuple(QPSolver)), "enum": QPSolver}
+    )
 
 
 

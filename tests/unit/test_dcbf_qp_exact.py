@@ -12,7 +12,7 @@ import numpy as np
 from offboard.clf_rcbf import ClfTerms
 from offboard.dcbf_filter import input_set_of
 from offboard.dcbf_qp import DcbfQP
-from swarm_common.enums import QPStatus
+from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.scenario import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
@@ -26,7 +26,7 @@ def test_one_active_row_is_solved_exactly_and_matches_osqp() -> None:
     ctl = SC.controller
     uset = input_set_of(ctl, SC.vehicle)
     exact_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c)
-    osqp_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c)
+    osqp_qp = DcbfQP(8, uset, ctl.rho, ctl.clf_c, solver=QPSolver.OSQP)
     rng = np.random.default_rng(14)
     exact = other = with_clf = 0
     for trial in range(400):
