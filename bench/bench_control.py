@@ -9,9 +9,10 @@ Prints, with no assertions (figures for docs/performance.md, "Control core"):
    run ``--repeats`` times (the 2-core machine is shared: give the range);
 2. per-agent step (``FollowerAgent.step`` and ``LeaderAgent.step``, wrapped with
    time.perf_counter, so Python call overhead is included) in µs, median and p99, over
-   the steps where OSQP was not called (the nominal input already satisfied every row,
-   or, dcbf, one row alone was active and solved exactly), over all steps (OSQP calls
-   included) and over the OSQP steps alone;
+   the steps where no QP solver was called (the nominal input already satisfied every
+   row, or, dcbf, one row alone was active and solved exactly), over all steps (solver
+   calls included) and over the steps with a solver call alone (DAQP, or OSQP: the
+   number of OSQP solves is printed as well);
 3. the follower step's parts: sensing, DESO update, desired-state observer.
 """
 
@@ -41,40 +42,47 @@ from swarm_common.scenario import Scenario, load_scenario  # noqa: E402
 Store = dict[str, list[float]]
 
 
-_osqp_calls = [0]  # OSQP solves so far (offboard.clf_rcbf.update_solve, counted)
+_solver_calls = [0]  # QP solves so far (offboard.clf_rcbf._ClfRowsQP._solve_rows, counted)
+_osqp_calls = [0]  # of which OSQP solves (offboard.clf_rcbf.update_solve, counted)
 
 
 def _wrap(cls: Any, name: str, store: Store, key: str) -> Callable[..., Any]:
     """Replace ``cls.name`` by a timed wrapper appending µs to ``store[key]``; returns the
-    original. Agent steps also record whether OSQP ran during the step (``key + ":osqp"``:
-    1.0 / 0.0): an OSQP solve was made, not merely an active QP (the dcbf QP solves a
-    single active row exactly, without OSQP)."""
+    original. Agent steps also record whether a QP solver ran during the step
+    (``key + ":solver"``: 1.0 / 0.0): a solve was made, not merely an active QP (the dcbf
+    QP solves a single active row exactly, without a solver)."""
     orig = getattr(cls, name)
 
     def timed(self: Any, *a: Any, **k: Any) -> Any:
-        calls = _osqp_calls[0]
+        calls = _solver_calls[0]
         t0 = time.perf_counter()
         out = orig(self, *a, **k)
         store.setdefault(key, []).append((time.perf_counter() - t0) * 1e6)
         if getattr(out, "status", None) is not None:
-            store.setdefault(key + ":osqp", []).append(1.0 if _osqp_calls[0] > calls else 0.0)
+            store.setdefault(key + ":solver", []).append(
+                1.0 if _solver_calls[0] > calls else 0.0)
         return out
 
     setattr(cls, name, timed)
     return orig
 
 
-def _count_osqp() -> Callable[..., Any]:
-    """Count OSQP solves (the QPs call ``offboard.clf_rcbf.update_solve``); returns the
-    original."""
-    orig = clf_rcbf.update_solve
+def _count_solves() -> tuple[Callable[..., Any], Callable[..., Any]]:
+    """Count QP solves (both QPs solve in ``_ClfRowsQP._solve_rows``) and OSQP's among them
+    (``offboard.clf_rcbf.update_solve``); returns the originals."""
+    orig_rows, orig_osqp = clf_rcbf._ClfRowsQP._solve_rows, clf_rcbf.update_solve
 
-    def counted(*a: Any, **k: Any) -> Any:
+    def rows(*a: Any, **k: Any) -> Any:
+        _solver_calls[0] += 1
+        return orig_rows(*a, **k)
+
+    def osqp(*a: Any, **k: Any) -> Any:
         _osqp_calls[0] += 1
-        return orig(*a, **k)
+        return orig_osqp(*a, **k)
 
-    clf_rcbf.update_solve = counted
-    return orig
+    clf_rcbf._ClfRowsQP._solve_rows = rows  # type: ignore[method-assign]
+    clf_rcbf.update_solve = osqp
+    return orig_rows, orig_osqp
 
 
 def stats(x: list[float] | np.ndarray) -> str:
@@ -102,21 +110,25 @@ def per_agent(sc: Scenario, method: str, duration: float) -> None:
                (Sensor, "measure", "sensing"), (DESO, "update", "deso"),
                (DesiredStateObserver, "update", "ref")]
     saved = [(cls, name, _wrap(cls, name, store, key)) for cls, name, key in targets]
-    solve = _count_osqp()
+    rows, osqp_call = _count_solves()
+    _solver_calls[0] = _osqp_calls[0] = 0
     try:
         run_inproc(sc, method, duration=duration)
     finally:
         for cls, name, orig in saved:
             setattr(cls, name, orig)
-        clf_rcbf.update_solve = solve
+        clf_rcbf._ClfRowsQP._solve_rows = rows  # type: ignore[method-assign]
+        clf_rcbf.update_solve = osqp_call
     f = np.asarray(store.get("follower", []))
-    osqp = np.asarray(store.get("follower:osqp", []), dtype=bool)
+    solved = np.asarray(store.get("follower:solver", []), dtype=bool)
     lead = store.get("leader", [])
-    print(f"per-agent control step [{method}], {sc.name}, {duration:.0f} s:")
-    print(f"  follower, OSQP not called  {stats(f[~osqp])}")
+    print(f"per-agent control step [{method}], {sc.name}, {duration:.0f} s "
+          f"(QP solves {_solver_calls[0]}, of which OSQP {_osqp_calls[0]}):")
+    print(f"  follower, no solver call   {stats(f[~solved])}")
     print(f"  follower, all steps        {stats(f)}")
-    print(f"  follower, OSQP called      {stats(f[osqp])}  ({osqp.mean() * 100:.1f} % of steps)"
-          if osqp.size else "  follower, OSQP called      (no samples)")
+    print(f"  follower, solver called    {stats(f[solved])}  "
+          f"({solved.mean() * 100:.1f} % of steps)"
+          if solved.size else "  follower, solver called    (no samples)")
     print(f"  leader                     {stats(lead)}")
     print(f"  sensing                    {stats(store.get('sensing', []))}")
     print(f"  DESO update                {stats(store.get('deso', []))}")
