@@ -12,7 +12,7 @@ Prints, with no assertions (figures for docs/performance.md, "Scaling (issue 11)
 * stepping wall (s), whole-process CPU (s, user + system), peak RSS (MiB);
 * × real time of the stepping (simulated s / stepping wall s);
 * µs per agent-step: stepping wall / (control steps × N);
-* OSQP fallbacks, minimum distance, collisions (the run is a mission, not a micro-kernel);
+* QP steps relaxed or fallen back (metrics "qp_fallbacks"), minimum distance, collisions (the run is a mission, not a micro-kernel);
 * the exponent a of a least-squares fit cost ∝ N^a, for the stepping wall per control
   step and for the setup wall (a = 1: linear in the number of agents).
 """
@@ -102,7 +102,7 @@ def main() -> None:
     print(f"grid, {opts.leaders} leaders, knn graph, --scramble {opts.scramble} --mix "
           f"{opts.mix:g}, {opts.method}, {opts.duration:g} s simulated, {opts.repeats} run(s)")
     print("| N | knn_k | setup s | stepping wall s | CPU s | peak RSS MiB | × real time "
-          "| µs / agent-step | OSQP fallbacks | min dist m | collisions |")
+          "| µs / agent-step | QP relaxed | min dist m | collisions |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for n in sizes:
         rs = runs[n]
