@@ -12,7 +12,8 @@ Prints, with no assertions (figures for docs/performance.md, "Scaling (issue 11)
 * stepping wall (s), whole-process CPU (s, user + system), peak RSS (MiB);
 * × real time of the stepping (simulated s / stepping wall s);
 * µs per agent-step: stepping wall / (control steps × N);
-* QP steps relaxed or fallen back (metrics "qp_fallbacks"), minimum distance, collisions (the run is a mission, not a micro-kernel);
+* QP steps relaxed or fallen back (metrics "qp_fallbacks"), minimum distance, collisions
+  (the run is a mission, not a micro-kernel);
 * the exponent a of a least-squares fit cost ∝ N^a, for the stepping wall per control
   step and for the setup wall (a = 1: linear in the number of agents).
 """
