@@ -170,6 +170,8 @@ def payload_finite(msg: wire.Payload) -> bool:
     A property of the payload alone: a packed process computes it once per payload
     (``offboard.zenoh_link.DecodeCache``), not once per daemon."""
     if isinstance(msg, wire.Estimate):
+        if msg.block is not None:  # decoded: every vector is a view of this block
+            return all_finite((msg.block,))
         return all_finite((msg.z1, msg.z2, msg.z3, msg.xi, msg.zeta))
     if isinstance(msg, wire.Truth):
         return all_finite((msg.p, msg.v, msg.att, msg.thrust, msg.lumped))

@@ -134,6 +134,9 @@ class Estimate:
     # there (e.g. AUTO.LAND by a third party): z1, z2 are then its measured state and it
     # flies no safety filter, so the others avoid it alone (docs/lifecycle.md)
     cooperative: bool = True
+    # the decoded float block z1..zeta are views of (None when built otherwise): one sum
+    # judges all of them finite (offboard.link_guard.payload_finite); not on the wire
+    block: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass
@@ -318,6 +321,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 xi=x[9:21],
                 zeta=x[21:27],
                 cooperative=_opt_bool(d, "coop", True),
+                block=x,
             )
         if kind == "status":
             return Status(

@@ -291,3 +291,29 @@ def test_all_finite_one_reduction_per_array() -> None:
         assert not all_finite((np.ones(3), arr))
     # +inf and -inf in different arrays do not cancel into a finite sum
     assert not all_finite((np.array([np.inf]), np.array([-np.inf])))
+
+
+def test_decoded_estimate_is_judged_by_its_block() -> None:
+    """A decoded estimate's vectors are views of one block, judged by one sum; a non-finite
+    value in any of its 27 floats on the wire makes it non-finite, and an estimate built
+    from separate arrays is judged vector by vector."""
+    from offboard.link_guard import payload_finite
+
+    good = wire.Estimate(id=2, step=7, t=0.14, role="follower", z1=np.ones(3),
+                         z2=np.ones(3), z3=np.ones(3), xi=np.ones(12), zeta=np.ones(6))
+    assert good.block is None and payload_finite(good)
+    got = wire.decode(wire.encode(good))
+    assert isinstance(got, wire.Estimate) and got.block is not None
+    for v in (got.z1, got.z2, got.z3, got.xi, got.zeta):
+        assert np.shares_memory(v, got.block)
+    assert payload_finite(got)
+    for pos in range(27):
+        x = np.ones(27)
+        x[pos] = np.nan if pos % 2 else np.inf
+        bad = wire.Estimate(id=2, step=7, t=0.14, role="follower", z1=x[0:3].copy(),
+                            z2=x[3:6].copy(), z3=x[6:9].copy(), xi=x[9:21].copy(),
+                            zeta=x[21:27].copy())
+        assert not payload_finite(bad), pos
+        dec = wire.decode(wire.encode(bad))
+        assert isinstance(dec, wire.Estimate) and dec.block is not None
+        assert not payload_finite(dec), pos
