@@ -156,3 +156,33 @@ def rows_hold_kernel(
         if not (g[r, 0] * u[0] + g[r, 1] * u[1] + g[r, 2] * u[2] >= rhs[r]):
             return False
     return True
+
+
+@kernel
+def project_kernel(
+    u: np.ndarray, uz_lo: float, uz_hi: float, uh_lo: float, uh_hi: float, cone_c: float,
+    g: float, shrink: float, cos_a: np.ndarray, sin_a: np.ndarray,
+) -> np.ndarray:
+    """:meth:`offboard.dcbf.InputSet.project` of a finite u (3,) (m/s²): u_z clipped to
+    [uz_lo, uz_hi], u_x, u_y to [uh_lo, uh_hi], then u_h scaled inward onto the tilt cone
+    ``cos_aᵀu_h ≤ (g + u_z)·cone_c − shrink``. The same operations in the same order as
+    the numpy method (Python's min/max semantics), so the same bits."""
+    out = u.copy()
+    z = out[2]
+    z = uz_lo if uz_lo > z else z
+    out[2] = uz_hi if uz_hi < z else z
+    for a in range(2):
+        x = out[a]
+        x = uh_lo if uh_lo > x else x
+        out[a] = uh_hi if uh_hi < x else x
+    r = (g + out[2]) * cone_c - shrink
+    worst = cos_a[0] * out[0] + sin_a[0] * out[1]
+    for i in range(1, cos_a.shape[0]):
+        side = cos_a[i] * out[0] + sin_a[i] * out[1]
+        if side > worst:
+            worst = side
+    if worst > r:
+        scale = (r if r > 0.0 else 0.0) / worst
+        out[0] *= scale
+        out[1] *= scale
+    return out

@@ -154,3 +154,26 @@ def test_rows_hold_kernel_is_the_qp_shortcut_test() -> None:
         want = bool(((a_u @ u <= hi) & (a_u @ u >= lo)).all() and (g[:k] @ u >= rhs[:k]).all())
         # BLAS and left-to-right sums may differ in the last bit at an exact tie only
         assert rows_hold_kernel(a_u, lo, hi, g, rhs, k, u) == want
+
+
+def test_input_set_projection_kernel_gives_the_numpy_bits() -> None:
+    """InputSet.project (compiled for finite u) equals its numpy formulation bit for bit
+    on points inside, outside and on the edges of the set, for several cone sides; the
+    result is in the set; a non-finite u takes the numpy path."""
+    from offboard.dcbf import InputSet
+
+    rng = np.random.default_rng(21)
+    for sides in (3, 8, 16):
+        uset = InputSet.from_vehicle(1.5, 9.81, 30.0, 35.0, 8.0, sides)
+        a, lo, hi = uset.rows()
+        pts = list(rng.normal(0.0, 6.0, (300, 3))) + list(rng.normal(0.0, 0.5, (100, 3)))
+        pts += [np.array([uset.uh_max, -uset.uh_max, uset.uz_max]),
+                np.array([0.0, 0.0, uset.uz_min - 5.0]), np.zeros(3)]
+        for u in pts:
+            got = uset.project(u)
+            want = uset._project_numpy(np.array(u, dtype=float))
+            assert np.array_equal(got, want), (sides, u, got, want)
+            assert uset.contains(got, tol=1e-12)
+        nan = uset.project(np.array([np.nan, 0.0, 0.0]))
+        assert np.isnan(nan[0]) and np.array_equal(
+            nan, uset._project_numpy(np.array([np.nan, 0.0, 0.0])), equal_nan=True)
