@@ -168,7 +168,8 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
 
 def test_input_clipped_flag_and_neighbour_acceleration() -> None:
     from offboard.agent_types import NeighbourEstimate
-    from offboard.follower import NeighbourAccel, input_clipped
+    from offboard.follower import input_clipped
+    from offboard.neighbour_accel import NeighbourAccel
 
     inside, outside = np.array([2.0, 1.0, 0.0]), np.array([7.0, 0.0, -3.0])  # 30° cone
     for u, clipped in ((inside, False), (outside, True)):
