@@ -132,3 +132,35 @@ def test_solver_choice_is_validated_on_load(tmp_path: Path) -> None:
     good = tmp_path / "osqp.toml"
     good.write_text(src.replace("[controller]\n", '[controller]\nqp_solver = "osqp"\n', 1))
     assert load_scenario(good).controller.qp_solver is QPSolver.OSQP
+
+
+def test_daqp_on_hostile_data_answers_finite_or_not_at_all() -> None:
+    """Extreme magnitudes (1e-300 … 1e300), zero and duplicate rows, infinite bounds and
+    infeasible problems: the adapter returns a finite x or None (then OSQP runs), never a
+    non-finite x, and the extension does not crash."""
+    from offboard.daqp_call import daqp_solve
+
+    rng = np.random.default_rng(17)
+    h = np.diag([1.0, 1.0, 1.0, 2.0 * RHO, 200.0])
+    answered = refused = 0
+    for trial in range(3000):
+        m = int(rng.integers(1, 40))
+        a = rng.normal(0, 1, (m, 5))
+        if trial % 3 == 0:
+            a *= 10.0 ** rng.uniform(-300, 300, (m, 5)) * rng.choice([-1, 0, 1], (m, 5))
+        if trial % 5 == 0 and m > 2:
+            a[1] = a[0]
+        if trial % 7 == 0:
+            a[0] = 0.0
+        lo = rng.normal(0, 1, m) * 10.0 ** rng.uniform(-5, 300 if trial % 4 == 0 else 3, m)
+        hi = lo + np.abs(rng.normal(0, 1, m)) * 10.0 ** rng.uniform(-5, 3, m)
+        lo[rng.random(m) < 0.3] = -np.inf
+        hi[rng.random(m) < 0.3] = np.inf
+        q = rng.normal(0, 1, 5) * 10.0 ** rng.uniform(-3, 300 if trial % 6 == 0 else 3, 5)
+        x = daqp_solve(h, q, np.ascontiguousarray(a), lo, hi)
+        if x is None:
+            refused += 1
+        else:
+            answered += 1
+            assert x.shape == (5,) and np.isfinite(x).all()
+    assert answered > 100 and refused > 100
