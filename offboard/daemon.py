@@ -52,6 +52,7 @@ from offboard.bearing import Formation, formation_from_scenario
 from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
 from offboard.daemon_config import DaemonConfig
 from offboard.daemon_peers import peer_ids
+from offboard.daemon_stream import SetpointStream
 from offboard.link_guard import PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.mode_requests import ModeRequests, SwarmReady
@@ -87,7 +88,7 @@ __all__ = ["RUNNER_LOST_PERIODS", "TAKEOFF_LATE_S", "TAKEOFF_LEAD_S", "DaemonCon
            "OffboardDaemon"]
 
 
-class OffboardDaemon(DaemonCommands):
+class OffboardDaemon(DaemonCommands, SetpointStream):
     """One agent's offboard process (ground-station commands: offboard.daemon_commands)."""
 
     def __init__(self, cfg: DaemonConfig, session: Any, form: Formation | None = None) -> None:
@@ -172,37 +173,6 @@ class OffboardDaemon(DaemonCommands):
                 self.bus.publish_estimate(est)
         self.last_est_pub = time.monotonic()
         self.republish_after = min(2.0 * self.republish_after, REPUBLISH_MAX_S)
-
-    def _answer_fresh(self, now: float) -> bool:
-        """A setpoint may go out while it answers the vehicle's current step (lockstep:
-        the vehicle's clock waits for it) or for one control period (real time)."""
-        if self.answer is None or (self.truth_lost and not self.answer_from_loss):
-            return False
-        if self.cfg.lockstep:
-            return self.vehicle_step <= self.answer_step
-        return now - self.answer_at <= 1.0 / self.control_hz
-
-    def _send_answer(self) -> None:
-        now = time.monotonic()
-        if self.answer is None or not self._answer_fresh(now):
-            return
-        ms, q, thrust = self.answer
-        self.link.send_attitude_target(ms, q, thrust)
-        if not self.streaming:
-            self.streaming, self.stream_since = True, now
-        self.last_send = now
-
-    def _check_stream(self, now: float) -> None:
-        """Say so when the vehicle's clock has moved on for 0.1 s without a new setpoint
-        (the stale one is no longer sent): the vehicle's failsafe acts."""
-        behind = self.vehicle_step > self.answer_step or (
-            self.truth_lost and not self.answer_from_loss)
-        if self.streaming and behind and now - self.last_send > 0.1:
-            self.streaming = False
-            self.keeper.fault(now)
-            log.warning("agent %d: no valid step since step %d (vehicle at step %d): "
-                        "setpoint stream stopped, the vehicle's failsafe will act",
-                        self.id, self.answer_step, self.vehicle_step)
 
     # -- the control step ---------------------------------------------------------------
     def _neighbours_for(self, k: int, t: float) -> tuple[dict[int, wire.Estimate], bool]:
