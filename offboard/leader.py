@@ -13,6 +13,8 @@ from offboard.governor import governor_for, log_governor
 from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
 from offboard.takeoff import climb_xi, leader_origin
 from swarm_common.enums import Method
+from swarm_common.fastnp import f64
+from swarm_common.jit import kernel
 from swarm_common.scenario import Scenario
 
 
@@ -107,9 +109,30 @@ class LeaderAgent(AgentBase):
         return self._output(sp, u, est, status, self.d_hat.copy())
 
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:
-        """Velocity ESO over the period (sub-stepped Euler, measurement ``v`` held)."""
-        dl = self.dt / self.substeps
-        for s in range(self.substeps):
-            err = v - self.v_hat
-            self.v_hat = self.v_hat + dl * (u_sub[s] + self.d_hat + self.l1 * err)
-            self.d_hat = self.d_hat + dl * self.l2 * err
+        """Velocity ESO over the period (sub-stepped Euler, measurement ``v`` held;
+        compiled: :func:`velocity_eso_kernel`)."""
+        self.v_hat, self.d_hat = velocity_eso_kernel(
+            f64(v), self.v_hat, self.d_hat, f64(u_sub), self.dt / self.substeps, self.l1,
+            self.l2,
+        )
+
+
+@kernel
+def velocity_eso_kernel(
+    v: np.ndarray, v_hat: np.ndarray, d_hat: np.ndarray, u_sub: np.ndarray, dl: float,
+    l1: float, l2: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(v̂, d̂) after ``len(u_sub)`` Euler sub-steps of dl (s) of the leader's velocity ESO
+    ``v̂' = u + d̂ + l1 (v − v̂)``, ``d̂' = l2 (v − v̂)`` with the measured velocity v (m/s)
+    held and u (m/s²) the inner-loop model's realised control per sub-step. Per axis the
+    operations and their order of the numpy formulation (``v̂ + dl·((u + d̂) + l1·e)``,
+    ``d̂ + (dl·l2)·e``), so the same bits."""
+    vh = v_hat.copy()
+    dh = d_hat.copy()
+    k = dl * l2
+    for s in range(u_sub.shape[0]):
+        for a in range(3):
+            err = v[a] - vh[a]
+            vh[a] = vh[a] + dl * (u_sub[s, a] + dh[a] + l1 * err)
+            dh[a] = dh[a] + k * err
+    return vh, dh
