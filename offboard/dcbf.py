@@ -33,7 +33,7 @@ from functools import cached_property
 
 import numpy as np
 
-from offboard.dcbf_kernel import dcbf_rows_kernel, project_kernel
+from offboard.dcbf_kernel import dcbf_rows_kernel, ground_rows_kernel, project_kernel
 from swarm_common.fastnp import einsum, f64, rows3, vec3
 
 
@@ -241,29 +241,16 @@ def ground_rows(
     as the pair barrier) is linear in the state, so its prediction T ahead is linear in
     u_z and the rows are exact (no linearisation): with the z-axis lag coefficients,
     own disturbance ``wz`` (m/s²) held and the error bound ē on the vertical
-    acceleration over [0, T]::
+    acceleration over [0, T] (compiled: :func:`offboard.dcbf_kernel.ground_rows_kernel`)::
 
         ẑ_T = z + v_z T + iia a0 + cp u_z + wz T²/2,  v̂_T = v_z + ia a0 + cv u_z + wz T
         â_T = E a0 + ca u_z + wz
         (C1) v̂_T + τ â_T − ē(T + τ) + γ1 (ĥ_gT − ē(T²/2 + τT)) ≥ 0
         (C2) ĥ_gT − ē(T²/2 + τT) ≥ h_g0 − min(T γ1 h_g0, h_g0/2)    (h_g0 − Tγ1h_g0 if ≤ 0)
     """
-    t, k = lag.T, 2
-    z_free = z + vz * t + lag.iia[k] * a0z + 0.5 * wz * t * t
-    v_free = vz + lag.ia[k] * a0z + wz * t
-    a_free = lag.ea[k] * a0z + wz
-    cz, cv, ca = float(lag.cp[k]), float(lag.cv[k]), float(lag.ca[k])
-    h_free = z_free - floor + tau_s * v_free
-    m_h = accel_err * (0.5 * t * t + tau_s * t)
-    h0 = z - floor + tau_s * vz
-    drop = t * gamma1 * h0
-    drop = min(drop, 0.5 * h0) if h0 > 0.0 else drop
-    # C1: (cv + τ ca + γ1 (cz + τ cv)) u_z ≥ −(v_free + τ a_free − ē(T + τ) + γ1 (h_free − m_h))
-    k1 = cv + tau_s * ca + gamma1 * (cz + tau_s * cv)
-    r1 = -(v_free + tau_s * a_free - accel_err * (t + tau_s) + gamma1 * (h_free - m_h)) / k1
-    # C2: (cz + τ cv) u_z ≥ h0 − drop − (h_free − m_h)
-    k2 = cz + tau_s * cv
-    r2 = (h0 - drop - (h_free - m_h)) / k2
-    g = np.zeros((2, 3))
-    g[:, 2] = 1.0
-    return g, np.array([r1, r2])
+    k = 2
+    return ground_rows_kernel(
+        float(z), float(vz), float(a0z), float(wz), float(floor), float(lag.T),
+        float(lag.iia[k]), float(lag.ia[k]), float(lag.ea[k]), float(lag.cp[k]),
+        float(lag.cv[k]), float(lag.ca[k]), float(tau_s), float(gamma1), float(accel_err),
+    )

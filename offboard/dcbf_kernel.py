@@ -186,3 +186,35 @@ def project_kernel(
         out[0] *= scale
         out[1] *= scale
     return out
+
+
+@kernel
+def ground_rows_kernel(
+    z: float, vz: float, a0z: float, wz: float, floor: float, t: float, iia: float,
+    ia: float, ea: float, cp: float, cv: float, ca: float, tau_s: float, gamma1: float,
+    accel_err: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two ground-barrier rows of :func:`offboard.dcbf.ground_rows` (g (2,3) = e_z,
+    r (2,) m/s²) from the z-axis lag coefficients over T = ``t`` (s); the arithmetic and
+    its order are those of the numpy formulation (the same bits)."""
+    z_free = z + vz * t + iia * a0z + 0.5 * wz * t * t
+    v_free = vz + ia * a0z + wz * t
+    a_free = ea * a0z + wz
+    h_free = z_free - floor + tau_s * v_free
+    m_h = accel_err * (0.5 * t * t + tau_s * t)
+    h0 = z - floor + tau_s * vz
+    drop = t * gamma1 * h0
+    if h0 > 0.0:
+        half = 0.5 * h0
+        drop = half if half < drop else drop
+    k1 = cv + tau_s * ca + gamma1 * (cp + tau_s * cv)
+    r1 = -(v_free + tau_s * a_free - accel_err * (t + tau_s) + gamma1 * (h_free - m_h)) / k1
+    k2 = cp + tau_s * cv
+    r2 = (h0 - drop - (h_free - m_h)) / k2
+    g = np.zeros((2, 3))
+    g[0, 2] = 1.0
+    g[1, 2] = 1.0
+    r = np.empty(2)
+    r[0] = r1
+    r[1] = r2
+    return g, r

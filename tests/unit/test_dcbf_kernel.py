@@ -177,3 +177,41 @@ def test_input_set_projection_kernel_gives_the_numpy_bits() -> None:
         nan = uset.project(np.array([np.nan, 0.0, 0.0]))
         assert np.isnan(nan[0]) and np.array_equal(
             nan, uset._project_numpy(np.array([np.nan, 0.0, 0.0])), equal_nan=True)
+
+
+def ground_rows_numpy(z: float, vz: float, a0z: float, wz: float, floor: float,
+                      lag: LagCoefficients, tau_s: float, gamma1: float,
+                      accel_err: float) -> tuple[np.ndarray, np.ndarray]:
+    """The numpy formulation ``offboard.dcbf.ground_rows`` had before it was compiled."""
+    t, k = lag.T, 2
+    z_free = z + vz * t + lag.iia[k] * a0z + 0.5 * wz * t * t
+    v_free = vz + lag.ia[k] * a0z + wz * t
+    a_free = lag.ea[k] * a0z + wz
+    cz, cv, ca = float(lag.cp[k]), float(lag.cv[k]), float(lag.ca[k])
+    h_free = z_free - floor + tau_s * v_free
+    m_h = accel_err * (0.5 * t * t + tau_s * t)
+    h0 = z - floor + tau_s * vz
+    drop = t * gamma1 * h0
+    drop = min(drop, 0.5 * h0) if h0 > 0.0 else drop
+    k1 = cv + tau_s * ca + gamma1 * (cz + tau_s * cv)
+    r1 = -(v_free + tau_s * a_free - accel_err * (t + tau_s) + gamma1 * (h_free - m_h)) / k1
+    k2 = cz + tau_s * cv
+    r2 = (h0 - drop - (h_free - m_h)) / k2
+    g = np.zeros((2, 3))
+    g[:, 2] = 1.0
+    return g, np.array([r1, r2])
+
+
+def test_ground_rows_kernel_gives_the_numpy_bits() -> None:
+    from offboard.dcbf import ground_rows
+
+    rng = np.random.default_rng(22)
+    for _ in range(400):
+        lag = LagCoefficients.of(rng.uniform(0.05, 0.4, 3), rng.uniform(0.05, 0.5))
+        args = (float(rng.uniform(-0.5, 4.0)), float(rng.normal(0, 2)), float(rng.normal(0, 3)),
+                float(rng.normal(0, 1)), float(rng.uniform(0.1, 1.0)), lag,
+                float(rng.uniform(0.1, 1.0)), float(rng.uniform(0.5, 5.0)),
+                float(rng.uniform(0.0, 2.0)))
+        g, r = ground_rows(*args)
+        g0, r0 = ground_rows_numpy(*args)
+        assert np.array_equal(g, g0) and np.array_equal(r, r0), args
