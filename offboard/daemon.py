@@ -149,11 +149,6 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
             log.info("agent %d: on its pad until the take-off command", self.id)
 
     # -- helpers ----------------------------------------------------------------------
-    @property
-    def truth_lost(self) -> bool:
-        """Real time: the runner or router is lost (offboard.runner_loss)."""
-        return self.loss.lost
-
     def _zeta(self) -> np.ndarray | None:
         return self.agent.deso.zeta if isinstance(self.agent, FollowerAgent) else None
 

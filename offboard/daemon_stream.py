@@ -15,6 +15,7 @@ import numpy as np
 from offboard.daemon_config import DaemonConfig
 from offboard.mavlink_link import VehicleLink
 from offboard.offboard_keeper import OffboardKeeper
+from offboard.runner_loss import RunnerLoss
 
 log = logging.getLogger("offboard.daemon")
 
@@ -36,9 +37,12 @@ class SetpointStream:
     stream_since: float
     streaming: bool
 
+    loss: RunnerLoss
+
     @property
     def truth_lost(self) -> bool:
-        raise NotImplementedError
+        """Real time: the runner or router is lost (offboard.runner_loss)."""
+        return self.loss.lost
 
     def _answer_fresh(self, now: float) -> bool:
         """A setpoint may go out while it answers the vehicle's current step (lockstep:

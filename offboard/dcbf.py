@@ -90,31 +90,13 @@ class InputSet:
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """A point of the (shrunk) set near ``u``: u_z clipped, then u_h scaled inward
-        (compiled for finite u: :func:`offboard.dcbf_kernel.project_kernel`)."""
-        out = np.array(u, dtype=float)
-        if math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2]):
-            s, k = self.shrink, self.sides
-            cos_a, sin_a = self._cone_dirs
-            return project_kernel(
-                out, self.uz_min + s, self.uz_max - s, -self.uh_max + s, self.uh_max - s,
-                self.tan_tilt * math.cos(math.pi / k), self.g, s, cos_a, sin_a,
-            )
-        return self._project_numpy(out)
-
-    def _project_numpy(self, out: np.ndarray) -> np.ndarray:
-        """:meth:`project` in numpy: the formulation the kernel follows, and the path of a
-        non-finite u (NaN propagates as numpy propagates it)."""
-        s = self.shrink
-        out[2] = min(max(out[2], self.uz_min + s), self.uz_max - s)
-        out[0:2] = np.clip(out[0:2], -self.uh_max + s, self.uh_max - s)
-        k = self.sides
-        c = self.tan_tilt * math.cos(math.pi / k)
-        r = (self.g + out[2]) * c - s
+        (compiled: :func:`offboard.dcbf_kernel.project_kernel`)."""
+        s, k = self.shrink, self.sides
         cos_a, sin_a = self._cone_dirs
-        worst = float((cos_a * out[0] + sin_a * out[1]).max())
-        if worst > r:
-            out[0:2] *= max(r, 0.0) / worst
-        return out
+        return project_kernel(
+            np.array(u, dtype=float), self.uz_min + s, self.uz_max - s, -self.uh_max + s,
+            self.uh_max - s, self.tan_tilt * math.cos(math.pi / k), self.g, s, cos_a, sin_a,
+        )
 
 
 @dataclass(frozen=True)
