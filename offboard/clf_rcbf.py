@@ -194,7 +194,7 @@ class _ClfRowsQP:
         build the problem with room for ``max_pairs`` rows."""
         self._weights = (float(rho), float(violation_weight), float(eps))
         self.backend = QPSolver(solver)
-        # the objective's Hessian, dense, for DAQP (OSQP gets the same diagonal in _setup)
+        # the objective's Hessian diag(1, 1, 1, 2ρ, 2ρ_σ): dense for DAQP, sparse for OSQP
         self._h = np.diag([1.0, 1.0, 1.0, 2.0 * float(rho), 2.0 * float(violation_weight)])
         self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
         self._setup(int(max_pairs))
@@ -291,7 +291,7 @@ class SafetyQP(_ClfRowsQP):
     def _setup(self, m: int) -> None:
         """(Re)build the OSQP problem with room for ``m`` RCBF rows."""
         self.m = m
-        rho, violation_weight, eps = self._weights
+        eps = self._weights[2]
         nrow = 1 + m + 3 + 1
         self.nrow = nrow
         pat = np.zeros((nrow, 5))
@@ -303,7 +303,7 @@ class SafetyQP(_ClfRowsQP):
         pat[nrow - 1, 4] = 1.0
         self._mask_t = (pat != 0).T
         self._a = pat.copy()
-        pmat = sparse.diags([1.0, 1.0, 1.0, 2.0 * rho, 2.0 * violation_weight]).tocsc()
+        pmat = sparse.csc_matrix(self._h)  # the one Hessian (_ClfRowsQP._start)
         amat = sparse.csc_matrix(pat)
         self.l = np.full(nrow, -np.inf)
         self.u = np.full(nrow, np.inf)

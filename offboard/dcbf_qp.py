@@ -45,7 +45,7 @@ class DcbfQP(_ClfRowsQP):
     def _setup(self, m: int) -> None:
         """(Re)build the OSQP problem with room for ``m`` barrier rows."""
         self.m = m
-        rho, violation_weight, eps = self._weights
+        eps = self._weights[2]
         uset = self.uset
         a_u, lo_u, hi_u = uset.rows()
         self.a_u, self.lo_u, self.hi_u = a_u, lo_u, hi_u
@@ -67,7 +67,7 @@ class DcbfQP(_ClfRowsQP):
         self.l[nrow - 1] = 0.0
         self.q = np.zeros(5)
         self.q[4] = self.lin_sigma
-        pmat = sparse.diags([1.0, 1.0, 1.0, 2.0 * rho, 2.0 * violation_weight]).tocsc()
+        pmat = sparse.csc_matrix(self._h)  # the one Hessian (_ClfRowsQP._start)
         amat = sparse.csc_matrix(pat)
         amat.data[:] = self._a.T[self._mask_t]
         self.solver = osqp.OSQP()
