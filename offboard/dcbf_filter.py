@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.clf_rcbf import barrier
-from offboard.dcbf import InputSet, LagCoefficients, dcbf_rows, ground_rows
-from offboard.dcbf_kernel import other_term_kernel
+from offboard.dcbf import InputSet, LagCoefficients
 from offboard.dcbf_qp import DcbfQP
+from offboard.dcbf_step_kernel import dcbf_filter_rows_kernel, dcbf_params
 from offboard.safety_filter import (
     W_SAFE,
     SafetyFilter,
@@ -23,7 +22,7 @@ from offboard.safety_filter import (
     saturate_norm,
 )
 from swarm_common.enums import Method
-from swarm_common.fastnp import rows3
+from swarm_common.fastnp import f64, rows3, vec3
 from swarm_common.scenario import ControllerConfig, VehicleConfig
 
 # rows the QP is first built with (it grows on demand, offboard.clf_rcbf._ClfRowsQP._fit):
@@ -64,12 +63,13 @@ class DcbfFilter(SafetyFilter):
         self.dt = 0.0
         n = len(leader_mask)
         # per scenario index j: Δv sensed the step before (valid where _prev_ok) and the
-        # low-passed relative acceleration (valid where _rel_ok); arrays, not dicts, so
-        # _other_term is a handful of vector operations (same values element by element)
+        # low-passed relative acceleration (valid where _rel_ok), read and updated by the
+        # compiled rows (offboard.dcbf_kernel.other_term_kernel)
         self._prev_dv = np.zeros((n, 3))
         self._prev_ok = np.zeros(n, dtype=bool)
         self._rel_acc = np.zeros((n, 3))
         self._rel_ok = np.zeros(n, dtype=bool)
+        self._params = np.zeros(0)  # the compiled rows' parameters, set by configure
 
     def configure(self, veh: VehicleConfig, dt: float) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
@@ -81,52 +81,44 @@ class DcbfFilter(SafetyFilter):
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
         self.dt = dt
-
-    def _other_term(self, x: SafetyInput, w_safe: np.ndarray) -> np.ndarray:
-        """(M,3) ``a_j − w_i`` for :func:`~offboard.dcbf.dcbf_rows` (own lumped disturbance
-        is not lagged, so it enters as an offset of the other's acceleration).
-
-        Where the pair was sensed the step before: from the sensed relative velocity,
-        ``Δa = (Δv_k − Δv_{k−1})/dt = a_i − a_j`` over the last period with
-        ``a_i = ā_i + w_i`` (ā_i the inner-loop model's mean realised control), so
-        ``a_j − w_i = ā_i − Δa`` (low-passed, no disturbance estimate needed). Otherwise the
-        other's broadcast-velocity estimate minus the saturated own estimate ``w_safe``
-        (``saturate_norm(x.w, W_SAFE)``, computed once per step by :meth:`apply`).
-        Compiled: :func:`offboard.dcbf_kernel.other_term_kernel`.
-        """
-        n = len(x.pairs)
-        other = np.zeros((n, 3)) if x.other_acc is None else x.other_acc
-        predicted = np.zeros(n, dtype=bool) if x.predicted is None else x.predicted
-        return other_term_kernel(
-            np.asarray(x.pairs, dtype=np.int64), np.asarray(predicted, dtype=np.bool_),
-            rows3(x.dv), rows3(other), w_safe, np.asarray(x.a_mean, dtype=float),
-            self.dt, REL_ACC_SMOOTH, self._prev_dv, self._prev_ok, self._rel_acc,
-            self._rel_ok,
+        ctl = self.ctl
+        self._params = dcbf_params(
+            ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
+            ctl.dcbf_accel_error_mps2, ctl.deadlock_gain, ctl.deadlock_h_m2, dt,
+            REL_ACC_SMOOTH, GROUND_GAMMA, GROUND_ACCEL_ERR, self.lag.T,
         )
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
+        """The barrier rows of this step (one compiled call,
+        :func:`offboard.dcbf_step_kernel.dcbf_filter_rows_kernel`) in the QP.
+
+        The other agent's acceleration enters the rows as ``a_j − w_i`` (the own lumped
+        disturbance is not lagged, so it is an offset of the other's acceleration). Where
+        the pair was sensed the step before it comes from the sensed relative velocity:
+        ``Δa = (Δv_k − Δv_{k−1})/dt = a_i − a_j`` over the last period with
+        ``a_i = ā_i + w_i`` (ā_i the inner-loop model's mean realised control), so
+        ``a_j − w_i = ā_i − Δa``, low-passed, with no disturbance estimate needed.
+        Otherwise it is the other's broadcast-velocity estimate minus the own estimate
+        saturated at W_SAFE."""
         if self.qp is None or self.lag is None:
             raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
-        ctl = self.ctl
-        h = barrier(x.dp, x.dv, ctl.tau_safe_s, ctl.d_safe_m)
-        h_min = float(h.min()) if len(h) else float("inf")
-        side = self._sidestep(x, h)
+        n = len(x.pairs)
         lm = self.leader_mask[x.pairs] if x.full_share is None else x.full_share
-        share = np.where(lm, 1.0, 0.5)
-        d_safe = ctl.d_safe_m if x.margin is None else ctl.d_safe_m + x.margin
+        # saturated: a start-up transient of the observer cannot cancel a row
         w_safe = saturate_norm(x.w, W_SAFE)
-        g, rhs = dcbf_rows(
-            x.dp, x.dv, x.a_real, x.u_prev, self._other_term(x, w_safe), share, self.lag,
-            ctl.tau_safe_s, d_safe, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
-            ctl.dcbf_accel_error_mps2,
+        ground = x.floor_m is not None and x.z1 is not None  # airborne: the ground barrier
+        g, rhs, h_min, side = dcbf_filter_rows_kernel(
+            rows3(x.dp), rows3(x.dv), np.asarray(x.pairs, dtype=np.int64),
+            np.asarray(lm, dtype=np.bool_),
+            np.zeros(n, dtype=np.bool_) if x.predicted is None else x.predicted,
+            np.zeros(n) if x.margin is None else f64(x.margin),
+            np.zeros((n, 3)) if x.other_acc is None else rows3(x.other_acc),
+            vec3(x.a_real), vec3(x.u_prev), vec3(x.a_mean), vec3(w_safe), ground,
+            float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
+            float(x.floor_m) if ground and x.floor_m is not None else 0.0,
+            self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
+            self._rel_acc, self._rel_ok,
         )
-        if x.floor_m is not None and x.z1 is not None:  # airborne: the ground barrier
-            wz = float(w_safe[2])
-            gg, rg = ground_rows(
-                float(x.z1[2]), float(x.z2[2]), float(x.a_real[2]), wz, x.floor_m, self.lag,
-                ctl.tau_safe_s, GROUND_GAMMA, GROUND_ACCEL_ERR,
-            )
-            g, rhs = np.concatenate([g, gg]), np.concatenate([rhs, rg])
         brake = -x.w - self.brake_gain * x.z2
         res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min, brake)
         return SafetyOutput(
