@@ -124,6 +124,10 @@ class FollowerAgent(AgentBase):
             (j, j in nb, bool(self.leader_mask[j]))
             for j in sorted(nb | set(self.form.leader_idx))
         ]
+        self._peer_ids = [self.ids[j] for j, _, _ in self._peers]
+        # scenario indices of the agents heard from, sorted (_predicted_pairs), kept for
+        # the number of agents heard (NeighbourPredictor.last only grows)
+        self._heard: tuple[int, list[int]] = (0, [])
         self.fallbacks = 0
         self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
@@ -210,8 +214,8 @@ class FollowerAgent(AgentBase):
     def _predict_peers(self, t: float) -> _Peers:
         """Neighbours' (and, for the anchor and the RCBF, leaders') data predicted to t."""
         out = _Peers()
-        for j, is_nbr, is_lead in self._peers:
-            got = self.pred.get(self.ids[j], t)
+        got_all = self.pred.predict_many(self._peer_ids, t)
+        for (j, is_nbr, is_lead), got in zip(self._peers, got_all, strict=True):
             if got is None:
                 continue
             if is_nbr:
@@ -250,11 +254,11 @@ class FollowerAgent(AgentBase):
         (dropout, occlusion): (idx, Δp, Δv, margin). The margin (m) is the prediction's
         error bound on the position plus τ times that on the velocity (docs/safety.md §5c),
         so the barrier is kept against every position the other can be at."""
-        sensed = set(int(j) for j in sel)
+        sensed = set(sel.tolist())
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
         # only agents heard from can be predicted (the others' get() is None): O(peers)
-        for j in sorted(self._index_of[a] for a in self.pred.last if a in self._index_of):
+        for j in self._heard_indices():
             if j == self.index or j in sensed:
                 continue
             aid = self.ids[j]
@@ -272,6 +276,14 @@ class FollowerAgent(AgentBase):
         return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                 np.array([r[2] for r in rows]), np.array([r[3] for r in rows]))
 
+    def _heard_indices(self) -> list[int]:
+        """Sorted scenario indices of the agents this follower has heard from."""
+        last = self.pred.last
+        if self._heard[0] != len(last):
+            index_of = self._index_of
+            self._heard = (len(last), sorted(index_of[a] for a in last if a in index_of))
+        return self._heard[1]
+
     def _ground_floor(self) -> float | None:
         """The dcbf ground barrier's floor (m) once this follower has been above it, None
         before (ground start) and while landing (docs/safety.md §7)."""
@@ -287,12 +299,9 @@ class FollowerAgent(AgentBase):
         leader, its last estimate says it no longer cooperates (docs/safety.md, A5), or it
         is sensed but has never been heard from (a real-time start: its daemon may not be
         flying it yet, so nothing says it will do its share)."""
-        out = self.leader_mask[sel].copy()
-        for r, j in enumerate(sel):
-            e = self.pred.last.get(self.ids[int(j)])
-            if e is None or not e.cooperative:
-                out[r] = True
-        return out
+        last, ids = self.pred.last, self.ids
+        silent = [(e := last.get(ids[j])) is None or not e.cooperative for j in sel.tolist()]
+        return self.leader_mask[sel] | np.array(silent, dtype=bool)
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10)."""

@@ -149,6 +149,21 @@ class NeighbourPredictor:
             return 0.0
         return 2.0 * b / max(t - e.t, 1e-9)
 
+    def predict_many(self, agent_ids: list[int], t: float) -> list[Prediction | None]:
+        """:meth:`get` of each of ``agent_ids`` at ``t``. Data that is current at ``t``
+        (age ≤ 0: the common case in lockstep) is returned as received without a call
+        of :meth:`get`, which would return it unchanged as well."""
+        last, out = self.last, []
+        for aid in agent_ids:
+            e = last.get(aid)
+            if e is None:
+                out.append(None)
+            elif t - e.t <= 0.0:
+                out.append((e.z1, e.z2, e.xi))
+            else:
+                out.append(self.get(aid, t))
+        return out
+
     def get(self, agent_id: int, t: float) -> Prediction | None:
         """(p, v, ξ) of ``agent_id`` predicted to ``t``; None if never received or, for a
         follower, if older than ``max_age`` or its :meth:`bound` exceeds ``drop_bound``
