@@ -153,7 +153,8 @@ class NeighbourPredictor:
         """:meth:`get` of each of ``agent_ids`` at ``t``. Data that is current at ``t``
         (age ≤ 0: the common case in lockstep) is returned as received without a call
         of :meth:`get`, which would return it unchanged as well."""
-        last, out = self.last, []
+        last = self.last
+        out: list[Prediction | None] = []
         for aid in agent_ids:
             e = last.get(aid)
             if e is None:
