@@ -17,6 +17,8 @@ from offboard.takeoff import TakeoffPlan, is_ground_start, takeoff_plan
 from swarm_common.enums import Method
 from swarm_common.scenario import Scenario
 
+CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as input_clipped
+
 
 def control_box(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """Box on u that the tilt/thrust limits can realise (paper §4.4 ‖u‖∞ ≤ u_max, tightened).

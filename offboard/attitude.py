@@ -21,6 +21,7 @@ import numpy as np
 
 from offboard.attitude_kernel import (
     accel_from_attitude_kernel,
+    command_kernel,
     inner_loop_kernel,
     quat_ned_kernel,
     setpoint_kernel,
@@ -109,6 +110,28 @@ class InnerLoopModel:
         self.a_f = math.exp(-dt_sub / veh.tau_thrust_s)
         self.att = [0.0, 0.0, 0.0]
         self.f = self.m * self.g
+
+    def command(
+        self, u: np.ndarray, yaw: float, n_sub: int, clip_tol: float
+    ) -> tuple[Setpoint, np.ndarray, bool, np.ndarray]:
+        """One control period of the virtual control ``u`` (3,) m/s² (ENU) at heading
+        ``yaw`` (rad): its setpoint (:func:`setpoint_from_accel`), the ``n_sub`` realised
+        rows of :meth:`run` under it, whether the setpoint realises an acceleration
+        farther than ``clip_tol`` (m/s²) from u on some axis (tilt or thrust clipped), and
+        the rows' mean (m/s²). One compiled call
+        (:func:`offboard.attitude_kernel.command_kernel`), the same bits as those calls."""
+        ua = np.ascontiguousarray(u, dtype=float)
+        if ua.shape != (3,):
+            raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
+        r, p, y = self.att
+        roll, pitch, yaw_c, f, q, tn, rows, state, clipped, mean = command_kernel(
+            ua, float(yaw), self.g, self.m, self.tilt, self.f_max,
+            np.array([r, p, y, self.f], dtype=float), self.a_rp, self.a_y, self.a_f,
+            int(n_sub), float(clip_tol),
+        )
+        self.att = [float(state[0]), float(state[1]), float(state[2])]
+        self.f = float(state[3])
+        return Setpoint(roll, pitch, yaw_c, f, q, np.float32(tn)), rows, bool(clipped), mean
 
     def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
         """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u (m/s²) at each

@@ -5,7 +5,9 @@
   behind :func:`swarm_common.frames.accel_to_attitude`), the NED/FRD wire quaternion
   rounded to float32 (:func:`quat_ned_kernel`) and the normalised thrust;
 * :func:`accel_from_attitude_kernel`: ``R e3 F/m − g e_z`` (ENU);
-* :func:`inner_loop_kernel`: the sub-steps of the first-order attitude/thrust lags.
+* :func:`inner_loop_kernel`: the sub-steps of the first-order attitude/thrust lags;
+* :func:`command_kernel`: the three above for one control period of a command, with the
+  clipping check and the period's mean realised control (one call per agent step).
 
 The operations and their order are those of the Python formulation they replaced (the
 same products and sums of floats), so results agree with it to rounding
@@ -117,3 +119,49 @@ def inner_loop_kernel(
         rows[s, 1] = (sy * sp * cr - cy * sr) * k
         rows[s, 2] = cp * cr * k - g
     return rows, r, p, y, f
+
+
+@kernel
+def command_kernel(
+    u: np.ndarray, yaw: float, gravity: float, mass: float, tilt_max_rad: float,
+    thrust_max_n: float, att: np.ndarray, a_rp: float, a_y: float, a_f: float, n_sub: int,
+    clip_tol: float,
+) -> tuple[float, float, float, float, np.ndarray, float, np.ndarray, np.ndarray, bool,
+           np.ndarray]:
+    """One control period of a command u (3,) m/s² (ENU) in one call:
+    (roll, pitch, yaw (rad), F (N), q_ned (4,) float32, F/F_max) of :func:`setpoint_kernel`;
+    rows (n_sub,3) m/s² of :func:`inner_loop_kernel` from the inner loop's state ``att``
+    (4,) [roll, pitch, yaw (rad), F (N)] towards that setpoint clipped to the tilt and
+    thrust limits; the new state (4,); whether the setpoint realises an acceleration
+    farther than ``clip_tol`` (m/s²) from u on some axis (False if that is nan, as numpy's
+    max gives it); and the rows' mean (m/s², summed row after row, as numpy's reduce over
+    the first axis does). The same kernels and operations as the separate calls, so the
+    same bits."""
+    roll, pitch, yaw_c, f, q, tn = setpoint_kernel(
+        u, yaw, gravity, mass, tilt_max_rad, thrust_max_n
+    )
+    real = accel_from_attitude_kernel(roll, pitch, yaw_c, f, mass, gravity)
+    worst, nan = 0.0, False
+    for k in range(3):
+        dk = abs(real[k] - u[k])
+        if math.isnan(dk):
+            nan = True
+        elif dk > worst:
+            worst = dk
+    clipped = not nan and worst > clip_tol
+    rc = py_min(tilt_max_rad, py_max(-tilt_max_rad, roll))
+    pc = py_min(tilt_max_rad, py_max(-tilt_max_rad, pitch))
+    fc = py_min(thrust_max_n, py_max(0.0, f))
+    rows, r, p, y, f_new = inner_loop_kernel(
+        att[0], att[1], att[2], att[3], rc, pc, yaw_c, fc, a_rp, a_y, a_f, mass, gravity,
+        n_sub,
+    )
+    state = np.empty(4)
+    state[0], state[1], state[2], state[3] = r, p, y, f_new
+    mean = rows[0].copy()
+    for s in range(1, n_sub):
+        for k in range(3):
+            mean[k] = mean[k] + rows[s, k]
+    for k in range(3):
+        mean[k] = mean[k] / n_sub
+    return roll, pitch, yaw_c, f, q, tn, rows, state, clipped, mean

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from offboard.agent_base import AgentBase
+from offboard.agent_base import CLIP_TOL, AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.attitude import Setpoint, accel_from_attitude, setpoint_from_accel
+from offboard.attitude import Setpoint
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.clf_rcbf import ClfTerms, clf_terms
 from offboard.dcbf_filter import DcbfFilter
@@ -40,7 +40,6 @@ from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
-CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as input_clipped
 MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s at 50 Hz)
 
 
@@ -178,14 +177,13 @@ class FollowerAgent(AgentBase):
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
-        sp: Setpoint = setpoint_from_accel(u, self.yaw, self.veh)
-        status.input_clipped = input_clipped(sp, u, self.veh.mass_kg, self.veh.gravity_mps2)
+        # setpoint, the inner-loop model's realised control over the period (sub-steps)
+        # and their mean, whether the setpoint clips u: one compiled call
+        sp, u_sub, status.input_clipped, a_mean = self.inner.command(
+            u, self.yaw, self.substeps, CLIP_TOL
+        )
         # --- observers to t_{k+1} ---------------------------------------------------
-        u_sub = self.inner.run(sp, self.substeps)
         self.last_sp = sp
-        # mean over the sub-steps as ndarray.mean computes it (sum, then divide by the
-        # count), without its Python wrapper
-        a_mean = np.add.reduce(u_sub, axis=0) / len(u_sub)
         self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), a_mean
         self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
         self.ref.update(peers.xi)
@@ -351,8 +349,3 @@ class FollowerAgent(AgentBase):
             self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False
         )
 
-
-def input_clipped(sp: Setpoint, u: np.ndarray, mass: float, g: float) -> bool:
-    """True if the setpoint realises an acceleration farther than CLIP_TOL from ``u``."""
-    real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, mass, g)
-    return bool(np.abs(real - u).max() > CLIP_TOL)

@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.agent_base import AgentBase
+from offboard.agent_base import CLIP_TOL, AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.attitude import accel_from_attitude, setpoint_from_accel
 from offboard.bearing import Formation
 from offboard.governor import governor_for, log_governor
 from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
@@ -94,18 +93,14 @@ class LeaderAgent(AgentBase):
         if self.landing is not None:
             u = self.landed_idle(t, float(p[2]), u)
         u = self.on_pad_floor(t, float(p[2]), u)
-        sp = setpoint_from_accel(u, self.yaw, self.veh)
-        u_sub = self.inner.run(sp, self.substeps)
+        sp, u_sub, clipped, u_mean = self.inner.command(u, self.yaw, self.substeps, CLIP_TOL)
         self._update_eso(v, u_sub)
-        a = np.add.reduce(u_sub, axis=0) / len(u_sub) + self.d_hat  # = u_sub.mean(axis=0)
+        a = u_mean + self.d_hat  # the period's mean realised control and disturbance
         est = NeighbourEstimate(
             self.id, t + self.dt, p + v * self.dt + 0.5 * a * self.dt**2, v + a * self.dt,
             self.d_hat.copy(), self.current_reference(t + self.dt), True,
         )
-        status = AgentStatus(method=self.method, comm_ok=comm_ok)
-        real = accel_from_attitude(sp.roll, sp.pitch, sp.yaw, sp.thrust_n, self.veh.mass_kg,
-                                   self.veh.gravity_mps2)
-        status.input_clipped = bool(np.abs(real - u).max() > 1e-3)
+        status = AgentStatus(method=self.method, comm_ok=comm_ok, input_clipped=clipped)
         return self._output(sp, u, est, status, self.d_hat.copy())
 
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:

@@ -224,3 +224,35 @@ def test_frames_euler_of_the_wire_quaternions() -> None:
         q = setpoint_from_accel(_u(rng), float(rng.uniform(-3.0, 3.0)), VEH).q_ned
         got, ref = euler_enu_from_quat_ned(q), euler_enu_from_quat_ned_py(q)
         assert np.allclose(got, ref, **TOL), trial
+
+
+def test_one_period_command_is_the_separate_calls_bitwise() -> None:
+    """InnerLoopModel.command (one compiled call) against the calls it replaced: the
+    setpoint, the clipping check against the realised acceleration (numpy's max, nan
+    included), the inner loop's sub-steps and the rows' mean (numpy's reduce), with the
+    model's state carried over from period to period in both."""
+    from offboard.agent_base import CLIP_TOL
+
+    rng = np.random.default_rng(21)
+    for n_sub in (1, 4, 7):
+        fused, separate = InnerLoopModel(VEH, 0.005), InnerLoopModel(VEH, 0.005)
+        for trial in range(400):
+            u = rng.normal(0.0, 6.0, 3)
+            if trial % 50 == 7:
+                u[trial % 3] = np.nan
+            yaw = float(rng.uniform(-3.0, 3.0))
+            sp, rows, clipped, mean = fused.command(u, yaw, n_sub, CLIP_TOL)
+            sp_ref = setpoint_from_accel(u, yaw, VEH)
+            real = accel_from_attitude(sp_ref.roll, sp_ref.pitch, sp_ref.yaw, sp_ref.thrust_n,
+                                       VEH.mass_kg, VEH.gravity_mps2)
+            rows_ref = separate.run(sp_ref, n_sub)
+            assert (sp.roll, sp.pitch, sp.yaw, sp.thrust_n) == (
+                sp_ref.roll, sp_ref.pitch, sp_ref.yaw, sp_ref.thrust_n
+            ) or not np.isfinite(u).all()
+            assert np.array_equal(sp.q_ned, sp_ref.q_ned, equal_nan=True)
+            assert sp.thrust_norm == sp_ref.thrust_norm or not np.isfinite(u).all()
+            assert clipped is bool(np.abs(real - u).max() > CLIP_TOL)
+            assert np.array_equal(rows, rows_ref, equal_nan=True)
+            assert np.array_equal(mean, np.add.reduce(rows_ref, axis=0) / n_sub,
+                                  equal_nan=True)
+            assert fused.att == separate.att or not np.isfinite(u).all()

@@ -167,14 +167,14 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
 
 
 def test_input_clipped_flag_and_neighbour_acceleration() -> None:
+    from offboard.agent_base import CLIP_TOL
     from offboard.agent_types import NeighbourEstimate
-    from offboard.follower import input_clipped
+    from offboard.attitude import InnerLoopModel
     from offboard.neighbour_accel import NeighbourAccel
 
     inside, outside = np.array([2.0, 1.0, 0.0]), np.array([7.0, 0.0, -3.0])  # 30° cone
     for u, clipped in ((inside, False), (outside, True)):
-        sp = setpoint_from_accel(u, 0.0, VEH)
-        assert input_clipped(sp, u, VEH.mass_kg, VEH.gravity_mps2) is clipped
+        assert InnerLoopModel(VEH, 0.005).command(u, 0.0, 4, CLIP_TOL)[2] is clipped
     acc = NeighbourAccel([1, 2], a_max=5.0)
     z = np.zeros(3)
     for t, vx in ((0.0, 0.0), (0.02, 0.04), (0.04, 1.0)):
