@@ -30,14 +30,16 @@ class Measurements:
     g_dot: np.ndarray  # (N,3) bearing rates
     d: np.ndarray  # (N,) distances
     d_dot: np.ndarray  # (N,) range rates
+    rel_p: np.ndarray  # (N,3) p_j − p_i = g_ij d_ij (m), from the measured ones
+    rel_v: np.ndarray  # (N,3) v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij (m/s), likewise
 
     def rel_pos(self) -> np.ndarray:
         """(N,3) measured p_j − p_i = g_ij d_ij."""
-        return self.g * self.d[:, None]
+        return self.rel_p
 
     def rel_vel(self) -> np.ndarray:
         """(N,3) measured v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij."""
-        return self.g_dot * self.d[:, None] + self.g * self.d_dot[:, None]
+        return self.rel_v
 
 
 class Sensor:
@@ -78,11 +80,11 @@ class Sensor:
         noise = self.rng.standard_normal((self.n, 8))
         drop = self.rng.random(self.n)
         sb, sr, sd, sdd = self._sig
-        valid, gm, gdm, dm, ddm = measure_kernel(
+        valid, gm, gdm, dm, ddm, rel_p, rel_v = measure_kernel(
             np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(v, dtype=float),
             self.index, noise, drop, sb, sr, sd, sdd, self.range, self.dropout,
         )
-        return Measurements(valid=valid, g=gm, g_dot=gdm, d=dm, d_dot=ddm)
+        return Measurements(valid, gm, gdm, dm, ddm, rel_p, rel_v)
 
 
 class DropoutHold:

@@ -32,8 +32,11 @@ def dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> fl
 def measure_kernel(
     p: np.ndarray, v: np.ndarray, i: int, noise: np.ndarray, drop: np.ndarray,
     sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(valid (N,) bool, g (N,3), ġ (N,3), d (N,), ḋ (N,)) measured by agent ``i``.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+           np.ndarray]:
+    """(valid (N,) bool, g (N,3), ġ (N,3), d (N,), ḋ (N,), p_j − p_i (N,3), v_j − v_i
+    (N,3)) measured by agent ``i``; the last two from the measured ones,
+    ``g̃ d̃`` (m) and ``ġ̃ d̃ + g̃ ḋ̃`` (m/s).
 
     p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (N,8) standard
     normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate); drop (N,)
@@ -51,6 +54,8 @@ def measure_kernel(
     gdm = np.empty((n, 3))
     dm = np.empty(n)
     ddm = np.empty(n)
+    rel_p = np.empty((n, 3))
+    rel_v = np.empty((n, 3))
     g = np.empty(3)
     w = np.empty(3)
     for j in range(n):
@@ -74,7 +79,10 @@ def measure_kernel(
         dm[j] = d + noise[j, 6] * sd
         ddm[j] = gd + noise[j, 7] * sdd
         valid[j] = (d <= range_m) and (drop[j] >= dropout) and j != i
-    return valid, gm, gdm, dm, ddm
+        for k in range(3):
+            rel_p[j, k] = gm[j, k] * dm[j]
+            rel_v[j, k] = gdm[j, k] * dm[j] + gm[j, k] * ddm[j]
+    return valid, gm, gdm, dm, ddm, rel_p, rel_v
 
 
 @kernel

@@ -115,6 +115,10 @@ def test_compiled_measure_equals_numpy(dropout: float) -> None:
             if EXACT:
                 assert np.array_equal(a, b, equal_nan=True), trial
             assert np.allclose(a, b, rtol=1e-12, atol=1e-12, equal_nan=True), trial
+        # the relative state from the measurements, as Measurements computed it in numpy
+        assert np.array_equal(got.rel_pos(), got.g * got.d[:, None], equal_nan=True)
+        assert np.array_equal(got.rel_vel(), got.g_dot * got.d[:, None]
+                              + got.g * got.d_dot[:, None], equal_nan=True), trial
         # the generator moved by exactly the same draws
         after = np.random.default_rng([seed, aid, 0x5E])
         after.standard_normal((n, 8))
@@ -134,6 +138,9 @@ def test_compiled_measure_is_bitwise_on_a_swarm() -> None:
     ref = measure_numpy(p, v, 4, np.random.default_rng([17, 5, 0x5E]), sig, 6.0, 0.1)
     for a, b in zip((got.valid, got.g, got.g_dot, got.d, got.d_dot), ref, strict=True):
         assert np.array_equal(a, b)
+    # the relative state from the measurements, as Measurements computed it in numpy
+    assert np.array_equal(got.rel_pos(), got.g * got.d[:, None])
+    assert np.array_equal(got.rel_vel(), got.g_dot * got.d[:, None] + got.g * got.d_dot[:, None])
 
 
 def test_compiled_hold_equals_numpy() -> None:
