@@ -28,6 +28,9 @@ from offboard.reference import exo_propagator, xi_a, xi_j, xi_p, xi_v
 
 A_MAX_DEFAULT = 16.0  # m/s², follower acceleration bound: √3·u_max (8 m/s²) + 2 m/s² disturbance
 DROP_BOUND_M = 1.0  # m, a follower's prediction is dropped once its error bound exceeds this
+# s, data at most this much older than the requested time is current (age 0): a stamp
+# t_k + dt computed by the sender and the receiver's (k + 1)·dt differ by rounding only
+CURRENT_AGE_S = 1e-9
 
 _EXO_CACHE: dict[tuple[float, float, int], np.ndarray] = {}
 _ERR_CACHE: dict[tuple[float, float, float, int], np.ndarray] = {}
@@ -126,13 +129,13 @@ class NeighbourPredictor:
     def bound(self, agent_id: int, t: float) -> float | None:
         """Bound (m) on the error of ``agent_id``'s predicted position at ``t``, None if
         nothing was received. Leaders: 0 (exosystem and their own PD; docs/estimation.md).
-        Followers: ½ a_dev age² (0 while the data is current); its velocity error is at
-        most a_dev·age."""
+        Followers: ½ a_dev age² (0 while the data is current, age ≤ CURRENT_AGE_S); its
+        velocity error is at most a_dev·age."""
         e = self.last.get(agent_id)
         if e is None:
             return None
         age = max(0.0, t - e.t)
-        if e.is_leader or age <= 0.0:
+        if e.is_leader or age <= CURRENT_AGE_S:
             return 0.0
         a = self._a_dev.get(agent_id)
         if a is None:
@@ -151,15 +154,15 @@ class NeighbourPredictor:
 
     def predict_many(self, agent_ids: list[int], t: float) -> list[Prediction | None]:
         """:meth:`get` of each of ``agent_ids`` at ``t``. Data that is current at ``t``
-        (age ≤ 0: the common case in lockstep) is returned as received without a call
-        of :meth:`get`, which would return it unchanged as well."""
+        (age ≤ CURRENT_AGE_S: the common case in lockstep) is returned as received without
+        a call of :meth:`get`, which would return it unchanged as well."""
         last = self.last
         out: list[Prediction | None] = []
         for aid in agent_ids:
             e = last.get(aid)
             if e is None:
                 out.append(None)
-            elif t - e.t <= 0.0:
+            elif t - e.t <= CURRENT_AGE_S:
                 out.append((e.z1, e.z2, e.xi))
             else:
                 out.append(self.get(aid, t))
@@ -175,7 +178,7 @@ class NeighbourPredictor:
         if e is None:
             return None
         age = t - e.t
-        if not e.is_leader and age > 0.0:  # current data (age ≤ 0) has bound 0: kept
+        if not e.is_leader and age > CURRENT_AGE_S:  # current data has bound 0: kept
             if age > self.max_age + 1e-9:
                 return None
             b = self.bound(agent_id, t)

@@ -136,3 +136,24 @@ def test_follower_bound_holds_on_simulated_data() -> None:
                 got, b = pred.get(5, t), pred.bound(5, t)
                 assert got is not None and b is not None
                 assert np.linalg.norm(got[0] - p) <= b + 1e-6
+
+
+def test_a_stamp_off_by_rounding_is_current_data() -> None:
+    """A follower's estimate stamped t_k + dt by its sender, read at (k + 1)·dt by the
+    receiver (6·0.02 + 0.02 < 7·0.02 by one rounding): current data, bound 0, returned as
+    received, and its a_dev is never computed; a millisecond later it is aged."""
+    t_sent, t_read = 6 * DT + DT, 7 * DT
+    assert 0.0 < t_read - t_sent < 1e-15
+    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=1.0)
+    xi = _xi0()
+    e = _est(2, t_sent, xi_p(xi) + 0.3, xi_v(xi) - 0.2, xi, False)
+    pred.ingest({2: e}, comm_ok=True)
+    got = pred.get(2, t_read)
+    assert got is not None and got[0] is e.z1 and got[1] is e.z2 and got[2] is e.xi
+    assert pred.bound(2, t_read) == 0.0 and pred.velocity_bound(2, t_read) == 0.0
+    many = pred.predict_many([2], t_read)[0]
+    assert many is not None and all(a is b for a, b in zip(many, got, strict=True))
+    assert not pred._a_dev  # nothing computed for current data
+    later = t_read + 1e-3
+    age = later - t_sent
+    assert pred.bound(2, later) == 0.5 * pred.a_dev(e) * age * age > 0.0
