@@ -55,11 +55,12 @@ import osqp
 from scipy import sparse
 
 from offboard.clf_kernel import clf_kernel
-from offboard.daqp_call import daqp_solve
+from offboard.daqp_call import DAQP_INF, daqp_solve
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
+from offboard.qp_rows_kernel import write_rows_kernel
 from swarm_common.enums import QPSolver, QPStatus
-from swarm_common.fastnp import einsum, rows3, vec3
+from swarm_common.fastnp import einsum, f64, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
@@ -197,6 +198,8 @@ class _ClfRowsQP:
         # the objective's Hessian diag(1, 1, 1, 2ρ, 2ρ_σ): dense for DAQP, sparse for OSQP
         self._h = np.diag([1.0, 1.0, 1.0, 2.0 * float(rho), 2.0 * float(violation_weight)])
         self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
+        # the bounds as DAQP reads them (clamped to ±DAQP_INF), written with the rows
+        self._lo_daqp = self._hi_daqp = np.empty(0)
         self._setup(int(max_pairs))
 
     def _setup(self, m: int) -> None:
@@ -224,20 +227,15 @@ class _ClfRowsQP:
         # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
         # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the safety rows)
         nrm = math.sqrt(float(clf.lgv @ clf.lgv))
-        if nrm > 1e-9:
-            a[0, 0:3] = clf.lgv / nrm
-            self.u[0] = clf_rhs / nrm
-        else:
-            a[0, 0:3] = 0.0
-            self.u[0] = np.inf
-        a[0, 3] = -1.0
-        a[1 : 1 + k, 0:3] = g[:k]
-        a[1 + k : 1 + m, 0:3] = 0.0
-        self.l[1 : 1 + k] = rhs[:k]
-        self.l[1 + k : 1 + m] = -np.inf
-        self.q[0:3] = -u_nom
+        if len(self._lo_daqp) != len(self.l):  # (re)sized with the problem (_setup)
+            self._lo_daqp, self._hi_daqp = np.empty(len(self.l)), np.empty(len(self.u))
+        write_rows_kernel(
+            a, self.l, self.u, self.q, vec3(clf.lgv), nrm, float(clf_rhs), rows3(g),
+            f64(rhs), k, m, vec3(u_nom), self._lo_daqp, self._hi_daqp, DAQP_INF,
+        )
         if self.backend is QPSolver.DAQP:
-            x_exact = daqp_solve(self._h, self.q, a, self.l, self.u)
+            x_exact = daqp_solve(self._h, self.q, a, self._lo_daqp, self._hi_daqp,
+                                 clamped=True)
             if x_exact is not None:
                 return int(osqp.SolverStatus.OSQP_SOLVED), x_exact
         status, x = update_solve(self.solver, self.q, self.l, self.u, a.T[self._mask_t])

@@ -18,14 +18,17 @@ DAQP_OPTIMAL = 1  # DAQP's exit flag of an optimal solution
 
 
 def daqp_solve(
-    h: np.ndarray, q: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray
+    h: np.ndarray, q: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+    clamped: bool = False,
 ) -> np.ndarray | None:
     """x minimising ``½xᵀHx + qᵀx`` subject to ``lo ≤ A x ≤ hi`` (H (n,n) positive
     definite, A (m,n) C-contiguous float64, infinite bounds allowed), or None when DAQP does
-    not report an optimum (then the caller's other solver runs)."""
-    x, _fval, flag, _info = daqp.solve(
-        h, q, a, np.minimum(hi, DAQP_INF), np.maximum(lo, -DAQP_INF)
-    )
+    not report an optimum (then the caller's other solver runs). ``clamped``: the bounds
+    are already within ±DAQP_INF (the QPs write them so:
+    :func:`offboard.qp_rows_kernel.write_rows_kernel`)."""
+    if not clamped:
+        lo, hi = np.maximum(lo, -DAQP_INF), np.minimum(hi, DAQP_INF)
+    x, _fval, flag, _info = daqp.solve(h, q, a, hi, lo)
     if flag != DAQP_OPTIMAL:
         return None
     out = np.asarray(x, dtype=float)

@@ -24,7 +24,9 @@ from scipy import sparse
 from offboard.clf_rcbf import ClfTerms, QPResult, _ClfRowsQP
 from offboard.dcbf import InputSet
 from offboard.dcbf_kernel import rows_hold_kernel
+from offboard.qp_rows_kernel import rows_finite_kernel
 from swarm_common.enums import QPSolver, QPStatus
+from swarm_common.fastnp import f64, rows3, vec3
 
 
 class DcbfQP(_ClfRowsQP):
@@ -89,10 +91,8 @@ class DcbfQP(_ClfRowsQP):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
                             False)
-        finite = bool(np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all()
-                      and np.isfinite(g[:k]).all() and np.isfinite(clf.lgv).all()
-                      and math.isfinite(clf.lfv) and math.isfinite(clf.V))
-        if not finite:
+        if not rows_finite_kernel(vec3(u_nom), rows3(g), f64(rhs), k, vec3(clf.lgv),
+                                  float(clf.lfv), float(clf.V)):
             u = self.uset.project(np.nan_to_num(brake, posinf=0.0, neginf=0.0))
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)

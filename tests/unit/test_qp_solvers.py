@@ -109,7 +109,7 @@ def test_no_daqp_optimum_falls_back_to_osqp(monkeypatch: pytest.MonkeyPatch) -> 
     assert want.status in (QPStatus.SOLVED, QPStatus.RELAXED)
     calls: list[int] = []
 
-    def no_optimum(*args: object) -> None:
+    def no_optimum(*args: object, **kwargs: object) -> None:
         calls.append(1)
         return None
 
