@@ -16,73 +16,74 @@ class NeighbourAccel:
     broadcast velocities z2 (leaders: their predicted true velocity), norm-bounded by
     ``a_max``; held while no new data arrives (docs/safety.md §3).
 
-    :meth:`ingest` keeps the last two estimates per agent in arrays by scenario index (two
-    slots each, the older overwritten); the difference is formed for the rows :meth:`rows`
-    asks for (compiled: :func:`neighbour_accel_rows`)."""
+    :meth:`ingest` keeps the last two estimates per agent by scenario index (the records
+    themselves: received estimates are never modified); the differences are formed for
+    the rows :meth:`rows` asks for (compiled: :func:`neighbour_accel_rows`)."""
 
     def __init__(self, ids: list[int] | tuple[int, ...], a_max: float) -> None:
         self.ids = list(ids)
         self.a_max = float(a_max)
         self._index_of = {aid: j for j, aid in enumerate(self.ids)}
         n = len(self.ids)
-        # estimates taken per index (0, 1, or 2 meaning "two or more")
-        self._count = np.zeros(n, dtype=np.int64)
-        # two slots per index; _last[j] is the slot of the last estimate, the other slot
-        # holds the previous one (a new estimate overwrites the previous: no shifting)
-        self._last = np.zeros(n, dtype=np.int64)
-        self._t_last = [0.0] * n  # the last estimate's time (s), for the ordering test
-        self._t = np.zeros((n, 2))  # times (s) per slot
-        self._z2 = np.zeros((n, 2, 3))  # velocities (m/s) per slot
+        self._last: list[NeighbourEstimate | None] = [None] * n
+        self._prev: list[NeighbourEstimate | None] = [None] * n
 
     def ingest(self, neighbours: dict[int, NeighbourEstimate]) -> None:
         """Update from the estimates received this step (by agent id; ids outside the
         scenario are ignored; one not newer than the last is ignored)."""
-        index_of, count, last, t_last = self._index_of, self._count, self._last, self._t_last
+        index_of, last, prev = self._index_of, self._last, self._prev
         for aid, e in neighbours.items():
             j = index_of.get(aid)
             if j is None:
                 continue
-            c = count[j]
-            slot = 0
-            if c:
-                if not e.t > t_last[j] + 1e-9:
+            old = last[j]
+            if old is not None:
+                if not e.t > old.t + 1e-9:
                     continue
-                slot = 1 - last[j]
-                count[j] = 2
-            else:
-                count[j] = 1
-            t_last[j] = e.t
-            self._t[j, slot] = e.t
-            self._z2[j, slot] = e.z2
-            last[j] = slot
+                prev[j] = old
+            last[j] = e
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(M,3) estimates for scenario indices ``idx`` (zero where fewer than two)."""
-        idx = np.asarray(idx, dtype=np.int64)
-        return neighbour_accel_rows(idx, self._count[idx] == 2, self._last, self._t,
-                                    self._z2, self.a_max)
+        last, prev = self._last, self._prev
+        rows: list[int] = []
+        t: list[float] = []
+        t_prev: list[float] = []
+        z2: list[np.ndarray] = []
+        z2_prev: list[np.ndarray] = []
+        for r, j in enumerate(idx.tolist()):
+            p, e = prev[j], last[j]
+            if p is not None and e is not None:
+                rows.append(r)
+                t.append(e.t)
+                t_prev.append(p.t)
+                z2.append(e.z2)
+                z2_prev.append(p.z2)
+        if not rows:
+            return np.zeros((len(idx), 3))
+        k = len(rows)
+        return neighbour_accel_rows(
+            len(idx), np.array(rows, dtype=np.int64),
+            np.array(t + t_prev, dtype=float).reshape(2, k),
+            np.concatenate(z2 + z2_prev).reshape(2, k, 3), self.a_max,
+        )
 
 
 @kernel
 def neighbour_accel_rows(
-    idx: np.ndarray, have: np.ndarray, last: np.ndarray, t: np.ndarray, z2: np.ndarray,
-    a_max: float,
+    m: int, rows: np.ndarray, t: np.ndarray, z2: np.ndarray, a_max: float
 ) -> np.ndarray:
-    """(M,3) ``sat_{a_max}((z2_last − z2_prev) / (t_last − t_prev))`` (m/s²) for the
-    scenario indices ``idx`` where ``have``, zero elsewhere (:class:`NeighbourAccel`):
-    slot ``last[j]`` of ``t`` (N,2) and ``z2`` (N,2,3) holds the last estimate, the other
-    slot the previous one; sat scales a vector down to norm ``a_max`` (m/s²) if longer."""
-    out = np.zeros((idx.shape[0], 3))
-    for r in range(idx.shape[0]):
-        if not have[r]:
-            continue
-        j = idx[r]
-        a = last[j]
-        b = 1 - a
-        dt = t[j, a] - t[j, b]
-        a0 = (z2[j, a, 0] - z2[j, b, 0]) / dt
-        a1 = (z2[j, a, 1] - z2[j, b, 1]) / dt
-        a2 = (z2[j, a, 2] - z2[j, b, 2]) / dt
+    """(m,3): at each of the K ``rows`` ``sat_{a_max}((z2_last − z2_prev) /
+    (t_last − t_prev))`` (m/s²) from t (2,K) [last; previous] times (s) and z2 (2,K,3)
+    velocities (m/s), zero elsewhere (:class:`NeighbourAccel`); sat scales a vector down to
+    norm ``a_max`` (m/s²) if longer."""
+    out = np.zeros((m, 3))
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        dt = t[0, i] - t[1, i]
+        a0 = (z2[0, i, 0] - z2[1, i, 0]) / dt
+        a1 = (z2[0, i, 1] - z2[1, i, 1]) / dt
+        a2 = (z2[0, i, 2] - z2[1, i, 2]) / dt
         n = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
         s = a_max / n if n > a_max else 1.0
         out[r, 0], out[r, 1], out[r, 2] = a0 * s, a1 * s, a2 * s
