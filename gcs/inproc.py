@@ -7,7 +7,8 @@ Same order as the distributed run (docs/architecture.md, lockstep), step k:
    where neighbours are the float32-rounded estimates published at step k−1 (valid for
    t_k); during an outage window (``communication.outages_s``) comm_ok is False;
 3. each setpoint goes through the wire form (float32 quaternion + thrust_norm) and is
-   decoded exactly as the simulator does (:func:`wire_to_command`) → ``set_command``;
+   decoded exactly as the simulator does (:func:`wire_to_command`, for all agents at once
+   :func:`wire_to_commands`) → ``set_command`` (``set_commands``);
 4. the dynamics advance one control period (physics_hz/control_hz physics steps).
 
 Everything that would cross a wire is rounded to float32 with :func:`f32` /
@@ -31,7 +32,7 @@ from gcs.run_output import (
     empty_series,
     run_document,
     safety_spec,
-    set_agent_row,
+    set_agent_rows,
     set_truth_row,
     write_run,
 )
@@ -41,7 +42,7 @@ from offboard.daemon_peers import peer_ids
 from offboard.landing import landing_plan
 from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common.blas import single_thread_blas
-from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
+from swarm_common.frames import euler_enu_from_quat_ned, euler_enu_from_quats_ned, norm_to_thrust
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
 
@@ -67,6 +68,25 @@ def wire_to_command(
     """
     roll, pitch, yaw = euler_enu_from_quat_ned(np.asarray(q_ned, dtype=np.float32))
     return roll, pitch, yaw, norm_to_thrust(float(np.float32(thrust_norm)), thrust_max_n)
+
+
+def wire_to_commands(
+    q_ned: np.ndarray, thrust_norm: np.ndarray, thrust_max_n: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`wire_to_command` of every agent at once: (N,4) float32 quaternions and (N,)
+    float32 normalised thrusts → (N,) roll, pitch, yaw (rad), F (N), the same bits row by
+    row (one compiled call for the angles)."""
+    att = euler_enu_from_quats_ned(np.asarray(q_ned, dtype=np.float32))
+    f = np.asarray(thrust_norm, dtype=np.float32).astype(np.float64) * thrust_max_n
+    return att[:, 0], att[:, 1], att[:, 2], f
+
+
+def round_estimates(ests: list[NeighbourEstimate]) -> list[NeighbourEstimate]:
+    """:func:`round_estimate` of each of ``ests``, rounded in one array."""
+    x = f32(np.concatenate([v for e in ests for v in (e.z1, e.z2, e.z3, e.xi)]))
+    x = x.reshape(len(ests), -1)
+    return [NeighbourEstimate(e.id, e.t, r[0:3], r[3:6], r[6:9], r[9:], e.is_leader)
+            for e, r in zip(ests, x, strict=True)]
 
 
 def round_estimate(e: NeighbourEstimate) -> NeighbourEstimate:
@@ -165,19 +185,20 @@ def run_inproc(
             tp, tv = f32(dyn.p), f32(dyn.v)
             comm = not in_outage(t, sc.outages)
             set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)
-            new_pub: dict[int, NeighbourEstimate] = {}
+            outs = []
             for i, ag in enumerate(agents):
                 e = published[ag.id]
                 ser.z1[k, i], ser.z2[k, i] = e.z1, e.z2
                 nb = {j: published[j] for j in peers[ag.id]} if comm else {}
-                out = ag.step(k, t, tp, tv, nb, comm)
-                roll, pitch, yaw, fn = wire_to_command(out.q_ned, out.thrust_norm, f_max)
-                dyn.set_command(i, roll, pitch, yaw, fn)
-                new_pub[ag.id] = round_estimate(out.estimate)
-                st = out.status
-                set_agent_row(ser, k, i, out.u, out.lumped, st.h_min, st.solve_us, st.qp_status,
-                              getattr(st, "input_clipped", False))
-            published = new_pub
+                outs.append(ag.step(k, t, tp, tv, nb, comm))
+            # the commands, estimates and records of all agents at once (each agent's
+            # step reads the estimates of the step before and never the dynamics)
+            dyn.set_commands(*wire_to_commands(
+                np.array([o.q_ned for o in outs]),
+                np.array([o.thrust_norm for o in outs], dtype=np.float32), f_max,
+            ))
+            published = {e.id: e for e in round_estimates([o.estimate for o in outs])}
+            set_agent_rows(ser, k, outs)
             md = math.inf
             for _ in range(nsub):
                 dyn.step()

@@ -14,13 +14,14 @@ from __future__ import annotations
 import json
 import logging
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gcs.metrics import SafetySpec, Series
+from offboard.agent_types import AgentOutput
 from offboard.bearing import Formation
 from swarm_common.enums import QPStatus
 from swarm_common.scenario import Scenario
@@ -100,6 +101,17 @@ def set_agent_row(
     ser.solve_us[r, i] = solve_us
     ser.fallback[r, i] = QPStatus(qp_status).degraded
     ser.input_clipped[r, i] = bool(input_clipped)
+
+
+def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
+    """Row ``r`` of every agent's status (:func:`set_agent_row`), ``outs`` in scenario
+    order."""
+    ser.u[r] = [o.u for o in outs]
+    ser.lumped_est[r] = [o.lumped for o in outs]
+    ser.h_min[r] = [o.status.h_min for o in outs]
+    ser.solve_us[r] = [o.status.solve_us for o in outs]
+    ser.fallback[r] = [QPStatus(o.status.qp_status).degraded for o in outs]
+    ser.input_clipped[r] = [bool(o.status.input_clipped) for o in outs]
 
 
 def run_document(

@@ -21,6 +21,7 @@ import numpy as np
 from swarm_common.frames_kernel import (
     accel_to_attitude_kernel,
     euler_enu_from_quat_ned_kernel,
+    euler_enu_from_quats_ned_kernel,
     rotm_from_quat_kernel,
 )
 
@@ -106,6 +107,15 @@ def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
     if qa.shape != (4,):
         raise ValueError(f"quaternion of shape {qa.shape}, not (4,)")
     return euler_enu_from_quat_ned_kernel(qa, T_ENU_NED, D_FRD_FLU)
+
+
+def euler_enu_from_quats_ned(q: np.ndarray) -> np.ndarray:
+    """(N,3) [roll, pitch, yaw] of :func:`euler_enu_from_quat_ned` for each row of the
+    (N,4) quaternions ``q`` (one compiled call; the same bits row by row)."""
+    qa = np.ascontiguousarray(q, dtype=float)
+    if qa.ndim != 2 or qa.shape[1] != 4:
+        raise ValueError(f"quaternions of shape {qa.shape}, not (N, 4)")
+    return euler_enu_from_quats_ned_kernel(qa, T_ENU_NED, D_FRD_FLU)
 
 
 def valid_quaternion(q: np.ndarray, tol: float = 0.05) -> bool:

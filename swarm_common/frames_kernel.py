@@ -80,6 +80,20 @@ def euler_enu_from_quat_ned_kernel(
 
 
 @kernel
+def euler_enu_from_quats_ned_kernel(
+    q: np.ndarray, t_enu_ned: np.ndarray, d_frd_flu: np.ndarray
+) -> np.ndarray:
+    """(N,3) [roll, pitch, yaw] (rad) of :func:`euler_enu_from_quat_ned_kernel` for each
+    row of q (N,4) [w, x, y, z]."""
+    out = np.empty((q.shape[0], 3))
+    for i in range(q.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = euler_enu_from_quat_ned_kernel(
+            q[i], t_enu_ned, d_frd_flu
+        )
+    return out
+
+
+@kernel
 def accel_to_attitude_kernel(
     u: np.ndarray, yaw: float, gravity: float, mass: float, tilt_max_rad: float,
     thrust_max_n: float, min_vertical_frac: float,

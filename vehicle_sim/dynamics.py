@@ -33,6 +33,7 @@ from vehicle_sim.dynamics_kernel import (
     lumped_accel_kernel,
     min_upper_kernel,
     pair_distances_kernel,
+    set_commands_kernel,
     step_kernel,
     thrust_accel_kernel,
 )
@@ -102,6 +103,14 @@ class SwarmDynamics:
         ca[idx, 1] = min(lim, max(-lim, pitch))
         ca[idx, 2] = yaw
         self.cmd_thrust[idx] = min(self.f_max, max(0.0, thrust_n))
+
+    def set_commands(
+        self, roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray, thrust_n: np.ndarray
+    ) -> None:
+        """:meth:`set_command` of every vehicle at once, (N,) arrays in scenario order (one
+        compiled call: :func:`vehicle_sim.dynamics_kernel.set_commands_kernel`)."""
+        set_commands_kernel(self.cmd_att, self.cmd_thrust, f64(roll), f64(pitch), f64(yaw),
+                            f64(thrust_n), float(self.tilt_max), float(self.f_max))
 
     def release(self, idx: int | None = None) -> None:
         """Let vehicle ``idx`` (or all) leave the spawn fixture with its spawn velocity."""

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from swarm_common.frames_kernel import py_max, py_min
 from swarm_common.jit import kernel
 from swarm_common.unmodeled_kernel import unmodeled_accel_kernel
 
@@ -191,3 +192,23 @@ def step_kernel(
                 new_pairs[r, 1] = j
                 r += 1
     return p_n, v_n, att_n, thr_n, dist, contact, new_pairs, min_upper_kernel(dist)
+
+
+@kernel
+def set_commands_kernel(
+    cmd_att: np.ndarray, cmd_thrust: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
+    yaw: np.ndarray, thrust: np.ndarray, tilt_max: float, f_max: float,
+) -> None:
+    """:meth:`vehicle_sim.dynamics.SwarmDynamics.set_command` for every vehicle i at once:
+    rows with a non-finite value are ignored (the previous command kept); roll and pitch
+    clamped to ±tilt_max (rad), thrust to [0, f_max] (N), with Python's min/max semantics.
+    cmd_att (N,3) and cmd_thrust (N,) are written in place."""
+    for i in range(roll.shape[0]):
+        r, p, y, f = roll[i], pitch[i], yaw[i], thrust[i]
+        if not (math.isfinite(r) and math.isfinite(p) and math.isfinite(y)
+                and math.isfinite(f)):
+            continue
+        cmd_att[i, 0] = py_min(tilt_max, py_max(-tilt_max, r))
+        cmd_att[i, 1] = py_min(tilt_max, py_max(-tilt_max, p))
+        cmd_att[i, 2] = y
+        cmd_thrust[i] = py_min(f_max, py_max(0.0, f))
