@@ -60,7 +60,6 @@ class DcbfFilter(SafetyFilter):
         self.qp: DcbfQP | None = None
         self.lag: LagCoefficients | None = None
         self.brake_gain = 2.0
-        self.dt = 0.0
         n = len(leader_mask)
         # per scenario index j: Δv sensed the step before (valid where _prev_ok) and the
         # low-passed relative acceleration (valid where _rel_ok), read and updated by the
@@ -80,7 +79,6 @@ class DcbfFilter(SafetyFilter):
                          limit=rows, solver=self.ctl.qp_solver)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
-        self.dt = dt
         ctl = self.ctl
         self._params = dcbf_params(
             ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
@@ -110,7 +108,8 @@ class DcbfFilter(SafetyFilter):
         g, rhs, h_min, side = dcbf_filter_rows_kernel(
             rows3(x.dp), rows3(x.dv), np.asarray(x.pairs, dtype=np.int64),
             np.asarray(lm, dtype=np.bool_),
-            np.zeros(n, dtype=np.bool_) if x.predicted is None else x.predicted,
+            np.zeros(n, dtype=np.bool_) if x.predicted is None
+            else np.asarray(x.predicted, dtype=np.bool_),
             np.zeros(n) if x.margin is None else f64(x.margin),
             np.zeros((n, 3)) if x.other_acc is None else rows3(x.other_acc),
             vec3(x.a_real), vec3(x.u_prev), vec3(x.a_mean), vec3(w_safe), ground,
