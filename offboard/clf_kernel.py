@@ -72,3 +72,22 @@ def clf_kernel(
         fb = -k_v * (e2[k] - v_r[k])
         out[5 + k] = f_c[k] + min(max(fb, -b_lo[k]), b_hi[k])
     return out
+
+
+@kernel
+def nominal_kernel(
+    z1: np.ndarray, z2: np.ndarray, xi: np.ndarray, tau_ff: float, w: np.ndarray, kp: float,
+    kd: float, lam: float, ks: float, use_box: bool, lo: np.ndarray, hi: np.ndarray,
+    brake_share: float, reserve: float,
+) -> np.ndarray:
+    """:func:`clf_kernel` on the errors of the estimate (z1 (m), z2 (m/s)) from the desired
+    state ξ = [p*, v*, a*, j*] (12,), ``e1 = z1 − p*``, ``e2 = z2 − v*``, with the
+    acceleration feed-forward taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*`` (m/s²)."""
+    e1 = np.empty(3)
+    e2 = np.empty(3)
+    a_ff = np.empty(3)
+    for k in range(3):
+        e1[k] = z1[k] - xi[k]
+        e2[k] = z2[k] - xi[3 + k]
+        a_ff[k] = xi[6 + k] + tau_ff * xi[9 + k]
+    return clf_kernel(e1, e2, w, a_ff, kp, kd, lam, ks, use_box, lo, hi, brake_share, reserve)

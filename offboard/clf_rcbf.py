@@ -54,7 +54,7 @@ import numpy as np
 import osqp
 from scipy import sparse
 
-from offboard.clf_kernel import clf_kernel
+from offboard.clf_kernel import clf_kernel, nominal_kernel
 from offboard.daqp_call import DAQP_INF, daqp_solve
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
@@ -98,6 +98,22 @@ def clf_terms(
     out = clf_kernel(
         vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
         float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
+    )
+    return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
+
+
+def clf_terms_of_reference(
+    z1: np.ndarray, z2: np.ndarray, xi: np.ndarray, tau_ff: float, w: np.ndarray, kp: float,
+    kd: float, lam: float, ks: float, box: tuple[np.ndarray, np.ndarray] | None = None,
+) -> ClfTerms:
+    """:func:`clf_terms` of the estimate (z1 (m), z2 (m/s)) tracking the desired state
+    ξ = [p*, v*, a*, j*] (12,): ``e1 = z1 − p*``, ``e2 = z2 − v*`` and the reference
+    acceleration taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*`` (m/s²). One compiled call
+    (:func:`offboard.clf_kernel.nominal_kernel`), the same bits as forming them in numpy."""
+    lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
+    out = nominal_kernel(
+        vec3(z1), vec3(z2), f64(xi), float(tau_ff), vec3(w), float(kp), float(kd),
+        float(lam), float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
     )
     return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
 

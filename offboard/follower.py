@@ -16,21 +16,14 @@ from offboard.agent_base import CLIP_TOL, AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import Setpoint
 from offboard.bearing import Formation, formation_from_scenario
-from offboard.clf_rcbf import ClfTerms, clf_terms
+from offboard.clf_rcbf import ClfTerms, clf_terms_of_reference
 from offboard.dcbf_filter import DcbfFilter
 from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import IdentityMemo
 from offboard.neighbour_accel import NeighbourAccel
 from offboard.predictor import NeighbourPredictor
-from offboard.reference import (
-    DesiredStateObserver,
-    xi_a,
-    xi_at_rest,
-    xi_j,
-    xi_p,
-    xi_v,
-)
+from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.takeoff import follower_xi
@@ -302,24 +295,21 @@ class FollowerAgent(AgentBase):
         return self.leader_mask[sel] | np.array(silent, dtype=bool)
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
-        """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10)."""
-        ctl, ref = self.ctl, self.ref
+        """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the
+        acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): it compensates the
+        first-order attitude lag of the inner loop on the moving reference."""
+        ctl = self.ctl
         if self.landing is not None:  # offboard.landing: the plan replaces ξ̂
             xi = self.landing.xi(t)
-            p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
         elif self.takeoff is not None and self.takeoff_clock(t) < self.takeoff.t_blend:
             # offboard.takeoff (at rest on the pad while held for the take-off command)
             xi = follower_xi(self.takeoff, self.index, self.takeoff_clock(t), self.ref.xi)
-            p, v, a, j = xi_p(xi), xi_v(xi), xi_a(xi), xi_j(xi)
         else:
-            p, v, a, j = ref.p, ref.v, ref.a, ref.j
-        e1 = self.deso.z1 - p
-        e2 = self.deso.z2 - v
-        # acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): compensates the
-        # first-order attitude lag of the inner loop on the moving reference
-        a_ff = a + self.tau_ff * j
-        return clf_terms(e1, e2, w, a_ff, ctl.kp, ctl.kd, ctl.clf_lambda, ctl.ks,
-                         box=self.aw_box[self.method])
+            xi = self.ref.xi
+        return clf_terms_of_reference(
+            self.deso.z1, self.deso.z2, xi, self.tau_ff, w, ctl.kp, ctl.kd, ctl.clf_lambda,
+            ctl.ks, box=self.aw_box[self.method],
+        )
 
     def _safe_control(self, x: SafetyInput, status: AgentStatus) -> np.ndarray:
         """The current method's filter; a non-finite result brakes on −w (a fallback)."""

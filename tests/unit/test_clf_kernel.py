@@ -82,3 +82,23 @@ def test_vdot_is_lfv_plus_lgv_u_along_the_error_dynamics() -> None:
         fd = (v_p - v_m) / (2 * h)
         c = clf_terms(e1, e2, w, a_ref, kp, kd, lam, ks)
         assert math.isclose(fd, c.lfv + float(c.lgv @ u), rel_tol=1e-6, abs_tol=1e-6)
+
+
+def test_terms_of_a_reference_are_the_terms_of_its_errors_bitwise() -> None:
+    """clf_terms_of_reference (errors and feed-forward formed in the kernel) against
+    clf_terms of the errors and feed-forward formed in numpy, with and without the box."""
+    from offboard.clf_rcbf import clf_terms_of_reference
+
+    rng = np.random.default_rng(12)
+    lo, hi = np.array([-4.0, -4.0, -8.0]), np.array([4.0, 4.0, 6.0])
+    for trial in range(500):
+        z1, z2, w = rng.normal(0, 3, 3), rng.normal(0, 2, 3), rng.normal(0, 1, 3)
+        xi = rng.normal(0, 2, 12)
+        tau = float(rng.uniform(0.0, 0.3))
+        gains = tuple(float(x) for x in rng.uniform(0.5, 5.0, 4))
+        box = (lo, hi) if trial % 2 else None
+        got = clf_terms_of_reference(z1, z2, xi, tau, w, *gains, box=box)
+        want = clf_terms(z1 - xi[0:3], z2 - xi[3:6], w, xi[6:9] + tau * xi[9:12], *gains,
+                         box=box)
+        assert (got.V, got.lfv) == (want.V, want.lfv), trial
+        assert np.array_equal(got.lgv, want.lgv) and np.array_equal(got.u_nom, want.u_nom)
