@@ -42,7 +42,7 @@ from offboard.daemon_peers import peer_ids
 from offboard.landing import landing_plan
 from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common.blas import single_thread_blas
-from swarm_common.frames import euler_enu_from_quat_ned, euler_enu_from_quats_ned, norm_to_thrust
+from swarm_common.frames import euler_enu_from_quats_ned
 from swarm_common.scenario import Scenario
 from vehicle_sim.dynamics import SwarmDynamics
 
@@ -66,23 +66,28 @@ def wire_to_command(
     ``roll, pitch, yaw = euler_enu_from_quat_ned(float32 q)``; ``F = norm_to_thrust(float32
     thrust_norm)``. The simulator's MAVLink side must call this same function.
     """
-    roll, pitch, yaw = euler_enu_from_quat_ned(np.asarray(q_ned, dtype=np.float32))
-    return roll, pitch, yaw, norm_to_thrust(float(np.float32(thrust_norm)), thrust_max_n)
+    roll, pitch, yaw, f = wire_to_commands(
+        np.asarray(q_ned, dtype=np.float32).reshape(1, 4),
+        np.asarray([thrust_norm], dtype=np.float32), thrust_max_n,
+    )
+    return float(roll[0]), float(pitch[0]), float(yaw[0]), float(f[0])
 
 
 def wire_to_commands(
     q_ned: np.ndarray, thrust_norm: np.ndarray, thrust_max_n: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`wire_to_command` of every agent at once: (N,4) float32 quaternions and (N,)
-    float32 normalised thrusts → (N,) roll, pitch, yaw (rad), F (N), the same bits row by
-    row (one compiled call for the angles)."""
+    float32 normalised thrusts → (N,) roll, pitch, yaw (rad), F (N):
+    ``euler_enu_from_quat_ned`` of each float32 quaternion (one compiled call) and each
+    float32 thrust times F_max (``norm_to_thrust``), as the simulator decodes them."""
     att = euler_enu_from_quats_ned(np.asarray(q_ned, dtype=np.float32))
     f = np.asarray(thrust_norm, dtype=np.float32).astype(np.float64) * thrust_max_n
     return att[:, 0], att[:, 1], att[:, 2], f
 
 
 def round_estimates(ests: list[NeighbourEstimate]) -> list[NeighbourEstimate]:
-    """:func:`round_estimate` of each of ``ests``, rounded in one array."""
+    """:func:`round_estimate` of each of ``ests``: the four vectors of all of them rounded
+    in one array (the same float32 value per element)."""
     x = f32(np.concatenate([v for e in ests for v in (e.z1, e.z2, e.z3, e.xi)]))
     x = x.reshape(len(ests), -1)
     return [NeighbourEstimate(e.id, e.t, r[0:3], r[3:6], r[6:9], r[9:], e.is_leader)
@@ -90,10 +95,8 @@ def round_estimates(ests: list[NeighbourEstimate]) -> list[NeighbourEstimate]:
 
 
 def round_estimate(e: NeighbourEstimate) -> NeighbourEstimate:
-    """A published estimate as the receivers see it (float32 vectors; t kept exact).
-    The four vectors are rounded in one array (the same float32 value per element)."""
-    x = f32(np.concatenate((e.z1, e.z2, e.z3, e.xi)))
-    return NeighbourEstimate(e.id, e.t, x[0:3], x[3:6], x[6:9], x[9:], e.is_leader)
+    """A published estimate as the receivers see it (float32 vectors; t kept exact)."""
+    return round_estimates([e])[0]
 
 
 def _in_order(ids: list[int] | tuple[int, ...], subset: list[int]) -> tuple[int, ...]:

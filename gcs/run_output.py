@@ -81,31 +81,10 @@ def set_truth_row(
     ser.tilt_deg[r] = tilt_deg(att)
 
 
-def set_agent_row(
-    ser: Series,
-    r: int,
-    i: int,
-    u: np.ndarray,
-    lumped: np.ndarray,
-    h_min: float,
-    solve_us: float,
-    qp_status: str,
-    input_clipped: bool = False,
-) -> None:
-    """Row ``r`` of agent ``i``'s status: virtual control u (m/s²), estimated lumped
-    disturbance, smallest barrier value, QP time (µs), whether the QP degraded, and whether
-    the setpoint conversion changed u (tilt/thrust clip)."""
-    ser.u[r, i] = u
-    ser.lumped_est[r, i] = lumped
-    ser.h_min[r, i] = h_min
-    ser.solve_us[r, i] = solve_us
-    ser.fallback[r, i] = QPStatus(qp_status).degraded
-    ser.input_clipped[r, i] = bool(input_clipped)
-
-
 def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
-    """Row ``r`` of every agent's status (:func:`set_agent_row`), ``outs`` in scenario
-    order."""
+    """Row ``r`` of every agent's status, ``outs`` in scenario order: virtual control u
+    (m/s²), estimated lumped disturbance, smallest barrier value, QP time (µs), whether the
+    QP degraded, and whether the setpoint conversion changed u (tilt/thrust clip)."""
     ser.u[r] = [o.u for o in outs]
     ser.lumped_est[r] = [o.lumped for o in outs]
     ser.h_min[r] = [o.status.h_min for o in outs]

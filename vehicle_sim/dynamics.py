@@ -33,6 +33,7 @@ from vehicle_sim.dynamics_kernel import (
     lumped_accel_kernel,
     min_upper_kernel,
     pair_distances_kernel,
+    set_command_kernel,
     set_commands_kernel,
     step_kernel,
     thrust_accel_kernel,
@@ -92,17 +93,12 @@ class SwarmDynamics:
         """Commanded attitude (ENU/FLU Euler, rad) and thrust (N) of vehicle ``idx``.
 
         Non-finite values are ignored (the previous command is kept). Tilt is clamped
-        to ``tilt_max`` per axis, thrust to [0, F_max].
+        to ``tilt_max`` per axis, thrust to [0, F_max] (compiled:
+        :func:`vehicle_sim.dynamics_kernel.set_command_kernel`).
         """
-        isfinite = math.isfinite
-        if not (isfinite(roll) and isfinite(pitch) and isfinite(yaw) and isfinite(thrust_n)):
-            return
-        lim = self.tilt_max
-        ca = self.cmd_att  # element by element: no tuple → array conversion (≈ 1 µs)
-        ca[idx, 0] = min(lim, max(-lim, roll))
-        ca[idx, 1] = min(lim, max(-lim, pitch))
-        ca[idx, 2] = yaw
-        self.cmd_thrust[idx] = min(self.f_max, max(0.0, thrust_n))
+        set_command_kernel(self.cmd_att, self.cmd_thrust, int(idx), float(roll),
+                           float(pitch), float(yaw), float(thrust_n), float(self.tilt_max),
+                           float(self.f_max))
 
     def set_commands(
         self, roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray, thrust_n: np.ndarray

@@ -195,20 +195,29 @@ def step_kernel(
 
 
 @kernel
+def set_command_kernel(
+    cmd_att: np.ndarray, cmd_thrust: np.ndarray, i: int, roll: float, pitch: float,
+    yaw: float, thrust: float, tilt_max: float, f_max: float,
+) -> None:
+    """Vehicle i's commanded attitude (rad) and thrust (N) written into cmd_att (N,3) and
+    cmd_thrust (N,): ignored if any value is non-finite (the previous command kept); roll
+    and pitch clamped to ±tilt_max, thrust to [0, f_max], with Python's min/max
+    semantics."""
+    if not (math.isfinite(roll) and math.isfinite(pitch) and math.isfinite(yaw)
+            and math.isfinite(thrust)):
+        return
+    cmd_att[i, 0] = py_min(tilt_max, py_max(-tilt_max, roll))
+    cmd_att[i, 1] = py_min(tilt_max, py_max(-tilt_max, pitch))
+    cmd_att[i, 2] = yaw
+    cmd_thrust[i] = py_min(f_max, py_max(0.0, thrust))
+
+
+@kernel
 def set_commands_kernel(
     cmd_att: np.ndarray, cmd_thrust: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
     yaw: np.ndarray, thrust: np.ndarray, tilt_max: float, f_max: float,
 ) -> None:
-    """:meth:`vehicle_sim.dynamics.SwarmDynamics.set_command` for every vehicle i at once:
-    rows with a non-finite value are ignored (the previous command kept); roll and pitch
-    clamped to ±tilt_max (rad), thrust to [0, f_max] (N), with Python's min/max semantics.
-    cmd_att (N,3) and cmd_thrust (N,) are written in place."""
+    """:func:`set_command_kernel` for every vehicle i at once ((N,) arrays)."""
     for i in range(roll.shape[0]):
-        r, p, y, f = roll[i], pitch[i], yaw[i], thrust[i]
-        if not (math.isfinite(r) and math.isfinite(p) and math.isfinite(y)
-                and math.isfinite(f)):
-            continue
-        cmd_att[i, 0] = py_min(tilt_max, py_max(-tilt_max, r))
-        cmd_att[i, 1] = py_min(tilt_max, py_max(-tilt_max, p))
-        cmd_att[i, 2] = y
-        cmd_thrust[i] = py_min(f_max, py_max(0.0, f))
+        set_command_kernel(cmd_att, cmd_thrust, i, roll[i], pitch[i], yaw[i], thrust[i],
+                           tilt_max, f_max)

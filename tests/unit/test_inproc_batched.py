@@ -8,14 +8,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
 
 from gcs.inproc import round_estimate, round_estimates, wire_to_command, wire_to_commands
-from gcs.run_output import empty_series, set_agent_row, set_agent_rows
+from gcs.run_output import empty_series, set_agent_rows
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import quat_ned_fast
 from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario import load_scenario
 from vehicle_sim.dynamics import SwarmDynamics
+from vehicle_sim.setpoints import parse_attitude
 
 SC = load_scenario("scenarios/cube8.toml")
 
@@ -27,21 +29,40 @@ def _quats(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def test_setpoints_decoded_at_once_are_the_simulators_decoding() -> None:
+    """Each row equals what vehicle-sim makes of the SET_ATTITUDE_TARGET carrying it
+    (packed and parsed by pymavlink, then vehicle_sim.setpoints.parse_attitude), and
+    wire_to_command (one agent) equals its row."""
     rng = np.random.default_rng(1)
     f_max = SC.vehicle.thrust_max_n
-    for _ in range(200):
+    mav = mavlink.MAVLink(None, 1, 191)
+    for _ in range(100):
         n = int(rng.integers(1, 12))
         q = _quats(rng, n)
-        tn = rng.uniform(-0.1, 1.1, n).astype(np.float32)
+        tn = rng.uniform(0.0, 1.0, n).astype(np.float32)
         got = wire_to_commands(q, tn, f_max)
         for i in range(n):
-            want = wire_to_command(q[i], tn[i], f_max)
-            assert tuple(float(a[i]) for a in got) == want
+            msg = mavlink.MAVLink_set_attitude_target_message(
+                0, 1, 1, 0b00000111, [float(c) for c in q[i]], 0.0, 0.0, 0.0, float(tn[i]))
+            parsed = mav.parse_char(msg.pack(mav))
+            att, thrust = parse_attitude(parsed, f_max)
+            assert (*att, thrust) == tuple(float(a[i]) for a in got)
+            assert wire_to_command(q[i], tn[i], f_max) == (*att, thrust)
 
 
-def test_commands_set_at_once_equal_one_by_one() -> None:
+def _set_command_py(att: np.ndarray, thrust: np.ndarray, i: int, cmd: np.ndarray,
+                    lim: float, f_max: float) -> None:
+    """SwarmDynamics.set_command as it was written in Python before it was compiled."""
+    r, p, y, f = (float(c) for c in cmd)
+    if not all(math.isfinite(c) for c in (r, p, y, f)):
+        return
+    att[i] = min(lim, max(-lim, r)), min(lim, max(-lim, p)), y
+    thrust[i] = min(f_max, max(0.0, f))
+
+
+def test_commands_set_one_by_one_and_at_once() -> None:
     rng = np.random.default_rng(2)
     one, many = SwarmDynamics(SC, seed=3), SwarmDynamics(SC, seed=3)
+    att, thrust = one.cmd_att.copy(), one.cmd_thrust.copy()
     for trial in range(300):
         cmd = rng.uniform(-1.5, 1.5, (SC.n, 4))
         cmd[:, 3] = rng.uniform(-10.0, 1.3 * one.f_max, SC.n)
@@ -50,9 +71,11 @@ def test_commands_set_at_once_equal_one_by_one() -> None:
                 math.nan, math.inf, -math.inf][trial % 3]
         for i in range(SC.n):
             one.set_command(i, *(float(c) for c in cmd[i]))
+            _set_command_py(att, thrust, i, cmd[i], one.tilt_max, one.f_max)
         many.set_commands(cmd[:, 0], cmd[:, 1], cmd[:, 2], cmd[:, 3])
-        assert np.array_equal(one.cmd_att, many.cmd_att), trial
-        assert np.array_equal(one.cmd_thrust, many.cmd_thrust), trial
+        for dyn in (one, many):
+            assert np.array_equal(dyn.cmd_att, att), trial
+            assert np.array_equal(dyn.cmd_thrust, thrust), trial
 
 
 def _estimate(rng: np.random.Generator, aid: int) -> NeighbourEstimate:
@@ -62,21 +85,25 @@ def _estimate(rng: np.random.Generator, aid: int) -> NeighbourEstimate:
 
 
 def test_estimates_rounded_at_once_equal_one_by_one() -> None:
+    """Each estimate's vectors take one float32 trip (what a receiver decodes from the
+    wire's float32 block), its time and flags unchanged; round_estimate is one of them."""
     rng = np.random.default_rng(3)
     ests = [_estimate(rng, aid) for aid in range(1, 10)]
     for got, e in zip(round_estimates(ests), ests, strict=True):
-        want = round_estimate(e)
-        assert (got.id, got.t, got.is_leader, got.cooperative) == (
-            want.id, want.t, want.is_leader, want.cooperative)
-        for a, b in ((got.z1, want.z1), (got.z2, want.z2), (got.z3, want.z3),
-                     (got.xi, want.xi)):
-            assert np.array_equal(a, b) and a.flags.c_contiguous
+        one = round_estimate(e)
+        assert (got.id, got.t, got.is_leader, got.cooperative) == (e.id, e.t, e.is_leader, True)
+        for a, b, c in ((got.z1, one.z1, e.z1), (got.z2, one.z2, e.z2),
+                        (got.z3, one.z3, e.z3), (got.xi, one.xi, e.xi)):
+            want = c.astype(np.float32).astype(np.float64)
+            assert np.array_equal(a, want) and np.array_equal(b, want)
+            assert a.flags.c_contiguous
 
 
-def test_status_rows_written_at_once_equal_one_by_one() -> None:
+def test_status_rows_written_at_once() -> None:
+    """Row r of each status field holds every agent's value, in scenario order."""
     rng = np.random.default_rng(4)
     n = 5
-    one, many = empty_series(np.arange(3) * 0.02, n), empty_series(np.arange(3) * 0.02, n)
+    ser = empty_series(np.arange(3) * 0.02, n)
     statuses = list(QPStatus)
     outs = []
     for i in range(n):
@@ -87,10 +114,12 @@ def test_status_rows_written_at_once_equal_one_by_one() -> None:
         outs.append(AgentOutput(0.0, 0.0, 0.0, 0.0, np.zeros(4, np.float32), np.float32(0.5),
                                 rng.normal(size=3), _estimate(rng, i + 1), st,
                                 lumped=rng.normal(size=3)))
+    set_agent_rows(ser, 1, outs)
     for i, o in enumerate(outs):
         st = o.status
-        set_agent_row(one, 1, i, o.u, o.lumped, st.h_min, st.solve_us, st.qp_status,
-                      st.input_clipped)
-    set_agent_rows(many, 1, outs)
-    for name in ("u", "lumped_est", "h_min", "solve_us", "fallback", "input_clipped"):
-        assert np.array_equal(getattr(one, name), getattr(many, name)), name
+        assert np.array_equal(ser.u[1, i], o.u)
+        assert np.array_equal(ser.lumped_est[1, i], o.lumped)
+        assert ser.h_min[1, i] == st.h_min and ser.solve_us[1, i] == st.solve_us
+        assert ser.fallback[1, i] == QPStatus(st.qp_status).degraded
+        assert ser.input_clipped[1, i] == st.input_clipped
+    assert not ser.fallback[0].any() and not ser.fallback[2].any()  # other rows untouched

@@ -16,7 +16,7 @@ from gcs.metrics import (
     pair_barrier,
     window_tracking,
 )
-from gcs.run_output import empty_series, set_agent_row
+from gcs.run_output import empty_series
 from swarm_common.enums import QPStatus
 
 TAU, D = 0.8, 0.5
@@ -128,10 +128,9 @@ def test_compute_metrics_schema_and_clipped_steps() -> None:
     s.p[:], s.v[:], s.p_des[:] = p, v, p
     s.min_dist[:] = np.linalg.norm(p[:, 0] - p[:, 1], axis=1)
     s.thrust[:] = 17.0
-    for r in range(len(t)):
-        for i in range(n):
-            set_agent_row(s, r, i, np.zeros(3), np.zeros(3), 1.0, 10.0, QPStatus.SOLVED,
-                          input_clipped=(r % 10 == 0 and i == 1))
+    s.h_min[:], s.solve_us[:] = 1.0, 10.0
+    s.fallback[:] = QPStatus(QPStatus.SOLVED).degraded
+    s.input_clipped[::10, 1] = True  # rows 0, 10, 20, ... of agent 1
     zeta = np.ones((n, 6))
     spec = SafetySpec(TAU, D, 2.0)
     m = compute_metrics(s, [1], DT, 1.8, 9.81, 0, zeta, zeta, 0, 1.0, 4.0, spec)
