@@ -59,6 +59,15 @@ def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> t
     return roll, pitch, yaw, norm_to_thrust(float(np.float32(thrust_norm)), thrust_max_n)
 
 
+def _virtual_control(u: np.ndarray) -> np.ndarray:
+    """``u`` as the (3,) float64 array the compiled conversions take; ValueError if it has
+    another shape."""
+    ua = np.ascontiguousarray(u, dtype=float)
+    if ua.shape != (3,):
+        raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
+    return ua
+
+
 def setpoint_from_accel(
     u: np.ndarray, yaw: float, veh: VehicleConfig, decode: bool = False
 ) -> Setpoint:
@@ -70,9 +79,7 @@ def setpoint_from_accel(
     :func:`quat_ned_fast`, :func:`swarm_common.frames.thrust_to_norm`) is the compiled
     :func:`offboard.attitude_kernel.setpoint_kernel`.
     """
-    ua = np.ascontiguousarray(u, dtype=float)
-    if ua.shape != (3,):
-        raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
+    ua = _virtual_control(u)
     f_max = veh.thrust_max_n
     roll, pitch, yaw_c, f, q, tn_f = setpoint_kernel(
         ua, float(yaw), float(veh.gravity_mps2), float(veh.mass_kg),
@@ -120,9 +127,7 @@ class InnerLoopModel:
         farther than ``clip_tol`` (m/s²) from u on some axis (tilt or thrust clipped), and
         the rows' mean (m/s²). One compiled call
         (:func:`offboard.attitude_kernel.command_kernel`), the same bits as those calls."""
-        ua = np.ascontiguousarray(u, dtype=float)
-        if ua.shape != (3,):
-            raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
+        ua = _virtual_control(u)
         r, p, y = self.att
         roll, pitch, yaw_c, f, q, tn, rows, state, clipped, mean = command_kernel(
             ua, float(yaw), self.g, self.m, self.tilt, self.f_max,
@@ -135,16 +140,13 @@ class InnerLoopModel:
 
     def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
         """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u (m/s²) at each
-        sub-step end. The command is clipped to the tilt and thrust limits; the sub-steps
-        are the compiled :func:`offboard.attitude_kernel.inner_loop_kernel`."""
-        lim = self.tilt
-        rc = min(lim, max(-lim, sp.roll))
-        pc = min(lim, max(-lim, sp.pitch))
-        fc = min(self.f_max, max(0.0, sp.thrust_n))
+        sub-step end. The command is clipped to the tilt and thrust limits and the
+        sub-steps run in the compiled :func:`offboard.attitude_kernel.inner_loop_kernel`."""
         r, p, y = self.att
         rows, r, p, y, f = inner_loop_kernel(
-            float(r), float(p), float(y), float(self.f), float(rc), float(pc), float(sp.yaw),
-            float(fc), self.a_rp, self.a_y, self.a_f, self.m, self.g, int(n_sub),
+            float(r), float(p), float(y), float(self.f), float(sp.roll), float(sp.pitch),
+            float(sp.yaw), float(sp.thrust_n), self.tilt, self.f_max, self.a_rp, self.a_y,
+            self.a_f, self.m, self.g, int(n_sub),
         )
         self.att = [r, p, y]
         self.f = f

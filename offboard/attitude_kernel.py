@@ -96,16 +96,21 @@ def accel_from_attitude_kernel(
 
 @kernel
 def inner_loop_kernel(
-    r: float, p: float, y: float, f: float, rc: float, pc: float, yc: float, fc: float,
-    a_rp: float, a_y: float, a_f: float, m: float, g: float, n_sub: int,
+    r: float, p: float, y: float, f: float, roll_c: float, pitch_c: float, yc: float,
+    thrust_c: float, tilt_max: float, f_max: float, a_rp: float, a_y: float, a_f: float,
+    m: float, g: float, n_sub: int,
 ) -> tuple[np.ndarray, float, float, float, float]:
     """(rows (n_sub,3) m/s², r, p, y (rad), F (N)) after ``n_sub`` sub-steps (§5.1).
 
-    From the attitude (r, p, y) and thrust f towards the command (rc, pc, yc, fc), each
-    sub-step exactly: ``x ← x_c + (x − x_c) a`` with ``a = exp(−dt_sub/τ)`` (a_rp roll and
-    pitch, a_y yaw, a_f thrust); row s is ``R e3 F/m − g e_z`` (mass m kg, gravity g m/s²)
-    at the end of sub-step s.
+    From the attitude (r, p, y) and thrust f towards the command (roll_c, pitch_c, yc,
+    thrust_c), roll and pitch clipped to ±tilt_max (rad) and thrust to [0, f_max] (N)
+    (Python's min/max semantics), each sub-step exactly: ``x ← x_c + (x − x_c) a`` with
+    ``a = exp(−dt_sub/τ)`` (a_rp roll and pitch, a_y yaw, a_f thrust); row s is
+    ``R e3 F/m − g e_z`` (mass m kg, gravity g m/s²) at the end of sub-step s.
     """
+    rc = py_min(tilt_max, py_max(-tilt_max, roll_c))
+    pc = py_min(tilt_max, py_max(-tilt_max, pitch_c))
+    fc = py_min(f_max, py_max(0.0, thrust_c))
     rows = np.empty((n_sub, 3))
     for s in range(n_sub):
         r = rc + (r - rc) * a_rp
@@ -131,8 +136,8 @@ def command_kernel(
     """One control period of a command u (3,) m/s² (ENU) in one call:
     (roll, pitch, yaw (rad), F (N), q_ned (4,) float32, F/F_max) of :func:`setpoint_kernel`;
     rows (n_sub,3) m/s² of :func:`inner_loop_kernel` from the inner loop's state ``att``
-    (4,) [roll, pitch, yaw (rad), F (N)] towards that setpoint clipped to the tilt and
-    thrust limits; the new state (4,); whether the setpoint realises an acceleration
+    (4,) [roll, pitch, yaw (rad), F (N)] towards that setpoint (clipped there to the tilt
+    and thrust limits); the new state (4,); whether the setpoint realises an acceleration
     farther than ``clip_tol`` (m/s²) from u on some axis (False if that is nan, as numpy's
     max gives it); and the rows' mean (m/s², summed row after row, as numpy's reduce over
     the first axis does). The same kernels and operations as the separate calls, so the
@@ -149,12 +154,9 @@ def command_kernel(
         elif dk > worst:
             worst = dk
     clipped = not nan and worst > clip_tol
-    rc = py_min(tilt_max_rad, py_max(-tilt_max_rad, roll))
-    pc = py_min(tilt_max_rad, py_max(-tilt_max_rad, pitch))
-    fc = py_min(thrust_max_n, py_max(0.0, f))
     rows, r, p, y, f_new = inner_loop_kernel(
-        att[0], att[1], att[2], att[3], rc, pc, yaw_c, fc, a_rp, a_y, a_f, mass, gravity,
-        n_sub,
+        att[0], att[1], att[2], att[3], roll, pitch, yaw_c, f, tilt_max_rad, thrust_max_n,
+        a_rp, a_y, a_f, mass, gravity, n_sub,
     )
     state = np.empty(4)
     state[0], state[1], state[2], state[3] = r, p, y, f_new

@@ -99,7 +99,7 @@ def clf_terms(
         vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
         float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
     )
-    return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
+    return _terms(out)
 
 
 def clf_terms_of_reference(
@@ -115,6 +115,11 @@ def clf_terms_of_reference(
         vec3(z1), vec3(z2), f64(xi), float(tau_ff), vec3(w), float(kp), float(kd),
         float(lam), float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
     )
+    return _terms(out)
+
+
+def _terms(out: np.ndarray) -> ClfTerms:
+    """The CLF kernels' (8,) output [V, L_fV, L_gV (3), u_nom (3)] as :class:`ClfTerms`."""
     return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
 
 
@@ -214,9 +219,14 @@ class _ClfRowsQP:
         # the objective's Hessian diag(1, 1, 1, 2ρ, 2ρ_σ): dense for DAQP, sparse for OSQP
         self._h = np.diag([1.0, 1.0, 1.0, 2.0 * float(rho), 2.0 * float(violation_weight)])
         self.limit = int(max_pairs if limit is None else max(limit, max_pairs))
-        # the bounds as DAQP reads them (clamped to ±DAQP_INF), written with the rows
-        self._lo_daqp = self._hi_daqp = np.empty(0)
-        self._setup(int(max_pairs))
+        self._build(int(max_pairs))
+
+    def _build(self, m: int) -> None:
+        """The subclass's problem with room for ``m`` rows (:meth:`_setup`), and the bounds
+        as DAQP reads them (clamped to ±DAQP_INF, written with the rows in
+        :meth:`_solve_rows`) sized to match."""
+        self._setup(m)
+        self._lo_daqp, self._hi_daqp = np.empty(len(self.l)), np.empty(len(self.u))
 
     def _setup(self, m: int) -> None:
         raise NotImplementedError
@@ -229,7 +239,7 @@ class _ClfRowsQP:
         rebuilt solver starts cold (no warm start) and is deterministic, so in-process and
         distributed runs stay equal."""
         if rows > self.m and self.m < self.limit:
-            self._setup(min(self.limit, max(rows, 2 * self.m)))
+            self._build(min(self.limit, max(rows, 2 * self.m)))
 
     def _solve_rows(
         self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray, rhs: np.ndarray,
@@ -243,8 +253,6 @@ class _ClfRowsQP:
         # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
         # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the safety rows)
         nrm = math.sqrt(float(clf.lgv @ clf.lgv))
-        if len(self._lo_daqp) != len(self.l):  # (re)sized with the problem (_setup)
-            self._lo_daqp, self._hi_daqp = np.empty(len(self.l)), np.empty(len(self.u))
         write_rows_kernel(
             a, self.l, self.u, self.q, vec3(clf.lgv), nrm, float(clf_rhs), rows3(g),
             f64(rhs), k, m, vec3(u_nom), self._lo_daqp, self._hi_daqp, DAQP_INF,
