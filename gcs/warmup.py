@@ -5,7 +5,8 @@ process on a machine (or after a source change) pays for it, a few seconds in al
 swarm started from a cold cache would have every daemon and the simulator compile the
 same kernels at the same time; :func:`compile_kernels` does it once beforehand, by
 flying a few control periods of cube8 in process with every safety method (the daemons
-and ``vehicle-sim`` drive the same objects, so the same kernels and argument types).
+and ``vehicle-sim`` drive the same objects, so the same kernels and argument types), then
+the simulator's own warm-up (:func:`vehicle_sim.server.load_kernels`: its telemetry).
 The test suite calls it at session start.
 """
 
@@ -26,6 +27,7 @@ def compile_kernels(scenario: Path = SCENARIO) -> float:
     """Fly ``PERIODS`` control periods of ``scenario`` in process per method; returns the
     wall time (s) it took (≈ 1 s with a warm cache)."""
     from gcs.inproc import run_inproc
+    from vehicle_sim.server import load_kernels
 
     t0 = time.perf_counter()
     sc = load_scenario(scenario)
@@ -34,6 +36,7 @@ def compile_kernels(scenario: Path = SCENARIO) -> float:
     try:
         for method in Method:
             run_inproc(sc, method, duration=PERIODS * sc.control_dt)
+        load_kernels(sc)  # the simulator's own (telemetry), not run in process
     finally:
         logging.getLogger().setLevel(level)
     return time.perf_counter() - t0

@@ -267,7 +267,8 @@ def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect
 def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
     """Build the daemons on ``session`` and run them: alone (``--agent``) or packed
     (:class:`offboard.daemon_host.DaemonHost`). ``$OFFBOARD_PROFILE``: a developer aid,
-    cProfile (CPU time) of the whole run written to ``$OFFBOARD_PROFILE.<name>``."""
+    cProfile (the main thread's CPU time, not Zenoh's threads) of the whole run written
+    to ``$OFFBOARD_PROFILE.<name>``."""
     single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
     form = formation_from_scenario(cfgs[0].scenario)
     warm_kernels(cfgs[0].scenario, cfgs[0].method, form)  # before any daemon's first step
@@ -286,7 +287,7 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
         return run()
     import cProfile
 
-    prof = cProfile.Profile(time.process_time)
+    prof = cProfile.Profile(time.thread_time)
     try:
         return int(prof.runcall(run))
     finally:

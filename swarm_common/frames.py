@@ -22,6 +22,10 @@ from swarm_common.frames_kernel import (
     accel_to_attitude_kernel,
     euler_enu_from_quat_ned_kernel,
     euler_enu_from_quats_ned_kernel,
+    odometry_ned_kernel,
+    quat_from_rotm_kernel,
+    quat_ned_from_euler_enu_kernel,
+    rotm_from_euler_kernel,
     rotm_from_quat_kernel,
 )
 
@@ -43,17 +47,9 @@ def ned_to_enu(v: np.ndarray) -> np.ndarray:
 
 
 def rotm_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """ZYX Euler angles -> rotation matrix (body to world)."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
+    """ZYX Euler angles -> rotation matrix (body to world; compiled:
+    :func:`~swarm_common.frames_kernel.rotm_from_euler_kernel`)."""
+    return rotm_from_euler_kernel(float(roll), float(pitch), float(yaw))
 
 
 def euler_from_rotm(r: np.ndarray) -> tuple[float, float, float]:
@@ -65,24 +61,12 @@ def euler_from_rotm(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def quat_from_rotm(r: np.ndarray) -> np.ndarray:
-    """Rotation matrix -> unit quaternion [w, x, y, z] with w >= 0."""
-    m = r
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    qa = np.array(q, dtype=float)
-    qa /= np.linalg.norm(qa)
-    return qa if qa[0] >= 0 else -qa
+    """Rotation matrix -> unit quaternion [w, x, y, z] with w >= 0 (compiled:
+    :func:`~swarm_common.frames_kernel.quat_from_rotm_kernel`)."""
+    m = np.ascontiguousarray(r, dtype=float)
+    if m.shape != (3, 3):
+        raise ValueError(f"rotation matrix of shape {m.shape}, not (3, 3)")
+    return quat_from_rotm_kernel(m)
 
 
 def rotm_from_quat(q: np.ndarray) -> np.ndarray:
@@ -92,9 +76,18 @@ def rotm_from_quat(q: np.ndarray) -> np.ndarray:
 
 
 def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """ENU/FLU Euler attitude -> NED/FRD quaternion [w, x, y, z] (what MAVLink carries)."""
-    r_ned = T_ENU_NED @ rotm_from_euler(roll, pitch, yaw) @ D_FRD_FLU
-    return quat_from_rotm(r_ned)
+    """ENU/FLU Euler attitude -> NED/FRD quaternion [w, x, y, z] (what MAVLink carries):
+    ``quat(T R D)`` (compiled: ``frames_kernel.quat_ned_from_euler_enu_kernel``)."""
+    return quat_ned_from_euler_enu_kernel(
+        float(roll), float(pitch), float(yaw), T_ENU_NED, D_FRD_FLU
+    )
+
+
+def odometry_ned(p: np.ndarray, v: np.ndarray, att: np.ndarray) -> np.ndarray:
+    """(10,) ODOMETRY pose and velocity of one vehicle from its ENU state (3,) each:
+    NED position (m), NED/FRD quaternion [w, x, y, z] and body FRD velocity (m/s)
+    (compiled: :func:`~swarm_common.frames_kernel.odometry_ned_kernel`)."""
+    return odometry_ned_kernel(p, v, att, T_ENU_NED, D_FRD_FLU)
 
 
 def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:

@@ -123,3 +123,79 @@ def accel_to_attitude_kernel(
     pitch = math.atan2(ax, a2)
     roll = math.atan2(-ay, math.hypot(ax, a2))
     return roll, pitch, yaw, f
+
+
+@kernel
+def rotm_from_euler_kernel(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """ZYX Euler angles (rad) → (3,3) rotation matrix, body to world
+    (frames.rotm_from_euler)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    r = np.empty((3, 3))
+    r[0, 0], r[0, 1], r[0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    r[1, 0], r[1, 1], r[1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    r[2, 0], r[2, 1], r[2, 2] = -sp, cp * sr, cp * cr
+    return r
+
+
+@kernel
+def quat_from_rotm_kernel(m: np.ndarray) -> np.ndarray:
+    """(3,3) rotation matrix → unit quaternion (4,) [w, x, y, z] with w ≥ 0
+    (frames.quat_from_rotm): the largest of trace, m00, m11, m22 picks the formula, then
+    the result is divided by its norm (squares summed w, x, y, z in order)."""
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    q = np.empty(4)
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q[0], q[1] = 0.25 * s, (m[2, 1] - m[1, 2]) / s
+        q[2], q[3] = (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q[0], q[1] = (m[2, 1] - m[1, 2]) / s, 0.25 * s
+        q[2], q[3] = (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q[0], q[1] = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s
+        q[2], q[3] = 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q[0], q[1] = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s
+        q[2], q[3] = (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    for i in range(4):
+        q[i] /= n
+    if q[0] < 0:
+        for i in range(4):
+            q[i] = -q[i]
+    return q
+
+
+@kernel
+def quat_ned_from_euler_enu_kernel(
+    roll: float, pitch: float, yaw: float, t_enu_ned: np.ndarray, d_frd_flu: np.ndarray
+) -> np.ndarray:
+    """ENU/FLU ZYX Euler (rad) → NED/FRD quaternion (4,) [w, x, y, z], w ≥ 0:
+    ``quat(T R(roll, pitch, yaw) D)`` (frames.quat_ned_from_euler_enu)."""
+    r = matmul3(matmul3(t_enu_ned, rotm_from_euler_kernel(roll, pitch, yaw)), d_frd_flu)
+    return quat_from_rotm_kernel(r)
+
+
+@kernel
+def odometry_ned_kernel(
+    p: np.ndarray, v: np.ndarray, att: np.ndarray, t_enu_ned: np.ndarray, d_frd_flu: np.ndarray
+) -> np.ndarray:
+    """One vehicle's ODOMETRY pose and velocity in MAVLink frames, (10,): NED position
+    (m), the NED/FRD quaternion [w, x, y, z] and the body FRD velocity
+    ``R_ned_frd(q)ᵀ v_ned`` (m/s, summed over the rows of R in order), from the ENU
+    position p (3,) m, velocity v (3,) m/s and attitude att (3,) roll/pitch/yaw (rad)."""
+    out = np.empty(10)
+    out[0], out[1], out[2] = p[1], p[0], -p[2]
+    vn0, vn1, vn2 = v[1], v[0], -v[2]
+    q = quat_ned_from_euler_enu_kernel(att[0], att[1], att[2], t_enu_ned, d_frd_flu)
+    out[3:7] = q
+    r = rotm_from_quat_kernel(q[0], q[1], q[2], q[3])
+    out[7] = r[0, 0] * vn0 + r[1, 0] * vn1 + r[2, 0] * vn2
+    out[8] = r[0, 1] * vn0 + r[1, 1] * vn1 + r[2, 1] * vn2
+    out[9] = r[0, 2] * vn0 + r[1, 2] * vn1 + r[2, 2] * vn2
+    return out

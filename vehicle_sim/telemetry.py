@@ -192,18 +192,14 @@ def odometry(v: Vehicle, sim_t: float) -> M.MAVLink_odometry_message:
         if len(v.odom_wall) > 256:
             v.odom_wall.clear()
         v.odom_wall[stamp] = time.monotonic()
-    pn = _p_ned(v)
-    vn = _v_ned(v)
-    q = q_ned(v)
-    vb = frames.rotm_from_quat(q).T @ vn  # body FRD velocity (child_frame_id = BODY_FRD)
+    d, i = v.dyn, v.idx
+    # NED position, quaternion, body FRD velocity (child_frame_id = BODY_FRD)
+    f = frames.odometry_ned(d.p[i], d.v[i], d.att[i]).tolist()
     wr = rates_frd(v)
     nan21 = [math.nan] * 21
     return M.MAVLink_odometry_message(
         _t_us(sim_t), M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD,
-        float(pn[0]), float(pn[1]), float(pn[2]),
-        [float(x) for x in q],
-        float(vb[0]), float(vb[1]), float(vb[2]),
-        wr[0], wr[1], wr[2],
+        f[0], f[1], f[2], f[3:7], f[7], f[8], f[9], wr[0], wr[1], wr[2],
         nan21, nan21, 0, M.MAV_ESTIMATOR_TYPE_NAIVE, ODOMETRY_QUALITY,
     )  # fmt: skip
 
