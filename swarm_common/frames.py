@@ -22,6 +22,7 @@ from swarm_common.frames_kernel import (
     accel_to_attitude_kernel,
     euler_enu_from_quat_ned_kernel,
     euler_enu_from_quats_ned_kernel,
+    lag_rates_frd_kernel,
     odometry_ned_kernel,
     quat_from_rotm_kernel,
     quat_ned_from_euler_enu_kernel,
@@ -88,6 +89,16 @@ def odometry_ned(p: np.ndarray, v: np.ndarray, att: np.ndarray) -> np.ndarray:
     NED position (m), NED/FRD quaternion [w, x, y, z] and body FRD velocity (m/s)
     (compiled: :func:`~swarm_common.frames_kernel.odometry_ned_kernel`)."""
     return odometry_ned_kernel(p, v, att, T_ENU_NED, D_FRD_FLU)
+
+
+def lag_rates_frd(
+    att: np.ndarray, cmd_att: np.ndarray, tau: np.ndarray
+) -> tuple[float, float, float]:
+    """FRD body rates (rad/s) of a first-order attitude lag from the ENU/FLU attitude
+    ``att`` to ``cmd_att`` (roll, pitch, yaw; rad) with time constants ``tau`` (s): the
+    Euler-angle rates ``(cmd_att − att)/tau``, y and z negated (compiled:
+    :func:`~swarm_common.frames_kernel.lag_rates_frd_kernel`)."""
+    return lag_rates_frd_kernel(att, cmd_att, tau)
 
 
 def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:

@@ -199,3 +199,16 @@ def odometry_ned_kernel(
     out[8] = r[0, 1] * vn0 + r[1, 1] * vn1 + r[2, 1] * vn2
     out[9] = r[0, 2] * vn0 + r[1, 2] * vn1 + r[2, 2] * vn2
     return out
+
+
+@kernel
+def lag_rates_frd_kernel(
+    att: np.ndarray, cmd_att: np.ndarray, tau: np.ndarray
+) -> tuple[float, float, float]:
+    """Body rates (FRD, rad/s) approximated by the Euler-angle rates of a first-order
+    attitude lag, ``(cmd_att − att)/tau`` with y and z negated (FLU → FRD); att, cmd_att
+    (3,) roll/pitch/yaw (rad), tau (3,) time constants (s)."""
+    r0 = (cmd_att[0] - att[0]) / tau[0]
+    r1 = (cmd_att[1] - att[1]) / tau[1]
+    r2 = (cmd_att[2] - att[2]) / tau[2]
+    return r0, -r1, -r2

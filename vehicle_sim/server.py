@@ -57,6 +57,7 @@ def load_kernels(sc: Scenario) -> None:
     warm.lumped_accel()
     frames.euler_enu_from_quat_ned(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32))
     frames.odometry_ned(warm.p[0], warm.v[0], warm.att[0])  # ODOMETRY
+    frames.lag_rates_frd(warm.att[0], warm.cmd_att[0], warm.tau)
     frames.quat_from_rotm(frames.rotm_from_euler(0.0, 0.0, 0.0))  # mission items
     frames.quat_ned_from_euler_enu(0.0, 0.0, 0.0)  # attitude streams
 

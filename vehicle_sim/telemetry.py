@@ -111,9 +111,8 @@ def q_ned(v: Vehicle) -> np.ndarray:
 
 def rates_frd(v: Vehicle) -> tuple[float, float, float]:
     """Body rates (FRD, rad/s) approximated by the Euler-angle rates of the attitude lag."""
-    d = v.dyn
-    rate = (d.cmd_att[v.idx] - d.att[v.idx]) / d.tau
-    return float(rate[0]), float(-rate[1]), float(-rate[2])
+    d, i = v.dyn, v.idx
+    return frames.lag_rates_frd(d.att[i], d.cmd_att[i], d.tau)
 
 
 def latlon(cfg: VehicleConfig, ned: np.ndarray) -> tuple[int, int]:
