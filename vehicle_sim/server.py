@@ -80,12 +80,18 @@ class SimServer(ServerIO):
         self.truth_pub = TruthPublisher()
         self.links: list[MavlinkLink] = []
         self.vehicles: list[Vehicle] = []
+        self.vehicle_by_id: dict[int, Vehicle] = {}
         self.vlinks: dict[int, dict[str, MavlinkLink]] = {}
         self.forwarded: dict[tuple[int, int], float] = {}  # (vehicle, component) -> last
         self.sel = selectors.DefaultSelector()
         self._collisions_seen = 0
         self._min_dist = self.dyn.min_pair_distance() if self.dyn.n >= 2 else float("inf")
         self._last_resend: dict[int, float] = {}
+        self.touched: set[int] = set()
+        # lockstep: the vehicles still to answer this step as of the last full scan (None:
+        # scan at the next poll), and the monotonic time of that scan
+        self._pending: set[int] | None = None
+        self._last_full_scan = -math.inf
         self._prestart_next = 0.0
         self._last_scan = -math.inf  # monotonic time of the last telemetry scan (run)
         self._rejects_reported: dict[int, tuple[int, float]] = {}
@@ -114,6 +120,7 @@ class SimServer(ServerIO):
             if o.signing_key is not None:
                 v.sign_links(o.signing_key, LINK_NAMES, signing.setup_signing)
             self.vehicles.append(v)
+            self.vehicle_by_id[aid] = v
             ports = vehicle_ports(aid, o.port_offset)
             api = MavlinkLink(
                 "api", aid, ports.api_local, (o.remote_host, ports.api_remote), o.bind_host,
@@ -229,9 +236,28 @@ class SimServer(ServerIO):
 
     def lockstep_poll(self, now: float) -> None:
         """One pass of the lockstep loop: start barrier, step when every answer is in, step
-        anyway at the step timeout, re-send ODOMETRY t_k to whoever is late."""
+        anyway at the step timeout, re-send ODOMETRY t_k to whoever is late.
+
+        The loop wakes on every datagram, so with many vehicles a scan of all of them per
+        wake-up cost O(N²) per step. Between full scans (at most :data:`LOCKSTEP_SCAN_S`
+        apart, and whenever the set runs empty) only the vehicles that received something
+        are looked at: those that answered, or stopped being waited for, leave the set of
+        the last scan. The step itself is always decided by a full scan."""
         clk = self.clock
         assert isinstance(clk, LockstepClock)
+        touched, self.touched = self.touched, set()
+        pending = self._pending
+        if (clk.started and pending and now - self._last_full_scan < LOCKSTEP_SCAN_S
+                and now < clk.deadline()):
+            ms = clk.t_ms()
+            by_id = self.vehicle_by_id
+            for vid in touched & pending:
+                v = by_id[vid]
+                if v.answered_ms == ms or not v.lockstep_should_wait():
+                    pending.discard(vid)
+            if pending:
+                return
+        self._pending, self._last_full_scan = None, now
         if not clk.started:
             self._lockstep_prestart(clk, now)
             return
@@ -249,6 +275,7 @@ class SimServer(ServerIO):
             self._lockstep_timeout(waiting)
             self.integrate()
             return
+        self._pending = {v.id for v in waiting}
         for v in waiting:  # a lost datagram must not cost a whole step timeout
             if now - self._last_resend.get(v.id, 0.0) >= LOCKSTEP_RESEND_S:
                 self._last_resend[v.id] = now

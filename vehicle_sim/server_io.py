@@ -50,6 +50,7 @@ class ServerIO:
 
     vehicles: list[Vehicle]
     vlinks: dict[int, dict[str, MavlinkLink]]
+    touched: set[int]  # ids of the vehicles that received a message since the last poll
     forwarded: dict[tuple[int, int], float]
     handler_errors: int
     _rejects_reported: dict[int, tuple[int, float]]
@@ -162,6 +163,7 @@ class ServerIO:
         t = self.clock.t()
         for key, _ in self.sel.select(max(0.0, timeout)):
             v, link = key.data
+            self.touched.add(v.id)
             for m in link.receive(now):
                 if link.name == "api" and m.get_msgId() == M.MAVLINK_MSG_ID_HEARTBEAT:
                     self._forward_component_heartbeat(v, m, now)
