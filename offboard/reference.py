@@ -80,13 +80,25 @@ class LeaderTrajectory:
         self.omega = 2.0 * math.pi * float(frequency_hz)
 
     def state(self, t: float) -> np.ndarray:
-        """ξ(t) = [p, ṗ, p̈, p⃛] (12,)."""
-        w = self.omega
-        c, s = math.cos(w * t), math.sin(w * t)
-        a = self.amp
-        return np.concatenate(
-            [self.p0 + a * (1.0 - c), a * w * s, a * w * w * c, -a * w**3 * s]
-        )
+        """ξ(t) = [p, ṗ, p̈, p⃛] (12,) (compiled: :func:`leader_state_kernel`)."""
+        return leader_state_kernel(self.p0, self.amp, self.omega, float(t))
+
+
+@kernel
+def leader_state_kernel(p0: np.ndarray, amp: np.ndarray, omega: float, t: float) -> np.ndarray:
+    """ξ(t) = [p, ṗ, p̈, p⃛] (12,) of p(t) = p0 + A(1 − cos ωt), p0 and A (3,) in m, ω in
+    rad/s, t in s: ``A ω sin ωt``, ``A ω² cos ωt``, ``−A ω³ sin ωt``, each product taken
+    left to right per axis (ω³ as ``ω**3``, the C library's pow)."""
+    c, s = math.cos(omega * t), math.sin(omega * t)
+    w3 = math.pow(omega, 3.0)
+    out = np.empty(12)
+    for i in range(3):
+        a = amp[i]
+        out[i] = p0[i] + a * (1.0 - c)
+        out[3 + i] = a * omega * s
+        out[6 + i] = a * omega * omega * c
+        out[9 + i] = -a * w3 * s
+    return out
 
 
 def exo_propagator(omega: float, dt: float) -> np.ndarray:
