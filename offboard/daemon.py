@@ -143,7 +143,12 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.offboard_seen = False  # the mission has had the vehicle in OFFBOARD
         self.cooperative = True
         self.bad_commands = 0  # commands with unusable fields: counted, logged, dropped
-        self.control_cpu_s = 0.0  # process CPU inside agent.step (s)
+        # CPU of this thread inside agent.step (s): the control law runs on the main thread
+        # alone (numba kernels, single-threaded BLAS). Not the process's CPU clock: reading
+        # it sums every thread and locks the run queue of each one running on another core,
+        # which cost tens of µs per read in a busy packed process (the profile in
+        # docs/performance.md, seventh round), and it counted Zenoh's threads as control
+        self.control_cpu_s = 0.0
         self.control_steps = 0
         if not cfg.lockstep and cfg.manual_start and self.agent.hold_for_takeoff():
             log.info("agent %d: on its pad until the take-off command", self.id)
@@ -232,9 +237,9 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
             self._maybe_start_trajectory(t)
         received, comm_ok = self._neighbours_for(k, t)
         neighbours = {j: estimate_from_wire(e) for j, e in received.items()}
-        cpu0 = time.process_time()
+        cpu0 = time.thread_time()
         out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
-        self.control_cpu_s += time.process_time() - cpu0
+        self.control_cpu_s += time.thread_time() - cpu0
         self.control_steps += 1
         self.answer, self.answer_from_loss = (time_boot_ms, out.q_ned, out.thrust_norm), False
         self.answer_step, self.answer_at = k, time.monotonic()
