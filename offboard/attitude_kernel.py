@@ -20,7 +20,12 @@ import math
 
 import numpy as np
 
-from swarm_common.frames_kernel import accel_to_attitude_kernel, py_max, py_min
+from swarm_common.frames_kernel import (
+    accel_to_attitude_kernel,
+    py_max,
+    py_min,
+    with_w_nonnegative,
+)
 from swarm_common.jit import kernel
 
 _S2 = math.sqrt(0.5)
@@ -52,10 +57,7 @@ def quat_ned_kernel(roll: float, pitch: float, yaw: float) -> np.ndarray:
     q[1] = tw * 1.0 + tx * 0.0 + ty * 0.0 - tz * 0.0
     q[2] = tw * 0.0 - tx * 0.0 + ty * 0.0 + tz * 1.0
     q[3] = tw * 0.0 + tx * 0.0 - ty * 1.0 + tz * 0.0
-    if q[0] < 0:
-        for k in range(4):
-            q[k] = -q[k]
-    return q
+    return with_w_nonnegative(q)
 
 
 @kernel

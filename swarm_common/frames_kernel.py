@@ -165,6 +165,13 @@ def quat_from_rotm_kernel(m: np.ndarray) -> np.ndarray:
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
     for i in range(4):
         q[i] /= n
+    return with_w_nonnegative(q)
+
+
+@kernel
+def with_w_nonnegative(q: np.ndarray) -> np.ndarray:
+    """The quaternion q (4,) [w, x, y, z], negated in place when w < 0 (q and −q are the
+    same rotation; MAVLink's convention here is w ≥ 0); returns q."""
     if q[0] < 0:
         for i in range(4):
             q[i] = -q[i]
