@@ -144,10 +144,10 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.cooperative = True
         self.bad_commands = 0  # commands with unusable fields: counted, logged, dropped
         # CPU of this thread inside agent.step (s): the control law runs on the main thread
-        # alone (numba kernels, single-threaded BLAS). Not the process's CPU clock: reading
-        # it sums every thread and locks the run queue of each one running on another core,
-        # which cost tens of µs per read in a busy packed process (the profile in
-        # docs/performance.md, seventh round), and it counted Zenoh's threads as control
+        # alone (numba kernels, single-threaded BLAS). Not the process's CPU clock: it
+        # counted Zenoh's threads as control, and reading it sums every thread and locks
+        # the run queue of each one running on another core (19 % of the wall-clock
+        # samples of a busy packed process; docs/performance.md, seventh round)
         self.control_cpu_s = 0.0
         self.control_steps = 0
         if not cfg.lockstep and cfg.manual_start and self.agent.hold_for_takeoff():
