@@ -62,6 +62,11 @@ def load_kernels(sc: Scenario) -> None:
     frames.quat_ned_from_euler_enu(0.0, 0.0, 0.0)  # attitude streams
 
 
+def _still_to_answer(v: Vehicle, ms: int) -> bool:
+    """Lockstep: the server waits for ``v``'s answer to the step stamped ``ms``."""
+    return v.lockstep_should_wait() and v.answered_ms != ms
+
+
 class SimServer(ServerIO):
     def __init__(self, sc: Scenario, opts: SimOptions) -> None:
         self.opts = opts
@@ -232,7 +237,7 @@ class SimServer(ServerIO):
 
     def lockstep_waiting(self) -> list[Vehicle]:
         ms = self.clock.t_ms()
-        return [v for v in self.vehicles if v.lockstep_should_wait() and v.answered_ms != ms]
+        return [v for v in self.vehicles if _still_to_answer(v, ms)]
 
     def lockstep_poll(self, now: float) -> None:
         """One pass of the lockstep loop: start barrier, step when every answer is in, step
@@ -252,8 +257,7 @@ class SimServer(ServerIO):
             ms = clk.t_ms()
             by_id = self.vehicle_by_id
             for vid in touched & pending:
-                v = by_id[vid]
-                if v.answered_ms == ms or not v.lockstep_should_wait():
+                if not _still_to_answer(by_id[vid], ms):
                     pending.discard(vid)
             if pending:
                 return
