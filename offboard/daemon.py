@@ -51,7 +51,7 @@ from offboard.agent import (
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.daemon_commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, DaemonCommands
 from offboard.daemon_config import DaemonConfig
-from offboard.daemon_peers import peer_ids
+from offboard.daemon_peers import peer_ids, ready_ids
 from offboard.daemon_stream import SetpointStream
 from offboard.link_guard import PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
@@ -100,6 +100,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.id = cfg.agent_id
         form = formation_from_scenario(sc) if form is None else form
         self.others = peer_ids(form, cfg.agent_id)  # whose estimates it reads and awaits
+        ready = [] if cfg.solo else ready_ids(form, cfg.agent_id)  # heard before flying
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed, form=form)
         self.control_hz = int(sc.run.control_hz)
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, self.control_hz, cfg.lockstep,
@@ -107,7 +108,8 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
                                 trim_streams=not cfg.keep_streams)
         guard = PayloadGuard(list(sc.ids), list(sc.leader_ids), self.control_hz, cfg.agent_id)
         self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard,
-                            odometry=cfg.sensing is SensingSource.ODOMETRY, peers=self.others)
+                            odometry=cfg.sensing is SensingSource.ODOMETRY, peers=self.others,
+                            ready=ready)
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1
@@ -125,7 +127,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.modes = ModeRequests(self.link, self.keeper, cfg.agent_id)
         self.loss = RunnerLoss(self.control_hz, cfg.loss_land_after)
         self.loss_flight = LossFlight(sc, self.agent.index, cfg.agent_id, self.loss)
-        self.ready = SwarmReady(cfg.agent_id, self.others, cfg.solo, WAIT_LOG_S)
+        self.ready = SwarmReady(cfg.agent_id, ready, cfg.solo, WAIT_LOG_S)
         self.sensing = SwarmSensing(
             cfg.sensing, list(sc.ids), cfg.agent_id, self.bus, self.loss,
             lockstep=cfg.lockstep, solo=cfg.solo, truth_timeout=cfg.truth_timeout,
@@ -306,6 +308,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         if k >= 0:
             self._publish_odometry(k)
         if k > self.last_step and self.ready.check(self.bus.heard, time.monotonic()):
+            self.bus.end_readiness()
             t = k / self.control_hz
             ms = int(round(t * 1000))
             if self.control_step(k, t, ms) or self._loss_step(k, t, ms):

@@ -89,13 +89,16 @@ class SwarmBus:
         self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None,
         faults: FaultInjector | None = None, odometry: bool = False,
         peers: list[int] | None = None, cache: DecodeCache | None = None,
+        ready: list[int] | None = None,
     ) -> None:
         """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
         process loaded (:func:`swarm_common.faults.injector_for`). ``odometry``: subscribe
         to the other agents' odometry (``--sensing odometry``, which senses every agent).
         ``peers``: the agents whose estimates to receive (None: every agent, one wildcard
         subscriber). ``cache``: decoded payloads shared with the process's other daemons
-        (default :data:`PROCESS_CACHE`)."""
+        (default :data:`PROCESS_CACHE`). ``ready``: agents to hear from before flying
+        (offboard.daemon_peers.ready_ids); those not among ``peers`` are listened to only
+        until :meth:`end_readiness` (a valid estimate marks them heard, nothing more)."""
         self.cache = PROCESS_CACHE if cache is None else cache
         self.session = session
         self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
@@ -124,6 +127,14 @@ class SwarmBus:
         for key, handler in keys:
             sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_DEPTH))
             self._subs.append((sub, handler))
+        # readiness only: undeclared by end_readiness
+        self._ready_subs: list[tuple[Any, Callable[[Any], None]]] = []
+        if peers is not None:
+            for j in sorted(set(ready or ()) - set(peers) - {agent_id}):
+                sub = session.declare_subscriber(wire.key_estimate(swarm, j),
+                                                 zenoh.handlers.FifoChannel(FIFO_DEPTH))
+                self._ready_subs.append((sub, self._on_announce))
+            self._subs += self._ready_subs
         self._pub_est = session.declare_publisher(wire.key_estimate(swarm, agent_id))
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
         self._pub_odo = session.declare_publisher(wire.key_odometry(swarm, agent_id))
@@ -202,6 +213,25 @@ class SwarmBus:
         for old in ([s for s in self.estimates if s < msg.step - KEEP_STEPS]
                     if min(self.estimates) < msg.step - KEEP_STEPS else ()):
             del self.estimates[old]
+
+    def _on_announce(self, sample: Any) -> None:
+        """An estimate listened to for readiness only: heard, not kept."""
+        msg = self._decode(sample, wire.Estimate)
+        if msg is not None and msg.id != self.agent_id:
+            self.heard.add(msg.id)
+
+    def end_readiness(self) -> None:
+        """Stop listening to the agents heard for readiness only (idempotent)."""
+        if not self._ready_subs:
+            return
+        gone = {id(sub) for sub, _ in self._ready_subs}
+        self._subs = [(sub, h) for sub, h in self._subs if id(sub) not in gone]
+        for sub, _ in self._ready_subs:
+            try:
+                sub.undeclare()
+            except ZENOH_ERRORS as exc:  # best effort, as on close
+                log.debug("undeclare after readiness: %s", exc)
+        self._ready_subs = []
 
     def _on_odometry(self, sample: Any) -> None:
         msg = self._decode(sample, wire.Odometry)

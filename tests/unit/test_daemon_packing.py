@@ -10,7 +10,7 @@ import pytest
 from gcs.launch_spec import LaunchError, LaunchSpec
 from offboard.bearing import formation_from_scenario
 from offboard.daemon_agents import format_agents, parse_agents
-from offboard.daemon_peers import peer_ids
+from offboard.daemon_peers import peer_ids, ready_ids
 from offboard.zenoh_link import DecodeCache
 from swarm_common import wire
 from swarm_common.scenario import load_scenario
@@ -43,17 +43,20 @@ def test_launch_spec_packs_contiguous_and_balanced() -> None:
         LaunchSpec(sc, daemon_processes=9)
 
 
-def test_peers_all_on_cube8_few_on_a_sparse_grid() -> None:
+def test_peers_all_on_cube8_few_on_a_sparse_grid_none_for_leaders() -> None:
     sc = load_scenario(str(SCEN / "cube8.toml"))
     form = formation_from_scenario(sc)
-    assert all(peer_ids(form, i) == [j for j in sc.ids if j != i] for i in sc.ids)
+    assert all(ready_ids(form, i) == [j for j in sc.ids if j != i] for i in sc.ids)
+    followers = [i for i in sc.ids if i not in sc.leader_ids]
+    assert all(peer_ids(form, i) == ready_ids(form, i) for i in followers)
     sc = load_scenario(str(SCEN / "grid27_knn.toml"))
     form = formation_from_scenario(sc)
     for i in sc.ids:
-        peers = peer_ids(form, i)
+        peers = ready_ids(form, i)
         assert i not in peers and set(sc.leader_ids) - {i} <= set(peers)
         assert {form.ids[j] for j in form.neighbours[form.index_of(i)]} <= set(peers)
-    assert min(len(peer_ids(form, i)) for i in sc.ids) < len(sc.ids) - 1
+        assert peer_ids(form, i) == ([] if i in sc.leader_ids else peers)
+    assert min(len(ready_ids(form, i)) for i in sc.ids) < len(sc.ids) - 1
 
 
 def test_decode_cache_returns_the_decoded_payload_and_rejects_garbage() -> None:
