@@ -161,6 +161,7 @@ def run_distributed(
         raise
     finally:
         group.stop()
+        rec.finalize()  # what the subscribers' channels still hold, before undeclaring
         for s in subs:
             try:
                 s.undeclare()
@@ -168,7 +169,6 @@ def run_distributed(
                 log.debug("undeclare subscriber: %s", exc)
         router.close()
         _remove(sec_dir)
-        rec.finalize()
         facts["wall_s"] = time.monotonic() - t_wall0
         if reason and on_abort is not None:
             facts["aborted"], facts["abort_reason"] = True, reason

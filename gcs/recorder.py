@@ -2,7 +2,8 @@
 
 Memory is allocated once, at the start, for the run's ``steps`` (float32: the values that
 crossed the wire are float32, so nothing is lost), and never grows with the run: the
-Zenoh callbacks only append raw payloads to a short list, which the runner's loop drains
+subscribers queue the payloads in Zenoh's own channels (no Python runs on Zenoh's
+threads, so the router never waits for the interpreter), which the runner's loop drains
 (:meth:`Recorder.drain`) into the preallocated arrays every few tens of milliseconds.
 A payload that does not decode, names an agent outside the scenario, carries a step
 outside the run or non-finite values is dropped and counted (``dropped``).
@@ -15,12 +16,18 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 import numpy as np
+import zenoh
 
+from offboard.link_guard import all_finite
 from swarm_common import wire
 from swarm_common.enums import QPStatus
 from swarm_common.scenario import Scenario
 
 F32 = np.float32
+# payloads a subscriber's channel holds between two drains (every 50 ms, longer during a
+# checkpoint): at 17 per step and 5x real time, about a minute of cube8 (a full channel
+# would make the router wait)
+CHANNEL_DEPTH = 1 << 18
 
 
 class TruthView(Mapping[int, wire.Truth]):
@@ -79,43 +86,41 @@ class Recorder:
         self.max_step = -1
         self.last_mode: list[str] = []
         self.dropped = 0
-        self._raw: list[bytes] = []
+        self._subs: list[Any] = []
 
     @property
     def truth(self) -> TruthView:
         return TruthView(self)
 
     def subscribe(self, session: Any, swarm: str) -> list[Any]:
-        """Declare the truth, estimate and status subscribers on ``session``."""
-        return [
-            session.declare_subscriber(wire.key_truth(swarm), self.on_truth),
-            session.declare_subscriber(wire.key_estimate(swarm, "*"), self.on_raw),
-            session.declare_subscriber(wire.key_status(swarm, "*"), self.on_raw),
+        """Declare the truth, estimate and status subscribers on ``session`` (each with its
+        channel, read by :meth:`drain`)."""
+        self._subs = [
+            session.declare_subscriber(key, zenoh.handlers.FifoChannel(CHANNEL_DEPTH))
+            for key in (wire.key_truth(swarm), wire.key_estimate(swarm, "*"),
+                        wire.key_status(swarm, "*"))
         ]
+        return self._subs
 
-    def on_truth(self, sample: Any) -> None:
-        try:
-            msg = wire.decode(sample.payload.to_bytes())
-        except wire.WireError:
-            with self.lock:
-                self.dropped += 1
-            return
-        with self.lock:
-            if not isinstance(msg, wire.Truth) or not self._put_truth(msg):
-                self.dropped += 1
-
-    def on_raw(self, sample: Any) -> None:
-        # kept raw and decoded by drain() off the Zenoh thread: cheap here
-        data = sample.payload.to_bytes()
-        with self.lock:
-            self._raw.append(data)
+    def _received(self) -> list[bytes]:
+        """Every payload waiting in the subscribers' channels."""
+        out: list[bytes] = []
+        for sub in self._subs:
+            while True:
+                try:
+                    sample = sub.try_recv()
+                except (zenoh.ZError, RuntimeError):  # undeclared: nothing more to read
+                    break
+                if sample is None:
+                    break
+                out.append(sample.payload.to_bytes())
+        return out
 
     def _put_truth(self, m: wire.Truth) -> bool:
         k = m.step
         if not (0 <= k <= self.steps) or list(m.ids) != self.sc.ids:
             return False
-        arrays = (m.p, m.v, m.att, m.lumped, m.thrust)
-        if not all(np.all(np.isfinite(a)) for a in arrays) or not np.isfinite(m.t):
+        if not all_finite((m.p, m.v, m.att, m.lumped, m.thrust)) or not np.isfinite(m.t):
             return False
         self.t[k], self.min_dist[k], self.collisions[k] = m.t, m.min_dist, m.collisions
         self.p[k], self.v[k], self.att[k], self.lumped_true[k] = m.p, m.v, m.att, m.lumped
@@ -127,15 +132,17 @@ class Recorder:
         return True
 
     def drain(self) -> None:
-        """Decode the payloads kept raw since the last call into the arrays."""
-        with self.lock:
-            raw, self._raw = self._raw, []
+        """Decode the payloads received since the last call into the arrays."""
         dropped = 0
-        for data in raw:
+        for data in self._received():
             try:
                 msg = wire.decode(data)
             except wire.WireError:
                 dropped += 1
+                continue
+            if isinstance(msg, wire.Truth):
+                with self.lock:
+                    dropped += not self._put_truth(msg)
                 continue
             i = self.idx.get(getattr(msg, "id", -1))
             k = getattr(msg, "step", -1)
@@ -153,7 +160,7 @@ class Recorder:
             self.dropped += dropped
 
     def _put_estimate(self, e: wire.Estimate, k: int, i: int) -> bool:
-        if not (np.all(np.isfinite(e.z1)) and np.all(np.isfinite(e.z2))):
+        if not all_finite((e.z1, e.z2)):
             return False
         self.z1[k + 1, i], self.z2[k + 1, i] = e.z1, e.z2
         if k == self.steps - 1 and np.all(np.isfinite(e.zeta)):
@@ -173,7 +180,8 @@ class Recorder:
         return True
 
     def finalize(self) -> None:
-        """Decode whatever is still raw (end of the run)."""
+        """Decode whatever the channels still hold (end of the run, before the
+        subscribers are undeclared)."""
         self.drain()
 
     def nbytes(self) -> int:

@@ -1,0 +1,93 @@
+"""The distributed run's recorder (gcs.recorder) reads its subscribers' Zenoh channels on
+the runner's thread: what is published reaches the arrays at the next drain, garbage and
+out-of-run payloads are counted and dropped, and ``finalize`` (before the subscribers are
+undeclared) keeps what is still queued. Real Zenoh sessions over loopback TCP."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from conftest import free_tcp_port, wait_for
+
+from gcs.recorder import Recorder
+from swarm_common import wire
+from swarm_common.scenario import load_scenario
+from swarm_common.zenoh_session import open_session
+
+SCEN = Path(__file__).resolve().parents[2] / "scenarios"
+SWARM = "rec"
+
+
+def _truth(sc_ids: list[int], k: int, bad: bool = False) -> bytes:
+    n = len(sc_ids)
+    p = np.arange(3 * n, dtype=float).reshape(n, 3) + k
+    if bad:
+        p[0, 0] = math.nan
+    return wire.encode(wire.Truth(
+        step=k, t=k / 50.0, ids=list(sc_ids), p=p, v=np.zeros((n, 3)), att=np.zeros((n, 3)),
+        thrust=np.ones(n), lumped=np.zeros((n, 3)), armed=[True] * n, mode=["OFFBOARD"] * n,
+    ))
+
+
+def _estimate(aid: int, k: int) -> bytes:
+    return wire.encode(wire.Estimate(
+        id=aid, step=k, t=(k + 1) / 50.0, role="follower", z1=np.full(3, float(k)),
+        z2=np.ones(3), z3=np.zeros(3), xi=np.zeros(12), zeta=np.zeros(6),
+    ))
+
+
+def _status(aid: int, k: int) -> bytes:
+    return wire.encode(wire.Status(
+        id=aid, step=k, t=k / 50.0, mode="OFFBOARD", method="dcbf", qp_status="inactive",
+        qp_solve_us=3.0, h_min=float(k), lyap_v=0.0, est_health="ok", fallbacks=0,
+        u=np.full(3, 0.5),
+    ))
+
+
+def test_recorder_drains_its_channels_and_counts_garbage() -> None:
+    sc = load_scenario(str(SCEN / "cube8.toml"))
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    runner = open_session(mode="router", listen=[ep])
+    other = open_session(connect=[ep])
+    rec = Recorder(sc, steps=10)
+    subs = rec.subscribe(runner, SWARM)
+    aid = sc.ids[3]
+    pub_t = other.declare_publisher(wire.key_truth(SWARM))
+    pub_e = other.declare_publisher(wire.key_estimate(SWARM, aid))
+    pub_s = other.declare_publisher(wire.key_status(SWARM, aid))
+    try:
+        assert wait_for(lambda: pub_t.matching_status.matching
+                        and pub_e.matching_status.matching and pub_s.matching_status.matching)
+        for k in range(3):
+            pub_t.put(_truth(sc.ids, k))
+            pub_e.put(_estimate(aid, k))
+            pub_s.put(_status(aid, k))
+        pub_t.put(_truth(sc.ids, 4, bad=True))  # non-finite: dropped
+        pub_t.put(_truth(sc.ids, 99))  # outside the run's 10 steps: dropped
+        pub_s.put(b"\x00not msgpack")  # undecodable: dropped
+
+        def drained() -> bool:
+            rec.drain()
+            return rec.max_step == 2 and bool(rec.have_status[2, 3]) and rec.dropped == 3
+
+        assert wait_for(drained)
+        assert not rec.have_truth[4] and not rec.have_truth[3]
+        assert rec.p[2, 0, 0] == np.float32(2.0) and rec.z1[3, 3, 0] == np.float32(2.0)
+        assert rec.h_min[1, 3] == np.float32(1.0) and rec.u[2, 3, 1] == np.float32(0.5)
+        # queued at the end of a run: finalize (before undeclaring) still records it
+        pub_s.put(_status(aid, 6))
+
+        def finalized() -> bool:
+            rec.finalize()
+            return bool(rec.have_status[6, 3])
+
+        assert wait_for(finalized)
+        for s in subs:
+            s.undeclare()
+        rec.finalize()  # undeclared: nothing more to read, and no error
+        assert rec.dropped == 3
+    finally:
+        other.close()
+        runner.close()
