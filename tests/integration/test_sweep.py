@@ -102,9 +102,14 @@ def _state(pid: int) -> str:
 
 
 def _children(pid: int) -> list[int]:
+    """The child pids of every thread of ``pid``; a thread that exits between the listing
+    and the read is skipped (its children, if any, pass to another thread of the process)."""
     out = []
     for task in Path(f"/proc/{pid}/task").iterdir():
-        kids = (task / "children").read_text().split()
+        try:
+            kids = (task / "children").read_text().split()
+        except OSError:  # the thread ended meanwhile
+            continue
         out += [int(k) for k in kids]
     return out
 
