@@ -104,8 +104,12 @@ def _state(pid: int) -> str:
 def _children(pid: int) -> list[int]:
     """The child pids of every thread of ``pid``; a thread that exits between the listing
     and the read is skipped (its children, if any, pass to another thread of the process)."""
-    out = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
+    out: list[int] = []
+    try:
+        tasks = list(Path(f"/proc/{pid}/task").iterdir())
+    except OSError:  # the process itself ended: the caller's checks say so
+        return out
+    for task in tasks:
         try:
             kids = (task / "children").read_text().split()
         except OSError:  # the thread ended meanwhile
