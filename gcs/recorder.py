@@ -19,6 +19,7 @@ import numpy as np
 import zenoh
 
 from offboard.link_guard import all_finite
+from offboard.zenoh_link import ZENOH_ERRORS
 from swarm_common import wire
 from swarm_common.enums import QPStatus
 from swarm_common.scenario import Scenario
@@ -103,13 +104,14 @@ class Recorder:
         return self._subs
 
     def _received(self) -> list[bytes]:
-        """Every payload waiting in the subscribers' channels."""
+        """Every payload waiting in the subscribers' channels (the loop of
+        :meth:`offboard.zenoh_link.SwarmBus.pump`, without its per-sample handler)."""
         out: list[bytes] = []
         for sub in self._subs:
             while True:
                 try:
                     sample = sub.try_recv()
-                except (zenoh.ZError, RuntimeError):  # undeclared: nothing more to read
+                except ZENOH_ERRORS:  # undeclared: nothing more to read
                     break
                 if sample is None:
                     break

@@ -226,11 +226,7 @@ class SwarmBus:
             return
         gone = {id(sub) for sub, _ in self._ready_subs}
         self._subs = [(sub, h) for sub, h in self._subs if id(sub) not in gone]
-        for sub, _ in self._ready_subs:
-            try:
-                sub.undeclare()
-            except ZENOH_ERRORS as exc:  # best effort, as on close
-                log.debug("undeclare after readiness: %s", exc)
+        _undeclare([sub for sub, _ in self._ready_subs], "after readiness")
         self._ready_subs = []
 
     def _on_odometry(self, sample: Any) -> None:
@@ -321,8 +317,14 @@ class SwarmBus:
     def close(self) -> None:
         if self.faults is not None:
             self.faults.close()
-        for sub in [self._odo_listener, *(sub for sub, _ in self._subs)]:
-            try:
-                sub.undeclare()
-            except ZENOH_ERRORS as exc:  # closing is best effort
-                log.debug("undeclare on close: %s", exc)
+        _undeclare([self._odo_listener, *(sub for sub, _ in self._subs)], "on close")
+
+
+def _undeclare(entities: list[Any], when: str) -> None:
+    """Undeclare each of ``entities`` (subscribers, listeners), best effort: one that is
+    already gone, or whose session closed, is logged at debug level and skipped."""
+    for ent in entities:
+        try:
+            ent.undeclare()
+        except ZENOH_ERRORS as exc:
+            log.debug("undeclare %s: %s", when, exc)
