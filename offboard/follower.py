@@ -120,6 +120,8 @@ class FollowerAgent(AgentBase):
         # scenario indices of the agents heard from, sorted (_predicted_pairs), kept for
         # the number of agents heard (NeighbourPredictor.last only grows)
         self._heard: tuple[int, list[int]] = (0, [])
+        # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
+        self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
         self.fallbacks = 0
         self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
@@ -290,9 +292,12 @@ class FollowerAgent(AgentBase):
         leader, its last estimate says it no longer cooperates (docs/safety.md, A5), or it
         is sensed but has never been heard from (a real-time start: its daemon may not be
         flying it yet, so nothing says it will do its share)."""
-        last, ids = self.pred.last, self.ids
-        silent = [(e := last.get(ids[j])) is None or not e.cooperative for j in sel.tolist()]
-        return self.leader_mask[sel] | np.array(silent, dtype=bool)
+        rev = self.pred.revision
+        if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
+            last = self.pred.last
+            silent = [(e := last.get(aid)) is None or not e.cooperative for aid in self.ids]
+            self._full = (rev, self.leader_mask | np.array(silent, dtype=bool))
+        return self._full[1][sel]
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the

@@ -81,6 +81,10 @@ class NeighbourPredictor:
         self.gains = {False: fol_gains, True: lead_gains}
         self.last: dict[int, NeighbourEstimate] = {}
         self._a_dev: dict[int, float] = {}  # per agent: a_dev of its last estimate (m/s²)
+        # bumped when an agent is first heard from or its ``cooperative`` flag changes:
+        # what a reader derives from who is heard and who cooperates is current while
+        # this is unchanged
+        self.revision = 0
 
     def exo(self, n: int) -> np.ndarray:
         """12×12 exosystem propagator over ``n`` control periods (cached)."""
@@ -109,6 +113,8 @@ class NeighbourPredictor:
         for j, e in neighbours.items():
             old = last.get(j)
             if old is None or e.t >= old.t:
+                if old is None or old.cooperative != e.cooperative:
+                    self.revision += 1
                 last[j] = e
                 self._a_dev.pop(j, None)
 

@@ -35,6 +35,10 @@ def _c_einsum() -> Callable[..., Any]:
 
 einsum: Callable[..., Any] = _c_einsum()
 
+_F64 = np.dtype(np.float64)  # the native float64 dtype, a singleton numpy reuses
+_VEC3_SHAPE, _VEC3_STRIDES = (3,), (8,)
+_ROWS3_STRIDES = (24, 8)
+
 
 def norm(x: np.ndarray) -> float:
     """``float(np.linalg.norm(x))`` for a 1-D float64 array (same dot, same sqrt)."""
@@ -43,8 +47,9 @@ def norm(x: np.ndarray) -> float:
 
 def rows3(x: np.ndarray) -> np.ndarray:
     """``x`` as a C-contiguous float64 (M,3) array for a compiled kernel (the same array,
-    no copy, when it already is one)."""
-    if x.dtype == np.float64 and x.ndim == 2 and x.flags.c_contiguous:
+    no copy, when it already is one: float64 with strides (24, 8), i.e. C order; any
+    other layout, a byte-swapped dtype included, takes the converting path)."""
+    if x.dtype is _F64 and x.strides == _ROWS3_STRIDES and x.ndim == 2:
         return x
     return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
 
@@ -57,8 +62,8 @@ def f64(x: np.ndarray) -> np.ndarray:
 
 def vec3(x: np.ndarray) -> np.ndarray:
     """``x`` as a C-contiguous float64 (3,) array for a compiled kernel (the same array,
-    no copy, when it already is one)."""
-    if x.dtype == np.float64 and x.flags.c_contiguous and x.shape == (3,):
+    no copy, when it already is one: native float64, shape (3,), stride 8; the checks
+    are plain attribute compares, cheaper than ``x.flags``)."""
+    if x.dtype is _F64 and x.shape == _VEC3_SHAPE and x.strides == _VEC3_STRIDES:
         return x
     return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
-
