@@ -179,7 +179,7 @@ class DesiredStateObserver:
 
     def update(self, nbr_xi: dict[int, np.ndarray]) -> None:
         """Advance ξ̂ from t_k to t_k+1 given neighbours' ξ̂_j (leaders' ξ) for t_k."""
-        used = tuple(j for j in self.nbrs if j in nbr_xi)
+        used = tuple([j for j in self.nbrs if j in nbr_xi])
         if not used:
             self.xi = self.exo @ self.xi
             return

@@ -110,7 +110,7 @@ class DropoutHold:
         """(sel, rp, rv): indices of the pairs to constrain at ``t`` (s) and the (N,3)
         relative positions p_j − p_i (m) / velocities (m/s) to use for them."""
         if not self.enabled:
-            return np.nonzero(valid)[0], rel_p, rel_v
+            return valid.nonzero()[0], rel_p, rel_v
         sel, rp_s, rv_s, n_held = hold_kernel(
             float(t), np.ascontiguousarray(valid, dtype=np.bool_),
             np.ascontiguousarray(rel_p, dtype=float), np.ascontiguousarray(rel_v, dtype=float),

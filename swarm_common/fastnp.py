@@ -35,7 +35,10 @@ def _c_einsum() -> Callable[..., Any]:
 
 einsum: Callable[..., Any] = _c_einsum()
 
-_F64 = np.dtype(np.float64)  # the native float64 dtype, a singleton numpy reuses
+# the native float64 dtype: compared with ``==`` (not ``is``: the arrays a compiled kernel
+# returns carry an equal dtype object of their own), ≈ 40 ns against ≈ 80 ns for
+# ``== np.float64``, which converts the scalar type first
+_F64 = np.dtype(np.float64)
 _VEC3_SHAPE, _VEC3_STRIDES = (3,), (8,)
 _ROWS3_STRIDES = (24, 8)
 
@@ -49,7 +52,7 @@ def rows3(x: np.ndarray) -> np.ndarray:
     """``x`` as a C-contiguous float64 (M,3) array for a compiled kernel (the same array,
     no copy, when it already is one: float64 with strides (24, 8), i.e. C order; any
     other layout, a byte-swapped dtype included, takes the converting path)."""
-    if x.dtype is _F64 and x.strides == _ROWS3_STRIDES and x.ndim == 2:
+    if x.dtype == _F64 and x.strides == _ROWS3_STRIDES and x.ndim == 2:
         return x
     return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
 
@@ -62,8 +65,8 @@ def f64(x: np.ndarray) -> np.ndarray:
 
 def vec3(x: np.ndarray) -> np.ndarray:
     """``x`` as a C-contiguous float64 (3,) array for a compiled kernel (the same array,
-    no copy, when it already is one: native float64, shape (3,), stride 8; the checks
-    are plain attribute compares, cheaper than ``x.flags``)."""
-    if x.dtype is _F64 and x.shape == _VEC3_SHAPE and x.strides == _VEC3_STRIDES:
+    no copy, when it already is one: native float64, shape (3,), stride 8; plain
+    attribute compares, cheaper than ``x.flags``)."""
+    if x.dtype == _F64 and x.shape == _VEC3_SHAPE and x.strides == _VEC3_STRIDES:
         return x
     return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
