@@ -118,8 +118,9 @@ class DcbfFilter(SafetyFilter):
             self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
             self._rel_acc, self._rel_ok,
         )
-        brake = -x.w - self.brake_gain * x.z2
-        res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min, brake)
+        gain = self.brake_gain
+        res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min,
+                            lambda: -x.w - gain * x.z2)  # the fallback, formed if taken
         return SafetyOutput(
             res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
         )

@@ -227,13 +227,12 @@ class FollowerAgent(AgentBase):
         neighbours that are not sensed now but predicted (:meth:`_predicted_pairs`)."""
         margin = np.zeros(len(sel))
         predicted = np.zeros(len(sel), dtype=bool)
-        if self.method == Method.DCBF:
-            idx, pp, pv, pm = self._predicted_pairs(t, sel)
-            if len(idx):
-                sel = np.concatenate([sel, idx])
-                dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
-                margin = np.concatenate([margin, pm])
-                predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
+        if self.method == Method.DCBF and (extra := self._predicted_pairs(t, sel)) is not None:
+            idx, pp, pv, pm = extra
+            sel = np.concatenate([sel, idx])
+            dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
+            margin = np.concatenate([margin, pm])
+            predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
         return SafetyInput(
             clf, w, self.deso.z2, dp, dv, sel, peers.lead_acc, self.a_real, self.u_prev,
             self.a_mean, self.acc_est.rows(sel), self._full_share(sel), self.deso.z1,
@@ -242,11 +241,12 @@ class FollowerAgent(AgentBase):
 
     def _predicted_pairs(
         self, t: float, sel: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """Agents within sensing range by their predicted position but not sensed now
-        (dropout, occlusion): (idx, Δp, Δv, margin). The margin (m) is the prediction's
-        error bound on the position plus τ times that on the velocity (docs/safety.md §5c),
-        so the barrier is kept against every position the other can be at."""
+        (dropout, occlusion): (idx, Δp, Δv, margin), None if there is none. The margin
+        (m) is the prediction's error bound on the position plus τ times that on the
+        velocity (docs/safety.md §5c), so the barrier is kept against every position the
+        other can be at."""
         sensed = set(sel.tolist())
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
@@ -264,8 +264,7 @@ class FollowerAgent(AgentBase):
             b = self.pred.bound(aid, t) or 0.0
             rows.append((j, dp, self.deso.z2 - got[1], b + tau * self.pred.velocity_bound(aid, t)))
         if not rows:
-            e = np.zeros((0, 3))
-            return np.zeros(0, dtype=int), e, e, np.zeros(0)
+            return None
         return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                 np.array([r[2] for r in rows]), np.array([r[3] for r in rows]))
 
