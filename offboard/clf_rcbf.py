@@ -60,7 +60,7 @@ from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
 from offboard.qp_rows_kernel import write_rows_kernel
 from swarm_common.enums import QPSolver, QPStatus
-from swarm_common.fastnp import einsum, f64, rows3, vec3
+from swarm_common.fastnp import einsum, f64, finite, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
@@ -264,7 +264,7 @@ class _ClfRowsQP:
                 return int(osqp.SolverStatus.OSQP_SOLVED), x_exact
         status, x = update_solve(self.solver, self.q, self.l, self.u, a.T[self._mask_t])
         sv = int(status)
-        if status in SOLVED and x is not None and np.isfinite(x).all():
+        if status in SOLVED and x is not None and finite(x):
             return sv, np.asarray(x, dtype=float)
         self.solver.warm_start(x=np.zeros(5), y=np.zeros(self.nrow))
         return sv, None

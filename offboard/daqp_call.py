@@ -13,6 +13,8 @@ from __future__ import annotations
 import daqp
 import numpy as np
 
+from swarm_common.fastnp import finite
+
 DAQP_INF = 1e30  # DAQP reads a bound at or beyond ±1e30 as absent
 DAQP_OPTIMAL = 1  # DAQP's exit flag of an optimal solution
 
@@ -32,4 +34,4 @@ def daqp_solve(
     if flag != DAQP_OPTIMAL:
         return None
     out = np.asarray(x, dtype=float)
-    return out if np.isfinite(out).all() else None
+    return out if finite(out) else None

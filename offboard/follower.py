@@ -28,7 +28,7 @@ from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
-from swarm_common.fastnp import norm
+from swarm_common.fastnp import finite, norm
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -323,7 +323,7 @@ class FollowerAgent(AgentBase):
             self.fallbacks += 1
         status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
         status.slack, status.violation = res.slack, res.violation
-        if not np.isfinite(u).all():
+        if not finite(u):
             u = np.clip(np.nan_to_num(-x.w), self.u_lo, self.u_hi)
             self.fallbacks += 1
         status.fallbacks = self.fallbacks

@@ -70,3 +70,10 @@ def vec3(x: np.ndarray) -> np.ndarray:
     if x.dtype == _F64 and x.shape == _VEC3_SHAPE and x.strides == _VEC3_STRIDES:
         return x
     return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
+
+
+def finite(x: np.ndarray) -> bool:
+    """``bool(np.isfinite(x).all())`` for a short float array (a control vector, a QP's
+    few variables): ≈ 0.2 µs instead of ≈ 1 µs (numpy's ``all`` is a Python-level
+    wrapper). Python-level per element, so it is the slower one beyond a few dozen."""
+    return all(map(math.isfinite, x.ravel().tolist()))
