@@ -9,7 +9,7 @@ from offboard.agent_base import CLIP_TOL, AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.bearing import Formation
 from offboard.governor import governor_for, log_governor
-from offboard.reference import LeaderTrajectory, xi_a, xi_at_rest, xi_j, xi_p, xi_v
+from offboard.reference import LeaderTrajectory, xi_at_rest, xi_p
 from offboard.takeoff import climb_xi, leader_origin
 from swarm_common.enums import Method
 from swarm_common.fastnp import f64
@@ -84,21 +84,22 @@ class LeaderAgent(AgentBase):
         neighbours: dict[int, NeighbourEstimate],
         comm_ok: bool = True,
     ) -> AgentOutput:
-        p = np.asarray(truth_p[self.index], dtype=float)
-        v = np.asarray(truth_v[self.index], dtype=float)
-        ref = self.current_reference(t)
-        a_ff = xi_a(ref) + self.veh.tau_rollpitch_s * xi_j(ref)  # lag compensation
-        u = a_ff - self.d_hat + self.kp * (xi_p(ref) - p) + self.kd * (xi_v(ref) - v)
-        u = np.clip(u, self.u_lo, self.u_hi)
+        p = f64(truth_p[self.index])
+        v = f64(truth_v[self.index])
+        # PD + feed-forward with lag compensation, clipped to the box (one compiled call)
+        u = leader_control_kernel(
+            f64(self.current_reference(t)), p, v, self.d_hat, self.veh.tau_rollpitch_s,
+            self.kp, self.kd, self.u_lo, self.u_hi,
+        )
         if self.landing is not None:
             u = self.landed_idle(t, float(p[2]), u)
         u = self.on_pad_floor(t, float(p[2]), u)
         sp, u_sub, clipped, u_mean = self.inner.command(u, self.yaw, self.substeps, CLIP_TOL)
         self._update_eso(v, u_sub)
-        a = u_mean + self.d_hat  # the period's mean realised control and disturbance
+        p1, v1 = leader_prediction_kernel(p, v, u_mean, self.d_hat, self.dt)
         est = NeighbourEstimate(
-            self.id, t + self.dt, p + v * self.dt + 0.5 * a * self.dt**2, v + a * self.dt,
-            self.d_hat.copy(), self.current_reference(t + self.dt), True,
+            self.id, t + self.dt, p1, v1, self.d_hat.copy(), self.current_reference(t + self.dt),
+            True,
         )
         status = AgentStatus(method=self.method, comm_ok=comm_ok, input_clipped=clipped)
         return self._output(sp, u, est, status, self.d_hat.copy())
@@ -131,3 +132,42 @@ def velocity_eso_kernel(
             vh[a] = vh[a] + dl * (u_sub[s, a] + dh[a] + l1 * err)
             dh[a] = dh[a] + k * err
     return vh, dh
+
+
+@kernel
+def leader_control_kernel(
+    ref: np.ndarray, p: np.ndarray, v: np.ndarray, d_hat: np.ndarray, tau: float, kp: float,
+    kd: float, lo: np.ndarray, hi: np.ndarray,
+) -> np.ndarray:
+    """The leader's command (m/s²): ``a_ff − d̂ + k_p (p* − p) + k_d (v* − v)`` with the
+    lag-compensating feed-forward ``a_ff = a* + τ j*`` of ξ = ``ref`` (12,), own position
+    p (m) and velocity v (m/s), the ESO's disturbance d̂ (m/s²), clipped to [lo, hi].
+    Per axis the numpy formulation's operations in its order (left to right), and
+    ``np.clip``'s (a NaN stays NaN), so the same bits."""
+    u = np.empty(3)
+    for a in range(3):
+        a_ff = ref[6 + a] + tau * ref[9 + a]
+        x = a_ff - d_hat[a] + kp * (ref[a] - p[a]) + kd * (ref[3 + a] - v[a])
+        if x < lo[a]:
+            x = lo[a]
+        if x > hi[a]:
+            x = hi[a]
+        u[a] = x
+    return u
+
+
+@kernel
+def leader_prediction_kernel(
+    p: np.ndarray, v: np.ndarray, u_mean: np.ndarray, d_hat: np.ndarray, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(p, v) one period ``dt`` (s) ahead at the constant acceleration a = ū + d̂ (the
+    period's mean realised control and the disturbance, m/s²): ``p + v dt + ½ a dt²``,
+    ``v + a dt``; the numpy formulation's operations in its order, so the same bits."""
+    p1 = np.empty(3)
+    v1 = np.empty(3)
+    dt2 = dt**2
+    for i in range(3):
+        a = u_mean[i] + d_hat[i]
+        p1[i] = p[i] + v[i] * dt + 0.5 * a * dt2
+        v1[i] = v[i] + a * dt
+    return p1, v1
