@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,6 +64,15 @@ from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.fastnp import einsum, f64, finite, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+
+# a safety QP's fallback input (m/s²), or a function giving it: the filters pass the
+# function, so the brake is formed only on the rare step that takes it
+Brake = np.ndarray | Callable[[], np.ndarray]
+
+
+def fallback_of(brake: Brake) -> np.ndarray:
+    """The fallback input of a safety QP's ``solve``, formed now if given as a function."""
+    return brake() if callable(brake) else brake
 
 
 @dataclass
@@ -348,9 +358,10 @@ class SafetyQP(_ClfRowsQP):
         n_hat: np.ndarray,
         rhs: np.ndarray,
         h: np.ndarray,
-        brake: np.ndarray,
+        brake: Brake,
     ) -> QPResult:
-        """Solve for u; ``brake`` (3,) is the fallback if OSQP fails (then clipped)."""
+        """Solve for u; ``brake`` (3,) is the fallback if OSQP fails (then clipped), or a
+        function giving it (:func:`fallback_of`)."""
         t0 = time.perf_counter()
         h_min = float(h.min()) if len(h) else float("inf")
         # Shortcut (exact): if the box-projected nominal input already satisfies every
@@ -366,14 +377,16 @@ class SafetyQP(_ClfRowsQP):
         self._fit(len(rhs))
         m = self.m
         k = min(len(rhs), m)
-        finite = np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all() and np.isfinite(
+        ok = np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all() and np.isfinite(
             clf.lgv).all() and np.isfinite(clf.lfv) and np.isfinite(clf.V)
-        if not finite:
-            u = np.clip(np.nan_to_num(brake, posinf=0.0, neginf=0.0), self.u_lo, self.u_hi)
+        if not ok:
+            u = np.clip(np.nan_to_num(fallback_of(brake), posinf=0.0, neginf=0.0), self.u_lo,
+                        self.u_hi)
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
         sv, x = self._solve_rows(u_nom, clf, clf_rhs, n_hat, rhs, k)
-        u = np.clip(x[0:3] if x is not None else np.nan_to_num(brake), self.u_lo, self.u_hi)
+        u = np.clip(x[0:3] if x is not None else np.nan_to_num(fallback_of(brake)), self.u_lo,
+                    self.u_hi)
         out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out

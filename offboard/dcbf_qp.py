@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 
 import numpy as np
 import osqp
 from scipy import sparse
 
-from offboard.clf_rcbf import ClfTerms, QPResult, _ClfRowsQP
+from offboard.clf_rcbf import Brake, ClfTerms, QPResult, _ClfRowsQP, fallback_of
 from offboard.dcbf import InputSet
 from offboard.dcbf_kernel import rows_hold_kernel
 from offboard.qp_rows_kernel import rows_finite_kernel
@@ -82,10 +81,10 @@ class DcbfQP(_ClfRowsQP):
 
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
-        h_min: float, brake: np.ndarray | Callable[[], np.ndarray],
+        h_min: float, brake: Brake,
     ) -> QPResult:
         """Solve for u (always inside the input set); ``brake`` (3,) is the fallback, or a
-        function giving it (formed only when a fallback is taken)."""
+        function giving it (:func:`offboard.clf_rcbf.fallback_of`)."""
         t0 = time.perf_counter()
         self._fit(len(rhs))
         k = min(len(rhs), self.m)
@@ -95,7 +94,7 @@ class DcbfQP(_ClfRowsQP):
                             False)
         if not rows_finite_kernel(vec3(u_nom), rows3(g), f64(rhs), k, vec3(clf.lgv),
                                   float(clf.lfv), float(clf.V)):
-            u = self.uset.project(np.nan_to_num(_brake(brake), posinf=0.0, neginf=0.0))
+            u = self.uset.project(np.nan_to_num(fallback_of(brake), posinf=0.0, neginf=0.0))
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
         u_c = self.uset.project(u_nom)
@@ -107,7 +106,7 @@ class DcbfQP(_ClfRowsQP):
                             False)
         sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
         # the solver's answer up to its tolerance; project() is a no-op inside the set
-        u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(_brake(brake)))
+        u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(fallback_of(brake)))
         out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out
@@ -165,8 +164,3 @@ class DcbfQP(_ClfRowsQP):
         if not rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u):
             return None
         return u, delta
-
-
-def _brake(brake: np.ndarray | Callable[[], np.ndarray]) -> np.ndarray:
-    """The fallback of :meth:`DcbfQP.solve`, formed now if it was given as a function."""
-    return brake() if callable(brake) else brake

@@ -198,8 +198,9 @@ class RcbfFilter(SafetyFilter):
             x.dp, x.dv, w_safe, self._other_accel(x, lm), share, ctl.tau_safe_s, ctl.d_safe_m,
             ctl.gamma, h=h,
         )
-        brake = -x.w - self.qp.brake_gain * x.z2
-        res = self.qp.solve(x.clf.u_nom + side, x.clf, n_hat, rhs, h, brake)
+        gain = self.qp.brake_gain
+        res = self.qp.solve(x.clf.u_nom + side, x.clf, n_hat, rhs, h,
+                            lambda: -x.w - gain * x.z2)  # the fallback, formed if taken
         return SafetyOutput(
             res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
         )
