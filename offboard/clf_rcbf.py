@@ -60,8 +60,9 @@ from offboard.daqp_call import DAQP_INF, daqp_solve
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
 from offboard.qp_rows_kernel import write_rows_kernel
+from offboard.rcbf_kernel import rcbf_rows_kernel
 from swarm_common.enums import QPSolver, QPStatus
-from swarm_common.fastnp import einsum, f64, finite, rows3, vec3
+from swarm_common.fastnp import f64, finite, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 
@@ -159,18 +160,16 @@ def rcbf_rows(
     dp, dv (M,3): Δp = p_i − p_j, Δv = v_i − v_j; w_i (3,): own lumped disturbance
     estimate; a_other (M,3): other agent's acceleration taken as known (leaders'
     broadcast, zeros for followers); share (M,): 0.5 follower–follower, 1.0 vs leader.
-    ``margin`` (m/s²) tightens the rows against solver tolerance.
+    ``margin`` (m/s²) tightens the rows against solver tolerance. Compiled
+    (:func:`offboard.rcbf_kernel.rcbf_rows_kernel`).
     """
     if h is None:
         h = barrier(dp, dv, tau, d_safe)
-    base = 2.0 * einsum("ij,ij->i", dp, dv) + 2.0 * tau * einsum("ij,ij->i", dv, dv)
-    base += gamma * h**3
-    nrm = np.sqrt(einsum("ij,ij->i", dp, dp))
-    nrm = np.maximum(nrm, 1e-6)
-    n_hat = dp / nrm[:, None]
-    # 2τΔpᵀ(u + w_i − a_j) ≥ −share·base   →   n̂ᵀu ≥ −share·base/(2τ‖Δp‖) − n̂ᵀ(w_i − a_j)
-    rhs = -share * base / (2.0 * tau * nrm) - einsum("ij,ij->i", n_hat, w_i[None, :] - a_other)
-    return n_hat, rhs + margin, h
+    n_hat, rhs = rcbf_rows_kernel(
+        rows3(dp), rows3(dv), vec3(w_i), rows3(a_other), np.ascontiguousarray(share, float),
+        np.ascontiguousarray(h, float), float(tau), float(gamma), float(margin),
+    )
+    return n_hat, rhs, h
 
 
 def tangential_term(dp: np.ndarray, h: np.ndarray, gain: float, h_on: float) -> np.ndarray:

@@ -24,9 +24,10 @@ from typing import ClassVar, TypeVar
 import numpy as np
 
 from offboard.apf import apf_control, none_control
-from offboard.clf_rcbf import ClfTerms, SafetyQP, barrier, rcbf_rows, tangential_term
+from offboard.clf_rcbf import ClfTerms, SafetyQP, barrier, tangential_term
+from offboard.rcbf_kernel import rcbf_filter_rows_kernel, rcbf_params
 from swarm_common.enums import Method, QPStatus
-from swarm_common.fastnp import einsum
+from swarm_common.fastnp import einsum, rows3, vec3
 from swarm_common.scenario import ControllerConfig
 
 W_SAFE = 0.5  # m/s², bound on the lumped-disturbance estimate inside the RCBF rows
@@ -175,28 +176,30 @@ class RcbfFilter(SafetyFilter):
                            limit=others, solver=ctl.qp_solver)
         if ctl.tau_safe_s <= 0.0:
             raise ValueError("controller.tau_safe_s must be > 0 for the RCBF (relative degree 1)")
+        self._params = rcbf_params(ctl.tau_safe_s, ctl.d_safe_m, ctl.gamma, ctl.deadlock_gain,
+                                   ctl.deadlock_h_m2)
 
-    def _other_accel(self, x: SafetyInput, lm: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _other_accel(x: SafetyInput, lead: list[bool]) -> np.ndarray:
         """(M,3) acceleration of the other agent taken as known: leaders' broadcast a*,
-        zero for followers (Departure 13)."""
-        a_other = np.zeros((len(x.pairs), 3))
-        if x.lead_acc and np.any(lm):
-            for r in np.nonzero(lm)[0]:
-                a_other[r] = x.lead_acc.get(int(x.pairs[r]), 0.0)
+        zero for followers and for leaders not heard from (Departure 13)."""
+        a_other = np.zeros((len(lead), 3))
+        if x.lead_acc:
+            get = x.lead_acc.get
+            for r, j in enumerate(x.pairs.tolist()):
+                if lead[r] and (a := get(j)) is not None:
+                    a_other[r] = a
         return a_other
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
-        ctl = self.ctl
-        h = self._barrier(x)
-        side = self._sidestep(x, h)
-        lm = self.leader_mask[x.pairs]
-        share = np.where(lm, 1.0, 0.5)  # follower–follower pairs split the budget
-        # own disturbance in the barrier rows: the estimate saturated at W_SAFE, so a
-        # start-up transient of the observer cannot cancel a safety row
-        w_safe = saturate_norm(x.w, W_SAFE)
-        n_hat, rhs, h = rcbf_rows(
-            x.dp, x.dv, w_safe, self._other_accel(x, lm), share, ctl.tau_safe_s, ctl.d_safe_m,
-            ctl.gamma, h=h,
+        """Barrier, deadlock breaker, shares and rows in one compiled call
+        (:func:`offboard.rcbf_kernel.rcbf_filter_rows_kernel`), then the QP. The own
+        disturbance enters the rows saturated at W_SAFE, so a start-up transient of the
+        observer cannot cancel a safety row."""
+        lm = self.leader_mask[x.pairs]  # follower–follower pairs split the budget
+        n_hat, rhs, h, side = rcbf_filter_rows_kernel(
+            rows3(x.dp), rows3(x.dv), lm, self._other_accel(x, lm.tolist()),
+            vec3(saturate_norm(x.w, W_SAFE)), self._params,
         )
         gain = self.qp.brake_gain
         res = self.qp.solve(x.clf.u_nom + side, x.clf, n_hat, rhs, h,
