@@ -210,7 +210,6 @@ class _ClfRowsQP:
     limit: int  # the most rows the problem may grow to
     _weights: tuple[float, float, float]  # rho, violation weight, eps (for _setup)
     nrow: int
-    solver: osqp.OSQP
     q: np.ndarray
     l: np.ndarray
     u: np.ndarray
@@ -239,6 +238,33 @@ class _ClfRowsQP:
 
     def _setup(self, m: int) -> None:
         raise NotImplementedError
+
+    def _defer_osqp(self, pattern: np.ndarray, a_data: np.ndarray | None, eps: float) -> None:
+        """Keep the OSQP problem's setup data: the sparsity ``pattern`` (nrow, 5) of A, its
+        values in OSQP's (column-major) order (None: the pattern's ones), and copies of q,
+        l, u as they are now (the rows are written into them in place later). OSQP is
+        set up from exactly this data the first time :attr:`solver` is used: DAQP answers
+        almost every solve, and a problem grown on demand need not factorise until OSQP
+        is called. The solver is the same as one set up here and not used until then."""
+        self._osqp: osqp.OSQP | None = None
+        self._osqp_data = (pattern, a_data, self.q.copy(), self.l.copy(), self.u.copy(), eps)
+
+    @property
+    def solver(self) -> osqp.OSQP:
+        """The OSQP solver of the current problem, set up on first use (:meth:`_defer_osqp`)."""
+        if self._osqp is None:
+            pattern, a_data, q, lo, hi, eps = self._osqp_data
+            amat = sparse.csc_matrix(pattern)
+            if a_data is not None:
+                amat.data[:] = a_data
+            solver = osqp.OSQP()
+            solver.setup(
+                sparse.csc_matrix(self._h), q, amat, lo, hi,  # _h: the one Hessian (_start)
+                eps_abs=eps, eps_rel=eps, warm_starting=True, polishing=True,
+                verbose=False, max_iter=4000,
+            )
+            self._osqp = solver
+        return self._osqp
 
     def _fit(self, rows: int) -> None:
         """Grow the problem (doubling, at most to ``limit``) when ``rows`` safety rows do
@@ -334,8 +360,6 @@ class SafetyQP(_ClfRowsQP):
         pat[nrow - 1, 4] = 1.0
         self._mask_t = (pat != 0).T
         self._a = pat.copy()
-        pmat = sparse.csc_matrix(self._h)  # the one Hessian (_ClfRowsQP._start)
-        amat = sparse.csc_matrix(pat)
         self.l = np.full(nrow, -np.inf)
         self.u = np.full(nrow, np.inf)
         self.l[1 + m : 4 + m] = self.u_lo
@@ -343,12 +367,7 @@ class SafetyQP(_ClfRowsQP):
         self.l[nrow - 1] = 0.0
         self.q = np.zeros(5)
         self.q[4] = self.lin_sigma
-        self.solver = osqp.OSQP()
-        self.solver.setup(
-            pmat, self.q, amat, self.l, self.u,
-            eps_abs=eps, eps_rel=eps, warm_starting=True, polishing=True,
-            verbose=False, max_iter=4000,
-        )
+        self._defer_osqp(pat, None, eps)
 
     def solve(
         self,

@@ -18,8 +18,6 @@ import math
 import time
 
 import numpy as np
-import osqp
-from scipy import sparse
 
 from offboard.clf_rcbf import Brake, ClfTerms, QPResult, _ClfRowsQP, fallback_of
 from offboard.dcbf import InputSet
@@ -69,15 +67,7 @@ class DcbfQP(_ClfRowsQP):
         self.l[nrow - 1] = 0.0
         self.q = np.zeros(5)
         self.q[4] = self.lin_sigma
-        pmat = sparse.csc_matrix(self._h)  # the one Hessian (_ClfRowsQP._start)
-        amat = sparse.csc_matrix(pat)
-        amat.data[:] = self._a.T[self._mask_t]
-        self.solver = osqp.OSQP()
-        self.solver.setup(
-            pmat, self.q, amat, self.l, self.u,
-            eps_abs=eps, eps_rel=eps, warm_starting=True, polishing=True,
-            verbose=False, max_iter=4000,
-        )
+        self._defer_osqp(pat, self._a.T[self._mask_t], eps)
 
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
