@@ -164,3 +164,52 @@ def test_daqp_on_hostile_data_answers_finite_or_not_at_all() -> None:
             answered += 1
             assert x.shape == (5,) and np.isfinite(x).all()
     assert answered > 100 and refused > 100
+
+
+def _dcbf_problems(
+    rng: np.random.Generator, n: int
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    out = []
+    for _ in range(n):
+        m = int(rng.integers(1, 9))
+        u_nom = rng.normal(0, 4.0, 3)
+        g = rng.normal(0, 1, (m, 3))
+        g /= np.linalg.norm(g, axis=1)[:, None]
+        out.append((u_nom, g, g @ u_nom + rng.normal(0.3, 1.5, m)))
+    return out
+
+
+def test_osqp_set_up_on_first_use_is_the_solver_set_up_with_the_problem() -> None:
+    """OSQP is set up on first use (offboard.clf_rcbf._ClfRowsQP.solver) from the data the
+    problem was built with, not from the rows written since: a solver first used after
+    rows were written answers every later problem with the same bits as one set up when
+    the problem was built."""
+    uset = input_set_of(SC.controller, SC.vehicle)
+    rng = np.random.default_rng(21)
+    early = DcbfQP(8, uset, RHO, CLF_C, solver=QPSolver.OSQP)
+    late = DcbfQP(8, uset, RHO, CLF_C, solver=QPSolver.OSQP)
+    assert early.solver is early.solver  # set up now, once
+    assert late._osqp is None
+    for u_nom, g, rhs in _dcbf_problems(rng, 60):
+        clf = _clf(rng, np.zeros(3))
+        clf = ClfTerms(clf.V, clf.lfv, clf.lgv, u_nom)
+        got = [qp.solve(u_nom, clf, g, rhs, 0.0, np.zeros(3)) for qp in (early, late)]
+        assert np.array_equal(got[0].u, got[1].u) and got[0].status == got[1].status
+
+
+def test_daqp_alone_never_sets_up_osqp_and_a_grown_problem_gets_its_own(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    uset = input_set_of(SC.controller, SC.vehicle)
+    rng = np.random.default_rng(22)
+    qp = DcbfQP(2, uset, RHO, CLF_C, limit=16, solver=QPSolver.DAQP)
+    for u_nom, g, rhs in _dcbf_problems(rng, 40):
+        clf = _clf(rng, np.zeros(3))
+        qp.solve(u_nom, ClfTerms(clf.V, clf.lfv, clf.lgv, u_nom), g, rhs, 0.0, np.zeros(3))
+    assert qp.m > 2  # grew on demand
+    assert qp._osqp is None  # DAQP answered every solve
+    monkeypatch.setattr(clf_rcbf, "daqp_solve", lambda *a, **k: None)  # no DAQP optimum
+    u_nom, g, rhs = _dcbf_problems(rng, 1)[0]
+    sv, x = qp._solve_rows(u_nom, _clf(rng, np.zeros(3)), 0.0, g, rhs, len(rhs))
+    assert qp._osqp is not None and x is not None  # OSQP, set up for the grown problem
+    assert _rows_hold(qp, x, len(rhs), 1e-3)
