@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offboard.sensing_kernel import hold_kernel, measure_kernel
+from offboard.sensing_kernel import hold_kernel, measure_into
+from swarm_common.fastnp import rows3
 from swarm_common.scenario import SensingConfig
 
 
@@ -75,16 +76,19 @@ class Sensor:
 
         The noise is drawn here (N×8 standard normals, then N uniforms: the same draws for
         the same seed); the geometry, the noisy measurements and the validity mask are the
-        compiled :func:`offboard.sensing_kernel.measure_kernel`.
+        compiled :func:`offboard.sensing_kernel.measure_into`.
         """
         noise = self.rng.standard_normal((self.n, 8))
         drop = self.rng.random(self.n)
         sb, sr, sd, sdd = self._sig
-        valid, gm, gdm, dm, ddm, rel_p, rel_v = measure_kernel(
-            np.ascontiguousarray(p, dtype=float), np.ascontiguousarray(v, dtype=float),
-            self.index, noise, drop, sb, sr, sd, sdd, self.range, self.dropout,
+        n = self.n
+        out = Measurements(np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
+                           np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3)))
+        measure_into(
+            rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
+            self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
         )
-        return Measurements(valid, gm, gdm, dm, ddm, rel_p, rel_v)
+        return out
 
 
 class DropoutHold:
