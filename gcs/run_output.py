@@ -81,6 +81,11 @@ def set_truth_row(
     ser.tilt_deg[r] = tilt_deg(att)
 
 
+# QPStatus.degraded by status (a StrEnum: its value looks up the same entry), without
+# constructing the enum per agent and step
+_DEGRADED: dict[str, bool] = {s: s.degraded for s in QPStatus}
+
+
 def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
     """Row ``r`` of every agent's status, ``outs`` in scenario order: virtual control u
     (m/s²), estimated lumped disturbance, smallest barrier value, QP time (µs), whether the
@@ -89,7 +94,7 @@ def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
     ser.lumped_est[r] = [o.lumped for o in outs]
     ser.h_min[r] = [o.status.h_min for o in outs]
     ser.solve_us[r] = [o.status.solve_us for o in outs]
-    ser.fallback[r] = [QPStatus(o.status.qp_status).degraded for o in outs]
+    ser.fallback[r] = [_DEGRADED[o.status.qp_status] for o in outs]
     ser.input_clipped[r] = [bool(o.status.input_clipped) for o in outs]
 
 
