@@ -165,10 +165,12 @@ def rcbf_rows(
     """
     if h is None:
         h = barrier(dp, dv, tau, d_safe)
-    n_hat, rhs = rcbf_rows_kernel(
-        rows3(dp), rows3(dv), vec3(w_i), rows3(a_other), np.ascontiguousarray(share, float),
-        np.ascontiguousarray(h, float), float(tau), float(gamma), float(margin),
-    )
+    dp, dv, a_other = rows3(dp), rows3(dv), rows3(a_other)
+    share, h = np.ascontiguousarray(share, float), np.ascontiguousarray(h, float)
+    if not len(dv) == len(a_other) == len(share) == len(h) == len(dp):  # read unchecked
+        raise ValueError("rcbf_rows: dp, dv, a_other, share and h differ in length")
+    n_hat, rhs = rcbf_rows_kernel(dp, dv, vec3(w_i), a_other, share, h, float(tau),
+                                  float(gamma), float(margin))
     return n_hat, rhs, h
 
 

@@ -78,10 +78,13 @@ class Sensor:
         the same seed); the geometry, the noisy measurements and the validity mask are the
         compiled :func:`offboard.sensing_kernel.measure_into`.
         """
-        noise = self.rng.standard_normal((self.n, 8))
-        drop = self.rng.random(self.n)
-        sb, sr, sd, sdd = self._sig
         n = self.n
+        p, v = np.asarray(p), np.asarray(v)
+        if p.shape != (n, 3) or v.shape != (n, 3):  # the kernel writes n rows, unchecked
+            raise ValueError(f"truth of shapes {p.shape} and {v.shape}, expected ({n}, 3)")
+        noise = self.rng.standard_normal((n, 8))
+        drop = self.rng.random(n)
+        sb, sr, sd, sdd = self._sig
         out = Measurements(np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
                            np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3)))
         measure_into(

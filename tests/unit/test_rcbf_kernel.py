@@ -2,6 +2,7 @@
 of calls it replaced, the rows against the numpy formulation, and the filter's inputs."""
 
 import numpy as np
+import pytest
 
 from offboard.clf_rcbf import barrier, rcbf_rows, tangential_term
 from offboard.rcbf_kernel import (
@@ -111,3 +112,17 @@ def test_filter_takes_a_leaders_broadcast_acceleration_only() -> None:
                     {0: a_lead, 1: np.ones(3)})
     got = filt._other_accel(x, leaders[pairs].tolist())
     assert np.array_equal(got, np.array([a_lead, np.zeros(3), np.zeros(3)]))
+
+
+def test_rows_of_different_lengths_are_refused() -> None:
+    """The rows kernel reads its arrays without bounds checks: the wrapper refuses rows of
+    different lengths."""
+    rng = np.random.default_rng(4)
+    dp, dv, _lead, a_other, w = _case(rng, 4)
+    share = np.full(4, 0.5)
+    for args in ((dp, dv[:3], w, a_other, share), (dp, dv, w, a_other[:2], share),
+                 (dp, dv, w, a_other, share[:1])):
+        with pytest.raises(ValueError, match="length"):
+            rcbf_rows(*args, TAU, D_SAFE, GAMMA)
+    with pytest.raises(ValueError, match="length"):
+        rcbf_rows(dp, dv, w, a_other, share, TAU, D_SAFE, GAMMA, h=np.zeros(5))

@@ -171,3 +171,19 @@ def test_disabled_hold_passes_valid_pairs_through() -> None:
     rp, rv = np.ones((4, 3)), np.zeros((4, 3))
     sel, rp_s, rv_s = hold.pairs(0.0, valid, rp, rv)
     assert sel.tolist() == [0, 3] and rp_s is rp and rv_s is rv
+
+
+def test_truth_of_another_shape_is_refused_before_any_draw() -> None:
+    """The kernel writes N rows without bounds checks: truth of another shape is a
+    ValueError, raised before the noise is drawn (the seeded stream is not advanced)."""
+    rng = np.random.default_rng(8)
+    cfg = _config(rng, 0.1)
+    sensor = Sensor(1, 2, 5, cfg, 6.0, 3)
+    ok = rng.normal(0.0, 3.0, (5, 3))
+    for p, v in ((rng.normal(size=(6, 3)), ok), (ok, rng.normal(size=(5, 2))),
+                 (rng.normal(size=(15,)), ok), (rng.normal(size=(3, 5)), ok)):
+        with pytest.raises(ValueError, match="expected"):
+            sensor.measure(p, v)
+    twin = Sensor(1, 2, 5, cfg, 6.0, 3)
+    a, b = sensor.measure(ok, ok), twin.measure(ok, ok)
+    assert np.array_equal(a.rel_p, b.rel_p) and np.array_equal(a.valid, b.valid)
