@@ -1,6 +1,6 @@
 """Compiled synthetic sensing (:mod:`offboard.sensing`; paper §3 inputs, Departure 6).
 
-:func:`measure_kernel` is :meth:`offboard.sensing.Sensor.measure` without its random draws:
+:func:`measure_into` is :meth:`offboard.sensing.Sensor.measure` without its random draws:
 the caller draws the (N,8) standard normals and the N uniforms with its numpy Generator
 (same shapes, same order, so a seed gives the same noise) and passes them in; the kernel
 computes the relative geometry, the noisy measurements and the validity mask row by row.
@@ -29,14 +29,16 @@ def dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> fl
 
 
 @kernel
-def measure_kernel(
+def measure_into(
     p: np.ndarray, v: np.ndarray, i: int, noise: np.ndarray, drop: np.ndarray,
     sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-           np.ndarray]:
-    """(valid (N,) bool, g (N,3), ġ (N,3), d (N,), ḋ (N,), p_j − p_i (N,3), v_j − v_i
-    (N,3)) measured by agent ``i``; the last two from the measured ones,
-    ``g̃ d̃`` (m) and ``ġ̃ d̃ + g̃ ḋ̃`` (m/s).
+    valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
+    rel_p: np.ndarray, rel_v: np.ndarray,
+) -> None:
+    """Writes (valid (N,) bool, g (N,3), ġ (N,3), d (N,), ḋ (N,), p_j − p_i (N,3),
+    v_j − v_i (N,3)) measured by agent ``i`` into ``valid, gm, gdm, dm, ddm, rel_p,
+    rel_v``, every element; the last two from the measured ones, ``g̃ d̃`` (m) and
+    ``ġ̃ d̃ + g̃ ḋ̃`` (m/s).
 
     p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (N,8) standard
     normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate); drop (N,)
@@ -47,31 +49,12 @@ def measure_kernel(
     (row i: (1,0,0)), ``ḋ = gᵀw``, ``ġ = (w − g ḋ)/d`` (module docstring of
     :mod:`offboard.sensing`); measured ``g̃ = (g + σ_b n)/‖g + σ_b n‖``, ``ġ + σ_r n``,
     ``d + σ_d n``, ``ḋ + σ_ḋ n``; valid iff ``d ≤ range``, ``drop ≥ dropout`` and j ≠ i.
+
+    The caller allocates the outputs: a kernel that returned seven new arrays would pay
+    for boxing each of them in Python (about 0.3 µs apiece), three times the cost of
+    ``np.empty``. Rows are not bounds-checked: the caller checks the shapes
+    (:meth:`offboard.sensing.Sensor.measure`).
     """
-    n = p.shape[0]
-    valid = np.empty(n, dtype=np.bool_)
-    gm = np.empty((n, 3))
-    gdm = np.empty((n, 3))
-    dm = np.empty(n)
-    ddm = np.empty(n)
-    rel_p = np.empty((n, 3))
-    rel_v = np.empty((n, 3))
-    measure_into(p, v, i, noise, drop, sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm, dm,
-                 ddm, rel_p, rel_v)
-    return valid, gm, gdm, dm, ddm, rel_p, rel_v
-
-
-@kernel
-def measure_into(
-    p: np.ndarray, v: np.ndarray, i: int, noise: np.ndarray, drop: np.ndarray,
-    sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
-    valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
-    rel_p: np.ndarray, rel_v: np.ndarray,
-) -> None:
-    """:func:`measure_kernel` into the caller's arrays: valid (N,) bool, gm, gdm (N,3),
-    dm, ddm (N,), rel_p, rel_v (N,3), every element written. A kernel that returns seven
-    new arrays pays for boxing each of them in Python (about 0.3 µs apiece); the caller's
-    ``np.empty`` costs a third of that."""
     n = p.shape[0]
     g = np.empty(3)
     w = np.empty(3)
