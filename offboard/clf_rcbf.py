@@ -60,7 +60,7 @@ from offboard.daqp_call import DAQP_INF, daqp_solve
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
 from offboard.qp_rows_kernel import write_rows_kernel
-from offboard.rcbf_kernel import rcbf_rows_kernel
+from offboard.rcbf_kernel import RCBF_ROW_MARGIN, rcbf_rows_kernel
 from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
 
@@ -152,7 +152,7 @@ def rcbf_rows(
     tau: float,
     d_safe: float,
     gamma: float,
-    margin: float = 1e-3,
+    margin: float = RCBF_ROW_MARGIN,
     h: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """RCBF rows ``n̂ᵀu ≥ r`` for agent i (Departures 12–13) and h per pair.

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from offboard.dcbf_kernel import dcbf_rows_kernel, ground_rows_kernel, other_term_kernel
-from offboard.pair_kernel import barrier_kernel, tangential_kernel
+from offboard.pair_kernel import FULL_SHARE, SPLIT_SHARE, barrier_kernel, tangential_kernel
 from swarm_common.jit import kernel
 
 # layout of the parameter array (dcbf_params)
@@ -99,7 +99,7 @@ def dcbf_filter_rows_kernel(
     share = np.empty(m)
     d = np.empty(m)
     for i in range(m):
-        share[i] = 1.0 if full_share[i] else 0.5
+        share[i] = FULL_SHARE if full_share[i] else SPLIT_SHARE
         d[i] = params[P_D_SAFE] + margin[i]
     other = other_term_kernel(
         pairs, predicted, dv, other_acc, w_safe, a_mean, params[P_DT], params[P_SMOOTH],

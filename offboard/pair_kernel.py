@@ -14,6 +14,12 @@ import numpy as np
 
 from swarm_common.jit import kernel
 
+# the share of a pair's avoidance budget one agent takes (§4.4, Departure 13): all of it
+# where the other does not share it (a leader, or an agent that no longer cooperates),
+# else half (follower–follower pairs split it)
+FULL_SHARE = 1.0
+SPLIT_SHARE = 0.5
+
 
 @kernel
 def barrier_kernel(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from offboard.pair_kernel import barrier_kernel, tangential_kernel
+from offboard.pair_kernel import FULL_SHARE, SPLIT_SHARE, barrier_kernel, tangential_kernel
 from swarm_common.jit import kernel
 
 # layout of the parameter array (rcbf_params)
@@ -32,8 +32,6 @@ P_SIDE_H = 5  # barrier value below which it acts (m²)
 N_PARAMS = 6
 
 RCBF_ROW_MARGIN = 1e-3  # m/s², the rows' default tightening (P_MARGIN)
-LEADER_SHARE = 1.0  # share of the avoidance budget taken against a leader
-FOLLOWER_SHARE = 0.5  # follower–follower pairs split it
 
 
 def rcbf_params(
@@ -80,7 +78,8 @@ def rcbf_filter_rows_kernel(
     params: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(n̂, r, h, sidestep) of one RCBF step. ``lead`` (M,) bool: the other is a leader
-    (the whole budget, :data:`LEADER_SHARE`; else :data:`FOLLOWER_SHARE`); a_other (M,3)
+    (the whole budget, ``FULL_SHARE``; else ``SPLIT_SHARE``, of
+    :mod:`offboard.pair_kernel`); a_other (M,3)
     its acceleration taken as known (m/s²); w_safe (3,) the own disturbance estimate,
     saturated (m/s²); ``params`` of :func:`rcbf_params`."""
     m = dp.shape[0]
@@ -90,7 +89,7 @@ def rcbf_filter_rows_kernel(
         side = tangential_kernel(dp, h, params[P_SIDE_GAIN], params[P_SIDE_H])
     share = np.empty(m)
     for i in range(m):
-        share[i] = LEADER_SHARE if lead[i] else FOLLOWER_SHARE
+        share[i] = FULL_SHARE if lead[i] else SPLIT_SHARE
     n_hat, rhs = rcbf_rows_kernel(dp, dv, w_safe, a_other, share, h, params[P_TAU],
                                   params[P_GAMMA], params[P_MARGIN])
     return n_hat, rhs, h, side

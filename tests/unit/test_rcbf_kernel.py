@@ -5,13 +5,8 @@ import numpy as np
 import pytest
 
 from offboard.clf_rcbf import barrier, rcbf_rows, tangential_term
-from offboard.rcbf_kernel import (
-    FOLLOWER_SHARE,
-    LEADER_SHARE,
-    rcbf_filter_rows_kernel,
-    rcbf_params,
-    rcbf_rows_kernel,
-)
+from offboard.pair_kernel import FULL_SHARE, SPLIT_SHARE
+from offboard.rcbf_kernel import rcbf_filter_rows_kernel, rcbf_params, rcbf_rows_kernel
 from offboard.safety_filter import RcbfFilter, SafetyInput
 from swarm_common.scenario import load_scenario
 
@@ -46,7 +41,7 @@ def test_fused_call_equals_the_chain_it_replaced() -> None:
         dp, dv, lead, a_other, w = _case(rng, m)
         n_hat, rhs, h, side = rcbf_filter_rows_kernel(dp, dv, lead, a_other, w, params)
         h_ref = barrier(dp, dv, TAU, D_SAFE)
-        share = np.where(lead, LEADER_SHARE, FOLLOWER_SHARE)
+        share = np.where(lead, FULL_SHARE, SPLIT_SHARE)
         n_ref, r_ref, _ = rcbf_rows(dp, dv, w, a_other, share, TAU, D_SAFE, GAMMA, h=h_ref)
         side_ref = tangential_term(dp, h_ref, SIDE_GAIN, SIDE_H)
         for got, ref in ((n_hat, n_ref), (rhs, r_ref), (h, h_ref), (side, side_ref)):
