@@ -30,7 +30,10 @@ SIM_CMD = [sys.executable, "-m", "vehicle_sim.cli"]
 HOVER_NORM = 1.8 * 9.81 / 52.92
 
 
-_used_offsets: set[int] = set()
+# offsets this session has used, oldest first: never used again while any other is free
+_used_offsets: list[int] = []
+# every offset free_port_offset may give: multiples of 1000 (never 0), or 300 above one
+OFFSET_POOL = tuple(k * 1000 + s for k in range(1, 46) for s in (0, 300))
 # offsets this process holds a claim on until the current test ends (see _claim_offset)
 _claimed: list[int] = []
 CLAIM_DIR = Path(tempfile.gettempdir()) / "bearing-swarm-port-offsets"
@@ -70,20 +73,26 @@ def release_port_offsets() -> None:
 
 
 def free_port_offset(n_vehicles: int = 8) -> int:
-    """A port offset (multiple of 1000, never 0) whose ports are all free right now,
-    claimed against other test sessions until the current test ends.
+    """A port offset of :data:`OFFSET_POOL` whose ports are all free right now, claimed
+    against other test sessions until the current test ends.
+
+    Offsets this session has not used yet come first, in random order; then, should every
+    one of those be taken, the ones it used longest ago (a session of the whole suite
+    can use most of the 90, and a second copy of the suite claims others meanwhile).
 
     Multiples of 1000 keep every port of one offset away from every port of another
     (vehicle ports end in 540-835, 000-244, 570-824; Zenoh's in 447)."""
-    rng = random.SystemRandom()
-    for _ in range(200):
-        off = rng.randrange(1, 46) * 1000 + rng.choice([0, 300])
-        if off in _used_offsets or not _claim_offset(off):
+    fresh = [off for off in OFFSET_POOL if off not in _used_offsets]
+    random.SystemRandom().shuffle(fresh)
+    for off in [*fresh, *_used_offsets]:
+        if not _claim_offset(off):
             continue
         ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
         zenoh_free = port_free(DEFAULT_ZENOH_PORT + off, socket.SOCK_STREAM)
         if all(port_free(p) for p in ports) and zenoh_free:
-            _used_offsets.add(off)
+            if off in _used_offsets:
+                _used_offsets.remove(off)
+            _used_offsets.append(off)
             return off
         (CLAIM_DIR / f"{off}.pid").unlink(missing_ok=True)
         _claimed.remove(off)

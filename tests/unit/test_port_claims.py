@@ -31,3 +31,27 @@ def test_claims_block_live_owners_and_take_over_dead_ones(
     assert (tmp_path / "9000.pid").read_text() == str(os.getpid())
     conftest.release_port_offsets()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["8000.pid"]  # not ours to free
+
+
+def test_a_session_that_used_every_offset_reuses_the_oldest(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Offsets not used yet in the session come first; once the pool is used up, the one
+    used longest ago whose ports are free is given again, not a RuntimeError."""
+    monkeypatch.setattr(conftest, "CLAIM_DIR", tmp_path)
+    monkeypatch.setattr(conftest, "_claimed", [])
+    pool = conftest.OFFSET_POOL[:3]
+    monkeypatch.setattr(conftest, "OFFSET_POOL", pool)
+    monkeypatch.setattr(conftest, "_used_offsets", [])
+    monkeypatch.setattr(conftest, "port_free", lambda port, kind=None: True)
+    got = []
+    for _ in range(3):
+        got.append(conftest.free_port_offset())
+        conftest.release_port_offsets()
+    assert sorted(got) == sorted(pool)  # each fresh one once
+    assert conftest.free_port_offset() == got[0]  # then the oldest
+    conftest.release_port_offsets()
+    # an offset another live session holds is skipped even when it is the oldest
+    (tmp_path / f"{got[1]}.pid").write_text("1")
+    assert conftest.free_port_offset() == got[2]
+    conftest.release_port_offsets()
