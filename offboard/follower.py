@@ -34,6 +34,10 @@ from swarm_common.scenario import Scenario
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
 MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s at 50 Hz)
+# a neighbour not heard from for longer than this is no longer trusted to do its half of
+# an avoidance (docs/safety.md §5b): s, and at least this many control periods
+SILENT_AFTER_S = 0.1
+SILENT_AFTER_PERIODS = 3
 
 
 # the DESO gain report of a formation and observer gains, once per process
@@ -122,6 +126,7 @@ class FollowerAgent(AgentBase):
         self._heard: tuple[int, list[int]] = (0, [])
         # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
         self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
+        self.silent_after = max(SILENT_AFTER_S, SILENT_AFTER_PERIODS * self.dt)  # s
         self.fallbacks = 0
         self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
@@ -235,7 +240,7 @@ class FollowerAgent(AgentBase):
             predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
         return SafetyInput(
             clf, w, self.deso.z2, dp, dv, sel, peers.lead_acc, self.a_real, self.u_prev,
-            self.a_mean, self.acc_est.rows(sel), self._full_share(sel), self.deso.z1,
+            self.a_mean, self.acc_est.rows(sel), self._full_share(sel, t), self.deso.z1,
             self._ground_floor(), margin, predicted,
         )
 
@@ -286,17 +291,30 @@ class FollowerAgent(AgentBase):
             self._airborne = True
         return floor if self._airborne else None
 
-    def _full_share(self, sel: np.ndarray) -> np.ndarray:
-        """(M,) True where this agent takes the whole avoidance budget: the other is a
-        leader, its last estimate says it no longer cooperates (docs/safety.md, A5), or it
-        is sensed but has never been heard from (a real-time start: its daemon may not be
-        flying it yet, so nothing says it will do its share)."""
+    def _full_share(self, sel: np.ndarray, t: float) -> np.ndarray:
+        """(M,) True where this agent takes the whole avoidance budget (docs/safety.md A5,
+        §5b): the other is a leader; its last estimate says it no longer cooperates; it is
+        sensed but has never been heard from (a real-time start: its daemon may not be
+        flying it yet); or it alone fell silent: no estimate from it for more than
+        ``silent_after`` (s) at ``t`` while others are heard within that time. Its daemon
+        is then stopped, dead or cut off, so its vehicle flies an old setpoint or its
+        failsafe, not its half. When everyone is silent at once (this agent's own link is
+        out) nobody is singled out: the others still run their filters on their onboard
+        sensing. Silence is judged by the estimates' own stamps, so in-process and
+        lockstep runs judge it alike."""
         rev = self.pred.revision
         if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
             last = self.pred.last
             silent = [(e := last.get(aid)) is None or not e.cooperative for aid in self.ids]
             self._full = (rev, self.leader_mask | np.array(silent, dtype=bool))
-        return self._full[1][sel]
+        full = self._full[1][sel]  # a copy (fancy indexing)
+        since = t - self.silent_after
+        if self.pred.newest >= since:  # others are heard: a silent one stands out
+            last, ids = self.pred.last, self.ids
+            for r, j in enumerate(sel.tolist()):
+                if not full[r] and last[ids[j]].t < since:  # heard (else full), now silent
+                    full[r] = True
+        return full
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the

@@ -85,6 +85,7 @@ class NeighbourPredictor:
         # what a reader derives from who is heard and who cooperates is current while
         # this is unchanged
         self.revision = 0
+        self.newest = -math.inf  # s, the newest stamp received from anyone
 
     def exo(self, n: int) -> np.ndarray:
         """12×12 exosystem propagator over ``n`` control periods (cached)."""
@@ -117,6 +118,8 @@ class NeighbourPredictor:
                     self.revision += 1
                 last[j] = e
                 self._a_dev.pop(j, None)
+                if e.t > self.newest:
+                    self.newest = e.t
 
     def a_dev(self, e: NeighbourEstimate) -> float:
         """Bound (m/s²) on the gap between a follower's actual acceleration and the one its

@@ -21,7 +21,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
+from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID, port_free, swarm_udp_ports  # noqa: E402
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,8 +32,33 @@ HOVER_NORM = 1.8 * 9.81 / 52.92
 
 # offsets this session has used, oldest first: never used again while any other is free
 _used_offsets: list[int] = []
-# every offset free_port_offset may give: multiples of 1000 (never 0), or 300 above one
-OFFSET_POOL = tuple(k * 1000 + s for k in range(1, 46) for s in (0, 300))
+EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+
+
+def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
+    """The kernel's range of ephemeral ports (Linux's default where it cannot be read)."""
+    try:
+        lo, hi = (int(x) for x in path.read_text().split())
+    except (OSError, ValueError):
+        return 32768, 60999
+    return lo, hi
+
+
+def offset_pool(ephemeral: tuple[int, int]) -> tuple[int, ...]:
+    """Multiples of 1000 (never 0), or 300 above one, whose every port (Zenoh's
+    7447 + offset up to vehicle 255's GCS link, 18824 + offset) lies outside the
+    ephemeral range: any socket's outgoing connection on the machine can be given a port
+    inside it, and a test's ports were once found taken that way ("ports in use: tcp
+    34748"). Every candidate if fewer than 12 lie outside."""
+    lo, hi = ephemeral
+    every = [k * 1000 + s for k in range(1, 46) for s in (0, 300)]
+    first, last = DEFAULT_ZENOH_PORT, GCS_LOCAL_BASE + MAX_ID - 1
+    outside = [off for off in every if last + off < lo or first + off > hi]
+    return tuple(outside) if len(outside) >= 12 else tuple(every)
+
+
+# every offset free_port_offset may give (26 with Linux's default ephemeral range)
+OFFSET_POOL = offset_pool(ephemeral_port_range())
 # offsets this process holds a claim on until the current test ends (see _claim_offset)
 _claimed: list[int] = []
 CLAIM_DIR = Path(tempfile.gettempdir()) / "bearing-swarm-port-offsets"
@@ -78,7 +103,8 @@ def free_port_offset(n_vehicles: int = 8) -> int:
 
     Offsets this session has not used yet come first, in random order; then, should every
     one of those be taken, the ones it used longest ago (a session of the whole suite
-    can use most of the 90, and a second copy of the suite claims others meanwhile).
+    uses more offsets than the pool holds, and a second copy of the suite claims others
+    meanwhile).
 
     Multiples of 1000 keep every port of one offset away from every port of another
     (vehicle ports end in 540-835, 000-244, 570-824; Zenoh's in 447)."""
@@ -88,7 +114,10 @@ def free_port_offset(n_vehicles: int = 8) -> int:
         if not _claim_offset(off):
             continue
         ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
-        zenoh_free = port_free(DEFAULT_ZENOH_PORT + off, socket.SOCK_STREAM)
+        # the router's and the simulator's, judged as the launcher judges them (a
+        # TIME_WAIT of an earlier test does not keep Zenoh from binding)
+        zenoh_free = all(port_free(DEFAULT_ZENOH_PORT + off + k, socket.SOCK_STREAM,
+                                   allow_time_wait=True) for k in (0, 1))
         if all(port_free(p) for p in ports) and zenoh_free:
             if off in _used_offsets:
                 _used_offsets.remove(off)

@@ -12,6 +12,9 @@ from pathlib import Path
 import conftest
 import pytest
 
+from swarm_common.ports import swarm_udp_ports
+from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
+
 
 def test_claims_block_live_owners_and_take_over_dead_ones(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
@@ -43,7 +46,7 @@ def test_a_session_that_used_every_offset_reuses_the_oldest(
     pool = conftest.OFFSET_POOL[:3]
     monkeypatch.setattr(conftest, "OFFSET_POOL", pool)
     monkeypatch.setattr(conftest, "_used_offsets", [])
-    monkeypatch.setattr(conftest, "port_free", lambda port, kind=None: True)
+    monkeypatch.setattr(conftest, "port_free", lambda port, kind=None, allow_time_wait=False: True)
     got = []
     for _ in range(3):
         got.append(conftest.free_port_offset())
@@ -55,3 +58,20 @@ def test_a_session_that_used_every_offset_reuses_the_oldest(
     (tmp_path / f"{got[1]}.pid").write_text("1")
     assert conftest.free_port_offset() == got[2]
     conftest.release_port_offsets()
+
+
+def test_the_pool_keeps_every_port_out_of_the_ephemeral_range(tmp_path: Path) -> None:
+    """With Linux's default range every offset's ports (Zenoh's router and simulator,
+    every vehicle port up to id 255) lie below it; an unreadable range file falls back to
+    that default; a range that leaves too few offsets outside gives every candidate."""
+    lo, hi = 32768, 60999
+    pool = conftest.offset_pool((lo, hi))
+    assert len(pool) >= 12 and 0 not in pool
+    for off in pool:
+        ports = [*swarm_udp_ports(list(range(1, 256)), off),
+                 DEFAULT_ZENOH_PORT + off, DEFAULT_ZENOH_PORT + off + 1]
+        assert all(p < lo or p > hi for p in ports), off
+    assert conftest.ephemeral_port_range(tmp_path / "missing") == (lo, hi)
+    (tmp_path / "range").write_text("40000\t50000\n")
+    assert conftest.ephemeral_port_range(tmp_path / "range") == (40000, 50000)
+    assert len(conftest.offset_pool((1024, 65535))) == 90  # nothing outside: every one
