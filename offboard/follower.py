@@ -252,6 +252,8 @@ class FollowerAgent(AgentBase):
         (m) is the prediction's error bound on the position plus τ times that on the
         velocity (docs/safety.md §5c), so the barrier is kept against every position the
         other can be at."""
+        if len(sel) >= len(self.ids) - 1:  # every other agent is sensed: none to predict
+            return None
         sensed = set(sel.tolist())
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
