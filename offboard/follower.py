@@ -294,8 +294,8 @@ class FollowerAgent(AgentBase):
         return floor if self._airborne else None
 
     def _full_share(self, sel: np.ndarray, t: float) -> np.ndarray:
-        """(M,) True where this agent takes the whole avoidance budget (docs/safety.md A5,
-        §5b): the other is a leader; its last estimate says it no longer cooperates; it is
+        """(M,) True where this agent takes the whole avoidance budget in the dcbf filter
+        (docs/safety.md A5, §5b; rcbf keeps the paper's shares): the other is a leader; its last estimate says it no longer cooperates; it is
         sensed but has never been heard from (a real-time start: its daemon may not be
         flying it yet); or it alone fell silent: no estimate from it for more than
         ``silent_after`` (s) at ``t`` while others are heard within that time. Its daemon

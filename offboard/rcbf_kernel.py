@@ -74,12 +74,12 @@ def rcbf_rows_kernel(
 
 @kernel
 def rcbf_filter_rows_kernel(
-    dp: np.ndarray, dv: np.ndarray, full: np.ndarray, a_other: np.ndarray, w_safe: np.ndarray,
+    dp: np.ndarray, dv: np.ndarray, lead: np.ndarray, a_other: np.ndarray, w_safe: np.ndarray,
     params: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(n̂, r, h, sidestep) of one RCBF step. ``full`` (M,) bool: this agent takes the
-    whole budget against the other (a leader, or a follower not doing its half:
-    ``FULL_SHARE``; else ``SPLIT_SHARE``, of :mod:`offboard.pair_kernel`); a_other (M,3)
+    """(n̂, r, h, sidestep) of one RCBF step. ``lead`` (M,) bool: the other is a leader
+    (the whole budget, ``FULL_SHARE``; else ``SPLIT_SHARE``, of
+    :mod:`offboard.pair_kernel`); a_other (M,3)
     its acceleration taken as known (m/s²); w_safe (3,) the own disturbance estimate,
     saturated (m/s²); ``params`` of :func:`rcbf_params`."""
     m = dp.shape[0]
@@ -89,7 +89,7 @@ def rcbf_filter_rows_kernel(
         side = tangential_kernel(dp, h, params[P_SIDE_GAIN], params[P_SIDE_H])
     share = np.empty(m)
     for i in range(m):
-        share[i] = FULL_SHARE if full[i] else SPLIT_SHARE
+        share[i] = FULL_SHARE if lead[i] else SPLIT_SHARE
     n_hat, rhs = rcbf_rows_kernel(dp, dv, w_safe, a_other, share, h, params[P_TAU],
                                   params[P_GAMMA], params[P_MARGIN])
     return n_hat, rhs, h, side

@@ -196,12 +196,9 @@ class RcbfFilter(SafetyFilter):
         (:func:`offboard.rcbf_kernel.rcbf_filter_rows_kernel`), then the QP. The own
         disturbance enters the rows saturated at W_SAFE, so a start-up transient of the
         observer cannot cancel a safety row."""
-        lm = self.leader_mask[x.pairs]
-        # follower–follower pairs split the budget, unless the follower's mask says the
-        # other is not doing its half (offboard.follower, docs/safety.md §5b)
-        full = lm if x.full_share is None else x.full_share
+        lm = self.leader_mask[x.pairs]  # follower–follower pairs split the budget
         n_hat, rhs, h, side = rcbf_filter_rows_kernel(
-            rows3(x.dp), rows3(x.dv), full, self._other_accel(x, lm.tolist()),
+            rows3(x.dp), rows3(x.dv), lm, self._other_accel(x, lm.tolist()),
             vec3(saturate_norm(x.w, W_SAFE)), self._params,
         )
         gain = self.qp.brake_gain
