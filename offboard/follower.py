@@ -238,9 +238,11 @@ class FollowerAgent(AgentBase):
             dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
             margin = np.concatenate([margin, pm])
             predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
+        # only the dcbf filter reads the share mask (rcbf keeps the paper's shares)
+        full = self._full_share(sel, t) if self.method == Method.DCBF else None
         return SafetyInput(
             clf, w, self.deso.z2, dp, dv, sel, peers.lead_acc, self.a_real, self.u_prev,
-            self.a_mean, self.acc_est.rows(sel), self._full_share(sel, t), self.deso.z1,
+            self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
             self._ground_floor(), margin, predicted,
         )
 
@@ -295,15 +297,18 @@ class FollowerAgent(AgentBase):
 
     def _full_share(self, sel: np.ndarray, t: float) -> np.ndarray:
         """(M,) True where this agent takes the whole avoidance budget in the dcbf filter
-        (docs/safety.md A5, §5b; rcbf keeps the paper's shares): the other is a leader; its last estimate says it no longer cooperates; it is
-        sensed but has never been heard from (a real-time start: its daemon may not be
-        flying it yet); or it alone fell silent: no estimate from it for more than
-        ``silent_after`` (s) at ``t`` while others are heard within that time. Its daemon
-        is then stopped, dead or cut off, so its vehicle flies an old setpoint or its
-        failsafe, not its half. When everyone is silent at once (this agent's own link is
-        out) nobody is singled out: the others still run their filters on their onboard
-        sensing. Silence is judged by the estimates' own stamps, so in-process and
-        lockstep runs judge it alike."""
+        (docs/safety.md A5, §5b; rcbf keeps the paper's shares):
+        * the other is a leader;
+        * its last estimate says it no longer cooperates;
+        * it is sensed but has never been heard from (a real-time start: its daemon may
+          not be flying it yet);
+        * or it alone fell silent: no estimate from it for more than ``silent_after`` (s)
+          at ``t`` while others are heard within that time. Its daemon is then stopped,
+          dead or cut off, so its vehicle flies an old setpoint or its failsafe, not its
+          half. When everyone is silent at once (this agent's own link is out) nobody is
+          singled out: the others still run their filters on their onboard sensing.
+        Silence is judged by the estimates' own stamps, so in-process and lockstep runs
+        judge it alike."""
         rev = self.pred.revision
         if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
             last = self.pred.last
