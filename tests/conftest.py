@@ -21,7 +21,8 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID, port_free, swarm_udp_ports  # noqa: E402
+from gcs.launch_spec import MAX_PORT_OFFSET  # noqa: E402
+from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,6 +34,7 @@ HOVER_NORM = 1.8 * 9.81 / 52.92
 # offsets this session has used, oldest first: never used again while any other is free
 _used_offsets: list[int] = []
 EPHEMERAL_RANGE_FILE = Path("/proc/sys/net/ipv4/ip_local_port_range")
+PORT_LIMIT = 65535  # the highest TCP/UDP port
 
 
 def ephemeral_port_range(path: Path = EPHEMERAL_RANGE_FILE) -> tuple[int, int]:
@@ -52,7 +54,8 @@ def offset_pool(ephemeral: tuple[int, int]) -> tuple[int, ...]:
     34748"). Every candidate if fewer than 12 lie outside."""
     lo, hi = ephemeral
     every = [k * 1000 + s for k in range(1, 46) for s in (0, 300)]
-    first, last = DEFAULT_ZENOH_PORT, GCS_LOCAL_BASE + MAX_ID - 1
+    # the lowest port a swarm uses at offset 0, and its highest (the launcher's bound)
+    first, last = DEFAULT_ZENOH_PORT, PORT_LIMIT - MAX_PORT_OFFSET
     outside = [off for off in every if last + off < lo or first + off > hi]
     return tuple(outside) if len(outside) >= 12 else tuple(every)
 
