@@ -60,6 +60,9 @@ def test_busy_port_exits_2_with_one_line(tmp_path: Path, kind: str) -> None:
     else:
         port = DEFAULT_ZENOH_PORT + off
         s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        # as a server binds it: free_port_offset accepts a TIME_WAIT left there by an
+        # earlier test (Zenoh binds the same way); the listener makes it busy all the same
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     s.bind(("127.0.0.1", port))
     if kind == "tcp":
         s.listen()

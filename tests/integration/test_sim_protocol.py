@@ -458,6 +458,9 @@ def test_busy_port_exits_nonzero_naming_it(sim_factory):
 def test_busy_zenoh_port_exits_nonzero(sim_factory):
     off = free_port_offset()
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    # bound as a server binds it (free_port_offset accepts a TIME_WAIT left by an earlier
+    # test there, as Zenoh does); the listener makes the port busy all the same
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     s.bind(("127.0.0.1", DEFAULT_ZENOH_PORT + off))
     s.listen(1)
     try:
