@@ -20,6 +20,7 @@ Agents are addressed by their *index* in scenario order; ``ids`` maps index → 
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -95,6 +96,24 @@ class Formation:
     sensed: list[list[int]] = field(default_factory=list)
     _kfl: np.ndarray | None = None
     _obs_eigs: dict[float, np.ndarray] = field(default_factory=dict)
+    _digest: str | None = None
+
+    def content_digest(self) -> str:
+        """SHA-256 (hex) of what defines the formation's observers and their gain check:
+        the agents' roles, the graph (neighbours, the sensed sets), the projectors P*_ij
+        and L_ff. Two formations built from equal scenarios have equal digests, so a
+        result that depends on these alone can be shared between them (the runs of a
+        sweep; :attr:`offboard.follower.FollowerAgent.gains`). Computed once."""
+        if self._digest is None:
+            h = hashlib.sha256()
+            for part in (self.ids, self.leader_idx, self.follower_idx, self.neighbours,
+                         self.sensed):
+                h.update(repr(part).encode())
+            for arr in (self.p_star, self.l_ff):
+                h.update(repr((arr.shape, arr.dtype.str)).encode())
+                h.update(np.ascontiguousarray(arr).tobytes())
+            self._digest = h.hexdigest()
+        return self._digest
 
     @property
     def n(self) -> int:

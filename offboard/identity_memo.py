@@ -32,3 +32,23 @@ class IdentityMemo(Generic[R]):
             del self._got[next(iter(self._got))]
         self._got[key] = (obj, value)
         return value
+
+
+class ContentMemo(Generic[R]):
+    """``get(key, compute)``: ``compute()`` once per hashable ``key`` that names the
+    computation's whole input by content (a digest and parameters), so equal inputs built
+    as different objects share one result (the runs of a sweep). Bounded like
+    :class:`IdentityMemo`: at most ``size`` entries, the oldest dropped first."""
+
+    def __init__(self, size: int = 8) -> None:
+        self.size = size
+        self._got: dict[Hashable, R] = {}
+
+    def get(self, key: Hashable, compute: Callable[[], R]) -> R:
+        if key in self._got:
+            return self._got[key]
+        value = compute()
+        if len(self._got) >= self.size:
+            del self._got[next(iter(self._got))]
+        self._got[key] = value
+        return value
