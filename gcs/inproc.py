@@ -12,7 +12,8 @@ Same order as the distributed run (docs/architecture.md, lockstep), step k:
 4. the dynamics advance one control period (physics_hz/control_hz physics steps).
 
 Everything that would cross a wire is rounded to float32 with :func:`f32` /
-:func:`round_estimate`, so a distributed run can reproduce this one bit for bit.
+:func:`round_estimate` (all agents' estimates as one :func:`published_batch`), so a
+distributed run can reproduce this one bit for bit.
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ from gcs.run_output import (
 )
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.bearing import formation_from_scenario
-from offboard.daemon_peers import peer_ids
 from offboard.landing import landing_plan
+from offboard.peer_table import ROW, EstimateBatch
 from offboard.takeoff import is_ground_start, takeoff_plan
 from swarm_common.blas import single_thread_blas
 from swarm_common.frames import euler_enu_from_quats_ned
@@ -88,8 +89,7 @@ def wire_to_commands(
 def round_estimates(ests: list[NeighbourEstimate]) -> list[NeighbourEstimate]:
     """:func:`round_estimate` of each of ``ests``: the four vectors of all of them rounded
     in one array (the same float32 value per element)."""
-    x = f32(np.concatenate([v for e in ests for v in (e.z1, e.z2, e.z3, e.xi)]))
-    x = x.reshape(len(ests), -1)
+    x = _rounded_rows(ests)
     return [NeighbourEstimate(e.id, e.t, r[0:3], r[3:6], r[6:9], r[9:], e.is_leader)
             for e, r in zip(ests, x, strict=True)]
 
@@ -99,10 +99,21 @@ def round_estimate(e: NeighbourEstimate) -> NeighbourEstimate:
     return round_estimates([e])[0]
 
 
-def _in_order(ids: list[int] | tuple[int, ...], subset: list[int]) -> tuple[int, ...]:
-    """The ids of ``subset`` in the order of ``ids``."""
-    keep = set(subset)
-    return tuple(j for j in ids if j in keep)
+def _rounded_rows(ests: list[NeighbourEstimate]) -> np.ndarray:
+    """(len(ests), ROW) [z1, z2, z3, ξ] of each estimate, float32-rounded."""
+    x = f32(np.concatenate([v for e in ests for v in (e.z1, e.z2, e.z3, e.xi)]))
+    return x.reshape(len(ests), ROW)
+
+
+def published_batch(ests: list[NeighbourEstimate]) -> EstimateBatch:
+    """The estimates of all agents (scenario order) as every receiver sees them: one
+    :class:`~offboard.peer_table.EstimateBatch`, rows as :func:`round_estimates` rounds
+    them (t exact; every agent cooperates in process)."""
+    n = len(ests)
+    return EstimateBatch(
+        np.array([e.t for e in ests], dtype=np.float64), _rounded_rows(ests),
+        np.array([e.is_leader for e in ests], dtype=np.bool_), np.ones(n, dtype=np.bool_),
+    )
 
 
 def in_outage(t: float, outages: tuple[tuple[float, float], ...]) -> bool:
@@ -170,10 +181,9 @@ def run_inproc(
         if progress:
             for line in gains:
                 log.info("%s", line)
-        published = {ag.id: round_estimate(ag.initial_estimate()) for ag in agents}
-        # each agent reads its peers' estimates only, as its daemon subscribes to them only
-        # (in scenario order, as ``published`` is: O(peers) per agent, not O(N))
-        peers = {ag.id: _in_order(sc.ids, peer_ids(form, ag.id)) for ag in agents}
+        # every agent's estimate of the step before, as the receivers see it; each follower
+        # takes its peers' rows only, as its daemon subscribes to them only
+        published = published_batch([ag.initial_estimate() for ag in agents])
         n = sc.n
         ser = empty_series(np.arange(n_steps) * dt, n)
         md_run = math.inf
@@ -188,19 +198,15 @@ def run_inproc(
             tp, tv = f32(dyn.p), f32(dyn.v)
             comm = not in_outage(t, sc.outages)
             set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)
-            outs = []
-            for i, ag in enumerate(agents):
-                e = published[ag.id]
-                ser.z1[k, i], ser.z2[k, i] = e.z1, e.z2
-                nb = {j: published[j] for j in peers[ag.id]} if comm else {}
-                outs.append(ag.step(k, t, tp, tv, nb, comm))
+            ser.z1[k], ser.z2[k] = published.rows[:, 0:3], published.rows[:, 3:6]
+            outs = [ag.step(k, t, tp, tv, published, comm) for ag in agents]
             # the commands, estimates and records of all agents at once (each agent's
             # step reads the estimates of the step before and never the dynamics)
             dyn.set_commands(*wire_to_commands(
                 np.array([o.q_ned for o in outs]),
                 np.array([o.thrust_norm for o in outs], dtype=np.float32), f_max,
             ))
-            published = {e.id: e for e in round_estimates([o.estimate for o in outs])}
+            published = published_batch([o.estimate for o in outs])
             set_agent_rows(ser, k, outs)
             md = math.inf
             for _ in range(nsub):

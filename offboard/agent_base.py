@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from typing import ClassVar
 
 import numpy as np
@@ -12,6 +13,7 @@ import numpy as np
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import InnerLoopModel, Setpoint
 from offboard.landing import LANDED_Z, LandingPlan, LandingReference, landed
+from offboard.peer_table import EstimateBatch
 from offboard.safety_filter import parse_method
 from offboard.takeoff import TakeoffPlan, is_ground_start, takeoff_plan
 from swarm_common.enums import Method
@@ -131,7 +133,7 @@ class AgentBase(ABC):
         t: float,
         truth_p: np.ndarray,
         truth_v: np.ndarray,
-        neighbours: dict[int, NeighbourEstimate],
+        neighbours: Mapping[int, NeighbourEstimate] | EstimateBatch,
         comm_ok: bool = True,
     ) -> AgentOutput:
         """One control step at t_k (see :mod:`offboard.agent`)."""

@@ -295,9 +295,6 @@ class DESO:
         self._step_cache: dict[
             tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
         ] = {}
-        # neighbours' estimates ẑ_j1 (m), ẑ_j2 (m/s) of the period, rows in `used` order
-        self._zp = np.zeros((len(self.nbrs), 3))
-        self._zv = np.zeros((len(self.nbrs), 3))
         self.last_e1 = np.zeros(3)
         self.last_e2 = np.zeros(3)
         self.n_used = 0
@@ -362,33 +359,30 @@ class DESO:
         rel_pos: np.ndarray,
         rel_vel: np.ndarray,
         valid: np.ndarray,
-        nbr_p: dict[int, np.ndarray],
-        nbr_v: dict[int, np.ndarray],
+        peer_rows: np.ndarray,
+        have: np.ndarray,
         u_sub: np.ndarray,
     ) -> None:
         """Integrate from t_k to t_k+1.
 
         rel_pos/rel_vel (N,3): measured p_j − p_i, v_j − v_i at t_k; valid (N,) mask;
-        nbr_p/nbr_v: neighbours' estimates (leaders' states) for t_k by index;
+        peer_rows (N,≥6): neighbours' estimates (leaders' states) for t_k by scenario
+        index, ẑ_j1 then ẑ_j2 (:mod:`offboard.peer_table`), usable where ``have`` (N,);
         u_sub (substeps, 3): applied virtual control per sub-step.
         """
         f_cached, self._f_hat = self._f_hat, None
-        used = tuple([j for j in self.nbrs if valid[j] and j in nbr_p])
+        used = tuple([j for j in self.nbrs if valid[j] and have[j]])
         self.n_used = len(used)
         if not used:  # no relative information: dead-reckon with the model
             self.converged_s = 0.0
             self.coast(u_sub)
             return
         a_s, g, dmat, pu, idx = self._step_arrays(used)
-        zp, zv = self._zp, self._zv
-        for k, j in enumerate(used):
-            zp[k] = nbr_p[j]
-            zv[k] = nbr_v[j]
         f_hat = (f_cached if f_cached is not None
                  else model_accel_kernel(self.z1, self.z2, self.zeta, self.h))
         c = np.ascontiguousarray
         out = deso_step_kernel(
-            a_s, g, dmat, pu, idx, zp, zv, c(rel_pos, dtype=np.float64),
+            a_s, g, dmat, pu, idx, c(peer_rows, dtype=np.float64), c(rel_pos, dtype=np.float64),
             c(rel_vel, dtype=np.float64), self.z1, self.z2, self.z3, self.zeta,
             c(u_sub, dtype=np.float64), f_hat, self.h, self.mu, self.sigma, self.dt,
             self.converged_s,

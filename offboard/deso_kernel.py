@@ -147,7 +147,7 @@ OUT_LEN = 22
 @kernel
 def deso_step_kernel(
     a_s: np.ndarray, g: np.ndarray, dmat: np.ndarray, pu: np.ndarray, idx: np.ndarray,
-    zp: np.ndarray, zv: np.ndarray, rel_pos: np.ndarray, rel_vel: np.ndarray,
+    peer_rows: np.ndarray, rel_pos: np.ndarray, rel_vel: np.ndarray,
     z1: np.ndarray, z2: np.ndarray, z3: np.ndarray, zeta: np.ndarray, u_sub: np.ndarray,
     f_hat: np.ndarray, h: float, mu: float, sigma: float, dt: float, converged_s: float,
 ) -> np.ndarray:
@@ -156,7 +156,8 @@ def deso_step_kernel(
 
     a_s (15,15), g (15,3S) the period map of the neighbour set and dmat D = Σ_j W_ij (3,3);
     pu (k,3,3) the W_ij of the k neighbours used, idx (k,) their scenario indices (int64);
-    zp, zv (≥k,3) their estimates ẑ_j1 (m), ẑ_j2 (m/s), first k rows; rel_pos, rel_vel
+    peer_rows (N,≥6) the agents' estimates by scenario index, ẑ_j1 (m) in columns 0–2 and
+    ẑ_j2 (m/s) in 3–5 (:mod:`offboard.peer_table`'s rows); rel_pos, rel_vel
     (N,3) measured r_ij = p_j − p_i (m), ṙ_ij (m/s); z1, z2, z3 (3,) and ζ̂ (6,) the state
     at t_k; u_sub (S,3) the virtual control per sub-step and f̂ (3,) = Φ(z1,z2)ζ̂ held over
     the period (m/s²); h ground-effect height (m); μ, σ the adaptive gains; dt the period
@@ -171,8 +172,12 @@ def deso_step_kernel(
     X = [z1, z2, z3, b1, ḃ1] (its first 9 rows: the b1 rows of X⁺ are not used).
     """
     n_sub = u_sub.shape[0]
-    if g.shape[1] != 3 * n_sub or zp.shape[0] < idx.shape[0] or zv.shape[0] < idx.shape[0]:
-        raise ValueError("deso_step_kernel: u_sub rows != sub-steps of G, or zp, zv too short")
+    if g.shape[1] != 3 * n_sub or peer_rows.shape[1] < 6:
+        raise ValueError("deso_step_kernel: u_sub rows != sub-steps of G, or rows too short")
+    for k in range(idx.shape[0]):
+        if not (0 <= idx[k] < peer_rows.shape[0] and idx[k] < rel_pos.shape[0]
+                and idx[k] < rel_vel.shape[0]):
+            raise ValueError("deso_step_kernel: a neighbour index outside the rows")
     out = np.empty(OUT_LEN)
     x = np.empty(15)
     for i in range(3):
@@ -185,8 +190,8 @@ def deso_step_kernel(
             j = idx[k]
             for c in range(3):
                 w = pu[k, i, c]
-                b1 += w * (zp[k, c] - rel_pos[j, c])
-                b1d += w * (zv[k, c] - rel_vel[j, c])
+                b1 += w * (peer_rows[j, c] - rel_pos[j, c])
+                b1d += w * (peer_rows[j, 3 + c] - rel_vel[j, c])
         x[9 + i] = b1
         x[12 + i] = b1d
         d1 = dmat[i, 0] * z1[0] + dmat[i, 1] * z1[1] + dmat[i, 2] * z1[2]

@@ -8,7 +8,7 @@ desired-state observer advanced to t_{k+1} → publish.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -17,11 +17,13 @@ from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import Setpoint
 from offboard.bearing import Formation, formation_from_scenario
 from offboard.clf_rcbf import ClfTerms, clf_terms_of_reference
+from offboard.daemon_peers import peer_ids
 from offboard.dcbf_filter import DcbfFilter
 from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import ContentMemo
 from offboard.neighbour_accel import NeighbourAccel
+from offboard.peer_table import XI, EstimateBatch
 from offboard.predictor import NeighbourPredictor
 from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
@@ -42,16 +44,6 @@ SILENT_AFTER_PERIODS = 3
 
 # the DESO gain report of a formation's content and observer gains, once per process
 _gain_reports: ContentMemo[GainReport] = ContentMemo()
-
-
-@dataclass
-class _Peers:
-    """Neighbour data predicted to t_k, by scenario index."""
-
-    p: dict[int, np.ndarray] = field(default_factory=dict)  # positions (m)
-    v: dict[int, np.ndarray] = field(default_factory=dict)  # velocities (m/s)
-    xi: dict[int, np.ndarray] = field(default_factory=dict)  # ξ̂_j of bearing neighbours
-    lead_acc: dict[int, np.ndarray] = field(default_factory=dict)  # leaders' a* (m/s²)
 
 
 class FollowerAgent(AgentBase):
@@ -91,7 +83,7 @@ class FollowerAgent(AgentBase):
         )
         lam, ks = ctl.clf_lambda, ctl.ks
         self.pred = NeighbourPredictor(
-            omega, self.dt, (ks * lam + ctl.kp / ctl.kd, lam + ks),
+            sc.ids, omega, self.dt, (ks * lam + ctl.kp / ctl.kd, lam + ks),
             (ctl.leader_kp, ctl.leader_kd), sc.communication.max_age_s,
             a_max=math.sqrt(3.0) * ctl.u_max_mps2 + W_MAX,
         )
@@ -101,7 +93,8 @@ class FollowerAgent(AgentBase):
         dcbf = self.filters.get(Method.DCBF)
         if isinstance(dcbf, DcbfFilter):
             dcbf.configure(self.veh, self.dt)
-        self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX)
+        # the acceleration estimate reads the predictor's table (one ingest fills both)
+        self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX, table=self.pred.table)
         # anti-windup box of the nominal law per method (docs/saturation.md §2): the box of
         # the box methods; none for dcbf, whose polytope the governor's reserve keeps free
         self.aw_box: dict[Method, tuple[np.ndarray, np.ndarray] | None] = {
@@ -114,16 +107,17 @@ class FollowerAgent(AgentBase):
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
         self.ids = sc.ids
-        self._index_of = {aid: j for j, aid in enumerate(sc.ids)}
+        # scenario indices of the agents whose estimates this follower reads (its daemon
+        # subscribes to them only): what it takes from an in-process batch, and predicts
+        self._peer_idx = np.array(
+            sorted(self.form.index_of(a) for a in peer_ids(self.form, agent_id)), dtype=np.int64
+        )
+        # the ones predicted to t_k for the observers: graph neighbours and leaders
         nb = set(self.form.neighbours[self.index])
-        self._peers = [
-            (j, j in nb, bool(self.leader_mask[j]))
-            for j in sorted(nb | set(self.form.leader_idx))
-        ]
-        self._peer_ids = [self.ids[j] for j, _, _ in self._peers]
-        # scenario indices of the agents heard from, sorted (_predicted_pairs), kept for
-        # the number of agents heard (NeighbourPredictor.last only grows)
-        self._heard: tuple[int, list[int]] = (0, [])
+        self._predict_idx = np.array(sorted(nb | set(self.form.leader_idx)), dtype=np.int64)
+        self._lead_peers = list(self.form.leader_idx)  # their a* for the rcbf filter
+        # (predictor revision, sorted scenario indices of the agents heard from)
+        self._heard: tuple[int, list[int]] = (-1, [])
         # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
         self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
         self.silent_after = max(SILENT_AFTER_S, SILENT_AFTER_PERIODS * self.dt)  # s
@@ -156,15 +150,22 @@ class FollowerAgent(AgentBase):
         t: float,
         truth_p: np.ndarray,
         truth_v: np.ndarray,
-        neighbours: dict[int, NeighbourEstimate],
+        neighbours: Mapping[int, NeighbourEstimate] | EstimateBatch,
         comm_ok: bool = True,
     ) -> AgentOutput:
+        """One step (module docstring). ``neighbours``: the estimates received (by agent
+        id), or the in-process runner's batch of every agent's, of which this follower
+        takes its peers' rows (nothing while the link is down, as a daemon then receives
+        nothing)."""
         self._coast_missed(k, t)
         meas = self.sensor.measure(np.asarray(truth_p, float), np.asarray(truth_v, float))
         rel_p = meas.rel_pos()  # p_j − p_i
         rel_v = meas.rel_vel()
-        self.pred.ingest(neighbours, comm_ok)
-        peers = self._predict_peers(t)
+        if not isinstance(neighbours, EstimateBatch):
+            self.pred.ingest(neighbours, comm_ok)  # the acceleration slots too
+        elif comm_ok:
+            self.pred.ingest_batch(neighbours, self._peer_idx, True)
+        rows, have = self.pred.predict_rows(self._predict_idx, t)
         # --- controller at t_k --------------------------------------------------------
         w_raw = self.deso.lumped()
         # peaking of the high-gain observer: saturate the disturbance estimate used in control
@@ -172,9 +173,9 @@ class FollowerAgent(AgentBase):
         clf = self._nominal(w, t)
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
-        self.acc_est.ingest(neighbours)
-        u = self._safe_control(self._safety_input(t, clf, w, sel, -rp[sel], -rv[sel], peers),
-                               status)
+        u = self._safe_control(
+            self._safety_input(t, clf, w, sel, -rp[sel], -rv[sel], rows, have), status
+        )
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
@@ -186,8 +187,8 @@ class FollowerAgent(AgentBase):
         # --- observers to t_{k+1} ---------------------------------------------------
         self.last_sp = sp
         self.u_prev, self.a_real, self.a_mean = u, u_sub[-1].copy(), a_mean
-        self.deso.update(rel_p, rel_v, meas.valid, peers.p, peers.v, u_sub)
-        self.ref.update(peers.xi)
+        self.deso.update(rel_p, rel_v, meas.valid, rows, have, u_sub)
+        self.ref.update(rows, have)
         status.n_used = self.deso.n_used
         return self._output(sp, u, self._estimate(t + self.dt), status, w_raw)
 
@@ -208,26 +209,18 @@ class FollowerAgent(AgentBase):
         for m in range(missed, 0, -1):
             u_sub = self.inner.run(self.last_sp, self.substeps)
             self.deso.coast(u_sub)
-            self.ref.update(self._predict_peers(t - m * self.dt).xi)
+            self.ref.update(*self.pred.predict_rows(self._predict_idx, t - m * self.dt))
 
-    def _predict_peers(self, t: float) -> _Peers:
-        """Neighbours' (and, for the anchor and the RCBF, leaders') data predicted to t."""
-        out = _Peers()
-        got_all = self.pred.predict_many(self._peer_ids, t)
-        for (j, is_nbr, is_lead), got in zip(self._peers, got_all, strict=True):
-            if got is None:
-                continue
-            if is_nbr:
-                out.xi[j] = got[2]
-            if is_nbr or (is_lead and self.anchor):
-                out.p[j], out.v[j] = got[0], got[1]
-            if is_lead:
-                out.lead_acc[j] = xi_a(got[2])
-        return out
+    def _leader_accels(self, rows: np.ndarray, have: np.ndarray) -> dict[int, np.ndarray]:
+        """The leaders' a* (m/s²) predicted to t_k, by scenario index: the rcbf filter's
+        known acceleration of a leader (Departure 13; the other filters do not read it)."""
+        if self.method != Method.RCBF:
+            return {}
+        return {j: xi_a(rows[j, XI]) for j in self._lead_peers if have[j]}
 
     def _safety_input(
         self, t: float, clf: ClfTerms, w: np.ndarray, sel: np.ndarray, dp: np.ndarray,
-        dv: np.ndarray, peers: _Peers,
+        dv: np.ndarray, rows: np.ndarray, have: np.ndarray,
     ) -> SafetyInput:
         """The filter's input: the sensed pairs (Δp = p_i − p_j, Δv), and for dcbf also the
         neighbours that are not sensed now but predicted (:meth:`_predicted_pairs`)."""
@@ -242,7 +235,8 @@ class FollowerAgent(AgentBase):
         # only the dcbf filter reads the share mask (rcbf keeps the paper's shares)
         full = self._full_share(sel, t) if self.method == Method.DCBF else None
         return SafetyInput(
-            clf, w, self.deso.z2, dp, dv, sel, peers.lead_acc, self.a_real, self.u_prev,
+            clf, w, self.deso.z2, dp, dv, sel, self._leader_accels(rows, have), self.a_real,
+            self.u_prev,
             self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
             self._ground_floor(), margin, predicted,
         )
@@ -261,18 +255,18 @@ class FollowerAgent(AgentBase):
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
         # only agents heard from can be predicted (the others' get() is None): O(peers)
+        pred = self.pred
         for j in self._heard_indices():
             if j == self.index or j in sensed:
                 continue
-            aid = self.ids[j]
-            got = self.pred.get(aid, t)
+            got = pred.get_at(j, t)
             if got is None:
                 continue
             dp = self.deso.z1 - got[0]
             if norm(dp) > rng:
                 continue
-            b = self.pred.bound(aid, t) or 0.0
-            rows.append((j, dp, self.deso.z2 - got[1], b + tau * self.pred.velocity_bound(aid, t)))
+            b = pred.bound_at(j, t) or 0.0
+            rows.append((j, dp, self.deso.z2 - got[1], b + tau * pred.velocity_bound_at(j, t)))
         if not rows:
             return None
         return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
@@ -280,10 +274,9 @@ class FollowerAgent(AgentBase):
 
     def _heard_indices(self) -> list[int]:
         """Sorted scenario indices of the agents this follower has heard from."""
-        last = self.pred.last
-        if self._heard[0] != len(last):
-            index_of = self._index_of
-            self._heard = (len(last), sorted(index_of[a] for a in last if a in index_of))
+        rev = self.pred.revision  # bumped when an agent is first heard from
+        if self._heard[0] != rev:
+            self._heard = (rev, np.flatnonzero(self.pred.table.t > -math.inf).tolist())
         return self._heard[1]
 
     def _ground_floor(self) -> float | None:
@@ -310,18 +303,14 @@ class FollowerAgent(AgentBase):
           singled out: the others still run their filters on their onboard sensing.
         Silence is judged by the estimates' own stamps, so in-process and lockstep runs
         judge it alike."""
-        rev = self.pred.revision
+        rev, tab = self.pred.revision, self.pred.table
         if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
-            last = self.pred.last
-            silent = [(e := last.get(aid)) is None or not e.cooperative for aid in self.ids]
-            self._full = (rev, self.leader_mask | np.array(silent, dtype=bool))
+            never = tab.t == -math.inf
+            self._full = (rev, self.leader_mask | never | ~tab.cooperative)
         full = self._full[1][sel]  # a copy (fancy indexing)
         since = t - self.silent_after
         if self.pred.newest >= since:  # others are heard: a silent one stands out
-            last, ids = self.pred.last, self.ids
-            for r, j in enumerate(sel.tolist()):
-                if not full[r] and last[ids[j]].t < since:  # heard (else full), now silent
-                    full[r] = True
+            full |= tab.t[sel] < since  # (never heard: −inf, full already)
         return full
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:

@@ -3,12 +3,15 @@ disturbance (Departure 4). It publishes its state predicted for t_{k+1} and ξ_L
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from offboard.agent_base import CLIP_TOL, AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.bearing import Formation
 from offboard.governor import governor_for, log_governor
+from offboard.peer_table import EstimateBatch
 from offboard.reference import LeaderTrajectory, xi_at_rest, xi_p
 from offboard.takeoff import climb_xi, leader_origin
 from swarm_common.enums import Method
@@ -81,7 +84,7 @@ class LeaderAgent(AgentBase):
         t: float,
         truth_p: np.ndarray,
         truth_v: np.ndarray,
-        neighbours: dict[int, NeighbourEstimate],
+        neighbours: Mapping[int, NeighbourEstimate] | EstimateBatch,
         comm_ok: bool = True,
     ) -> AgentOutput:
         p = f64(truth_p[self.index])

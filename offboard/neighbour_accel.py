@@ -4,10 +4,12 @@ the dcbf filter's estimate of a neighbour's acceleration (``SafetyInput.other_ac
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
 from offboard.agent_types import NeighbourEstimate
+from offboard.peer_table import EstimateBatch, PeerTable
 from swarm_common.jit import kernel
 
 
@@ -16,45 +18,29 @@ class NeighbourAccel:
     broadcast velocities z2 (leaders: their predicted true velocity), norm-bounded by
     ``a_max``; held while no new data arrives (docs/safety.md §3).
 
-    :meth:`ingest` keeps the last two accepted estimates' time and z2 per agent by
-    scenario index, in two slots of arrays (the older slot is overwritten; a slot never
-    written has time NaN); :meth:`rows` forms the differences for the rows it is asked
+    The last two accepted estimates' time and z2 per agent are the acceleration slots of a
+    :class:`~offboard.peer_table.PeerTable` (``table``: a follower shares its predictor's,
+    which one ingest fills); :meth:`rows` forms the differences for the rows it is asked
     for in one compiled call (:func:`neighbour_accel_rows`)."""
 
-    def __init__(self, ids: list[int] | tuple[int, ...], a_max: float) -> None:
+    def __init__(
+        self, ids: list[int] | tuple[int, ...], a_max: float, table: PeerTable | None = None
+    ) -> None:
         self.ids = list(ids)
         self.a_max = float(a_max)
         self._index_of = {aid: j for j, aid in enumerate(self.ids)}
-        n = len(self.ids)
-        self._t = np.full((2, n), np.nan)  # s, the time of each slot's estimate
-        self._z2 = np.zeros((2, n, 3))  # m/s, each slot's velocity
-        # per agent, in plain Python (no numpy scalars on the per-estimate path): the slot
-        # the next accepted estimate overwrites, and the last accepted time (s)
-        self._older = [0] * n
-        self._t_last: list[float | None] = [None] * n
+        self.table = PeerTable(len(self.ids)) if table is None else table
 
-    def ingest(self, neighbours: dict[int, NeighbourEstimate]) -> None:
+    def ingest(self, neighbours: Mapping[int, NeighbourEstimate]) -> None:
         """Update from the estimates received this step (by agent id; ids outside the
         scenario are ignored; one not newer than the last is ignored)."""
-        index_of, t_last, older = self._index_of, self._t_last, self._older
-        tt, zz = self._t, self._z2
-        for aid, e in neighbours.items():
-            j = index_of.get(aid)
-            if j is None:
-                continue
-            last = t_last[j]
-            if last is not None and not e.t > last + 1e-9:
-                continue
-            s = older[j]
-            older[j] = 1 - s
-            t_last[j] = e.t
-            tt[s, j] = e.t
-            zz[s, j] = e.z2
+        batch, idx = EstimateBatch.from_estimates(self._index_of, len(self.ids), neighbours)
+        self.table.ingest(batch, idx, True)
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(M,3) estimates for scenario indices ``idx`` (zero where fewer than two)."""
         return neighbour_accel_rows(
-            np.asarray(idx, dtype=np.int64), self._t, self._z2, self.a_max
+            np.asarray(idx, dtype=np.int64), self.table.acc_t, self.table.acc_z2, self.a_max
         )
 
 

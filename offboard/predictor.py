@@ -19,12 +19,15 @@ leaders). Both are exact matrix exponentials, cached per step count.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.linalg import expm
 
 from offboard.agent_types import NeighbourEstimate
+from offboard.peer_table import XI, Z1, Z2, EstimateBatch, PeerTable
 from offboard.reference import exo_propagator, xi_a, xi_j, xi_p, xi_v
+from swarm_common.jit import kernel
 
 A_MAX_DEFAULT = 16.0  # m/s², follower acceleration bound: √3·u_max (8 m/s²) + 2 m/s² disturbance
 DROP_BOUND_M = 1.0  # m, a follower's prediction is dropped once its error bound exceeds this
@@ -63,29 +66,42 @@ def error_accel_gain(kp: float, kv: float) -> float:
 class NeighbourPredictor:
     """Last received estimate per agent, predicted to a requested time (Departure 16).
 
-    ``omega`` (rad/s) is the exosystem frequency, ``dt`` (s) the control period;
-    ``fol_gains``/``lead_gains`` are (k_p', k_v) of the error dynamics of followers and
-    leaders; ``max_age`` (s) caps the age of followers' data, ``a_max`` (m/s²) bounds a
-    follower's actual acceleration and ``drop_bound`` (m) is the error bound beyond which
-    a follower's prediction is useless (see :meth:`bound`).
+    ``ids`` are the scenario's agent ids (the table's rows, :class:`PeerTable`; estimates of
+    other ids are ignored); ``omega`` (rad/s) is the exosystem frequency, ``dt`` (s) the
+    control period; ``fol_gains``/``lead_gains`` are (k_p', k_v) of the error dynamics of
+    followers and leaders; ``max_age`` (s) caps the age of followers' data, ``a_max``
+    (m/s²) bounds a follower's actual acceleration and ``drop_bound`` (m) is the error
+    bound beyond which a follower's prediction is useless (see :meth:`bound`).
     """
 
-    def __init__(self, omega: float, dt: float, fol_gains: tuple[float, float],
-                 lead_gains: tuple[float, float], max_age: float = math.inf,
-                 a_max: float = A_MAX_DEFAULT, drop_bound: float = DROP_BOUND_M) -> None:
+    def __init__(self, ids: Sequence[int], omega: float, dt: float,
+                 fol_gains: tuple[float, float], lead_gains: tuple[float, float],
+                 max_age: float = math.inf, a_max: float = A_MAX_DEFAULT,
+                 drop_bound: float = DROP_BOUND_M) -> None:
+        self.ids = tuple(ids)
+        self.index_of = {aid: j for j, aid in enumerate(self.ids)}
+        self.table = PeerTable(len(self.ids))
         self.omega = omega
         self.dt = dt
         self.max_age = max_age  # followers' older data is dropped (communication.max_age_s)
         self.a_max = a_max
         self.drop_bound = drop_bound
         self.gains = {False: fol_gains, True: lead_gains}
-        self.last: dict[int, NeighbourEstimate] = {}
-        self._a_dev: dict[int, float] = {}  # per agent: a_dev of its last estimate (m/s²)
-        # bumped when an agent is first heard from or its ``cooperative`` flag changes:
-        # what a reader derives from who is heard and who cooperates is current while
-        # this is unchanged
-        self.revision = 0
-        self.newest = -math.inf  # s, the newest stamp received from anyone
+        # per index: (the table's version of the row, a_dev of that row (m/s²))
+        self._a_dev: dict[int, tuple[int, float]] = {}
+        self._have = np.zeros(len(self.ids), dtype=np.bool_)  # predict_rows' mask
+
+    @property
+    def revision(self) -> int:
+        """Bumped when an agent is first heard from or its ``cooperative`` flag changes:
+        what a reader derives from who is heard and who cooperates is current while this
+        is unchanged."""
+        return self.table.revision
+
+    @property
+    def newest(self) -> float:
+        """The newest stamp received from anyone (s; −inf before the first)."""
+        return self.table.newest
 
     def exo(self, n: int) -> np.ndarray:
         """12×12 exosystem propagator over ``n`` control periods (cached)."""
@@ -106,102 +122,145 @@ class NeighbourPredictor:
             _ERR_CACHE[key] = m
         return m
 
-    def ingest(self, neighbours: dict[int, NeighbourEstimate], comm_ok: bool) -> None:
-        """Keep the newest estimate per agent (an out-of-order older one is ignored)."""
-        if not comm_ok:
-            return
-        last = self.last
-        for j, e in neighbours.items():
-            old = last.get(j)
-            if old is None or e.t >= old.t:
-                if old is None or old.cooperative != e.cooperative:
-                    self.revision += 1
-                last[j] = e
-                self._a_dev.pop(j, None)
-                if e.t > self.newest:
-                    self.newest = e.t
+    def ingest(self, neighbours: Mapping[int, NeighbourEstimate], comm_ok: bool) -> None:
+        """Keep the newest estimate per agent (an out-of-order older one is ignored; nothing
+        while the link is down); the acceleration slots take theirs either way
+        (:class:`PeerTable`)."""
+        batch, idx = EstimateBatch.from_estimates(self.index_of, len(self.ids), neighbours)
+        self.table.ingest(batch, idx, comm_ok)
+
+    def ingest_batch(self, batch: EstimateBatch, idx: np.ndarray, comm_ok: bool) -> None:
+        """:meth:`ingest` of the rows ``idx`` (scenario indices, int64) of ``batch``."""
+        self.table.ingest(batch, idx, comm_ok)
 
     def a_dev(self, e: NeighbourEstimate) -> float:
+        """:meth:`a_dev_of` an estimate's z1, z2 and ξ."""
+        return self.a_dev_of(e.z1, e.z2, e.xi)
+
+    def a_dev_of(self, z1: np.ndarray, z2: np.ndarray, xi: np.ndarray) -> float:
         """Bound (m/s²) on the gap between a follower's actual acceleration and the one its
-        prediction from ``e`` assumes: a_max + ā* + c_r ‖(e1, e2)‖ (module docstring).
-        The exosystem's acceleration is a sinusoid per axis, so
+        prediction from (z1, z2, ξ) assumes: a_max + ā* + c_r ‖(e1, e2)‖ (module
+        docstring). The exosystem's acceleration is a sinusoid per axis, so
         ‖a*(s)‖ ≤ ā* = √(‖a*₀‖² + ‖j*₀‖²/ω²) for all s."""
-        a0, j0 = xi_a(e.xi), xi_j(e.xi)
+        a0, j0 = xi_a(xi), xi_j(xi)
         w2 = self.omega**2 if self.omega > 0.0 else 1.0
         a_star = math.sqrt(float(a0 @ a0) + float(j0 @ j0) / w2)
-        e1 = e.z1 - xi_p(e.xi)
-        e2 = e.z2 - xi_v(e.xi)
+        e1 = z1 - xi_p(xi)
+        e2 = z2 - xi_v(xi)
         kp, kv = self.gains[False]
         c_r = error_accel_gain(kp, kv)
         return self.a_max + a_star + c_r * math.sqrt(float(e1 @ e1) + float(e2 @ e2))
 
     def bound(self, agent_id: int, t: float) -> float | None:
-        """Bound (m) on the error of ``agent_id``'s predicted position at ``t``, None if
-        nothing was received. Leaders: 0 (exosystem and their own PD; docs/estimation.md).
-        Followers: ½ a_dev age² (0 while the data is current, age ≤ CURRENT_AGE_S); its
-        velocity error is at most a_dev·age."""
-        e = self.last.get(agent_id)
-        if e is None:
+        """:meth:`bound_at` of an agent id (None for an id outside the scenario)."""
+        j = self.index_of.get(agent_id)
+        return None if j is None else self.bound_at(j, t)
+
+    def bound_at(self, j: int, t: float) -> float | None:
+        """Bound (m) on the error of agent ``j``'s (scenario index) predicted position at
+        ``t``, None if nothing was received. Leaders: 0 (exosystem and their own PD;
+        docs/estimation.md). Followers: ½ a_dev age² (0 while the data is current, age ≤
+        CURRENT_AGE_S); its velocity error is at most a_dev·age."""
+        tab = self.table
+        stamp = float(tab.t[j])
+        if stamp == -math.inf:
             return None
-        age = max(0.0, t - e.t)
-        if e.is_leader or age <= CURRENT_AGE_S:
+        age = max(0.0, t - stamp)
+        if tab.leader[j] or age <= CURRENT_AGE_S:
             return 0.0
-        a = self._a_dev.get(agent_id)
-        if a is None:
-            a = self.a_dev(e)
-            self._a_dev[agent_id] = a
-        return 0.5 * a * age * age
+        version = int(tab.version[j])
+        got = self._a_dev.get(j)
+        if got is None or got[0] != version:
+            r = tab.rows[j]
+            got = (version, self.a_dev_of(r[Z1], r[Z2], r[XI]))
+            self._a_dev[j] = got
+        return 0.5 * got[1] * age * age
 
     def velocity_bound(self, agent_id: int, t: float) -> float:
-        """Bound (m/s) on the error of ``agent_id``'s predicted velocity at ``t``: a_dev·age
-        for a follower (the derivative of :meth:`bound`), 0 for a leader or current data."""
-        b = self.bound(agent_id, t)
-        e = self.last.get(agent_id)
-        if b is None or e is None or b <= 0.0:
-            return 0.0
-        return 2.0 * b / max(t - e.t, 1e-9)
+        """:meth:`velocity_bound_at` of an agent id (0 for an id outside the scenario)."""
+        j = self.index_of.get(agent_id)
+        return 0.0 if j is None else self.velocity_bound_at(j, t)
 
-    def predict_many(self, agent_ids: list[int], t: float) -> list[Prediction | None]:
-        """:meth:`get` of each of ``agent_ids`` at ``t``, with get's first answer inline:
-        data current at ``t`` (age ≤ CURRENT_AGE_S, the common case in lockstep) as
-        received, without a method call per agent."""
-        last = self.last
-        out: list[Prediction | None] = []
-        for aid in agent_ids:
-            e = last.get(aid)
-            if e is None:
-                out.append(None)
-            elif t - e.t <= CURRENT_AGE_S:
-                out.append((e.z1, e.z2, e.xi))
-            else:
-                out.append(self.get(aid, t))
-        return out
+    def velocity_bound_at(self, j: int, t: float) -> float:
+        """Bound (m/s) on the error of agent ``j``'s predicted velocity at ``t``: a_dev·age
+        for a follower (the derivative of :meth:`bound_at`), 0 for a leader or current
+        data."""
+        b = self.bound_at(j, t)
+        if b is None or b <= 0.0:
+            return 0.0
+        return 2.0 * b / max(t - float(self.table.t[j]), 1e-9)
+
+    def predict_rows(self, peers: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The rows of ``peers`` (scenario indices, int64) predicted to ``t``: (rows (N,
+        ROW), have (N,) bool), ``have[j]`` where agent j's row is usable (:meth:`get_at`
+        is not None). Data current at ``t`` (age ≤ CURRENT_AGE_S, the common case in
+        lockstep) is read where it lies, the table itself; otherwise a copy holds the
+        predictions of the others. Both are valid until the next ingest."""
+        tab, have = self.table, self._have
+        if mark_current(peers, tab.t, t, CURRENT_AGE_S, have) == 0:
+            return tab.rows, have
+        rows = tab.rows.copy()
+        for j in peers.tolist():
+            if have[j] or tab.t[j] == -math.inf:
+                continue
+            got = self.get_at(j, t)
+            if got is not None:
+                rows[j, Z1], rows[j, Z2], rows[j, XI] = got
+                have[j] = True
+        return rows, have
 
     def get(self, agent_id: int, t: float) -> Prediction | None:
-        """(p, v, ξ) of ``agent_id`` predicted to ``t``; None if never received or, for a
-        follower, if older than ``max_age`` or its :meth:`bound` exceeds ``drop_bound``
-        (the agent then runs without that neighbour: the conservative behaviour for a
-        silent or unpredictable neighbour; onboard sensing still feeds the safety filter).
-        A leader's data is never dropped."""
-        e = self.last.get(agent_id)
-        if e is None:
+        """:meth:`get_at` of an agent id (None for an id outside the scenario)."""
+        j = self.index_of.get(agent_id)
+        return None if j is None else self.get_at(j, t)
+
+    def get_at(self, j: int, t: float) -> Prediction | None:
+        """(p, v, ξ) of agent ``j`` (scenario index) predicted to ``t``; None if never
+        received or, for a follower, if older than ``max_age`` or its :meth:`bound_at`
+        exceeds ``drop_bound`` (the agent then runs without that neighbour: the
+        conservative behaviour for a silent or unpredictable neighbour; onboard sensing
+        still feeds the safety filter). A leader's data is never dropped. Current data is
+        returned as views of the table's row (valid until the next ingest)."""
+        tab = self.table
+        stamp = float(tab.t[j])
+        if stamp == -math.inf:
             return None
-        age = t - e.t
+        r = tab.rows[j]
+        z1, z2, xi = r[Z1], r[Z2], r[XI]
+        age = t - stamp
         if age <= CURRENT_AGE_S:  # current data (bound 0): as received
-            return e.z1, e.z2, e.xi
-        if not e.is_leader:
+            return z1, z2, xi
+        leader = bool(tab.leader[j])
+        if not leader:
             if age > self.max_age + 1e-9:
                 return None
-            b = self.bound(agent_id, t)
+            b = self.bound_at(j, t)
             if b is not None and b > self.drop_bound:
                 return None
         n = int(round(age / self.dt))
         if n <= 0:
-            return e.z1, e.z2, e.xi
-        xi = self.exo(n) @ e.xi
-        m = self.err(e.is_leader, n)
-        e1 = e.z1 - xi_p(e.xi)
-        e2 = e.z2 - xi_v(e.xi)
-        p = xi_p(xi) + m[0, 0] * e1 + m[0, 1] * e2
-        v = xi_v(xi) + m[1, 0] * e1 + m[1, 1] * e2
-        return p, v, xi
+            return z1, z2, xi
+        xi_n = self.exo(n) @ xi
+        m = self.err(leader, n)
+        e1 = z1 - xi_p(xi)
+        e2 = z2 - xi_v(xi)
+        p = xi_p(xi_n) + m[0, 0] * e1 + m[0, 1] * e2
+        v = xi_v(xi_n) + m[1, 0] * e1 + m[1, 1] * e2
+        return p, v, xi_n
+
+
+@kernel
+def mark_current(
+    peers: np.ndarray, t_tab: np.ndarray, t: float, age_max: float, have: np.ndarray
+) -> int:
+    """For each ``j`` in ``peers``: ``have[j]`` = its last stamp ``t_tab[j]`` (s, −inf never
+    heard) is at most ``age_max`` (s) before ``t``. Returns how many peers were heard but
+    are not current (to be predicted)."""
+    stale = 0
+    for r in range(peers.shape[0]):
+        j = peers[r]
+        cur = t - t_tab[j] <= age_max
+        have[j] = cur
+        if not cur and t_tab[j] > -math.inf:
+            stale += 1
+    return stale

@@ -33,6 +33,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from offboard.bearing import Formation
+from offboard.peer_table import XI_COL
 from swarm_common.jit import kernel
 
 XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
@@ -108,21 +109,30 @@ def exo_propagator(omega: float, dt: float) -> np.ndarray:
 
 @kernel
 def observer_step(
-    mx: np.ndarray, mc: np.ndarray, pu: np.ndarray, xs: np.ndarray, xi: np.ndarray
+    mx: np.ndarray, mc: np.ndarray, pu: np.ndarray, idx: np.ndarray, peer_rows: np.ndarray,
+    xi: np.ndarray,
 ) -> np.ndarray:
     """One period of the desired-state observer (§4.1), compiled:
     ``ξ̂⁺ = M_x ξ̂ + M_c c`` with ``c = Σ_j (I₄ ⊗ P*_ij) ξ̂_j``.
 
     mx, mc (12,12) the exact one-period maps of :meth:`DesiredStateObserver._matrices`;
-    pu (k,3,3) the P*_ij of the k neighbours used; xs (k,12) their ξ̂_j (m, m/s, m/s²,
-    m/s³); xi (12,) own ξ̂. Sums run left to right over neighbours, then components."""
+    pu (k,3,3) the P*_ij of the k neighbours used and idx (k,) their scenario indices
+    (int64); peer_rows (N,21) the agents' rows by scenario index, ξ̂_j (m, m/s, m/s², m/s³)
+    in columns 9–20 (:mod:`offboard.peer_table`); xi (12,) own ξ̂. Sums run left to
+    right over neighbours, then components."""
+    if peer_rows.shape[1] < XI_COL + 12:
+        raise ValueError("observer_step: rows too short")
+    for n in range(idx.shape[0]):
+        if not 0 <= idx[n] < peer_rows.shape[0]:
+            raise ValueError("observer_step: a neighbour index outside the rows")
     c = np.zeros(12)
     for n in range(pu.shape[0]):
+        row = idx[n]
         for d in range(4):
             for i in range(3):
                 acc = 0.0
                 for j in range(3):
-                    acc += pu[n, i, j] * xs[n, 3 * d + j]
+                    acc += pu[n, i, j] * peer_rows[row, XI_COL + 3 * d + j]
                 c[3 * d + i] += acc
     out = np.empty(12)
     for r in range(12):
@@ -156,11 +166,15 @@ class DesiredStateObserver:
         self.nbrs = list(form.neighbours[index])
         self.xi = np.array(xi0, dtype=float)
         self.exo = exo_propagator(self.omega, self.dt)
-        self._cache: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._cache: dict[
+            tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+        ] = {}
 
-    def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(M_x (12×12), M_c (12×12), the stacked (k,3,3) P*_ij) for this neighbour set
-        (cached: computed once per set)."""
+    def _matrices(
+        self, used: tuple[int, ...]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(M_x (12×12), M_c (12×12), the stacked (k,3,3) P*_ij, the indices (k,) int64)
+        for this neighbour set (cached: computed once per set)."""
         m = self._cache.get(used)
         if m is None:
             dmat = np.zeros((3, 3))
@@ -173,19 +187,22 @@ class DesiredStateObserver:
             a[12:, 12:] = sk
             full = expm(a * self.dt)
             pu = self.form.p_star[self.index, list(used)]  # (k,3,3), symmetric
-            m = (full[:12, :12].copy(), full[:12, 12:].copy(), pu)
+            m = (full[:12, :12].copy(), full[:12, 12:].copy(), np.ascontiguousarray(pu),
+                 np.array(used, dtype=np.int64))
             self._cache[used] = m
         return m
 
-    def update(self, nbr_xi: dict[int, np.ndarray]) -> None:
-        """Advance ξ̂ from t_k to t_k+1 given neighbours' ξ̂_j (leaders' ξ) for t_k."""
-        used = tuple([j for j in self.nbrs if j in nbr_xi])
+    def update(self, peer_rows: np.ndarray, have: np.ndarray) -> None:
+        """Advance ξ̂ from t_k to t_k+1 given neighbours' ξ̂_j (leaders' ξ) for t_k: the
+        rows (N,21) of :mod:`offboard.peer_table` by scenario index, usable where
+        ``have`` (N,)."""
+        used = tuple([j for j in self.nbrs if have[j]])
         if not used:
             self.xi = self.exo @ self.xi
             return
-        mx, mc, pu = self._matrices(used)
-        xs = np.array([nbr_xi[j] for j in used], dtype=float)
-        self.xi = observer_step(mx, mc, pu, xs, self.xi)
+        mx, mc, pu, idx = self._matrices(used)
+        self.xi = observer_step(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float),
+                                self.xi)
 
     @property
     def rate(self) -> float:

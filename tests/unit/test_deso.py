@@ -19,6 +19,7 @@ from offboard.deso import (
     regressor,
     regressor_t_times,
 )
+from offboard.peer_table import rows_of
 from swarm_common.scenario import load_scenario
 from vehicle_sim.dynamics import regressor as sim_regressor
 
@@ -77,7 +78,7 @@ def test_deso_converges_known_answer(sc, anchor, kappa):
         for i in f.follower_idx:
             nb = {j: pub[j][0] for j in obs[i].nbrs}
             nv = {j: pub[j][1] for j in obs[i].nbrs}
-            obs[i].update(rel_p[i], rel_v[i], valid, nb, nv, u_sub)
+            obs[i].update(rel_p[i], rel_v[i], valid, *rows_of(sc.n, nb, nv), u_sub)
     for i in f.follower_idx:
         assert np.allclose(obs[i].z1, p[i], atol=1e-3)
         assert np.allclose(obs[i].z2, 0.0, atol=1e-3)
@@ -123,10 +124,11 @@ def test_gate_freezes_adaptation_until_converged(sc):
     valid = np.ones(sc.n, bool)
     nb = {j: p[j] for j in obs.nbrs}
     nv = {j: np.zeros(3) for j in obs.nbrs}
-    obs.update(p - p[i], np.zeros_like(p), valid, nb, nv, np.zeros((4, 3)))
+    rows, have = rows_of(sc.n, nb, nv)
+    obs.update(p - p[i], np.zeros_like(p), valid, rows, have, np.zeros((4, 3)))
     assert np.linalg.norm(obs.last_e1) > GATE_E1 and np.all(obs.zeta == 0.0)
     for _ in range(int(GATE_HOLD_S / 0.02) + 200):
-        obs.update(p - p[i], np.zeros_like(p), valid, nb, nv, np.zeros((4, 3)))
+        obs.update(p - p[i], np.zeros_like(p), valid, rows, have, np.zeros((4, 3)))
     assert obs.converged_s >= GATE_HOLD_S  # innovations small for long enough: adapting
 
 

@@ -32,6 +32,7 @@ from offboard.deso import (
     model_accel,
     regressor_t_times,
 )
+from offboard.peer_table import rows_of
 from swarm_common.scenario import load_scenario
 
 RTOL = ATOL = 1e-12
@@ -122,7 +123,10 @@ class NumpyDESO:
             self.z1 = self.z1 + o.delta * self.z2 + 0.5 * o.delta**2 * acc
             self.z2 = self.z2 + o.delta * acc
 
-    def update(self, rel_pos, rel_vel, valid, nbr_p, nbr_v, u_sub) -> None:  # type: ignore[no-untyped-def]
+    def update(self, rel_pos, rel_vel, valid, rows, have, u_sub) -> None:  # type: ignore[no-untyped-def]
+        """As DESO.update; the neighbours' data taken out of the rows into dicts first."""
+        nbr_p = {j: rows[j, 0:3].copy() for j in range(len(have)) if have[j]}
+        nbr_v = {j: rows[j, 3:6].copy() for j in nbr_p}
         o = self.obs
         f_cached, self._f_hat = self._f_hat, None
         used = tuple(j for j in o.nbrs if valid[j] and j in nbr_p)
@@ -232,8 +236,9 @@ def test_one_period_equals_numpy(cube8, anchor, kappa, mu) -> None:  # type: ign
                 counts["coast"] += 1
             else:
                 zeta0 = obs.zeta.copy()
-                obs.update(rel_p, rel_v, valid, nbr_p, nbr_v, u_sub)
-                ref.update(rel_p, rel_v, valid, nbr_p, nbr_v, u_sub)
+                rows, have = rows_of(sc.n, nbr_p, nbr_v)
+                obs.update(rel_p, rel_v, valid, rows, have, u_sub)
+                ref.update(rel_p, rel_v, valid, rows, have, u_sub)
                 counts["adapted" if not np.array_equal(obs.zeta, zeta0) else "frozen"] += 1
             _assert_same(obs, ref, (i, trial))
     assert counts["frozen"] > 0 and counts["coast"] > 0
@@ -269,8 +274,9 @@ def test_trajectories_equal_numpy(cube8, mu) -> None:  # type: ignore[no-untyped
             rel_v = v - v[i] + rng.normal(0, 0.01, p.shape)
             for o, r in ((obs[i], pub_o), (ref[i], pub_r)):
                 o.lumped()
-                o.update(rel_p, rel_v, valid, {j: r[j][0] for j in obs[i].nbrs},
-                         {j: r[j][1] for j in obs[i].nbrs}, u_sub)
+                rows, have = rows_of(sc.n, {j: r[j][0] for j in obs[i].nbrs},
+                                     {j: r[j][1] for j in obs[i].nbrs})
+                o.update(rel_p, rel_v, valid, rows, have, u_sub)
             _assert_same(obs[i], ref[i], (i, k))
     if mu > 0.0:
         assert any(np.any(o.zeta != 0.0) for o in obs.values())  # the law did run

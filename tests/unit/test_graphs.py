@@ -15,6 +15,7 @@ from offboard.bearing import (
     formation_from_scenario,
 )
 from offboard.deso import DESO, gain_report, observer_weights
+from offboard.peer_table import rows_of
 from offboard.reference import DesiredStateObserver, LeaderTrajectory
 from swarm_common import graphs
 from swarm_common.scenario import ScenarioError, load_scenario
@@ -184,7 +185,8 @@ def test_deso_ignores_data_of_unsensed_leaders(sc27):
         valid = np.ones(sc27.n, dtype=bool)
         valid[i] = False
         for _ in range(50):
-            d.update(p - p[i], np.zeros((sc27.n, 3)), valid, nbr_p, nbr_v, np.zeros((4, 3)))
+            d.update(p - p[i], np.zeros((sc27.n, 3)), valid, *rows_of(sc27.n, nbr_p, nbr_v),
+                     np.zeros((4, 3)))
         return d.z1
 
     z_plain, z_extra = run(False), run(True)
@@ -214,7 +216,7 @@ def test_desired_state_observer_neighbours_only_on_sparse_graph(sc27):
         pub = {i: o.xi.copy() for i, o in obs.items()}
         pub.update({i: trs[i].state(k * dt) for i in f.leader_idx})
         for i, o in obs.items():  # only graph neighbours' ξ̂ is handed over
-            o.update({j: pub[j] for j in f.neighbours[i]})
+            o.update(*rows_of(sc27.n, xi={j: pub[j] for j in f.neighbours[i]}))
     lead = np.array([trs[i].state(steps * dt) for i in f.leader_idx])
     want = f.desired_positions(lead[:, 0:3])
     err = max(np.linalg.norm(o.p - want[i]) for i, o in obs.items())
@@ -223,10 +225,11 @@ def test_desired_state_observer_neighbours_only_on_sparse_graph(sc27):
     assert o.rate == pytest.approx(sc27.observer.reference_gain * f.lambda_min)
     # data of a non-neighbour (even garbage) is not used
     xi0 = o.xi.copy()
-    o.update({j: pub[j] for j in f.neighbours[i]})
+    o.update(*rows_of(sc27.n, xi={j: pub[j] for j in f.neighbours[i]}))
     a = o.xi.copy()
     o.xi = xi0
-    o.update(pub | {j: np.full(12, 1e3) for j in range(sc27.n) if j not in f.neighbours[i]})
+    o.update(*rows_of(sc27.n, xi=pub | {j: np.full(12, 1e3) for j in range(sc27.n)
+                                         if j not in f.neighbours[i]}))
     assert np.array_equal(a, o.xi)
 
 

@@ -1,7 +1,9 @@
 """A follower's bookkeeping of the other agents' estimates, against plain references:
 ``NeighbourAccel`` (two slots per agent, the older overwritten) against a list of every
-accepted estimate, and ``NeighbourPredictor.predict_many`` against ``get`` per agent, over
-random streams with late, duplicate, out-of-order, stale and unknown-agent estimates."""
+accepted estimate, ``NeighbourPredictor.predict_rows`` against ``get_at`` per agent and
+its table against a dict of the last accepted estimates (given as estimates or as an
+in-process batch), over random streams with late, duplicate, out-of-order, stale and
+unknown-agent estimates."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import numpy as np
 
 from offboard.agent_types import NeighbourEstimate
 from offboard.neighbour_accel import NeighbourAccel
+from offboard.peer_table import EstimateBatch
 from offboard.predictor import NeighbourPredictor
 
 IDS = [3, 5, 8, 13, 21]
@@ -55,19 +58,57 @@ def test_neighbour_accel_keeps_the_last_two_newer_estimates() -> None:
         assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
 
 
-def test_predict_many_is_get_of_each_agent() -> None:
+def test_predict_rows_is_get_of_each_agent() -> None:
     rng = np.random.default_rng(4)
-    pred = NeighbourPredictor(0.4, 0.02, (4.0, 3.0), (2.0, 2.5), max_age=0.5, a_max=10.0)
+    pred = NeighbourPredictor(IDS, 0.4, 0.02, (4.0, 3.0), (2.0, 2.5), max_age=0.5, a_max=10.0)
+    stale = 0
     for k in range(300):
         t = 0.02 * k
         batch = {aid: _estimate(rng, aid, t + 0.02 * float(rng.choice([1, 1, 0, -2, -10])))
                  for aid in IDS if rng.random() < 0.5}
         pred.ingest(batch, comm_ok=bool(rng.random() < 0.9))
-        ask = [*IDS, 77]  # 77 never heard: None
-        many = pred.predict_many(ask, t)
-        for aid, got in zip(ask, many, strict=True):
-            want = pred.get(aid, t)
-            assert (got is None) == (want is None)
-            if got is not None and want is not None:
-                for a, b in zip(got, want, strict=True):
-                    assert np.array_equal(a, b)
+        ask = rng.permutation(len(IDS))[: int(rng.integers(1, len(IDS) + 1))]
+        rows, have = pred.predict_rows(ask.astype(np.int64), t)
+        stale += rows is not pred.table.rows
+        for j in ask.tolist():
+            want = pred.get_at(j, t)
+            assert bool(have[j]) == (want is not None)
+            if want is not None:
+                for cols, w in zip((slice(0, 3), slice(3, 6), slice(9, 21)), want, strict=True):
+                    assert np.array_equal(rows[j, cols], w)
+    assert stale > 0  # aged data was predicted, not only read
+
+
+def test_table_keeps_the_newest_estimate_per_agent() -> None:
+    """The predictor's table against a dict of the last accepted estimate per agent (one at
+    least as new as the last, only while the link is up), its revision (first heard, or a
+    changed cooperative flag: it moves exactly when who is heard or who cooperates
+    changed) and the same estimates handed over as an in-process batch."""
+    rng = np.random.default_rng(5)
+    pred = NeighbourPredictor(IDS, 0.4, 0.02, (4.0, 3.0), (2.0, 2.5))
+    twin = NeighbourPredictor(IDS, 0.4, 0.02, (4.0, 3.0), (2.0, 2.5))
+    last: dict[int, NeighbourEstimate] = {}
+    for k in range(400):
+        before = pred.revision
+        batch = {aid: _estimate(rng, aid, 0.02 * (k + int(rng.choice([0, 0, -1, -4]))))
+                 for aid in [*IDS, 99] if rng.random() < 0.6}
+        up = bool(rng.random() < 0.85)
+        pred.ingest(batch, comm_ok=up)
+        b, idx = EstimateBatch.from_estimates(twin.index_of, len(IDS), batch)
+        twin.ingest_batch(b, np.arange(len(IDS), dtype=np.int64), up)
+        changed = False
+        for aid, e in batch.items() if up else ():
+            old = last.get(aid)
+            if aid in IDS and (old is None or e.t >= old.t):
+                changed |= old is None or old.cooperative != e.cooperative
+                last[aid] = e
+        assert (pred.revision != before) == changed and pred.revision == twin.revision
+        assert pred.newest == twin.newest == max((e.t for e in last.values()), default=-math.inf)
+        for j, aid in enumerate(IDS):
+            e = last.get(aid)
+            for tab in (pred.table, twin.table):
+                assert tab.t[j] == (-math.inf if e is None else e.t)
+                if e is not None:
+                    assert np.array_equal(tab.rows[j], np.concatenate([e.z1, e.z2, e.z3, e.xi]))
+                    assert tab.leader[j] == e.is_leader and tab.cooperative[j] == e.cooperative
+        assert np.array_equal(pred.table.acc_t, twin.table.acc_t, equal_nan=True)

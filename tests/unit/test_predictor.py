@@ -14,6 +14,7 @@ OMEGA = 2 * np.pi * 0.2
 DT = 0.02
 FOL = (7.0, 3.0)  # k_p', k_v of the followers' assumed loop (cube8: ks λ + kp/kd, λ + ks)
 LEAD = (4.0, 3.0)
+IDS = list(range(10))  # the scenario's agent ids
 
 
 def _xi0() -> np.ndarray:
@@ -36,7 +37,7 @@ def _est(aid: int, t: float, z1: np.ndarray, z2: np.ndarray, xi: np.ndarray,
 def test_leader_exact_through_a_long_outage() -> None:
     """A leader on the exosystem with a PD offset: the prediction 5 s later equals the
     exosystem's state plus the PD loop's decayed offset, and is never dropped (max_age 1 s)."""
-    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=1.0)
+    pred = NeighbourPredictor(IDS, OMEGA, DT, FOL, LEAD, max_age=1.0)
     xi = _xi0()
     off_p, off_v = np.array([0.05, -0.02, 0.01]), np.array([0.0, 0.03, -0.01])
     pred.ingest({1: _est(1, 0.0, xi_p(xi) + off_p, xi_v(xi) + off_v, xi, True)}, comm_ok=True)
@@ -61,7 +62,7 @@ def test_leader_exact_through_a_long_outage() -> None:
 
 
 def test_follower_bound_grows_and_drops() -> None:
-    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=1.0, a_max=10.0, drop_bound=0.5)
+    pred = NeighbourPredictor(IDS, OMEGA, DT, FOL, LEAD, max_age=1.0, a_max=10.0, drop_bound=0.5)
     xi = _xi0()
     pred.ingest({5: _est(5, 0.0, xi_p(xi), xi_v(xi), xi, False)}, comm_ok=True)
     assert pred.bound(5, 0.0) == 0.0 and pred.bound(9, 0.0) is None
@@ -89,7 +90,7 @@ def test_follower_bound_grows_and_drops() -> None:
 
 
 def test_max_age_caps_followers() -> None:
-    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=0.1, a_max=0.0, drop_bound=1e9)
+    pred = NeighbourPredictor(IDS, OMEGA, DT, FOL, LEAD, max_age=0.1, a_max=0.0, drop_bound=1e9)
     xi = _xi0()
     pred.ingest({5: _est(5, 0.0, xi_p(xi), xi_v(xi), xi, False)}, comm_ok=True)
     assert pred.get(5, 0.1) is not None and pred.get(5, 0.12) is None
@@ -113,7 +114,7 @@ def test_follower_bound_holds_on_simulated_data() -> None:
     """A follower whose true acceleration deviates from the assumed loop (held, saturated,
     disturbed) within a_max: the prediction error stays inside the bound at every step."""
     a_max = 6.0
-    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, a_max=a_max, drop_bound=1e9)
+    pred = NeighbourPredictor(IDS, OMEGA, DT, FOL, LEAD, a_max=a_max, drop_bound=1e9)
     rng = np.random.default_rng(7)
     kp, kv = FOL
     for trial in range(10):
@@ -144,15 +145,17 @@ def test_a_stamp_off_by_rounding_is_current_data() -> None:
     received, and its a_dev is never computed; a millisecond later it is aged."""
     t_sent, t_read = 6 * DT + DT, 7 * DT
     assert 0.0 < t_read - t_sent < 1e-15
-    pred = NeighbourPredictor(OMEGA, DT, FOL, LEAD, max_age=1.0)
+    pred = NeighbourPredictor(IDS, OMEGA, DT, FOL, LEAD, max_age=1.0)
     xi = _xi0()
     e = _est(2, t_sent, xi_p(xi) + 0.3, xi_v(xi) - 0.2, xi, False)
     pred.ingest({2: e}, comm_ok=True)
     got = pred.get(2, t_read)
-    assert got is not None and got[0] is e.z1 and got[1] is e.z2 and got[2] is e.xi
+    assert got is not None
+    for a, b in zip(got, (e.z1, e.z2, e.xi), strict=True):  # as received, in the table
+        assert np.array_equal(a, b) and np.shares_memory(a, pred.table.rows)
     assert pred.bound(2, t_read) == 0.0 and pred.velocity_bound(2, t_read) == 0.0
-    many = pred.predict_many([2], t_read)[0]
-    assert many is not None and all(a is b for a, b in zip(many, got, strict=True))
+    rows, have = pred.predict_rows(np.array([2, 4]), t_read)
+    assert rows is pred.table.rows and have[2] and not have[4]  # 4 never heard
     assert not pred._a_dev  # nothing computed for current data
     later = t_read + 1e-3
     age = later - t_sent

@@ -6,6 +6,7 @@ import pytest
 from conftest import CUBE8  # noqa: E402
 
 from offboard.bearing import formation_from_scenario
+from offboard.peer_table import rows_of
 from offboard.reference import DesiredStateObserver, LeaderTrajectory, exo_propagator
 from swarm_common.scenario import load_scenario
 
@@ -42,7 +43,7 @@ def test_desired_state_observer_converges(sc):
         pub = {i: o.xi.copy() for i, o in obs.items()}
         pub.update({i: trs[i].state(t) for i in f.leader_idx})
         for i, o in obs.items():
-            o.update({j: pub[j] for j in f.neighbours[i]})
+            o.update(*rows_of(sc.n, xi={j: pub[j] for j in f.neighbours[i]}))
     t = int(15 / dt) * dt
     lead = np.array([trs[i].state(t) for i in f.leader_idx])  # (2, 12)
     for d in range(4):
@@ -63,10 +64,13 @@ def test_compiled_observer_step_equals_numpy_formulation(sc):
     nbrs = obs.nbrs
     for trial in range(200):
         used = tuple(j for j in nbrs if rng.random() < 0.7) or (nbrs[0],)
-        mx, mc, pu = obs._matrices(used)
+        mx, mc, pu, idx = obs._matrices(used)
+        assert idx.tolist() == list(used)
         xs = rng.normal(0.0, 3.0, (len(used), 12))
         xi = rng.normal(0.0, 3.0, 12)
         c = np.einsum("kij,kdj->di", pu, xs.reshape(len(used), 4, 3)).reshape(12)
         want = mx @ xi + mc @ c
-        got = observer_step(mx, mc, pu, xs, xi)
+        rows, _ = rows_of(f.n, xi=dict(zip(used, xs, strict=True)))
+        rows[[j for j in range(f.n) if j not in used], 9:] = np.nan  # others never read
+        got = observer_step(mx, mc, pu, idx, rows, xi)
         assert np.allclose(got, want, rtol=1e-12, atol=1e-12), trial

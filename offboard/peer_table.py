@@ -1,0 +1,172 @@
+"""The neighbour data path as arrays: received estimates by scenario index.
+
+A follower reads its neighbours' estimates three ways: the predictor (the last accepted
+estimate per agent, predicted to t_k; :mod:`offboard.predictor`), the acceleration
+estimate (its last two velocities; :mod:`offboard.neighbour_accel`) and the observers
+(ẑ_j1, ẑ_j2 and ξ̂_j gathered by index inside :func:`offboard.deso_kernel.deso_step_kernel`
+and :func:`offboard.reference.observer_step`). All three read one :class:`PeerTable`,
+which :meth:`PeerTable.ingest` updates from a step's :class:`EstimateBatch` in one
+compiled call (:func:`ingest_kernel`), with no Python per neighbour.
+
+The in-process runner hands every agent the same batch (all agents' estimates of the step
+before, float32-rounded as on the wire) and each follower takes its own peers' rows; a
+daemon's received estimates are written into a batch of their own
+(:meth:`EstimateBatch.from_estimates`). Row layout (:data:`ROW`): z1 (m), z2 (m/s), z3
+(m/s²), ξ (12: p*, v*, a*, j*).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from offboard.agent_types import NeighbourEstimate
+from swarm_common.jit import kernel
+
+ROW = 21  # floats per estimate row: z1, z2, z3, ξ
+XI_COL = 9  # the row's first column of ξ
+Z1, Z2, Z3, XI = slice(0, 3), slice(3, 6), slice(6, 9), slice(XI_COL, XI_COL + 12)
+# s: an acceleration estimate takes an estimate only this much newer than its last one
+ACC_NEWER_S = 1e-9
+
+# ingest_kernel's result: whether who is heard or who cooperates changed, the newest stamp
+ING_CHANGED, ING_NEWEST = 0, 1
+
+
+@dataclass
+class EstimateBatch:
+    """One step's estimates by scenario index: stamp ``t`` (s; NaN where there is none),
+    ``rows`` (N, ROW) [z1, z2, z3, ξ], ``leader`` and ``cooperative`` flags (N,)."""
+
+    t: np.ndarray
+    rows: np.ndarray
+    leader: np.ndarray
+    cooperative: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> EstimateBatch:
+        return cls(np.full(n, np.nan), np.zeros((n, ROW)), np.zeros(n, dtype=np.bool_),
+                   np.ones(n, dtype=np.bool_))
+
+    @classmethod
+    def from_estimates(
+        cls, index_of: Mapping[int, int], n: int, ests: Mapping[int, NeighbourEstimate]
+    ) -> tuple[EstimateBatch, np.ndarray]:
+        """The batch of ``ests`` (by agent id; ids outside ``index_of`` are left out) and
+        the scenario indices it holds, in the order given."""
+        b = cls.empty(n)
+        idx: list[int] = []
+        for aid, e in ests.items():
+            j = index_of.get(aid)
+            if j is None:
+                continue
+            idx.append(j)
+            b.t[j] = e.t
+            r = b.rows[j]
+            r[Z1], r[Z2], r[Z3], r[XI] = e.z1, e.z2, e.z3, e.xi
+            b.leader[j], b.cooperative[j] = e.is_leader, e.cooperative
+        return b, np.array(idx, dtype=np.int64)
+
+
+class PeerTable:
+    """What one agent has received, by scenario index of the ``n`` agents.
+
+    * the last accepted estimate per agent (the predictor's): ``t`` (s, −inf never heard),
+      ``rows``, ``leader``, ``cooperative``; an estimate is accepted when at least as new
+      as the last one, and only while the link is up;
+    * the last two accepted velocities per agent (the acceleration estimate's): ``acc_t``
+      (2, n) (s, NaN for a slot never written), ``acc_z2`` (2, n, 3) (m/s), ``acc_older``
+      the slot the next one overwrites; accepted when more than ACC_NEWER_S newer than the
+      last, link up or not (docs/safety.md §3).
+    """
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self.t = np.full(n, -np.inf)
+        self.rows = np.zeros((n, ROW))
+        self.leader = np.zeros(n, dtype=np.bool_)
+        self.cooperative = np.ones(n, dtype=np.bool_)
+        self.version = np.zeros(n, dtype=np.int64)  # rows accepted per agent
+        self.acc_t = np.full((2, n), np.nan)
+        self.acc_z2 = np.zeros((2, n, 3))
+        self.acc_older = np.zeros(n, dtype=np.int64)
+        self.newest = -math.inf  # s, the newest stamp accepted from anyone
+        # bumped when an agent is first heard from or its cooperative flag changes
+        self.revision = 0
+
+    def heard(self, j: int) -> bool:
+        return bool(self.t[j] > -math.inf)
+
+    def ingest(self, batch: EstimateBatch, idx: np.ndarray, link_up: bool) -> None:
+        """Take the estimates of ``batch`` at scenario indices ``idx`` (NaN stamps skipped)."""
+        res = ingest_kernel(
+            idx, batch.t, batch.rows, batch.leader, batch.cooperative, link_up, self.t,
+            self.rows, self.leader, self.cooperative, self.version, self.acc_t, self.acc_z2,
+            self.acc_older,
+        )
+        if res[ING_CHANGED]:
+            self.revision += 1
+        if res[ING_NEWEST] > self.newest:
+            self.newest = float(res[ING_NEWEST])
+
+
+@kernel
+def ingest_kernel(
+    idx: np.ndarray, bt: np.ndarray, brows: np.ndarray, blead: np.ndarray,
+    bcoop: np.ndarray, link_up: bool, t: np.ndarray, rows: np.ndarray, lead: np.ndarray,
+    coop: np.ndarray, version: np.ndarray, acc_t: np.ndarray, acc_z2: np.ndarray,
+    acc_older: np.ndarray,
+) -> np.ndarray:
+    """:meth:`PeerTable.ingest` (arrays as there; idx (m,) int64): for each ``j = idx[r]``
+    with a stamp, the predictor's row is replaced when ``link_up`` and the stamp is not
+    older than the last (its ``version`` counted; first heard, or a changed cooperative
+    flag, is reported), and the
+    acceleration slots take its z2 when it is more than ACC_NEWER_S newer than their last.
+    Returns [changed (0/1), newest accepted stamp (s, −inf if none)]."""
+    out = np.empty(2)
+    out[ING_CHANGED] = 0.0
+    out[ING_NEWEST] = -math.inf
+    for r in range(idx.shape[0]):
+        j = idx[r]
+        s = bt[j]
+        if math.isnan(s):
+            continue
+        if link_up and s >= t[j]:
+            if t[j] == -math.inf or coop[j] != bcoop[j]:
+                out[ING_CHANGED] = 1.0
+            t[j] = s
+            for c in range(ROW):
+                rows[j, c] = brows[j, c]
+            lead[j] = blead[j]
+            coop[j] = bcoop[j]
+            version[j] += 1
+            if s > out[ING_NEWEST]:
+                out[ING_NEWEST] = s
+        older = acc_older[j]
+        last = acc_t[1 - older, j]
+        if math.isnan(last) or s > last + ACC_NEWER_S:
+            acc_t[older, j] = s
+            for c in range(3):
+                acc_z2[older, j, c] = brows[j, 3 + c]
+            acc_older[j] = 1 - older
+    return out
+
+
+def rows_of(
+    n: int, z1: Mapping[int, np.ndarray] | None = None, z2: Mapping[int, np.ndarray] | None = None,
+    xi: Mapping[int, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rows (n, ROW), have (n,) bool) of vectors given by scenario index: the input of
+    :meth:`offboard.deso.DESO.update` and
+    :meth:`offboard.reference.DesiredStateObserver.update` from per-agent z1 (m), z2 (m/s)
+    and ξ; ``have[j]`` where any of them is given for j."""
+    rows = np.zeros((n, ROW))
+    have = np.zeros(n, dtype=np.bool_)
+    for cols, vecs in ((Z1, z1), (Z2, z2), (XI, xi)):
+        for j, x in (vecs or {}).items():
+            rows[j, cols] = x
+            have[j] = True
+    return rows, have
