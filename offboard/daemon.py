@@ -60,8 +60,8 @@ from offboard.offboard_keeper import OffboardKeeper
 from offboard.runner_loss import RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.sensing_source import SwarmSensing
 from offboard.wire_convert import (
-    estimate_from_wire,
     estimate_to_wire,
+    estimates_from_wire,
     measured_state,
     status_to_wire,
 )
@@ -100,6 +100,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.id = cfg.agent_id
         form = formation_from_scenario(sc) if form is None else form
         self.others = peer_ids(form, cfg.agent_id)  # whose estimates it reads and awaits
+        self._index_of = {aid: j for j, aid in enumerate(form.ids)}  # id -> scenario index
         ready = [] if cfg.solo else ready_ids(form, cfg.agent_id)  # heard before flying
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed, form=form)
         self.control_hz = int(sc.run.control_hz)
@@ -238,7 +239,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         if not self.cfg.lockstep and isinstance(self.agent, LeaderAgent):
             self._maybe_start_trajectory(t)
         received, comm_ok = self._neighbours_for(k, t)
-        neighbours = {j: estimate_from_wire(e) for j, e in received.items()}
+        neighbours = estimates_from_wire(self._index_of, len(self._index_of), received)
         cpu0 = time.thread_time()
         out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
         self.control_cpu_s += time.thread_time() - cpu0

@@ -4,10 +4,13 @@ Pure functions, used by :mod:`offboard.daemon`."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from offboard.agent import AgentOutput, NeighbourEstimate
 from offboard.mavlink_link import Odometry
+from offboard.peer_table import ROW, EstimateBatch
 from offboard.reference import xi_p
 from swarm_common import frames, wire
 from swarm_common.enums import Role
@@ -34,6 +37,27 @@ def estimate_from_wire(e: wire.Estimate) -> NeighbourEstimate:
     return NeighbourEstimate(
         e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == Role.LEADER, cooperative=e.cooperative
     )
+
+
+def estimates_from_wire(
+    index_of: Mapping[int, int], n: int, received: Mapping[int, wire.Estimate]
+) -> EstimateBatch:
+    """Received payloads (by agent id) as the agent consumes them: one
+    :class:`~offboard.peer_table.EstimateBatch` of the ``n`` agents by scenario index
+    (``index_of``: id → index; ids outside it are left out), each row the payload's
+    float32-rounded z1, z2, z3 and ξ (the decoded block's first ROW floats)."""
+    b = EstimateBatch.empty(n)
+    for aid, e in received.items():
+        j = index_of.get(aid)
+        if j is None:
+            continue
+        blk = e.block
+        b.rows[j] = (blk[:ROW] if blk is not None and blk.shape[0] >= ROW
+                     else np.concatenate([e.z1, e.z2, e.z3, e.xi]))
+        b.t[j] = e.t
+        b.leader[j] = e.role == Role.LEADER
+        b.cooperative[j] = e.cooperative
+    return b
 
 
 def measured_state(odo: Odometry, dt: float) -> tuple[np.ndarray, np.ndarray] | None:

@@ -123,3 +123,40 @@ def test_status_rows_written_at_once() -> None:
         assert ser.fallback[1, i] == QPStatus(st.qp_status).degraded
         assert ser.input_clipped[1, i] == st.input_clipped
     assert not ser.fallback[0].any() and not ser.fallback[2].any()  # other rows untouched
+
+
+def test_followers_given_the_batch_equal_followers_given_dicts() -> None:
+    """A follower handed the runner's batch of every agent's estimates (published_batch)
+    flies the same bits as one handed its peers' estimates one by one (round_estimates,
+    what a daemon receives), through an outage where the batch gives nothing and the dict
+    is empty. Truth moves on a fixed path (the agents' commands do not act on it), so
+    every step is compared on the same inputs."""
+    from gcs.inproc import published_batch
+    from offboard.agent import make_agent
+    from offboard.bearing import formation_from_scenario
+    from offboard.daemon_peers import peer_ids
+
+    form = formation_from_scenario(SC)
+    pair = [[make_agent(SC, a.id, method="dcbf", form=form) for a in SC.agents] for _ in (0, 1)]
+    by_batch, by_dict = pair
+    p0 = SC.initial_positions()
+    dt = SC.control_dt
+    pub_batch = published_batch([ag.initial_estimate() for ag in by_batch])
+    pub_dict = {e.id: e for e in round_estimates([ag.initial_estimate() for ag in by_dict])}
+    compared = 0
+    for k in range(120):
+        t = k * dt
+        tp = (p0 + 0.3 * np.sin(0.5 * t + np.arange(SC.n))[:, None]).astype(np.float32)
+        tv = np.full_like(tp, 0.1)
+        comm = not 40 <= k < 60
+        outs_b = [ag.step(k, t, tp, tv, pub_batch, comm) for ag in by_batch]
+        outs_d = [ag.step(k, t, tp, tv, {j: pub_dict[j] for j in peer_ids(form, ag.id)}
+                          if comm else {}, comm) for ag in by_dict]
+        for ob, od in zip(outs_b, outs_d, strict=True):
+            assert np.array_equal(ob.q_ned, od.q_ned) and ob.thrust_norm == od.thrust_norm
+            for f in ("z1", "z2", "z3", "xi"):
+                assert np.array_equal(getattr(ob.estimate, f), getattr(od.estimate, f)), (k, f)
+            compared += 1
+        pub_batch = published_batch([o.estimate for o in outs_b])
+        pub_dict = {e.id: e for e in round_estimates([o.estimate for o in outs_d])}
+    assert compared == 120 * SC.n

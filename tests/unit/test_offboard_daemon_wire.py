@@ -9,6 +9,7 @@ from offboard.mavlink_link import Odometry
 from offboard.wire_convert import (
     estimate_from_wire,
     estimate_to_wire,
+    estimates_from_wire,
     measured_state,
     status_to_wire,
 )
@@ -36,6 +37,30 @@ def test_estimate_round_trip_keeps_cooperation() -> None:
         back = wire.decode(wire.encode(estimate_to_wire(e, 7, None)))
         assert isinstance(back, wire.Estimate)
         assert estimate_from_wire(back).cooperative is cooperative
+
+
+def test_received_payloads_as_one_batch() -> None:
+    """estimates_from_wire: each decoded payload's vectors, stamp and flags in its agent's
+    row (the same values estimate_from_wire gives), ids outside the scenario left out,
+    agents not received NaN-stamped; a payload built without its block as well."""
+    rng = np.random.default_rng(2)
+    sent = {}
+    flags = ((4, True, True), (9, False, False), (7, False, True), (50, False, True))
+    for aid, leader, coop in flags:
+        e = NeighbourEstimate(aid, 0.02 * aid, rng.normal(size=3), rng.normal(size=3),
+                              rng.normal(size=3), rng.normal(size=12), leader, coop)
+        back = wire.decode(wire.encode(estimate_to_wire(e, 3, rng.normal(size=6))))
+        assert isinstance(back, wire.Estimate)
+        sent[aid] = back
+    sent[7].block = None  # a payload made in process, not decoded
+    index_of = {4: 0, 7: 1, 8: 2, 9: 3}
+    b = estimates_from_wire(index_of, 4, sent)
+    assert np.isnan(b.t[2])
+    for aid, j in ((4, 0), (7, 1), (9, 3)):
+        want = estimate_from_wire(sent[aid])
+        assert b.t[j] == want.t
+        assert np.array_equal(b.rows[j], np.concatenate([want.z1, want.z2, want.z3, want.xi]))
+        assert b.leader[j] == want.is_leader and b.cooperative[j] == want.cooperative
 
 
 def test_measured_state_is_enu_and_carried_one_step() -> None:
