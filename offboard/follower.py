@@ -23,8 +23,8 @@ from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import ContentMemo
 from offboard.neighbour_accel import NeighbourAccel
-from offboard.peer_table import XI, EstimateBatch
-from offboard.predictor import NeighbourPredictor
+from offboard.peer_table import XI, EstimateBatch, current_beyond
+from offboard.predictor import CURRENT_AGE_S, NeighbourPredictor
 from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
@@ -40,6 +40,9 @@ MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s a
 # an avoidance (docs/safety.md §5b): s, and at least this many control periods
 SILENT_AFTER_S = 0.1
 SILENT_AFTER_PERIODS = 3
+# relative margin on the sensing range of the compiled pre-test of predicted pairs (its sum
+# of squares and the exact norm's BLAS dot differ by a few ulps)
+RANGE_MARGIN = 1e-6
 
 
 # the DESO gain report of a formation's content and observer gains, once per process
@@ -256,8 +259,15 @@ class FollowerAgent(AgentBase):
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
         # only agents heard from can be predicted (the others' get() is None): O(peers)
         pred = self.pred
-        for j in self._heard_indices():
-            if j == self.index or j in sensed:
+        cand = [j for j in self._heard_indices() if j != self.index and j not in sensed]
+        if not cand:
+            return None
+        # current data certainly out of range (a margin over the exact test below) is
+        # passed over in one compiled call; the rest take the exact test
+        far = current_beyond(np.array(cand, dtype=np.int64), pred.table.t, pred.table.rows,
+                             self.deso.z1, t, CURRENT_AGE_S, (rng * (1.0 + RANGE_MARGIN)) ** 2)
+        for j, beyond in zip(cand, far.tolist(), strict=True):
+            if beyond:
                 continue
             got = pred.get_at(j, t)
             if got is None:

@@ -170,3 +170,23 @@ def rows_of(
             rows[j, cols] = x
             have[j] = True
     return rows, have
+
+
+@kernel
+def current_beyond(
+    idx: np.ndarray, t_tab: np.ndarray, rows: np.ndarray, z1: np.ndarray, t: float,
+    age_max: float, r2: float,
+) -> np.ndarray:
+    """(len(idx),) bool: agent ``idx[r]``'s last row is current at ``t`` (stamp at most
+    ``age_max`` s before it) and its z1 lies farther than √r2 (m) from ``z1`` (a sum of
+    squares in order: a cheap test, callers keep a margin on r2 for the exact norm)."""
+    out = np.zeros(idx.shape[0], dtype=np.bool_)
+    for r in range(idx.shape[0]):
+        j = idx[r]
+        if not t - t_tab[j] <= age_max:
+            continue
+        d0 = z1[0] - rows[j, 0]
+        d1 = z1[1] - rows[j, 1]
+        d2 = z1[2] - rows[j, 2]
+        out[r] = d0 * d0 + d1 * d1 + d2 * d2 > r2
+    return out
