@@ -112,3 +112,30 @@ def test_table_keeps_the_newest_estimate_per_agent() -> None:
                     assert np.array_equal(tab.rows[j], np.concatenate([e.z1, e.z2, e.z3, e.xi]))
                     assert tab.leader[j] == e.is_leader and tab.cooperative[j] == e.cooperative
         assert np.array_equal(pred.table.acc_t, twin.table.acc_t, equal_nan=True)
+
+
+def test_current_beyond_is_a_safe_pretest_of_the_range() -> None:
+    """current_beyond marks current rows farther than the range (with its margin) from z1
+    and nothing else: never a stale row, never a row the exact norm puts within range."""
+    from offboard.follower import RANGE_MARGIN
+    from offboard.peer_table import ROW, current_beyond
+
+    rng = np.random.default_rng(6)
+    marked = 0
+    for _ in range(300):
+        n = int(rng.integers(1, 12))
+        rows = rng.normal(0.0, 4.0, (n, ROW))
+        t_tab = rng.choice([1.0, 1.0 - 1e-12, 0.98, -math.inf], n)
+        z1 = rng.normal(0.0, 4.0, 3)
+        r = float(rng.uniform(0.5, 9.0))
+        idx = rng.permutation(n)[: int(rng.integers(0, n + 1))].astype(np.int64)
+        got = current_beyond(idx, t_tab, rows, z1, 1.0, 1e-9, (r * (1 + RANGE_MARGIN)) ** 2)
+        for j, far in zip(idx.tolist(), got.tolist(), strict=True):
+            d = z1 - rows[j, 0:3]
+            exact = math.sqrt(float(d.dot(d)))
+            if far:
+                assert 1.0 - t_tab[j] <= 1e-9 and exact > r
+                marked += 1
+            elif 1.0 - t_tab[j] <= 1e-9:
+                assert exact <= r * (1 + 2 * RANGE_MARGIN)
+    assert marked > 0
