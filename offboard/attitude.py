@@ -115,8 +115,18 @@ class InnerLoopModel:
         self.a_rp = math.exp(-dt_sub / veh.tau_rollpitch_s)
         self.a_y = math.exp(-dt_sub / veh.tau_yaw_s)
         self.a_f = math.exp(-dt_sub / veh.tau_thrust_s)
-        self.att = [0.0, 0.0, 0.0]
-        self.f = self.m * self.g
+        # [roll, pitch, yaw (rad), thrust (N)] realised: the state the kernels take
+        self.state = np.array([0.0, 0.0, 0.0, self.m * self.g])
+
+    @property
+    def att(self) -> list[float]:
+        """Realised [roll, pitch, yaw] (rad)."""
+        return [float(x) for x in self.state[:3]]
+
+    @property
+    def f(self) -> float:
+        """Realised thrust (N)."""
+        return float(self.state[3])
 
     def command(
         self, u: np.ndarray, yaw: float, n_sub: int, clip_tol: float
@@ -128,26 +138,21 @@ class InnerLoopModel:
         the rows' mean (m/s²). One compiled call
         (:func:`offboard.attitude_kernel.command_kernel`), the same bits as those calls."""
         ua = _virtual_control(u)
-        r, p, y = self.att
-        roll, pitch, yaw_c, f, q, tn, rows, state, clipped, mean = command_kernel(
-            ua, float(yaw), self.g, self.m, self.tilt, self.f_max,
-            np.array([r, p, y, self.f], dtype=float), self.a_rp, self.a_y, self.a_f,
-            int(n_sub), float(clip_tol),
+        roll, pitch, yaw_c, f, q, tn, rows, self.state, clipped, mean = command_kernel(
+            ua, float(yaw), self.g, self.m, self.tilt, self.f_max, self.state, self.a_rp,
+            self.a_y, self.a_f, int(n_sub), float(clip_tol),
         )
-        self.att = [float(state[0]), float(state[1]), float(state[2])]
-        self.f = float(state[3])
         return Setpoint(roll, pitch, yaw_c, f, q, np.float32(tn)), rows, bool(clipped), mean
 
     def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
         """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u (m/s²) at each
         sub-step end. The command is clipped to the tilt and thrust limits and the
         sub-steps run in the compiled :func:`offboard.attitude_kernel.inner_loop_kernel`."""
-        r, p, y = self.att
+        r, p, y, f0 = self.state.tolist()
         rows, r, p, y, f = inner_loop_kernel(
-            float(r), float(p), float(y), float(self.f), float(sp.roll), float(sp.pitch),
+            r, p, y, f0, float(sp.roll), float(sp.pitch),
             float(sp.yaw), float(sp.thrust_n), self.tilt, self.f_max, self.a_rp, self.a_y,
             self.a_f, self.m, self.g, int(n_sub),
         )
-        self.att = [r, p, y]
-        self.f = f
+        self.state = np.array([r, p, y, f])
         return rows

@@ -123,6 +123,7 @@ class FollowerAgent(AgentBase):
         self._heard: tuple[int, list[int]] = (-1, [])
         # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
         self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
+        self._zero_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _no_margin
         self.silent_after = max(SILENT_AFTER_S, SILENT_AFTER_PERIODS * self.dt)  # s
         self.fallbacks = 0
         self._airborne = False  # latched once the altitude estimate reached the ground floor
@@ -227,8 +228,7 @@ class FollowerAgent(AgentBase):
     ) -> SafetyInput:
         """The filter's input: the sensed pairs (Δp = p_i − p_j, Δv), and for dcbf also the
         neighbours that are not sensed now but predicted (:meth:`_predicted_pairs`)."""
-        margin = np.zeros(len(sel))
-        predicted = np.zeros(len(sel), dtype=bool)
+        margin, predicted = self._no_margin(len(sel))
         if self.method == Method.DCBF and (extra := self._predicted_pairs(t, sel)) is not None:
             idx, pp, pv, pm = extra
             sel = np.concatenate([sel, idx])
@@ -243,6 +243,15 @@ class FollowerAgent(AgentBase):
             self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
             self._ground_floor(), margin, predicted,
         )
+
+    def _no_margin(self, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) zero margins and (M,) False predicted flags: the sensed pairs' part of the
+        filter's input, made once per M (the filters only read them)."""
+        got = self._zero_rows.get(m)
+        if got is None:
+            got = (np.zeros(m), np.zeros(m, dtype=bool))
+            self._zero_rows[m] = got
+        return got
 
     def _predicted_pairs(
         self, t: float, sel: np.ndarray

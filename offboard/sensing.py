@@ -85,8 +85,9 @@ class Sensor:
         noise = self.rng.standard_normal((n, 8))
         drop = self.rng.random(n)
         sb, sr, sd, sdd = self._sig
-        out = Measurements(np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
-                           np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3)))
+        vec, sca = np.empty((4, n, 3)), np.empty((2, n))  # C-contiguous (n,3) and (n,) views
+        out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
+                           vec[3])
         measure_into(
             rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,

@@ -140,8 +140,7 @@ def inner_run_py(m: InnerLoopModel, sp: Setpoint, n_sub: int) -> np.ndarray:
         k = f / m.m
         rows.append(((cy * sp_ * cr + sy * sr) * k, (sy * sp_ * cr - cy * sr) * k,
                      cp * cr * k - m.g))
-    m.att = [r, p, y]
-    m.f = f
+    m.state = np.array([r, p, y, f])
     return np.array(rows)
 
 
