@@ -71,7 +71,6 @@ class FollowerAgent(AgentBase):
         spec = sc.agents[self.index]
         z1 = spec.position + rng.standard_normal(3) * obs.init_pos_error_m
         z2 = spec.velocity + rng.standard_normal(3) * obs.init_vel_error_mps
-        self.anchor = obs.leader_anchor > 0.0
         self.deso = DESO(
             self.form, self.index, tuple(obs.beta), obs.mu, obs.sigma, self.substeps, self.dt,
             sc.unmodeled.ground_effect_height_m, z1, z2, obs.leader_anchor,

@@ -97,9 +97,6 @@ class PeerTable:
         # bumped when an agent is first heard from or its cooperative flag changes
         self.revision = 0
 
-    def heard(self, j: int) -> bool:
-        return bool(self.t[j] > -math.inf)
-
     def ingest(self, batch: EstimateBatch, idx: np.ndarray, link_up: bool) -> None:
         """Take the estimates of ``batch`` at scenario indices ``idx`` (NaN stamps skipped)."""
         res = ingest_kernel(
@@ -123,9 +120,14 @@ def ingest_kernel(
     """:meth:`PeerTable.ingest` (arrays as there; idx (m,) int64): for each ``j = idx[r]``
     with a stamp, the predictor's row is replaced when ``link_up`` and the stamp is not
     older than the last (its ``version`` counted; first heard, or a changed cooperative
-    flag, is reported), and the
-    acceleration slots take its z2 when it is more than ACC_NEWER_S newer than their last.
-    Returns [changed (0/1), newest accepted stamp (s, −inf if none)]."""
+    flag, is reported), and the acceleration slots take its z2 when it is more than
+    ACC_NEWER_S newer than their last. Returns [changed (0/1), newest accepted stamp (s,
+    −inf if none)]. ValueError, with nothing written, for an index outside the batch or
+    the table."""
+    n = min(bt.shape[0], brows.shape[0], t.shape[0], rows.shape[0], acc_t.shape[1])
+    for r in range(idx.shape[0]):
+        if not 0 <= idx[r] < n:
+            raise ValueError("ingest_kernel: an index outside the batch or the table")
     out = np.empty(2)
     out[ING_CHANGED] = 0.0
     out[ING_NEWEST] = -math.inf
@@ -183,6 +185,8 @@ def current_beyond(
     out = np.zeros(idx.shape[0], dtype=np.bool_)
     for r in range(idx.shape[0]):
         j = idx[r]
+        if not (0 <= j < t_tab.shape[0] and j < rows.shape[0]):
+            raise ValueError("current_beyond: an index outside the table")
         if not t - t_tab[j] <= age_max:
             continue
         d0 = z1[0] - rows[j, 0]

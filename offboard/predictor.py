@@ -259,6 +259,8 @@ def mark_current(
     stale = 0
     for r in range(peers.shape[0]):
         j = peers[r]
+        if not (0 <= j < t_tab.shape[0] and j < have.shape[0]):
+            raise ValueError("mark_current: an index outside the table")
         cur = t - t_tab[j] <= age_max
         have[j] = cur
         if not cur and t_tab[j] > -math.inf:

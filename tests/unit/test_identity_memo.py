@@ -3,17 +3,25 @@ content; bounded."""
 
 from __future__ import annotations
 
-from offboard.identity_memo import IdentityMemo
+from collections.abc import Callable
+
+from offboard.identity_memo import ContentMemo, IdentityMemo
 
 
-def test_computed_once_per_object_and_parameters() -> None:
-    memo: IdentityMemo[int] = IdentityMemo(size=2)
+def _recorded() -> tuple[list[int], Callable[[int], int]]:
+    """(calls, compute): compute(v) returns v and records that it ran."""
     calls: list[int] = []
 
     def compute(v: int) -> int:
         calls.append(v)
         return v
 
+    return calls, compute
+
+
+def test_computed_once_per_object_and_parameters() -> None:
+    memo: IdentityMemo[int] = IdentityMemo(size=2)
+    calls, compute = _recorded()
     a, b = [1], [1]  # equal, but two objects
     assert memo.get(a, "p", lambda: compute(10)) == 10
     assert memo.get(a, "p", lambda: compute(11)) == 10  # cached
@@ -25,15 +33,8 @@ def test_computed_once_per_object_and_parameters() -> None:
 
 
 def test_content_memo_shares_equal_keys_and_is_bounded() -> None:
-    from offboard.identity_memo import ContentMemo
-
     memo: ContentMemo[int] = ContentMemo(size=2)
-    calls: list[int] = []
-
-    def compute(v: int) -> int:
-        calls.append(v)
-        return v
-
+    calls, compute = _recorded()
     assert memo.get(("d1", 1), lambda: compute(10)) == 10
     assert memo.get(("d1", 1), lambda: compute(11)) == 10  # an equal key: shared
     assert memo.get(("d1", 2), lambda: compute(12)) == 12

@@ -139,3 +139,22 @@ def test_current_beyond_is_a_safe_pretest_of_the_range() -> None:
             elif 1.0 - t_tab[j] <= 1e-9:
                 assert exact <= r * (1 + 2 * RANGE_MARGIN)
     assert marked > 0
+
+
+def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
+    import pytest
+
+    from offboard.peer_table import PeerTable, current_beyond
+
+    tab = PeerTable(3)
+    b = EstimateBatch.empty(3)
+    b.t[:] = 1.0
+    for bad in (np.array([0, 3]), np.array([-1])):
+        with pytest.raises(ValueError, match="outside"):
+            tab.ingest(b, bad, True)
+        with pytest.raises(ValueError, match="outside"):
+            current_beyond(bad, tab.t, tab.rows, np.zeros(3), 1.0, 1e-9, 1.0)
+    assert np.all(tab.t == -math.inf) and np.all(np.isnan(tab.acc_t))
+    pred = NeighbourPredictor([1, 2, 3], 0.4, 0.02, (4.0, 3.0), (2.0, 2.5))
+    with pytest.raises(ValueError, match="outside"):
+        pred.predict_rows(np.array([5], dtype=np.int64), 0.0)
