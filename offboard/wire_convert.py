@@ -32,13 +32,6 @@ def estimate_to_wire(e: NeighbourEstimate, step: int, zeta: np.ndarray | None) -
     )
 
 
-def estimate_from_wire(e: wire.Estimate) -> NeighbourEstimate:
-    """A received payload as the agent consumes it (float32-rounded vectors)."""
-    return NeighbourEstimate(
-        e.id, e.t, e.z1, e.z2, e.z3, e.xi, e.role == Role.LEADER, cooperative=e.cooperative
-    )
-
-
 def estimates_from_wire(
     index_of: Mapping[int, int], n: int, received: Mapping[int, wire.Estimate]
 ) -> EstimateBatch:

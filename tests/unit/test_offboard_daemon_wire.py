@@ -7,7 +7,6 @@ import numpy as np
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.mavlink_link import Odometry
 from offboard.wire_convert import (
-    estimate_from_wire,
     estimate_to_wire,
     estimates_from_wire,
     measured_state,
@@ -27,7 +26,7 @@ def test_estimate_round_trip_keeps_the_role() -> None:
         w = estimate_to_wire(_est(leader), 7, None)
         back = wire.decode(wire.encode(w))
         assert isinstance(back, wire.Estimate) and back.role == role
-        assert estimate_from_wire(back).is_leader is leader
+        assert bool(estimates_from_wire({2: 0}, 1, {2: back}).leader[0]) is leader
 
 
 def test_estimate_round_trip_keeps_cooperation() -> None:
@@ -36,16 +35,17 @@ def test_estimate_round_trip_keeps_cooperation() -> None:
         e.cooperative = cooperative
         back = wire.decode(wire.encode(estimate_to_wire(e, 7, None)))
         assert isinstance(back, wire.Estimate)
-        assert estimate_from_wire(back).cooperative is cooperative
+        assert bool(estimates_from_wire({2: 0}, 1, {2: back}).cooperative[0]) is cooperative
 
 
 def test_received_payloads_as_one_batch() -> None:
     """estimates_from_wire: each decoded payload's vectors, stamp and flags in its agent's
-    row (the same values estimate_from_wire gives), ids outside the scenario left out,
-    agents not received NaN-stamped; a payload built without its block as well."""
+    row, ids outside the scenario left out, agents not received NaN-stamped; a payload
+    built without its block as well."""
     rng = np.random.default_rng(2)
     sent = {}
     flags = ((4, True, True), (9, False, False), (7, False, True), (50, False, True))
+    flags_of = {aid: (leader, coop) for aid, leader, coop in flags}
     for aid, leader, coop in flags:
         e = NeighbourEstimate(aid, 0.02 * aid, rng.normal(size=3), rng.normal(size=3),
                               rng.normal(size=3), rng.normal(size=12), leader, coop)
@@ -57,10 +57,11 @@ def test_received_payloads_as_one_batch() -> None:
     b = estimates_from_wire(index_of, 4, sent)
     assert np.isnan(b.t[2])
     for aid, j in ((4, 0), (7, 1), (9, 3)):
-        want = estimate_from_wire(sent[aid])
-        assert b.t[j] == want.t
-        assert np.array_equal(b.rows[j], np.concatenate([want.z1, want.z2, want.z3, want.xi]))
-        assert b.leader[j] == want.is_leader and b.cooperative[j] == want.cooperative
+        got = sent[aid]
+        assert b.t[j] == got.t
+        assert np.array_equal(b.rows[j], np.concatenate([got.z1, got.z2, got.z3, got.xi]))
+        assert b.leader[j] == (got.role == "leader") and b.cooperative[j] == got.cooperative
+        assert b.leader[j] == flags_of[aid][0] and b.cooperative[j] == flags_of[aid][1]
 
 
 def test_measured_state_is_enu_and_carried_one_step() -> None:
