@@ -28,7 +28,15 @@ def mavsdk_system(sim_factory):
     sim = sim_factory(ONE)
     with mavsdk_autopilot(sim) as system:
         tel = Telemetry(system)
-        assert wait_for(lambda: tel.health().is_global_position_ok, 10.0), sim.text()
+
+        def placed() -> bool:
+            # MAVSDK reports the health before its first position (NaN until then): under
+            # load a plan made at once sat at (NaN, NaN) and uploaded as one item
+            pos = tel.position()
+            return bool(tel.health().is_global_position_ok and math.isfinite(pos.latitude_deg)
+                        and math.isfinite(pos.longitude_deg))
+
+        assert wait_for(placed, 10.0), sim.text()
         pos = tel.position()
         yield sim, system, (pos.latitude_deg, pos.longitude_deg)
 
