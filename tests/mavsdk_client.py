@@ -4,6 +4,7 @@ drive the simulator as a PX4 client would."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -27,3 +28,12 @@ def mavsdk_autopilot(sim: Any, vehicle: int = 1) -> Iterator[Any]:
         yield system
     finally:
         m.destroy()
+
+
+def position_ready(tel: Any) -> bool:
+    """MAVSDK ``Telemetry`` reports a global position: the health flag and a finite
+    latitude and longitude. MAVSDK raises the flag before its first position arrives
+    (NaN until then), so a test that reads the position at once can get (NaN, NaN)."""
+    pos = tel.position()
+    return bool(tel.health().is_global_position_ok and math.isfinite(pos.latitude_deg)
+                and math.isfinite(pos.longitude_deg))

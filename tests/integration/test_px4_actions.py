@@ -12,7 +12,7 @@ import time
 
 import pytest
 from conftest import ROOT, wait_for
-from mavsdk_client import mavsdk_autopilot
+from mavsdk_client import mavsdk_autopilot, position_ready
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -32,7 +32,7 @@ def drone(sim_factory):
     sim = sim_factory(ONE, scenario=GROUND8)
     with mavsdk_autopilot(sim) as system:
         tel = Telemetry(system)
-        assert wait_for(lambda: tel.health().is_global_position_ok and tel.health().is_armable,
+        assert wait_for(lambda: position_ready(tel) and tel.health().is_armable,
                         10.0), sim.text()  # fmt: skip
         yield sim, system, tel
 

@@ -8,7 +8,7 @@ import math
 
 import pytest
 from conftest import wait_for
-from mavsdk_client import mavsdk_autopilot
+from mavsdk_client import mavsdk_autopilot, position_ready
 from pymavlink import mavwp
 from pymavlink.dialects.v20 import common as M
 
@@ -28,15 +28,8 @@ def mavsdk_system(sim_factory):
     sim = sim_factory(ONE)
     with mavsdk_autopilot(sim) as system:
         tel = Telemetry(system)
-
-        def placed() -> bool:
-            # MAVSDK reports the health before its first position (NaN until then): under
-            # load a plan made at once sat at (NaN, NaN) and uploaded as one item
-            pos = tel.position()
-            return bool(tel.health().is_global_position_ok and math.isfinite(pos.latitude_deg)
-                        and math.isfinite(pos.longitude_deg))
-
-        assert wait_for(placed, 10.0), sim.text()
+        # not the health flag alone: under load a plan made at (NaN, NaN) was uploaded
+        assert wait_for(lambda: position_ready(tel), 10.0), sim.text()
         pos = tel.position()
         yield sim, system, (pos.latitude_deg, pos.longitude_deg)
 
