@@ -71,7 +71,7 @@ class NeighbourPredictor:
     control period; ``fol_gains``/``lead_gains`` are (k_p', k_v) of the error dynamics of
     followers and leaders; ``max_age`` (s) caps the age of followers' data, ``a_max``
     (m/s²) bounds a follower's actual acceleration and ``drop_bound`` (m) is the error
-    bound beyond which a follower's prediction is useless (see :meth:`bound`).
+    bound beyond which a follower's prediction is useless (see :meth:`bound_at`).
     """
 
     def __init__(self, ids: Sequence[int], omega: float, dt: float,
@@ -133,10 +133,6 @@ class NeighbourPredictor:
         """:meth:`ingest` of the rows ``idx`` (scenario indices, int64) of ``batch``."""
         self.table.ingest(batch, idx, comm_ok)
 
-    def a_dev(self, e: NeighbourEstimate) -> float:
-        """:meth:`a_dev_of` an estimate's z1, z2 and ξ."""
-        return self.a_dev_of(e.z1, e.z2, e.xi)
-
     def a_dev_of(self, z1: np.ndarray, z2: np.ndarray, xi: np.ndarray) -> float:
         """Bound (m/s²) on the gap between a follower's actual acceleration and the one its
         prediction from (z1, z2, ξ) assumes: a_max + ā* + c_r ‖(e1, e2)‖ (module
@@ -150,11 +146,6 @@ class NeighbourPredictor:
         kp, kv = self.gains[False]
         c_r = error_accel_gain(kp, kv)
         return self.a_max + a_star + c_r * math.sqrt(float(e1 @ e1) + float(e2 @ e2))
-
-    def bound(self, agent_id: int, t: float) -> float | None:
-        """:meth:`bound_at` of an agent id (None for an id outside the scenario)."""
-        j = self.index_of.get(agent_id)
-        return None if j is None else self.bound_at(j, t)
 
     def bound_at(self, j: int, t: float) -> float | None:
         """Bound (m) on the error of agent ``j``'s (scenario index) predicted position at
@@ -175,11 +166,6 @@ class NeighbourPredictor:
             got = (version, self.a_dev_of(r[Z1], r[Z2], r[XI]))
             self._a_dev[j] = got
         return 0.5 * got[1] * age * age
-
-    def velocity_bound(self, agent_id: int, t: float) -> float:
-        """:meth:`velocity_bound_at` of an agent id (0 for an id outside the scenario)."""
-        j = self.index_of.get(agent_id)
-        return 0.0 if j is None else self.velocity_bound_at(j, t)
 
     def velocity_bound_at(self, j: int, t: float) -> float:
         """Bound (m/s) on the error of agent ``j``'s predicted velocity at ``t``: a_dev·age
@@ -208,11 +194,6 @@ class NeighbourPredictor:
                 rows[j, Z1], rows[j, Z2], rows[j, XI] = got
                 have[j] = True
         return rows, have
-
-    def get(self, agent_id: int, t: float) -> Prediction | None:
-        """:meth:`get_at` of an agent id (None for an id outside the scenario)."""
-        j = self.index_of.get(agent_id)
-        return None if j is None else self.get_at(j, t)
 
     def get_at(self, j: int, t: float) -> Prediction | None:
         """(p, v, ξ) of agent ``j`` (scenario index) predicted to ``t``; None if never
