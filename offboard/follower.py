@@ -238,8 +238,7 @@ class FollowerAgent(AgentBase):
         full = self._full_share(sel, t) if self.method == Method.DCBF else None
         return SafetyInput(
             clf, w, self.deso.z2, dp, dv, sel, self._leader_accels(rows, have), self.a_real,
-            self.u_prev,
-            self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
+            self.u_prev, self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
             self._ground_floor(), margin, predicted,
         )
 

@@ -10,8 +10,9 @@ compiled call (:func:`ingest_kernel`), with no Python per neighbour.
 
 The in-process runner hands every agent the same batch (all agents' estimates of the step
 before, float32-rounded as on the wire) and each follower takes its own peers' rows; a
-daemon's received estimates are written into a batch of their own
-(:meth:`EstimateBatch.from_estimates`). Row layout (:data:`ROW`): z1 (m), z2 (m/s), z3
+daemon writes its received payloads into a batch of their own
+(:func:`offboard.wire_convert.estimates_from_wire`; records given by agent id go through
+:meth:`EstimateBatch.from_estimates`). Row layout (:data:`ROW`): z1 (m), z2 (m/s), z3
 (m/s²), ξ (12: p*, v*, a*, j*).
 """
 
@@ -84,7 +85,6 @@ class PeerTable:
     """
 
     def __init__(self, n: int) -> None:
-        self.n = n
         self.t = np.full(n, -np.inf)
         self.rows = np.zeros((n, ROW))
         self.leader = np.zeros(n, dtype=np.bool_)
