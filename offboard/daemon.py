@@ -59,6 +59,7 @@ from offboard.mode_requests import ModeRequests, SwarmReady
 from offboard.offboard_keeper import OffboardKeeper
 from offboard.runner_loss import RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.sensing_source import SwarmSensing
+from offboard.shared_subs import SharedSubscriptions
 from offboard.wire_convert import (
     estimate_to_wire,
     estimates_from_wire,
@@ -91,9 +92,14 @@ __all__ = ["RUNNER_LOST_PERIODS", "TAKEOFF_LATE_S", "TAKEOFF_LEAD_S", "DaemonCon
 class OffboardDaemon(DaemonCommands, SetpointStream):
     """One agent's offboard process (ground-station commands: offboard.daemon_commands)."""
 
-    def __init__(self, cfg: DaemonConfig, session: Any, form: Formation | None = None) -> None:
+    def __init__(
+        self, cfg: DaemonConfig, session: Any, form: Formation | None = None,
+        shared: SharedSubscriptions | None = None,
+    ) -> None:
         """``session``: an open Zenoh session (shared by the daemons of a packed process);
-        ``form``: the scenario's formation when the caller already built it."""
+        ``form``: the scenario's formation when the caller already built it; ``shared``:
+        the Zenoh subscriptions of a packed process's daemons (:mod:`offboard.shared_subs`),
+        None for subscribers of its own."""
         self.cfg = cfg
         sc = cfg.scenario
         self.sc = sc
@@ -110,7 +116,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         guard = PayloadGuard(list(sc.ids), list(sc.leader_ids), self.control_hz, cfg.agent_id)
         self.bus = SwarmBus(session, cfg.swarm, cfg.agent_id, guard,
                             odometry=cfg.sensing is SensingSource.ODOMETRY, peers=self.others,
-                            ready=ready)
+                            ready=ready, shared=shared)
         self.lost: set[int] = set()
         self.extra_outages: list[tuple[float, float]] = []
         self.last_step = -1

@@ -69,22 +69,18 @@ class DropLog:
             self._last_log[reason] = now
 
 
-def _finite(values: Iterable[float]) -> bool:
-    return all(math.isfinite(float(x)) for x in values)
-
-
 def odometry_fields_ok(
     pos: Iterable[float], q: Iterable[float], vel: Iterable[float]
 ) -> str | None:
     """None when the position (m), quaternion and velocity (m/s) are usable; else why."""
-    p, qq, v = list(pos), list(q), list(vel)
-    if not (_finite(p) and _finite(qq) and _finite(v)):
+    p, qq, v = [float(x) for x in pos], [float(x) for x in q], [float(x) for x in vel]
+    if not all(map(math.isfinite, p + qq + v)):
         return "non-finite field"
-    if max(abs(float(x)) for x in p) > MAX_ABS_POSITION_M:
+    if max(map(abs, p)) > MAX_ABS_POSITION_M:
         return "position out of range"
-    if max(abs(float(x)) for x in v) > MAX_ABS_SPEED_MS:
+    if max(map(abs, v)) > MAX_ABS_SPEED_MS:
         return "velocity out of range"
-    if abs(math.sqrt(sum(float(x) ** 2 for x in qq)) - 1.0) > QUAT_NORM_TOL:
+    if abs(math.sqrt(sum([x * x for x in qq])) - 1.0) > QUAT_NORM_TOL:
         return "quaternion not unit"
     return None
 
@@ -190,6 +186,7 @@ class PayloadGuard:
         self, ids: list[int], leader_ids: list[int], control_hz: float, own_id: int
     ) -> None:
         self.ids = list(ids)
+        self.id_set = frozenset(self.ids)  # membership per payload without a list scan
         self.leaders = set(leader_ids)
         self.dt = 1.0 / float(control_hz)
         self.own_id = own_id
@@ -199,6 +196,12 @@ class PayloadGuard:
         if self.ref is None:
             return -1 <= step <= MAX_STEP_BEFORE_FIRST
         return self.ref - STEP_BEHIND <= step <= self.ref + STEP_AHEAD
+
+    def window(self) -> tuple[int, int]:
+        """The steps :meth:`step_ok` accepts, as (lowest, highest)."""
+        if self.ref is None:
+            return -1, MAX_STEP_BEFORE_FIRST
+        return self.ref - STEP_BEHIND, self.ref + STEP_AHEAD
 
     def _time_ok(self, step: int, t: float, offset_steps: int) -> bool:
         """``t`` finite and within two periods of ``(step + offset_steps) * dt``."""
@@ -233,7 +236,7 @@ class PayloadGuard:
         return None
 
     def _estimate(self, m: wire.Estimate, finite: bool) -> str | None:
-        if m.id not in self.ids:
+        if m.id not in self.id_set:
             return f"estimate id {m.id} not in the scenario"
         if m.step != -1 and not self.step_ok(m.step):  # -1: the initial estimate, any time
             return f"estimate step {m.step} implausible (own step {self.ref})"
@@ -247,14 +250,14 @@ class PayloadGuard:
         return None
 
     def _status(self, m: wire.Status) -> str | None:
-        if m.id not in self.ids:
+        if m.id not in self.id_set:
             return f"status id {m.id} not in the scenario"
         if not self.step_ok(m.step) or not self._time_ok(m.step, m.t, 0):
             return f"status step {m.step} / t {m.t!r} implausible"
         return None
 
     def _odometry(self, m: wire.Odometry, finite: bool) -> str | None:
-        if m.id not in self.ids:
+        if m.id not in self.id_set:
             return f"odometry id {m.id} not in the scenario"
         if m.step < 0 or not self.step_ok(m.step) or not self._time_ok(m.step, m.t, 0):
             return f"odometry step {m.step} / t {m.t!r} implausible"
@@ -263,7 +266,7 @@ class PayloadGuard:
         return None
 
     def _command(self, m: wire.Command) -> str | None:
-        if m.agent != 0 and m.agent not in self.ids:
+        if m.agent != 0 and m.agent not in self.id_set:
             return f"command for agent {m.agent} not in the scenario"
         if not (math.isfinite(m.duration_s) and 0.0 <= m.duration_s <= MAX_OUTAGE_S):
             return f"command duration {m.duration_s!r} out of range"

@@ -279,7 +279,7 @@ class VehicleLink:
                 self.failsafe_texts += 1
 
     def _odometry(self, msg: Any, now: float) -> None:
-        q = tuple(float(c) for c in msg.q)
+        q = tuple(map(float, msg.q))
         pos = (float(msg.x), float(msg.y), float(msg.z))
         vel = (float(msg.vx), float(msg.vy), float(msg.vz))
         why = odometry_fields_ok(pos, q, vel)

@@ -40,14 +40,14 @@ from typing import Any
 import zenoh
 
 from offboard.link_guard import DropLog, PayloadGuard, payload_finite
+from offboard.shared_subs import ZENOH_ERRORS, Handler, SharedSubscriptions
+from offboard.step_store import StepStore
 from swarm_common import faults as fault_plan
 from swarm_common import wire
 from swarm_common.faults import FaultInjector
 
 log = logging.getLogger(__name__)
 
-# what a channel read or an undeclare raises once the subscriber or session is gone
-ZENOH_ERRORS: tuple[type[Exception], ...] = (zenoh.ZError, RuntimeError)
 KEEP_STEPS = 64
 FIFO_DEPTH = 1024
 POLL_S = 0.0002  # channel polling period while waiting for data
@@ -89,7 +89,7 @@ class SwarmBus:
         self, session: Any, swarm: str, agent_id: int, guard: PayloadGuard | None = None,
         faults: FaultInjector | None = None, odometry: bool = False,
         peers: list[int] | None = None, cache: DecodeCache | None = None,
-        ready: list[int] | None = None,
+        ready: list[int] | None = None, shared: SharedSubscriptions | None = None,
     ) -> None:
         """``faults``: injected faults (docs/faults.md); None: the plan of the scenario this
         process loaded (:func:`swarm_common.faults.injector_for`). ``odometry``: subscribe
@@ -98,7 +98,10 @@ class SwarmBus:
         subscriber). ``cache``: decoded payloads shared with the process's other daemons
         (default :data:`PROCESS_CACHE`). ``ready``: agents to hear from before flying
         (offboard.daemon_peers.ready_ids); those not among ``peers`` are listened to only
-        until :meth:`end_readiness` (a valid estimate marks them heard, nothing more)."""
+        until :meth:`end_readiness` (a valid estimate marks them heard, nothing more).
+        ``shared``: the subscriptions of the process's daemons (a packed process,
+        :mod:`offboard.shared_subs`); None: subscribers of its own."""
+        self.shared = shared
         self.cache = PROCESS_CACHE if cache is None else cache
         self.session = session
         self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
@@ -107,16 +110,16 @@ class SwarmBus:
         self.truth_time = 0.0  # monotonic time of the last accepted truth
         self.swarm = swarm
         self.agent_id = agent_id
-        self.truth: dict[int, wire.Truth] = {}
+        self.truth: StepStore[wire.Truth] = StepStore()
         self.latest_truth: wire.Truth | None = None
-        self.estimates: dict[int, dict[int, wire.Estimate]] = {}  # step -> id -> est
+        self.estimates: StepStore[dict[int, wire.Estimate]] = StepStore()  # step -> id -> est
         self.latest_estimate: dict[int, wire.Estimate] = {}
         self.commands: deque[wire.Command] = deque()
         self.heard: set[int] = set()  # agents whose estimate was ever accepted (readiness)
-        self.odometry: dict[int, dict[int, wire.Odometry]] = {}  # step -> id -> odometry
+        self.odometry: StepStore[dict[int, wire.Odometry]] = StepStore()  # step -> id -> odo
         self.latest_odometry: dict[int, wire.Odometry] = {}
-        self._subs: list[tuple[Any, Callable[[Any], None]]] = []
-        keys: list[tuple[str, Callable[[Any], None]]] = [
+        self._subs: list[tuple[Any, Handler]] = []
+        keys: list[tuple[str, Handler]] = [
             (wire.key_truth(swarm), self._on_truth),
             (wire.key_cmd(swarm, "*"), self._on_command),
         ]
@@ -124,17 +127,19 @@ class SwarmBus:
         keys += [(wire.key_estimate(swarm, j), self._on_estimate) for j in est_keys]
         if odometry:
             keys.append((wire.key_odometry(swarm, "*"), self._on_odometry))
+        # readiness only: undeclared by end_readiness
+        self._ready_keys = [] if peers is None else [
+            wire.key_estimate(swarm, j) for j in sorted(set(ready or ()) - set(peers) - {agent_id})]
+        keys += [(key, self._on_announce) for key in self._ready_keys]
+        self._ready_subs: list[tuple[Any, Handler]] = []
         for key, handler in keys:
+            if shared is not None:
+                shared.add(key, self, handler)
+                continue
             sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_DEPTH))
             self._subs.append((sub, handler))
-        # readiness only: undeclared by end_readiness
-        self._ready_subs: list[tuple[Any, Callable[[Any], None]]] = []
-        if peers is not None:
-            for j in sorted(set(ready or ()) - set(peers) - {agent_id}):
-                sub = session.declare_subscriber(wire.key_estimate(swarm, j),
-                                                 zenoh.handlers.FifoChannel(FIFO_DEPTH))
-                self._ready_subs.append((sub, self._on_announce))
-            self._subs += self._ready_subs
+            if key in self._ready_keys:
+                self._ready_subs.append((sub, handler))
         self._pub_est = session.declare_publisher(wire.key_estimate(swarm, agent_id))
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
         self._pub_odo = session.declare_publisher(wire.key_odometry(swarm, agent_id))
@@ -149,20 +154,21 @@ class SwarmBus:
     def bad_payloads(self) -> int:
         return self.drops.total
 
-    def _decode(self, sample: Any, kind: type) -> Any:
-        """The payload if it decodes to ``kind`` and passes the guard; else None (counted)."""
-        now = time.monotonic()
+    def _decode(self, data: bytes, key: Any, kind: type) -> Any:
+        """The payload ``data`` (received on ``key``) if it decodes to ``kind`` and passes
+        the guard; else None (counted)."""
         try:
-            msg, finite = self.cache.decode_checked(sample.payload.to_bytes())
+            msg, finite = self.cache.decode_checked(data)
         except wire.WireError as exc:
-            self.drops.drop("undecodable", str(exc), now)
+            self.drops.drop("undecodable", str(exc), time.monotonic())
             return None
         if not isinstance(msg, kind):
-            self.drops.drop("wrong kind", f"{type(msg).__name__} on {sample.key_expr}", now)
+            self.drops.drop("wrong kind", f"{type(msg).__name__} on {key}",
+                            time.monotonic())
             return None
         why = None if self.guard is None else self.guard.check(msg, finite)
         if why is not None:
-            self.drops.drop(type(msg).__name__.lower(), why, now)
+            self.drops.drop(type(msg).__name__.lower(), why, time.monotonic())
             return None
         return msg
 
@@ -172,84 +178,77 @@ class SwarmBus:
         if self.guard is None:
             return
         self.guard.ref = step
-        ok = self.guard.step_ok
-        if self.latest_truth is not None and not ok(self.latest_truth.step):
+        lo, hi = self.guard.window()
+        if self.latest_truth is not None and not lo <= self.latest_truth.step <= hi:
             self.latest_truth = None
-        for j, est in list(self.latest_estimate.items()):
-            if not ok(est.step):
-                del self.latest_estimate[j]
-        for j, odo in list(self.latest_odometry.items()):
-            if not ok(odo.step):
-                del self.latest_odometry[j]
-        for store in (self.truth, self.estimates, self.odometry):
-            # oldest first, one at a time: usually one step leaves the window per step
-            while store and not ok(oldest := min(store)):
-                del store[oldest]
-            if store and not ok(max(store)):
-                for s in [s for s in store if not ok(s)]:
-                    del store[s]
+        for latest in (self.latest_estimate, self.latest_odometry):
+            for j in [j for j, m in latest.items() if not lo <= m.step <= hi]:
+                del latest[j]
+        self.truth.keep_within(lo, hi)
+        self.estimates.keep_within(lo, hi)
+        self.odometry.keep_within(lo, hi)
 
-    def _on_truth(self, sample: Any) -> None:
-        msg = self._decode(sample, wire.Truth)
+    def _on_truth(self, data: bytes, key: Any) -> None:
+        msg = self._decode(data, key, wire.Truth)
         if msg is None:
             return
         self.truth[msg.step] = msg
         self.truth_time = time.monotonic()
         if self.latest_truth is None or msg.step >= self.latest_truth.step:
             self.latest_truth = msg
-        for old in ([s for s in self.truth if s < msg.step - KEEP_STEPS]
-                    if min(self.truth) < msg.step - KEEP_STEPS else ()):
-            del self.truth[old]
+        if self.truth.lo < msg.step - KEEP_STEPS:  # (the common case costs no call)
+            self.truth.keep_from(msg.step - KEEP_STEPS)
 
-    def _on_estimate(self, sample: Any) -> None:
-        msg = self._decode(sample, wire.Estimate)
+    def _on_estimate(self, data: bytes, key: Any) -> None:
+        msg = self._decode(data, key, wire.Estimate)
         if msg is None or msg.id == self.agent_id:
             return
         self.heard.add(msg.id)
-        self.estimates.setdefault(msg.step, {})[msg.id] = msg
+        _slot(self.estimates, msg.step)[msg.id] = msg
         prev = self.latest_estimate.get(msg.id)
         if prev is None or msg.step >= prev.step:
             self.latest_estimate[msg.id] = msg
-        for old in ([s for s in self.estimates if s < msg.step - KEEP_STEPS]
-                    if min(self.estimates) < msg.step - KEEP_STEPS else ()):
-            del self.estimates[old]
+        if self.estimates.lo < msg.step - KEEP_STEPS:  # (the common case costs no call)
+            self.estimates.keep_from(msg.step - KEEP_STEPS)
 
-    def _on_announce(self, sample: Any) -> None:
+    def _on_announce(self, data: bytes, key: Any) -> None:
         """An estimate listened to for readiness only: heard, not kept."""
-        msg = self._decode(sample, wire.Estimate)
+        msg = self._decode(data, key, wire.Estimate)
         if msg is not None and msg.id != self.agent_id:
             self.heard.add(msg.id)
 
     def end_readiness(self) -> None:
         """Stop listening to the agents heard for readiness only (idempotent)."""
-        if not self._ready_subs:
+        if not self._ready_keys:
             return
+        if self.shared is not None:
+            _undeclare(self.shared.remove(self, self._ready_keys), "after readiness")
         gone = {id(sub) for sub, _ in self._ready_subs}
         self._subs = [(sub, h) for sub, h in self._subs if id(sub) not in gone]
         _undeclare([sub for sub, _ in self._ready_subs], "after readiness")
-        self._ready_subs = []
+        self._ready_subs, self._ready_keys = [], []
 
-    def _on_odometry(self, sample: Any) -> None:
-        msg = self._decode(sample, wire.Odometry)
+    def _on_odometry(self, data: bytes, key: Any) -> None:
+        msg = self._decode(data, key, wire.Odometry)
         if msg is None or msg.id == self.agent_id:
             return
-        self.odometry.setdefault(msg.step, {})[msg.id] = msg
+        _slot(self.odometry, msg.step)[msg.id] = msg
         prev = self.latest_odometry.get(msg.id)
         if prev is None or msg.step >= prev.step:
             self.latest_odometry[msg.id] = msg
-        for old in ([s for s in self.odometry if s < msg.step - KEEP_STEPS]
-                    if min(self.odometry) < msg.step - KEEP_STEPS else ()):
-            del self.odometry[old]
+        if self.odometry.lo < msg.step - KEEP_STEPS:  # (the common case costs no call)
+            self.odometry.keep_from(msg.step - KEEP_STEPS)
 
-    def _on_command(self, sample: Any) -> None:
-        msg = self._decode(sample, wire.Command)
+    def _on_command(self, data: bytes, key: Any) -> None:
+        msg = self._decode(data, key, wire.Command)
         if msg is not None and msg.agent in (0, self.agent_id):
             self.commands.append(msg)
 
     # -- main-thread API ---------------------------------------------------------------
     def pump(self) -> int:
-        """Handle every sample waiting in the channels; returns how many."""
-        n = 0
+        """Handle every sample waiting in the channels; returns how many (shared: every
+        sample the process's shared channels held, whoever it was for)."""
+        n = 0 if self.shared is None else self.shared.pump()
         for sub, handler in self._subs:
             while True:
                 try:
@@ -260,7 +259,7 @@ class SwarmBus:
                     break
                 if self.faults is not None and self.faults.drop_inbound():
                     continue
-                handler(sample)
+                handler(sample.payload.to_bytes(), sample.key_expr)
                 n += 1
         return n
 
@@ -317,7 +316,16 @@ class SwarmBus:
     def close(self) -> None:
         if self.faults is not None:
             self.faults.close()
-        _undeclare([self._odo_listener, *(sub for sub, _ in self._subs)], "on close")
+        unused = [] if self.shared is None else self.shared.remove(self)
+        _undeclare([self._odo_listener, *(sub for sub, _ in self._subs), *unused], "on close")
+
+
+def _slot(store: StepStore[dict[int, Any]], step: int) -> dict[int, Any]:
+    """The payloads of ``step`` in ``store`` (by sender), made empty on first use."""
+    got = store.get(step)
+    if got is None:
+        got = store[step] = {}
+    return got
 
 
 def _undeclare(entities: list[Any], when: str) -> None:
