@@ -3,12 +3,15 @@
 Each agent keeps everything that is its own: its :class:`offboard.daemon.OffboardDaemon`
 (agent, guards, mode requests, runner-loss policy), its MAVLink link to its own vehicle
 (own UDP socket, sequence numbers, signing state and ``.tlog``). What they share is the
-process: one Zenoh session (each daemon its own publishers and subscribers on it, decoded
-payloads shared, :class:`offboard.zenoh_link.DecodeCache`), one formation object and one
-event loop.
+process: one Zenoh session (each daemon its own publishers on it; one subscriber per key
+for all of them, :mod:`offboard.shared_subs`, each daemon judging what it is handed;
+decoded payloads shared, :class:`offboard.zenoh_link.DecodeCache`), one formation object
+and one event loop.
 
 The loop: wait (``select``) until any vehicle socket is readable or ``WAIT_CAP_S`` passes,
-then give every daemon one pass (:meth:`OffboardDaemon.iterate`) in agent order. In
+hand out what the shared Zenoh channels hold, then give every daemon one pass
+(:meth:`OffboardDaemon.iterate`) in agent order. A daemon that waits for data in its step
+(its truth, its peers' estimates) pumps the shared channels itself. In
 lockstep a daemon's step k waits only for data of step k (its vehicle's ODOMETRY, the
 truth) and of step k−1 (its peers' estimates, published when their step k−1 ended), so
 stepping the packed agents one after the other cannot deadlock, and each agent computes
@@ -75,9 +78,12 @@ class DaemonHost:
         fds = [fd for d in live if (fd := d.link.fileno()) is not None]
         whole = len(fds) == len(live)  # every link a socket: one select waits for them all
         mark = time.monotonic()
+        shared = live[0].bus.shared  # the packed daemons' Zenoh subscriptions (or None)
         while live and not self.stop:
             if whole:
                 select.select(fds, [], [], WAIT_CAP_S)
+            if shared is not None:  # once a pass, not once per daemon (each would drain
+                shared.pump()  # every key); a daemon waiting for data pumps it itself
             for d in list(live):
                 rc = d.iterate(mark, 0.0 if whole else WAIT_CAP_S / len(live))
                 mark = time.monotonic()

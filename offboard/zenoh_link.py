@@ -245,10 +245,12 @@ class SwarmBus:
             self.commands.append(msg)
 
     # -- main-thread API ---------------------------------------------------------------
-    def pump(self) -> int:
+    def pump(self, with_shared: bool = True) -> int:
         """Handle every sample waiting in the channels; returns how many (shared: every
-        sample the process's shared channels held, whoever it was for)."""
-        n = 0 if self.shared is None else self.shared.pump()
+        sample the process's shared channels held, whoever it was for). ``with_shared``
+        False: leave the shared channels to whoever pumps them for the whole process
+        (:class:`offboard.daemon_host.DaemonHost`, once per pass over its daemons)."""
+        n = 0 if self.shared is None or not with_shared else self.shared.pump()
         for sub, handler in self._subs:
             while True:
                 try:
