@@ -8,10 +8,11 @@ every payload cost a scan of up to 64 keys per payload, about 14 payloads per ag
 step in a packed grid64 process (docs/performance.md, "Issue 11, thirteenth round").
 
 :class:`StepStore` is a dict (step → value) that also holds a lower and an upper bound
-of its keys. The bounds are exact after a trim and widened by every insertion, and a key
-deleted from outside only leaves them conservative. So "is anything out of the window?"
-is two comparisons, and a scan happens only when something does leave, about once per
-step.
+of its keys: no key lies outside them. Every insertion widens them; a trim narrows them to
+the window it keeps (or, after a scan, to the keys left); a key deleted from outside only
+leaves them wider than needed. So "is anything out of the window?" is two comparisons.
+When something does leave, about once per step, it is usually a step or two just beyond
+a bound: those are popped by number (steps are integers), without a scan of the keys.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import math
 from typing import TypeVar
 
 V = TypeVar("V")
+FEW = 8  # steps beyond a bound popped one by one; a wider gap is found by a scan
 
 
 class StepStore(dict[int, V]):
@@ -43,6 +45,19 @@ class StepStore(dict[int, V]):
     def keep_within(self, lowest: float, highest: float) -> None:
         """Forget every step outside [lowest, highest]."""
         if self.lo >= lowest and self.hi <= highest:
+            return
+        if lowest - self.lo <= FEW and self.hi - highest <= FEW:
+            # the usual case: a step or two leave at one end; pop them by number
+            if self.lo < lowest:
+                for step in range(int(self.lo), math.ceil(lowest)):
+                    self.pop(step, None)
+                self.lo = lowest  # no key below it now (not necessarily one at it)
+            if self.hi > highest:
+                for step in range(int(self.hi), math.floor(highest), -1):
+                    self.pop(step, None)
+                self.hi = highest
+            if not self:
+                self.lo, self.hi = math.inf, -math.inf
             return
         for step in [s for s in self if not lowest <= s <= highest]:
             del self[step]

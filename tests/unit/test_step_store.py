@@ -43,14 +43,17 @@ def test_trims_equal_a_full_scan(seed: int) -> None:
         assert all(store.lo <= s <= store.hi for s in store)
 
 
-def test_bounds_exact_after_a_trim_and_empty_store() -> None:
+def test_bounds_after_trims_near_and_far() -> None:
     store: StepStore[str] = StepStore()
     assert (store.lo, store.hi) == (math.inf, -math.inf)
     store.keep_within(0, 10)  # nothing to do on an empty store
     for s in (5, 1, 9, 3):
         store[s] = str(s)
     assert (store.lo, store.hi) == (1, 9)
-    store.keep_within(2, 8)
+    store.keep_within(2, 8)  # one step beyond each bound: popped by number
+    assert sorted(store) == [3, 5] and (store.lo, store.hi) == (2, 8)
+    store[100] = "100"  # far beyond: the next trim scans, and its bounds are exact
+    store.keep_within(3, 40)
     assert sorted(store) == [3, 5] and (store.lo, store.hi) == (3, 5)
     store.keep_from(6)
     assert store == {} and (store.lo, store.hi) == (math.inf, -math.inf)
