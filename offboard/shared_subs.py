@@ -8,6 +8,9 @@ payload once, and :meth:`SharedSubscriptions.pump` takes it out and copies its b
 Then it hands the same bytes to every daemon that subscribed to the key, in the order they
 subscribed.
 
+A daemon alone in its process holds a private instance: the same code hands its payloads
+to it alone, as its own subscribers did.
+
 Each daemon still judges what it is handed on its own, exactly as it judges what its own
 subscriber delivers (:class:`offboard.zenoh_link.SwarmBus`): its inbound faults, its
 decode, its guard and its drop counts. So a forged or malformed payload is counted and
@@ -24,7 +27,7 @@ import zenoh
 
 # (payload bytes, key expression) -> None; the key is only read to say what was dropped
 Handler = Callable[[bytes, Any], None]
-# what a channel read raises once the subscriber or session is gone
+# what a channel read or an undeclare raises once the subscriber or session is gone
 ZENOH_ERRORS: tuple[type[Exception], ...] = (zenoh.ZError, RuntimeError)
 
 

@@ -37,8 +37,6 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-import zenoh
-
 from offboard.link_guard import DropLog, PayloadGuard, payload_finite
 from offboard.shared_subs import ZENOH_ERRORS, Handler, SharedSubscriptions
 from offboard.step_store import StepStore
@@ -100,8 +98,10 @@ class SwarmBus:
         (offboard.daemon_peers.ready_ids); those not among ``peers`` are listened to only
         until :meth:`end_readiness` (a valid estimate marks them heard, nothing more).
         ``shared``: the subscriptions of the process's daemons (a packed process,
-        :mod:`offboard.shared_subs`); None: subscribers of its own."""
+        :mod:`offboard.shared_subs`); None: subscriptions of its own (a private
+        :class:`~offboard.shared_subs.SharedSubscriptions`, handing it alone its payloads)."""
         self.shared = shared
+        self.subs = SharedSubscriptions(session, FIFO_DEPTH) if shared is None else shared
         self.cache = PROCESS_CACHE if cache is None else cache
         self.session = session
         self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
@@ -118,7 +118,6 @@ class SwarmBus:
         self.heard: set[int] = set()  # agents whose estimate was ever accepted (readiness)
         self.odometry: StepStore[dict[int, wire.Odometry]] = StepStore()  # step -> id -> odo
         self.latest_odometry: dict[int, wire.Odometry] = {}
-        self._subs: list[tuple[Any, Handler]] = []
         keys: list[tuple[str, Handler]] = [
             (wire.key_truth(swarm), self._on_truth),
             (wire.key_cmd(swarm, "*"), self._on_command),
@@ -131,15 +130,8 @@ class SwarmBus:
         self._ready_keys = [] if peers is None else [
             wire.key_estimate(swarm, j) for j in sorted(set(ready or ()) - set(peers) - {agent_id})]
         keys += [(key, self._on_announce) for key in self._ready_keys]
-        self._ready_subs: list[tuple[Any, Handler]] = []
         for key, handler in keys:
-            if shared is not None:
-                shared.add(key, self, handler)
-                continue
-            sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(FIFO_DEPTH))
-            self._subs.append((sub, handler))
-            if key in self._ready_keys:
-                self._ready_subs.append((sub, handler))
+            self.subs.add(key, self, handler)
         self._pub_est = session.declare_publisher(wire.key_estimate(swarm, agent_id))
         self._pub_status = session.declare_publisher(wire.key_status(swarm, agent_id))
         self._pub_odo = session.declare_publisher(wire.key_odometry(swarm, agent_id))
@@ -221,12 +213,8 @@ class SwarmBus:
         """Stop listening to the agents heard for readiness only (idempotent)."""
         if not self._ready_keys:
             return
-        if self.shared is not None:
-            _undeclare(self.shared.remove(self, self._ready_keys), "after readiness")
-        gone = {id(sub) for sub, _ in self._ready_subs}
-        self._subs = [(sub, h) for sub, h in self._subs if id(sub) not in gone]
-        _undeclare([sub for sub, _ in self._ready_subs], "after readiness")
-        self._ready_subs, self._ready_keys = [], []
+        _undeclare(self.subs.remove(self, self._ready_keys), "after readiness")
+        self._ready_keys = []
 
     def _on_odometry(self, data: bytes, key: Any) -> None:
         msg = self._decode(data, key, wire.Odometry)
@@ -246,24 +234,14 @@ class SwarmBus:
 
     # -- main-thread API ---------------------------------------------------------------
     def pump(self, with_shared: bool = True) -> int:
-        """Handle every sample waiting in the channels; returns how many (shared: every
-        sample the process's shared channels held, whoever it was for). ``with_shared``
-        False: leave the shared channels to whoever pumps them for the whole process
-        (:class:`offboard.daemon_host.DaemonHost`, once per pass over its daemons)."""
-        n = 0 if self.shared is None or not with_shared else self.shared.pump()
-        for sub, handler in self._subs:
-            while True:
-                try:
-                    sample = sub.try_recv()
-                except ZENOH_ERRORS:  # undeclared / session closed: nothing more to read
-                    break
-                if sample is None:
-                    break
-                if self.faults is not None and self.faults.drop_inbound():
-                    continue
-                handler(sample.payload.to_bytes(), sample.key_expr)
-                n += 1
-        return n
+        """Handle every sample waiting in the channels; returns how many were taken out
+        (shared: every sample the process's shared channels held, whoever it was for).
+        ``with_shared`` False: leave a packed process's shared channels to whoever pumps
+        them for the whole process (:class:`offboard.daemon_host.DaemonHost`, once per
+        pass over its daemons); a bus with subscriptions of its own pumps them anyway."""
+        if self.shared is not None and not with_shared:
+            return 0
+        return self.subs.pump()
 
     def wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
         """Pump until ``predicate()`` holds or ``timeout`` seconds pass. The predicate is
@@ -322,8 +300,7 @@ class SwarmBus:
     def close(self) -> None:
         if self.faults is not None:
             self.faults.close()
-        unused = [] if self.shared is None else self.shared.remove(self)
-        _undeclare([self._odo_listener, *(sub for sub, _ in self._subs), *unused], "on close")
+        _undeclare([self._odo_listener, *self.subs.remove(self)], "on close")
 
 
 def _slot(store: StepStore[dict[int, Any]], step: int) -> dict[int, Any]:
