@@ -8,12 +8,13 @@ One Zenoh session (no network: no listen, no connect, no multicast) holds ``--ag
 ``--peers`` peers (the leaders 1-4 and random others), as in a packed process. Each step
 every agent puts one estimate payload; then every bus moves its reference to the step
 (``set_reference``) and pumps what arrived, exactly as the packed daemons do.
-``--layout own``: each bus declares its own subscribers (the layout before the
-thirteenth round); ``shared``: one subscriber per key for all of them
-(:mod:`offboard.shared_subs`, pumped once per step). Prints (no assertions) the medians,
-over the steps after the first 50, of the main thread's CPU per agent-step spent
-receiving (pump and reference) and per put. Every payload must be accepted by every
-subscriber: the bench fails loudly if any is dropped or missing.
+``--layout own``: each bus holds subscriptions of its own, as a daemon alone in its
+process does (and as packed daemons did before the thirteenth round); ``shared``: one
+subscriber per key for all of them (:mod:`offboard.shared_subs`, pumped once per step).
+Prints (no assertions) the medians, over the steps after the first 50, of the main
+thread's CPU per agent-step spent receiving (pump and reference) and per put. Every
+payload must be accepted by every subscriber: the bench fails loudly if any is dropped
+or missing.
 """
 
 from __future__ import annotations
