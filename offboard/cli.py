@@ -26,6 +26,7 @@ from offboard.daemon_agents import parse_agents
 from offboard.daemon_host import DaemonHost
 from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
+from offboard.shared_batch import SharedBatch
 from offboard.shared_subs import SharedSubscriptions
 from offboard.warmup import warm_kernels
 from offboard.zenoh_link import FIFO_DEPTH, ZENOH_ERRORS
@@ -274,11 +275,14 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
     form = formation_from_scenario(cfgs[0].scenario)
     warm_kernels(cfgs[0].scenario, cfgs[0].method, form)  # before any daemon's first step
     daemons: list[OffboardDaemon] = []
-    # packed: one Zenoh subscriber per key for all the process's daemons (shared_subs)
-    shared = SharedSubscriptions(session, FIFO_DEPTH) if len(cfgs) > 1 else None
+    # packed: one Zenoh subscriber per key for all the process's daemons (shared_subs), and
+    # their received estimates as one batch per step (shared_batch)
+    packed = len(cfgs) > 1
+    shared = SharedSubscriptions(session, FIFO_DEPTH) if packed else None
+    batch = SharedBatch({aid: j for j, aid in enumerate(form.ids)}) if packed else None
     for cfg in cfgs:
         try:
-            daemons.append(OffboardDaemon(cfg, session, form, shared))
+            daemons.append(OffboardDaemon(cfg, session, form, shared, batch))
         except (OSError, ValueError) as exc:
             print(f"offboard: cannot open MAVLink {cfg.mavlink_url}: {exc}", file=sys.stderr)
             for d in daemons:

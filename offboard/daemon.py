@@ -59,6 +59,7 @@ from offboard.mode_requests import ModeRequests, SwarmReady
 from offboard.offboard_keeper import OffboardKeeper
 from offboard.runner_loss import RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.sensing_source import SwarmSensing
+from offboard.shared_batch import SharedBatch
 from offboard.shared_subs import SharedSubscriptions
 from offboard.wire_convert import (
     estimate_to_wire,
@@ -94,12 +95,14 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
 
     def __init__(
         self, cfg: DaemonConfig, session: Any, form: Formation | None = None,
-        shared: SharedSubscriptions | None = None,
+        shared: SharedSubscriptions | None = None, batch: SharedBatch | None = None,
     ) -> None:
         """``session``: an open Zenoh session (shared by the daemons of a packed process);
         ``form``: the scenario's formation when the caller already built it; ``shared``:
         the Zenoh subscriptions of a packed process's daemons (:mod:`offboard.shared_subs`),
-        None for subscribers of its own."""
+        None for subscribers of its own; ``batch``: their received estimates as one batch
+        per step (:mod:`offboard.shared_batch`, lockstep only), None for batches of its
+        own."""
         self.cfg = cfg
         sc = cfg.scenario
         self.sc = sc
@@ -107,6 +110,8 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         form = formation_from_scenario(sc) if form is None else form
         self.others = peer_ids(form, cfg.agent_id)  # whose estimates it reads and awaits
         self._index_of = {aid: j for j, aid in enumerate(form.ids)}  # id -> scenario index
+        self._peer_idx = np.array([self._index_of[j] for j in self.others], dtype=np.int64)
+        self.shared_batch = batch if cfg.lockstep else None
         ready = [] if cfg.solo else ready_ids(form, cfg.agent_id)  # heard before flying
         self.agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed, form=form)
         self.control_hz = int(sc.run.control_hz)
@@ -245,7 +250,11 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         if not self.cfg.lockstep and isinstance(self.agent, LeaderAgent):
             self._maybe_start_trajectory(t)
         received, comm_ok = self._neighbours_for(k, t)
-        neighbours = estimates_from_wire(self._index_of, len(self._index_of), received)
+        neighbours = (
+            estimates_from_wire(self._index_of, len(self._index_of), received)
+            if self.shared_batch is None
+            else self.shared_batch.batch_for(k - 1, received, self._peer_idx)
+        )
         cpu0 = time.thread_time()
         out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
         self.control_cpu_s += time.thread_time() - cpu0

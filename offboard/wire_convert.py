@@ -42,15 +42,20 @@ def estimates_from_wire(
     b = EstimateBatch.empty(n)
     for aid, e in received.items():
         j = index_of.get(aid)
-        if j is None:
-            continue
-        blk = e.block
-        b.rows[j] = (blk[:ROW] if blk is not None and blk.shape[0] >= ROW
-                     else np.concatenate([e.z1, e.z2, e.z3, e.xi]))
-        b.t[j] = e.t
-        b.leader[j] = e.role == Role.LEADER
-        b.cooperative[j] = e.cooperative
+        if j is not None:
+            put_row(b, j, e)
     return b
+
+
+def put_row(b: EstimateBatch, j: int, e: wire.Estimate) -> None:
+    """Row ``j`` of ``b`` from the received payload ``e``: its float32-rounded z1, z2, z3
+    and ξ (the decoded block's first ROW floats), stamp, role and cooperation."""
+    blk = e.block
+    b.rows[j] = (blk[:ROW] if blk is not None and blk.shape[0] >= ROW
+                 else np.concatenate([e.z1, e.z2, e.z3, e.xi]))
+    b.t[j] = e.t
+    b.leader[j] = e.role == Role.LEADER
+    b.cooperative[j] = e.cooperative
 
 
 def measured_state(odo: Odometry, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
