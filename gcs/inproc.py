@@ -34,7 +34,7 @@ from gcs.run_output import (
     run_document,
     safety_spec,
     set_agent_rows,
-    set_truth_row,
+    set_truth_rows,
     write_run,
 )
 from offboard.agent import FollowerAgent, NeighbourEstimate, make_agent
@@ -186,6 +186,10 @@ def run_inproc(
         published = published_batch([ag.initial_estimate() for ag in agents])
         n = sc.n
         ser = empty_series(np.arange(n_steps) * dt, n)
+        # the truth of every step, its derived rows (desired states, tilt) filled after
+        # the loop in one product each (gcs.run_output.set_truth_rows)
+        lumped_true, thrust, att = (np.zeros((n_steps, n, 3)), np.zeros((n_steps, n)),
+                                    np.zeros((n_steps, n, 3)))
         md_run = math.inf
         t_wall = time.perf_counter()
         for k in range(n_steps):
@@ -197,7 +201,8 @@ def run_inproc(
                     ag.start_landing(plan)
             tp, tv = f32(dyn.p), f32(dyn.v)
             comm = not in_outage(t, sc.outages)
-            set_truth_row(ser, k, form, dyn.p, dyn.v, dyn.lumped_accel(), dyn.thrust, dyn.att)
+            ser.p[k], ser.v[k], lumped_true[k] = dyn.p, dyn.v, dyn.lumped_accel()
+            thrust[k], att[k] = dyn.thrust, dyn.att
             ser.z1[k], ser.z2[k] = published.rows[:, 0:3], published.rows[:, 3:6]
             outs = [ag.step(k, t, tp, tv, published, comm) for ag in agents]
             # the commands, estimates and records of all agents at once (each agent's
@@ -218,6 +223,7 @@ def run_inproc(
                 bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
         if bar is not None:
             bar.close()
+        set_truth_rows(ser, form, ser.p, ser.v, lumped_true, thrust, att)
         wall = time.perf_counter() - t_wall
     zeta_est = np.zeros((n, 6))
     fallbacks = 0

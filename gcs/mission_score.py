@@ -18,7 +18,7 @@ from gcs.run_output import (
     run_dir_inside,
     run_document,
     safety_spec,
-    set_truth_row,
+    set_truth_rows,
 )
 from offboard.bearing import formation_from_scenario
 from offboard.takeoff import is_ground_start, takeoff_plan
@@ -37,10 +37,9 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
     form = formation_from_scenario(sc)
     steps = np.flatnonzero(rec.have_truth[: rec.steps])
     ser = empty_series(rec.t[steps].copy(), sc.n, fill=np.nan)
-    for r, k in enumerate(steps):
-        set_truth_row(ser, r, form, rec.p[k].astype(float), rec.v[k].astype(float),
-                      rec.lumped_true[k].astype(float), rec.thrust[k].astype(float),
-                      rec.att[k].astype(float))
+    set_truth_rows(ser, form, rec.p[steps].astype(float), rec.v[steps].astype(float),
+                   rec.lumped_true[steps].astype(float), rec.thrust[steps].astype(float),
+                   rec.att[steps].astype(float))
     nxt = steps + 1
     ser.min_dist[:] = np.where(rec.have_truth[nxt], rec.min_dist[nxt], np.nan)
     ser.z1[:], ser.z2[:] = rec.z1[steps], rec.z2[steps]  # estimates valid at t_k

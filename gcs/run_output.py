@@ -38,9 +38,9 @@ def safety_spec(sc: Scenario, clipped_known: bool = True) -> SafetySpec:
 
 
 def tilt_deg(att: np.ndarray) -> np.ndarray:
-    """Tilt of each vehicle from vertical (deg): arccos(cos φ cos θ) of (N, 3) ENU
+    """Tilt of each vehicle from vertical (deg): arccos(cos φ cos θ) of (..., 3) ENU
     roll/pitch/yaw in rad (the angle between body z and world z)."""
-    return np.degrees(np.arccos(np.clip(np.cos(att[:, 0]) * np.cos(att[:, 1]), -1, 1)))
+    return np.degrees(np.arccos(np.clip(np.cos(att[..., 0]) * np.cos(att[..., 1]), -1, 1)))
 
 
 def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
@@ -60,9 +60,8 @@ def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
     )
 
 
-def set_truth_row(
+def set_truth_rows(
     ser: Series,
-    r: int,
     form: Formation,
     p: np.ndarray,
     v: np.ndarray,
@@ -70,15 +69,17 @@ def set_truth_row(
     thrust: np.ndarray,
     att: np.ndarray,
 ) -> None:
-    """Row ``r`` of the simulator's truth: positions/velocities (m, m/s, ENU), the desired
-    ones from the leaders' (paper eq. 5), true lumped disturbance (m/s²), thrust (N), tilt."""
+    """Every row of the simulator's truth, (K, N, ...) each: positions/velocities (m, m/s,
+    ENU), the desired ones from the leaders' (paper eq. 5), true lumped disturbance
+    (m/s²), thrust (N) and the tilt from the (K, N, 3) attitudes (rad). One product per
+    quantity for the whole run (the in-process runner and a recorded run alike)."""
     lid = form.leader_idx
-    ser.p[r], ser.v[r] = p, v
-    ser.p_des[r] = form.desired_positions(p[lid])
-    ser.v_des[r] = form.desired_positions(v[lid])
-    ser.lumped_true[r] = lumped
-    ser.thrust[r] = thrust
-    ser.tilt_deg[r] = tilt_deg(att)
+    ser.p[:], ser.v[:] = p, v
+    ser.p_des[:] = form.desired_positions_series(p[:, lid])
+    ser.v_des[:] = form.desired_positions_series(v[:, lid])
+    ser.lumped_true[:] = lumped
+    ser.thrust[:] = thrust
+    ser.tilt_deg[:] = tilt_deg(att)
 
 
 # QPStatus.degraded by status (a StrEnum: its value looks up the same entry), without

@@ -155,10 +155,25 @@ class Formation:
         lp = np.asarray(leader_pos, dtype=float)
         out = np.zeros((self.n, 3))
         out[self.leader_idx] = lp
+        out[self.follower_idx] = (self._leader_map() @ lp.reshape(-1)).reshape(-1, 3)
+        return out
+
+    def desired_positions_series(self, leader_pos: np.ndarray) -> np.ndarray:
+        """(K,N,3) :meth:`desired_positions` of K rows of leaders' positions (K,L,3) (m, or
+        any leader quantity the map is linear in: velocities) in one product. Equal to the
+        row-by-row map up to the rounding of the product's summation order."""
+        lp = np.asarray(leader_pos, dtype=float)
+        k = len(lp)
+        out = np.zeros((k, self.n, 3))
+        out[:, self.leader_idx] = lp
+        out[:, self.follower_idx] = (lp.reshape(k, -1) @ self._leader_map().T).reshape(k, -1, 3)
+        return out
+
+    def _leader_map(self) -> np.ndarray:
+        """(3F, 3L) −L_ff⁻¹ L_fl (computed once)."""
         if self._kfl is None:
             self._kfl = -np.linalg.solve(self.l_ff, self.l_fl)
-        out[self.follower_idx] = (self._kfl @ lp.reshape(-1)).reshape(-1, 3)
-        return out
+        return self._kfl
 
 
 def build_formation(

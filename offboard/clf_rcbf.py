@@ -289,7 +289,7 @@ class _ClfRowsQP:
         a, m = self._a, self.m
         # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
         # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the safety rows)
-        nrm = math.sqrt(float(clf.lgv @ clf.lgv))
+        nrm = math.sqrt(float(clf.lgv.dot(clf.lgv)))
         write_rows_kernel(
             a, self.l, self.u, self.q, vec3(clf.lgv), nrm, float(clf_rhs), rows3(g),
             f64(rhs), k, m, vec3(u_nom), self._lo_daqp, self._hi_daqp, DAQP_INF,
@@ -390,7 +390,7 @@ class SafetyQP(_ClfRowsQP):
         # The CLF row never demands more decrease than the box-projected nominal input
         # achieves: otherwise, with the box active, the heavy slack weight ρ turns the QP
         # into a bang-bang (sliding-mode) law on sign(s) that chatters between box corners.
-        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
+        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv.dot(u_c)))
         if len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all()):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_c, QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0, False)

@@ -88,7 +88,7 @@ class DcbfQP(_ClfRowsQP):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
         u_c = self.uset.project(u_nom)
-        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv @ u_c))
+        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv.dot(u_c)))
         exact = self._one_row_exact(u_nom, clf, clf_rhs, g, rhs, k)
         if exact is not None:
             us = (time.perf_counter() - t0) * 1e6
@@ -129,19 +129,19 @@ class DcbfQP(_ClfRowsQP):
             return None
         j = int(bad[0])
         gj = g[j]
-        if abs(float(gj @ gj) - 1.0) > 1e-9:
+        if abs(float(gj.dot(gj)) - 1.0) > 1e-9:
             return None
         lam = float(viol[j]) + 1e-9
         u = u_nom + lam * gj
         delta = 0.0
-        if float(clf.lgv @ u) > clf_rhs:  # the CLF row is active too
-            nrm = math.sqrt(float(clf.lgv @ clf.lgv))
+        if float(clf.lgv.dot(u)) > clf_rhs:  # the CLF row is active too
+            nrm = math.sqrt(float(clf.lgv.dot(clf.lgv)))
             if nrm <= 1e-9:
                 return None
             a = clf.lgv / nrm
-            c = float(a @ gj)
+            c = float(a.dot(gj))
             half_inv_rho = 0.5 / self._weights[0]
-            nu = (float(a @ u_nom) - clf_rhs / nrm + c * float(viol[j])) / (
+            nu = (float(a.dot(u_nom)) - clf_rhs / nrm + c * float(viol[j])) / (
                 1.0 + half_inv_rho - c * c
             )
             if not nu >= 0.0:

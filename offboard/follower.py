@@ -23,7 +23,7 @@ from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import ContentMemo
 from offboard.neighbour_accel import NeighbourAccel
-from offboard.peer_table import XI, EstimateBatch, current_beyond
+from offboard.peer_table import XI, EstimateBatch, unsensed_candidates
 from offboard.predictor import CURRENT_AGE_S, NeighbourPredictor
 from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
@@ -118,8 +118,8 @@ class FollowerAgent(AgentBase):
         nb = set(self.form.neighbours[self.index])
         self._predict_idx = np.array(sorted(nb | set(self.form.leader_idx)), dtype=np.int64)
         self._lead_peers = list(self.form.leader_idx)  # their a* for the rcbf filter
-        # (predictor revision, sorted scenario indices of the agents heard from)
-        self._heard: tuple[int, list[int]] = (-1, [])
+        # (predictor revision, sorted scenario indices (int64) of the agents heard from)
+        self._heard: tuple[int, np.ndarray] = (-1, np.zeros(0, dtype=np.int64))
         # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
         self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
         self._zero_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _no_margin
@@ -261,21 +261,18 @@ class FollowerAgent(AgentBase):
         other can be at."""
         if len(sel) >= len(self.ids) - 1:  # every other agent is sensed: none to predict
             return None
-        sensed = set(sel.tolist())
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
-        # only agents heard from can be predicted (the others' get() is None): O(peers)
+        # only agents heard from can be predicted (the others' get() is None): O(peers).
+        # Current data certainly out of range (a margin over the exact test below) is
+        # passed over in the same compiled call; the rest take the exact test
         pred = self.pred
-        cand = [j for j in self._heard_indices() if j != self.index and j not in sensed]
-        if not cand:
-            return None
-        # current data certainly out of range (a margin over the exact test below) is
-        # passed over in one compiled call; the rest take the exact test
-        far = current_beyond(np.array(cand, dtype=np.int64), pred.table.t, pred.table.rows,
-                             self.deso.z1, t, CURRENT_AGE_S, (rng * (1.0 + RANGE_MARGIN)) ** 2)
-        for j, beyond in zip(cand, far.tolist(), strict=True):
-            if beyond:
-                continue
+        cand = unsensed_candidates(
+            self._heard_indices(), self.index, np.asarray(sel, dtype=np.int64),
+            pred.table.t, pred.table.rows, self.deso.z1, t, CURRENT_AGE_S,
+            (rng * (1.0 + RANGE_MARGIN)) ** 2,
+        )
+        for j in cand.tolist():
             got = pred.get_at(j, t)
             if got is None:
                 continue
@@ -289,11 +286,12 @@ class FollowerAgent(AgentBase):
         return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                 np.array([r[2] for r in rows]), np.array([r[3] for r in rows]))
 
-    def _heard_indices(self) -> list[int]:
-        """Sorted scenario indices of the agents this follower has heard from."""
+    def _heard_indices(self) -> np.ndarray:
+        """Sorted scenario indices (int64) of the agents this follower has heard from."""
         rev = self.pred.revision  # bumped when an agent is first heard from
         if self._heard[0] != rev:
-            self._heard = (rev, np.flatnonzero(self.pred.table.t > -math.inf).tolist())
+            heard = np.flatnonzero(self.pred.table.t > -math.inf).astype(np.int64)
+            self._heard = (rev, heard)
         return self._heard[1]
 
     def _ground_floor(self) -> float | None:

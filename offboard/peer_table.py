@@ -175,22 +175,38 @@ def rows_of(
 
 
 @kernel
-def current_beyond(
-    idx: np.ndarray, t_tab: np.ndarray, rows: np.ndarray, z1: np.ndarray, t: float,
-    age_max: float, r2: float,
+def unsensed_candidates(
+    heard: np.ndarray, own: int, sensed: np.ndarray, t_tab: np.ndarray, rows: np.ndarray,
+    z1: np.ndarray, t: float, age_max: float, r2: float,
 ) -> np.ndarray:
-    """(len(idx),) bool: agent ``idx[r]``'s last row is current at ``t`` (stamp at most
-    ``age_max`` s before it) and its z1 lies farther than √r2 (m) from ``z1`` (a sum of
-    squares in order: a cheap test, callers keep a margin on r2 for the exact norm)."""
-    out = np.zeros(idx.shape[0], dtype=np.bool_)
-    for r in range(idx.shape[0]):
-        j = idx[r]
-        if not (0 <= j < t_tab.shape[0] and j < rows.shape[0]):
-            raise ValueError("current_beyond: an index outside the table")
-        if not t - t_tab[j] <= age_max:
+    """The agents of ``heard`` (scenario indices, int64, in that order) that may be within
+    sensing range but are not sensed: not ``own``, not in ``sensed`` (int64), and not
+    certainly out of range, i.e. not current at ``t`` (stamp at most ``age_max`` s before
+    it) with its z1 farther than √r2 (m) from ``z1``. That test is a sum of squares in
+    order, a cheap pre-test: callers keep a margin on r2 and test the rest exactly."""
+    n = t_tab.shape[0]
+    if rows.shape[0] < n:
+        raise ValueError("unsensed_candidates: the rows are fewer than the stamps")
+    skip = np.zeros(n, dtype=np.bool_)
+    for r in range(sensed.shape[0]):
+        j = sensed[r]
+        if not 0 <= j < n:
+            raise ValueError("unsensed_candidates: an index outside the table")
+        skip[j] = True
+    out = np.empty(heard.shape[0], dtype=np.int64)
+    m = 0
+    for r in range(heard.shape[0]):
+        j = heard[r]
+        if not 0 <= j < n:
+            raise ValueError("unsensed_candidates: an index outside the table")
+        if j == own or skip[j]:
             continue
-        d0 = z1[0] - rows[j, 0]
-        d1 = z1[1] - rows[j, 1]
-        d2 = z1[2] - rows[j, 2]
-        out[r] = d0 * d0 + d1 * d1 + d2 * d2 > r2
-    return out
+        if t - t_tab[j] <= age_max:
+            d0 = z1[0] - rows[j, 0]
+            d1 = z1[1] - rows[j, 1]
+            d2 = z1[2] - rows[j, 2]
+            if d0 * d0 + d1 * d1 + d2 * d2 > r2:
+                continue
+        out[m] = j
+        m += 1
+    return out[:m]

@@ -45,7 +45,7 @@ def parse_method(method: Method | str) -> Method:
 
 def saturate_norm(x: np.ndarray, bound: float) -> np.ndarray:
     """``x`` scaled down to Euclidean norm ``bound`` if longer (same array otherwise)."""
-    n = math.sqrt(float(x @ x))
+    n = math.sqrt(float(x.dot(x)))  # numpy's dot, as x @ x but a cheaper call
     return x * (bound / n) if n > bound else x
 
 

@@ -114,37 +114,44 @@ def test_table_keeps_the_newest_estimate_per_agent() -> None:
         assert np.array_equal(pred.table.acc_t, twin.table.acc_t, equal_nan=True)
 
 
-def test_current_beyond_is_a_safe_pretest_of_the_range() -> None:
-    """current_beyond marks current rows farther than the range (with its margin) from z1
-    and nothing else: never a stale row, never a row the exact norm puts within range."""
+def test_unsensed_candidates_pass_over_only_what_is_certainly_out_of_range() -> None:
+    """unsensed_candidates keeps, in the order heard, every heard agent but the own one
+    and the sensed ones, except current rows farther than the range (with its margin)
+    from z1: never a stale row, never a row the exact norm puts within range."""
     from offboard.follower import RANGE_MARGIN
-    from offboard.peer_table import ROW, current_beyond
+    from offboard.peer_table import ROW, unsensed_candidates
 
     rng = np.random.default_rng(6)
-    marked = 0
+    passed_over = 0
     for _ in range(300):
         n = int(rng.integers(1, 12))
         rows = rng.normal(0.0, 4.0, (n, ROW))
         t_tab = rng.choice([1.0, 1.0 - 1e-12, 0.98, -math.inf], n)
         z1 = rng.normal(0.0, 4.0, 3)
         r = float(rng.uniform(0.5, 9.0))
-        idx = rng.permutation(n)[: int(rng.integers(0, n + 1))].astype(np.int64)
-        got = current_beyond(idx, t_tab, rows, z1, 1.0, 1e-9, (r * (1 + RANGE_MARGIN)) ** 2)
-        for j, far in zip(idx.tolist(), got.tolist(), strict=True):
+        heard = np.sort(rng.permutation(n)[: int(rng.integers(0, n + 1))]).astype(np.int64)
+        sensed = rng.permutation(n)[: int(rng.integers(0, n + 1))].astype(np.int64)
+        own = int(rng.integers(0, n))
+        got = unsensed_candidates(heard, own, sensed, t_tab, rows, z1, 1.0, 1e-9,
+                                  (r * (1 + RANGE_MARGIN)) ** 2).tolist()
+        others = [j for j in heard.tolist() if j != own and j not in set(sensed.tolist())]
+        assert got == [j for j in others if j in got]  # a subsequence, in the order heard
+        for j in others:
             d = z1 - rows[j, 0:3]
             exact = math.sqrt(float(d.dot(d)))
-            if far:
-                assert 1.0 - t_tab[j] <= 1e-9 and exact > r
-                marked += 1
-            elif 1.0 - t_tab[j] <= 1e-9:
+            current = 1.0 - t_tab[j] <= 1e-9
+            if j not in got:
+                assert current and exact > r
+                passed_over += 1
+            elif current:
                 assert exact <= r * (1 + 2 * RANGE_MARGIN)
-    assert marked > 0
+    assert passed_over > 0
 
 
 def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
     import pytest
 
-    from offboard.peer_table import PeerTable, current_beyond
+    from offboard.peer_table import PeerTable, unsensed_candidates
 
     tab = PeerTable(3)
     b = EstimateBatch.empty(3)
@@ -152,8 +159,10 @@ def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
     for bad in (np.array([0, 3]), np.array([-1])):
         with pytest.raises(ValueError, match="outside"):
             tab.ingest(b, bad, True)
-        with pytest.raises(ValueError, match="outside"):
-            current_beyond(bad, tab.t, tab.rows, np.zeros(3), 1.0, 1e-9, 1.0)
+        for heard, sensed in ((bad, np.zeros(0, np.int64)), (np.zeros(0, np.int64), bad)):
+            with pytest.raises(ValueError, match="outside"):
+                unsensed_candidates(heard, 0, sensed, tab.t, tab.rows, np.zeros(3), 1.0,
+                                    1e-9, 1.0)
     assert np.all(tab.t == -math.inf) and np.all(np.isnan(tab.acc_t))
     pred = NeighbourPredictor([1, 2, 3], 0.4, 0.02, (4.0, 3.0), (2.0, 2.5))
     with pytest.raises(ValueError, match="outside"):
