@@ -23,14 +23,15 @@ from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import ContentMemo
 from offboard.neighbour_accel import NeighbourAccel
-from offboard.peer_table import XI, EstimateBatch, unsensed_candidates
+from offboard.peer_table import XI, EstimateBatch, full_share_rows, unsensed_candidates
 from offboard.predictor import CURRENT_AGE_S, NeighbourPredictor
 from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
+from offboard.sensing_kernel import pair_rows
 from offboard.takeoff import follower_xi
 from swarm_common.enums import Method
-from swarm_common.fastnp import finite, norm
+from swarm_common.fastnp import finite, norm, rows3
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -176,9 +177,8 @@ class FollowerAgent(AgentBase):
         clf = self._nominal(w, t)
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
-        u = self._safe_control(
-            self._safety_input(t, clf, w, sel, -rp[sel], -rv[sel], rows, have), status
-        )
+        dp, dv = pair_rows(sel, rows3(rp), rows3(rv))  # Δp = p_i − p_j, Δv = v_i − v_j
+        u = self._safe_control(self._safety_input(t, clf, w, sel, dp, dv, rows, have), status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
@@ -322,11 +322,10 @@ class FollowerAgent(AgentBase):
         if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
             never = tab.t == -math.inf
             self._full = (rev, self.leader_mask | never | ~tab.cooperative)
-        full = self._full[1][sel]  # a copy (fancy indexing)
         since = t - self.silent_after
-        if self.pred.newest >= since:  # others are heard: a silent one stands out
-            full |= tab.t[sel] < since  # (never heard: −inf, full already)
-        return full
+        # others heard (newest ≥ since): a silent one stands out (never heard: −inf,
+        # full already)
+        return full_share_rows(sel, self._full[1], tab.t, since, self.pred.newest >= since)
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the

@@ -126,3 +126,23 @@ def hold_kernel(
             sel[s] = j
             s += 1
     return sel, rp, rv, n_held
+
+
+@kernel
+def pair_rows(
+    sel: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(Δp, Δv) (M,3) of the pairs ``sel`` (M,) (scenario indices, int64) from the (N,3)
+    measured p_j − p_i (m) and v_j − v_i (m/s): their negations, Δp = p_i − p_j and
+    Δv = v_i − v_j, the safety filters' input (``-rel_p[sel]`` in one call)."""
+    m = sel.shape[0]
+    dp = np.empty((m, 3))
+    dv = np.empty((m, 3))
+    for r in range(m):
+        j = sel[r]
+        if not (0 <= j < rel_p.shape[0] and j < rel_v.shape[0]):
+            raise ValueError("pair_rows: an index outside the measurements")
+        for c in range(3):
+            dp[r, c] = -rel_p[j, c]
+            dv[r, c] = -rel_v[j, c]
+    return dp, dv

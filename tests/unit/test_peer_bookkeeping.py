@@ -167,3 +167,23 @@ def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
     pred = NeighbourPredictor([1, 2, 3], 0.4, 0.02, (4.0, 3.0), (2.0, 2.5))
     with pytest.raises(ValueError, match="outside"):
         pred.predict_rows(np.array([5], dtype=np.int64), 0.0)
+
+
+def test_full_share_rows_equal_the_numpy_mask() -> None:
+    """full_share_rows equals ``full[sel] | (others_heard & (t[sel] < since))`` on random
+    tables (never-heard stamps included), and refuses an index outside the table."""
+    import pytest
+
+    from offboard.peer_table import full_share_rows
+
+    rng = np.random.default_rng(12)
+    for _ in range(300):
+        n = int(rng.integers(1, 12))
+        full = rng.random(n) < 0.3
+        t_tab = rng.choice([1.0, 0.9, 0.5, -math.inf], n)
+        sel = rng.integers(0, n, int(rng.integers(0, n + 1))).astype(np.int64)
+        since, heard = float(rng.choice([0.8, 0.95, 1.1])), bool(rng.random() < 0.7)
+        want = full[sel] | (heard & (t_tab[sel] < since))
+        assert np.array_equal(full_share_rows(sel, full, t_tab, since, heard), want)
+    with pytest.raises(ValueError, match="outside"):
+        full_share_rows(np.array([4], np.int64), np.zeros(4, bool), np.zeros(4), 0.0, True)

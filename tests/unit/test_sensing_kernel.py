@@ -187,3 +187,21 @@ def test_truth_of_another_shape_is_refused_before_any_draw() -> None:
     twin = Sensor(1, 2, 5, cfg, 6.0, 3)
     a, b = sensor.measure(ok, ok), twin.measure(ok, ok)
     assert np.array_equal(a.rel_p, b.rel_p) and np.array_equal(a.valid, b.valid)
+
+
+def test_pair_rows_are_the_negated_rows_of_the_selected_pairs() -> None:
+    """pair_rows(sel, rel_p, rel_v) equals numpy's -rel_p[sel], -rel_v[sel] bit for bit
+    (any order, repeats, none), and an index outside the rows is a ValueError."""
+    from offboard.sensing_kernel import pair_rows
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        n = int(rng.integers(1, 10))
+        rel_p, rel_v = rng.normal(0.0, 5.0, (n, 3)), rng.normal(0.0, 2.0, (n, 3))
+        sel = rng.integers(0, n, int(rng.integers(0, n + 2))).astype(np.int64)
+        dp, dv = pair_rows(sel, rel_p, rel_v)
+        assert dp.shape == dv.shape == (len(sel), 3)
+        assert np.array_equal(dp, -rel_p[sel]) and np.array_equal(dv, -rel_v[sel])
+    for bad in (np.array([3], dtype=np.int64), np.array([-1], dtype=np.int64)):
+        with pytest.raises(ValueError, match="outside"):
+            pair_rows(bad, np.zeros((3, 3)), np.zeros((3, 3)))
