@@ -26,6 +26,7 @@ from offboard.attitude_kernel import (
     quat_ned_kernel,
     setpoint_kernel,
 )
+from swarm_common.fastnp import f64
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
 from swarm_common.scenario import VehicleConfig
 
@@ -117,6 +118,9 @@ class InnerLoopModel:
         self.a_f = math.exp(-dt_sub / veh.tau_thrust_s)
         # [roll, pitch, yaw (rad), thrust (N)] realised: the state the kernels take
         self.state = np.array([0.0, 0.0, 0.0, self.m * self.g])
+        # what :meth:`command` writes in place: its rows (one buffer per n_sub) and mean
+        self._rows: dict[int, np.ndarray] = {}
+        self._mean = np.zeros(3)
 
     @property
     def att(self) -> list[float]:
@@ -136,13 +140,22 @@ class InnerLoopModel:
         rows of :meth:`run` under it, whether the setpoint realises an acceleration
         farther than ``clip_tol`` (m/s²) from u on some axis (tilt or thrust clipped), and
         the rows' mean (m/s²). One compiled call
-        (:func:`offboard.attitude_kernel.command_kernel`), the same bits as those calls."""
+        (:func:`offboard.attitude_kernel.command_kernel`), the same bits as those calls.
+
+        The rows and the mean are this model's own buffers, rewritten by the next call:
+        valid until then (each step reads them before its next command)."""
         ua = _virtual_control(u)
-        roll, pitch, yaw_c, f, q, tn, rows, self.state, clipped, mean = command_kernel(
+        rows = self._rows.get(n_sub)
+        if rows is None:
+            if not 1 <= n_sub <= 1000:
+                raise ValueError(f"n_sub {n_sub} outside 1..1000")
+            rows = self._rows[n_sub] = np.zeros((int(n_sub), 3))
+        self.state = f64(self.state)
+        roll, pitch, yaw_c, f, q, tn, clipped = command_kernel(
             ua, float(yaw), self.g, self.m, self.tilt, self.f_max, self.state, self.a_rp,
-            self.a_y, self.a_f, int(n_sub), float(clip_tol),
+            self.a_y, self.a_f, float(clip_tol), rows, self._mean,
         )
-        return Setpoint(roll, pitch, yaw_c, f, q, np.float32(tn)), rows, bool(clipped), mean
+        return Setpoint(roll, pitch, yaw_c, f, q, np.float32(tn)), rows, clipped, self._mean
 
     def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
         """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u (m/s²) at each

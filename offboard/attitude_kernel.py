@@ -131,19 +131,22 @@ def inner_loop_kernel(
 @kernel
 def command_kernel(
     u: np.ndarray, yaw: float, gravity: float, mass: float, tilt_max_rad: float,
-    thrust_max_n: float, att: np.ndarray, a_rp: float, a_y: float, a_f: float, n_sub: int,
-    clip_tol: float,
-) -> tuple[float, float, float, float, np.ndarray, float, np.ndarray, np.ndarray, bool,
-           np.ndarray]:
+    thrust_max_n: float, att: np.ndarray, a_rp: float, a_y: float, a_f: float,
+    clip_tol: float, rows_out: np.ndarray, mean_out: np.ndarray,
+) -> tuple[float, float, float, float, np.ndarray, float, bool]:
     """One control period of a command u (3,) m/s² (ENU) in one call:
-    (roll, pitch, yaw (rad), F (N), q_ned (4,) float32, F/F_max) of :func:`setpoint_kernel`;
-    rows (n_sub,3) m/s² of :func:`inner_loop_kernel` from the inner loop's state ``att``
-    (4,) [roll, pitch, yaw (rad), F (N)] towards that setpoint (clipped there to the tilt
-    and thrust limits); the new state (4,); whether the setpoint realises an acceleration
-    farther than ``clip_tol`` (m/s²) from u on some axis (False if that is nan, as numpy's
-    max gives it); and the rows' mean (m/s², summed row after row, as numpy's reduce over
-    the first axis does). The same kernels and operations as the separate calls, so the
-    same bits."""
+    (roll, pitch, yaw (rad), F (N), q_ned (4,) float32, F/F_max) of :func:`setpoint_kernel`
+    and whether the setpoint realises an acceleration farther than ``clip_tol`` (m/s²)
+    from u on some axis (False if that is nan, as numpy's max gives it). Written in place:
+    ``rows_out`` (n_sub,3) m/s², the rows of :func:`inner_loop_kernel` from the inner
+    loop's state ``att`` (4,) [roll, pitch, yaw (rad), F (N)] towards that setpoint
+    (clipped there to the tilt and thrust limits); ``att``, the new state; ``mean_out``
+    (3,), the rows' mean (m/s², summed row after row, as numpy's reduce over the first
+    axis does). The same kernels and operations as the separate calls, so the same bits;
+    the outputs are written in place so that a step boxes no new arrays for them."""
+    n_sub = rows_out.shape[0]
+    if n_sub < 1 or rows_out.shape[1] != 3 or att.shape[0] != 4 or mean_out.shape[0] != 3:
+        raise ValueError("command_kernel: outputs of the wrong shape")
     roll, pitch, yaw_c, f, q, tn = setpoint_kernel(
         u, yaw, gravity, mass, tilt_max_rad, thrust_max_n
     )
@@ -160,12 +163,15 @@ def command_kernel(
         att[0], att[1], att[2], att[3], roll, pitch, yaw_c, f, tilt_max_rad, thrust_max_n,
         a_rp, a_y, a_f, mass, gravity, n_sub,
     )
-    state = np.empty(4)
-    state[0], state[1], state[2], state[3] = r, p, y, f_new
-    mean = rows[0].copy()
+    att[0], att[1], att[2], att[3] = r, p, y, f_new
+    for s in range(n_sub):
+        for k in range(3):
+            rows_out[s, k] = rows[s, k]
+    for k in range(3):
+        mean_out[k] = rows[0, k]
     for s in range(1, n_sub):
         for k in range(3):
-            mean[k] = mean[k] + rows[s, k]
+            mean_out[k] = mean_out[k] + rows[s, k]
     for k in range(3):
-        mean[k] = mean[k] / n_sub
-    return roll, pitch, yaw_c, f, q, tn, rows, state, clipped, mean
+        mean_out[k] = mean_out[k] / n_sub
+    return roll, pitch, yaw_c, f, q, tn, clipped
