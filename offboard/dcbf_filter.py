@@ -12,7 +12,7 @@ import numpy as np
 
 from offboard.dcbf import InputSet, LagCoefficients
 from offboard.dcbf_qp import DcbfQP
-from offboard.dcbf_step_kernel import dcbf_filter_rows_kernel, dcbf_params
+from offboard.dcbf_step_kernel import dcbf_filter_rows_into, dcbf_params
 from offboard.safety_filter import (
     W_SAFE,
     SafetyFilter,
@@ -69,6 +69,11 @@ class DcbfFilter(SafetyFilter):
         self._rel_acc = np.zeros((n, 3))
         self._rel_ok = np.zeros(n, dtype=bool)
         self._params = np.zeros(0)  # the compiled rows' parameters, set by configure
+        # the rows' buffers (two per other agent, two for the ground) and the sidestep,
+        # rewritten each step: the QP reads them within the step
+        self._g = np.zeros((2 * n + 2, 3))
+        self._rhs = np.zeros(2 * n + 2)
+        self._side = np.zeros(3)
 
     def configure(self, veh: VehicleConfig, dt: float) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
@@ -105,7 +110,7 @@ class DcbfFilter(SafetyFilter):
         # saturated: a start-up transient of the observer cannot cancel a row
         w_safe = saturate_norm(x.w, W_SAFE)
         ground = x.floor_m is not None and x.z1 is not None  # airborne: the ground barrier
-        g, rhs, h_min, side = dcbf_filter_rows_kernel(
+        k, h_min = dcbf_filter_rows_into(
             rows3(x.dp), rows3(x.dv), np.asarray(x.pairs, dtype=np.int64),
             np.asarray(lm, dtype=np.bool_),
             np.zeros(n, dtype=np.bool_) if x.predicted is None
@@ -116,10 +121,10 @@ class DcbfFilter(SafetyFilter):
             float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
             float(x.floor_m) if ground and x.floor_m is not None else 0.0,
             self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
-            self._rel_acc, self._rel_ok,
+            self._rel_acc, self._rel_ok, self._g, self._rhs, self._side,
         )
         gain = self.brake_gain
-        res = self.qp.solve(x.clf.u_nom + side, x.clf, g, rhs, h_min,
+        res = self.qp.solve(x.clf.u_nom + self._side, x.clf, self._g[:k], self._rhs[:k], h_min,
                             lambda: -x.w - gain * x.z2)  # the fallback, formed if taken
         return SafetyOutput(
             res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback

@@ -123,3 +123,32 @@ def dcbf_filter_rows_kernel(
     r_all[: 2 * m] = rhs
     r_all[2 * m :] = rg
     return g_all, r_all, h_min, side
+
+
+@kernel
+def dcbf_filter_rows_into(
+    dp: np.ndarray, dv: np.ndarray, pairs: np.ndarray, full_share: np.ndarray,
+    predicted: np.ndarray, margin: np.ndarray, other_acc: np.ndarray, a_real: np.ndarray,
+    u_prev: np.ndarray, a_mean: np.ndarray, w_safe: np.ndarray, ground: bool, z: float,
+    vz: float, floor: float, params: np.ndarray, lag: np.ndarray, sens: np.ndarray,
+    prev_dv: np.ndarray, prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray,
+    g_out: np.ndarray, r_out: np.ndarray, side_out: np.ndarray,
+) -> tuple[int, float]:
+    """:func:`dcbf_filter_rows_kernel` written into the caller's buffers: the K rows in
+    the first K rows of ``g_out`` (≥ K, 3) and of ``r_out`` (≥ K,), the sidestep in
+    ``side_out`` (3,); returns (K, h_min). The same values, without three new arrays
+    boxed per step."""
+    g, rhs, h_min, side = dcbf_filter_rows_kernel(
+        dp, dv, pairs, full_share, predicted, margin, other_acc, a_real, u_prev, a_mean,
+        w_safe, ground, z, vz, floor, params, lag, sens, prev_dv, prev_ok, rel_acc, rel_ok,
+    )
+    k = rhs.shape[0]
+    if g_out.shape[0] < k or r_out.shape[0] < k or g_out.shape[1] != 3 or side_out.shape[0] != 3:
+        raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
+    for r in range(k):
+        r_out[r] = rhs[r]
+        for c in range(3):
+            g_out[r, c] = g[r, c]
+    for c in range(3):
+        side_out[c] = side[c]
+    return k, h_min

@@ -87,6 +87,8 @@ class SwarmDynamics:
         self._iu = np.triu_indices(self.n, 1)
         self._step_dist = self.pair_distances()  # of the last step (step_min_distance)
         self._step_min = min_upper_kernel(self._step_dist)  # its minimum (m)
+        # the pairs entering contact in a step (step_kernel writes the first rows)
+        self._new_pairs = np.zeros((self.n * (self.n - 1) // 2, 2), dtype=np.int64)
 
     # -- commands ---------------------------------------------------------------
     def set_command(self, idx: int, roll: float, pitch: float, yaw: float, thrust_n: float) -> None:
@@ -144,19 +146,20 @@ class SwarmDynamics:
         """Advance one physics step of ``dt`` (compiled:
         :func:`vehicle_sim.dynamics_kernel.step_kernel`)."""
         dt = self.dt
-        p, v, att, thrust, dist, contact, new, dmin = step_kernel(
+        # the contact matrix and the distances are rewritten in place (own buffers)
+        self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
+        p, v, att, thrust, n_new, dmin = step_kernel(
             f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
             f64(self.cmd_att), f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
             self._a_f, self.mass, self.g, dt, self.ge_height, self.dist_amp,
             self.dist_omega, self.t, self._in_contact, self.collision_radius,
+            self._step_dist, self._new_pairs,
         )
         self.p, self.v, self.att, self.thrust = p, v, att, thrust
         self.t = (self.step_count + 1) * dt
         self.step_count += 1
-        self._step_dist = dist
         self._step_min = dmin
-        self._in_contact = contact
-        for i, j in new:
+        for i, j in self._new_pairs[:n_new].tolist():
             self.collisions += 1
             self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
 

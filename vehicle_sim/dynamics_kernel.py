@@ -121,8 +121,8 @@ def step_kernel(
     cmd_att: np.ndarray, cmd_thrust: np.ndarray, held: np.ndarray, zeta: np.ndarray,
     a_att: np.ndarray, a_f: float, mass: float, g: float, dt: float, ge_height: float,
     amp: float, omega: float, t: float, in_contact: np.ndarray, radius: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-           np.ndarray, float]:
+    dist_out: np.ndarray, pairs_out: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
     """One physics step of ``dt`` (s) from time ``t`` (s) for all N vehicles.
 
     State in: p (N,3) m, v (N,3) m/s, att (N,3) rad, thrust (N,) N; commands cmd_att (N,3)
@@ -132,9 +132,11 @@ def step_kernel(
     omega (rad/s) as in :func:`lumped_accel_kernel`; in_contact (N,N) bool, the pairs
     closer than ``radius`` (m) after the previous step.
 
-    Returns new arrays (p, v, att, thrust, dist (N,N) m, contact (N,N) bool, new_pairs
-    (K,2) int64: pairs i < j entering contact this step, row by row) and the minimum pair
-    distance (m; :func:`min_upper_kernel` of dist)::
+    Returns new arrays (p, v, att, thrust), the number K of pairs i < j entering contact
+    this step and the minimum pair distance (m; :func:`min_upper_kernel` of dist). Written
+    in place (no new arrays to box per step): ``in_contact``, the pairs in contact after
+    this step; ``dist_out`` (N,N), the pair distances (m); the first K rows of
+    ``pairs_out`` (≥ N(N−1)/2, 2) int64, the pairs entering contact, row by row::
 
         att' = c + (att − c) a_att,  F' = F_c + (F − F_c) a_f
         v' = v + (R(att') e3 F'/m − g e_z + Φ(p, v) ζ + d(t)/m) dt,  p' = v' dt + p
@@ -174,24 +176,22 @@ def step_kernel(
             v_n[i, 2] = 0.0 if vz < 0.0 else vz  # np.maximum(vz, 0): nan stays nan
             v_n[i, 0] *= 0.0  # friction: a landed vehicle stops
             v_n[i, 1] *= 0.0
+    if (in_contact.shape[0] != n or in_contact.shape[1] != n or dist_out.shape[0] != n
+            or dist_out.shape[1] != n or pairs_out.shape[0] < n * (n - 1) // 2
+            or pairs_out.shape[1] != 2):
+        raise ValueError("step_kernel: contact, distance or pair buffers of the wrong shape")
     dist = pair_distances_kernel(p_n)
-    contact = np.empty((n, n), dtype=np.bool_)
     n_new = 0
     for i in range(n):
         for j in range(n):
             c = i != j and dist[i, j] < radius
-            contact[i, j] = c
-            if c and j > i and not in_contact[i, j]:
+            if c and j > i and not in_contact[i, j]:  # (i, j) read before it is written
+                pairs_out[n_new, 0] = i
+                pairs_out[n_new, 1] = j
                 n_new += 1
-    new_pairs = np.empty((n_new, 2), dtype=np.int64)
-    r = 0
-    for i in range(n):
-        for j in range(i + 1, n):
-            if contact[i, j] and not in_contact[i, j]:
-                new_pairs[r, 0] = i
-                new_pairs[r, 1] = j
-                r += 1
-    return p_n, v_n, att_n, thr_n, dist, contact, new_pairs, min_upper_kernel(dist)
+            in_contact[i, j] = c
+            dist_out[i, j] = dist[i, j]
+    return p_n, v_n, att_n, thr_n, n_new, min_upper_kernel(dist)
 
 
 @kernel

@@ -98,3 +98,34 @@ def test_fused_rows_report_a_nan_barrier_as_numpy_does() -> None:
     )
     assert math.isnan(got[2])
     assert got[0].shape == (4, 3) and not np.isfinite(got[1][1])
+
+
+def test_rows_into_buffers_equal_the_returned_rows() -> None:
+    """dcbf_filter_rows_into writes exactly the rows, h_min and sidestep the returning
+    kernel gives (state updated alike), over random steps with and without the ground
+    rows, and refuses buffers smaller than the rows."""
+    import pytest
+
+    from offboard.dcbf_step_kernel import dcbf_filter_rows_into
+
+    rng = np.random.default_rng(9)
+    lag = LagCoefficients.of(TAU, 0.15 + DT)
+    params = dcbf_params(**{**P, "side_gain": 0.4}, horizon=lag.T)
+    s_ret, s_into = _state(), _state()
+    g_buf, r_buf, side = np.full((2 * N + 2, 3), np.nan), np.full(2 * N + 2, np.nan), np.zeros(3)
+    for step in range(200):
+        m = int(rng.integers(0, N))
+        args = (rng.normal(0.0, 1.5, (m, 3)), rng.normal(0.0, 1.0, (m, 3)),
+                rng.permutation(N)[:m].astype(np.int64), rng.random(m) < 0.3,
+                rng.random(m) < 0.2, rng.random(m) * 0.1, rng.normal(0.0, 2.0, (m, 3)),
+                *rng.normal(0.0, 2.0, (4, 3)), step % 3 != 0, float(rng.uniform(0.0, 3.0)),
+                float(rng.normal()), 0.5, params, lag.table, lag.sens3)
+        g, rhs, h_min, want_side = dcbf_filter_rows_kernel(*args, *s_ret)
+        k, h2 = dcbf_filter_rows_into(*args, *s_into, g_buf, r_buf, side)
+        assert k == len(rhs) and (h2 == h_min or (math.isinf(h2) and math.isinf(h_min)))
+        assert np.array_equal(g_buf[:k], g) and np.array_equal(r_buf[:k], rhs)
+        assert np.array_equal(side, want_side)
+        for a, b in zip(s_into, s_ret, strict=True):
+            assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="smaller"):
+        dcbf_filter_rows_into(*args, *s_into, np.zeros((1, 3)), np.zeros(1), side)
