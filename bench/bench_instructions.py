@@ -7,8 +7,10 @@ On a shared 2-core machine the wall-clock benchmarks move by ±15 % between runs
 same code, more than most single changes to the control step. This one counts the
 machine instructions instead (callgrind's ``Ir``), which repeat to a few parts in 10⁴:
 
-1. the mission is imported and run once for 1 s uninstrumented (numba's cache loaded,
-   OSQP and the caches warm);
+1. the mission is imported and run once for ``--long`` seconds uninstrumented, so that
+   every kernel the counted runs call is compiled or loaded from numba's cache before
+   (a kernel first compiled inside a counted run adds about a billion instructions to
+   it), OSQP and the caches warm;
 2. instrumentation is switched on (``callgrind_control -i on``) and ``run_inproc`` runs
    ``--short`` then ``--long`` seconds of mission, the counters dumped after each;
 3. the difference of the two counts, divided by the steps between them, is the cost of a
@@ -38,7 +40,7 @@ sys.path.insert(0, {root!r})
 from gcs.inproc import run_inproc
 from swarm_common.scenario import load_scenario
 sc = load_scenario({scenario!r})
-run_inproc(sc, duration=1.0, method={method!r})
+run_inproc(sc, duration=max({durations!r}), method={method!r})
 def mark(name):
     open(os.path.join({tmp!r}, name), "w").close()
 def wait(name):

@@ -163,10 +163,11 @@ class Formation:
         any leader quantity the map is linear in: velocities) in one product. Equal to the
         row-by-row map up to the rounding of the product's summation order."""
         lp = np.asarray(leader_pos, dtype=float)
-        k = len(lp)
+        k, n_l, n_f = len(lp), len(self.leader_idx), len(self.follower_idx)
         out = np.zeros((k, self.n, 3))
         out[:, self.leader_idx] = lp
-        out[:, self.follower_idx] = (lp.reshape(k, -1) @ self._leader_map().T).reshape(k, -1, 3)
+        fol = lp.reshape(k, 3 * n_l) @ self._leader_map().T  # k may be 0 (nothing recorded)
+        out[:, self.follower_idx] = fol.reshape(k, n_f, 3)
         return out
 
     def _leader_map(self) -> np.ndarray:

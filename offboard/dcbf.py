@@ -93,8 +93,8 @@ class InputSet:
         (compiled: :func:`offboard.dcbf_kernel.project_kernel`)."""
         s, k = self.shrink, self.sides
         cos_a, sin_a = self._cone_dirs
-        return project_kernel(
-            np.array(u, dtype=float), self.uz_min + s, self.uz_max - s, -self.uh_max + s,
+        return project_kernel(  # the kernel works on its own copy of u
+            vec3(u), self.uz_min + s, self.uz_max - s, -self.uh_max + s,
             self.uh_max - s, self.tan_tilt * math.cos(math.pi / k), self.g, s, cos_a, sin_a,
         )
 

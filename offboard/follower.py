@@ -129,6 +129,8 @@ class FollowerAgent(AgentBase):
         self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
         self.hold = DropoutHold(sc.n, self.index, SENSE_HOLD_S, sc.sensing.dropout_prob > 0.0)
+        # the sensed pairs' Δp, Δv of the step (the filter reads them within the step)
+        self._dp, self._dv = np.zeros((sc.n, 3)), np.zeros((sc.n, 3))
 
     @property
     def gains(self) -> GainReport:
@@ -177,7 +179,9 @@ class FollowerAgent(AgentBase):
         clf = self._nominal(w, t)
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
-        dp, dv = pair_rows(sel, rows3(rp), rows3(rv))  # Δp = p_i − p_j, Δv = v_i − v_j
+        m = len(sel)
+        dp, dv = self._dp[:m], self._dv[:m]  # Δp = p_i − p_j, Δv = v_i − v_j, written here
+        pair_rows(sel, rows3(rp), rows3(rv), dp, dv)
         u = self._safe_control(self._safety_input(t, clf, w, sel, dp, dv, rows, have), status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)

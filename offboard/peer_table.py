@@ -33,9 +33,6 @@ Z1, Z2, Z3, XI = slice(0, 3), slice(3, 6), slice(6, 9), slice(XI_COL, XI_COL + 1
 # s: an acceleration estimate takes an estimate only this much newer than its last one
 ACC_NEWER_S = 1e-9
 
-# ingest_kernel's result: whether who is heard or who cooperates changed, the newest stamp
-ING_CHANGED, ING_NEWEST = 0, 1
-
 
 @dataclass
 class EstimateBatch:
@@ -99,15 +96,15 @@ class PeerTable:
 
     def ingest(self, batch: EstimateBatch, idx: np.ndarray, link_up: bool) -> None:
         """Take the estimates of ``batch`` at scenario indices ``idx`` (NaN stamps skipped)."""
-        res = ingest_kernel(
+        changed, newest = ingest_kernel(
             idx, batch.t, batch.rows, batch.leader, batch.cooperative, link_up, self.t,
             self.rows, self.leader, self.cooperative, self.version, self.acc_t, self.acc_z2,
             self.acc_older,
         )
-        if res[ING_CHANGED]:
+        if changed:
             self.revision += 1
-        if res[ING_NEWEST] > self.newest:
-            self.newest = float(res[ING_NEWEST])
+        if newest > self.newest:
+            self.newest = newest
 
 
 @kernel
@@ -116,21 +113,19 @@ def ingest_kernel(
     bcoop: np.ndarray, link_up: bool, t: np.ndarray, rows: np.ndarray, lead: np.ndarray,
     coop: np.ndarray, version: np.ndarray, acc_t: np.ndarray, acc_z2: np.ndarray,
     acc_older: np.ndarray,
-) -> np.ndarray:
+) -> tuple[bool, float]:
     """:meth:`PeerTable.ingest` (arrays as there; idx (m,) int64): for each ``j = idx[r]``
     with a stamp, the predictor's row is replaced when ``link_up`` and the stamp is not
     older than the last (its ``version`` counted; first heard, or a changed cooperative
     flag, is reported), and the acceleration slots take its z2 when it is more than
-    ACC_NEWER_S newer than their last. Returns [changed (0/1), newest accepted stamp (s,
-    −inf if none)]. ValueError, with nothing written, for an index outside the batch or
-    the table."""
+    ACC_NEWER_S newer than their last. Returns (changed, newest accepted stamp (s, −inf
+    if none)): scalars, no array to box. ValueError, with nothing written, for an index
+    outside the batch or the table."""
     n = min(bt.shape[0], brows.shape[0], t.shape[0], rows.shape[0], acc_t.shape[1])
     for r in range(idx.shape[0]):
         if not 0 <= idx[r] < n:
             raise ValueError("ingest_kernel: an index outside the batch or the table")
-    out = np.empty(2)
-    out[ING_CHANGED] = 0.0
-    out[ING_NEWEST] = -math.inf
+    changed, newest = False, -math.inf
     for r in range(idx.shape[0]):
         j = idx[r]
         s = bt[j]
@@ -138,15 +133,15 @@ def ingest_kernel(
             continue
         if link_up and s >= t[j]:
             if t[j] == -math.inf or coop[j] != bcoop[j]:
-                out[ING_CHANGED] = 1.0
+                changed = True
             t[j] = s
             for c in range(ROW):
                 rows[j, c] = brows[j, c]
             lead[j] = blead[j]
             coop[j] = bcoop[j]
             version[j] += 1
-            if s > out[ING_NEWEST]:
-                out[ING_NEWEST] = s
+            if s > newest:
+                newest = s
         older = acc_older[j]
         last = acc_t[1 - older, j]
         if math.isnan(last) or s > last + ACC_NEWER_S:
@@ -154,7 +149,7 @@ def ingest_kernel(
             for c in range(3):
                 acc_z2[older, j, c] = brows[j, 3 + c]
             acc_older[j] = 1 - older
-    return out
+    return changed, newest
 
 
 def rows_of(

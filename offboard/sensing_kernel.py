@@ -130,19 +130,20 @@ def hold_kernel(
 
 @kernel
 def pair_rows(
-    sel: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(Δp, Δv) (M,3) of the pairs ``sel`` (M,) (scenario indices, int64) from the (N,3)
-    measured p_j − p_i (m) and v_j − v_i (m/s): their negations, Δp = p_i − p_j and
-    Δv = v_i − v_j, the safety filters' input (``-rel_p[sel]`` in one call)."""
+    sel: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray, dp_out: np.ndarray,
+    dv_out: np.ndarray,
+) -> None:
+    """Δp and Δv of the pairs ``sel`` (M,) (scenario indices, int64) from the (N,3)
+    measured p_j − p_i (m) and v_j − v_i (m/s), written into the first M rows of
+    ``dp_out`` and ``dv_out`` (≥ M, 3): their negations, Δp = p_i − p_j and
+    Δv = v_i − v_j, the safety filters' input (``-rel_p[sel]`` in one call, no new array)."""
     m = sel.shape[0]
-    dp = np.empty((m, 3))
-    dv = np.empty((m, 3))
+    if dp_out.shape[0] < m or dv_out.shape[0] < m:
+        raise ValueError("pair_rows: outputs with fewer rows than the pairs")
     for r in range(m):
         j = sel[r]
         if not (0 <= j < rel_p.shape[0] and j < rel_v.shape[0]):
             raise ValueError("pair_rows: an index outside the measurements")
         for c in range(3):
-            dp[r, c] = -rel_p[j, c]
-            dv[r, c] = -rel_v[j, c]
-    return dp, dv
+            dp_out[r, c] = -rel_p[j, c]
+            dv_out[r, c] = -rel_v[j, c]

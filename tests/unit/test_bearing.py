@@ -51,6 +51,20 @@ def test_desired_positions_cube(sc):
     assert np.allclose(pd, expect)
 
 
+def test_desired_positions_of_a_series_are_the_per_row_map(sc):
+    """desired_positions_series over K rows of leader positions equals desired_positions
+    row by row (to the rounding of the summation order), and takes K = 0 (a recording
+    with no truth yet)."""
+    f = formation_from_scenario(sc)
+    rng = np.random.default_rng(4)
+    lead = rng.normal(0.0, 5.0, (30, len(f.leader_idx), 3))
+    got = f.desired_positions_series(lead)
+    assert got.shape == (30, f.n, 3)
+    for k in range(30):
+        assert np.allclose(got[k], f.desired_positions(lead[k]), rtol=1e-13, atol=1e-12)
+    assert f.desired_positions_series(lead[:0]).shape == (0, f.n, 3)
+
+
 def test_cube_edges_only_is_refused(sc):
     # the 12 cube edges let the cube stretch along an axis: the leaders fix no follower
     with pytest.raises(RigidityError, match='^formation.graph = "cube_edges": .*follower block '

@@ -190,8 +190,9 @@ def test_truth_of_another_shape_is_refused_before_any_draw() -> None:
 
 
 def test_pair_rows_are_the_negated_rows_of_the_selected_pairs() -> None:
-    """pair_rows(sel, rel_p, rel_v) equals numpy's -rel_p[sel], -rel_v[sel] bit for bit
-    (any order, repeats, none), and an index outside the rows is a ValueError."""
+    """pair_rows(sel, rel_p, rel_v, dp, dv) writes numpy's -rel_p[sel], -rel_v[sel] bit for
+    bit into the first rows of dp, dv (any order, repeats, none; the rest untouched), and
+    an index outside the rows or outputs too short are a ValueError."""
     from offboard.sensing_kernel import pair_rows
 
     rng = np.random.default_rng(11)
@@ -199,9 +200,14 @@ def test_pair_rows_are_the_negated_rows_of_the_selected_pairs() -> None:
         n = int(rng.integers(1, 10))
         rel_p, rel_v = rng.normal(0.0, 5.0, (n, 3)), rng.normal(0.0, 2.0, (n, 3))
         sel = rng.integers(0, n, int(rng.integers(0, n + 2))).astype(np.int64)
-        dp, dv = pair_rows(sel, rel_p, rel_v)
-        assert dp.shape == dv.shape == (len(sel), 3)
-        assert np.array_equal(dp, -rel_p[sel]) and np.array_equal(dv, -rel_v[sel])
+        m = len(sel)
+        dp, dv = np.full((m + 2, 3), 7.0), np.full((m + 2, 3), 7.0)
+        pair_rows(sel, rel_p, rel_v, dp, dv)
+        assert np.array_equal(dp[:m], -rel_p[sel]) and np.array_equal(dv[:m], -rel_v[sel])
+        assert np.all(dp[m:] == 7.0) and np.all(dv[m:] == 7.0)
+    out = np.zeros((3, 3))
     for bad in (np.array([3], dtype=np.int64), np.array([-1], dtype=np.int64)):
         with pytest.raises(ValueError, match="outside"):
-            pair_rows(bad, np.zeros((3, 3)), np.zeros((3, 3)))
+            pair_rows(bad, np.zeros((3, 3)), np.zeros((3, 3)), out, out)
+    with pytest.raises(ValueError, match="fewer rows"):
+        pair_rows(np.zeros(4, dtype=np.int64), np.zeros((3, 3)), np.zeros((3, 3)), out, out)
