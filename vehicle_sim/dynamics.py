@@ -36,6 +36,7 @@ from vehicle_sim.dynamics_kernel import (
     set_command_kernel,
     set_commands_kernel,
     step_kernel,
+    steps_kernel,
     thrust_accel_kernel,
 )
 
@@ -89,6 +90,9 @@ class SwarmDynamics:
         self._step_min = min_upper_kernel(self._step_dist)  # its minimum (m)
         # the pairs entering contact in a step (step_kernel writes the first rows)
         self._new_pairs = np.zeros((self.n * (self.n - 1) // 2, 2), dtype=np.int64)
+        # those of a control period's sub-steps and the sub-step of each (advance_period)
+        self._period_pairs = np.zeros((0, 2), dtype=np.int64)
+        self._period_pair_step = np.zeros(0, dtype=np.int64)
 
     # -- commands ---------------------------------------------------------------
     def set_command(self, idx: int, roll: float, pitch: float, yaw: float, thrust_n: float) -> None:
@@ -166,6 +170,38 @@ class SwarmDynamics:
     def advance(self, n_steps: int) -> None:
         for _ in range(n_steps):
             self.step()
+
+    def advance_period(self, n_steps: int) -> float:
+        """``n_steps`` ≥ 1 calls of :meth:`step` in one compiled call (the sub-steps of a
+        control period, the commands held: :func:`~vehicle_sim.dynamics_kernel.steps_kernel`),
+        to the same bits. Returns the minimum pair distance over the sub-steps (m; +inf
+        for N < 2), the ``min`` of :meth:`step_min_distance` after each."""
+        n_steps = int(n_steps)
+        if n_steps < 1:
+            raise ValueError(f"advance_period: n_steps {n_steps} < 1")
+        rows = n_steps * (self.n * (self.n - 1) // 2)
+        if self._period_pairs.shape[0] < rows:
+            self._period_pairs = np.zeros((rows, 2), dtype=np.int64)
+            self._period_pair_step = np.zeros(rows, dtype=np.int64)
+        self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
+        p, v, att, thrust, n_new, md, dmin = steps_kernel(
+            f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
+            f64(self.cmd_att), f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
+            self._a_f, self.mass, self.g, self.dt, self.ge_height, self.dist_amp,
+            self.dist_omega, self.t, self.step_count, n_steps, self._in_contact,
+            self.collision_radius, self._step_dist, self._period_pairs,
+            self._period_pair_step,
+        )
+        self.p, self.v, self.att, self.thrust = p, v, att, thrust
+        first = self.step_count
+        self.step_count += n_steps
+        self.t = self.step_count * self.dt
+        self._step_min = dmin
+        steps = self._period_pair_step[:n_new].tolist()
+        for (i, j), s in zip(self._period_pairs[:n_new].tolist(), steps, strict=True):
+            self.collisions += 1
+            self.collision_pairs.append(((first + s + 1) * self.dt, self.ids[i], self.ids[j]))
+        return md
 
     # -- geometry -----------------------------------------------------------------
     def pair_distances(self) -> np.ndarray:

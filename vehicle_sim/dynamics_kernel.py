@@ -195,6 +195,49 @@ def step_kernel(
 
 
 @kernel
+def steps_kernel(
+    p: np.ndarray, v: np.ndarray, att: np.ndarray, thrust: np.ndarray,
+    cmd_att: np.ndarray, cmd_thrust: np.ndarray, held: np.ndarray, zeta: np.ndarray,
+    a_att: np.ndarray, a_f: float, mass: float, g: float, dt: float, ge_height: float,
+    amp: float, omega: float, t: float, step_count: int, n_steps: int,
+    in_contact: np.ndarray, radius: float, dist_out: np.ndarray, pairs_out: np.ndarray,
+    pair_step_out: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float, float]:
+    """``n_steps`` ≥ 1 calls of :func:`step_kernel` in one (the commands held): a control
+    period's physics sub-steps with one call from Python and four arrays boxed instead of
+    four per sub-step. Sub-step s ≥ 1 starts at ``(step_count + s)·dt`` (s), the time
+    :class:`~vehicle_sim.dynamics.SwarmDynamics` gives it after each step; the first at
+    ``t``.
+
+    Returns the state after the last sub-step (p, v, att, thrust), the number K of pairs
+    entering contact over all sub-steps, the minimum pair distance over the sub-steps (m;
+    Python's ``min`` of theirs, in order) and that of the last sub-step. The first K rows
+    of ``pairs_out`` (≥ n_steps·N(N−1)/2, 2) hold the pairs and those of
+    ``pair_step_out`` (≥ n_steps·N(N−1)/2,) the sub-step (0-based) each entered in;
+    ``in_contact`` and ``dist_out`` are those of the last sub-step.
+    """
+    n = p.shape[0]
+    per = n * (n - 1) // 2
+    if n_steps < 1 or pairs_out.shape[0] < n_steps * per or pair_step_out.shape[0] < n_steps * per:
+        raise ValueError("steps_kernel: n_steps < 1 or pair buffers too short")
+    md = np.inf
+    dmin = np.inf
+    k = 0
+    for s in range(n_steps):
+        ts = t if s == 0 else (step_count + s) * dt
+        p, v, att, thrust, n_new, dmin = step_kernel(
+            p, v, att, thrust, cmd_att, cmd_thrust, held, zeta, a_att, a_f, mass, g, dt,
+            ge_height, amp, omega, ts, in_contact, radius, dist_out, pairs_out[k:],
+        )
+        for r in range(k, k + n_new):
+            pair_step_out[r] = s
+        k += n_new
+        if dmin < md:  # min(md, dmin): a nan never replaces the running minimum
+            md = dmin
+    return p, v, att, thrust, k, md, dmin
+
+
+@kernel
 def set_command_kernel(
     cmd_att: np.ndarray, cmd_thrust: np.ndarray, i: int, roll: float, pitch: float,
     yaw: float, thrust: float, tilt_max: float, f_max: float,

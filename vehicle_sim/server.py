@@ -200,12 +200,8 @@ class SimServer(ServerIO):
                 self.dyn.release(v.idx)
                 v.release_requested = False
             self.dyn.set_command(v.idx, *v.command(self.dt))
-        md = float("inf")
-        for _ in range(self.substeps):  # min pair distance over (t_k, t_k+1] for Truth
-            self.dyn.step()
-            if self.dyn.n >= 2:
-                md = min(md, self.dyn.step_min_distance())
-        self._min_dist = md
+        # the sub-steps in one call; the min pair distance over (t_k, t_k+1] for Truth
+        self._min_dist = self.dyn.advance_period(self.substeps)
         self.clock.advance(time.monotonic())
         self._check_collisions()
         self.announce_step()

@@ -194,3 +194,35 @@ def test_rollouts_equal_numpy_steps(cube8, ground_start: bool) -> None:
             step_np(old)
             assert_same(new, old, {"rtol": 1e-11, "atol": 1e-11}, k)
     assert not new.held.all()
+
+
+def test_advance_period_equals_single_steps(cube8) -> None:
+    """A control period's sub-steps in one compiled call give the bits of as many
+    :meth:`step` calls: state, contacts, distances, clock, collisions with their times,
+    and the minimum pair distance over the sub-steps, from random (clustered, colliding)
+    states with random commands."""
+    rng = np.random.default_rng(23)
+    entered = later = 0
+    for trial in range(300):
+        one = SwarmDynamics(cube8, seed=trial)
+        random_state(one, rng)
+        period = copy.deepcopy(one)
+        n_steps = int(rng.integers(1, 6))
+        md = math.inf
+        for _ in range(n_steps):
+            one.step()
+            md = min(md, one.step_min_distance())
+        got = period.advance_period(n_steps)
+        assert got == md or (math.isnan(got) and math.isnan(md)), trial
+        for name in ("p", "v", "att", "thrust", "_step_dist", "_in_contact"):
+            assert np.array_equal(getattr(period, name), getattr(one, name)), (name, trial)
+        assert period.step_min_distance() == one.step_min_distance(), trial
+        assert (period.t, period.step_count) == (one.t, one.step_count), trial
+        assert period.collision_pairs == one.collision_pairs, trial
+        assert period.collisions == one.collisions, trial
+        entered += one.collisions
+        first_end = (period.step_count - n_steps + 1) * period.dt
+        later += sum(1 for c in one.collision_pairs if c[0] > first_end)
+    assert entered > 50 and later > 0  # contacts are reached, in later sub-steps too (8)
+    with pytest.raises(ValueError, match="n_steps 0"):
+        SwarmDynamics(cube8, seed=0).advance_period(0)
