@@ -18,16 +18,16 @@ CLF_OUT = 8  # [V, L_fV, L_gV (3), u_nom (3)]
 
 
 @kernel
-def clf_kernel(
+def clf_into(
     e1: np.ndarray, e2: np.ndarray, w: np.ndarray, a_ref: np.ndarray, kp: float, kd: float,
     lam: float, ks: float, use_box: bool, lo: np.ndarray, hi: np.ndarray, brake_share: float,
-    reserve: float,
-) -> np.ndarray:
-    """(8,) [V (m²), L_fV (m²/s), L_gV (3, m·s), u_nom (3, m/s²)] for e1 (m), e2 (m/s), the
+    reserve: float, out: np.ndarray,
+) -> None:
+    """Writes ``out`` (CLF_OUT,) = [V (m²), L_fV (m²/s), L_gV (3, m·s), u_nom (3, m/s²)]
+    (the caller's new array: none to box) for e1 (m), e2 (m/s), the
     disturbance estimate w and the reference acceleration a_ref (m/s²), gains k_p, k_d, λ,
     k_s. With ``use_box`` the nominal law has the anti-windup of docs/saturation.md §2 over
     the per-axis box [lo, hi] (m/s²), braking share β and feed-forward reserve."""
-    out = np.empty(CLF_OUT)
     s = np.empty(3)
     drift = np.empty(3)
     for k in range(3):
@@ -44,7 +44,7 @@ def clf_kernel(
         c_p = kp / kd
         for k in range(3):
             out[5 + k] = a_ref[k] - w[k] - lam * e2[k] - ks * s[k] - c_p * e1[k]
-        return out
+        return
     k_v = lam + ks
     c = (ks * lam + kp / kd) / k_v
     f_c = np.empty(3)
@@ -71,18 +71,18 @@ def clf_kernel(
     for k in range(3):
         fb = -k_v * (e2[k] - v_r[k])
         out[5 + k] = f_c[k] + min(max(fb, -b_lo[k]), b_hi[k])
-    return out
 
 
 @kernel
-def nominal_kernel(
+def nominal_into(
     z1: np.ndarray, z2: np.ndarray, xi: np.ndarray, tau_ff: float, w: np.ndarray, kp: float,
     kd: float, lam: float, ks: float, use_box: bool, lo: np.ndarray, hi: np.ndarray,
-    brake_share: float, reserve: float,
-) -> np.ndarray:
-    """:func:`clf_kernel` on the errors of the estimate (z1 (m), z2 (m/s)) from the desired
-    state ξ = [p*, v*, a*, j*] (12,), ``e1 = z1 − p*``, ``e2 = z2 − v*``, with the
-    acceleration feed-forward taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*`` (m/s²)."""
+    brake_share: float, reserve: float, out: np.ndarray,
+) -> None:
+    """:func:`clf_into` (into ``out``) on the errors of the estimate (z1 (m), z2 (m/s))
+    from the desired state ξ = [p*, v*, a*, j*] (12,), ``e1 = z1 − p*``, ``e2 = z2 − v*``,
+    with the acceleration feed-forward taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*``
+    (m/s²)."""
     e1 = np.empty(3)
     e2 = np.empty(3)
     a_ff = np.empty(3)
@@ -90,4 +90,4 @@ def nominal_kernel(
         e1[k] = z1[k] - xi[k]
         e2[k] = z2[k] - xi[3 + k]
         a_ff[k] = xi[6 + k] + tau_ff * xi[9 + k]
-    return clf_kernel(e1, e2, w, a_ff, kp, kd, lam, ks, use_box, lo, hi, brake_share, reserve)
+    clf_into(e1, e2, w, a_ff, kp, kd, lam, ks, use_box, lo, hi, brake_share, reserve, out)

@@ -55,7 +55,7 @@ import numpy as np
 import osqp
 from scipy import sparse
 
-from offboard.clf_kernel import clf_kernel, nominal_kernel
+from offboard.clf_kernel import CLF_OUT, clf_into, nominal_into
 from offboard.daqp_call import DAQP_INF, daqp_solve
 from offboard.osqp_call import update_solve
 from offboard.pair_kernel import barrier_kernel, tangential_kernel
@@ -104,11 +104,12 @@ def clf_terms(
     """CLF of Departure 10 and the nominal formation controller (see module docstring);
     with ``box`` = (lo, hi) (m/s², per axis) the nominal control has anti-windup
     (docs/saturation.md §2) and lies in the box. Compiled:
-    :func:`offboard.clf_kernel.clf_kernel`."""
+    :func:`offboard.clf_kernel.clf_into`."""
     lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
-    out = clf_kernel(
+    out = np.empty(CLF_OUT)
+    clf_into(
         vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
-        float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
+        float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE, out,
     )
     return _terms(out)
 
@@ -120,11 +121,13 @@ def clf_terms_of_reference(
     """:func:`clf_terms` of the estimate (z1 (m), z2 (m/s)) tracking the desired state
     ξ = [p*, v*, a*, j*] (12,): ``e1 = z1 − p*``, ``e2 = z2 − v*`` and the reference
     acceleration taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*`` (m/s²). One compiled call
-    (:func:`offboard.clf_kernel.nominal_kernel`), the same bits as forming them in numpy."""
+    (:func:`offboard.clf_kernel.nominal_into`), the same bits as forming them in numpy."""
     lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
-    out = nominal_kernel(
+    out = np.empty(CLF_OUT)  # a new array from Python: cheaper than one the kernel boxes
+    nominal_into(
         vec3(z1), vec3(z2), f64(xi), float(tau_ff), vec3(w), float(kp), float(kd),
         float(lam), float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
+        out,
     )
     return _terms(out)
 

@@ -33,7 +33,7 @@ from functools import cached_property
 
 import numpy as np
 
-from offboard.dcbf_kernel import dcbf_rows_kernel, ground_rows_kernel, project_kernel
+from offboard.dcbf_kernel import dcbf_rows_kernel, ground_rows_kernel, project_into
 from swarm_common.fastnp import einsum, f64, rows3, vec3
 
 
@@ -90,13 +90,15 @@ class InputSet:
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """A point of the (shrunk) set near ``u``: u_z clipped, then u_h scaled inward
-        (compiled: :func:`offboard.dcbf_kernel.project_kernel`)."""
+        (compiled: :func:`offboard.dcbf_kernel.project_into`, on a new array)."""
         s, k = self.shrink, self.sides
         cos_a, sin_a = self._cone_dirs
-        return project_kernel(  # the kernel works on its own copy of u
-            vec3(u), self.uz_min + s, self.uz_max - s, -self.uh_max + s,
+        out = vec3(u).copy()  # a new array from Python: cheaper than one boxed by the kernel
+        project_into(
+            out, self.uz_min + s, self.uz_max - s, -self.uh_max + s,
             self.uh_max - s, self.tan_tilt * math.cos(math.pi / k), self.g, s, cos_a, sin_a,
         )
+        return out
 
 
 @dataclass(frozen=True)

@@ -159,15 +159,15 @@ def rows_hold_kernel(
 
 
 @kernel
-def project_kernel(
-    u: np.ndarray, uz_lo: float, uz_hi: float, uh_lo: float, uh_hi: float, cone_c: float,
+def project_into(
+    out: np.ndarray, uz_lo: float, uz_hi: float, uh_lo: float, uh_hi: float, cone_c: float,
     g: float, shrink: float, cos_a: np.ndarray, sin_a: np.ndarray,
-) -> np.ndarray:
-    """:meth:`offboard.dcbf.InputSet.project` of a finite u (3,) (m/s²): u_z clipped to
-    [uz_lo, uz_hi], u_x, u_y to [uh_lo, uh_hi], then u_h scaled inward onto the tilt cone
+) -> None:
+    """:meth:`offboard.dcbf.InputSet.project` of a finite u (3,) (m/s²), in place in
+    ``out`` (u on entry; no array to box): u_z clipped to [uz_lo, uz_hi], u_x, u_y to
+    [uh_lo, uh_hi], then u_h scaled inward onto the tilt cone
     ``cos_aᵀu_h ≤ (g + u_z)·cone_c − shrink``. The same operations in the same order as
     the numpy method (Python's min/max semantics), so the same bits."""
-    out = u.copy()
     z = out[2]
     z = uz_lo if uz_lo > z else z
     out[2] = uz_hi if uz_hi < z else z
@@ -185,7 +185,6 @@ def project_kernel(
         scale = (r if r > 0.0 else 0.0) / worst
         out[0] *= scale
         out[1] *= scale
-    return out
 
 
 @kernel

@@ -58,12 +58,14 @@ from offboard.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
     OUT_CONVERGED,
     OUT_E1,
     OUT_E2,
+    OUT_LEN,
     OUT_Z1,
     OUT_Z2,
     OUT_Z3,
     OUT_ZETA,
     coast_kernel,
     deso_step_kernel,
+    lumped_into,
     model_accel_kernel,
 )
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
@@ -341,9 +343,12 @@ class DESO:
         return arrs
 
     def lumped(self) -> np.ndarray:
-        """Estimate of the lumped disturbance acceleration Φζ + d/m: f̂ + z3."""
-        self._f_hat = model_accel_kernel(self.z1, self.z2, self.zeta, self.h)
-        return self.z3 + self._f_hat
+        """Estimate of the lumped disturbance acceleration Φζ + d/m: f̂ + z3 (one compiled
+        call, :func:`offboard.deso_kernel.lumped_into`; f̂ is kept for :meth:`update`)."""
+        out = np.empty((2, 3))  # a new array from Python: cheaper than two the kernel boxes
+        lumped_into(self.z1, self.z2, self.zeta, self.h, self.z3, out)
+        self._f_hat = out[0]
+        return out[1]
 
     def coast(self, u_sub: np.ndarray) -> None:
         """Dead-reckon one control period with the model (z3 and ζ held): a period
@@ -381,11 +386,12 @@ class DESO:
         f_hat = (f_cached if f_cached is not None
                  else model_accel_kernel(self.z1, self.z2, self.zeta, self.h))
         c = np.ascontiguousarray
-        out = deso_step_kernel(
+        out = np.empty(OUT_LEN)  # a new array from Python: cheaper than one the kernel boxes
+        deso_step_kernel(
             a_s, g, dmat, pu, idx, c(peer_rows, dtype=np.float64), c(rel_pos, dtype=np.float64),
             c(rel_vel, dtype=np.float64), self.z1, self.z2, self.z3, self.zeta,
             c(u_sub, dtype=np.float64), f_hat, self.h, self.mu, self.sigma, self.dt,
-            self.converged_s,
+            self.converged_s, out,
         )
         # new arrays each period (views of the kernel's one output array)
         self.z1, self.z2, self.z3 = out[OUT_Z1], out[OUT_Z2], out[OUT_Z3]

@@ -109,6 +109,20 @@ def adapt_step_kernel(
 
 
 @kernel
+def lumped_into(
+    z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, h: float, z3: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The lumped-disturbance estimate of :meth:`offboard.deso.DESO.lumped` into ``out``
+    (2,3), the caller's new array (none to box): row 0 f̂ = :func:`model_accel_kernel`
+    (m/s²), row 1 ``z3 + f̂`` (m/s², the same additions as numpy's)."""
+    f = model_accel_kernel(z1, z2, zeta, h)
+    for k in range(3):
+        out[0, k] = f[k]
+        out[1, k] = z3[k] + f[k]
+
+
+@kernel
 def coast_kernel(
     z1: np.ndarray, z2: np.ndarray, z3: np.ndarray, zeta: np.ndarray, u_sub: np.ndarray,
     h: float, delta: float,
@@ -150,9 +164,11 @@ def deso_step_kernel(
     peer_rows: np.ndarray, rel_pos: np.ndarray, rel_vel: np.ndarray,
     z1: np.ndarray, z2: np.ndarray, z3: np.ndarray, zeta: np.ndarray, u_sub: np.ndarray,
     f_hat: np.ndarray, h: float, mu: float, sigma: float, dt: float, converged_s: float,
-) -> np.ndarray:
-    """One DESO period with relative information: (OUT_LEN,) [z1, z2, z3, e1, e2, ζ̂,
-    converged_s] after it (slices ``OUT_*``).
+    out: np.ndarray,
+) -> None:
+    """One DESO period with relative information, written into ``out`` (OUT_LEN,) (the
+    caller's new array: none to box): [z1, z2, z3, e1, e2, ζ̂, converged_s] after it
+    (slices ``OUT_*``).
 
     a_s (15,15), g (15,3S) the period map of the neighbour set and dmat D = Σ_j W_ij (3,3);
     pu (k,3,3) the W_ij of the k neighbours used, idx (k,) their scenario indices (int64);
@@ -172,13 +188,13 @@ def deso_step_kernel(
     X = [z1, z2, z3, b1, ḃ1] (its first 9 rows: the b1 rows of X⁺ are not used).
     """
     n_sub = u_sub.shape[0]
-    if g.shape[1] != 3 * n_sub or peer_rows.shape[1] < 6:
-        raise ValueError("deso_step_kernel: u_sub rows != sub-steps of G, or rows too short")
+    if g.shape[1] != 3 * n_sub or peer_rows.shape[1] < 6 or out.shape[0] != OUT_LEN:
+        raise ValueError("deso_step_kernel: u_sub rows != sub-steps of G, rows too short, "
+                         "or out not of OUT_LEN")
     for k in range(idx.shape[0]):
         if not (0 <= idx[k] < peer_rows.shape[0] and idx[k] < rel_pos.shape[0]
                 and idx[k] < rel_vel.shape[0]):
             raise ValueError("deso_step_kernel: a neighbour index outside the rows")
-    out = np.empty(OUT_LEN)
     x = np.empty(15)
     for i in range(3):
         x[i] = z1[i]
@@ -225,4 +241,3 @@ def deso_step_kernel(
         for c in range(3 * n_sub):
             gw += g[r, c] * w_in[c]
         out[r] = ax + gw
-    return out

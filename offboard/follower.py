@@ -329,7 +329,9 @@ class FollowerAgent(AgentBase):
         since = t - self.silent_after
         # others heard (newest ≥ since): a silent one stands out (never heard: −inf,
         # full already)
-        return full_share_rows(sel, self._full[1], tab.t, since, self.pred.newest >= since)
+        out = np.empty(len(sel), dtype=np.bool_)  # new from Python: cheaper than boxed
+        full_share_rows(sel, self._full[1], tab.t, since, self.pred.newest >= since, out)
+        return out
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the

@@ -90,19 +90,21 @@ class LeaderAgent(AgentBase):
         p = f64(truth_p[self.index])
         v = f64(truth_v[self.index])
         # PD + feed-forward with lag compensation, clipped to the box (one compiled call)
-        u = leader_control_kernel(
+        u = np.empty(3)  # new arrays from Python here: cheaper than ones the kernels box
+        leader_control_kernel(
             f64(self.current_reference(t)), p, v, self.d_hat, self.veh.tau_rollpitch_s,
-            self.kp, self.kd, self.u_lo, self.u_hi,
+            self.kp, self.kd, self.u_lo, self.u_hi, u,
         )
         if self.landing is not None:
             u = self.landed_idle(t, float(p[2]), u)
         u = self.on_pad_floor(t, float(p[2]), u)
         sp, u_sub, clipped, u_mean = self.inner.command(u, self.yaw, self.substeps, CLIP_TOL)
         self._update_eso(v, u_sub)
-        p1, v1 = leader_prediction_kernel(p, v, u_mean, self.d_hat, self.dt)
+        pv = np.empty((2, 3))
+        leader_prediction_kernel(p, v, u_mean, self.d_hat, self.dt, pv)
         est = NeighbourEstimate(
-            self.id, t + self.dt, p1, v1, self.d_hat.copy(), self.current_reference(t + self.dt),
-            True,
+            self.id, t + self.dt, pv[0], pv[1], self.d_hat.copy(),
+            self.current_reference(t + self.dt), True,
         )
         status = AgentStatus(method=self.method, comm_ok=comm_ok, input_clipped=clipped)
         return self._output(sp, u, est, status, self.d_hat.copy())
@@ -110,44 +112,50 @@ class LeaderAgent(AgentBase):
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:
         """Velocity ESO over the period (sub-stepped Euler, measurement ``v`` held;
         compiled: :func:`velocity_eso_kernel`)."""
-        self.v_hat, self.d_hat = velocity_eso_kernel(
+        out = np.empty((2, 3))
+        velocity_eso_kernel(
             f64(v), self.v_hat, self.d_hat, f64(u_sub), self.dt / self.substeps, self.l1,
-            self.l2,
+            self.l2, out,
         )
+        self.v_hat, self.d_hat = out[0], out[1]
 
 
 @kernel
 def velocity_eso_kernel(
     v: np.ndarray, v_hat: np.ndarray, d_hat: np.ndarray, u_sub: np.ndarray, dl: float,
-    l1: float, l2: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(v̂, d̂) after ``len(u_sub)`` Euler sub-steps of dl (s) of the leader's velocity ESO
+    l1: float, l2: float, out: np.ndarray,
+) -> None:
+    """(v̂, d̂) into the rows of ``out`` (2,3), the caller's new array (none to box; not
+    ``v_hat`` or ``d_hat``), after ``len(u_sub)`` Euler sub-steps of dl (s) of the leader's
+    velocity ESO
     ``v̂' = u + d̂ + l1 (v − v̂)``, ``d̂' = l2 (v − v̂)`` with the measured velocity v (m/s)
     held and u (m/s²) the inner-loop model's realised control per sub-step. Per axis the
     operations and their order of the numpy formulation (``v̂ + dl·((u + d̂) + l1·e)``,
     ``d̂ + (dl·l2)·e``), so the same bits."""
-    vh = v_hat.copy()
-    dh = d_hat.copy()
+    vh = out[0]
+    dh = out[1]
+    for a in range(3):
+        vh[a] = v_hat[a]
+        dh[a] = d_hat[a]
     k = dl * l2
     for s in range(u_sub.shape[0]):
         for a in range(3):
             err = v[a] - vh[a]
             vh[a] = vh[a] + dl * (u_sub[s, a] + dh[a] + l1 * err)
             dh[a] = dh[a] + k * err
-    return vh, dh
 
 
 @kernel
 def leader_control_kernel(
     ref: np.ndarray, p: np.ndarray, v: np.ndarray, d_hat: np.ndarray, tau: float, kp: float,
-    kd: float, lo: np.ndarray, hi: np.ndarray,
-) -> np.ndarray:
-    """The leader's command (m/s²): ``a_ff − d̂ + k_p (p* − p) + k_d (v* − v)`` with the
+    kd: float, lo: np.ndarray, hi: np.ndarray, u: np.ndarray,
+) -> None:
+    """The leader's command (m/s²) into ``u`` (3,), the caller's new array (none to box):
+    ``a_ff − d̂ + k_p (p* − p) + k_d (v* − v)`` with the
     lag-compensating feed-forward ``a_ff = a* + τ j*`` of ξ = ``ref`` (12,), own position
     p (m) and velocity v (m/s), the ESO's disturbance d̂ (m/s²), clipped to [lo, hi].
     Per axis the numpy formulation's operations in its order (left to right), and
     ``np.clip``'s (a NaN stays NaN), so the same bits."""
-    u = np.empty(3)
     for a in range(3):
         a_ff = ref[6 + a] + tau * ref[9 + a]
         x = a_ff - d_hat[a] + kp * (ref[a] - p[a]) + kd * (ref[3 + a] - v[a])
@@ -156,21 +164,19 @@ def leader_control_kernel(
         if x > hi[a]:
             x = hi[a]
         u[a] = x
-    return u
 
 
 @kernel
 def leader_prediction_kernel(
-    p: np.ndarray, v: np.ndarray, u_mean: np.ndarray, d_hat: np.ndarray, dt: float
-) -> tuple[np.ndarray, np.ndarray]:
+    p: np.ndarray, v: np.ndarray, u_mean: np.ndarray, d_hat: np.ndarray, dt: float,
+    out: np.ndarray,
+) -> None:
     """(p, v) one period ``dt`` (s) ahead at the constant acceleration a = ū + d̂ (the
-    period's mean realised control and the disturbance, m/s²): ``p + v dt + ½ a dt²``,
-    ``v + a dt``; the numpy formulation's operations in its order, so the same bits."""
-    p1 = np.empty(3)
-    v1 = np.empty(3)
+    period's mean realised control and the disturbance, m/s²), into the rows of ``out``
+    (2,3), the caller's new array (none to box): ``p + v dt + ½ a dt²``, ``v + a dt``;
+    the numpy formulation's operations in its order, so the same bits."""
     dt2 = dt**2
     for i in range(3):
         a = u_mean[i] + d_hat[i]
-        p1[i] = p[i] + v[i] * dt + 0.5 * a * dt2
-        v1[i] = v[i] + a * dt
-    return p1, v1
+        out[0, i] = p[i] + v[i] * dt + 0.5 * a * dt2
+        out[1, i] = v[i] + a * dt

@@ -39,25 +39,29 @@ class NeighbourAccel:
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(M,3) estimates for scenario indices ``idx`` (zero where fewer than two)."""
-        return neighbour_accel_rows(
-            np.asarray(idx, dtype=np.int64), self.table.acc_t, self.table.acc_z2, self.a_max
-        )
+        sel = np.asarray(idx, dtype=np.int64)
+        out = np.empty((len(sel), 3))  # a new array from Python: cheaper than a boxed one
+        neighbour_accel_rows(sel, self.table.acc_t, self.table.acc_z2, self.a_max, out)
+        return out
 
 
 @kernel
 def neighbour_accel_rows(
-    idx: np.ndarray, t: np.ndarray, z2: np.ndarray, a_max: float
-) -> np.ndarray:
-    """(M,3): for each scenario index ``idx[r]`` with two accepted estimates,
+    idx: np.ndarray, t: np.ndarray, z2: np.ndarray, a_max: float, out: np.ndarray
+) -> None:
+    """Writes ``out`` (M,3) (the caller's new array: none to box): for each scenario index
+    ``idx[r]`` with two accepted estimates,
     ``sat_{a_max}((z2_last − z2_prev) / (t_last − t_prev))`` (m/s²), zero elsewhere
     (:class:`NeighbourAccel`). t (2,N) times (s, NaN for a slot never written) and z2
     (2,N,3) velocities (m/s) in two slots per agent; the later time is the last (an
     estimate is accepted only if newer). sat scales a vector down to norm ``a_max``
     (m/s²) if longer."""
-    out = np.zeros((idx.shape[0], 3))
+    if out.shape[0] != idx.shape[0] or out.shape[1] != 3:
+        raise ValueError("neighbour_accel_rows: out not (M, 3)")
     for r in range(idx.shape[0]):
         j = idx[r]
         if math.isnan(t[0, j]) or math.isnan(t[1, j]):
+            out[r, 0], out[r, 1], out[r, 2] = 0.0, 0.0, 0.0
             continue
         s = 0 if t[0, j] > t[1, j] else 1
         q = 1 - s
@@ -68,4 +72,3 @@ def neighbour_accel_rows(
         n = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
         sc = a_max / n if n > a_max else 1.0
         out[r, 0], out[r, 1], out[r, 2] = a0 * sc, a1 * sc, a2 * sc
-    return out

@@ -209,16 +209,18 @@ def unsensed_candidates(
 
 @kernel
 def full_share_rows(
-    sel: np.ndarray, full: np.ndarray, t_tab: np.ndarray, since: float, others_heard: bool
-) -> np.ndarray:
-    """(M,) bool for the pairs ``sel`` (M,) (scenario indices, int64): ``full[j]`` (N,)
+    sel: np.ndarray, full: np.ndarray, t_tab: np.ndarray, since: float, others_heard: bool,
+    out: np.ndarray,
+) -> None:
+    """Writes ``out`` (M,) bool (the caller's new array: none to box) for the pairs ``sel``
+    (M,) (scenario indices, int64): ``full[j]`` (N,)
     bool, or, when ``others_heard``, the agent's last stamp ``t_tab[j]`` (s, −inf never
     heard) is before ``since`` (s). The dcbf filter's full-share mask
     (:meth:`offboard.follower.FollowerAgent._full_share`) in one call."""
-    out = np.empty(sel.shape[0], dtype=np.bool_)
+    if out.shape[0] != sel.shape[0]:
+        raise ValueError("full_share_rows: out not of the pairs' length")
     for r in range(sel.shape[0]):
         j = sel[r]
         if not (0 <= j < full.shape[0] and j < t_tab.shape[0]):
             raise ValueError("full_share_rows: an index outside the table")
         out[r] = full[j] or (others_heard and t_tab[j] < since)
-    return out

@@ -82,24 +82,27 @@ class LeaderTrajectory:
 
     def state(self, t: float) -> np.ndarray:
         """ξ(t) = [p, ṗ, p̈, p⃛] (12,) (compiled: :func:`leader_state_kernel`)."""
-        return leader_state_kernel(self.p0, self.amp, self.omega, float(t))
+        out = np.empty(12)  # a new array from Python: cheaper than one the kernel boxes
+        leader_state_kernel(self.p0, self.amp, self.omega, float(t), out)
+        return out
 
 
 @kernel
-def leader_state_kernel(p0: np.ndarray, amp: np.ndarray, omega: float, t: float) -> np.ndarray:
-    """ξ(t) = [p, ṗ, p̈, p⃛] (12,) of p(t) = p0 + A(1 − cos ωt), p0 and A (3,) in m, ω in
+def leader_state_kernel(
+    p0: np.ndarray, amp: np.ndarray, omega: float, t: float, out: np.ndarray
+) -> None:
+    """ξ(t) = [p, ṗ, p̈, p⃛] into ``out`` (12,) (the caller's new array: none to box) of
+    p(t) = p0 + A(1 − cos ωt), p0 and A (3,) in m, ω in
     rad/s, t in s: ``A ω sin ωt``, ``A ω² cos ωt``, ``−A ω³ sin ωt``, each product taken
     left to right per axis (ω³ as ``ω**3``, the C library's pow)."""
     c, s = math.cos(omega * t), math.sin(omega * t)
     w3 = math.pow(omega, 3.0)
-    out = np.empty(12)
     for i in range(3):
         a = amp[i]
         out[i] = p0[i] + a * (1.0 - c)
         out[3 + i] = a * omega * s
         out[6 + i] = a * omega * omega * c
         out[9 + i] = -a * w3 * s
-    return out
 
 
 def exo_propagator(omega: float, dt: float) -> np.ndarray:
@@ -110,18 +113,19 @@ def exo_propagator(omega: float, dt: float) -> np.ndarray:
 @kernel
 def observer_step(
     mx: np.ndarray, mc: np.ndarray, pu: np.ndarray, idx: np.ndarray, peer_rows: np.ndarray,
-    xi: np.ndarray,
-) -> np.ndarray:
+    xi: np.ndarray, out: np.ndarray,
+) -> None:
     """One period of the desired-state observer (§4.1), compiled:
-    ``ξ̂⁺ = M_x ξ̂ + M_c c`` with ``c = Σ_j (I₄ ⊗ P*_ij) ξ̂_j``.
+    ``ξ̂⁺ = M_x ξ̂ + M_c c`` with ``c = Σ_j (I₄ ⊗ P*_ij) ξ̂_j``, written into ``out`` (12,)
+    (the caller's new array, not ``xi``: none to box).
 
     mx, mc (12,12) the exact one-period maps of :meth:`DesiredStateObserver._matrices`;
     pu (k,3,3) the P*_ij of the k neighbours used and idx (k,) their scenario indices
     (int64); peer_rows (N,21) the agents' rows by scenario index, ξ̂_j (m, m/s, m/s², m/s³)
     in columns 9–20 (:mod:`offboard.peer_table`); xi (12,) own ξ̂. Sums run left to
     right over neighbours, then components."""
-    if peer_rows.shape[1] < XI_COL + 12:
-        raise ValueError("observer_step: rows too short")
+    if peer_rows.shape[1] < XI_COL + 12 or out.shape[0] != 12:
+        raise ValueError("observer_step: rows too short or out not (12,)")
     for n in range(idx.shape[0]):
         if not 0 <= idx[n] < peer_rows.shape[0]:
             raise ValueError("observer_step: a neighbour index outside the rows")
@@ -134,7 +138,6 @@ def observer_step(
                 for j in range(3):
                     acc += pu[n, i, j] * peer_rows[row, XI_COL + 3 * d + j]
                 c[3 * d + i] += acc
-    out = np.empty(12)
     for r in range(12):
         acc = 0.0
         for q in range(12):
@@ -143,7 +146,6 @@ def observer_step(
         for q in range(12):
             acc2 += mc[r, q] * c[q]
         out[r] = acc + acc2
-    return out
 
 
 class DesiredStateObserver:
@@ -201,8 +203,10 @@ class DesiredStateObserver:
             self.xi = self.exo @ self.xi
             return
         mx, mc, pu, idx = self._matrices(used)
-        self.xi = observer_step(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float),
-                                self.xi)
+        out = np.empty(12)  # a new array from Python: cheaper than one the kernel boxes
+        observer_step(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float), self.xi,
+                      out)
+        self.xi = out
 
     @property
     def rate(self) -> float:

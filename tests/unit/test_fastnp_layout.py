@@ -9,17 +9,14 @@ import pickle
 import numpy as np
 import pytest
 
-from offboard.clf_kernel import nominal_kernel
 from swarm_common.fastnp import rows3, vec3
+from vehicle_sim.dynamics_kernel import pair_distances_kernel
 
 
 def _kernel_output() -> np.ndarray:
-    """A (3,) slice of an array a compiled kernel returned: its dtype is an equal object
+    """A (3,) row of an array a compiled kernel returned: its dtype is an equal object
     of numba's, not numpy's float64 singleton."""
-    z = np.zeros(3)
-    out = nominal_kernel(z, z, np.zeros(12), 0.0, z, 1.0, 1.0, 1.0, 1.0, False, z, z,
-                         0.5, 0.1)
-    return out[5:8]
+    return pair_distances_kernel(np.zeros((3, 3)))[0]
 
 
 @pytest.mark.parametrize("x", [

@@ -12,6 +12,20 @@ from offboard.leader import leader_control_kernel, leader_prediction_kernel
 TAU, KP, KD = 0.08, 4.0, 3.0
 
 
+def control(*args: object) -> np.ndarray:
+    """leader_control_kernel into a new (3,) array (NaN first: every element written)."""
+    out = np.full(3, np.nan)
+    leader_control_kernel(*args, out)
+    return out
+
+
+def predict(*args: object) -> tuple[np.ndarray, np.ndarray]:
+    """leader_prediction_kernel into a new (2,3) array."""
+    out = np.full((2, 3), np.nan)
+    leader_prediction_kernel(*args, out)
+    return out[0], out[1]
+
+
 def control_numpy(ref: np.ndarray, p: np.ndarray, v: np.ndarray, d_hat: np.ndarray,
                   tau: float, kp: float, kd: float, lo: np.ndarray,
                   hi: np.ndarray) -> np.ndarray:
@@ -41,7 +55,7 @@ def test_control_gives_the_numpy_bits() -> None:
             ref[rng.integers(0, 12)] = -0.0
             p[rng.integers(0, 3)] = np.nan if i % 30 == 0 else 0.0
             d[:] = -0.0
-        got = leader_control_kernel(ref, p, v, d, TAU, KP, KD, lo, hi)
+        got = control(ref, p, v, d, TAU, KP, KD, lo, hi)
         assert _same(got, control_numpy(ref, p, v, d, TAU, KP, KD, lo, hi)), i
 
 
@@ -52,7 +66,7 @@ def test_prediction_gives_the_numpy_bits() -> None:
         dt = float(rng.choice([0.02, 0.01, 1 / 30, 0.005]))
         if i % 10 == 0:
             v[:] = -0.0
-        got = leader_prediction_kernel(p, v, u, d, dt)
+        got = predict(p, v, u, d, dt)
         want = prediction_numpy(p, v, u, d, dt)
         assert _same(got[0], want[0]) and _same(got[1], want[1]), i
 
@@ -66,7 +80,7 @@ def test_command_tracks_a_moving_reference() -> None:
     for k in range(2500):
         t = k * dt
         ref = np.concatenate([vel * t, vel, np.zeros(6)])
-        u = leader_control_kernel(ref, p, v, np.zeros(3), 0.0, KP, KD, lo, hi)
+        u = control(ref, p, v, np.zeros(3), 0.0, KP, KD, lo, hi)
         assert np.all(u >= lo) and np.all(u <= hi)
-        p, v = leader_prediction_kernel(p, v, u, np.zeros(3), dt)
+        p, v = predict(p, v, u, np.zeros(3), dt)
     assert np.allclose(p, vel * 2500 * dt, atol=1e-3)

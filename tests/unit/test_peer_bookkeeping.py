@@ -184,6 +184,12 @@ def test_full_share_rows_equal_the_numpy_mask() -> None:
         sel = rng.integers(0, n, int(rng.integers(0, n + 1))).astype(np.int64)
         since, heard = float(rng.choice([0.8, 0.95, 1.1])), bool(rng.random() < 0.7)
         want = full[sel] | (heard & (t_tab[sel] < since))
-        assert np.array_equal(full_share_rows(sel, full, t_tab, since, heard), want)
+        got = ~want  # every row must be written
+        full_share_rows(sel, full, t_tab, since, heard, got)
+        assert np.array_equal(got, want)
     with pytest.raises(ValueError, match="outside"):
-        full_share_rows(np.array([4], np.int64), np.zeros(4, bool), np.zeros(4), 0.0, True)
+        full_share_rows(np.array([4], np.int64), np.zeros(4, bool), np.zeros(4), 0.0, True,
+                        np.zeros(1, bool))
+    with pytest.raises(ValueError, match="length"):
+        full_share_rows(np.array([0], np.int64), np.zeros(4, bool), np.zeros(4), 0.0, True,
+                        np.zeros(2, bool))

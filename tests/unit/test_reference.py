@@ -72,5 +72,6 @@ def test_compiled_observer_step_equals_numpy_formulation(sc):
         want = mx @ xi + mc @ c
         rows, _ = rows_of(f.n, xi=dict(zip(used, xs, strict=True)))
         rows[[j for j in range(f.n) if j not in used], 9:] = np.nan  # others never read
-        got = observer_step(mx, mc, pu, idx, rows, xi)
+        got = np.full(12, np.nan)
+        observer_step(mx, mc, pu, idx, rows, xi, got)
         assert np.allclose(got, want, rtol=1e-12, atol=1e-12), trial
