@@ -151,9 +151,10 @@ class InnerLoopModel:
                 raise ValueError(f"n_sub {n_sub} outside 1..1000")
             rows = self._rows[n_sub] = np.zeros((int(n_sub), 3))
         self.state = f64(self.state)
-        roll, pitch, yaw_c, f, q, tn, clipped = command_kernel(
+        q = np.empty(4, dtype=np.float32)  # new from Python: cheaper than one boxed
+        roll, pitch, yaw_c, f, tn, clipped = command_kernel(
             ua, float(yaw), self.g, self.m, self.tilt, self.f_max, self.state, self.a_rp,
-            self.a_y, self.a_f, float(clip_tol), rows, self._mean,
+            self.a_y, self.a_f, float(clip_tol), rows, self._mean, q,
         )
         return Setpoint(roll, pitch, yaw_c, f, q, np.float32(tn)), rows, clipped, self._mean
 

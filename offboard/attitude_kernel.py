@@ -132,12 +132,13 @@ def inner_loop_kernel(
 def command_kernel(
     u: np.ndarray, yaw: float, gravity: float, mass: float, tilt_max_rad: float,
     thrust_max_n: float, att: np.ndarray, a_rp: float, a_y: float, a_f: float,
-    clip_tol: float, rows_out: np.ndarray, mean_out: np.ndarray,
-) -> tuple[float, float, float, float, np.ndarray, float, bool]:
+    clip_tol: float, rows_out: np.ndarray, mean_out: np.ndarray, q_out: np.ndarray,
+) -> tuple[float, float, float, float, float, bool]:
     """One control period of a command u (3,) m/s² (ENU) in one call:
-    (roll, pitch, yaw (rad), F (N), q_ned (4,) float32, F/F_max) of :func:`setpoint_kernel`
-    and whether the setpoint realises an acceleration farther than ``clip_tol`` (m/s²)
-    from u on some axis (False if that is nan, as numpy's max gives it). Written in place:
+    (roll, pitch, yaw (rad), F (N), F/F_max) of :func:`setpoint_kernel`, its q_ned written
+    into ``q_out`` (4,) float32 (the caller's new array: none to box), and whether the
+    setpoint realises an acceleration farther than ``clip_tol`` (m/s²) from u on some axis
+    (False if that is nan, as numpy's max gives it). Written in place:
     ``rows_out`` (n_sub,3) m/s², the rows of :func:`inner_loop_kernel` from the inner
     loop's state ``att`` (4,) [roll, pitch, yaw (rad), F (N)] towards that setpoint
     (clipped there to the tilt and thrust limits); ``att``, the new state; ``mean_out``
@@ -145,11 +146,14 @@ def command_kernel(
     axis does). The same kernels and operations as the separate calls, so the same bits;
     the outputs are written in place so that a step boxes no new arrays for them."""
     n_sub = rows_out.shape[0]
-    if n_sub < 1 or rows_out.shape[1] != 3 or att.shape[0] != 4 or mean_out.shape[0] != 3:
+    if (n_sub < 1 or rows_out.shape[1] != 3 or att.shape[0] != 4 or mean_out.shape[0] != 3
+            or q_out.shape[0] != 4):
         raise ValueError("command_kernel: outputs of the wrong shape")
     roll, pitch, yaw_c, f, q, tn = setpoint_kernel(
         u, yaw, gravity, mass, tilt_max_rad, thrust_max_n
     )
+    for k in range(4):
+        q_out[k] = q[k]
     real = accel_from_attitude_kernel(roll, pitch, yaw_c, f, mass, gravity)
     worst, nan = 0.0, False
     for k in range(3):
@@ -174,4 +178,4 @@ def command_kernel(
             mean_out[k] = mean_out[k] + rows[s, k]
     for k in range(3):
         mean_out[k] = mean_out[k] / n_sub
-    return roll, pitch, yaw_c, f, q, tn, clipped
+    return roll, pitch, yaw_c, f, tn, clipped

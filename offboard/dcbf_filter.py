@@ -93,7 +93,7 @@ class DcbfFilter(SafetyFilter):
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
         """The barrier rows of this step (one compiled call,
-        :func:`offboard.dcbf_step_kernel.dcbf_filter_rows_kernel`) in the QP.
+        :func:`offboard.dcbf_step_kernel.dcbf_filter_rows_into`) in the QP.
 
         The other agent's acceleration enters the rows as ``a_j − w_i`` (the own lumped
         disturbance is not lagged, so it is an offset of the other's acceleration). Where

@@ -1,15 +1,16 @@
 """The dcbf filter's rows of one step in one compiled call (``Method.DCBF``; docs/safety.md).
 
-:func:`dcbf_filter_rows_kernel` chains, in one call, the kernels the filter used to call
+:func:`dcbf_filter_rows_into` chains, in one call, the kernels the filter used to call
 one by one from Python: the barrier now (:func:`offboard.pair_kernel.barrier_kernel`), its
 minimum, the deadlock breaker (:func:`offboard.pair_kernel.tangential_kernel`), the
 budget share per pair, the other agents' accelerations
 (:func:`offboard.dcbf_kernel.other_term_kernel`), the pair rows
 (:func:`offboard.dcbf_kernel.dcbf_rows_kernel`) and the ground rows
 (:func:`offboard.dcbf_kernel.ground_rows_kernel`). It calls those same kernels with the
-same arguments, so it returns the same bits as the chain of calls it replaced
+same arguments, so it gives the same bits as the chain of calls it replaced
 (``tests/unit/test_dcbf_step_kernel.py``); what it saves is a dozen Python-level calls and
-temporary arrays per follower step.
+temporary arrays per follower step. It writes the rows into the filter's own buffers, so
+no new array is boxed for them.
 
 The scalar parameters travel in one array, laid out by the ``P_*`` indices below
 (:func:`dcbf_params`), so a call passes a handful of arguments.
@@ -46,7 +47,7 @@ def dcbf_params(
     side_gain: float, side_h: float, dt: float, smooth: float, ground_gamma: float,
     ground_err: float, horizon: float,
 ) -> np.ndarray:
-    """The parameter array of :func:`dcbf_filter_rows_kernel` (units at the ``P_*``)."""
+    """The parameter array of :func:`dcbf_filter_rows_into` (units at the ``P_*``)."""
     out = np.empty(N_PARAMS)
     out[P_TAU], out[P_D_SAFE], out[P_GAMMA1], out[P_GAMMA3] = tau_s, d_safe, gamma1, gamma3
     out[P_ACCEL_ERR], out[P_SIDE_GAIN], out[P_SIDE_H] = accel_err, side_gain, side_h
@@ -68,14 +69,18 @@ def _min_or_nan(h: np.ndarray) -> float:
 
 
 @kernel
-def dcbf_filter_rows_kernel(
+def dcbf_filter_rows_into(
     dp: np.ndarray, dv: np.ndarray, pairs: np.ndarray, full_share: np.ndarray,
     predicted: np.ndarray, margin: np.ndarray, other_acc: np.ndarray, a_real: np.ndarray,
     u_prev: np.ndarray, a_mean: np.ndarray, w_safe: np.ndarray, ground: bool, z: float,
     vz: float, floor: float, params: np.ndarray, lag: np.ndarray, sens: np.ndarray,
     prev_dv: np.ndarray, prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """(g (2M[+2],3), r (2M[+2],), h_min (m²), sidestep (3,) m/s²) of one dcbf step.
+    g_out: np.ndarray, r_out: np.ndarray, side_out: np.ndarray,
+) -> tuple[int, float]:
+    """The K = 2M [+2] rows of one dcbf step, ``g_iᵀu ≥ r_i``, into the caller's buffers
+    (no new arrays boxed per step): g in the first K rows of ``g_out`` (≥ K, 3), r (m/s²)
+    in those of ``r_out`` (≥ K,), the sidestep (m/s²) in ``side_out`` (3,). Returns
+    (K, h_min (m²)); buffers too small are refused before any state is touched.
 
     Rows (M): dp, dv relative position (m) and velocity (m/s), pairs the scenario index j,
     full_share True where this agent takes the whole budget (share 1, else ½), predicted
@@ -90,12 +95,18 @@ def dcbf_filter_rows_kernel(
     and updated in place.
     """
     m = dp.shape[0]
+    k = 2 * m + 2 if ground else 2 * m
+    if g_out.shape[0] < k or r_out.shape[0] < k or g_out.shape[1] != 3 or side_out.shape[0] != 3:
+        raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
     tau = params[P_TAU]
     h = barrier_kernel(dp, dv, tau, params[P_D_SAFE])
     h_min = _min_or_nan(h)
-    side = np.zeros(3)
+    for c in range(3):
+        side_out[c] = 0.0
     if params[P_SIDE_GAIN] > 0.0 and m > 0:
         side = tangential_kernel(dp, h, params[P_SIDE_GAIN], params[P_SIDE_H])
+        for c in range(3):
+            side_out[c] = side[c]
     share = np.empty(m)
     d = np.empty(m)
     for i in range(m):
@@ -109,46 +120,18 @@ def dcbf_filter_rows_kernel(
         dp, dv, a_real, u_prev, other, share, d, lag, sens, params[P_HORIZON], tau,
         params[P_GAMMA1], params[P_GAMMA3], params[P_ACCEL_ERR],
     )
-    if not ground:
-        return g, rhs, h_min, side
-    gg, rg = ground_rows_kernel(
-        z, vz, a_real[2], w_safe[2], floor, params[P_HORIZON], lag[5, 2], lag[4, 2],
-        lag[3, 2], lag[2, 2], lag[1, 2], lag[0, 2], tau, params[P_GROUND_GAMMA],
-        params[P_GROUND_ERR],
-    )
-    g_all = np.empty((2 * m + 2, 3))
-    r_all = np.empty(2 * m + 2)
-    g_all[: 2 * m] = g
-    g_all[2 * m :] = gg
-    r_all[: 2 * m] = rhs
-    r_all[2 * m :] = rg
-    return g_all, r_all, h_min, side
-
-
-@kernel
-def dcbf_filter_rows_into(
-    dp: np.ndarray, dv: np.ndarray, pairs: np.ndarray, full_share: np.ndarray,
-    predicted: np.ndarray, margin: np.ndarray, other_acc: np.ndarray, a_real: np.ndarray,
-    u_prev: np.ndarray, a_mean: np.ndarray, w_safe: np.ndarray, ground: bool, z: float,
-    vz: float, floor: float, params: np.ndarray, lag: np.ndarray, sens: np.ndarray,
-    prev_dv: np.ndarray, prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray,
-    g_out: np.ndarray, r_out: np.ndarray, side_out: np.ndarray,
-) -> tuple[int, float]:
-    """:func:`dcbf_filter_rows_kernel` written into the caller's buffers: the K rows in
-    the first K rows of ``g_out`` (≥ K, 3) and of ``r_out`` (≥ K,), the sidestep in
-    ``side_out`` (3,); returns (K, h_min). The same values, without three new arrays
-    boxed per step."""
-    g, rhs, h_min, side = dcbf_filter_rows_kernel(
-        dp, dv, pairs, full_share, predicted, margin, other_acc, a_real, u_prev, a_mean,
-        w_safe, ground, z, vz, floor, params, lag, sens, prev_dv, prev_ok, rel_acc, rel_ok,
-    )
-    k = rhs.shape[0]
-    if g_out.shape[0] < k or r_out.shape[0] < k or g_out.shape[1] != 3 or side_out.shape[0] != 3:
-        raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
-    for r in range(k):
+    for r in range(2 * m):
         r_out[r] = rhs[r]
         for c in range(3):
             g_out[r, c] = g[r, c]
-    for c in range(3):
-        side_out[c] = side[c]
+    if ground:
+        gg, rg = ground_rows_kernel(
+            z, vz, a_real[2], w_safe[2], floor, params[P_HORIZON], lag[5, 2], lag[4, 2],
+            lag[3, 2], lag[2, 2], lag[1, 2], lag[0, 2], tau, params[P_GROUND_GAMMA],
+            params[P_GROUND_ERR],
+        )
+        for r in range(2):
+            r_out[2 * m + r] = rg[r]
+            for c in range(3):
+                g_out[2 * m + r, c] = gg[r, c]
     return k, h_min
