@@ -76,4 +76,4 @@ def finite(x: np.ndarray) -> bool:
     """``bool(np.isfinite(x).all())`` for a short float array (a control vector, a QP's
     few variables): ≈ 0.2 µs instead of ≈ 1 µs (numpy's ``all`` is a Python-level
     wrapper). Python-level per element, so it is the slower one beyond a few dozen."""
-    return all(map(math.isfinite, x.ravel().tolist()))
+    return all(map(math.isfinite, (x if x.ndim == 1 else x.ravel()).tolist()))

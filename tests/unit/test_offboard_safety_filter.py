@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +113,26 @@ def test_rcbf_needs_a_positive_tau(sc) -> None:
     ctl = sc.with_overrides(controller={"tau_safe_s": 0.0}).controller
     with pytest.raises(ValueError, match="tau_safe_s"):
         RcbfFilter(ctl, LO, HI, np.zeros(sc.n, dtype=bool))
+
+
+def test_saturate_norm_of_random_vectors_and_other_shapes() -> None:
+    """The 3-vector path (in-order sum in Python floats) against numpy's norm, over
+    magnitudes from 1e-6 to 1e6 on both sides of the bound; other shapes and float32."""
+    rng = np.random.default_rng(17)
+    for _ in range(2000):
+        x = rng.normal(0.0, 1.0, 3) * 10.0 ** rng.uniform(-6.0, 6.0)
+        bound = float(10.0 ** rng.uniform(-6.0, 6.0))
+        n = float(np.linalg.norm(x))
+        got = saturate_norm(x, bound)
+        if n > bound:
+            assert np.allclose(got, x * (bound / n), rtol=1e-15, atol=0.0)
+            assert math.isclose(float(np.linalg.norm(got)), bound, rel_tol=1e-14)
+        else:
+            assert got is x
+    y = np.array([3.0, 4.0, 0.0, 12.0])
+    assert np.allclose(saturate_norm(y, 6.5), y / 2.0)
+    z = np.array([3.0, 4.0, 0.0], dtype=np.float32)
+    assert np.allclose(saturate_norm(z, 1.0), [0.6, 0.8, 0.0])
 
 
 def test_saturate_norm() -> None:
