@@ -48,7 +48,7 @@ def saturate_norm(x: np.ndarray, bound: float) -> np.ndarray:
 
     A 3-vector's squared norm is summed in order in Python floats, ``(x0² + x1²) + x2²``:
     a third of the cost of numpy's ``dot`` call, and the same bits as the OpenBLAS ``ddot``
-    this project was measured with (200 000 of 200 000 random vectors; docs/performance.md,
+    this project was measured with (400 000 of 400 000 random vectors; docs/performance.md,
     fifteenth round). Other shapes take ``dot``."""
     if x.shape == _VEC3 and x.dtype.char == "d":  # float64, either byte order
         a, b, c = x.tolist()
