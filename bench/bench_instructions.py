@@ -1,7 +1,7 @@
 """Instructions per in-process control step, counted by valgrind (callgrind), not timed.
 
     .venv/bin/python bench/bench_instructions.py [--scenario scenarios/cube8.toml]
-        [--method dcbf] [--short 2] [--long 6] [--no-gc]
+        [--method dcbf] [--short 2] [--long 6]
 
 On a shared 2-core machine the wall-clock benchmarks move by ±15 % between runs of the
 same code, more than most single changes to the control step. This one counts the
@@ -15,13 +15,6 @@ machine instructions instead (callgrind's ``Ir``), which repeat to a few parts i
    ``--short`` then ``--long`` seconds of mission, the counters dumped after each;
 3. the difference of the two counts, divided by the steps between them, is the cost of a
    control step of the whole swarm (agents, simulator, recording), start-up excluded.
-
-``--no-gc`` collects once after the warm-up and switches Python's cyclic collector off for
-the counted runs. A full collection walks every object of the process (numba's and
-LLVM's included) and runs when allocation counts cross a threshold, so whether one falls
-inside a short counted window depends on how the code allocates; with grid64's 50-step
-window that moved the count by ±15 % between trees. Without the collector the count is
-the step's own work (the collector's share of a long run is not counted).
 
 Prints the instructions per control step and per agent-step; asserts nothing. Needs
 valgrind (exit 2 with a one-line message without it). ``PYTHONHASHSEED`` is fixed so
@@ -42,15 +35,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = """
-import gc, sys, time, os
+import sys, time, os
 sys.path.insert(0, {root!r})
 from gcs.inproc import run_inproc
 from swarm_common.scenario import load_scenario
 sc = load_scenario({scenario!r})
 run_inproc(sc, duration=max({durations!r}), method={method!r})
-if {no_gc!r}:
-    gc.collect()
-    gc.disable()
 def mark(name):
     open(os.path.join({tmp!r}, name), "w").close()
 def wait(name):
@@ -72,15 +62,13 @@ def _wait_for(path: Path, proc: subprocess.Popen[bytes], what: str) -> None:
         time.sleep(0.2)
 
 
-def count(scenario: str, method: str | None, durations: list[float],
-          no_gc: bool = False) -> list[int]:
-    """Callgrind ``Ir`` of each ``run_inproc`` of ``durations`` (s), in order (``no_gc``:
-    the cyclic collector off for them)."""
+def count(scenario: str, method: str | None, durations: list[float]) -> list[int]:
+    """Callgrind ``Ir`` of each ``run_inproc`` of ``durations`` (s), in order."""
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
         child = tmp / "child.py"
         child.write_text(CHILD.format(root=str(ROOT), scenario=scenario, method=method,
-                                      tmp=tmp_s, durations=durations, no_gc=no_gc))
+                                      tmp=tmp_s, durations=durations))
         out = tmp / "callgrind.out"
         env = {**os.environ, "PYTHONHASHSEED": "0"}
         proc = subprocess.Popen(
@@ -125,8 +113,6 @@ def main() -> None:
     ap.add_argument("--method", default=None, help="default: the scenario's")
     ap.add_argument("--short", type=float, default=2.0, help="s of mission, first run")
     ap.add_argument("--long", type=float, default=6.0, help="s of mission, second run")
-    ap.add_argument("--no-gc", action="store_true",
-                    help="Python's cyclic collector off for the counted runs")
     a = ap.parse_args()
     if shutil.which("valgrind") is None or shutil.which("callgrind_control") is None:
         print("bench_instructions: valgrind (callgrind) is not installed", file=sys.stderr)
@@ -138,12 +124,10 @@ def main() -> None:
     from swarm_common.scenario import load_scenario
 
     sc = load_scenario(a.scenario)
-    short, long_ = count(a.scenario, a.method, [a.short, a.long], a.no_gc)
+    short, long_ = count(a.scenario, a.method, [a.short, a.long])
     steps = round((a.long - a.short) / sc.control_dt)
     per_step = (long_ - short) / steps
-    gc_note = ", collector off" if a.no_gc else ""
-    print(f"{sc.name} [{a.method or sc.controller.method}{gc_note}]: {short / 1e9:.4f} G "
-          "instructions "
+    print(f"{sc.name} [{a.method or sc.controller.method}]: {short / 1e9:.4f} G instructions "
           f"in {a.short:g} s, {long_ / 1e9:.4f} G in {a.long:g} s")
     print(f"  per control step {per_step / 1e6:.3f} M, per agent-step "
           f"{per_step / sc.n / 1e3:.1f} k ({steps} steps, {sc.n} agents)")
