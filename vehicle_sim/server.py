@@ -49,11 +49,11 @@ LINK_NAMES = ("api", "gcs")  # a vehicle's links; link i signs with signing link
 
 def load_kernels(sc: Scenario) -> None:
     """Load the compiled kernels the simulator runs (swarm_common.jit) before its first
-    step: a physics step of a throwaway swarm, the setpoint decode and the telemetry's
-    attitude conversions, so the first real step does not pay for loading (or, on a
-    machine's first run, compiling) them."""
+    step: a control period's physics of a throwaway swarm (as :meth:`SimServer.integrate`
+    runs it), the setpoint decode and the telemetry's attitude conversions, so the first
+    real step does not pay for loading (or, on a machine's first run, compiling) them."""
     warm = SwarmDynamics(sc, held=False)
-    warm.step()  # computes the pair distances too (none for a single vehicle)
+    warm.advance_period(sc.substeps_per_control)  # the pair distances too (none for one)
     warm.lumped_accel()
     frames.euler_enu_from_quat_ned(np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32))
     frames.odometry_ned(warm.p[0], warm.v[0], warm.att[0])  # ODOMETRY

@@ -39,3 +39,25 @@ def test_a_failing_warm_up_is_a_warning(
     assert any("kernel warm-up skipped (LinAlgError: singular)" in r.getMessage()
                for r in caplog.records)
     assert logging.root.manager.disable == logging.NOTSET
+
+
+def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
+    """vehicle_sim.server.load_kernels loads the kernel each lockstep step runs
+    (``steps_kernel``, through ``SwarmDynamics.advance_period``), checked in a fresh
+    process, where nothing else has loaded it."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    code = (
+        "from swarm_common.scenario import load_scenario\n"
+        "from vehicle_sim.dynamics_kernel import steps_kernel\n"
+        "from vehicle_sim.server import load_kernels\n"
+        "assert not steps_kernel.signatures\n"
+        f"load_kernels(load_scenario({str(root / 'scenarios' / 'cube8.toml')!r}))\n"
+        "print(len(steps_kernel.signatures))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
+                         text=True, timeout=300, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert int(out.stdout.split()[-1]) >= 1
