@@ -35,7 +35,6 @@ from vehicle_sim.dynamics_kernel import (
     pair_distances_kernel,
     set_command_kernel,
     set_commands_kernel,
-    step_kernel,
     steps_kernel,
     thrust_accel_kernel,
 )
@@ -88,9 +87,8 @@ class SwarmDynamics:
         self._iu = np.triu_indices(self.n, 1)
         self._step_dist = self.pair_distances()  # of the last step (step_min_distance)
         self._step_min = min_upper_kernel(self._step_dist)  # its minimum (m)
-        # the pairs entering contact in a step (step_kernel writes the first rows)
-        self._new_pairs = np.zeros((self.n * (self.n - 1) // 2, 2), dtype=np.int64)
-        # those of a control period's sub-steps and the sub-step of each (advance_period)
+        # the pairs entering contact in a period's sub-steps and the sub-step of each
+        # (advance_period writes the first rows)
         self._period_pairs = np.zeros((0, 2), dtype=np.int64)
         self._period_pair_step = np.zeros(0, dtype=np.int64)
 
@@ -147,25 +145,10 @@ class SwarmDynamics:
         )
 
     def step(self) -> None:
-        """Advance one physics step of ``dt`` (compiled:
-        :func:`vehicle_sim.dynamics_kernel.step_kernel`)."""
-        dt = self.dt
-        # the contact matrix and the distances are rewritten in place (own buffers)
-        self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
-        p, v, att, thrust, n_new, dmin = step_kernel(
-            f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
-            f64(self.cmd_att), f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
-            self._a_f, self.mass, self.g, dt, self.ge_height, self.dist_amp,
-            self.dist_omega, self.t, self._in_contact, self.collision_radius,
-            self._step_dist, self._new_pairs,
-        )
-        self.p, self.v, self.att, self.thrust = p, v, att, thrust
-        self.t = (self.step_count + 1) * dt
-        self.step_count += 1
-        self._step_min = dmin
-        for i, j in self._new_pairs[:n_new].tolist():
-            self.collisions += 1
-            self.collision_pairs.append((self.t, self.ids[i], self.ids[j]))
+        """Advance one physics step of ``dt``: :meth:`advance_period` of one step (compiled:
+        :func:`vehicle_sim.dynamics_kernel.step_kernel`, through ``steps_kernel``), so a
+        single step and a period's sub-steps share one path and one collision record."""
+        self.advance_period(1)
 
     def advance(self, n_steps: int) -> None:
         for _ in range(n_steps):
