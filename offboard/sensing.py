@@ -70,6 +70,10 @@ class Sensor:
         self._sig = tuple(float(x) for x in self.sig)  # plain floats: no numpy scalars
         self.dropout = float(sensing.dropout_prob)
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
+        # the draws of a call, written in place (``out=``: the same numbers as drawing new
+        # arrays of that shape, without the allocations); read only within the call
+        self._noise = np.empty((n, 8))
+        self._drop = np.empty(n)
 
     def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:
         """Measurements from ground-truth (N,3) ENU positions (m) and velocities (m/s).
@@ -82,8 +86,8 @@ class Sensor:
         p, v = np.asarray(p), np.asarray(v)
         if p.shape != (n, 3) or v.shape != (n, 3):  # the kernel writes n rows, unchecked
             raise ValueError(f"truth of shapes {p.shape} and {v.shape}, expected ({n}, 3)")
-        noise = self.rng.standard_normal((n, 8))
-        drop = self.rng.random(n)
+        noise = self.rng.standard_normal(out=self._noise)
+        drop = self.rng.random(out=self._drop)
         sb, sr, sd, sdd = self._sig
         vec, sca = np.empty((4, n, 3)), np.empty((2, n))  # C-contiguous (n,3) and (n,) views
         out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
