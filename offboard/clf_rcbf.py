@@ -111,7 +111,7 @@ def clf_terms(
         vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
         float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE, out,
     )
-    return _terms(out)
+    return clf_terms_from(out)
 
 
 def clf_terms_of_reference(
@@ -129,10 +129,10 @@ def clf_terms_of_reference(
         float(lam), float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE,
         out,
     )
-    return _terms(out)
+    return clf_terms_from(out)
 
 
-def _terms(out: np.ndarray) -> ClfTerms:
+def clf_terms_from(out: np.ndarray) -> ClfTerms:
     """The CLF kernels' (8,) output [V, L_fV, L_gV (3), u_nom (3)] as :class:`ClfTerms`."""
     return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
 
@@ -271,7 +271,7 @@ class _ClfRowsQP:
             self._osqp = solver
         return self._osqp
 
-    def _fit(self, rows: int) -> None:
+    def fit_rows(self, rows: int) -> None:
         """Grow the problem (doubling, at most to ``limit``) when ``rows`` safety rows do
         not fit. A problem sized for every other agent of a large swarm would factorise
         hundreds of unused rows on every solve (125 agents: 250), though a follower senses
@@ -341,7 +341,7 @@ class SafetyQP(_ClfRowsQP):
         solver: QPSolver | str = QPSolver.DAQP,
     ) -> None:
         """Room for ``max_pairs`` RCBF rows, grown on demand up to ``limit`` rows (default:
-        ``max_pairs``; :meth:`_ClfRowsQP._fit`), solved by ``solver``."""
+        ``max_pairs``; :meth:`_ClfRowsQP.fit_rows`), solved by ``solver``."""
         self.u_lo = np.asarray(u_lo, dtype=float)
         self.u_hi = np.asarray(u_hi, dtype=float)
         self.c = float(clf_c)
@@ -397,7 +397,7 @@ class SafetyQP(_ClfRowsQP):
         if len(rhs) == 0 or bool((n_hat @ u_c >= rhs).all()):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_c, QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0, False)
-        self._fit(len(rhs))
+        self.fit_rows(len(rhs))
         m = self.m
         k = min(len(rhs), m)
         ok = np.isfinite(u_nom).all() and np.isfinite(rhs[:k]).all() and np.isfinite(

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from offboard.clf_rcbf import ClfTerms
 from offboard.dcbf import InputSet, LagCoefficients
 from offboard.dcbf_qp import DcbfQP
 from offboard.dcbf_step_kernel import dcbf_filter_rows_into, dcbf_params
@@ -25,16 +26,19 @@ from swarm_common.enums import Method
 from swarm_common.fastnp import f64, rows3, vec3
 from swarm_common.scenario import ControllerConfig, VehicleConfig
 
-# rows the QP is first built with (it grows on demand, offboard.clf_rcbf._ClfRowsQP._fit):
+# rows the QP is first built with (it grows on demand, offboard.clf_rcbf._ClfRowsQP.fit_rows):
 # 8 pairs and the ground, so up to 9 agents never grow
 QP_INITIAL_ROWS = 18
-REL_ACC_SMOOTH = 0.5
+REL_ACC_SMOOTH = 0.5  # low-pass weight of the previous relative-acceleration estimate
 # ground barrier (offboard.dcbf.ground_rows): its class-K gain (1/s) and the bound on the
 # error of the predicted own vertical acceleration (m/s²): thrust lag τ_F = 0.03 s makes
 # the vertical channel fast, and the error is the disturbance estimate's (saturated at
 # W_SAFE) plus the tilt–thrust coupling; at rest the floor is kept by h_g ≥ ē(T+τ)/γ
 GROUND_GAMMA = 2.0
-GROUND_ACCEL_ERR = 1.0  # low-pass weight of the previous relative-acceleration estimate
+GROUND_ACCEL_ERR = 1.0
+# dcbf_filter_rows_into's arguments from params to side_out (DcbfFilter.rows_state)
+RowsState = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                  np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
@@ -120,12 +124,31 @@ class DcbfFilter(SafetyFilter):
             vec3(x.a_real), vec3(x.u_prev), vec3(x.a_mean), vec3(w_safe), ground,
             float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
             float(x.floor_m) if ground and x.floor_m is not None else 0.0,
-            self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
-            self._rel_acc, self._rel_ok, self._g, self._rhs, self._side,
+            *self.rows_state(),
         )
+        return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
+
+    def solve_rows(
+        self, u_try: np.ndarray, clf: ClfTerms, k: int, h_min: float, w: np.ndarray,
+        z2: np.ndarray, unheld: bool = False,
+    ) -> SafetyOutput:
+        """The QP over the K rows in the buffers, from ``u_try`` = u_nom + sidestep (m/s²);
+        its fallback brakes on ``−w − gain·z2`` (w the saturated disturbance estimate,
+        z2 the velocity estimate). ``unheld``: :meth:`DcbfQP.solve`'s."""
+        if self.qp is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
         gain = self.brake_gain
-        res = self.qp.solve(x.clf.u_nom + self._side, x.clf, self._g[:k], self._rhs[:k], h_min,
-                            lambda: -x.w - gain * x.z2)  # the fallback, formed if taken
+        res = self.qp.solve(u_try, clf, self._g[:k], self._rhs[:k], h_min,
+                            lambda: -w - gain * z2, unheld)  # the fallback, formed if taken
         return SafetyOutput(
             res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
         )
+
+    def rows_state(self) -> RowsState:
+        """The arguments of :func:`dcbf_filter_rows_into` from ``params`` to ``side_out``:
+        the parameters, lag tables, per-pair state and row buffers, updated in place (the
+        arrays themselves never change after :meth:`configure`)."""
+        if self.lag is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        return (self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
+                self._rel_acc, self._rel_ok, self._g, self._rhs, self._side)

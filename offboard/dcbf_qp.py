@@ -36,7 +36,7 @@ class DcbfQP(_ClfRowsQP):
         solver: QPSolver | str = QPSolver.DAQP,
     ) -> None:
         """Room for ``max_pairs`` barrier rows, grown on demand up to ``limit`` rows
-        (default: ``max_pairs``; :meth:`_ClfRowsQP._fit`), solved by ``solver``."""
+        (default: ``max_pairs``; :meth:`_ClfRowsQP.fit_rows`), solved by ``solver``."""
         self.uset = uset
         self.c = float(clf_c)
         self.lin_sigma = max(1e3, 50.0 * rho)
@@ -71,14 +71,17 @@ class DcbfQP(_ClfRowsQP):
 
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
-        h_min: float, brake: Brake,
+        h_min: float, brake: Brake, unheld: bool = False,
     ) -> QPResult:
         """Solve for u (always inside the input set); ``brake`` (3,) is the fallback, or a
-        function giving it (:func:`offboard.clf_rcbf.fallback_of`)."""
+        function giving it (:func:`offboard.clf_rcbf.fallback_of`). ``unheld``: the caller
+        already found that u_nom breaks a row or the input set (the shortcut's test,
+        :func:`~offboard.dcbf_kernel.rows_hold_kernel`, made in :mod:`offboard.dcbf_front`),
+        so it is not made again."""
         t0 = time.perf_counter()
-        self._fit(len(rhs))
+        self.fit_rows(len(rhs))
         k = min(len(rhs), self.m)
-        if rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u_nom):
+        if not unheld and rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u_nom):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
                             False)

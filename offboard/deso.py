@@ -347,6 +347,12 @@ class DESO:
         call, :func:`offboard.deso_kernel.lumped_into`; f̂ is kept for :meth:`update`)."""
         out = np.empty((2, 3))  # a new array from Python: cheaper than two the kernel boxes
         lumped_into(self.z1, self.z2, self.zeta, self.h, self.z3, out)
+        return self.adopt_lumped(out)
+
+    def adopt_lumped(self, out: np.ndarray) -> np.ndarray:
+        """Keep f̂ of ``out`` (2,3) [f̂, z3 + f̂], :func:`lumped_into` of the current
+        state (made here or by :func:`offboard.dcbf_front.dcbf_front_into`), for
+        :meth:`update`; returns z3 + f̂ (m/s²)."""
         self._f_hat = out[0]
         return out[1]
 

@@ -8,6 +8,7 @@ desired-state observer advanced to t_{k+1} → publish.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Mapping
 
 import numpy as np
@@ -16,22 +17,24 @@ from offboard.agent_base import CLIP_TOL, AgentBase
 from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.attitude import Setpoint
 from offboard.bearing import Formation, formation_from_scenario
-from offboard.clf_rcbf import ClfTerms, clf_terms_of_reference
+from offboard.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
 from offboard.daemon_peers import peer_ids
 from offboard.dcbf_filter import DcbfFilter
+from offboard.dcbf_front import DcbfFront
 from offboard.deso import DESO, GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import ContentMemo
 from offboard.neighbour_accel import NeighbourAccel
-from offboard.peer_table import XI, EstimateBatch, full_share_rows, unsensed_candidates
-from offboard.predictor import CURRENT_AGE_S, NeighbourPredictor
+from offboard.peer_table import XI, EstimateBatch, full_share_rows
+from offboard.predictor import NeighbourPredictor
 from offboard.reference import DesiredStateObserver, xi_a, xi_at_rest
-from offboard.safety_filter import SafetyInput, make_filters, saturate_norm
+from offboard.safety_filter import SafetyInput, SafetyOutput, make_filters, saturate_norm
 from offboard.sensing import DropoutHold, Sensor
 from offboard.sensing_kernel import pair_rows
 from offboard.takeoff import follower_xi
-from swarm_common.enums import Method
-from swarm_common.fastnp import finite, norm, rows3
+from offboard.unsensed import PredictedPairs, UnsensedNeighbours
+from swarm_common.enums import Method, QPStatus
+from swarm_common.fastnp import f64, finite, rows3, vec3
 from swarm_common.scenario import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -41,9 +44,6 @@ MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s a
 # an avoidance (docs/safety.md §5b): s, and at least this many control periods
 SILENT_AFTER_S = 0.1
 SILENT_AFTER_PERIODS = 3
-# relative margin on the sensing range of the compiled pre-test of predicted pairs (its sum
-# of squares and the exact norm's BLAS dot differ by a few ulps)
-RANGE_MARGIN = 1e-6
 
 
 # the DESO gain report of a formation's content and observer gains, once per process
@@ -54,6 +54,9 @@ class FollowerAgent(AgentBase):
     """Follower: sensing → DESO (§3) + desired-state observer (§4.1) → CLF–RCBF QP (§4.4)."""
 
     is_leader = False
+    # the dcbf step through offboard.dcbf_front (False: part by part, the same bits; the
+    # tests compare the two, and the kernel warm-up steps both)
+    use_front = True
 
     def __init__(
         self, sc: Scenario, agent_id: int, method: Method | str | None = None,
@@ -119,8 +122,9 @@ class FollowerAgent(AgentBase):
         nb = set(self.form.neighbours[self.index])
         self._predict_idx = np.array(sorted(nb | set(self.form.leader_idx)), dtype=np.int64)
         self._lead_peers = list(self.form.leader_idx)  # their a* for the rcbf filter
-        # (predictor revision, sorted scenario indices (int64) of the agents heard from)
-        self._heard: tuple[int, np.ndarray] = (-1, np.zeros(0, dtype=np.int64))
+        # neighbours predicted into sensing range but not sensed (dcbf, docs/safety.md §5c)
+        self.unsensed = UnsensedNeighbours(self.pred, self.index, sc.n,
+                                           sc.formation.sensing_range_m, ctl.tau_safe_s)
         # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
         self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
         self._zero_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _no_margin
@@ -131,6 +135,10 @@ class FollowerAgent(AgentBase):
         self.hold = DropoutHold(sc.n, self.index, SENSE_HOLD_S, sc.sensing.dropout_prob > 0.0)
         # the sensed pairs' Δp, Δv of the step (the filter reads them within the step)
         self._dp, self._dv = np.zeros((sc.n, 3)), np.zeros((sc.n, 3))
+        # the dcbf step up to the QP in one compiled call (offboard.dcbf_front)
+        self._front = (DcbfFront(self.deso, dcbf, self.acc_est, ctl, self.tau_ff, W_MAX,
+                                 self._dp, self._dv)
+                       if isinstance(dcbf, DcbfFilter) else None)
 
     @property
     def gains(self) -> GainReport:
@@ -173,16 +181,16 @@ class FollowerAgent(AgentBase):
             self.pred.ingest_batch(neighbours, self._peer_idx, True)
         rows, have = self.pred.predict_rows(self._predict_idx, t)
         # --- controller at t_k --------------------------------------------------------
-        w_raw = self.deso.lumped()
-        # peaking of the high-gain observer: saturate the disturbance estimate used in control
-        w = saturate_norm(w_raw, W_MAX)
-        clf = self._nominal(w, t)
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
-        status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=clf.V)
-        m = len(sel)
-        dp, dv = self._dp[:m], self._dv[:m]  # Δp = p_i − p_j, Δv = v_i − v_j, written here
-        pair_rows(sel, rows3(rp), rows3(rv), dp, dv)
-        u = self._safe_control(self._safety_input(t, clf, w, sel, dp, dv, rows, have), status)
+        extra = (self.unsensed.pairs(t, sel, self.deso.z1, self.deso.z2)
+                 if self.method == Method.DCBF else None)
+        front = self._front if self.use_front and self.method == Method.DCBF else None
+        if front is not None and extra is None:
+            w_raw, w, v_clf, res = self._front_step(front, t, sel, rp, rv)
+        else:
+            w_raw, w, v_clf, res = self._composed_step(t, sel, rp, rv, rows, have, extra)
+        status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf)
+        u = self._use_filter_output(res, w, status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
@@ -218,6 +226,45 @@ class FollowerAgent(AgentBase):
             self.deso.coast(u_sub)
             self.ref.update(*self.pred.predict_rows(self._predict_idx, t - m * self.dt))
 
+    def _composed_step(
+        self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
+        have: np.ndarray, extra: PredictedPairs | None,
+    ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
+        """The step from the state to the filter's output, part by part: (w_raw, w, V,
+        output). ``w_raw`` is the lumped-disturbance estimate, ``w`` its saturation."""
+        w_raw = self.deso.lumped()
+        # peaking of the high-gain observer: saturate the disturbance estimate used in control
+        w = saturate_norm(w_raw, W_MAX)
+        clf = self._nominal(w, t)
+        m = len(sel)
+        dp, dv = self._dp[:m], self._dv[:m]  # Δp = p_i − p_j, Δv = v_i − v_j, written here
+        pair_rows(sel, rows3(rp), rows3(rv), dp, dv)
+        x = self._safety_input(t, clf, w, sel, dp, dv, rows, have, extra)
+        return w_raw, w, clf.V, self.filters[self.method].apply(x)
+
+    def _front_step(
+        self, front: DcbfFront, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
+        """:meth:`_composed_step` of the dcbf filter in one compiled call
+        (:mod:`offboard.dcbf_front`; every pair sensed), the same bits. A step the
+        shortcut settles reports the call's time as ``solve_us``."""
+        tab = self.pred.table
+        since = t - self.silent_after
+        margin, predicted = self._no_margin(len(sel))
+        t0 = time.perf_counter()
+        lumped, w, clf, k, h_min, held, u_try = front.run(
+            f64(self._reference_xi(t)), sel, rows3(rp), rows3(rv), self._full_mask(), tab.t,
+            since, self.pred.newest >= since, vec3(self.a_real), vec3(self.u_prev),
+            vec3(self.a_mean), self._ground_floor(), margin, predicted,
+        )
+        if held:
+            res = SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
+                               (time.perf_counter() - t0) * 1e6)
+        else:
+            res = front.filt.solve_rows(u_try, clf_terms_from(clf), k, h_min, w,
+                                        self.deso.z2, unheld=True)
+        return lumped[1], w, float(clf[0]), res
+
     def _leader_accels(self, rows: np.ndarray, have: np.ndarray) -> dict[int, np.ndarray]:
         """The leaders' a* (m/s²) predicted to t_k, by scenario index: the rcbf filter's
         known acceleration of a leader (Departure 13; the other filters do not read it)."""
@@ -227,12 +274,12 @@ class FollowerAgent(AgentBase):
 
     def _safety_input(
         self, t: float, clf: ClfTerms, w: np.ndarray, sel: np.ndarray, dp: np.ndarray,
-        dv: np.ndarray, rows: np.ndarray, have: np.ndarray,
+        dv: np.ndarray, rows: np.ndarray, have: np.ndarray, extra: PredictedPairs | None,
     ) -> SafetyInput:
-        """The filter's input: the sensed pairs (Δp = p_i − p_j, Δv), and for dcbf also the
-        neighbours that are not sensed now but predicted (:meth:`_predicted_pairs`)."""
+        """The filter's input: the sensed pairs (Δp = p_i − p_j, Δv), and ``extra``, the
+        neighbours that are not sensed now but predicted (:class:`UnsensedNeighbours`)."""
         margin, predicted = self._no_margin(len(sel))
-        if self.method == Method.DCBF and (extra := self._predicted_pairs(t, sel)) is not None:
+        if extra is not None:
             idx, pp, pv, pm = extra
             sel = np.concatenate([sel, idx])
             dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
@@ -254,49 +301,6 @@ class FollowerAgent(AgentBase):
             got = (np.zeros(m), np.zeros(m, dtype=bool))
             self._zero_rows[m] = got
         return got
-
-    def _predicted_pairs(
-        self, t: float, sel: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-        """Agents within sensing range by their predicted position but not sensed now
-        (dropout, occlusion): (idx, Δp, Δv, margin), None if there is none. The margin
-        (m) is the prediction's error bound on the position plus τ times that on the
-        velocity (docs/safety.md §5c), so the barrier is kept against every position the
-        other can be at."""
-        if len(sel) >= len(self.ids) - 1:  # every other agent is sensed: none to predict
-            return None
-        rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
-        tau, rng = self.ctl.tau_safe_s, self.sc.formation.sensing_range_m
-        # only agents heard from can be predicted (the others' get() is None): O(peers).
-        # Current data certainly out of range (a margin over the exact test below) is
-        # passed over in the same compiled call; the rest take the exact test
-        pred = self.pred
-        cand = unsensed_candidates(
-            self._heard_indices(), self.index, np.asarray(sel, dtype=np.int64),
-            pred.table.t, pred.table.rows, self.deso.z1, t, CURRENT_AGE_S,
-            (rng * (1.0 + RANGE_MARGIN)) ** 2,
-        )
-        for j in cand.tolist():
-            got = pred.get_at(j, t)
-            if got is None:
-                continue
-            dp = self.deso.z1 - got[0]
-            if norm(dp) > rng:
-                continue
-            b = pred.bound_at(j, t) or 0.0
-            rows.append((j, dp, self.deso.z2 - got[1], b + tau * pred.velocity_bound_at(j, t)))
-        if not rows:
-            return None
-        return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
-                np.array([r[2] for r in rows]), np.array([r[3] for r in rows]))
-
-    def _heard_indices(self) -> np.ndarray:
-        """Sorted scenario indices (int64) of the agents this follower has heard from."""
-        rev = self.pred.revision  # bumped when an agent is first heard from
-        if self._heard[0] != rev:
-            heard = np.flatnonzero(self.pred.table.t > -math.inf).astype(np.int64)
-            self._heard = (rev, heard)
-        return self._heard[1]
 
     def _ground_floor(self) -> float | None:
         """The dcbf ground barrier's floor (m) once this follower has been above it, None
@@ -322,44 +326,56 @@ class FollowerAgent(AgentBase):
           singled out: the others still run their filters on their onboard sensing.
         Silence is judged by the estimates' own stamps, so in-process and lockstep runs
         judge it alike."""
-        rev, tab = self.pred.revision, self.pred.table
-        if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
-            never = tab.t == -math.inf
-            self._full = (rev, self.leader_mask | never | ~tab.cooperative)
         since = t - self.silent_after
         # others heard (newest ≥ since): a silent one stands out (never heard: −inf,
         # full already)
         out = np.empty(len(sel), dtype=np.bool_)  # new from Python: cheaper than boxed
-        full_share_rows(sel, self._full[1], tab.t, since, self.pred.newest >= since, out)
+        full_share_rows(sel, self._full_mask(), self.pred.table.t, since,
+                        self.pred.newest >= since, out)
         return out
+
+    def _full_mask(self) -> np.ndarray:
+        """(N,) True for a leader, an agent never heard from or one that no longer
+        cooperates (:meth:`_full_share`'s fixed part, kept while the predictor's revision
+        is unchanged)."""
+        rev, tab = self.pred.revision, self.pred.table
+        if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
+            never = tab.t == -math.inf
+            self._full = (rev, self.leader_mask | never | ~tab.cooperative)
+        return self._full[1]
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the
         acceleration feed-forward taken τ_rp ahead (â* + τ_rp ĵ*): it compensates the
         first-order attitude lag of the inner loop on the moving reference."""
         ctl = self.ctl
-        if self.landing is not None:  # offboard.landing: the plan replaces ξ̂
-            xi = self.landing.xi(t)
-        elif self.takeoff is not None and self.takeoff_clock(t) < self.takeoff.t_blend:
-            # offboard.takeoff (at rest on the pad while held for the take-off command)
-            xi = follower_xi(self.takeoff, self.index, self.takeoff_clock(t), self.ref.xi)
-        else:
-            xi = self.ref.xi
         return clf_terms_of_reference(
-            self.deso.z1, self.deso.z2, xi, self.tau_ff, w, ctl.kp, ctl.kd, ctl.clf_lambda,
-            ctl.ks, box=self.aw_box[self.method],
+            self.deso.z1, self.deso.z2, self._reference_xi(t), self.tau_ff, w, ctl.kp, ctl.kd,
+            ctl.clf_lambda, ctl.ks, box=self.aw_box[self.method],
         )
 
-    def _safe_control(self, x: SafetyInput, status: AgentStatus) -> np.ndarray:
-        """The current method's filter; a non-finite result brakes on −w (a fallback)."""
-        res = self.filters[self.method].apply(x)
+    def _reference_xi(self, t: float) -> np.ndarray:
+        """The desired state the nominal law tracks at t: the landing plan's once landing,
+        the take-off plan's while taking off, else the observer's ξ̂ (12,)."""
+        if self.landing is not None:  # offboard.landing: the plan replaces ξ̂
+            return self.landing.xi(t)
+        if self.takeoff is not None and self.takeoff_clock(t) < self.takeoff.t_blend:
+            # offboard.takeoff (at rest on the pad while held for the take-off command)
+            return follower_xi(self.takeoff, self.index, self.takeoff_clock(t), self.ref.xi)
+        return self.ref.xi
+
+    def _use_filter_output(
+        self, res: SafetyOutput, w: np.ndarray, status: AgentStatus
+    ) -> np.ndarray:
+        """The filter's u, recorded in ``status``; a non-finite u brakes on −w (the
+        saturated disturbance estimate; a fallback)."""
         u = res.u
         if res.fallback:
             self.fallbacks += 1
         status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
         status.slack, status.violation = res.slack, res.violation
         if not finite(u):
-            u = np.clip(np.nan_to_num(-x.w), self.u_lo, self.u_hi)
+            u = np.clip(np.nan_to_num(-w), self.u_lo, self.u_hi)
             self.fallbacks += 1
         status.fallbacks = self.fallbacks
         return u

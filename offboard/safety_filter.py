@@ -183,7 +183,7 @@ class RcbfFilter(SafetyFilter):
         self, ctl: ControllerConfig, u_lo: np.ndarray, u_hi: np.ndarray, leader_mask: np.ndarray
     ) -> None:
         super().__init__(ctl, u_lo, u_hi, leader_mask)
-        others = len(leader_mask) - 1  # grown on demand (offboard.clf_rcbf._ClfRowsQP._fit)
+        others = len(leader_mask) - 1  # grown on demand (offboard.clf_rcbf._ClfRowsQP.fit_rows)
         self.qp = SafetyQP(min(others, QP_INITIAL_PAIRS), u_lo, u_hi, ctl.rho, ctl.clf_c,
                            limit=others, solver=ctl.qp_solver)
         if ctl.tau_safe_s <= 0.0:

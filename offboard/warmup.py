@@ -4,7 +4,7 @@ A numba kernel is loaded from its on-disk cache (or compiled, on a machine's fir
 on its first call in a process: 0.3–0.5 s of CPU for the follower's kernels, 2–5 s when
 compiling. Left to the first control step, that time lands inside the control loop: a
 late first answer in real time, and a start-up cost counted as control. :func:`warm_kernels`
-steps throwaway agents of the scenario (one follower, one leader) for a few control
+steps throwaway agents of the scenario (one follower, twice, and one leader) for a few control
 periods on the scenario's initial state before the daemon starts, so the real agents'
 first step runs loaded code. The throwaway agents share nothing with the real ones but
 the process-wide caches (gain reports, propagators), and their log lines are muted.
@@ -20,6 +20,7 @@ import numpy as np
 from offboard.agent import make_agent
 from offboard.agent_types import NeighbourEstimate
 from offboard.bearing import Formation
+from offboard.follower import FollowerAgent
 from offboard.reference import xi_at_rest
 from swarm_common.scenario import Scenario
 
@@ -56,8 +57,13 @@ def _step_throwaway_agents(sc: Scenario, method: str | None, form: Formation) ->
     previous = logging.root.manager.disable
     logging.disable(logging.INFO)  # the throwaway agents' start-up lines are not the run's
     try:
-        for aid in ids:
+        # the follower twice: its dcbf step in one call (offboard.dcbf_front) and part by
+        # part (the path of a step with a predicted pair), so both paths' kernels load
+        for aid, front in [(a, f) for a in ids for f in (True, False)
+                           if f or a in sc.follower_ids]:
             agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
+            if isinstance(agent, FollowerAgent):
+                agent.use_front = front
             for k in range(PERIODS):
                 t = k * sc.control_dt
                 nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)

@@ -118,8 +118,8 @@ def test_unsensed_candidates_pass_over_only_what_is_certainly_out_of_range() -> 
     """unsensed_candidates keeps, in the order heard, every heard agent but the own one
     and the sensed ones, except current rows farther than the range (with its margin)
     from z1: never a stale row, never a row the exact norm puts within range."""
-    from offboard.follower import RANGE_MARGIN
     from offboard.peer_table import ROW, unsensed_candidates
+    from offboard.unsensed import RANGE_MARGIN
 
     rng = np.random.default_rng(6)
     passed_over = 0

@@ -1,4 +1,4 @@
-"""Safety QPs that start small and grow on demand (offboard.clf_rcbf._ClfRowsQP._fit):
+"""Safety QPs that start small and grow on demand (offboard.clf_rcbf._ClfRowsQP.fit_rows):
 a grown problem answers what a problem built at full size answers, every row is kept, and
 the growth stops at the limit."""
 
@@ -56,9 +56,9 @@ def test_growth_stops_at_the_limit() -> None:
     rng = np.random.default_rng(8)
     n_hat, rhs, h, clf, w = _rcbf_case(rng, 12)
     qp = SafetyQP(2, LO, HI, rho=10.0, clf_c=1.0, limit=6)
-    qp._fit(12)
+    qp.fit_rows(12)
     assert qp.m == 6
-    qp._fit(3)
+    qp.fit_rows(3)
     assert qp.m == 6  # never shrinks
 
 

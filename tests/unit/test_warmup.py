@@ -61,3 +61,30 @@ def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
                          text=True, timeout=300, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
     assert int(out.stdout.split()[-1]) >= 1
+
+
+def test_daemon_warm_up_loads_both_paths_of_the_dcbf_step() -> None:
+    """warm_kernels steps the throwaway follower through the fused dcbf step
+    (offboard.dcbf_front) and part by part (a step with a predicted pair), so the kernels
+    of both are loaded; checked in a fresh process, where nothing else has loaded them."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    code = (
+        "from swarm_common.scenario import load_scenario\n"
+        "from offboard.bearing import formation_from_scenario\n"
+        "from offboard.clf_kernel import nominal_into\n"
+        "from offboard.dcbf_front import dcbf_front_into\n"
+        "from offboard.dcbf_step_kernel import dcbf_filter_rows_into\n"
+        "from offboard.warmup import warm_kernels\n"
+        "ks = (dcbf_front_into, nominal_into, dcbf_filter_rows_into)\n"
+        "assert not any(k.signatures for k in ks)\n"
+        f"sc = load_scenario({str(root / 'scenarios' / 'cube8.toml')!r})\n"
+        "warm_kernels(sc, 'dcbf', formation_from_scenario(sc))\n"
+        "print(*[len(k.signatures) for k in ks])\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
+                         text=True, timeout=300, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert all(int(c) >= 1 for c in out.stdout.split()[-3:])
