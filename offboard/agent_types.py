@@ -36,6 +36,8 @@ class AgentStatus:
 
     method: Method
     qp_status: QPStatus = QPStatus.INACTIVE
+    # µs of wall clock spent in the QP; for a dcbf step the no-solver test settled in the
+    # compiled front call (offboard.dcbf_front), that whole call (rows included)
     solve_us: float = 0.0
     h_min: float = float("inf")
     V: float = 0.0

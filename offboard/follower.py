@@ -54,9 +54,9 @@ class FollowerAgent(AgentBase):
     """Follower: sensing → DESO (§3) + desired-state observer (§4.1) → CLF–RCBF QP (§4.4)."""
 
     is_leader = False
-    # the dcbf step through offboard.dcbf_front (False: part by part, the same bits; the
-    # tests compare the two, and the kernel warm-up steps both)
-    use_front = True
+    # the dcbf step up to the QP in one compiled call, offboard.dcbf_front (False: part
+    # by part, the same bits; the tests compare the two, and the kernel warm-up steps both)
+    fused = True
 
     def __init__(
         self, sc: Scenario, agent_id: int, method: Method | str | None = None,
@@ -184,7 +184,7 @@ class FollowerAgent(AgentBase):
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         extra = (self.unsensed.pairs(t, sel, self.deso.z1, self.deso.z2)
                  if self.method == Method.DCBF else None)
-        front = self._front if self.use_front and self.method == Method.DCBF else None
+        front = self._front if self.fused and self.method == Method.DCBF else None
         if front is not None and extra is None:
             w_raw, w, v_clf, res = self._front_step(front, t, sel, rp, rv)
         else:

@@ -4,10 +4,11 @@ A numba kernel is loaded from its on-disk cache (or compiled, on a machine's fir
 on its first call in a process: 0.3–0.5 s of CPU for the follower's kernels, 2–5 s when
 compiling. Left to the first control step, that time lands inside the control loop: a
 late first answer in real time, and a start-up cost counted as control. :func:`warm_kernels`
-steps throwaway agents of the scenario (one follower, twice, and one leader) for a few control
-periods on the scenario's initial state before the daemon starts, so the real agents'
-first step runs loaded code. The throwaway agents share nothing with the real ones but
-the process-wide caches (gain reports, propagators), and their log lines are muted.
+steps throwaway agents of the scenario (one follower, through its fused dcbf step and part
+by part, and one leader) for a few control periods on the scenario's initial state before
+the daemon starts, so the real agents' first step runs loaded code. The throwaway agents
+share nothing with the real ones but the process-wide caches (gain reports, propagators),
+and their log lines are muted.
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def _step_throwaway_agents(sc: Scenario, method: str | None, form: Formation) ->
                            if f or a in sc.follower_ids]:
             agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
             if isinstance(agent, FollowerAgent):
-                agent.use_front = front
+                agent.fused = front
             for k in range(PERIODS):
                 t = k * sc.control_dt
                 nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)

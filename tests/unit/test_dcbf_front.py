@@ -1,5 +1,5 @@
 """The dcbf follower's step up to the QP in one compiled call (offboard.dcbf_front) against
-the same step part by part (``FollowerAgent.use_front = False``): whole in-process missions
+the same step part by part (``FollowerAgent.fused = False``): whole in-process missions
 give the same bits, over the families whose steps take each branch (every pair sensed,
 dropouts held, predicted pairs, the solver called, the ground barrier, take-off and
 landing references)."""
@@ -26,7 +26,7 @@ from swarm_common.scenario import load_scenario
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _run(name: str, duration: float, use_front: bool, monkeypatch: pytest.MonkeyPatch,
+def _run(name: str, duration: float, fused: bool, monkeypatch: pytest.MonkeyPatch,
          calls: Counter[str], land_at: float | None = None) -> MissionResult:
     sc = load_scenario(ROOT / "scenarios" / f"{name}.toml")
     run, composed = front_mod.DcbfFront.run, FollowerAgent._composed_step
@@ -40,7 +40,7 @@ def _run(name: str, duration: float, use_front: bool, monkeypatch: pytest.Monkey
         return composed(self, *a)
 
     with monkeypatch.context() as mp:
-        mp.setattr(FollowerAgent, "use_front", use_front)
+        mp.setattr(FollowerAgent, "fused", fused)
         mp.setattr(front_mod.DcbfFront, "run", counted_run)
         mp.setattr(FollowerAgent, "_composed_step", counted_composed)
         return run_inproc(sc, "dcbf", duration=duration, land_at=land_at)
@@ -86,9 +86,9 @@ def test_predicted_pairs_and_solver_steps_are_covered(monkeypatch: pytest.Monkey
     assert calls["composed"] > 0
     solve_rows = DcbfFilter.solve_rows
 
-    def counted(self: DcbfFilter, *a: Any, unheld: bool = False) -> Any:
-        calls["unheld" if unheld else "held-check"] += 1
-        return solve_rows(self, *a, unheld=unheld)
+    def counted(self: DcbfFilter, *a: Any, **kw: Any) -> Any:
+        calls["unheld" if kw.get("unheld") else "held-check"] += 1
+        return solve_rows(self, *a, **kw)
 
     monkeypatch.setattr(DcbfFilter, "solve_rows", counted)
     _run("grid12", 3.0, True, monkeypatch, calls)
