@@ -2,6 +2,9 @@
 
     .venv/bin/python bench/bench_distributed.py [--duration 20] [--port-offset 900]
         [--processes N] [--default-streams always|on-contact] [--scenario FILE] [--skip-realtime]
+        [--method rcbf|dcbf|apf|none]
+
+The method defaults to rcbf, the one every earlier round's figures were measured with.
 
 Prints (no assertions): the lockstep stepping rate (sim seconds per wall second, start-up
 excluded), CPU seconds, CPU ms per step and peak RSS of every process, over the whole run
@@ -22,7 +25,7 @@ from pathlib import Path
 
 from gcs.mission import run_and_score
 from offboard.daemon_agents import parse_agents
-from swarm_common.enums import DefaultStreams
+from swarm_common.enums import DefaultStreams, Method
 from swarm_common.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,17 +42,19 @@ def main() -> None:
                     help="the simulator's default telemetry (gcs mission run --default-streams)")
     ap.add_argument("--processes", type=int, default=None,
                     help="pack the daemons into N processes (default: one per agent)")
+    ap.add_argument("--method", choices=[m.value for m in Method], default=Method.RCBF.value,
+                    help="safety filter of the run (default rcbf, as the earlier figures)")
     args = ap.parse_args()
     sc = load_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as tmp:
-        doc = run_and_score(sc, Path(tmp) / "lockstep", "rcbf", None, args.duration,
+        doc = run_and_score(sc, Path(tmp) / "lockstep", args.method, None, args.duration,
                             port_offset=args.port_offset, show_progress=False,
                             processes=args.processes,
                             default_streams=DefaultStreams(args.default_streams))
         run = doc["run"]
         layout = ("one process per agent" if args.processes is None
                   else f"{args.processes} daemon processes")
-        layout += f", default streams {args.default_streams}"
+        layout += f", default streams {args.default_streams}, {args.method}"
         print(f"lockstep {sc.name} {args.duration:.0f} s, {layout}: stepping "
               f"{run['stepping_realtime_factor']:.2f}x real time "
               f"(whole run incl. start-up {args.duration / run['wall_s']:.2f}x)")
@@ -65,7 +70,7 @@ def main() -> None:
         m = doc["metrics"]
         print(f"min_distance_m {m['min_distance_m']:.3f}  collisions {m['collisions']}")
         if not args.skip_realtime:
-            doc = run_and_score(sc, Path(tmp) / "realtime", "rcbf", None, args.duration,
+            doc = run_and_score(sc, Path(tmp) / "realtime", args.method, None, args.duration,
                                 realtime=True, port_offset=args.port_offset + 50,
                                 show_progress=False)
             lat = doc["run"].get("simulator", {}).get("latency", {})
