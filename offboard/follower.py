@@ -112,7 +112,6 @@ class FollowerAgent(AgentBase):
         self.last_sp: Setpoint | None = None
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
-        self.ids = sc.ids
         # scenario indices of the agents whose estimates this follower reads (its daemon
         # subscribes to them only): what it takes from an in-process batch, and predicts
         self._peer_idx = np.array(
@@ -248,13 +247,12 @@ class FollowerAgent(AgentBase):
         """:meth:`_composed_step` of the dcbf filter in one compiled call
         (:mod:`offboard.dcbf_front`; every pair sensed), the same bits. A step the
         shortcut settles reports the call's time as ``solve_us``."""
-        tab = self.pred.table
-        since = t - self.silent_after
+        since, others_heard = self._silence(t)
         margin, predicted = self._no_margin(len(sel))
         t0 = time.perf_counter()
         lumped, w, clf, k, h_min, held, u_try = front.run(
-            f64(self._reference_xi(t)), sel, rows3(rp), rows3(rv), self._full_mask(), tab.t,
-            since, self.pred.newest >= since, vec3(self.a_real), vec3(self.u_prev),
+            f64(self._reference_xi(t)), sel, rows3(rp), rows3(rv), self._full_mask(),
+            self.pred.table.t, since, others_heard, vec3(self.a_real), vec3(self.u_prev),
             vec3(self.a_mean), self._ground_floor(), margin, predicted,
         )
         if held:
@@ -326,13 +324,17 @@ class FollowerAgent(AgentBase):
           singled out: the others still run their filters on their onboard sensing.
         Silence is judged by the estimates' own stamps, so in-process and lockstep runs
         judge it alike."""
-        since = t - self.silent_after
-        # others heard (newest ≥ since): a silent one stands out (never heard: −inf,
-        # full already)
+        since, others_heard = self._silence(t)
         out = np.empty(len(sel), dtype=np.bool_)  # new from Python: cheaper than boxed
-        full_share_rows(sel, self._full_mask(), self.pred.table.t, since,
-                        self.pred.newest >= since, out)
+        full_share_rows(sel, self._full_mask(), self.pred.table.t, since, others_heard, out)
         return out
+
+    def _silence(self, t: float) -> tuple[float, bool]:
+        """(since, others_heard): an agent whose newest estimate is older than ``since``
+        (s) is silent at ``t``, and it stands out only when others were heard since then
+        (newest ≥ since; one never heard has −inf and a full share already)."""
+        since = t - self.silent_after
+        return since, self.pred.newest >= since
 
     def _full_mask(self) -> np.ndarray:
         """(N,) True for a leader, an agent never heard from or one that no longer
