@@ -83,21 +83,24 @@ class InputSet:
         return bool((y <= hi + s).all() and (y >= lo - s).all())
 
     @cached_property
-    def _cone_dirs(self) -> tuple[np.ndarray, np.ndarray]:
-        """(cos, sin) of the K cone-side angles 2πk/K (computed once per set)."""
-        ang = 2.0 * math.pi * np.arange(self.sides) / self.sides
-        return np.cos(ang), np.sin(ang)
+    def projection(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The arguments of :func:`offboard.dcbf_kernel.project_into` after ``out`` (computed
+        once per set): the scalars (uz_lo, uz_hi, uh_lo, uh_hi, cone_c, g, shrink) as one
+        array, then the cosines and sines of the K cone-side angles 2πk/K."""
+        s, k = self.shrink, self.sides
+        ang = 2.0 * math.pi * np.arange(k) / k
+        scalars = np.array([
+            self.uz_min + s, self.uz_max - s, -self.uh_max + s, self.uh_max - s,
+            self.tan_tilt * math.cos(math.pi / k), self.g, s,
+        ])
+        return scalars, np.cos(ang), np.sin(ang)
 
     def project(self, u: np.ndarray) -> np.ndarray:
         """A point of the (shrunk) set near ``u``: u_z clipped, then u_h scaled inward
         (compiled: :func:`offboard.dcbf_kernel.project_into`, on a new array)."""
-        s, k = self.shrink, self.sides
-        cos_a, sin_a = self._cone_dirs
+        p, cos_a, sin_a = self.projection
         out = vec3(u).copy()  # a new array from Python: cheaper than one boxed by the kernel
-        project_into(
-            out, self.uz_min + s, self.uz_max - s, -self.uh_max + s,
-            self.uh_max - s, self.tan_tilt * math.cos(math.pi / k), self.g, s, cos_a, sin_a,
-        )
+        project_into(out, p, cos_a, sin_a)
         return out
 
 

@@ -159,15 +159,16 @@ def rows_hold_kernel(
 
 
 @kernel
-def project_into(
-    out: np.ndarray, uz_lo: float, uz_hi: float, uh_lo: float, uh_hi: float, cone_c: float,
-    g: float, shrink: float, cos_a: np.ndarray, sin_a: np.ndarray,
-) -> None:
+def project_into(out: np.ndarray, proj: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray) -> None:
     """:meth:`offboard.dcbf.InputSet.project` of a finite u (3,) (m/s²), in place in
-    ``out`` (u on entry; no array to box): u_z clipped to [uz_lo, uz_hi], u_x, u_y to
-    [uh_lo, uh_hi], then u_h scaled inward onto the tilt cone
+    ``out`` (u on entry; no array to box): with ``proj`` = (uz_lo, uz_hi, uh_lo, uh_hi,
+    cone_c, g, shrink) (:attr:`offboard.dcbf.InputSet.projection`), u_z clipped to
+    [uz_lo, uz_hi], u_x, u_y to [uh_lo, uh_hi], then u_h scaled inward onto the tilt cone
     ``cos_aᵀu_h ≤ (g + u_z)·cone_c − shrink``. The same operations in the same order as
     the numpy method (Python's min/max semantics), so the same bits."""
+    uz_lo, uz_hi, uh_lo, uh_hi, cone_c, g, shrink = (
+        proj[0], proj[1], proj[2], proj[3], proj[4], proj[5], proj[6]
+    )
     z = out[2]
     z = uz_lo if uz_lo > z else z
     out[2] = uz_hi if uz_hi < z else z

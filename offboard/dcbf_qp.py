@@ -14,13 +14,13 @@ the answer is always realisable; if the solve fails the fallback brake is projec
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from offboard.clf_rcbf import Brake, ClfTerms, QPResult, _ClfRowsQP, fallback_of
 from offboard.dcbf import InputSet
+from offboard.dcbf_exact_kernel import NO_EXACT, pre_solve_kernel
 from offboard.dcbf_kernel import rows_hold_kernel
 from offboard.qp_rows_kernel import rows_finite_kernel
 from swarm_common.enums import QPSolver, QPStatus
@@ -40,6 +40,7 @@ class DcbfQP(_ClfRowsQP):
         self.uset = uset
         self.c = float(clf_c)
         self.lin_sigma = max(1e3, 50.0 * rho)
+        self._half_inv_rho = 0.5 / float(rho)  # the CLF slack's δ = ν/(2ρ) (pre_solve_kernel)
         self._start(max_pairs, limit, rho, violation_weight, eps, solver)
 
     def _setup(self, m: int) -> None:
@@ -85,75 +86,25 @@ class DcbfQP(_ClfRowsQP):
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
                             False)
-        if not rows_finite_kernel(vec3(u_nom), rows3(g), f64(rhs), k, vec3(clf.lgv),
-                                  float(clf.lfv), float(clf.V)):
+        u_nom3, g3, rhs1, lgv3 = vec3(u_nom), rows3(g), f64(rhs), vec3(clf.lgv)
+        lfv, v = float(clf.lfv), float(clf.V)
+        if not rows_finite_kernel(u_nom3, g3, rhs1, k, lgv3, lfv, v):
             u = self.uset.project(np.nan_to_num(fallback_of(brake), posinf=0.0, neginf=0.0))
             us = (time.perf_counter() - t0) * 1e6
             return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
-        u_c = self.uset.project(u_nom)
-        clf_rhs = max(-clf.lfv - self.c * clf.V, float(clf.lgv.dot(u_c)))
-        exact = self._one_row_exact(u_nom, clf, clf_rhs, g, rhs, k)
-        if exact is not None:
+        viol = rhs[:k] - g[:k] @ u_nom  # BLAS's order: pre_solve_kernel takes it as it is
+        u = np.empty(3)
+        proj, cos_a, sin_a = self.uset.projection
+        clf_rhs, delta = pre_solve_kernel(
+            u_nom3, g3, rhs1, viol, k, lgv3, lfv, v, self.c, self._half_inv_rho,
+            self.lin_sigma, self.a_u, self.lo_u, self.hi_u, proj, cos_a, sin_a, u,
+        )
+        if delta != NO_EXACT:  # one barrier row active, alone or with the CLF row: exact
             us = (time.perf_counter() - t0) * 1e6
-            return QPResult(exact[0], QPStatus.SOLVED, 0, us, h_min, clf.V, exact[1], 0.0,
-                            False)
+            return QPResult(u, QPStatus.SOLVED, 0, us, h_min, clf.V, delta, 0.0, False)
         sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
         # the solver's answer up to its tolerance; project() is a no-op inside the set
         u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(fallback_of(brake)))
         out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
         return out
-
-    def _one_row_exact(
-        self, u_nom: np.ndarray, clf: ClfTerms, clf_rhs: float, g: np.ndarray,
-        rhs: np.ndarray, k: int,
-    ) -> tuple[np.ndarray, float] | None:
-        """(u, δ): the QP's exact solution when one barrier row is active, alone or with
-        the CLF row; None otherwise (OSQP solves it).
-
-        If u_nom violates exactly one of the k rows, ``g_jᵀu ≥ r_j`` (g_j unit length),
-        two active sets are tried, each solved from the KKT conditions of the QP (module
-        docstring) and kept only if they hold:
-
-        * the row alone: ``u = u_nom + λ g_j``, ``λ = r_j − g_jᵀu_nom``, δ = 0, if u keeps
-          the CLF row without slack (``L_gV u ≤ clf_rhs``);
-        * the row and the CLF row ``aᵀu − δ ≤ b`` (a = L_gV/‖L_gV‖, b = clf_rhs/‖L_gV‖, as
-          the QP writes it): ``u = u_nom − ν a + λ g_j``, ``δ = ν/(2ρ)``, with
-          ``ν = (aᵀu_nom − b + c (r_j − g_jᵀu_nom)) / (1 + 1/(2ρ) − c²)``, c = aᵀg_j, and
-          ``λ = r_j − g_jᵀu_nom + ν c``; kept if ν ≥ 0.
-
-        Either is kept only if λ ∈ [0, M] (M the slack's linear weight, so σ = 0 is
-        optimal) and u satisfies every other row and the input set (checked); it is then
-        the QP's unique minimiser, which OSQP would return to its tolerance. λ gets 1e-9
-        m/s² more so that rounding cannot leave u a hair outside row j."""
-        viol = rhs[:k] - g[:k] @ u_nom
-        bad = np.flatnonzero(viol > 0.0)
-        if len(bad) != 1:
-            return None
-        j = int(bad[0])
-        gj = g[j]
-        if abs(float(gj.dot(gj)) - 1.0) > 1e-9:
-            return None
-        lam = float(viol[j]) + 1e-9
-        u = u_nom + lam * gj
-        delta = 0.0
-        if float(clf.lgv.dot(u)) > clf_rhs:  # the CLF row is active too
-            nrm = math.sqrt(float(clf.lgv.dot(clf.lgv)))
-            if nrm <= 1e-9:
-                return None
-            a = clf.lgv / nrm
-            c = float(a.dot(gj))
-            half_inv_rho = 0.5 / self._weights[0]
-            nu = (float(a.dot(u_nom)) - clf_rhs / nrm + c * float(viol[j])) / (
-                1.0 + half_inv_rho - c * c
-            )
-            if not nu >= 0.0:
-                return None
-            lam = float(viol[j]) + nu * c + 1e-9
-            u = u_nom - nu * a + lam * gj
-            delta = nu * half_inv_rho
-        if not 0.0 <= lam <= self.lin_sigma:
-            return None
-        if not rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u):
-            return None
-        return u, delta

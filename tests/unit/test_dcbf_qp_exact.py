@@ -1,7 +1,8 @@
 """The DCBF QP's exact solution with one active barrier row, alone or with the CLF row
-(offboard.dcbf_qp.DcbfQP._one_row_exact), against OSQP on the same problems: where it
-applies, OSQP's answer is the same point (and slack) to its tolerance; where it does not
-(two barrier rows, the input set active, a multiplier of the wrong sign) OSQP runs."""
+(offboard.dcbf_exact_kernel.pre_solve_kernel, called by DcbfQP.solve), against OSQP on
+the same problems: where it applies, OSQP's answer is the same point (and slack) to its
+tolerance; where it does not (two barrier rows, the input set active, a multiplier of
+the wrong sign) OSQP runs."""
 
 from __future__ import annotations
 

@@ -63,10 +63,12 @@ def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
     assert int(out.stdout.split()[-1]) >= 1
 
 
-def test_daemon_warm_up_loads_both_paths_of_the_dcbf_step() -> None:
+def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
     """warm_kernels steps the throwaway follower through the fused dcbf step
     (offboard.dcbf_front) and part by part (a step with a predicted pair), so the kernels
-    of both are loaded; checked in a fresh process, where nothing else has loaded them."""
+    of both are loaded, the QP's past its shortcut among them (the throwaway follower's
+    steps at rest reach it); checked in a fresh process, where nothing else has loaded
+    them."""
     import subprocess
     import sys
 
@@ -77,8 +79,11 @@ def test_daemon_warm_up_loads_both_paths_of_the_dcbf_step() -> None:
         "from offboard.clf_kernel import nominal_into\n"
         "from offboard.dcbf_front import dcbf_front_into\n"
         "from offboard.dcbf_step_kernel import dcbf_filter_rows_into\n"
+        "from offboard.dcbf_exact_kernel import pre_solve_kernel\n"
+        "from offboard.qp_rows_kernel import write_rows_kernel\n"
         "from offboard.warmup import warm_kernels\n"
-        "ks = (dcbf_front_into, nominal_into, dcbf_filter_rows_into)\n"
+        "ks = (dcbf_front_into, nominal_into, dcbf_filter_rows_into, pre_solve_kernel,\n"
+        "      write_rows_kernel)\n"
         "assert not any(k.signatures for k in ks)\n"
         f"sc = load_scenario({str(root / 'scenarios' / 'cube8.toml')!r})\n"
         "warm_kernels(sc, 'dcbf', formation_from_scenario(sc))\n"
@@ -87,4 +92,4 @@ def test_daemon_warm_up_loads_both_paths_of_the_dcbf_step() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
                          text=True, timeout=300, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert all(int(c) >= 1 for c in out.stdout.split()[-3:])
+    assert all(int(c) >= 1 for c in out.stdout.split()[-5:])
