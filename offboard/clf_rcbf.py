@@ -105,7 +105,7 @@ def clf_terms(
     with ``box`` = (lo, hi) (m/s², per axis) the nominal control has anti-windup
     (docs/saturation.md §2) and lies in the box. Compiled:
     :func:`offboard.clf_kernel.clf_into`."""
-    lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
+    lo, hi = box if box is not None else (NO_BOX, NO_BOX)
     out = np.empty(CLF_OUT)
     clf_into(
         vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
@@ -122,7 +122,7 @@ def clf_terms_of_reference(
     ξ = [p*, v*, a*, j*] (12,): ``e1 = z1 − p*``, ``e2 = z2 − v*`` and the reference
     acceleration taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*`` (m/s²). One compiled call
     (:func:`offboard.clf_kernel.nominal_into`), the same bits as forming them in numpy."""
-    lo, hi = box if box is not None else (_NO_BOX, _NO_BOX)
+    lo, hi = box if box is not None else (NO_BOX, NO_BOX)
     out = np.empty(CLF_OUT)  # a new array from Python: cheaper than one the kernel boxes
     nominal_into(
         vec3(z1), vec3(z2), f64(xi), float(tau_ff), vec3(w), float(kp), float(kd),
@@ -137,7 +137,7 @@ def clf_terms_from(out: np.ndarray) -> ClfTerms:
     return ClfTerms(V=float(out[0]), lfv=float(out[1]), lgv=out[2:5], u_nom=out[5:8])
 
 
-_NO_BOX = np.zeros(3)
+NO_BOX = np.zeros(3)  # the kernels' box argument when the anti-windup box is off (never written)
 
 
 def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:

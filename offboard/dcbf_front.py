@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from offboard.clf_kernel import nominal_into
-from offboard.clf_rcbf import AW_BRAKE_SHARE, AW_RESERVE, CLF_OUT
+from offboard.clf_rcbf import AW_BRAKE_SHARE, AW_RESERVE, CLF_OUT, NO_BOX
 from offboard.dcbf_filter import DcbfFilter
 from offboard.dcbf_kernel import rows_hold_kernel
 from offboard.dcbf_step_kernel import dcbf_filter_rows_into
@@ -54,9 +54,6 @@ F_W_SAFE = 8  # the filter's bound on it (m/s²)
 F_A_MAX = 9  # bound on an other agent's estimated acceleration (m/s²)
 F_DESO_H = 10  # the DESO's ground-effect height (m)
 N_FRONT = 11
-
-_NO_BOX = np.zeros(3)  # the anti-windup box is off for dcbf (docs/saturation.md §2)
-
 
 @kernel
 def saturate_into(x: np.ndarray, bound: float, out: np.ndarray) -> None:
@@ -108,7 +105,7 @@ def dcbf_front_into(
     saturate_into(lumped[1], prm[F_W_MAX], w)
     nominal_into(
         z1, z2, xi, prm[F_TAU_FF], w, prm[F_KP], prm[F_KD], prm[F_LAMBDA], prm[F_KS], False,
-        _NO_BOX, _NO_BOX, prm[F_BRAKE_SHARE], prm[F_RESERVE], clf,
+        NO_BOX, NO_BOX, prm[F_BRAKE_SHARE], prm[F_RESERVE], clf,
     )
     m = sel.shape[0]
     pair_rows(sel, rel_p, rel_v, dp, dv)

@@ -60,15 +60,15 @@ def _step_throwaway_agents(sc: Scenario, method: str | None, form: Formation) ->
     try:
         # the follower twice: its dcbf step in one call (offboard.dcbf_front) and part by
         # part (the path of a step with a predicted pair), so both paths' kernels load
-        for aid, front in [(a, f) for a in ids for f in (True, False)
-                           if f or a in sc.follower_ids]:
-            agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
-            if isinstance(agent, FollowerAgent):
-                agent.fused = front
-            for k in range(PERIODS):
-                t = k * sc.control_dt
-                nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)
-                        for j, e in ests.items() if j != aid}
-                agent.step(k, t, p, v, nbrs, True)
+        for aid in ids:
+            for front in (True, False) if aid in sc.follower_ids else (True,):
+                agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
+                if isinstance(agent, FollowerAgent):
+                    agent.fused = front
+                for k in range(PERIODS):
+                    t = k * sc.control_dt
+                    nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)
+                            for j, e in ests.items() if j != aid}
+                    agent.step(k, t, p, v, nbrs, True)
     finally:
         logging.disable(previous)
