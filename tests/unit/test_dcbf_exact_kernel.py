@@ -3,7 +3,8 @@ against the numpy formulation it replaced, written out here as the reference: th
 row's bound from the projected nominal input, and the exact solution with one active
 barrier row, alone or with the CLF row. Bit for bit, on random problems that take every
 branch (no row violated, two violated, one violated with and without the CLF row, a
-multiplier of the wrong sign, a row of non-unit length, the input set broken)."""
+multiplier of the wrong sign, a row of non-unit length, the input set broken, an L_gV
+too small to normalise)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.to
 RHO = SC.controller.rho
 CLF_C = SC.controller.clf_c
 LIN_SIGMA = max(1e3, 50.0 * RHO)
+TINY_LGV_SEEN: list[int] = []  # the reference's branch of a vanishing L_gV, when taken
 
 
 def _reference(u_nom, g, rhs, k, lgv, lfv, v, uset, a_u, lo_u, hi_u):  # type: ignore[no-untyped-def]
@@ -41,6 +43,7 @@ def _reference(u_nom, g, rhs, k, lgv, lfv, v, uset, a_u, lo_u, hi_u):  # type: i
     if float(lgv.dot(u)) > clf_rhs:
         nrm = math.sqrt(float(lgv.dot(lgv)))
         if nrm <= 1e-9:
+            TINY_LGV_SEEN.append(1)
             return clf_rhs, None
         a = lgv / nrm
         c = float(a.dot(gj))
@@ -79,7 +82,7 @@ def test_pre_solve_kernel_equals_the_numpy_formulation_bit_for_bit() -> None:
         k = m if trial % 7 else max(1, m - 1)
         lgv = rng.normal(0.0, 0.05 if trial % 2 else 2.0, 3)
         if trial % 29 == 0:
-            lgv[:] = 0.0
+            lgv *= 1e-11  # ‖L_gV‖ below 1e-9: the CLF row cannot be normalised
         lfv, v = float(rng.normal(0.0, 1.0)), float(rng.uniform(0.0, 2.0))
         ref_rhs, ref = _reference(u_nom, g, rhs, k, lgv, lfv, v, uset, a_u, lo_u, hi_u)
         viol = rhs[:k] - g[:k] @ u_nom
@@ -97,6 +100,7 @@ def test_pre_solve_kernel_equals_the_numpy_formulation_bit_for_bit() -> None:
             seen["exact"] += 1
             seen["with_clf"] += ref[1] > 0.0
     assert min(seen.values()) > 300, seen  # every branch taken often
+    assert len(TINY_LGV_SEEN) > 10
 
 
 def test_projection_keeps_points_inside_and_moves_none_strictly_inside() -> None:
