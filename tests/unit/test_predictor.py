@@ -160,3 +160,32 @@ def test_a_stamp_off_by_rounding_is_current_data() -> None:
     later = t_read + 1e-3
     age = later - t_sent
     assert pred.bound_at(2, later) == 0.5 * pred.a_dev_of(e.z1, e.z2, e.xi) * age * age > 0.0
+
+
+def test_an_outage_computes_nothing_new_in_the_control_loop() -> None:
+    """The predictor computes c_r and every propagator up to max_age when it is made, so
+    predicting a leader and a follower through an outage as long as max_age adds nothing
+    to the process-wide caches (left to the first outage, c_r's sweep alone took ~15 ms
+    inside one control step); the cached values are those the functions give."""
+    import offboard.predictor as predictor
+
+    for cache in (predictor._EXO_CACHE, predictor._ERR_CACHE, predictor._CR_CACHE):
+        cache.clear()
+    omega, fol = OMEGA * 1.01, (7.5, 3.0)  # keys no other test has filled
+    pred = NeighbourPredictor(IDS, omega, DT, fol, LEAD, max_age=0.5, drop_bound=1e9)
+    sizes = [len(c) for c in (predictor._EXO_CACHE, predictor._ERR_CACHE,
+                              predictor._CR_CACHE)]
+    assert sizes[0] >= 26 and sizes[1] >= 52 and sizes[2] == 1
+    xi = _xi0()
+    pred.ingest({1: _est(1, 0.0, xi_p(xi), xi_v(xi), xi, True),
+                 5: _est(5, 0.0, xi_p(xi) + 0.1, xi_v(xi), xi, False)}, comm_ok=True)
+    peers = np.array([1, 5], dtype=np.int64)
+    for k in range(1, 26):  # 0.5 s of silence
+        rows, have = pred.predict_rows(peers, k * DT)
+        assert have[1] and have[5], k
+    assert [len(c) for c in (predictor._EXO_CACHE, predictor._ERR_CACHE,
+                             predictor._CR_CACHE)] == sizes
+    assert np.array_equal(pred.exo(7), exo_propagator(omega, 7 * DT))
+    assert np.array_equal(pred.err(False, 7),
+                          expm(np.array([[0.0, 1.0], [-fol[0], -fol[1]]]) * 7 * DT))
+    assert predictor._CR_CACHE[fol] == error_accel_gain(*fol)
