@@ -38,10 +38,23 @@ def pre_solve_kernel(
       scalars uz_lo, uz_hi, uh_lo, uh_hi, cone_c, g, shrink): the CLF row never asks for
       more than the projected nominal input already gives.
     * δ ≥ 0 and u the QP's exact minimiser when exactly one of the k rows ``g_jᵀu ≥ r_j``
-      (g_j unit length) is violated (``viol = r − g u_nom`` > 0 for j alone) and it is
-      active alone or with the CLF row (``DcbfQP._one_row_exact``'s conditions: λ ∈ [0,
-      lin_sigma], ν ≥ 0, u keeps every row and the input set); else δ = ``NO_EXACT``
-      and u_out is unspecified (a solver runs)."""
+      (g_j unit length) is violated (``viol = r − g u_nom`` > 0 for j alone); else
+      δ = ``NO_EXACT`` and u_out is unspecified (a solver runs).
+
+    Two active sets are tried, each solved from the KKT conditions of the QP
+    (:mod:`offboard.dcbf_qp`) and kept only if they hold:
+
+    * the row alone: ``u = u_nom + λ g_j``, ``λ = r_j − g_jᵀu_nom``, δ = 0, if u keeps the
+      CLF row without slack (``L_gV u ≤ clf_rhs``);
+    * the row and the CLF row ``aᵀu − δ ≤ b`` (a = L_gV/‖L_gV‖, b = clf_rhs/‖L_gV‖, as
+      the QP writes it): ``u = u_nom − ν a + λ g_j``, ``δ = ν/(2ρ)``, with
+      ``ν = (aᵀu_nom − b + c (r_j − g_jᵀu_nom)) / (1 + 1/(2ρ) − c²)``, c = aᵀg_j, and
+      ``λ = r_j − g_jᵀu_nom + ν c``; kept if ν ≥ 0.
+
+    Either is kept only if λ ∈ [0, lin_sigma] (the slack's linear weight, so σ = 0 is
+    optimal) and u satisfies every other row and the input set (checked); it is then the
+    QP's unique minimiser, which a solver would return to its tolerance. λ gets 1e-9 m/s²
+    more so that rounding cannot leave u a hair outside row j."""
     for c in range(3):
         u_out[c] = u_nom[c]
     project_into(u_out, proj, cos_a, sin_a)

@@ -99,9 +99,9 @@ class NeighbourPredictor:
         of every step count up to ``max_age`` (:data:`UNBOUNDED_AGE_S` when it is
         unbounded). They are exact functions of the gains, ω, dt and the count, cached
         for the process, so a run's numbers are the same; only when they are computed
-        changes. Left to the first outage, they took about 30 ms of one control step per
-        follower process (c_r's 2001-point sweep and one matrix exponential per new
-        count), and made the in-process runs' slowest 1 % of follower steps. Older data
+        changes. Left to the first outage, they took 10–22 ms of one control step (c_r's
+        2001-point sweep and one matrix exponential per new count; in process, 2-core),
+        and made the in-process runs' slowest 1 % of follower steps. Older data
         (a leader's, never dropped) still fills the caches as it comes."""
         error_accel_gain(*self.gains[False])
         horizon = self.max_age if math.isfinite(self.max_age) else UNBOUNDED_AGE_S
