@@ -61,6 +61,7 @@ def _wrap(cls: Any, name: str, store: Store, key: str) -> Callable[..., Any]:
         if getattr(out, "status", None) is not None:
             store.setdefault(key + ":solver", []).append(
                 1.0 if _solver_calls[0] > calls else 0.0)
+            store.setdefault(key + ":t", []).append(float(a[1]))  # step(k, t, ...): t (s)
         return out
 
     setattr(cls, name, timed)
@@ -90,6 +91,20 @@ def stats(x: list[float] | np.ndarray) -> str:
     if a.size == 0:
         return "(no samples)"
     return f"median {np.median(a):7.1f} µs  p99 {np.percentile(a, 99):7.1f} µs  (n = {a.size})"
+
+
+def slow_tail(us: np.ndarray, t: np.ndarray, bin_s: float = 0.5) -> None:
+    """Print the slowest follower step (µs, at t) and where the slowest 1 % of steps lie:
+    the 0.5 s windows of mission time holding most of them (a cluster there is work that
+    some event, such as an outage, brings into the control loop)."""
+    worst = int(np.argmax(us))
+    cut = np.percentile(us, 99)
+    tail_t = t[us > cut]
+    bins, counts = np.unique(np.floor(tail_t / bin_s) * bin_s, return_counts=True)
+    top = sorted(zip(counts.tolist(), bins.tolist(), strict=True), reverse=True)[:3]
+    where = ", ".join(f"{c} in [{b:.1f}, {b + bin_s:.1f}) s" for c, b in top)
+    print(f"  follower, slowest step     {us[worst]:7.1f} µs at t = {t[worst]:.2f} s; "
+          f"slowest 1 % ({tail_t.size}): {where}")
 
 
 def realtime(sc: Scenario, method: str, duration: float, repeats: int) -> None:
@@ -129,6 +144,8 @@ def per_agent(sc: Scenario, method: str, duration: float) -> None:
     print(f"  follower, solver called    {stats(f[solved])}  "
           f"({solved.mean() * 100:.1f} % of steps)"
           if solved.size else "  follower, solver called    (no samples)")
+    if f.size:
+        slow_tail(f, np.asarray(store.get("follower:t", []), dtype=float))
     print(f"  leader                     {stats(lead)}")
     print(f"  sensing                    {stats(store.get('sensing', []))}")
     print(f"  DESO update                {stats(store.get('deso', []))}")
