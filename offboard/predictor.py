@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from offboard.agent_types import NeighbourEstimate
-from offboard.peer_table import XI, Z1, Z2, EstimateBatch, PeerTable
+from offboard.peer_table import XI, XI_COL, Z1, Z2, EstimateBatch, PeerTable
 from offboard.reference import exo_propagator, xi_a, xi_j, xi_p, xi_v
 from swarm_common.jit import kernel
 
@@ -208,10 +208,14 @@ class NeighbourPredictor:
         for j in peers.tolist():
             if have[j] or tab.t[j] == -math.inf:
                 continue
-            got = self.get_at(j, t)
-            if got is not None:
-                rows[j, Z1], rows[j, Z2], rows[j, XI] = got
-                have[j] = True
+            n = self._periods_ahead(j, t)
+            if n is None:
+                continue
+            if n > 0:  # else the copy holds the row as received
+                src = tab.rows[j]
+                xi_n = self.exo(n) @ src[XI]  # numpy's product, as get_at's (the same bits)
+                predict_row_into(src, xi_n, self.err(bool(tab.leader[j]), n), rows[j])
+            have[j] = True
         return rows, have
 
     def get_at(self, j: int, t: float) -> Prediction | None:
@@ -221,32 +225,59 @@ class NeighbourPredictor:
         conservative behaviour for a silent or unpredictable neighbour; onboard sensing
         still feeds the safety filter). A leader's data is never dropped. Current data is
         returned as views of the table's row (valid until the next ingest)."""
-        tab = self.table
-        stamp = float(tab.t[j])
-        if stamp == -math.inf:
+        n = self._periods_ahead(j, t)
+        if n is None:
             return None
+        tab = self.table
         r = tab.rows[j]
         z1, z2, xi = r[Z1], r[Z2], r[XI]
-        age = t - stamp
-        if age <= CURRENT_AGE_S:  # current data (bound 0): as received
-            return z1, z2, xi
-        leader = bool(tab.leader[j])
-        if not leader:
-            if age > self.max_age + 1e-9:
-                return None
-            b = self.bound_at(j, t)
-            if b is not None and b > self.drop_bound:
-                return None
-        n = int(round(age / self.dt))
-        if n <= 0:
+        if n == 0:  # current data (bound 0): as received
             return z1, z2, xi
         xi_n = self.exo(n) @ xi
-        m = self.err(leader, n)
+        m = self.err(bool(tab.leader[j]), n)
         e1 = z1 - xi_p(xi)
         e2 = z2 - xi_v(xi)
         p = xi_p(xi_n) + m[0, 0] * e1 + m[0, 1] * e2
         v = xi_v(xi_n) + m[1, 0] * e1 + m[1, 1] * e2
         return p, v, xi_n
+
+    def _periods_ahead(self, j: int, t: float) -> int | None:
+        """Control periods to predict agent ``j``'s row over to reach ``t``: 0 for data
+        current at ``t`` (or less than half a period old), None when it is not usable
+        (never received; a follower's older than ``max_age`` or beyond ``drop_bound``)."""
+        tab = self.table
+        stamp = float(tab.t[j])
+        if stamp == -math.inf:
+            return None
+        age = t - stamp
+        if age <= CURRENT_AGE_S:
+            return 0
+        if not bool(tab.leader[j]):
+            if age > self.max_age + 1e-9:
+                return None
+            b = self.bound_at(j, t)
+            if b is not None and b > self.drop_bound:
+                return None
+        return max(0, int(round(age / self.dt)))
+
+
+@kernel
+def predict_row_into(src: np.ndarray, xi_n: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
+    """:meth:`NeighbourPredictor.get_at`'s prediction of a row, written into ``out``
+    (ROW,): from ``src`` = [z1, z2, z3, ξ] (m, m/s, m/s², ξ), ξ_n (12,) = the exosystem's
+    propagator times ξ (given: numpy's product, BLAS's order) and m (2,2) the error loop's
+    propagator, ``p = p*_n + m₀₀ e1 + m₀₁ e2``, ``v = v*_n + m₁₀ e1 + m₁₁ e2`` with
+    ``e1 = z1 − p*``, ``e2 = z2 − v*``, and ξ_n; z3 is left as ``out`` holds it. The
+    operations of get_at's numpy formulation in its order, so the same bits."""
+    for c in range(3):
+        e1 = src[c] - src[XI_COL + c]
+        e2 = src[3 + c] - src[XI_COL + 3 + c]
+        p = xi_n[c] + m[0, 0] * e1 + m[0, 1] * e2
+        v = xi_n[3 + c] + m[1, 0] * e1 + m[1, 1] * e2
+        out[c] = p
+        out[3 + c] = v
+    for c in range(12):
+        out[XI_COL + c] = xi_n[c]
 
 
 @kernel

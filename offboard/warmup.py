@@ -5,8 +5,9 @@ on its first call in a process: 0.3–0.5 s of CPU for the follower's kernels, 2
 compiling. Left to the first control step, that time lands inside the control loop: a
 late first answer in real time, and a start-up cost counted as control. :func:`warm_kernels`
 steps throwaway agents of the scenario (one follower, through its fused dcbf step and part
-by part, and one leader) for a few control periods on the scenario's initial state before
-the daemon starts, so the real agents' first step runs loaded code. The throwaway agents
+by part, and one leader) for a few control periods on the scenario's initial state, the
+last of them silent as in an outage, before the daemon starts, so the real agents' first
+step runs loaded code. The throwaway agents
 share nothing with the real ones but the process-wide caches (gain reports, propagators),
 and their log lines are muted.
 """
@@ -25,14 +26,15 @@ from offboard.follower import FollowerAgent
 from offboard.reference import xi_at_rest
 from swarm_common.scenario import Scenario
 
-PERIODS = 3  # control periods each throwaway agent is stepped
+PERIODS = 3  # control periods each throwaway agent is stepped hearing its neighbours
 
 log = logging.getLogger(__name__)
 
 
 def warm_kernels(sc: Scenario, method: str | None, form: Formation) -> float:
     """Step a throwaway follower and leader of ``sc`` (``method``) for :data:`PERIODS`
-    periods at rest on the initial state; returns the CPU time it took (s). The warm-up
+    periods at rest on the initial state, then one silent period (the neighbours' data
+    predicted); returns the CPU time it took (s). The warm-up
     is an optimisation: if it fails, a warning says why and the daemon starts as it
     would without it (its kernels then load on the first step)."""
     t0 = time.process_time()
@@ -65,10 +67,12 @@ def _step_throwaway_agents(sc: Scenario, method: str | None, form: Formation) ->
                 agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
                 if isinstance(agent, FollowerAgent):
                     agent.fused = front
-                for k in range(PERIODS):
+                for k in range(PERIODS + 1):
                     t = k * sc.control_dt
                     nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)
                             for j, e in ests.items() if j != aid}
-                    agent.step(k, t, p, v, nbrs, True)
+                    # the last period silent, as in an outage: the neighbours' data is a
+                    # period old and predicted (offboard.predictor.predict_row_into)
+                    agent.step(k, t, p, v, nbrs, k < PERIODS)
     finally:
         logging.disable(previous)

@@ -67,8 +67,8 @@ def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
     """warm_kernels steps the throwaway follower through the fused dcbf step
     (offboard.dcbf_front) and part by part (a step with a predicted pair), so the kernels
     of both are loaded, the QP's past its shortcut among them (the throwaway follower's
-    steps at rest reach it); checked in a fresh process, where nothing else has loaded
-    them."""
+    steps at rest reach it), and the neighbour prediction of an outage (its last period
+    is silent); checked in a fresh process, where nothing else has loaded them."""
     import subprocess
     import sys
 
@@ -82,8 +82,9 @@ def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
         "from offboard.dcbf_exact_kernel import pre_solve_kernel\n"
         "from offboard.qp_rows_kernel import write_rows_kernel\n"
         "from offboard.warmup import warm_kernels\n"
+        "from offboard.predictor import predict_row_into\n"
         "ks = (dcbf_front_into, nominal_into, dcbf_filter_rows_into, pre_solve_kernel,\n"
-        "      write_rows_kernel)\n"
+        "      write_rows_kernel, predict_row_into)\n"
         "assert not any(k.signatures for k in ks)\n"
         f"sc = load_scenario({str(root / 'scenarios' / 'cube8.toml')!r})\n"
         "warm_kernels(sc, 'dcbf', formation_from_scenario(sc))\n"
@@ -92,4 +93,4 @@ def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,
                          text=True, timeout=300, check=False)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert all(int(c) >= 1 for c in out.stdout.split()[-5:])
+    assert all(int(c) >= 1 for c in out.stdout.split()[-6:])
