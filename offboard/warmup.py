@@ -7,9 +7,8 @@ late first answer in real time, and a start-up cost counted as control. :func:`w
 steps throwaway agents of the scenario (one follower, through its fused dcbf step and part
 by part, and one leader) for a few control periods on the scenario's initial state, the
 last of them silent as in an outage, before the daemon starts, so the real agents' first
-step runs loaded code. The throwaway agents
-share nothing with the real ones but the process-wide caches (gain reports, propagators),
-and their log lines are muted.
+step runs loaded code. The throwaway agents share nothing with the real ones but the
+process-wide caches (gain reports, propagators), and their log lines are muted.
 """
 
 from __future__ import annotations
@@ -34,9 +33,9 @@ log = logging.getLogger(__name__)
 def warm_kernels(sc: Scenario, method: str | None, form: Formation) -> float:
     """Step a throwaway follower and leader of ``sc`` (``method``) for :data:`PERIODS`
     periods at rest on the initial state, then one silent period (the neighbours' data
-    predicted); returns the CPU time it took (s). The warm-up
-    is an optimisation: if it fails, a warning says why and the daemon starts as it
-    would without it (its kernels then load on the first step)."""
+    predicted); returns the CPU time it took (s). The warm-up is an optimisation: if it
+    fails, a warning says why and the daemon starts as it would without it (its kernels
+    then load on the first step)."""
     t0 = time.process_time()
     try:
         _step_throwaway_agents(sc, method, form)
