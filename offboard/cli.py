@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import ctypes.util
+import faulthandler
 import logging
 import os
 import signal
@@ -166,6 +167,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: --mavlink {args.mavlink!r}: {why}", file=sys.stderr)
         return 2
     configure_logging(args.log_level)
+    # SIGUSR1 writes every thread's stack to stderr (the daemon's log): a stalled or hung
+    # daemon on a companion computer can be inspected without stopping it
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     if args.die_with_parent and (why := die_with_parent()) is not None:
         print(f"offboard: --die-with-parent: {why}", file=sys.stderr)
         return 2

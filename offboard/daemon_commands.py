@@ -19,8 +19,10 @@ from swarm_common.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
-TAKEOFF_LATE_S = 1.0  # s, a take-off command's at_s may lie this far behind the step time
-TAKEOFF_LEAD_S = 60.0  # s, ... and at most this far ahead of it
+# s: a take-off command reaching a held daemon at most this long after its at_s joins the
+# common plan of t0 = at_s; a later one (the daemon's loop stalled) climbs from its step time
+TAKEOFF_LATE_S = 1.0
+TAKEOFF_LEAD_S = 60.0  # s, a take-off command's at_s may lie at most this far ahead
 
 
 class DaemonCommands:
@@ -74,11 +76,22 @@ class DaemonCommands:
 
     def _takeoff_command(self, cmd: wire.Command, t: float) -> None:
         """Coordinated take-off with the climbs at ``at_s`` (negative: now) if held on the
-        pad; ``at_s`` finite, at most TAKEOFF_LATE_S behind t and TAKEOFF_LEAD_S ahead."""
-        t0 = cmd.at_s if cmd.at_s >= 0.0 else t
-        if not (math.isfinite(cmd.at_s) and -TAKEOFF_LATE_S <= t0 - t <= TAKEOFF_LEAD_S):
+        pad; ``at_s`` finite and at most TAKEOFF_LEAD_S ahead of t, else dropped. A copy
+        that finds nothing held (started already, an airborne start) changes nothing. One
+        that arrives more than TAKEOFF_LATE_S after ``at_s`` (this daemon's loop stalled
+        while the others started) does not jump into the plan: this agent climbs the same
+        layered plan from t instead (docs/lifecycle.md)."""
+        if not math.isfinite(cmd.at_s) or cmd.at_s - t > TAKEOFF_LEAD_S:
             self._bad_command(cmd, f"at_s = {cmd.at_s!r} at t = {t:.2f} s")
-        elif self.agent.start_takeoff(t0):
+            return
+        if not self.agent.takeoff_held:
+            return
+        t0 = cmd.at_s if cmd.at_s >= 0.0 else t
+        if t - t0 > TAKEOFF_LATE_S:
+            log.warning("agent %d: take-off for t=%.2f s arrived late, at t=%.2f s: climbing "
+                        "from now", self.id, t0, t)
+            t0 = t
+        if self.agent.start_takeoff(t0):
             log.info("agent %d: take-off at t=%.2f s", self.id, t0)
 
     def _maybe_start_landing(self, t: float) -> None:

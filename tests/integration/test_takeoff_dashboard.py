@@ -8,8 +8,11 @@ climb, ``l``, everyone back on the ground with no collision."""
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import signal
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -22,9 +25,11 @@ from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
 from offboard.takeoff import takeoff_plan
 from swarm_common.scenario import load_scenario
+from swarm_common.wire import Command
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 EARLY_S = 2.5  # s after t0: the plan's climbs are at 1 m/s·(2.5 − 0.5) s = 2 m
+STALL_S = 3.0  # s a stalled daemon's process stays stopped (its vehicle's failsafe: 0.5 s)
 
 
 def log_text(app: DashboardApp) -> str:
@@ -74,18 +79,48 @@ async def until(pilot, pred, timeout: float, each=lambda: None) -> bool:
     return False
 
 
-def _daemon_takeoffs(launch) -> dict[str, tuple[bool, list[float]]]:
-    """Per daemon log: (held on its pad at start, take-off times it logged)."""
+def _daemon_takeoffs(launch) -> dict[str, tuple[bool, list[float], bool]]:
+    """Per daemon log: (held on its pad at start, take-off times it logged, whether the
+    command reached it late: offboard.daemon_commands, it then climbs from its step time)."""
     out = {}
     for c in launch.group.children[1:]:
         text = c.log_path.read_text(errors="replace")
         t0 = [float(x) for x in re.findall(r"take-off at t=([0-9.]+) s", text)]
-        out[c.name] = ("on its pad until the take-off command" in text, t0)
+        out[c.name] = ("on its pad until the take-off command" in text, t0, "arrived late" in text)
     return out
 
 
+def _daemon_lines(launch) -> str:
+    """The daemons' take-off lines and warnings (a failure's context)."""
+    keep = ("take-off", "WARNING", "ERROR")
+    return "\n".join(
+        f"{c.name}: {line}" for c in launch.group.children[1:]
+        for line in c.log_path.read_text(errors="replace").splitlines()
+        if any(k in line for k in keep)
+    )
+
+
+def _stall_on_takeoff(app: DashboardApp, launch, agent: int) -> Callable[[], None]:
+    """Stop (SIGSTOP) agent ``agent``'s daemon process as the dashboard publishes the
+    take-off command; the returned function resumes it (SIGCONT). A stalled companion
+    computer: the command reaches that daemon only after it resumes, late."""
+    (child,) = [c for c in launch.group.children if c.name == f"offboard-{agent}"]
+    publish = app.send_zenoh
+
+    def send(cmd: Command) -> None:
+        if cmd.kind == "takeoff":
+            os.kill(child.proc.pid, signal.SIGSTOP)
+        publish(cmd)
+
+    app.send_zenoh = send  # type: ignore[method-assign]
+    return lambda: os.kill(child.proc.pid, signal.SIGCONT)
+
+
 @pytest.mark.asyncio
-async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
+@pytest.mark.parametrize("stalled", [None, 1], ids=["all", "daemon-1-stalled-3s"])
+async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None) -> None:
+    """``stalled``: that daemon's process is stopped for STALL_S from the take-off command
+    on (offboard.daemon_commands: it then climbs from its own step time)."""
     sc = load_scenario(GROUND8)
     plan = takeoff_plan(sc)
     args = configure_parser(argparse.ArgumentParser()).parse_args(
@@ -96,12 +131,17 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
     ids = list(sc.ids)
     z_max = dict.fromkeys(ids, 0.0)
     leaders = set(sc.formation.leaders)
-    early_leader_z = 0.0  # the leaders' highest altitude up to t0 + EARLY_S (m)
+    # (mission time, the leaders' highest altitude (m)) of every truth message seen; the
+    # altitude up to t0 + EARLY_S is read after the run, once t0 is known: a loaded machine
+    # can stall this loop for seconds between the take-off and the line that logs its t0
+    leader_z: dict[float, float] = {}
+    truth_z_max = dict.fromkeys(ids, 0.0)
     t0 = np.inf
     min_dist = np.inf
+    resume = (lambda: None) if stalled is None else _stall_on_takeoff(app, launch, stalled)
 
     def sample() -> None:
-        nonlocal min_dist, early_leader_z
+        nonlocal min_dist
         v = app.view
         if v is None or v.sim_time is None:
             return
@@ -114,10 +154,11 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
         # position comes from the vehicle's own MAVLink odometry, fresher than the view's
         # mission time (the Zenoh truth) when the runner falls behind on a loaded machine
         truth = source.feed.snapshot().truth if source.feed is not None else None
-        if truth is not None and truth.t <= t0 + EARLY_S:
-            for k, i in enumerate(truth.ids):
-                if i in leaders:
-                    early_leader_z = max(early_leader_z, float(truth.p[k][2]))
+        if truth is not None:
+            z = {i: float(truth.p[k][2]) for k, i in enumerate(truth.ids)}
+            leader_z[float(truth.t)] = max(z[i] for i in leaders)
+            for i in ids:
+                truth_z_max[i] = max(truth_z_max[i], z.get(i, 0.0))
 
     def rows_z() -> list[float]:
         assert app.view is not None
@@ -137,11 +178,17 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
             await pilot.press("t", "u")
             assert await watch(lambda: "take-off at t=" in log_text(app), 20.0)
             t0 = float(re.findall(r"take-off at t=([0-9.]+) s", log_text(app))[0])
+            if stalled is not None:
+                await pilot.pause(STALL_S)
+                resume()
 
             def airborne() -> bool:
                 return all(z > 1.5 for z in z_max.values())
 
-            assert await watch(airborne, timeout=30.0), (z_max, launch.dead())
+            assert await watch(airborne, timeout=30.0), (
+                f"shown {z_max}, truth {truth_z_max}, dead {launch.dead()}\n"
+                + _daemon_lines(launch)
+            )
             # formed: leaders on their trajectory (after t_traj of the shifted plan)
             t_traj = takeoff_plan(sc, t0).t_traj
             assert await watch(lambda: app.view.sim_time >= t_traj, timeout=30.0)
@@ -154,17 +201,22 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
             assert await watch(down, timeout=40.0), (rows_z(), launch.dead())
             collisions = app.view.collisions
     finally:
+        resume()
         source.close()
         launch.stop()
     held = _daemon_takeoffs(launch)
+    early_leader_z = max((z for t, z in leader_z.items() if t <= t0 + EARLY_S), default=0.0)
     print(f"t0 = {t0:.2f} s, min distance {min_dist:.3f} m, early leader z {early_leader_z:.2f}"
           f" m, z_max {z_max}")
     assert collisions == 0
     assert all(z > 1.5 for z in z_max.values()), z_max
-    # the leaders climbed with the plan of t0 (2 m at t0 + 2.5 s), not from when armed ...
-    assert early_leader_z < 3.0, early_leader_z
-    # ... every daemon held its agent and started the one plan at t0
-    assert all(h and t == [pytest.approx(t0)] for h, t in held.values()), held
+    # every daemon held its agent and started the one plan at t0 (or, reached late after a
+    # stall of its loop, from its own step time; offboard.daemon_commands) ...
+    assert all(h and len(t) == 1 and (late or t[0] == pytest.approx(t0))
+               for h, t, late in held.values()), held
+    # ... and the leaders climbed with the plan of t0 (2 m at t0 + 2.5 s), not from when
+    # armed (t0 - TAKEOFF_LEAD_S: 3 m by then)
+    assert early_leader_z < 3.0, (early_leader_z, _daemon_lines(launch))
     # the top layer climbed higher than the bottom layer (layered staging altitudes)
     top = [i for k, i in enumerate(ids) if plan.z_stage[k] > plan.z_stage.min() + 1.0]
     assert min(z_max[i] for i in top) > 0.8 * plan.z_stage.max()

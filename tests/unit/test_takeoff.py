@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -187,11 +188,32 @@ def _daemon(cmds: list[wire.Command]) -> OffboardDaemon:
     return d
 
 
-@pytest.mark.parametrize("at_s", [float("nan"), float("inf"), 3.0, 500.0])
+@pytest.mark.parametrize("at_s", [float("nan"), float("inf"), 500.0])
 def test_daemon_drops_a_bad_takeoff_time(at_s: float) -> None:
     d = _daemon([wire.Command(kind="takeoff", at_s=at_s)])
-    d._apply_commands(10.0)  # 3.0: 7 s late; 500: 490 s ahead
+    d._apply_commands(10.0)  # 500: 490 s ahead
     assert d.bad_commands == 1 and d.agent.takeoff_held
+
+
+def test_late_takeoff_climbs_from_now_without_a_jump(caplog: pytest.LogCaptureFixture) -> None:
+    """A daemon whose loop stalled gets the command 7 s after its at_s: it climbs the same
+    plan from its step time, not from 7 s into the plan (its reference would jump up)."""
+    d = _daemon([wire.Command(kind="takeoff", at_s=3.0)])
+    pad = d.agent.current_reference(10.0)[0:3].copy()
+    with caplog.at_level(logging.WARNING):
+        d._apply_commands(10.0)
+    assert d.bad_commands == 0 and not d.agent.takeoff_held
+    assert d.agent.takeoff is not None and d.agent.takeoff.t0 == 10.0
+    assert "arrived late" in caplog.text
+    assert np.allclose(d.agent.current_reference(10.0)[0:3], pad)  # still on the pad, at rest
+    assert np.allclose(d.agent.current_reference(10.0)[3:], 0.0)
+    # a late copy of it changes nothing; 0.9 s late joins the common plan
+    d.bus.cmds = [wire.Command(kind="takeoff", at_s=3.0)]  # type: ignore[attr-defined]
+    d._apply_commands(11.0)
+    assert d.agent.takeoff.t0 == 10.0 and d.bad_commands == 0
+    d = _daemon([wire.Command(kind="takeoff", at_s=9.1)])
+    d._apply_commands(10.0)
+    assert d.agent.takeoff is not None and d.agent.takeoff.t0 == 9.1
 
 
 def test_daemon_takeoff_and_land_commands() -> None:
