@@ -213,7 +213,7 @@ class NeighbourPredictor:
                 continue
             if n > 0:  # else the copy holds the row as received
                 src = tab.rows[j]
-                xi_n = self.exo(n) @ src[XI]  # numpy's product, as get_at's (the same bits)
+                xi_n = self.exo(n) @ src[XI]  # numpy's product, as get_at's
                 predict_row_into(src, xi_n, self.err(bool(tab.leader[j]), n), rows[j])
             have[j] = True
         return rows, have
@@ -230,16 +230,12 @@ class NeighbourPredictor:
             return None
         tab = self.table
         r = tab.rows[j]
-        z1, z2, xi = r[Z1], r[Z2], r[XI]
         if n == 0:  # current data (bound 0): as received
-            return z1, z2, xi
-        xi_n = self.exo(n) @ xi
-        m = self.err(bool(tab.leader[j]), n)
-        e1 = z1 - xi_p(xi)
-        e2 = z2 - xi_v(xi)
-        p = xi_p(xi_n) + m[0, 0] * e1 + m[0, 1] * e2
-        v = xi_v(xi_n) + m[1, 0] * e1 + m[1, 1] * e2
-        return p, v, xi_n
+            return r[Z1], r[Z2], r[XI]
+        out = r.copy()
+        xi_n = self.exo(n) @ r[XI]  # numpy's product (BLAS's order), as predict_rows's
+        predict_row_into(r, xi_n, self.err(bool(tab.leader[j]), n), out)
+        return out[Z1], out[Z2], out[XI]
 
     def _periods_ahead(self, j: int, t: float) -> int | None:
         """Control periods to predict agent ``j``'s row over to reach ``t``: 0 for data
@@ -263,12 +259,13 @@ class NeighbourPredictor:
 
 @kernel
 def predict_row_into(src: np.ndarray, xi_n: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
-    """:meth:`NeighbourPredictor.get_at`'s prediction of a row, written into ``out``
-    (ROW,): from ``src`` = [z1, z2, z3, ξ] (m, m/s, m/s², ξ), ξ_n (12,) = the exosystem's
-    propagator times ξ (given: numpy's product, BLAS's order) and m (2,2) the error loop's
-    propagator, ``p = p*_n + m₀₀ e1 + m₀₁ e2``, ``v = v*_n + m₁₀ e1 + m₁₁ e2`` with
-    ``e1 = z1 − p*``, ``e2 = z2 − v*``, and ξ_n; z3 is left as ``out`` holds it. The
-    operations of get_at's numpy formulation in its order, so the same bits."""
+    """The prediction of a row n periods ahead (:meth:`NeighbourPredictor.get_at` and
+    :meth:`~NeighbourPredictor.predict_rows`), written into ``out`` (ROW,): from ``src`` =
+    [z1, z2, z3, ξ] (m, m/s, m/s², ξ), ξ_n (12,) = the exosystem's propagator times ξ
+    (given: numpy's product, BLAS's order) and m (2,2) the error loop's propagator,
+    ``p = p*_n + m₀₀ e1 + m₀₁ e2``, ``v = v*_n + m₁₀ e1 + m₁₁ e2`` with ``e1 = z1 − p*``,
+    ``e2 = z2 − v*``, and ξ_n; z3 is left as ``out`` holds it. The operations of the numpy
+    formulation (kept in tests/unit/test_predictor.py) in its order, so the same bits."""
     for c in range(3):
         e1 = src[c] - src[XI_COL + c]
         e2 = src[3 + c] - src[XI_COL + 3 + c]
