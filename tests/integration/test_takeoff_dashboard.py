@@ -25,7 +25,7 @@ from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
 from offboard.takeoff import takeoff_plan
 from swarm_common.scenario import load_scenario
-from swarm_common.wire import Command
+from swarm_common.wire import Command, Truth, WireError, decode
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 EARLY_S = 2.5  # s after t0: the plan's climbs are at 1 m/s·(2.5 − 0.5) s = 2 m
@@ -100,6 +100,27 @@ def _daemon_lines(launch) -> str:
     )
 
 
+def _record_leader_altitude(source, leaders: set[int], out: dict[float, float]) -> None:
+    """Keep (mission time, the leaders' highest altitude (m)) of every truth message the
+    dashboard's Zenoh feed receives, on its receiving thread: the test's own loop can
+    stall for seconds on a loaded machine and would miss the messages in between."""
+    feed = source.feed
+    assert feed is not None
+    ingest = feed.ingest
+
+    def spy(key: str, data: bytes) -> None:
+        ingest(key, data)
+        try:
+            obj = decode(data)
+        except WireError:
+            return
+        if isinstance(obj, Truth):
+            out[float(obj.t)] = max(float(obj.p[k][2]) for k, i in enumerate(obj.ids)
+                                    if i in leaders)
+
+    feed.ingest = spy  # type: ignore[method-assign]
+
+
 def _stall_on_takeoff(app: DashboardApp, launch, agent: int) -> Callable[[], None]:
     """Stop (SIGSTOP) agent ``agent``'s daemon process as the dashboard publishes the
     take-off command; the returned function resumes it (SIGCONT). A stalled companion
@@ -131,10 +152,12 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
     ids = list(sc.ids)
     z_max = dict.fromkeys(ids, 0.0)
     leaders = set(sc.formation.leaders)
-    # (mission time, the leaders' highest altitude (m)) of every truth message seen; the
-    # altitude up to t0 + EARLY_S is read after the run, once t0 is known: a loaded machine
-    # can stall this loop for seconds between the take-off and the line that logs its t0
+    # (mission time, the leaders' highest altitude (m)) of every truth message received;
+    # the altitude up to t0 + EARLY_S is read after the run, once t0 is known: a loaded
+    # machine can stall this loop for seconds between the take-off and the line that
+    # logs its t0
     leader_z: dict[float, float] = {}
+    _record_leader_altitude(source, leaders, leader_z)
     truth_z_max = dict.fromkeys(ids, 0.0)
     t0 = np.inf
     min_dist = np.inf
@@ -150,15 +173,10 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
         for r in v.rows:
             if r.pos is not None:
                 z_max[r.id] = max(z_max[r.id], r.pos[2])
-        # the leaders' altitude against mission time from one truth message: a row's
-        # position comes from the vehicle's own MAVLink odometry, fresher than the view's
-        # mission time (the Zenoh truth) when the runner falls behind on a loaded machine
         truth = source.feed.snapshot().truth if source.feed is not None else None
         if truth is not None:
-            z = {i: float(truth.p[k][2]) for k, i in enumerate(truth.ids)}
-            leader_z[float(truth.t)] = max(z[i] for i in leaders)
-            for i in ids:
-                truth_z_max[i] = max(truth_z_max[i], z.get(i, 0.0))
+            for k, i in enumerate(truth.ids):
+                truth_z_max[i] = max(truth_z_max[i], float(truth.p[k][2]))
 
     def rows_z() -> list[float]:
         assert app.view is not None
@@ -206,8 +224,9 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
         launch.stop()
     held = _daemon_takeoffs(launch)
     early_leader_z = max((z for t, z in leader_z.items() if t <= t0 + EARLY_S), default=0.0)
+    n_window = sum(t0 <= t <= t0 + EARLY_S for t in leader_z)
     print(f"t0 = {t0:.2f} s, min distance {min_dist:.3f} m, early leader z {early_leader_z:.2f}"
-          f" m, z_max {z_max}")
+          f" m ({n_window} truth messages in [t0, t0 + {EARLY_S} s]), z_max {z_max}")
     assert collisions == 0
     assert all(z > 1.5 for z in z_max.values()), z_max
     # every daemon held its agent and started the one plan at t0 (or, reached late after a
