@@ -6,6 +6,7 @@ leaders' real-time trajectory start). A mixin of :class:`offboard.daemon.Offboar
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
@@ -23,6 +24,9 @@ log = logging.getLogger(__name__)
 # common plan of t0 = at_s; a later one (the daemon's loop stalled) climbs from its step time
 TAKEOFF_LATE_S = 1.0
 TAKEOFF_LEAD_S = 60.0  # s, a take-off command's at_s may lie at most this far ahead
+# s: a daemon that reaches the land-all time t_L at most this late flies the common landing
+# plan of t_L; a later one (its loop stalled) flies that plan's pad, timed from its step
+LAND_LATE_S = 1.0
 
 
 class DaemonCommands:
@@ -96,9 +100,17 @@ class DaemonCommands:
 
     def _maybe_start_landing(self, t: float) -> None:
         """From the first step at or after ``land_at``: the common plan of offboard.landing,
-        computed for t_L = ``land_at`` (the same on every agent, no communication)."""
+        computed for t_L = ``land_at`` (the same on every agent, no communication). A step
+        more than LAND_LATE_S after t_L (this daemon's loop stalled across it) keeps the
+        plan's pads and flies its timing from t, from the reference it holds now, instead
+        of jumping into the plan, whose reference may by then be metres lower
+        (docs/lifecycle.md)."""
         if self.land_at is not None and t >= self.land_at and self.agent.landing is None:
             plan = landing_plan(self.sc, self.land_at)
+            if t - self.land_at > LAND_LATE_S:
+                log.warning("agent %d: land-all of t=%.2f s started late, at t=%.2f s: the "
+                            "same pad, timed from now", self.id, self.land_at, t)
+                plan = dataclasses.replace(plan, t_land=t)
             self.agent.start_landing(plan)
             log.info("agent %d: landing at t=%.2f s (transit %.2f s)", self.id, t, plan.t_h)
 

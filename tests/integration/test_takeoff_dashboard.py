@@ -121,15 +121,16 @@ def _record_leader_altitude(source, leaders: set[int], out: dict[float, float]) 
     feed.ingest = spy  # type: ignore[method-assign]
 
 
-def _stall_on_takeoff(app: DashboardApp, launch, agent: int) -> Callable[[], None]:
+def _stall_on_commands(app: DashboardApp, launch, agent: int) -> Callable[[], None]:
     """Stop (SIGSTOP) agent ``agent``'s daemon process as the dashboard publishes the
-    take-off command; the returned function resumes it (SIGCONT). A stalled companion
-    computer: the command reaches that daemon only after it resumes, late."""
+    take-off or the land-all command; the returned function resumes it (SIGCONT). A
+    stalled companion computer: the command reaches that daemon only after it resumes,
+    late (offboard.daemon_commands)."""
     (child,) = [c for c in launch.group.children if c.name == f"offboard-{agent}"]
     publish = app.send_zenoh
 
     def send(cmd: Command) -> None:
-        if cmd.kind == "takeoff":
+        if cmd.kind in ("takeoff", "land"):
             os.kill(child.proc.pid, signal.SIGSTOP)
         publish(cmd)
 
@@ -141,7 +142,8 @@ def _stall_on_takeoff(app: DashboardApp, launch, agent: int) -> Callable[[], Non
 @pytest.mark.parametrize("stalled", [None, 1], ids=["all", "daemon-1-stalled-3s"])
 async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None) -> None:
     """``stalled``: that daemon's process is stopped for STALL_S from the take-off command
-    on (offboard.daemon_commands: it then climbs from its own step time)."""
+    on, and again from the land-all (offboard.daemon_commands: it then climbs, and lands
+    on its pad, timed from its own step)."""
     sc = load_scenario(GROUND8)
     plan = takeoff_plan(sc)
     args = configure_parser(argparse.ArgumentParser()).parse_args(
@@ -161,7 +163,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
     truth_z_max = dict.fromkeys(ids, 0.0)
     t0 = np.inf
     min_dist = np.inf
-    resume = (lambda: None) if stalled is None else _stall_on_takeoff(app, launch, stalled)
+    resume = (lambda: None) if stalled is None else _stall_on_commands(app, launch, stalled)
 
     def sample() -> None:
         nonlocal min_dist
@@ -212,6 +214,9 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
             assert await watch(lambda: app.view.sim_time >= t_traj, timeout=30.0)
             await pilot.press("l")
             assert await watch(lambda: "land-all at t=" in log_text(app), 10.0)
+            if stalled is not None:
+                await pilot.pause(STALL_S)
+                resume()
 
             def down() -> bool:
                 return max(rows_z()) < 0.1

@@ -12,6 +12,7 @@ from conftest import CUBE8, ROOT
 from gcs.metrics import min_distance_by_phase
 from offboard.agent import make_agent
 from offboard.daemon import OffboardDaemon
+from offboard.landing import LandingReference, landing_plan
 from offboard.leader import LeaderAgent
 from offboard.takeoff import (
     climb_xi,
@@ -182,7 +183,8 @@ def _daemon(cmds: list[wire.Command]) -> OffboardDaemon:
     """OffboardDaemon's command handling alone (no links): a held ground8 leader."""
     d = OffboardDaemon.__new__(OffboardDaemon)
     d.id, d.land_at, d.bad_commands, d.extra_outages = 1, None, 0, []
-    d.agent = make_agent(load_scenario(GROUND8), 1)
+    d.sc = load_scenario(GROUND8)
+    d.agent = make_agent(d.sc, 1)
     d.agent.hold_for_takeoff()
     d.bus = _Bus(cmds)  # type: ignore[assignment]
     return d
@@ -229,6 +231,33 @@ def test_daemon_takeoff_and_land_commands() -> None:
     d.agent.start_takeoff(0.0)
     d._apply_commands(30.0)
     assert d.bad_commands == 1 and d.land_at is None
+
+
+def test_late_land_all_keeps_the_common_pad_and_flies_it_from_now(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A daemon whose loop stalled across the land-all time t_L = 20 s reaches it 4 s
+    late: it lands on the common plan's pad, timed from its step (its reference does not
+    jump 4 s into the plan); 0.5 s late it flies the common plan itself."""
+    sc = load_scenario(GROUND8)
+    common = landing_plan(sc, 20.0)
+    for late, t_land in ((4.0, 24.0), (0.5, 20.0)):
+        d = _daemon([])
+        d.agent.start_takeoff(0.0)
+        d.land_at = 20.0
+        held = d.agent.current_reference(20.0 + late).copy()
+        with caplog.at_level(logging.WARNING):
+            d._maybe_start_landing(20.0 + late)
+        landing = d.agent.landing
+        assert landing is not None and landing.plan.t_land == t_land
+        assert np.array_equal(landing.plan.pads, common.pads)
+        assert np.array_equal(landing.plan.descent_delay, common.descent_delay)
+        ref = d.agent.current_reference(20.0 + late)
+        if late > 1.0:
+            assert np.allclose(ref[0:6], held[0:6]) and "started late" in caplog.text
+        else:  # the common plan, 0.5 s in: not where a plan timed from now would be
+            assert np.array_equal(ref, LandingReference(
+                common, d.agent.index, d.agent.reference(20.0)).xi(20.5))
 
 
 def test_unknown_command_kind_fails_decode() -> None:
