@@ -68,6 +68,11 @@ ERROR = mavlink.MAV_SEVERITY_ERROR
 OUTAGES_S = (0.5, 1.0, 2.0, 5.0)
 MAV_ACTIONS = ("arm", "disarm", "offboard", "hold", "land")
 LAND_LEAD_S = 1.0  # s of mission time between the land-all key and the common t_L
+# a take-off or land-all is published again this many times, this far apart (s): a Zenoh
+# put is not acknowledged, and it is lost to a daemon whose link is congested (its process
+# stalled) or reconnecting; every daemon acts on the first copy and ignores the others
+COMMAND_REPEATS = 20
+COMMAND_REPEAT_S = 0.5
 TAKEOFF_LEAD_S = 1.0  # s of mission time between the last ACK and the common take-off t0
 WIDE_TABLE_COLUMNS = 150
 
@@ -104,6 +109,7 @@ class DashboardApp(App[int]):
         self.source = source
         self.commander = commander
         self.poll_s = poll_s
+        self.command_repeat_s = COMMAND_REPEAT_S  # s between the copies of a command
         self.view: SwarmView | None = None
         self.results: list[CommandResult] = []
         self.published: list[str] = []
@@ -338,6 +344,19 @@ class DashboardApp(App[int]):
             f"{what} ({who}) published",
             NOTICE,
         )
+        if cmd.kind in ("land", "takeoff"):
+            self.run_worker(self._repeat(cmd), group="repeat", exit_on_error=False)
+
+    async def _repeat(self, cmd: Command) -> None:
+        """Publish ``cmd`` again COMMAND_REPEATS times, ``command_repeat_s`` apart (the
+        same command: the same at_s), quietly (see COMMAND_REPEATS)."""
+        for _ in range(COMMAND_REPEATS):
+            await asyncio.sleep(self.command_repeat_s)
+            try:
+                self.commander.zenoh(cmd)
+            except Exception:  # the link went down: the first copy's outcome stands
+                log.debug("re-publishing %s failed", cmd.kind, exc_info=True)
+                return
 
     def _palette_takeoff(self) -> None:
         self.target_all = True

@@ -7,7 +7,7 @@ import pytest
 from conftest import free_tcp_port, settle, wait_for  # noqa: E402
 from dashboard_fakes import FakeCommander
 
-from gcs.dashboard.app import LAND_LEAD_S, DashboardApp
+from gcs.dashboard.app import COMMAND_REPEATS, LAND_LEAD_S, DashboardApp
 from gcs.dashboard.commands import LiveCommander
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.zenoh_feed import ZenohFeed
@@ -20,13 +20,17 @@ from swarm_common.zenoh_session import open_session
 async def test_land_all_goes_out_as_one_zenoh_command() -> None:
     cmd = FakeCommander(up=True, t=12.5)
     app = DashboardApp(recorded_source(), cmd)
+    app.command_repeat_s = 0.01  # the copies' spacing, short for the test
     async with app.run_test(size=(80, 24)) as pilot:
         await pilot.press("t", "l")
-        assert await settle(app, pilot, lambda: bool(cmd.zenoh_calls))
+        assert await settle(app, pilot, lambda: len(cmd.zenoh_calls) >= 2)
         assert cmd.mav_calls == []
-        (c,) = cmd.zenoh_calls
+        c = cmd.zenoh_calls[0]
         assert c.kind == "land" and c.agent == 0
         assert c.at_s == pytest.approx(12.5 + LAND_LEAD_S)
+        # the same command again (COMMAND_REPEATS): a put lost to one daemon is not final
+        assert len(cmd.zenoh_calls) == 1 + COMMAND_REPEATS
+        assert all(copy == c for copy in cmd.zenoh_calls)
 
 
 @pytest.mark.asyncio
