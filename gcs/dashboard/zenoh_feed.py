@@ -10,6 +10,16 @@ estimator health, status gone stale / back). Publishes :class:`Command` payloads
 By default it opens its own peer session that dials the simulator's listening
 endpoint (``swarm_common.zenoh_session.default_endpoint(offset)``); a session can be
 passed in instead (tests, or a process that already has one). No Textual here.
+
+**No Python on Zenoh's threads.** Each subscriber delivers into a
+:class:`zenoh.handlers.RingChannel` of :data:`RING_DEPTH` samples (it drops the oldest
+when full and never blocks the pushing thread), and a thread of this feed per subscriber
+decodes from it. ``gcs dashboard --launch`` passes the session of the swarm's router, and
+a Python callback there runs on the router's receive thread: it waits for the GIL and for
+this feed's lock, and while it waits the router forwards nothing to anyone. A busy
+dashboard on a loaded host stalled the truth of every daemon for longer than the
+runner-loss limit that way, and a FIFO channel would do the same once full. With the
+ring, a stalled dashboard loses its own oldest samples and nothing else.
 """
 
 from __future__ import annotations
@@ -48,6 +58,7 @@ log = logging.getLogger(__name__)
 METHODS = tuple(Method)
 NOTICE = mavlink.MAV_SEVERITY_NOTICE
 INFO = mavlink.MAV_SEVERITY_INFO
+RING_DEPTH = 256  # samples per subscriber kept for the feed's reader (the oldest dropped)
 
 
 @dataclass(frozen=True)
@@ -100,6 +111,7 @@ class ZenohFeed:
         self.clock = clock
         self._lock = threading.Lock()
         self._subs: list[Any] = []
+        self._readers: list[threading.Thread] = []
         self.truth: Truth | None = None
         self.truth_time: float | None = None
         self.status: dict[int, tuple[Status, float]] = {}
@@ -115,21 +127,30 @@ class ZenohFeed:
             self._session = open_session(self.mode, listen=self.listen, connect=self.connect,
                                          config_file=self.config_file)
         s = self._session
-        self._subs = [
-            s.declare_subscriber(key_truth(self.swarm), self._on_sample),
-            s.declare_subscriber(key_status(self.swarm, "*"), self._on_sample),
-            s.declare_subscriber(key_estimate(self.swarm, "*"), self._on_sample),
+        keys = (key_truth(self.swarm), key_status(self.swarm, "*"),
+                key_estimate(self.swarm, "*"))
+        self._subs = [s.declare_subscriber(k, zenoh.handlers.RingChannel(RING_DEPTH))
+                      for k in keys]
+        self._readers = [
+            threading.Thread(target=self._read, args=(sub.handler,), daemon=True,
+                             name=f"zenoh-feed-{i}")
+            for i, sub in enumerate(self._subs)
         ]
+        for th in self._readers:
+            th.start()
         self.started_at = self.clock()
         return self
 
     def close(self) -> None:
-        for sub in self._subs:
+        for sub in self._subs:  # closes its channel: its reader's recv() raises and it ends
             try:
                 sub.undeclare()
             except zenoh.ZError as exc:  # the session is already gone
                 log.debug("undeclare %s: %s", sub, exc)
         self._subs = []
+        for th in self._readers:
+            th.join(timeout=1.0)
+        self._readers = []
         if self._own_session and self._session is not None:
             try:
                 self._session.close()
@@ -138,6 +159,15 @@ class ZenohFeed:
             self._session = None
 
     # -- receive -----------------------------------------------------------------
+    def _read(self, channel: Any) -> None:
+        """A reader thread: every sample of one subscriber's ring, until it is closed."""
+        while True:
+            try:
+                sample = channel.recv()
+            except zenoh.ZError:  # undeclared (or the session closed): nothing more
+                return
+            self._on_sample(sample)
+
     def _on_sample(self, sample: Any) -> None:
         try:
             data = sample.payload.to_bytes()
@@ -150,7 +180,7 @@ class ZenohFeed:
         self.ingest(key, data)
 
     def ingest(self, key: str, data: bytes) -> None:
-        """Decode one payload received on ``key`` (Zenoh callback thread, or tests)."""
+        """Decode one payload received on ``key`` (a reader thread, or tests)."""
         now = self.clock()
         try:
             obj = decode(data)

@@ -136,3 +136,59 @@ def test_feed_publishes_commands(sessions):
             feed.switch_method("magic")
     finally:
         sub.undeclare()
+
+
+def truth_at(step: int) -> Truth:
+    return Truth(
+        step=step, t=0.02 * step, ids=[1, 2, 3], p=np.zeros((3, 3)), v=np.zeros((3, 3)),
+        att=np.zeros((3, 3)), thrust=np.ones(3), lumped=np.zeros((3, 3)),
+        armed=[True] * 3, mode=["OFFBOARD"] * 3,
+    )
+
+
+def test_a_stalled_feed_on_the_router_session_does_not_stall_the_router():
+    """``gcs dashboard --launch`` runs its feed on the swarm router's own session. While
+    the feed cannot take in anything (its lock held here: a dashboard busy or descheduled
+    on a loaded host), the router still forwards every truth from the simulator to the
+    daemons, and the feed catches up with the newest once it runs again. With a Python
+    callback as the subscriber's handler (zenoh-python queues the samples for the
+    callback's thread, about 256 of them), the router forwarded nothing more once that
+    queue was full: the daemons got truth up to step 258 of 1000 here until the lock was
+    released."""
+    from gcs.router import open_router
+
+    LAST = 1000
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_router([ep])
+    feed = ZenohFeed("t3", ids=[1, 2, 3], session=router).start()
+    sim = open_session("client", connect=[ep])
+    daemon = open_session("client", connect=[ep])
+    got: list[int] = []
+    sub = daemon.declare_subscriber(key_truth("t3"), lambda s: got.append(
+        decode(s.payload.to_bytes()).step))
+
+    def both_hear() -> bool:  # the clients may need a moment to reach the router
+        sim.put(key_truth("t3"), encode(truth_at(1)))
+        return bool(got) and feed.truth is not None
+
+    def send_last() -> bool:
+        sim.put(key_truth("t3"), encode(truth_at(LAST)))
+        return True
+
+    try:
+        assert wait_for(both_hear)
+        with feed._lock:  # the feed's reader stops at its first sample from here on
+            for k in range(2, LAST + 1):  # 4 times the ring, and any queue of ~256
+                sim.put(key_truth("t3"), encode(truth_at(k)))
+            # the newest truth is forwarded while the feed is stuck (sent again while it
+            # has not arrived: a put may be dropped by a congested sender)
+            assert wait_for(lambda: send_last() and LAST in got, timeout=15.0), (
+                f"daemon got up to {max(got)}")
+        assert wait_for(lambda: send_last() and feed.truth is not None
+                        and feed.truth.step == LAST)
+    finally:
+        sub.undeclare()
+        feed.close()
+        daemon.close()
+        sim.close()
+        router.close()
