@@ -25,7 +25,7 @@ from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
 from offboard.takeoff import takeoff_plan
 from swarm_common.scenario import load_scenario
-from swarm_common.wire import Command
+from swarm_common.wire import Command, Truth, WireError, decode, key_truth
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 EARLY_S = 2.5  # s after t0: the plan's climbs are at 1 m/s·(2.5 − 0.5) s = 2 m
@@ -105,6 +105,27 @@ def _daemon_lines(launch) -> str:
     )
 
 
+def _record_truth(feed, leaders: set[int], leader_z: dict[float, float]) -> None:
+    """Record (mission time, the leaders' highest altitude) of every truth ``feed`` takes
+    in, on the feed's own reader thread (it runs no Python on the router's threads:
+    gcs.dashboard.zenoh_feed)."""
+    ingest, key = feed.ingest, key_truth(feed.swarm)
+
+    def record(k: str, data: bytes) -> None:
+        ingest(k, data)
+        if k != key:
+            return
+        try:
+            m = decode(data)
+        except WireError:
+            return
+        if isinstance(m, Truth):
+            leader_z[float(m.t)] = max(
+                float(m.p[j][2]) for j, i in enumerate(m.ids) if i in leaders)
+
+    feed.ingest = record
+
+
 def _stall_on_commands(app: DashboardApp, launch, agent: int) -> Callable[[], None]:
     """Stop (SIGSTOP) agent ``agent``'s daemon process as the dashboard publishes the
     take-off or the land-all command; the returned function resumes it (SIGCONT). A
@@ -138,13 +159,12 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
     ids = list(sc.ids)
     z_max = dict.fromkeys(ids, 0.0)
     leaders = set(sc.formation.leaders)
-    # (mission time, the leaders' highest altitude (m)) of every truth message sampled; the
-    # altitude up to t0 + EARLY_S is read after the run, once t0 is known: a loaded machine
-    # can stall this loop for seconds between the take-off and the line that logs its t0.
-    # (Not recorded on the feed's receiving thread: that thread also routes the swarm's
-    # Zenoh traffic, the router living in this process, and work there stalled the truth
-    # of every daemon in three of four loaded runs; docs/testing.md)
+    # (mission time, the leaders' highest altitude (m)) of every truth message the feed
+    # takes in, recorded on its reader thread; the altitude up to t0 + EARLY_S is read
+    # after the run, once t0 is known: a loaded machine can stall the test's loop for
+    # seconds between the take-off and the line that logs its t0
     leader_z: dict[float, float] = {}
+    _record_truth(source.feed, leaders, leader_z)
     truth_z_max = dict.fromkeys(ids, 0.0)
     t0 = np.inf
     min_dist = np.inf
@@ -164,9 +184,6 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
         if truth is not None:
             for k, i in enumerate(truth.ids):
                 truth_z_max[i] = max(truth_z_max[i], float(truth.p[k][2]))
-            leader_z[float(truth.t)] = max(
-                float(truth.p[k][2]) for k, i in enumerate(truth.ids) if i in leaders
-            )
 
     def rows_z() -> list[float]:
         assert app.view is not None
@@ -222,7 +239,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
     early_leader_z = max((z for t, z in leader_z.items() if t <= t0 + EARLY_S), default=0.0)
     n_window = sum(t0 <= t <= t0 + EARLY_S for t in leader_z)
     print(f"t0 = {t0:.2f} s, min distance {min_dist:.3f} m, early leader z {early_leader_z:.2f}"
-          f" m ({n_window} truth messages sampled in [t0, t0 + {EARLY_S} s]), z_max {z_max}")
+          f" m ({n_window} truth messages recorded in [t0, t0 + {EARLY_S} s]), z_max {z_max}")
     assert collisions == 0
     assert all(z > 1.5 for z in z_max.values()), z_max
     # every daemon held its agent and started the one plan at t0 (or, reached late after a
