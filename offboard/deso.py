@@ -28,14 +28,11 @@ to V_EVAL_MAX, the gradient is normalised, ζ̂ is projected onto a box of physi
 for GATE_HOLD_S (never during start-up transients or outages).
 The whole period is then one affine map ``X⁺ = A_S X + Σ_s G_s (u_s + f̂)``.
 
-:func:`gain_report` checks the gains per eigen-channel (``s³ + β1λ s² + β2λ s + β3λ``
-Hurwitz ⇔ β1β2λ > β3) and the *sampled* network loop by the spectral radius of its
-one-period transition, with post-update publishing and with a one-step stale exchange.
+:func:`offboard.deso_gains.gain_report` checks the gains per eigen-channel and the
+sampled network loop (Departure 7).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import expm
@@ -115,140 +112,6 @@ def _cont_matrix(
         a[6:9, 3:6] = -k3 * dmat
         a[6:9, 12:15] = k3 * i3
     return a
-
-
-@dataclass
-class GainReport:
-    """Numbers of the DESO gain check (Departure 7); ``lines()`` for printing at start-up."""
-
-    beta: tuple[float, ...]
-    dt: float
-    substeps: int
-    lambda_ff: np.ndarray
-    margin: np.ndarray  # β1 β2 λ − β3 per channel (>0 ⇔ Hurwitz)
-    max_real_pole: float  # slowest continuous pole over all channels (<0)
-    fastest_bandwidth: float  # β1 λ_max  (rad/s)
-    euler_number: float  # δ β1 λ_max with δ = dt/substeps (explicit Euler needs < 2)
-    rho_post_update: float  # spectral radius, exact sub-steps, post-update exchange
-    rho_stale: float  # same with neighbours' estimates one period stale
-    rho_euler_post: float  # explicit Euler sub-steps, post-update exchange
-    rho_single_euler_stale: float  # one Euler step per period, one-step stale (naive)
-    paper_condition: bool  # β2 > β1 + β3/λ_min (paper §3)
-    kappa: tuple[float, ...] = (0.0, 0.0)  # velocity-innovation gains κ2, κ3
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def ok(self) -> bool:
-        return bool(self.max_real_pole < 0.0 and self.rho_post_update < 1.0)
-
-    def lines(self) -> list[str]:
-        b = self.beta
-        return [
-            f"DESO gains beta = {b[0]:g}/{b[1]:g}/{b[2]:g}, kappa = {self.kappa[0]:g}/"
-            f"{self.kappa[1]:g}, dt = {self.dt:g} s x {self.substeps} sub-steps",
-            f"  lambda(observer Laplacian) in [{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; "
-            f"channel margin min(b1 b2 lam - b3) = {self.margin.min():.1f} "
-            f"({'Hurwitz' if np.all(self.margin > 0) else 'NOT Hurwitz'} without kappa); "
-            f"slowest pole {self.max_real_pole:.3f} 1/s",
-            f"  paper condition b2 > b1 + b3/lam_min: {self.paper_condition}",
-            f"  fastest channel b1*lam_max = {self.fastest_bandwidth:.1f} rad/s; "
-            f"dt_sub*b1*lam_max = {self.euler_number:.2f} (< 2 for explicit Euler)",
-            f"  sampled loop spectral radius: exact sub-steps post-update "
-            f"{self.rho_post_update:.4f}, "
-            f"one-step stale {self.rho_stale:.4f}; Euler sub-steps {self.rho_euler_post:.4f}; "
-            f"single Euler step + stale {self.rho_single_euler_stale:.4f}",
-            f"  => {'OK' if self.ok else 'UNSTABLE'}",
-        ]
-
-
-def _network_transition(
-    form: Formation, beta: tuple[float, ...], dt: float, substeps: int, euler: bool,
-    leader_anchor: float = 0.0, kappa: tuple[float, ...] = (0.0, 0.0),
-) -> tuple[np.ndarray, np.ndarray]:
-    """One-period error transition of all followers: E_{k+1} = T0 E_k + T1 E_nbr.
-
-    E = [z̃1; z̃2; z̃3] stacked per follower (9 per follower). T1 multiplies the neighbour
-    data actually used (current for post-update, previous for stale).
-    """
-    fol = form.follower_idx
-    nf = len(fol)
-    pos = {a: k for k, a in enumerate(fol)}
-    t0 = np.zeros((9 * nf, 9 * nf))
-    t1 = np.zeros((9 * nf, 9 * nf))
-    delta = dt / substeps
-    for k, i in enumerate(fol):
-        wts = observer_weights(form, i, leader_anchor)
-        dmat = np.zeros((3, 3))
-        for pij in wts.values():
-            dmat += pij
-        a = _cont_matrix(dmat, beta, kappa)
-        m = np.eye(18) + a * delta if euler else expm(a * delta)
-        mm = np.linalg.matrix_power(m, substeps)[:9, :15]
-        t0[9 * k : 9 * k + 9, 9 * k : 9 * k + 9] = mm[:, :9]
-        for j, pij in wts.items():
-            if j not in pos:
-                continue
-            c = pos[j]
-            t1[9 * k : 9 * k + 9, 9 * c : 9 * c + 3] += mm[:, 9:12] @ pij
-            t1[9 * k : 9 * k + 9, 9 * c + 3 : 9 * c + 6] += mm[:, 12:15] @ pij
-    return t0, t1
-
-
-def _rho(t0: np.ndarray, t1: np.ndarray, stale: bool) -> float:
-    if not stale:
-        return float(np.max(np.abs(np.linalg.eigvals(t0 + t1))))
-    n = t0.shape[0]
-    big = np.block([[t0, t1], [np.eye(n), np.zeros((n, n))]])
-    return float(np.max(np.abs(np.linalg.eigvals(big))))
-
-
-def gain_report(
-    form: Formation, beta: tuple[float, ...], dt: float, substeps: int,
-    leader_anchor: float = 0.0, kappa: tuple[float, ...] = (0.0, 0.0),
-) -> GainReport:
-    """Per-channel and sampled-loop stability numbers of the DESO gains (Departure 7).
-
-    The channels are the eigenvalues of the observer's Laplacian
-    ``L_ff + leader_anchor·blockdiag(m_i I₃)`` (m_i leaders sensed by follower i;
-    ``Formation.observer_laplacian``; = L_ff for the paper's observer).
-    """
-    b1, b2, b3 = (float(x) for x in beta)
-    lam = form.observer_eigs(leader_anchor)
-    margin = b1 * b2 * lam - b3
-    k2, k3 = (float(k) for k in kappa)
-    poles = [
-        np.linalg.eigvals(np.array([[-b1 * x, 1.0, 0.0], [-b2 * x, -k2 * x, 1.0],
-                                    [-b3 * x, -k3 * x, 0.0]]))
-        for x in lam
-    ]
-    max_re = float(max(np.max(p.real) for p in poles))
-    la = leader_anchor
-    t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False, leader_anchor=la,
-                                 kappa=(k2, k3))
-    rho_post = _rho(t0, t1, stale=False)
-    rho_stale = _rho(t0, t1, stale=True)
-    e0, e1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=True, leader_anchor=la,
-                                 kappa=(k2, k3))
-    rho_e = _rho(e0, e1, stale=False)
-    s0, s1 = _network_transition(form, (b1, b2, b3), dt, 1, euler=True, leader_anchor=la,
-                                 kappa=(k2, k3))
-    rho_s = _rho(s0, s1, stale=True)
-    return GainReport(
-        beta=(b1, b2, b3),
-        dt=dt,
-        substeps=substeps,
-        lambda_ff=lam,
-        margin=margin,
-        max_real_pole=max_re,
-        fastest_bandwidth=b1 * float(lam[-1]),
-        euler_number=dt / substeps * b1 * float(lam[-1]),
-        rho_post_update=rho_post,
-        rho_stale=rho_stale,
-        rho_euler_post=rho_e,
-        rho_single_euler_stale=rho_s,
-        paper_condition=bool(b2 > b1 + b3 / float(lam[0])),
-        kappa=(k2, k3),
-    )
 
 
 class DESO:

@@ -21,7 +21,8 @@ from offboard.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
 from offboard.daemon_peers import peer_ids
 from offboard.dcbf_filter import DcbfFilter
 from offboard.dcbf_front import DcbfFront
-from offboard.deso import DESO, GainReport, gain_report
+from offboard.deso import DESO
+from offboard.deso_gains import GainReport, gain_report
 from offboard.governor import governor_for, log_governor
 from offboard.identity_memo import ContentMemo
 from offboard.neighbour_accel import NeighbourAccel

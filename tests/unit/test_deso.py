@@ -14,11 +14,11 @@ from offboard.deso import (
     ZETA_HI,
     ZETA_LO,
     adapt_step,
-    gain_report,
     model_accel,
     regressor,
     regressor_t_times,
 )
+from offboard.deso_gains import gain_report
 from offboard.peer_table import rows_of
 from swarm_common.scenario import load_scenario
 from vehicle_sim.dynamics import regressor as sim_regressor

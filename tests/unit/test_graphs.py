@@ -14,7 +14,8 @@ from offboard.bearing import (
     check_observable,
     formation_from_scenario,
 )
-from offboard.deso import DESO, gain_report, observer_weights
+from offboard.deso import DESO, observer_weights
+from offboard.deso_gains import gain_report
 from offboard.peer_table import rows_of
 from offboard.reference import DesiredStateObserver, LeaderTrajectory
 from swarm_common import graphs
