@@ -84,8 +84,8 @@ class Formation:
     vertices: np.ndarray  # (N, 3)
     edges: list[tuple[int, int]]
     neighbours: list[list[int]]  # per index, sorted neighbour indices
-    g_star: np.ndarray  # (N, N, 3) desired bearings (0 on the diagonal)
-    p_star: np.ndarray  # (N, N, 3, 3) desired projectors P*_ij
+    g_star: np.ndarray  # (N, N, 3) desired bearings g*_ij of graph edges (0 elsewhere)
+    p_star: np.ndarray  # (N, N, 3, 3) desired projectors P*_ij of graph edges (0 elsewhere)
     laplacian: np.ndarray  # (3N, 3N)
     l_ff: np.ndarray
     l_fl: np.ndarray
@@ -199,13 +199,13 @@ def build_formation(
     for i, j in edges:
         nbrs[i].append(j)
         nbrs[j].append(i)
+    # the observers read P*_ij of graph neighbours only: O(edges) work, not O(N²) pairs
     g_star = np.zeros((n, n, 3))
     p_star = np.zeros((n, n, 3, 3))
-    for i in range(n):
-        for j in range(n):
-            if i != j:
-                g_star[i, j] = bearing(v[i], v[j])
-                p_star[i, j] = projector(g_star[i, j])
+    for i, j in edges:
+        for a, b in ((i, j), (j, i)):
+            g_star[a, b] = bearing(v[a], v[b])
+            p_star[a, b] = projector(g_star[a, b])
     fb, lb = _blocks(follower_idx), _blocks(leader_idx)
     l_ff = lap[np.ix_(fb, fb)]
     return Formation(
