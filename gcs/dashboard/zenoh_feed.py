@@ -166,7 +166,12 @@ class ZenohFeed:
                 sample = channel.recv()
             except zenoh.ZError:  # undeclared (or the session closed): nothing more
                 return
-            self._on_sample(sample)
+            try:
+                self._on_sample(sample)
+            except Exception:  # a payload that breaks a handler: counted, reading goes on
+                log.warning("Zenoh sample not taken in", exc_info=True)
+                with self._lock:
+                    self.bad_payloads += 1
 
     def _on_sample(self, sample: Any) -> None:
         try:
