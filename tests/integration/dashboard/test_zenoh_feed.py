@@ -192,3 +192,23 @@ def test_a_stalled_feed_on_the_router_session_does_not_stall_the_router():
         daemon.close()
         sim.close()
         router.close()
+
+
+def test_a_sample_that_breaks_a_handler_is_counted_and_reading_goes_on(sessions):
+    sim, feed = sessions
+    ingest, broken = feed.ingest, []
+
+    def breaks_once(key: str, data: bytes) -> None:
+        if not broken:
+            broken.append(key)
+            raise KeyError("a handler's bug")
+        ingest(key, data)
+
+    feed.ingest = breaks_once
+
+    def pump() -> bool:  # the dialling peer may need a moment: keep publishing
+        sim.put(key_truth("t1"), encode(truth_at(7)))
+        return feed.truth is not None
+
+    assert wait_for(pump)
+    assert broken and feed.bad_payloads >= 1 and feed.truth.step == 7
