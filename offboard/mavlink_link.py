@@ -18,6 +18,9 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
   (:class:`offboard.link_guard.CommandRetry`);
 * **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
   dropped and counted.
+* **unread telemetry**: a datagram made only of messages the daemon does not read is
+  dropped from the frames' headers, undecoded and unverified (:mod:`offboard.frame_peek`),
+  unless a ``.tlog`` is kept.
 
 Fault injection (docs/faults.md): with a ``[faults]`` plan for this agent's ``mavlink``
 link, every datagram sent goes through a seeded :class:`swarm_common.faults.FaultInjector`
@@ -46,6 +49,7 @@ from typing import Any, BinaryIO, SupportsFloat
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from offboard.frame_peek import unread_frames  # noqa: E402
 from offboard.link_guard import CommandRetry, DropLog, StampGuard, odometry_fields_ok  # noqa: E402
 from offboard.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
 from swarm_common import faults as fault_plan  # noqa: E402
@@ -211,6 +215,11 @@ class VehicleLink:
         if self.peer is not None and addr != self.peer:
             self.drops.drop("foreign address", f"datagram from {addr[0]}:{addr[1]}", now)
             return
+        unread = None if self._tlog is not None else unread_frames(data)
+        if unread is not None:  # nothing the daemon reads: dropped undecoded (frame_peek)
+            for sysid, compid, kind in unread:
+                self._drop_unread(sysid, compid, kind, now)
+            return
         self._reset_parser()
         try:
             msgs = self.mav.parse_buffer(data) or []
@@ -256,6 +265,17 @@ class VehicleLink:
         self._log(msg.get_msgbuf())
         self._handle(msg, kind, now)
         if self.trim.on_message(kind, now):
+            self._send(stop_streams_message(self.agent_id))
+
+    def _drop_unread(self, sysid: int, compid: int, kind: str, now: float) -> None:
+        """What :meth:`_accept` does with a message the daemon does not read, from the
+        frame's header (:mod:`offboard.frame_peek`): counted, and the stop-streams request
+        sent again when it is due."""
+        if sysid != self.agent_id or compid != COMP_AUTOPILOT:
+            self.drops.drop("foreign system", f"{kind} from {sysid}/{compid}", now)
+        elif not self.locked:
+            self.drops.counts["before lock"] = self.drops.counts.get("before lock", 0) + 1
+        elif self.trim.on_message(kind, now):
             self._send(stop_streams_message(self.agent_id))
 
     def _handle(self, msg: Any, kind: str, now: float) -> None:
