@@ -51,7 +51,17 @@ class MissionError(RuntimeError):
 
 
 AbortHook = Callable[[Recorder, dict[str, Any], str], None]
-STARTUP_TIMEOUT_S = 90.0  # wall, from start to the first truth
+STARTUP_TIMEOUT_S = 90.0  # wall: the start-up (to step 1) may take at least this long
+STARTUP_PER_PROCESS_S = 10.0  # wall, per child: its interpreter, imports and kernels
+
+
+def startup_timeout_s(processes: int) -> float:
+    """How long the start-up may take (wall s, from the start to step 1: every daemon
+    ready and the simulator's barrier at t_0 passed): :data:`STARTUP_TIMEOUT_S`, or
+    :data:`STARTUP_PER_PROCESS_S` per child process when that is longer (64 daemons,
+    one per agent, start in about 2 minutes on 2 loaded cores)."""
+    return max(STARTUP_TIMEOUT_S, STARTUP_PER_PROCESS_S * processes)
+
 CHECKPOINT_EVERY_S = 10.0  # wall: metrics.json + series.npz so far, marked aborted
 
 
@@ -234,6 +244,7 @@ def _supervise(
     ``processes_at_first_step`` / ``steps_from_first``: each process's CPU when stepping
     began, so that the stepping cost can be told from the start-up)."""
     out: dict[str, Any] = {}
+    startup_limit = startup_timeout_s(len(group.children))
     failed: list[int] = facts["failed_agents"]
     last_k = -1
     last_change = t_run0 = next_ckpt = time.monotonic()
@@ -265,9 +276,16 @@ def _supervise(
             if victim is not None and not facts["killed_agents"] and k * dt >= (kill_at or 0.0):
                 group.kill(victim)
                 facts["killed_agents"].append(kill_agent)
-            _check_children(group, failed, k * dt)
-            # before the first truth: 9 interpreters importing numpy on a loaded machine
-            limit = stall_timeout if k >= 0 else max(stall_timeout, STARTUP_TIMEOUT_S)
+            _check_children(group, failed, max(k, 0) * dt)
+            if failed and k < 1:  # the start barrier waits for every vehicle: it never passes
+                raise MissionError(
+                    f"the daemon of agent(s) {', '.join(map(str, failed))} exited before the "
+                    "start; the simulator starts when every vehicle is armed in OFFBOARD, so "
+                    f"the run cannot start; see logs in {out_dir}"
+                )
+            # the start-up, to step 1: the simulator offers t_0 (truth of step 0) until
+            # every daemon is up and answers in OFFBOARD (its barrier)
+            limit = stall_timeout if k >= 1 else max(stall_timeout, startup_limit)
             if time.monotonic() - last_change > limit:
                 raise MissionError(
                     f"run stalled at step {k} for {limit:.0f} s; see logs in {out_dir}"
@@ -300,9 +318,9 @@ def _check_children(group: ProcessGroup, failed: list[int], t: float) -> None:
         for aid in parse_agents(child.name.removeprefix("offboard-")):
             if aid not in failed:
                 failed.append(aid)
-                log.warning("agent %d's daemon exited (code %s) at t = %.2f s; the run goes "
-                            "on without it (see %s)", aid, child.proc.returncode, t,
-                            child.log_path)
+                then = "the run goes on without it" if t > 0 else "before the start"
+                log.warning("agent %d's daemon exited (code %s) at t = %.2f s, %s (see %s)",
+                            aid, child.proc.returncode, t, then, child.log_path)
 
 
 def run_and_score(
