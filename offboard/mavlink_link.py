@@ -249,14 +249,9 @@ class VehicleLink:
             why = "bad signature" if reason.startswith("Invalid signature") else "bad data"
             self.drops.drop(why, reason, now)
             return
-        if msg.get_srcSystem() != self.agent_id or msg.get_srcComponent() != COMP_AUTOPILOT:
-            self.drops.drop("foreign system", f"{kind} from {msg.get_srcSystem()}/"
-                            f"{msg.get_srcComponent()}", now)
+        if not self._admit(msg.get_srcSystem(), msg.get_srcComponent(), kind, now):
             return
-        if not self.locked:
-            if kind != "HEARTBEAT":
-                self.drops.counts["before lock"] = self.drops.counts.get("before lock", 0) + 1
-                return
+        if not self.locked:  # this HEARTBEAT locks the link
             self.locked = True
             self.peer = addr
             where = f"{addr[0]}:{addr[1]}" if addr else self.url
@@ -267,15 +262,22 @@ class VehicleLink:
         if self.trim.on_message(kind, now):
             self._send(stop_streams_message(self.agent_id))
 
+    def _admit(self, sysid: int, compid: int, kind: str, now: float) -> bool:
+        """False (and counted) unless the message comes from this link's vehicle and, before
+        the lock, is a HEARTBEAT."""
+        if sysid != self.agent_id or compid != COMP_AUTOPILOT:
+            self.drops.drop("foreign system", f"{kind} from {sysid}/{compid}", now)
+            return False
+        if not self.locked and kind != "HEARTBEAT":
+            self.drops.counts["before lock"] = self.drops.counts.get("before lock", 0) + 1
+            return False
+        return True
+
     def _drop_unread(self, sysid: int, compid: int, kind: str, now: float) -> None:
         """What :meth:`_accept` does with a message the daemon does not read, from the
         frame's header (:mod:`offboard.frame_peek`): counted, and the stop-streams request
         sent again when it is due."""
-        if sysid != self.agent_id or compid != COMP_AUTOPILOT:
-            self.drops.drop("foreign system", f"{kind} from {sysid}/{compid}", now)
-        elif not self.locked:
-            self.drops.counts["before lock"] = self.drops.counts.get("before lock", 0) + 1
-        elif self.trim.on_message(kind, now):
+        if self._admit(sysid, compid, kind, now) and self.trim.on_message(kind, now):
             self._send(stop_streams_message(self.agent_id))
 
     def _handle(self, msg: Any, kind: str, now: float) -> None:
