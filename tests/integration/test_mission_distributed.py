@@ -21,7 +21,7 @@ from conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from gcs.inproc import run_inproc  # noqa: E402
-from gcs.mission import recorded_metrics, run_distributed  # noqa: E402
+from gcs.mission import MissionError, recorded_metrics, run_distributed  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
 from swarm_common.scenario import load_scenario  # noqa: E402
 
@@ -92,6 +92,16 @@ def test_killed_follower_enters_failsafe_and_others_stay_clear(tmp_path: Path) -
     )
     assert dmin >= d_safe
     assert rec.truth[max(rec.truth)].collisions == 0
+
+
+def test_a_daemon_dead_before_the_start_ends_the_run(tmp_path: Path) -> None:
+    """The simulator starts when every vehicle is armed in OFFBOARD, so a daemon killed
+    at t_0 (the first truth, long before its swarm is up) ends the run at once with that
+    reason, instead of a wait for the start-up limit that ends in "stalled at step 0"."""
+    sc = load_scenario(CUBE8)
+    with pytest.raises(MissionError, match=r"agent\(s\) 3 exited before the start"):
+        run_distributed(sc, tmp_path, "rcbf", None, 3.0, port_offset=free_port_offset(),
+                        kill_agent=3, kill_at=0.0, show_progress=False)
 
 
 def test_child_death_is_reported_and_the_run_goes_on(tmp_path: Path) -> None:
