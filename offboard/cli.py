@@ -25,7 +25,8 @@ from offboard.bearing import formation_from_scenario
 from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
 from offboard.daemon_agents import parse_agents
 from offboard.daemon_host import DaemonHost
-from offboard.mavlink_link import COMP_ONBOARD, mavlink_url_problem
+from offboard.mavlink_link import COMP_ONBOARD
+from offboard.mavlink_url import mavlink_url_problem
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.shared_batch import SharedBatch
 from offboard.shared_subs import SharedSubscriptions

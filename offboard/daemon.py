@@ -359,7 +359,9 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
                 log.error("agent %d: no heartbeat from vehicle on %s", self.id, cfg.mavlink_url)
             return 0 if self.stop else 2
         log.info("agent %d: vehicle heartbeat received (%s)", self.id, cfg.mavlink_url)
-        self.link.start_message_interval(mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval)
+        self.link.commands.message_interval(
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT, cfg.heartbeat_interval
+        )
         if isinstance(self.agent, FollowerAgent):
             for line in self.agent.gains.lines():
                 log.info("agent %d: %s", self.id, line)
@@ -394,14 +396,14 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         if (self.last_estimate is not None and now - self.last_est_pub > self.republish_after
                 and not self.loss.landing):
             self._republish_estimates()  # for late joiners / lost datagrams
-        if self.link.pending:
-            done, res = self.link.finished(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
+        if self.link.commands:
+            done, res = self.link.commands.finished(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
             if done and res != mavlink.MAV_RESULT_ACCEPTED:  # its default (1 Hz) still works
                 log.warning("agent %d: HEARTBEAT interval %.2f s not accepted (result %s)",
                             self.id, cfg.heartbeat_interval, res)
         streaming_s = now - self.stream_since if self.streaming else 0.0
         self.modes.request(now, self.answer is not None, streaming_s)
-        self.link.tick()
+        self.link.commands.tick()
         return None
 
     def say_stopped(self) -> None:

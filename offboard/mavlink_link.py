@@ -13,9 +13,8 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
   system/component are dropped; everything sent goes to the locked address only;
 * **ODOMETRY**: non-finite or out-of-range fields, duplicate, non-monotonic and
   implausibly far stamps are dropped (:class:`offboard.link_guard.StampGuard`);
-* **commands** never block: :meth:`VehicleLink.start_command` queues a COMMAND_LONG,
-  :meth:`VehicleLink.tick` (re)sends it, the ACK completes it
-  (:class:`offboard.link_guard.CommandRetry`);
+* **commands** never block: :attr:`VehicleLink.commands` queues a COMMAND_LONG, (re)sends
+  it on ``tick`` and the ACK completes it (:mod:`offboard.vehicle_commands`);
 * **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
   dropped and counted.
 * **unread telemetry**: a datagram made only of messages the daemon does not read is
@@ -50,8 +49,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from offboard.frame_peek import unread_frames  # noqa: E402
-from offboard.link_guard import CommandRetry, DropLog, StampGuard, odometry_fields_ok  # noqa: E402
+from offboard.link_guard import DropLog, StampGuard, odometry_fields_ok  # noqa: E402
+from offboard.mavlink_url import parse_udpin  # noqa: E402
 from offboard.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
+from offboard.vehicle_commands import VehicleCommands  # noqa: E402
 from swarm_common import faults as fault_plan  # noqa: E402
 from swarm_common import px4  # noqa: E402
 from swarm_common.faults import FaultInjector  # noqa: E402
@@ -88,34 +89,7 @@ class Odometry:
     v_body: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
-MAVLINK_SCHEMES = ("udpin", "udpout", "udp", "tcp", "tcpin")
 HEARTBEAT_PERIOD_S = 1.0  # the daemon's own HEARTBEAT (MAVLink microservice: 1 Hz)
-
-
-def mavlink_url_problem(url: str) -> str | None:
-    """Why ``url`` is not a usable ``SCHEME:HOST:PORT`` MAVLink URL (one line), or None.
-    Schemes: :data:`MAVLINK_SCHEMES`; HOST not empty; PORT a decimal 1..65535."""
-    scheme, sep, rest = url.partition(":")
-    if not sep or scheme not in MAVLINK_SCHEMES:
-        return f"unknown scheme {scheme!r}: use one of {', '.join(MAVLINK_SCHEMES)}"
-    host, sep, port = rest.rpartition(":")
-    if not sep or not host:
-        return f"expected {scheme}:HOST:PORT (e.g. udpin:127.0.0.1:14540)"
-    if not port.isascii() or not port.isdigit():
-        return f"port {port!r} is not a number"
-    if not 0 < int(port) < 65536:
-        return f"port {int(port)} out of range 1..65535"
-    return None
-
-
-def parse_udpin(url: str) -> tuple[str, int] | None:
-    """``udpin:HOST:PORT`` -> (host, port); None for any other scheme."""
-    if not url.startswith("udpin:"):
-        return None
-    if (why := mavlink_url_problem(url)) is not None:
-        raise ValueError(f"MAVLink URL {url!r}: {why}")
-    host, _, port = url[len("udpin:"):].rpartition(":")
-    return host, int(port)
 
 
 class VehicleLink:
@@ -163,7 +137,7 @@ class VehicleLink:
         self.odometry: Odometry | None = None
         self.stamps = StampGuard(control_hz, lockstep)
         self.drops = DropLog(f"agent {agent_id}: MAVLink")
-        self.pending: dict[int, CommandRetry] = {}
+        self.commands = VehicleCommands(agent_id, self._send)  # COMMAND_LONG, ACK, retry
         self.statustexts: list[str] = []
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
         self.sent = 0
@@ -290,10 +264,7 @@ class VehicleLink:
         elif kind == "ODOMETRY":
             self._odometry(msg, now)
         elif kind == "COMMAND_ACK":
-            retry = self.pending.get(int(msg.command))
-            target = int(getattr(msg, "target_system", 0))
-            if retry is not None and target in (0, self.agent_id):
-                retry.on_ack(int(msg.result), now, mavlink.MAV_RESULT_IN_PROGRESS)
+            self.commands.on_ack(msg, now)
         elif kind == "STATUSTEXT":
             text = str(msg.text)
             self.statustexts = [*self.statustexts[-31:], text]
@@ -389,53 +360,6 @@ class VehicleLink:
             mavlink.MAV_STATE_ACTIVE, 3,  # mavlink_version: 3 for MAVLink 1.0 and later
         ))
         return True
-
-    # -- commands (never blocking) ---------------------------------------------------------
-    def start_command(
-        self, command: int, params: list[float], attempts: int = 3, timeout_s: float = 1.0
-    ) -> None:
-        """Queue COMMAND_LONG ``command`` (replacing one of the same number in flight);
-        :meth:`tick` sends it, :meth:`finished` collects its outcome."""
-        p = [float(x) for x in params] + [math.nan] * (7 - len(params))
-        self.pending[command] = CommandRetry(command, p[:7], attempts, timeout_s)
-        self.tick()
-
-    def tick(self) -> None:
-        """Send every command attempt that is due now."""
-        now = time.monotonic()
-        for retry in self.pending.values():
-            if retry.due(now):
-                self._send(mavlink.MAVLink_command_long_message(
-                    self.agent_id, COMP_AUTOPILOT, retry.command, retry.attempt, *retry.params
-                ))
-
-    def busy(self, command: int) -> bool:
-        retry = self.pending.get(command)
-        return retry is not None and not retry.done
-
-    def finished(self, command: int) -> tuple[bool, int | None]:
-        """(True, MAV_RESULT or None when never acknowledged) once ``command`` is over
-        (it is then forgotten); (False, None) while it is in flight or was never sent."""
-        retry = self.pending.get(command)
-        if retry is None or not retry.done:
-            return False, None
-        del self.pending[command]
-        return True, retry.result
-
-    def start_set_mode(self, main: int, sub: int = 0) -> int:
-        params = [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED,
-                  main, sub]
-        self.start_command(mavlink.MAV_CMD_DO_SET_MODE, params)
-        return int(mavlink.MAV_CMD_DO_SET_MODE)
-
-    def start_arm(self) -> int:
-        self.start_command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1, 0])  # param1 1 = arm
-        return int(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
-
-    def start_message_interval(self, msg_id: int, interval_s: float) -> int:
-        """MAV_CMD_SET_MESSAGE_INTERVAL on this link (param2 in µs)."""
-        self.start_command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [msg_id, round(interval_s * 1e6)])
-        return int(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
 
     def close(self) -> None:
         if self.faults is not None:

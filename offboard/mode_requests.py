@@ -30,7 +30,7 @@ class ModeRequests:
     def collect(self, now: float) -> None:
         """Hand finished OFFBOARD / arm commands to the keeper, logging each outcome."""
         for what, cmd in MODE_COMMANDS:
-            done, res = self.link.finished(cmd)
+            done, res = self.link.commands.finished(cmd)
             if not done:
                 continue
             ok = res == mavlink.MAV_RESULT_ACCEPTED
@@ -51,7 +51,7 @@ class ModeRequests:
         have streamed without a gap (0 when not streaming)."""
         self.collect(now)
         link = self.link
-        if not have_answer or any(link.busy(cmd) for _, cmd in MODE_COMMANDS):
+        if not have_answer or any(link.commands.busy(cmd) for _, cmd in MODE_COMMANDS):
             return
         main, sub = px4.split_mode(link.custom_mode)
         view = VehicleView(
@@ -64,15 +64,15 @@ class ModeRequests:
         )
         want = self.keeper.decide(now, view)
         if want == "offboard":
-            link.start_set_mode(px4.MAIN_OFFBOARD)
+            link.commands.set_mode(px4.MAIN_OFFBOARD)
         elif want == "arm":
-            link.start_arm()
+            link.commands.arm()
 
     def disarm(self) -> None:
         """A normal (not forced) disarm: the vehicle refuses it unless on the ground."""
-        if not self.link.busy(mavlink.MAV_CMD_COMPONENT_ARM_DISARM):
+        if not self.link.commands.busy(mavlink.MAV_CMD_COMPONENT_ARM_DISARM):
             self.disarming = True
-            self.link.start_command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [0, 0])
+            self.link.commands.disarm()
 
 
 class SwarmReady:

@@ -4,6 +4,7 @@ lander flying its slot of the landing plan down to idle (a point-mass model, no 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -117,21 +118,15 @@ def test_loss_flight_commits_once_and_asks_to_disarm_when_landed() -> None:
 
 
 class _Link:
-    """The few VehicleLink members ModeRequests uses (unit test of one class)."""
+    """The few VehicleLink members ModeRequests uses (unit test of one class): its real
+    command queue, sending into a list."""
 
     def __init__(self) -> None:
+        from offboard.vehicle_commands import VehicleCommands
+
         self.custom_mode, self.in_offboard, self.armed, self.failsafe_texts = 0, False, True, 0
-        self.sent: list[tuple[int, list[float]]] = []
-        self.results: dict[int, int] = {}
-
-    def finished(self, cmd: int) -> tuple[bool, int | None]:
-        return (True, self.results.pop(cmd)) if cmd in self.results else (False, None)
-
-    def busy(self, cmd: int) -> bool:
-        return False
-
-    def start_command(self, cmd: int, params: list[float]) -> None:
-        self.sent.append((cmd, params))
+        self.sent: list[Any] = []
+        self.commands = VehicleCommands(3, self.sent.append)
 
 
 def test_disarm_outcome_is_not_taken_for_an_arm() -> None:
@@ -143,10 +138,16 @@ def test_disarm_outcome_is_not_taken_for_an_arm() -> None:
     keeper = OffboardKeeper(0.6, manual_start=True)
     modes = ModeRequests(link, keeper, 3)  # type: ignore[arg-type]
     modes.disarm()
-    assert link.sent == [(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [0, 0])] and modes.disarming
-    link.results[mavlink.MAV_CMD_COMPONENT_ARM_DISARM] = mavlink.MAV_RESULT_DENIED
+    (sent,) = link.sent
+    assert sent.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM and sent.param1 == 0
+    assert sent.target_system == 3 and modes.disarming
+    ack = mavlink.MAVLink_command_ack_message(
+        mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_RESULT_DENIED, 0, 0, 3, 191
+    )
+    link.commands.on_ack(ack, 1.0)
     modes.collect(1.0)
     assert not modes.disarming and not keeper.arm_acked
+    assert not link.commands  # collected and forgotten
 
 
 @pytest.mark.parametrize(("text", "value"), [("3", 3.0), ("0", 0.0), ("2", 2.0), ("1", None),
