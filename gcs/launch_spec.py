@@ -263,7 +263,7 @@ class LaunchSpec:
         who = ["--agent", str(ids[0])] if len(ids) == 1 else ["--agents", format_agents(ids)]
         tlog = f"vehicle_{ids[0]}.tlog" if len(ids) == 1 else "vehicle_{id}.tlog"
         argv = [
-            *python_entry("offboard.cli"),
+            *python_entry("offboard"),
             "--scenario", self.sc.path,
             *who,
             "--port-offset", str(self.port_offset),
@@ -280,6 +280,11 @@ class LaunchSpec:
         if self.manual_start:
             argv.append("--manual-start")
         return argv + self._signing_args() + self._common_args()
+
+    @staticmethod
+    def is_daemon(name: str) -> bool:
+        """True for the name of a daemon process (:meth:`daemon_name`)."""
+        return name.startswith("offboard-")
 
     def child_env(self, name: str) -> dict[str, str]:
         """Extra environment of child ``name``: with :attr:`zenoh_security`, the path of

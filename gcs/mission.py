@@ -26,7 +26,13 @@ from typing import Any
 import zenoh
 
 from gcs.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
-from gcs.mission_score import default_out_dir, recorded_metrics, recorder_series, score_run
+from gcs.mission_score import (
+    default_out_dir,
+    late_steps,
+    recorded_metrics,
+    recorder_series,
+    score_run,
+)
 from gcs.procs import ProcessGroup
 from gcs.progress import Progress
 from gcs.recorder import Recorder
@@ -141,7 +147,7 @@ def run_distributed(
         # them from the cache instead of all compiling them at once (gcs.warmup)
         log.debug("kernels ready in %.1f s", compile_kernels())
         for name, argv in spec.processes():
-            group.start(name, argv, env=spec.child_env(name))
+            group.start(name, argv, env=spec.child_env(name), gated=spec.is_daemon(name))
         bar = Progress(duration, label=str(method)) if show_progress else None
         on_step = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
                                                              sc.control_dt)
@@ -399,5 +405,9 @@ def cli_run(args: Any, sc: Scenario) -> int:
     log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
     if doc["run"]["failed_agents"]:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])
+    if (late := late_steps(doc)) and not args.realtime:
+        log.warning("the simulator stepped %d time(s) without every answer (lockstep "
+                    "timeouts: a daemon too slow for this machine): this run is not the "
+                    "in-process run; fewer daemon processes (--processes N) avoid it", late)
     print_result(doc, args.json)
     return 0

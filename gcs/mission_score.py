@@ -103,3 +103,9 @@ def score_run(
         run=facts,
     )
     return doc, ser
+
+
+def late_steps(doc: dict[str, Any]) -> int:
+    """The simulator's lockstep timeouts in a run's document (0 when it has none)."""
+    sim = doc.get("run", {}).get("simulator") or {}
+    return int(sim.get("lockstep_timeouts") or 0)

@@ -5,14 +5,18 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
+
+from offboard.start_gate import GATE_ENV, gate_value
 
 log = logging.getLogger(__name__)
 
@@ -44,13 +48,22 @@ class Child:
 
 
 class ProcessGroup:
-    """Processes started by one run. ``dead()`` names any that exited unexpectedly."""
+    """Processes started by one run. ``dead()`` names any that exited unexpectedly.
+    ``slots``: how many gated children (the daemons) may be in their start-up at once
+    (:mod:`offboard.start_gate`; default :func:`start_slots`)."""
 
-    def __init__(self, log_dir: Path) -> None:
+    def __init__(self, log_dir: Path, slots: int | None = None) -> None:
         self.log_dir = log_dir
         self.children: list[Child] = []
+        self.slots = start_slots() if slots is None else slots
+        self._gate: Path | None = None  # the slots' directory, made on the first gated start
 
-    def start(self, name: str, argv: list[str], env: dict[str, str] | None = None) -> Child:
+    def start(
+        self, name: str, argv: list[str], env: dict[str, str] | None = None,
+        gated: bool = False,
+    ) -> Child:
+        """Start child ``name``; ``gated``: it takes a start-up slot of this group's gate
+        (a daemon started as ``python -m offboard``)."""
         log_path = self.log_dir / f"{name}.log"
         f = open(log_path, "wb")  # noqa: SIM115 - closed in stop()
         full_env = dict(os.environ)
@@ -60,6 +73,10 @@ class ProcessGroup:
         full_env.setdefault("OMP_NUM_THREADS", "1")
         if env:
             full_env.update(env)
+        if gated:
+            if self._gate is None:
+                self._gate = Path(tempfile.mkdtemp(prefix="swarm-start-"))
+            full_env[GATE_ENV] = gate_value(self.slots, self._gate)
         # own process group: a terminal's Ctrl-C reaches the runner only, which stops the
         # children in order; PDEATHSIG: no child outlives the runner, even after kill -9
         proc = subprocess.Popen(
@@ -113,6 +130,9 @@ class ProcessGroup:
                 c.proc.wait(2.0)
         for c in self.children:
             c.log_file.close()
+        if self._gate is not None:
+            shutil.rmtree(self._gate, ignore_errors=True)
+            self._gate = None
 
     def tail(self, child: Child, lines: int = 15) -> str:
         try:
@@ -120,6 +140,15 @@ class ProcessGroup:
         except OSError:
             return ""
         return "\n".join(text[-lines:])
+
+
+def start_slots() -> int:
+    """Daemons allowed in their start-up at once: the CPUs this process may run on
+    (:mod:`offboard.start_gate`)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def python_entry(module: str) -> list[str]:

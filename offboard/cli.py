@@ -21,6 +21,7 @@ import threading
 import time
 from typing import Any
 
+from offboard import start_gate
 from offboard.bearing import formation_from_scenario
 from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
 from offboard.daemon_agents import parse_agents
@@ -294,6 +295,7 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
                 d.close()
             return 2
     run = daemons[0].run if len(daemons) == 1 else DaemonHost(daemons).run
+    start_gate.release()  # the CPU-heavy start-up is over (offboard.start_gate)
     prof_path = os.environ.get("OFFBOARD_PROFILE")
     if not prof_path:
         return run()

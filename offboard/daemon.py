@@ -85,6 +85,9 @@ REPUBLISH_MAX_S = 0.2
 # s: the longest wait for the vehicle's next datagram; every timer above is a multiple of
 # it, and the ODOMETRY that starts a step wakes the loop at once
 WAIT_CAP_S = 0.01
+# s: the same while the swarm is not ready (no step, no setpoint, no request: nothing to
+# time finely); a few dozen waiting daemons on a few cores otherwise starve the simulator
+IDLE_WAIT_S = 0.05
 WAIT_LOG_S = 3.0  # s: start-up waits say what they wait for this often
 __all__ = ["RUNNER_LOST_PERIODS", "TAKEOFF_LATE_S", "TAKEOFF_LEAD_S", "DaemonConfig",
            "OffboardDaemon"]
@@ -340,7 +343,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
                 return rc
             last_iter = time.monotonic()
             while not self.stop:
-                rc = self.iterate(last_iter, WAIT_CAP_S)
+                rc = self.iterate(last_iter, WAIT_CAP_S if self.ready.ready else IDLE_WAIT_S)
                 if rc is not None:
                     return rc
                 last_iter = time.monotonic()  # between iterations: not our own waits

@@ -293,9 +293,10 @@ class SimServer(ServerIO):
             self.integrate()
             return
         if now >= self._prestart_next:  # keep offering t_0 until everyone is ready
-            self._prestart_next = now + (
-                1.0 / self.opts.odometry_hz if self.opts.odometry_hz else LOCKSTEP_RESEND_S
-            )
+            # at most every LOCKSTEP_RESEND_S: N waiting daemons decode every offer, and at
+            # the ODOMETRY rate a few dozen of them on a few cores starve this process
+            hz = self.opts.odometry_hz
+            self._prestart_next = now + max(1.0 / hz if hz else 0.0, LOCKSTEP_RESEND_S)
             self.publish_truth()
             for v in self.vehicles:
                 v.expect_ms = 0

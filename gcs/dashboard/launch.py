@@ -86,7 +86,8 @@ class Launch:
             raise LaunchError(str(exc)) from None
         try:
             for name, argv in self.spec.processes(daemons=self.daemons):
-                self.group.start(name, argv, env=self.spec.child_env(name))
+                self.group.start(name, argv, env=self.spec.child_env(name),
+                                 gated=self.spec.is_daemon(name))
         except BaseException:
             self.stop()
             raise

@@ -207,7 +207,7 @@ def test_fake_truth_and_estimates_over_zenoh_are_ignored(tmp_path: Path) -> None
 
 
 def _daemon_pid(agent: int, off: int) -> int:
-    want = ["offboard.cli", "--agent", str(agent), "--port-offset", str(off)]
+    want = ["-m offboard ", "--agent", str(agent), "--port-offset", str(off)]
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue

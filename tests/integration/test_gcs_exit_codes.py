@@ -47,7 +47,7 @@ def wait_for_progress(proc: subprocess.Popen[str], timeout: float = 90.0) -> lis
 
 
 def leftovers(off: int) -> bytes:
-    return subprocess.run(["pgrep", "-f", f"cli.*--port-offset {off} "],
+    return subprocess.run(["pgrep", "-f", f"(cli|-m offboard) .*--port-offset {off} "],
                           capture_output=True).stdout.strip()
 
 
@@ -138,7 +138,8 @@ def test_daemon_death_mid_run_is_named_and_the_run_is_scored(tmp_path: Path) -> 
                      "--out", str(tmp_path))
     try:
         wait_for_progress(proc)
-        pids = subprocess.run(["pgrep", "-f", f"offboard.cli.*--agent 4 --port-offset {off} "],
+        daemon_4 = f"offboard --scenario .*--agent 4 --port-offset {off} "
+        pids = subprocess.run(["pgrep", "-f", daemon_4],
                               capture_output=True, text=True).stdout.split()
         assert len(pids) == 1
         os.kill(int(pids[0]), signal.SIGKILL)

@@ -118,7 +118,8 @@ def test_child_death_is_reported_and_the_run_goes_on(tmp_path: Path) -> None:
                 tmp_path / "offboard-6.log"
             ).read_text():
                 subprocess.run(
-                    ["pkill", "-9", "-f", f"offboard.cli.*--agent {victim} --port-offset {off} "],
+                    ["pkill", "-9", "-f",
+                     f"offboard --scenario .*--agent {victim} --port-offset {off} "],
                     check=False,
                 )
                 return
@@ -132,7 +133,8 @@ def test_child_death_is_reported_and_the_run_goes_on(tmp_path: Path) -> None:
     assert facts["failed_agents"] == [victim]
     assert rec.truth[max(rec.truth)].collisions == 0
     # nothing of this run is left running
-    out = subprocess.run(["pgrep", "-f", f"cli.*--port-offset {off} "], capture_output=True)
+    out = subprocess.run(["pgrep", "-f", f"(cli|-m offboard) .*--port-offset {off} "],
+                         capture_output=True)
     assert out.stdout.strip() == b""
 
 

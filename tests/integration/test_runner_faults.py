@@ -21,8 +21,8 @@ GCS = [sys.executable, "-m", "gcs.cli"]
 
 def leftovers(off: int) -> list[str]:
     """Command lines of the swarm's processes still alive (unique port offset)."""
-    r = subprocess.run(["pgrep", "-af", f"cli.*--port-offset {off} "], capture_output=True,
-                       text=True)
+    r = subprocess.run(["pgrep", "-af", f"(cli|-m offboard) .*--port-offset {off} "],
+                       capture_output=True, text=True)
     return [ln for ln in r.stdout.splitlines() if ln.strip()]
 
 

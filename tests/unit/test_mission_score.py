@@ -41,3 +41,10 @@ def test_recorded_truth_rows_give_the_desired_states_and_tilt_of_each_step() -> 
         assert np.allclose(ser.v_des[r], form.desired_positions(v[form.leader_idx]),
                            rtol=1e-13, atol=1e-12)
         assert np.array_equal(ser.tilt_deg[r], tilt_deg(rec.att[k].astype(float)))
+
+
+def test_late_steps_reads_the_simulators_lockstep_timeouts() -> None:
+    from gcs.mission_score import late_steps
+
+    assert late_steps({}) == 0 and late_steps({"run": {"simulator": None}}) == 0
+    assert late_steps({"run": {"simulator": {"lockstep_timeouts": 339}}}) == 339
