@@ -407,7 +407,8 @@ def cli_run(args: Any, sc: Scenario) -> int:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])
     if (late := late_steps(doc)) and not args.realtime:
         log.warning("the simulator stepped %d time(s) without every answer (lockstep "
-                    "timeouts: a daemon too slow for this machine): this run is not the "
-                    "in-process run; fewer daemon processes (--processes N) avoid it", late)
+                    "timeouts: a daemon too slow for this machine), so this run may differ "
+                    "from the in-process run; fewer daemon processes (--processes N) avoid "
+                    "it", late)
     print_result(doc, args.json)
     return 0

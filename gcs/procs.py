@@ -142,13 +142,21 @@ class ProcessGroup:
         return "\n".join(text[-lines:])
 
 
+# daemons that may start at once whatever the number of CPUs: a cube8 run starts its 8
+# together, as it always has. Fewer slots would cost a real-time run its start: on a
+# machine busy with other work, 2 slots gave the run's daemons 2 shares of the CPU
+# instead of 8, and half of them were not up before a 10 s real-time run ended
+MIN_START_SLOTS = 8
+
+
 def start_slots() -> int:
-    """Daemons allowed in their start-up at once: the CPUs this process may run on
-    (:mod:`offboard.start_gate`)."""
+    """Daemons allowed in their start-up at once (:mod:`offboard.start_gate`): the CPUs
+    this process may run on, and at least :data:`MIN_START_SLOTS`."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
+        cpus = os.cpu_count() or 1
+    return max(MIN_START_SLOTS, cpus)
 
 
 def python_entry(module: str) -> list[str]:

@@ -36,3 +36,11 @@ def test_acquire_then_release_frees_the_slot(tmp_path: Path) -> None:
     assert not start_gate.holding()
     assert start_gate.acquire(value, max_wait_s=0.0) is not None and start_gate.holding()
     start_gate.release()
+
+
+def test_a_run_gates_at_least_eight_daemons_at_once() -> None:
+    """A cube8 run starts its 8 daemons together (fewer slots cost real-time runs their
+    start on a busy machine: docs/performance.md, twentieth round)."""
+    from gcs.procs import MIN_START_SLOTS, start_slots
+
+    assert MIN_START_SLOTS == 8 and start_slots() >= MIN_START_SLOTS
