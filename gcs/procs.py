@@ -49,13 +49,12 @@ class Child:
 
 class ProcessGroup:
     """Processes started by one run. ``dead()`` names any that exited unexpectedly.
-    ``slots``: how many gated children (the daemons) may be in their start-up at once
-    (:mod:`offboard.start_gate`; default :func:`start_slots`)."""
+    Gated children (the daemons) take one of :func:`start_slots` start-up slots
+    (:mod:`offboard.start_gate`)."""
 
-    def __init__(self, log_dir: Path, slots: int | None = None) -> None:
+    def __init__(self, log_dir: Path) -> None:
         self.log_dir = log_dir
         self.children: list[Child] = []
-        self.slots = start_slots() if slots is None else slots
         self._gate: Path | None = None  # the slots' directory, made on the first gated start
 
     def start(
@@ -76,7 +75,7 @@ class ProcessGroup:
         if gated:
             if self._gate is None:
                 self._gate = Path(tempfile.mkdtemp(prefix="swarm-start-"))
-            full_env[GATE_ENV] = gate_value(self.slots, self._gate)
+            full_env[GATE_ENV] = gate_value(start_slots(), self._gate)
         # own process group: a terminal's Ctrl-C reaches the runner only, which stops the
         # children in order; PDEATHSIG: no child outlives the runner, even after kill -9
         proc = subprocess.Popen(

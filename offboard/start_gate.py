@@ -56,14 +56,26 @@ def parse_gate(value: str) -> tuple[int, Path]:
     return slots, path
 
 
-def _try_slots(slots: int, directory: Path) -> int | None:
-    """The descriptor of a free slot, now locked by this process; None if all are held."""
-    for i in range(slots):
-        fd = os.open(directory / f"slot-{i}.lock", os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o600)
+def _open_slots(slots: int, directory: Path) -> list[int]:
+    """Descriptors of the gate's ``slots`` lock files (created if missing)."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_CLOEXEC
+    fds: list[int] = []
+    try:
+        for i in range(slots):
+            fds.append(os.open(directory / f"slot-{i}.lock", flags, 0o600))
+    except OSError:
+        for fd in fds:
+            os.close(fd)
+        raise
+    return fds
+
+
+def _lock_one(fds: list[int]) -> int | None:
+    """The first of ``fds`` this process could lock now; None if all are held."""
+    for fd in fds:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            os.close(fd)
             continue
         return fd
     return None
@@ -78,13 +90,17 @@ def acquire(value: str | None, max_wait_s: float = MAX_WAIT_S) -> float | None:
     if not value:
         return None
     slots, directory = parse_gate(value)
+    fds = _open_slots(slots, directory)  # opened once; only the flock is retried
     start = time.monotonic()
-    while (fd := _try_slots(slots, directory)) is None:
+    while (fd := _lock_one(fds)) is None:
         if time.monotonic() - start >= max_wait_s:
             print(f"offboard: no start-up slot free after {max_wait_s:.0f} s; starting "
                   "without one", file=sys.stderr)
-            return time.monotonic() - start
+            break
         time.sleep(POLL_S)
+    for other in fds:
+        if other != fd:
+            os.close(other)
     _held = fd
     return time.monotonic() - start
 

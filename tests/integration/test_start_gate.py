@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import CUBE8, ROOT, free_port_offset, wait_for
+from conftest import CUBE8, ROOT, free_port_offset, stop_processes, wait_for
 
 from offboard import start_gate
 from swarm_common.zenoh_session import default_endpoint, open_session
@@ -115,12 +115,7 @@ def test_a_gated_daemon_waits_for_a_slot_and_gives_it_back_once_started(
         assert start_gate.holding()
     finally:
         start_gate.release()
-        daemon.terminate()
-        try:
-            daemon.wait(30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-            daemon.wait(10)
+        stop_processes([daemon], grace_s=30.0)
         router.close()
 
 
