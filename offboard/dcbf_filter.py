@@ -13,7 +13,7 @@ import numpy as np
 from offboard.clf_rcbf import ClfTerms
 from offboard.dcbf import InputSet, LagCoefficients
 from offboard.dcbf_qp import DcbfQP
-from offboard.dcbf_step_kernel import dcbf_filter_rows_into, dcbf_params
+from offboard.dcbf_step_kernel import P_DT, dcbf_filter_rows_into, dcbf_params
 from offboard.safety_filter import (
     W_SAFE,
     SafetyFilter,
@@ -73,6 +73,7 @@ class DcbfFilter(SafetyFilter):
         self._rel_acc = np.zeros((n, 3))
         self._rel_ok = np.zeros(n, dtype=bool)
         self._params = np.zeros(0)  # the compiled rows' parameters, set by configure
+        self._dt = 0.0  # control period (s), set by configure
         # the rows' buffers (two per other agent, two for the ground) and the sidestep,
         # rewritten each step: the QP reads them within the step
         self._g = np.zeros((2 * n + 2, 3))
@@ -88,12 +89,30 @@ class DcbfFilter(SafetyFilter):
                          limit=rows, solver=self.ctl.qp_solver)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
+        self._dt = float(dt)
         ctl = self.ctl
         self._params = dcbf_params(
             ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2, ctl.deadlock_gain, ctl.deadlock_h_m2, dt,
             REL_ACC_SMOOTH, GROUND_GAMMA, GROUND_ACCEL_ERR, self.lag.T,
         )
+
+    def set_span(self, periods: int) -> None:
+        """The step before was ``periods`` control periods ago (1 in process and in
+        lockstep; more where a real-time daemon missed steps, whose vehicle meanwhile
+        flew the last command: :meth:`offboard.follower.FollowerAgent._coast_missed`).
+        The relative acceleration's finite difference then spans that time, and the
+        caller's ``a_mean`` the same span: dividing by one period made a step after m
+        missed ones see an m-fold relative acceleration, spurious barrier rows and
+        saturated escapes (docs/faults.md)."""
+        if self.lag is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        self._params[P_DT] = self._dt * periods
+
+    def forget_history(self) -> None:
+        """No pair's relative velocity of the step before is used (a gap too long to
+        difference across): each pair starts afresh, from the broadcast estimates."""
+        self._prev_ok[:] = False
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
         """The barrier rows of this step (one compiled call,

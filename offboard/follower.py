@@ -110,6 +110,7 @@ class FollowerAgent(AgentBase):
         self.aw_box[Method.DCBF] = None
         self.u_prev = np.zeros(3)
         self.last_k: int | None = None  # the step of the previous call (coasting, above)
+        self._span = 1  # control periods since the step before (_coast_missed)
         self.last_sp: Setpoint | None = None
         self.a_real = np.zeros(3)  # inner-loop model's realised virtual control (m/s²)
         self.a_mean = np.zeros(3)  # ... its mean over the last control period
@@ -215,16 +216,37 @@ class FollowerAgent(AgentBase):
         stamp left them a period behind the vehicle. For each missed period the inner-loop
         model applies the last setpoint (what the vehicle kept flying), the DESO
         dead-reckons with it (:meth:`~offboard.deso.DESO.coast`) and ξ̂ is advanced with
-        the neighbours' predictions for that period. In process and in lockstep k always
-        follows k − 1, so this never runs there (bit-identical runs)."""
+        the neighbours' predictions for that period. The dcbf filter's inputs then span
+        the m periods too: the realised acceleration now, its mean since the step before,
+        and the relative-acceleration difference over m periods
+        (:meth:`~offboard.dcbf_filter.DcbfFilter.set_span`). In process and in lockstep
+        k always follows k − 1, so this never runs there (bit-identical runs)."""
         last, self.last_k = self.last_k, k
         if last is None or self.last_sp is None or k <= last + 1:
+            if self._span != 1:
+                self._set_span(1)
             return
-        missed = min(k - last - 1, MAX_COAST_PERIODS)
+        gap = k - last - 1
+        missed = min(gap, MAX_COAST_PERIODS)
+        total = np.array(self.a_mean, dtype=np.float64)  # the period after step k − m
+        u_sub = self.u_prev[None, :]
         for m in range(missed, 0, -1):
             u_sub = self.inner.run(self.last_sp, self.substeps)
+            total += u_sub.mean(axis=0)
             self.deso.coast(u_sub)
             self.ref.update(*self.pred.predict_rows(self._predict_idx, t - m * self.dt))
+        self.a_real = u_sub[-1].copy()
+        self.a_mean = total / (missed + 1)
+        self._set_span(missed + 1, forget=gap > missed)
+
+    def _set_span(self, periods: int, forget: bool = False) -> None:
+        """The dcbf filter's span to the step before (:meth:`_coast_missed`)."""
+        self._span = periods
+        dcbf = self.filters.get(Method.DCBF)
+        if isinstance(dcbf, DcbfFilter):
+            dcbf.set_span(periods)
+            if forget:
+                dcbf.forget_history()
 
     def _composed_step(
         self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
