@@ -56,6 +56,7 @@ from offboard.daemon_stream import SetpointStream
 from offboard.link_guard import PayloadGuard
 from offboard.mavlink_link import VehicleLink, mavlink
 from offboard.mode_requests import ModeRequests, SwarmReady
+from offboard.nav_check import NavigationCheck
 from offboard.offboard_keeper import OffboardKeeper
 from offboard.runner_loss import RUNNER_LOST_PERIODS, LossFlight, RunnerLoss
 from offboard.sensing_source import SwarmSensing
@@ -142,6 +143,9 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.modes = ModeRequests(self.link, self.keeper, cfg.agent_id)
         self.loss = RunnerLoss(self.control_hz, cfg.loss_land_after)
         self.loss_flight = LossFlight(sc, self.agent.index, cfg.agent_id, self.loss)
+        # real-time followers: the DESO estimate against the vehicle's own odometry
+        follower = isinstance(self.agent, FollowerAgent)
+        self.nav = NavigationCheck(self.control_hz) if follower and not cfg.lockstep else None
         self.ready = SwarmReady(cfg.agent_id, ready, cfg.solo, WAIT_LOG_S)
         self.sensing = SwarmSensing(
             cfg.sensing, list(sc.ids), cfg.agent_id, self.bus, self.loss,
@@ -244,6 +248,23 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
             self.modes.disarm()
         return True
 
+    def _check_navigation(self, k: int, t: float) -> None:
+        """A real-time follower's estimate ẑ₁ (valid a period ahead) against its vehicle's
+        ODOMETRY predicted as far (offboard.nav_check): once diverged, the runner-loss hold
+        and landing on odometry from the next step on, for good."""
+        if self.nav is None or not isinstance(self.agent, FollowerAgent):
+            return
+        odo = self.link.odometry
+        got = None if odo is None else measured_state(odo, 1.0 / self.control_hz)
+        if got is not None and self.nav.update(k, self.agent.deso.z1, got[0]):
+            self.loss.navigation_fault(t)
+            self.keeper.fault(time.monotonic())
+            t_land = self.loss.t_land
+            log.error("agent %d: estimate off its odometry by more than %.1f m at t=%.2f s: "
+                      "holding on odometry; %s", self.id, self.nav.gate_m, t,
+                      "no landing (--loss-land-after 0)" if t_land is None
+                      else f"landing at t={t_land:.2f} s")
+
     def control_step(self, k: int, t: float, time_boot_ms: int) -> bool:
         sensed = self.sensing.for_step(k)
         if sensed is None:
@@ -262,6 +283,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
         self.control_cpu_s += time.thread_time() - cpu0
         self.control_steps += 1
+        self._check_navigation(k, t)
         self.answer, self.answer_from_loss = (time_boot_ms, out.q_ned, out.thrust_norm), False
         self.answer_step, self.answer_at = k, time.monotonic()
         self._send_answer()
@@ -412,10 +434,12 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
     def say_stopped(self) -> None:
         """The last line: drops, and the CPU the control law took (bench_distributed reads
         it to tell the control from the plumbing)."""
+        nav = ("" if self.nav is None
+               else f"; estimate at most {self.nav.worst_m:.3f} m from odometry (after grace)")
         log.info("agent %d: stopped; dropped MAVLink %s, Zenoh %s; control CPU %.3f s over "
-                 "%d steps; truth lag at most %d periods", self.id, self.link.drops.counts,
+                 "%d steps; truth lag at most %d periods%s", self.id, self.link.drops.counts,
                  self.bus.drops.counts, self.control_cpu_s, self.control_steps,
-                 self.loss.max_lag)
+                 self.loss.max_lag, nav)
 
     def close(self) -> None:
         self.link.close()

@@ -101,6 +101,7 @@ class RunnerLoss:
         self.t_s: float | None = None  # time of the last truth step seen when lost
         self.episode = 0  # count of stalls (each one holds where it began)
         self.max_lag = 0  # the largest k − truth step seen while flying (periods)
+        self.sticky = False  # a navigation fault: never back to flying on the agent
 
     @property
     def lost(self) -> bool:
@@ -121,7 +122,7 @@ class RunnerLoss:
         """The vehicle is at step ``k``, the latest truth is of ``truth_step`` (None: none
         yet). Returns "stalled", "lost" or "back" on a change, else None; once landing,
         None."""
-        if self.phase is LossPhase.LANDING or truth_step is None:
+        if self.phase is LossPhase.LANDING or truth_step is None or self.sticky:
             return None
         lag = k - truth_step
         if lag <= STALLED_PERIODS:
@@ -140,6 +141,17 @@ class RunnerLoss:
             self.episode += 1
             return "stalled"
         return None
+
+    def navigation_fault(self, t: float) -> None:
+        """The agent's own estimate diverged at t (s; :mod:`offboard.nav_check`): the same
+        brake-and-hold on odometry and land time as a lost runner (t_s = t), and no way
+        back to the agent, whatever truth does."""
+        if self.phase is LossPhase.LANDING or self.sticky:
+            return
+        self.sticky = True
+        self.episode += self.phase is LossPhase.FLYING
+        self.phase = LossPhase.HOLDING
+        self.t_s = t
 
     def commit_due(self, t: float) -> bool:
         """Holding and t ≥ t_L − LEAD_S: time to start the landing (then call commit)."""
@@ -255,15 +267,18 @@ class LossFlight:
         if self.flight is None or self.flight_episode != self.loss.episode:  # a new stall
             self.flight = OdometryFlight(self.sc, HoldReference(p))
             self.flight_episode = self.loss.episode
-            log.warning("agent %d: truth late at t=%.2f s: braking to a hold at "
-                        "(%.2f, %.2f, %.2f) on odometry", self.id, t, *p)
+            log.warning("agent %d: %s at t=%.2f s: braking to a hold at "
+                        "(%.2f, %.2f, %.2f) on odometry", self.id,
+                        "estimate diverged" if self.loss.sticky else "truth late", t, *p)
         t_s, t_land = self.loss.t_s, self.loss.t_land
         if self.loss.commit_due(t) and t_s is not None and t_land is not None:
             self.loss.commit()
             self.flight.ref = landing_reference(self.sc, self.index, t_s, t_land, p)
             pad = self.flight.pad
-            log.warning("agent %d: runner/router lost since t=%.2f s: landing on odometry, "
-                        "t_L=%.2f s, pad (%.2f, %.2f)", self.id, t_s, t_land, pad[0], pad[1])
+            log.warning("agent %d: %s since t=%.2f s: landing on odometry, t_L=%.2f s, "
+                        "pad (%.2f, %.2f)", self.id,
+                        "estimate diverged" if self.loss.sticky else "runner/router lost",
+                        t_s, t_land, pad[0], pad[1])
         return self.flight.command(t, p, v)[0]
 
     def disarm_due(self, t: float, z: float, armed: bool) -> bool:
