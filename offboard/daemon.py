@@ -252,7 +252,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         """A real-time follower's estimate ẑ₁ (valid a period ahead) against its vehicle's
         ODOMETRY predicted as far (offboard.nav_check): once diverged, the runner-loss hold
         and landing on odometry from the next step on, for good."""
-        if self.nav is None or not isinstance(self.agent, FollowerAgent):
+        if self.nav is None or not isinstance(self.agent, FollowerAgent) or not self.nav.due(k):
             return
         odo = self.link.odometry
         got = None if odo is None else measured_state(odo, 1.0 / self.control_hz)

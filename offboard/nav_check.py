@@ -3,7 +3,8 @@ its own vehicle's ODOMETRY (docs/faults.md, "A starved daemon").
 
 A follower flies on the DESO's estimate ẑ₁, built from relative sensing and its
 neighbours' estimates; its vehicle measures its own position too. When the two disagree by
-more than ``gate_m`` (m) at ``steps`` consecutive control steps, the estimate has diverged
+more than ``gate_m`` (m) at ``steps`` consecutive checks (one every ``every`` control
+steps at most), the estimate has diverged
 (a starved daemon whose observer ran away; every neighbour out of sensing range while it
 dead-reckons). Flying on it then throws the vehicle away: in starved test runs, 12 to 88 m up. The
 check latches; the daemon then brakes and holds on its odometry and lands
@@ -27,6 +28,9 @@ from offboard.follower import MAX_COAST_PERIODS
 NAV_GATE_M = 2.0  # m, |estimate − odometry| above this is a disagreement ...
 NAV_GATE_STEPS = 3  # ... at this many consecutive steps: the estimate has diverged
 NAV_GRACE_S = 2.0  # s not counted after the first step and after a long gap
+# steps between two checks (10 Hz at 50 Hz): converting the ODOMETRY costs about 54 µs,
+# and an estimate runs away over seconds (docs/performance.md, twenty-first round)
+NAV_CHECK_EVERY = 5
 
 
 class NavigationCheck:
@@ -34,13 +38,16 @@ class NavigationCheck:
 
     def __init__(
         self, control_hz: int, gate_m: float = NAV_GATE_M, steps: int = NAV_GATE_STEPS,
-        grace_s: float = NAV_GRACE_S,
+        grace_s: float = NAV_GRACE_S, every: int = NAV_CHECK_EVERY,
     ) -> None:
-        if not (control_hz > 0 and gate_m > 0.0 and steps >= 1 and grace_s >= 0.0):
+        if not (control_hz > 0 and gate_m > 0.0 and steps >= 1 and grace_s >= 0.0
+                and every >= 1):
             raise ValueError(f"control_hz = {control_hz!r}, gate_m = {gate_m!r}, steps = "
-                             f"{steps!r}, grace_s = {grace_s!r}: need > 0, > 0, >= 1, >= 0")
+                             f"{steps!r}, grace_s = {grace_s!r}, every = {every!r}: need > 0, "
+                             "> 0, >= 1, >= 0, >= 1")
         self.gate_m = float(gate_m)
         self.steps = int(steps)
+        self.every = int(every)
         self.grace_steps = int(round(grace_s * control_hz))
         self.last_k: int | None = None
         self.grace_until = 0  # steps before this one are in the grace ...
@@ -48,6 +55,11 @@ class NavigationCheck:
         self.run = 0  # consecutive steps over the gate
         self.worst_m = 0.0  # the largest disagreement seen (m)
         self.failed = False
+
+    def due(self, k: int) -> bool:
+        """Whether step ``k`` is checked: not failed, and ``every`` steps or more since the
+        last check (the caller converts its ODOMETRY only then)."""
+        return not self.failed and (self.last_k is None or k - self.last_k >= self.every)
 
     def update(self, k: int, estimate: np.ndarray, measured: np.ndarray) -> bool:
         """``estimate`` and ``measured`` (3,) positions for the same instant (m), at control

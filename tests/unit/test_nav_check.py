@@ -73,6 +73,8 @@ def test_bad_parameters_are_refused() -> None:
                                    (0, 2.0, 3, 1.0), (HZ, 2.0, 3, -1.0)):
         with pytest.raises(ValueError):
             NavigationCheck(hz, gate, steps, grace)
+    with pytest.raises(ValueError):
+        NavigationCheck(HZ, every=0)
 
 
 def test_navigation_fault_holds_then_lands_and_never_returns() -> None:
@@ -104,3 +106,11 @@ def test_an_estimate_running_away_during_the_grace_still_fails() -> None:
     assert NAV_GATE_M < growth < NAV_GATE_M + 0.3, (failed_at, growth)
     converging = NavigationCheck(HZ)
     assert not any(converging.update(k, P + 50.0 * 0.9**k, P) for k in range(GRACE + 10))
+
+
+def test_due_every_few_steps_and_never_once_failed() -> None:
+    nav = NavigationCheck(HZ, steps=1, grace_s=0.0, every=5)
+    assert nav.due(0) and not nav.update(0, P, P)
+    assert [k for k in range(1, 12) if nav.due(k)] == [5, 6, 7, 8, 9, 10, 11]
+    assert not nav.update(7, P, P) and not nav.due(11) and nav.due(12)
+    assert nav.update(12, P + 3.0, P) and not nav.due(100)
