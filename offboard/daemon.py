@@ -233,8 +233,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         LossFlight from the vehicle's own ODOMETRY (brake and hold, then the landing)."""
         if self.cfg.lockstep or not self.loss.lost:
             return False
-        odo = self.link.odometry
-        got = None if odo is None else measured_state(odo, 0.0)
+        got = self._measured(0.0)
         sp = None if got is None else self.loss_flight.setpoint(t, *got)
         if got is None or sp is None:
             return False
@@ -248,14 +247,19 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
             self.modes.disarm()
         return True
 
+    def _measured(self, dt: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The vehicle's (position, velocity) ENU from its latest ODOMETRY, the position
+        carried ``dt`` s ahead (offboard.wire_convert.measured_state); None without one."""
+        odo = self.link.odometry
+        return None if odo is None else measured_state(odo, dt)
+
     def _check_navigation(self, k: int, t: float) -> None:
         """A real-time follower's estimate ẑ₁ (valid a period ahead) against its vehicle's
         ODOMETRY predicted as far (offboard.nav_check): once diverged, the runner-loss hold
         and landing on odometry from the next step on, for good."""
         if self.nav is None or not isinstance(self.agent, FollowerAgent) or not self.nav.due(k):
             return
-        odo = self.link.odometry
-        got = None if odo is None else measured_state(odo, 1.0 / self.control_hz)
+        got = self._measured(1.0 / self.control_hz)
         if got is not None and self.nav.update(k, self.agent.deso.z1, got[0]):
             self.loss.navigation_fault(t)
             self.keeper.fault(time.monotonic())
@@ -312,8 +316,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         if cooperative:
             return est
         est.cooperative = False
-        odo = self.link.odometry
-        got = None if odo is None else measured_state(odo, 1.0 / self.control_hz)
+        got = self._measured(1.0 / self.control_hz)
         if got is not None:
             est.z1, est.z2 = got
             est.z3 = np.zeros(3)
@@ -333,8 +336,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         ``--sensing odometry``), and handed to our own sensing source."""
         if self.cfg.sensing is SensingSource.TRUTH and not self.bus.odometry_matched:
             return  # nobody reads it: neither our sensing (truth) nor a subscriber
-        odo = self.link.odometry
-        got = None if odo is None or k == self.odo_pub_step else measured_state(odo, 0.0)
+        got = None if k == self.odo_pub_step else self._measured(0.0)
         if got is None:
             return
         self.odo_pub_step = k

@@ -229,8 +229,7 @@ class FollowerAgent(AgentBase):
         gap = k - last - 1
         missed = min(gap, MAX_COAST_PERIODS)
         total = np.array(self.a_mean, dtype=np.float64)  # the period after step k − m
-        u_sub = self.u_prev[None, :]
-        for m in range(missed, 0, -1):
+        for m in range(missed, 0, -1):  # missed ≥ 1: u_sub is the last coasted period's
             u_sub = self.inner.run(self.last_sp, self.substeps)
             total += u_sub.mean(axis=0)
             self.deso.coast(u_sub)

@@ -1,22 +1,21 @@
 """The navigation check of a real-time follower daemon: its DESO position estimate against
 its own vehicle's ODOMETRY (docs/faults.md, "A starved daemon").
 
-A follower flies on the DESO's estimate ẑ₁, built from relative sensing and its
-neighbours' estimates; its vehicle measures its own position too. When the two disagree by
-more than ``gate_m`` (m) at ``steps`` consecutive checks (one every ``every`` control
-steps at most), the estimate has diverged
-(a starved daemon whose observer ran away; every neighbour out of sensing range while it
-dead-reckons). Flying on it then throws the vehicle away: in starved test runs, 12 to 88 m up. The
-check latches; the daemon then brakes and holds on its odometry and lands
-(:meth:`offboard.runner_loss.RunnerLoss.navigation_fault`), and does not give the vehicle
-back to the estimate. Healthy flight keeps the two within centimetres (docs/faults.md),
-so the gate is far above noise. For ``grace_s`` after the first step and after a gap
-longer than the follower's coast covers (a stalled daemon, or a scenario's large initial
-estimate error) the estimate converges first (the DESO's slowest pole is about 3.6 1/s:
-in 2 s an error of 100 m, the largest a scenario may set, decays below 0.1 m): meanwhile
-the disagreement may not grow by more than the gate over the one at the grace's start.
-Lockstep and in-process runs have no such check: their steps are never late, and the
-check must not change their bits. ENU, m.
+A follower flies on the DESO's estimate ẑ₁, built from relative sensing and its neighbours'
+estimates; its vehicle measures its own position too. When the two disagree by more than
+``gate_m`` (m) at ``steps`` consecutive checks (one every ``every`` control steps at most),
+the estimate has diverged (a starved daemon whose observer ran away; every neighbour out of
+sensing range while it dead-reckons). Flying on it then throws the vehicle away: in starved
+test runs, 12 to 88 m up. The check latches; the daemon then brakes and holds on its
+odometry and lands (:meth:`offboard.runner_loss.RunnerLoss.navigation_fault`), and does not
+give the vehicle back to the estimate. Healthy flight kept the two within 0.9 m in every
+real-time test, under load too (docs/faults.md), so the gate is above that. For ``grace_s``
+after the first step and after a gap longer than the follower's coast covers (a stalled
+daemon, or a scenario's large initial estimate error) the estimate converges first (the
+DESO's slowest pole is about 3.6 1/s: in 2 s an error of 100 m, the largest a scenario may
+set, decays below 0.1 m): meanwhile the disagreement may not grow by more than the gate over
+the one at the grace's start. Lockstep and in-process runs have no such check: their steps
+are never late, and the check must not change their bits. ENU, m.
 """
 
 from __future__ import annotations
@@ -26,7 +25,7 @@ import numpy as np
 from offboard.follower import MAX_COAST_PERIODS
 
 NAV_GATE_M = 2.0  # m, |estimate − odometry| above this is a disagreement ...
-NAV_GATE_STEPS = 3  # ... at this many consecutive steps: the estimate has diverged
+NAV_GATE_STEPS = 3  # ... at this many consecutive checks: the estimate has diverged
 NAV_GRACE_S = 2.0  # s not counted after the first step and after a long gap
 # steps between two checks (10 Hz at 50 Hz): converting the ODOMETRY costs about 54 µs,
 # and an estimate runs away over seconds (docs/performance.md, twenty-first round)
@@ -52,7 +51,7 @@ class NavigationCheck:
         self.last_k: int | None = None
         self.grace_until = 0  # steps before this one are in the grace ...
         self.grace_err: float | None = None  # ... which starts at this disagreement (m)
-        self.run = 0  # consecutive steps over the gate
+        self.run = 0  # consecutive checks over the gate
         self.worst_m = 0.0  # the largest disagreement seen (m)
         self.failed = False
 
