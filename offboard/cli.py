@@ -28,6 +28,7 @@ from offboard.daemon_agents import parse_agents
 from offboard.daemon_host import DaemonHost
 from offboard.mavlink_link import COMP_ONBOARD
 from offboard.mavlink_url import mavlink_url_problem
+from offboard.nav_check import MAX_NAV_GATE_M, MIN_NAV_GATE_M, NAV_GATE_M, NAV_GATE_STEPS
 from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.shared_batch import SharedBatch
 from offboard.shared_subs import SharedSubscriptions
@@ -112,6 +113,18 @@ def loss_land_after(text: object) -> float | None:
     return None
 
 
+def nav_gate(text: object) -> float | None:
+    """``--nav-gate``: 0 (no check) or a finite number of metres in
+    MIN_NAV_GATE_M..MAX_NAV_GATE_M; None when it is not."""
+    try:
+        value = float(str(text))
+    except ValueError:
+        return None
+    if value == 0.0 or MIN_NAV_GATE_M <= value <= MAX_NAV_GATE_M:
+        return value
+    return None
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="offboard", description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", required=True, help="scenario TOML file")
@@ -147,6 +160,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="real time: when the runner or router is lost, land on the "
                     f"coordinated plan S s after the last truth (default {LAND_AFTER_S:g}, at "
                     f"least {MIN_LAND_AFTER_S:g}; 0 = hold until truth is back)")
+    ap.add_argument("--nav-gate", default=NAV_GATE_M, metavar="M",
+                    help="real time, followers: an estimate more than M m from the vehicle's "
+                    f"odometry at {NAV_GATE_STEPS} checks in a row is a navigation fault: hold on "
+                    f"odometry, then land (default {NAV_GATE_M:g}; {MIN_NAV_GATE_M:g}.."
+                    f"{MAX_NAV_GATE_M:g}; 0 = no check)")
     ap.add_argument("--keep-streams", action="store_true",
                     help="keep the vehicle's default telemetry on the API link (by default the "
                          "daemon switches off the streams it does not read)")
@@ -203,10 +221,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: --loss-land-after {args.loss_land_after!r}: must be 0 or a number "
               f"of seconds in {MIN_LAND_AFTER_S:g}..3600", file=sys.stderr)
         return 2
+    gate = nav_gate(args.nav_gate)
+    if gate is None:
+        print(f"offboard: --nav-gate {args.nav_gate!r}: must be 0 or a number of metres in "
+              f"{MIN_NAV_GATE_M:g}..{MAX_NAV_GATE_M:g}", file=sys.stderr)
+        return 2
     connect = args.zenoh_connect
     if connect is None:
         connect = [default_endpoint(args.port_offset)]
-    cfgs = [daemon_config(args, sc, i, connect, key, land_after) for i in ids]
+    cfgs = [daemon_config(args, sc, i, connect, key, land_after, gate) for i in ids]
     try:
         session = open_session_saying(cfgs[0].zenoh_mode, connect, cfgs[0].zenoh_listen,
                                       args.zenoh_config)
@@ -239,7 +262,7 @@ def agent_ids(args: argparse.Namespace, ids: list[int]) -> list[int] | str:
 
 
 def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect: list[str],
-                  key: bytes | None, land_after: float) -> DaemonConfig:
+                  key: bytes | None, land_after: float, gate: float) -> DaemonConfig:
     """One agent's :class:`DaemonConfig` from the checked command line."""
     ports = vehicle_ports(agent_id, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
@@ -262,6 +285,7 @@ def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect
         solo=args.solo,
         keep_streams=args.keep_streams,
         sensing=SensingSource(args.sensing),
+        nav_gate_m=gate,
     )
     log.info("agent %d: vehicle link %s (system %d, component %d, signing %s); Zenoh %s "
              "%s, swarm %r; sensing %s; %s", cfg.agent_id, url, cfg.agent_id, COMP_ONBOARD,

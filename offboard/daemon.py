@@ -145,7 +145,8 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.loss_flight = LossFlight(sc, self.agent.index, cfg.agent_id, self.loss)
         # real-time followers: the DESO estimate against the vehicle's own odometry
         follower = isinstance(self.agent, FollowerAgent)
-        self.nav = NavigationCheck(self.control_hz) if follower and not cfg.lockstep else None
+        checked = follower and not cfg.lockstep and cfg.nav_gate_m > 0.0
+        self.nav = NavigationCheck(self.control_hz, cfg.nav_gate_m) if checked else None
         self.ready = SwarmReady(cfg.agent_id, ready, cfg.solo, WAIT_LOG_S)
         self.sensing = SwarmSensing(
             cfg.sensing, list(sc.ids), cfg.agent_id, self.bus, self.loss,
@@ -264,7 +265,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
             self.loss.navigation_fault(t)
             self.keeper.fault(time.monotonic())
             t_land = self.loss.t_land
-            log.error("agent %d: estimate off its odometry by more than %.1f m at t=%.2f s: "
+            log.error("agent %d: estimate off its odometry by more than %g m at t=%.2f s: "
                       "holding on odometry; %s", self.id, self.nav.gate_m, t,
                       "no landing (--loss-land-after 0)" if t_land is None
                       else f"landing at t={t_land:.2f} s")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from offboard.nav_check import NAV_GATE_M
 from offboard.runner_loss import LAND_AFTER_S
 from swarm_common.enums import Method, SensingSource
 from swarm_common.scenario import Scenario
@@ -38,3 +39,5 @@ class DaemonConfig:
     solo: bool = False  # fly without waiting for the swarm (offboard.mode_requests.SwarmReady)
     sensing: SensingSource = SensingSource.TRUTH  # the sensor's inputs (offboard.sensing_source)
     keep_streams: bool = False  # leave the vehicle's default telemetry on (offboard.stream_trim)
+    # real-time followers: the navigation check's gate (m, offboard.nav_check; 0 = no check)
+    nav_gate_m: float = NAV_GATE_M

@@ -93,6 +93,11 @@ class Observer(threading.Thread):
         with self.lock:
             return max((t for t, _, _ in self.pos.values()), default=0.0)
 
+    def landed_one(self, i: int) -> bool:
+        """Vehicle ``i`` on the ground (z NED ≥ −LANDED_Z_M) and disarmed."""
+        with self.lock:
+            return i in self.pos and -self.pos[i][1][2] < LANDED_Z_M and self.armed.get(i) is False
+
     def landed(self) -> bool:
         """Every vehicle on the ground (z NED ≥ −LANDED_Z_M) and disarmed."""
         with self.lock:
@@ -138,10 +143,13 @@ class Swarm:
 
 
 @contextmanager
-def flying_swarm(tmp_path: Path, fly_s: float, scenario: str = CUBE8,
-                 method: str = "dcbf") -> Iterator[Swarm]:
+def flying_swarm(tmp_path: Path, fly_s: float, scenario: str = CUBE8, method: str = "dcbf",
+                 extra_args: dict[int, list[str]] | None = None,
+                 all_armed: bool = True) -> Iterator[Swarm]:
     """``gcs router``, ``vehicle-sim`` and the daemons of ``scenario`` in real time,
-    flying and armed past mission time ``fly_s``; everything stopped afterwards."""
+    flying past mission time ``fly_s`` (and every vehicle armed, unless not ``all_armed``);
+    everything stopped afterwards. ``extra_args``: agent id -> flags appended to that
+    agent's daemon command line."""
     sc = load_scenario(scenario)
     off = free_port_offset()
     spec = LaunchSpec(sc, port_offset=off, lockstep=False, run_dir=tmp_path, method=method)
@@ -154,13 +162,18 @@ def flying_swarm(tmp_path: Path, fly_s: float, scenario: str = CUBE8,
         wait_for(lambda: port_open(spec.router_port) or router.poll() is not None, 30, "router")
         assert router.poll() is None, (tmp_path / "router.log").read_text()
         for name, argv in spec.processes():
-            procs.append(start(argv, tmp_path / f"{name}.log"))
+            who = name.removeprefix("offboard-")  # one agent per process here
+            more = (extra_args or {}).get(int(who), []) if who.isdigit() else []
+            procs.append(start(argv + more,
+                               tmp_path / f"{name}.log"))
         logs = [tmp_path / f"offboard-{i}.log" for i in sc.ids]
         wait_for(lambda: all(p.exists() and "ARM accepted" in p.read_text() for p in logs), 90,
               "every daemon to arm")
         wait_for(lambda: obs.time_s() >= fly_s, 60, "the swarm to fly")
         # the observer learns of an arm from the next 1 Hz HEARTBEAT, after the daemon's log
-        wait_for(lambda: all(obs.armed.get(i) for i in sc.ids), 30, "every HEARTBEAT to say armed")
+        if all_armed:
+            wait_for(lambda: all(obs.armed.get(i) for i in sc.ids), 30,
+                     "every HEARTBEAT to say armed")
         yield Swarm(obs, router, procs, logs)
     finally:
         stop_processes(procs)

@@ -145,6 +145,7 @@ def test_router_needs_scenario_and_dir_together(tmp_path):
         ["offboard.cli", "--scenario", CUBE8, "--agent", "1", "--swarm", "a?b"],
         ["vehicle_sim.cli", "--scenario", CUBE8, "--no-zenoh", "--zenoh-config", "/nonexistent"],
         ["offboard.cli", "--scenario", CUBE8, "--agent", "1", "--zenoh-config", "/nonexistent"],
+        ["offboard.cli", "--scenario", CUBE8, "--agent", "3", "--nav-gate", "nan"],
     ],
 )
 def test_sim_and_daemon_bad_swarm_or_zenoh_config_exit_2(argv):

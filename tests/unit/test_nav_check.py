@@ -114,3 +114,13 @@ def test_due_every_few_steps_and_never_once_failed() -> None:
     assert [k for k in range(1, 12) if nav.due(k)] == [5, 6, 7, 8, 9, 10, 11]
     assert not nav.update(7, P, P) and not nav.due(11) and nav.due(12)
     assert nav.update(12, P + 3.0, P) and not nav.due(100)
+
+
+@pytest.mark.parametrize(("text", "value"), [("2", 2.0), ("0", 0.0), ("0.001", 0.001),
+                                             ("1000", 1000.0), ("0.0005", None), ("-1", None),
+                                             ("nan", None), ("inf", None), ("x", None),
+                                             ("1001", None)])
+def test_nav_gate_flag(text: str, value: float | None) -> None:
+    from offboard.cli import nav_gate
+
+    assert nav_gate(text) == value
