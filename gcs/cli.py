@@ -39,6 +39,7 @@ from gcs.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.launch_spec import add_signing_flags
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
+from swarm_common.process_life import exit_now
 from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
 from swarm_common.zenoh_session import default_endpoint
 
@@ -417,4 +418,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    exit_now(main())  # no interpreter teardown (swarm_common.process_life)

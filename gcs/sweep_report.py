@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import beta
 
 from gcs.metrics import METRIC_KEYS, PHASES
 from gcs.report import FORMED_TOL_M, LABELS, md_legend
@@ -51,6 +50,8 @@ def clopper_pearson_upper(x: int, n: int, conf: float = CONFIDENCE) -> float:
         return 1.0
     if x >= n:
         return 1.0
+    from scipy.stats import beta  # here: importing scipy.stats costs every gcs command 0.3 s
+
     return float(beta.ppf(conf, x + 1, n - x))
 
 

@@ -9,6 +9,7 @@ import os
 import sys
 
 from offboard import start_gate
+from swarm_common.process_life import exit_now
 
 
 def gated_main() -> int:
@@ -25,4 +26,4 @@ def gated_main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(gated_main())
+    exit_now(gated_main())  # no interpreter teardown (swarm_common.process_life)

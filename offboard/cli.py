@@ -38,6 +38,7 @@ from swarm_common.blas import single_thread_blas
 from swarm_common.enums import Method, SensingSource
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
+from swarm_common.process_life import exit_now, freeze_startup
 from swarm_common.scenario import (
     ALLOW_INFEASIBLE_FLAG,
     Scenario,
@@ -320,6 +321,7 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
             return 2
     run = daemons[0].run if len(daemons) == 1 else DaemonHost(daemons).run
     start_gate.release()  # the CPU-heavy start-up is over (offboard.start_gate)
+    freeze_startup()  # later collections skip the start-up's objects (process_life)
     prof_path = os.environ.get("OFFBOARD_PROFILE")
     if not prof_path:
         return run()
@@ -330,15 +332,6 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
         return int(prof.runcall(run))
     finally:
         prof.dump_stats(f"{prof_path}.{name}")
-
-
-def exit_now(rc: int) -> None:
-    """Exit without the interpreter's teardown, once everything is closed: Zenoh's
-    runtime makes that teardown take seconds, and a stopped daemon should be gone."""
-    logging.shutdown()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(rc)
 
 
 if __name__ == "__main__":

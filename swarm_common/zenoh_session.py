@@ -65,6 +65,8 @@ def make_config(
     cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
     cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast)))
+    if not multicast:  # nothing to discover: a router or peer would wait 0.5 s in open()
+        cfg.insert_json5("scouting/delay", "0")
     if mode == "peer":
         cfg.insert_json5("scouting/gossip/enabled", "false")
     # Keep retrying a connect endpoint that is not up yet (processes start in any order).

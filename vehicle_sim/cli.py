@@ -23,6 +23,7 @@ from swarm_common.blas import single_thread_blas
 from swarm_common.enums import DefaultStreams, FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
+from swarm_common.process_life import exit_now, freeze_startup
 from swarm_common.scenario import (
     ALLOW_INFEASIBLE_FLAG,
     Scenario,
@@ -259,6 +260,7 @@ def _run(server: SimServer) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
     prof_path = os.environ.get("VEHICLE_SIM_PROFILE")
+    freeze_startup()  # later collections skip the start-up's objects (process_life)
     try:
         if prof_path:
             import cProfile
@@ -289,4 +291,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    exit_now(main())  # no interpreter teardown (swarm_common.process_life)
