@@ -90,6 +90,7 @@ class Odometry:
 
 
 HEARTBEAT_PERIOD_S = 1.0  # the daemon's own HEARTBEAT (MAVLink microservice: 1 Hz)
+HEARTBEAT_ASK_S = 0.5  # s between two requests for the vehicle's HEARTBEAT before the lock
 
 
 class VehicleLink:
@@ -142,6 +143,7 @@ class VehicleLink:
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
         self.sent = 0
         self.heartbeat_sent_at = -math.inf  # monotonic time of our own last HEARTBEAT
+        self.heartbeat_asked_at = -math.inf  # ... of our last request for the vehicle's
         self.custom_mode = 0
         self.critical = False  # the vehicle's HEARTBEAT says a failsafe is active
         self.armed = False
@@ -224,6 +226,8 @@ class VehicleLink:
             self.drops.drop(why, reason, now)
             return
         if not self._admit(msg.get_srcSystem(), msg.get_srcComponent(), kind, now):
+            if not self.locked and msg.get_srcSystem() == self.agent_id:
+                self._ask_heartbeat(msg.get_srcComponent(), addr, now)
             return
         if not self.locked:  # this HEARTBEAT locks the link
             self.locked = True
@@ -246,6 +250,21 @@ class VehicleLink:
             self.drops.counts["before lock"] = self.drops.counts.get("before lock", 0) + 1
             return False
         return True
+
+    def _ask_heartbeat(self, compid: int, addr: tuple[str, int] | None, now: float) -> None:
+        """Before the lock, a decoded (and, with signing, verified) frame of this link's
+        vehicle names its address: ask it for its HEARTBEAT at once
+        (MAV_CMD_REQUEST_MESSAGE) instead of waiting for its 1 Hz stream, which cost
+        every run's start up to a second (docs/performance.md, twenty-second round). At
+        most every HEARTBEAT_ASK_S; the lock itself still takes the HEARTBEAT."""
+        if (self.sock is None or addr is None or compid != COMP_AUTOPILOT
+                or now - self.heartbeat_asked_at < HEARTBEAT_ASK_S):
+            return
+        self.heartbeat_asked_at = now
+        ask = mavlink.MAVLink_command_long_message(
+            self.agent_id, COMP_AUTOPILOT, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT, 0, 0, 0, 0, 0, 0)
+        self._send(ask, addr)
 
     def _drop_unread(self, sysid: int, compid: int, kind: str, now: float) -> None:
         """What :meth:`_accept` does with a message the daemon does not read, from the
@@ -303,19 +322,21 @@ class VehicleLink:
         return self.locked
 
     # -- send ---------------------------------------------------------------------------
-    def _send(self, msg: Any) -> None:
+    def _send(self, msg: Any, to: tuple[str, int] | None = None) -> None:
         """Pack (signed when signing is on) with the link's sequence number, which goes up
         by one per packed message (mod 256) like ``MAVLink.send`` does, so a receiver's loss
-        count (pymavlink ``mavloss``) is right; then send to the locked vehicle."""
+        count (pymavlink ``mavloss``) is right; then send to the locked vehicle (``to``:
+        the one address a frame before the lock goes to, :meth:`_ask_heartbeat`)."""
         buf = msg.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256
+        dest = self.peer or to
         if self.sock is None:
             self.conn.write(buf)
-        elif self.peer is None:
+        elif dest is None:
             return  # nothing goes out before the lock
         elif self.faults is not None:
-            self.faults.send((buf, self.peer), self._sendto)
-        elif not self._sendto((buf, self.peer)):
+            self.faults.send((buf, dest), self._sendto)
+        elif not self._sendto((buf, dest)):
             return
         self.sent += 1
         self._log(buf)
