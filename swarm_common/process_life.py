@@ -18,6 +18,9 @@ teardown, where it kept a stopped simulator and each stopped daemon alive for ab
 * :func:`exit_now` ends the process without the interpreter's teardown, once the caller
   has closed its sockets, files and Zenoh session: the log is flushed and the exit
   status kept.
+
+Standard library only: ``python -m offboard`` imports this before its start-up slot
+(:mod:`offboard.start_gate`).
 """
 
 from __future__ import annotations
