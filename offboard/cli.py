@@ -102,28 +102,25 @@ def open_session_saying(
     return box["session"]
 
 
-def loss_land_after(text: object) -> float | None:
-    """``--loss-land-after``: 0 or a finite number of seconds in MIN_LAND_AFTER_S..3600;
-    None when it is not."""
+def _zero_or_within(text: object, lo: float, hi: float) -> float | None:
+    """``text`` as a number that is 0 or in lo..hi (so finite); None when it is not."""
     try:
         value = float(str(text))
     except ValueError:
         return None
-    if value == 0.0 or MIN_LAND_AFTER_S <= value <= 3600.0:
-        return value
-    return None
+    return value if value == 0.0 or lo <= value <= hi else None
+
+
+def loss_land_after(text: object) -> float | None:
+    """``--loss-land-after``: 0 or a finite number of seconds in MIN_LAND_AFTER_S..3600;
+    None when it is not."""
+    return _zero_or_within(text, MIN_LAND_AFTER_S, 3600.0)
 
 
 def nav_gate(text: object) -> float | None:
     """``--nav-gate``: 0 (no check) or a finite number of metres in
     MIN_NAV_GATE_M..MAX_NAV_GATE_M; None when it is not."""
-    try:
-        value = float(str(text))
-    except ValueError:
-        return None
-    if value == 0.0 or MIN_NAV_GATE_M <= value <= MAX_NAV_GATE_M:
-        return value
-    return None
+    return _zero_or_within(text, MIN_NAV_GATE_M, MAX_NAV_GATE_M)
 
 
 def build_parser() -> argparse.ArgumentParser:

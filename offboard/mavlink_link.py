@@ -225,9 +225,10 @@ class VehicleLink:
             why = "bad signature" if reason.startswith("Invalid signature") else "bad data"
             self.drops.drop(why, reason, now)
             return
-        if not self._admit(msg.get_srcSystem(), msg.get_srcComponent(), kind, now):
-            if not self.locked and msg.get_srcSystem() == self.agent_id:
-                self._ask_heartbeat(msg.get_srcComponent(), addr, now)
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if not self._admit(sysid, compid, kind, now):
+            if not self.locked and (sysid, compid) == (self.agent_id, COMP_AUTOPILOT):
+                self._ask_heartbeat(addr, now)
             return
         if not self.locked:  # this HEARTBEAT locks the link
             self.locked = True
@@ -251,14 +252,13 @@ class VehicleLink:
             return False
         return True
 
-    def _ask_heartbeat(self, compid: int, addr: tuple[str, int] | None, now: float) -> None:
+    def _ask_heartbeat(self, addr: tuple[str, int] | None, now: float) -> None:
         """Before the lock, a decoded (and, with signing, verified) frame of this link's
         vehicle names its address: ask it for its HEARTBEAT at once
         (MAV_CMD_REQUEST_MESSAGE) instead of waiting for its 1 Hz stream, which cost
         every run's start up to a second (docs/performance.md, twenty-second round). At
         most every HEARTBEAT_ASK_S; the lock itself still takes the HEARTBEAT."""
-        if (self.sock is None or addr is None or compid != COMP_AUTOPILOT
-                or now - self.heartbeat_asked_at < HEARTBEAT_ASK_S):
+        if self.sock is None or addr is None or now - self.heartbeat_asked_at < HEARTBEAT_ASK_S:
             return
         self.heartbeat_asked_at = now
         ask = mavlink.MAVLink_command_long_message(
