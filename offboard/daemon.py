@@ -303,7 +303,7 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         ...): the agent's setpoints no longer fly, so publish cooperative=False and the
         vehicle's measured state instead of the estimate of a controller that does not fly
         it (docs/lifecycle.md, "Third-party AUTO.LAND"). Control is not taken back."""
-        if self.link.in_offboard:
+        if self.link.offboard_reported:  # latched by the link, backlog included
             self.offboard_seen = True
         cooperative = self.link.in_offboard or not self.offboard_seen
         if cooperative != self.cooperative:

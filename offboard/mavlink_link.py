@@ -141,12 +141,16 @@ class VehicleLink:
         self.commands = VehicleCommands(agent_id, self._send)  # COMMAND_LONG, ACK, retry
         self.statustexts: list[str] = []
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
+        self.offboard_lost_texts = 0  # ... that say "failsafe" and "offboard"
         self.sent = 0
         self.heartbeat_sent_at = -math.inf  # monotonic time of our own last HEARTBEAT
         self.heartbeat_asked_at = -math.inf  # ... of our last request for the vehicle's
         self.custom_mode = 0
         self.critical = False  # the vehicle's HEARTBEAT says a failsafe is active
         self.armed = False
+        # latched by every HEARTBEAT that says OFFBOARD, also one read in a backlog that
+        # the main loop never samples (a daemon stopped while its vehicle was in OFFBOARD)
+        self.offboard_reported = False
         self.faults = faults or fault_plan.injector_for(fault_plan.MAVLINK, agent_id, "offboard")
         self.trim = StreamTrim(trim_streams)
 
@@ -280,6 +284,7 @@ class VehicleLink:
             self.custom_mode = int(msg.custom_mode)
             self.critical = int(msg.system_status) == mavlink.MAV_STATE_CRITICAL
             self.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            self.offboard_reported = self.offboard_reported or self.in_offboard
         elif kind == "ODOMETRY":
             self._odometry(msg, now)
         elif kind == "COMMAND_ACK":
@@ -287,8 +292,10 @@ class VehicleLink:
         elif kind == "STATUSTEXT":
             text = str(msg.text)
             self.statustexts = [*self.statustexts[-31:], text]
-            if "failsafe" in text.lower():
+            low = text.lower()
+            if "failsafe" in low:
                 self.failsafe_texts += 1
+                self.offboard_lost_texts += "offboard" in low
 
     def _odometry(self, msg: Any, now: float) -> None:
         q = tuple(map(float, msg.q))

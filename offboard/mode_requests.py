@@ -61,6 +61,8 @@ class ModeRequests:
             failsafe_texts=link.failsafe_texts,
             streaming_s=streaming_s,
             critical=link.critical,
+            reported_offboard=link.offboard_reported,
+            offboard_lost_texts=link.offboard_lost_texts,
         )
         want = self.keeper.decide(now, view)
         if want == "offboard":

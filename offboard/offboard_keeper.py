@@ -51,6 +51,8 @@ class VehicleView:
     failsafe_texts: int  # STATUSTEXTs from the vehicle that say "failsafe", so far
     streaming_s: float  # how long fresh setpoints have streamed without a gap
     critical: bool = False  # its HEARTBEAT says MAV_STATE_CRITICAL (a failsafe is active)
+    reported_offboard: bool = False  # a HEARTBEAT since the daemon's start said OFFBOARD
+    offboard_lost_texts: int = 0  # STATUSTEXTs so far that say "failsafe" and "offboard"
 
 
 class OffboardKeeper:
@@ -100,7 +102,7 @@ class OffboardKeeper:
             self.texts_ref = v.failsafe_texts
             self.backoff.reset()
             return None
-        if not (self.seen_offboard or (self.offboard_acked and v.hold)):
+        if not self._was_offboard(v):
             return None  # not in OFFBOARD yet (the heartbeat lags the accepted request)
         if self.left_at is None:
             self.left_at = now
@@ -123,6 +125,15 @@ class OffboardKeeper:
         if self.recovering and v.streaming_s >= self.stream_s and self.backoff.ready(now):
             return "offboard"
         return None
+
+    def _was_offboard(self, v: VehicleView) -> bool:
+        """Whether the vehicle has been in OFFBOARD in this mission: this keeper saw it,
+        or a HEARTBEAT said so (also one the loop never sampled), or the vehicle said it
+        lost offboard (a failsafe can come before any HEARTBEAT showed OFFBOARD: a ground
+        station's OFFBOARD, then this daemon stopped for longer than the failsafe's
+        timeout), or OFFBOARD was accepted and the vehicle is now in HOLD."""
+        return (self.seen_offboard or v.reported_offboard or v.offboard_lost_texts > 0
+                or (self.offboard_acked and v.hold))
 
     def _startup(self, now: float, v: VehicleView) -> str | None:
         if v.in_offboard:  # a failsafe HOLD from here on is recovered (decide)

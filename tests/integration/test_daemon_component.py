@@ -12,6 +12,7 @@ router hosted by the test, over 127.0.0.1.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -25,21 +26,23 @@ os.environ.setdefault("MAVLINK20", "1")
 from conftest import CUBE8, ROOT, MavClient  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
+from swarm_common import px4  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.zenoh_session import default_endpoint, open_session  # noqa: E402
 
 pytestmark = pytest.mark.timeout(120)
 
 M = mavutil.mavlink
+GROUND8 = ROOT / "scenarios" / "ground8.toml"
 ONBOARD = (1, M.MAV_COMP_ID_ONBOARD_COMPUTER)
 
 
 class Daemon:
     """``offboard --agent 1`` as a subprocess, its stderr collected."""
 
-    def __init__(self, off: int, tlog: Path, extra: list[str]) -> None:
+    def __init__(self, off: int, tlog: Path, extra: list[str], scenario: Path = CUBE8) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", "1",
+            [sys.executable, "-m", "offboard.cli", "--scenario", scenario, "--agent", "1",
              "--port-offset", str(off), "--realtime", "--sensing", "odometry",
              "--zenoh-connect", default_endpoint(off), "--tlog", str(tlog), *extra],
             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
@@ -79,7 +82,17 @@ class Daemon:
 def one_vehicle(sim_factory) -> Iterator[tuple[int, MavClient]]:
     """(port offset, a GCS listening on vehicle 1's GCS link): ``vehicle-sim --vehicles 1``
     (real time, no truth) and a Zenoh router on the offset's endpoint."""
-    sim = sim_factory(["--vehicles", "1", "--no-zenoh"])
+    yield from _one_vehicle(sim_factory, CUBE8)
+
+
+@pytest.fixture
+def one_vehicle_on_the_ground(sim_factory) -> Iterator[tuple[int, MavClient]]:
+    """:func:`one_vehicle` of ground8 (on its pad)."""
+    yield from _one_vehicle(sim_factory, GROUND8)
+
+
+def _one_vehicle(sim_factory, scenario: Path) -> Iterator[tuple[int, MavClient]]:
+    sim = sim_factory(["--vehicles", "1", "--no-zenoh"], scenario=str(scenario))
     off = sim.offset
     router = open_session(mode="router", listen=[default_endpoint(off)])
     gcs = MavClient(vehicle_ports(1, off).gcs_remote)
@@ -174,3 +187,49 @@ def test_solo_arms_and_loses_no_sequence_number(one_vehicle, tmp_path: Path) -> 
     kinds = {m.get_type() for m in msgs}
     assert {"HEARTBEAT", "SET_ATTITUDE_TARGET", "COMMAND_LONG"} <= kinds
     assert sum(m.get_type() == "HEARTBEAT" for m in msgs) >= 2
+
+
+def _mode(gcs: MavClient) -> tuple[int, int, bool] | None:
+    """(main mode, sub mode, armed) of vehicle 1's next HEARTBEAT on the GCS link."""
+    hb = gcs.recv("HEARTBEAT", timeout=5.0, sysid=1,
+                  cond=lambda m: m.get_srcComponent() == M.MAV_COMP_ID_AUTOPILOT1)
+    if hb is None:
+        return None
+    main, sub = px4.split_mode(int(hb.custom_mode))
+    return main, sub, bool(hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+
+
+def test_stopped_right_after_a_ground_stations_offboard_it_takes_the_vehicle_back(
+    one_vehicle_on_the_ground, tmp_path: Path
+) -> None:
+    """``--manual-start``: the ground station puts the vehicle in OFFBOARD; the daemon's
+    process is stopped (SIGSTOP) as the ACK comes back, before the vehicle's 1 Hz HEARTBEAT
+    can show it OFFBOARD, and the ground station arms it. The offboard-loss failsafe puts
+    it in HOLD; resumed 2 s later, the daemon reads the vehicle's "failsafe: offboard
+    lost" and asks for OFFBOARD again (offboard.offboard_keeper: it once waited forever,
+    having never seen OFFBOARD itself)."""
+    off, gcs = one_vehicle_on_the_ground
+    d = Daemon(off, tmp_path / "vehicle_1.tlog", ["--solo", "--manual-start"], GROUND8)
+    try:
+        assert d.wait_for("on its pad until the take-off command", 60), d.lines
+        time.sleep(1.5)  # its setpoints stream: the vehicle accepts OFFBOARD
+        assert _mode(gcs) is not None  # the client knows where the vehicle is
+        ack = gcs.command(1, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                          px4.MAIN_OFFBOARD)
+        os.kill(d.proc.pid, signal.SIGSTOP)
+        try:
+            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+            ack = gcs.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+            time.sleep(2.0)
+            gcs.drain()
+            hold = (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER, True)
+            assert _mode(gcs) == hold  # the failsafe did trip
+        finally:
+            os.kill(d.proc.pid, signal.SIGCONT)
+        assert d.wait_for("back in OFFBOARD after a failsafe", 20), d.lines
+        gcs.drain()
+        state = _mode(gcs)
+        assert state is not None and state[0] == px4.MAIN_OFFBOARD and state[2]
+    finally:
+        print(d.stop())

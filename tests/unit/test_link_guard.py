@@ -265,6 +265,31 @@ def test_failsafe_whose_statustext_was_lost_is_recovered_from_the_heartbeat() ->
     assert k.recovering and not k.respect
 
 
+def _ground_station_start(now: float, **evidence: object) -> str | None:
+    """A ``--manual-start`` daemon (its ground station sends OFFBOARD and arm): the
+    vehicle went to OFFBOARD and armed, then this daemon stopped for longer than the
+    offboard-loss timeout before its loop sampled a HEARTBEAT that showed OFFBOARD. After
+    it resumes, the vehicle is armed in HOLD; what the keeper asks for at ``now``."""
+    k = OffboardKeeper(stream_s=0.6, manual_start=True)
+    assert k.decide(1.0, _view(False, armed=False)) is None  # on its pad, nothing asked
+    evidence.setdefault("failsafe_texts", 0)
+    held = VehicleView(False, True, True, streaming_s=5.0, **evidence)  # type: ignore[arg-type]
+    want = None
+    for t in np.arange(4.0, now + 1e-9, 0.1):
+        want = k.decide(float(t), held) or want
+    return want
+
+
+def test_manual_start_failsafe_before_the_daemon_saw_offboard_is_recovered() -> None:
+    """The vehicle's own word that it was in OFFBOARD: a HEARTBEAT that said so (read in
+    the backlog after the stop, never sampled by the loop), or its failsafe STATUSTEXT
+    naming offboard. Without either (a HOLD the daemon cannot place) it is left alone."""
+    assert _ground_station_start(6.0, failsafe_texts=1, offboard_lost_texts=1) == "offboard"
+    assert _ground_station_start(6.0, reported_offboard=True, critical=True) == "offboard"
+    assert _ground_station_start(6.0, failsafe_texts=1, critical=True) is None
+    assert _ground_station_start(6.0, reported_offboard=True) is None  # HOLD, no evidence
+
+
 def test_no_warning_while_the_heartbeat_still_shows_the_old_mode(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
