@@ -214,13 +214,14 @@ def test_stopped_right_after_a_ground_stations_offboard_it_takes_the_vehicle_bac
         assert d.wait_for("on its pad until the take-off command", 60), d.lines
         time.sleep(1.5)  # its setpoints stream: the vehicle accepts OFFBOARD
         assert _mode(gcs) is not None  # the client knows where the vehicle is
+        gcs.drain()
         ack = gcs.command(1, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                          px4.MAIN_OFFBOARD)
+                          px4.MAIN_OFFBOARD, timeout=10.0)
         os.kill(d.proc.pid, signal.SIGSTOP)
         try:
-            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
-            ack = gcs.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED, ack
+            ack = gcs.command(1, M.MAV_CMD_COMPONENT_ARM_DISARM, 1, timeout=10.0)
+            assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED, ack
             time.sleep(2.0)
             gcs.drain()
             hold = (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER, True)
