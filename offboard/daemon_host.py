@@ -33,6 +33,7 @@ from typing import Any
 
 from offboard.daemon import WAIT_CAP_S, OffboardDaemon
 from offboard.daemon_agents import format_agents, parse_agents
+from offboard.output_burst import OutputBurst
 
 __all__ = ["DaemonHost", "format_agents", "parse_agents"]
 
@@ -79,6 +80,7 @@ class DaemonHost:
         whole = len(fds) == len(live)  # every link a socket: one select waits for them all
         mark = time.monotonic()
         shared = live[0].bus.shared  # the packed daemons' Zenoh subscriptions (or None)
+        burst = self._burst(live)
         while live and not self.stop:
             if whole:
                 select.select(fds, [], [], WAIT_CAP_S)
@@ -93,4 +95,19 @@ class DaemonHost:
                     worst = max(worst, rc)
                     live.remove(d)
                     fds = [fd for x in live if (fd := x.link.fileno()) is not None]
+            if burst is not None:
+                burst.flush()
+        if burst is not None:
+            burst.flush()
         return worst
+
+    @staticmethod
+    def _burst(live: list[OffboardDaemon]) -> OutputBurst | None:
+        """One burst for the pass's sends (:mod:`offboard.output_burst`): lockstep and
+        more than one agent only."""
+        if len(live) < 2 or not all(d.cfg.lockstep for d in live):
+            return None
+        burst = OutputBurst()
+        for d in live:
+            d.link.burst = d.bus.burst = burst
+        return burst

@@ -51,6 +51,7 @@ from pymavlink import mavutil  # noqa: E402
 from offboard.frame_peek import unread_frames  # noqa: E402
 from offboard.link_guard import DropLog, StampGuard, odometry_fields_ok  # noqa: E402
 from offboard.mavlink_url import parse_udpin  # noqa: E402
+from offboard.output_burst import OutputBurst  # noqa: E402
 from offboard.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
 from offboard.vehicle_commands import VehicleCommands  # noqa: E402
 from swarm_common import faults as fault_plan  # noqa: E402
@@ -151,6 +152,8 @@ class VehicleLink:
         # latched by every HEARTBEAT that says OFFBOARD, also one read in a backlog that
         # the main loop never samples (a daemon stopped while its vehicle was in OFFBOARD)
         self.offboard_reported = False
+        # a packed lockstep process's burst: sends held until the end of its pass
+        self.burst: OutputBurst | None = None
         self.faults = faults or fault_plan.injector_for(fault_plan.MAVLINK, agent_id, "offboard")
         self.trim = StreamTrim(trim_streams)
 
@@ -343,10 +346,19 @@ class VehicleLink:
             return  # nothing goes out before the lock
         elif self.faults is not None:
             self.faults.send((buf, dest), self._sendto)
+        elif self.burst is not None:
+            self.burst.hold(self._deliver, (buf, dest))
+            return
         elif not self._sendto((buf, dest)):
             return
         self.sent += 1
         self._log(buf)
+
+    def _deliver(self, frame: tuple[bytes, tuple[str, int]]) -> None:
+        """A held frame, sent (:mod:`offboard.output_burst`): counted and logged if it went."""
+        if self._sendto(frame):
+            self.sent += 1
+            self._log(frame[0])
 
     def _sendto(self, frame: tuple[bytes, tuple[str, int]]) -> bool:
         assert self.sock is not None

@@ -38,6 +38,7 @@ from collections.abc import Callable
 from typing import Any
 
 from offboard.link_guard import DropLog, PayloadGuard, payload_finite
+from offboard.output_burst import OutputBurst
 from offboard.shared_subs import ZENOH_ERRORS, Handler, SharedSubscriptions
 from offboard.step_store import StepStore
 from swarm_common import faults as fault_plan
@@ -105,6 +106,8 @@ class SwarmBus:
         self.cache = PROCESS_CACHE if cache is None else cache
         self.session = session
         self.faults = faults or fault_plan.injector_for(fault_plan.ZENOH, agent_id, "offboard")
+        # a packed lockstep process's burst: puts held until the end of its pass
+        self.burst: OutputBurst | None = None
         self.guard = guard
         self.drops = DropLog(f"agent {agent_id}: Zenoh")
         self.truth_time = 0.0  # monotonic time of the last accepted truth
@@ -282,13 +285,23 @@ class SwarmBus:
         the encoding and the router's work every step)."""
         if not self.odometry_matched:
             return
-        self._put(self._pub_odo, wire.encode(odo))
+        # never held in a burst: a peer's step k waits for our odometry of step k, which
+        # a peer of this very process may do within the same pass
+        self._put(self._pub_odo, wire.encode(odo), hold=False)
 
-    def _put(self, pub: Any, payload: bytes) -> None:
+    def _put(self, pub: Any, payload: bytes, hold: bool = True) -> None:
         if self.faults is None:
-            pub.put(payload)
+            if self.burst is None or not hold:
+                pub.put(payload)
+            else:
+                self.burst.hold(self._held_put, (pub, payload))
         else:
             self.faults.send(payload, lambda data: self._late_put(pub, data))
+
+    def _held_put(self, item: tuple[Any, bytes]) -> None:
+        """A put of the burst (:mod:`offboard.output_burst`): the publisher may be
+        undeclared by the time the burst goes."""
+        self._late_put(*item)
 
     def _late_put(self, pub: Any, payload: bytes) -> None:
         """A delayed put from the fault timer: the publisher may be gone by then."""
