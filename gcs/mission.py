@@ -92,6 +92,7 @@ def run_distributed(
     signing: SigningChoice | None = None,
     processes: int | None = None,
     default_streams: DefaultStreams = DefaultStreams.ALWAYS,
+    on_step: Callable[[int], None] | None = None,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
@@ -105,7 +106,9 @@ def run_distributed(
     ``processes``: pack the daemons into this many processes (None: one per agent;
     :class:`~gcs.launch_spec.LaunchSpec`); a packed process authenticates as one Zenoh
     user that may publish its own agents' keys only. ``default_streams``: the simulator's
-    ``--default-streams`` (:class:`~gcs.launch_spec.LaunchSpec`).
+    ``--default-streams`` (:class:`~gcs.launch_spec.LaunchSpec`). ``on_step(k)``: called
+    by the supervising loop with the newest recorded step, about every 50 ms of wall time
+    while the run goes (a script's events at a mission time).
 
     Raises :class:`~gcs.launch_spec.LaunchError` before starting anything when a port is
     busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
@@ -149,14 +152,15 @@ def run_distributed(
         for name, argv in spec.processes():
             group.start(name, argv, env=spec.child_env(name), gated=spec.is_daemon(name))
         bar = Progress(duration, label=str(method)) if show_progress else None
-        on_step = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
-                                                             sc.control_dt)
+        land = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
+                                                          sc.control_dt)
+        hooks = [h for h in (land, on_step) if h is not None]
         checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
         victim = None if kill_agent is None else next(
             spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
         facts.update(
             _supervise(rec, group, sc.control_dt, victim, kill_agent, kill_at, bar,
-                       stall_timeout, out_dir, on_step, facts, checkpoint)
+                       stall_timeout, out_dir, _each(hooks), facts, checkpoint)
         )
         at_first = facts.get("processes_at_first_step", {}).get(RUNNER_NAME)
         if at_first is not None:
@@ -208,6 +212,18 @@ def _remove(path: Path | None) -> None:
     run)."""
     if path is not None:
         shutil.rmtree(path, ignore_errors=True)
+
+
+def _each(hooks: list[Callable[[int], None]]) -> Callable[[int], None] | None:
+    """One on_step callback that calls every one of ``hooks`` in order (None: none)."""
+    if not hooks:
+        return None
+
+    def call(k: int) -> None:
+        for hook in hooks:
+            hook(k)
+
+    return call
 
 
 def _land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callable[[int], None]:
