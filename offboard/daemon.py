@@ -162,7 +162,6 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         self.stop = False
         self.trajectory_started = False
         self.land_at: float | None = cfg.land_at
-        self.offboard_seen = False  # the mission has had the vehicle in OFFBOARD
         self.cooperative = True
         self.bad_commands = 0  # commands with unusable fields: counted, logged, dropped
         # CPU of this thread inside agent.step (s): the control law runs on the main thread
@@ -303,9 +302,8 @@ class OffboardDaemon(DaemonCommands, SetpointStream):
         ...): the agent's setpoints no longer fly, so publish cooperative=False and the
         vehicle's measured state instead of the estimate of a controller that does not fly
         it (docs/lifecycle.md, "Third-party AUTO.LAND"). Control is not taken back."""
-        if self.link.offboard_reported:  # latched by the link, backlog included
-            self.offboard_seen = True
-        cooperative = self.link.in_offboard or not self.offboard_seen
+        # the mission has had the vehicle in OFFBOARD: latched by the link, backlog included
+        cooperative = self.link.in_offboard or not self.link.offboard_reported
         if cooperative != self.cooperative:
             self.cooperative = cooperative
             mode = px4.short_name(self.link.custom_mode)

@@ -349,13 +349,15 @@ class VehicleLink:
         elif self.burst is not None:
             self.burst.hold(self._deliver, (buf, dest))
             return
-        elif not self._sendto((buf, dest)):
+        else:
+            self._deliver((buf, dest))
             return
         self.sent += 1
         self._log(buf)
 
     def _deliver(self, frame: tuple[bytes, tuple[str, int]]) -> None:
-        """A held frame, sent (:mod:`offboard.output_burst`): counted and logged if it went."""
+        """Send ``frame`` now (also a held one, :mod:`offboard.output_burst`): counted and
+        logged if it went."""
         if self._sendto(frame):
             self.sent += 1
             self._log(frame[0])

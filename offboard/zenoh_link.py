@@ -304,7 +304,7 @@ class SwarmBus:
         self._late_put(*item)
 
     def _late_put(self, pub: Any, payload: bytes) -> None:
-        """A delayed put from the fault timer: the publisher may be gone by then."""
+        """A delayed put (the fault timer, a burst): the publisher may be gone by then."""
         try:
             pub.put(payload)
         except ZENOH_ERRORS as exc:

@@ -309,6 +309,19 @@ def wait_for(pred: Callable[[], object], timeout: float = 8.0) -> bool:
     return bool(pred())
 
 
+def received_frames(sock: socket.socket) -> list:
+    """Every MAVLink message in the datagrams waiting on ``sock`` (a non-blocking socket
+    or one with a timeout), parsed by pymavlink."""
+    out: list = []
+    parser = mavutil.mavlink.MAVLink(None)
+    while True:
+        try:
+            data = sock.recv(2048)
+        except (BlockingIOError, TimeoutError):
+            return out
+        out += parser.parse_buffer(data) or []
+
+
 def free_tcp_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago."""
     s = socket.socket()

@@ -10,10 +10,9 @@ import time
 from typing import Any
 
 import numpy as np
-from conftest import free_port_offset, free_tcp_port, wait_for
+from conftest import free_port_offset, free_tcp_port, received_frames, wait_for
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil  # noqa: E402
 
 from offboard.link_guard import PayloadGuard  # noqa: E402
 from offboard.mavlink_link import VehicleLink  # noqa: E402
@@ -23,19 +22,7 @@ from swarm_common import wire  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.zenoh_session import open_session  # noqa: E402
 
-M = mavutil.mavlink
 SWARM = "burst"
-
-
-def _frames(sock: socket.socket) -> list[Any]:
-    out: list[Any] = []
-    parser = M.MAVLink(None)
-    while True:
-        try:
-            data = sock.recv(2048)
-        except (BlockingIOError, TimeoutError):
-            return out
-        out += parser.parse_buffer(data) or []
 
 
 def test_vehicle_link_setpoints_wait_for_the_flush_in_order() -> None:
@@ -50,17 +37,17 @@ def test_vehicle_link_setpoints_wait_for_the_flush_in_order() -> None:
         for ms in (10, 20, 30):
             link.send_attitude_target(ms, (1.0, 0.0, 0.0, 0.0), 0.5)
         time.sleep(0.2)
-        assert _frames(vehicle) == [] and link.sent == 0 and len(burst) == 3
+        assert received_frames(vehicle) == [] and link.sent == 0 and len(burst) == 3
         burst.flush()
         got: list[Any] = []
-        assert wait_for(lambda: bool(got.extend(_frames(vehicle))) or len(got) >= 3)
+        assert wait_for(lambda: bool(got.extend(received_frames(vehicle))) or len(got) >= 3)
         assert [m.time_boot_ms for m in got] == [10, 20, 30]
         seqs = [m.get_seq() for m in got]
         assert seqs == [seqs[0], seqs[0] + 1, seqs[0] + 2] and link.sent == 3
         link.burst = None  # outside a burst: at once
         link.send_attitude_target(40, (1.0, 0.0, 0.0, 0.0), 0.5)
         more: list[Any] = []
-        assert wait_for(lambda: bool(more.extend(_frames(vehicle))) or len(more) >= 1)
+        assert wait_for(lambda: bool(more.extend(received_frames(vehicle))) or len(more) >= 1)
         assert [m.time_boot_ms for m in more] == [40]
     finally:
         link.close()

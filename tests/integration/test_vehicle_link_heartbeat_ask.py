@@ -8,7 +8,7 @@ import os
 import socket
 import time
 
-from conftest import free_port_offset, wait_for  # noqa: E402
+from conftest import free_port_offset, received_frames, wait_for  # noqa: E402
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -26,16 +26,6 @@ def _odometry(mav: object) -> bytes:
         1000, 1, 12, 1.0, 2.0, -3.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
         [float("nan")] * 21, [float("nan")] * 21)
     return bytes(odo.pack(mav))
-
-
-def _received(sock: socket.socket) -> list[object]:
-    out: list[object] = []
-    while True:
-        try:
-            data = sock.recv(2048)
-        except (BlockingIOError, TimeoutError):
-            return out
-        out += M.MAVLink(None).parse_buffer(data) or []
 
 
 def _requests(msgs: list[object]) -> list[object]:
@@ -73,16 +63,16 @@ def test_a_verified_frame_before_the_lock_asks_for_the_heartbeat() -> None:
         stranger.sendto(_odometry(other_signed), ("127.0.0.1", port))
         stranger.sendto(_odometry(other), ("127.0.0.1", port))
         assert poll_until(lambda: link.drops.total >= 3)
-        assert _received(stranger) == [] and not link.locked
+        assert received_frames(stranger) == [] and not link.locked
         # the vehicle's verified ODOMETRY, five times: a request for its HEARTBEAT, to it,
         # and at most one per HEARTBEAT_ASK_S whatever the number of frames
         got: list[object] = []
         start = time.monotonic()
         for _ in range(5):
             vehicle.sendto(_odometry(signed), ("127.0.0.1", port))
-        assert poll_until(lambda: bool(_requests(got)) or got.extend(_received(vehicle)))
+        assert poll_until(lambda: bool(_requests(got)) or got.extend(received_frames(vehicle)))
         link.poll(0.05)
-        got.extend(_received(vehicle))
+        got.extend(received_frames(vehicle))
         elapsed = time.monotonic() - start
         asks = _requests(got)
         assert 1 <= len(asks) <= 1 + elapsed // HEARTBEAT_ASK_S, (len(asks), elapsed)
@@ -95,7 +85,7 @@ def test_a_verified_frame_before_the_lock_asks_for_the_heartbeat() -> None:
                        ("127.0.0.1", port))
         assert poll_until(lambda: link.locked)
         assert link.peer == vehicle.getsockname()
-        assert _received(stranger) == []
+        assert received_frames(stranger) == []
     finally:
         vehicle.close()
         stranger.close()
