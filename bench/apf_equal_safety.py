@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from gcs.inproc import run_inproc
-from swarm_common.scenario import load_scenario
+from gcs.mission.inproc import run_inproc
+from swarm_common.scenario.model import load_scenario
 
 SCENARIO = "scenarios/cube8.toml"
 TUNED_APF = {"apf_gain": 16.0, "apf_velocity_gain": 16.0, "apf_radius_m": 3.0}

@@ -4,13 +4,13 @@
         [--layout shared|own] [--seed 1]
 
 One Zenoh session (no network: no listen, no connect, no multicast) holds ``--agents``
-:class:`offboard.zenoh_link.SwarmBus` objects, each with a :class:`PayloadGuard` and
+:class:`offboard.daemon.zenoh.link.SwarmBus` objects, each with a :class:`PayloadGuard` and
 ``--peers`` peers (the leaders 1-4 and random others), as in a packed process. Each step
 every agent puts one estimate payload; then every bus moves its reference to the step
 (``set_reference``) and pumps what arrived, exactly as the packed daemons do.
 ``--layout own``: each bus holds subscriptions of its own, as a daemon alone in its
 process does (and as packed daemons did before the thirteenth round); ``shared``: one
-subscriber per key for all of them (:mod:`offboard.shared_subs`, pumped once per step).
+subscriber per key for all of them (:mod:`offboard.daemon.zenoh.shared_subs`, pumped once per step).
 Prints (no assertions) the medians, over the steps after the first 50, of the main
 thread's CPU per agent-step spent receiving (pump and reference) and per put. Every
 payload must be accepted by every subscriber: the bench fails loudly if any is dropped
@@ -30,9 +30,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from offboard.link_guard import PayloadGuard  # noqa: E402
-from offboard.shared_subs import SharedSubscriptions  # noqa: E402
-from offboard.zenoh_link import FIFO_DEPTH, SwarmBus  # noqa: E402
+from offboard.daemon.link_guard import PayloadGuard  # noqa: E402
+from offboard.daemon.zenoh.link import FIFO_DEPTH, SwarmBus  # noqa: E402
+from offboard.daemon.zenoh.shared_subs import SharedSubscriptions  # noqa: E402
 from swarm_common import wire  # noqa: E402
 from swarm_common.zenoh_session import open_session  # noqa: E402
 

@@ -30,20 +30,21 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gcs.inproc import run_inproc  # noqa: E402
+from gcs.mission.inproc import run_inproc  # noqa: E402
 from offboard import clf_rcbf  # noqa: E402
-from offboard.agent import FollowerAgent  # noqa: E402
-from offboard.deso import DESO  # noqa: E402
-from offboard.leader import LeaderAgent  # noqa: E402
-from offboard.reference import DesiredStateObserver  # noqa: E402
-from offboard.sensing import Sensor  # noqa: E402
-from swarm_common.scenario import Scenario, load_scenario  # noqa: E402
+from offboard.agent.factory import FollowerAgent  # noqa: E402
+from offboard.agent.leader import LeaderAgent  # noqa: E402
+from offboard.estimation.deso import DESO  # noqa: E402
+from offboard.estimation.reference import DesiredStateObserver  # noqa: E402
+from offboard.estimation.sensing import Sensor  # noqa: E402
+from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
 
 Store = dict[str, list[float]]
 
 
-_solver_calls = [0]  # QP solves so far (offboard.clf_rcbf._ClfRowsQP._solve_rows, counted)
-_osqp_calls = [0]  # of which OSQP solves (offboard.clf_rcbf.update_solve, counted)
+# QP solves so far (offboard.safety.rcbf.clf_rcbf._ClfRowsQP._solve_rows, counted)
+_solver_calls = [0]
+_osqp_calls = [0]  # of which OSQP solves (offboard.safety.rcbf.clf_rcbf.update_solve, counted)
 
 
 def _wrap(cls: Any, name: str, store: Store, key: str) -> Callable[..., Any]:
@@ -70,7 +71,7 @@ def _wrap(cls: Any, name: str, store: Store, key: str) -> Callable[..., Any]:
 
 def _count_solves() -> tuple[Callable[..., Any], Callable[..., Any]]:
     """Count QP solves (both QPs solve in ``_ClfRowsQP._solve_rows``) and OSQP's among them
-    (``offboard.clf_rcbf.update_solve``); returns the originals."""
+    (``offboard.safety.rcbf.clf_rcbf.update_solve``); returns the originals."""
     orig_rows, orig_osqp = clf_rcbf._ClfRowsQP._solve_rows, clf_rcbf.update_solve
 
     def rows(*a: Any, **k: Any) -> Any:

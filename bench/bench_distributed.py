@@ -23,10 +23,10 @@ import re
 import tempfile
 from pathlib import Path
 
-from gcs.mission import run_and_score
-from offboard.daemon_agents import parse_agents
+from gcs.mission.distributed import run_and_score
+from offboard.daemon.packing import parse_agents
 from swarm_common.enums import DefaultStreams, Method
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 

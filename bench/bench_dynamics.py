@@ -14,8 +14,8 @@ import time
 from pathlib import Path
 
 from swarm_common import wire
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 ROOT = Path(__file__).resolve().parents[1]

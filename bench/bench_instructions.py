@@ -37,8 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = """
 import sys, time, os
 sys.path.insert(0, {root!r})
-from gcs.inproc import run_inproc
-from swarm_common.scenario import load_scenario
+from gcs.mission.inproc import run_inproc
+from swarm_common.scenario.model import load_scenario
 sc = load_scenario({scenario!r})
 run_inproc(sc, duration=max({durations!r}), method={method!r})
 def mark(name):
@@ -121,7 +121,7 @@ def main() -> None:
         print("bench_instructions: need 0 < --short < --long <= 600", file=sys.stderr)
         raise SystemExit(2)
     sys.path.insert(0, str(ROOT))
-    from swarm_common.scenario import load_scenario
+    from swarm_common.scenario.model import load_scenario
 
     sc = load_scenario(a.scenario)
     short, long_ = count(a.scenario, a.method, [a.short, a.long])

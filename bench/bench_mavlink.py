@@ -93,8 +93,8 @@ def run_rate(rate: float, seconds: float) -> tuple[int, int, float, dict[str, in
 
 
 def inprocess(n: int = 20000) -> float:
-    from swarm_common.scenario import load_scenario
-    from vehicle_sim.dynamics import SwarmDynamics
+    from swarm_common.scenario.model import load_scenario
+    from vehicle_sim.physics.dynamics import SwarmDynamics
     from vehicle_sim.vehicle import Vehicle
 
     sc = load_scenario(ROOT / "scenarios/cube8.toml")

@@ -37,9 +37,9 @@ sys.path.insert(0, str(ROOT))
 
 def child(opts: argparse.Namespace) -> dict[str, Any]:
     """One run in this process; returns its figures."""
-    from gcs.inproc import run_inproc
+    from gcs.mission.inproc import run_inproc
     from gcs.scenario_gen import add_scenario_parser, build
-    from swarm_common.scenario import parse_scenario
+    from swarm_common.scenario.model import parse_scenario
 
     ap = argparse.ArgumentParser()
     add_scenario_parser(ap.add_subparsers())

@@ -3,7 +3,7 @@
     python bench/safety_sweep.py [--scenarios cube8 swap_centre ...] [--methods rcbf dcbf]
                                  [--seeds 10] [--duration 30] [--jobs 2] [--out F.json]
 
-Each run is in-process (gcs.inproc.run_inproc, as ``gcs mission run --inproc --seed N
+Each run is in-process (gcs.mission.inproc.run_inproc, as ``gcs mission run --inproc --seed N
 --method M``). From the ground truth: true h_min (m²), (pair, step) samples with h < 0,
 follower-step fraction with h < 0, min distance (m, over the physics steps), collisions,
 formation time (s), tracking rms (m), follower-steps whose input was clipped by the
@@ -40,10 +40,10 @@ COLUMNS = [
 
 def one(job: tuple[str, str, int, float]) -> dict[str, Any]:
     """Run one (scenario, method, seed, duration) and return its row."""
-    from gcs.inproc import run_inproc
-    from offboard.bearing import formation_from_scenario
-    from offboard.safety_metrics import clipped_steps, true_barrier
-    from swarm_common.scenario import load_scenario
+    from gcs.mission.inproc import run_inproc
+    from gcs.report.safety_metrics import clipped_steps, true_barrier
+    from offboard.estimation.bearing import formation_from_scenario
+    from swarm_common.scenario.model import load_scenario
 
     name, method, seed, dur = job
     sc = load_scenario(ROOT / "scenarios" / f"{name}.toml")

@@ -17,15 +17,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gcs.sweep_report import seeds_table  # noqa: E402
+from gcs.report.sweep import seeds_table  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
 
 METHODS = [str(m) for m in Method]
 
 
 def _one(job: tuple[str, str, int, float | None]) -> tuple[str, int, dict]:
-    from gcs.inproc import run_inproc
-    from swarm_common.scenario import load_scenario
+    from gcs.mission.inproc import run_inproc
+    from swarm_common.scenario.model import load_scenario
 
     path, method, seed, dur = job
     return method, seed, run_inproc(load_scenario(path), method, seed=seed, duration=dur).metrics

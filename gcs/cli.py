@@ -4,7 +4,7 @@
 
 ``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
 ``--inproc``; the seed sweep of ``compare --seeds N`` and ``mission sweep``
-(:mod:`gcs.sweep`) always run in process.
+(:mod:`gcs.mission.sweep`) always run in process.
 ``gcs --log-level {debug,info,warning,error} ...`` sets the diagnostics level.
 ``mission run --fault-drop P --fault-delay-ms MS ... --fault-link mavlink|zenoh|both``
 injects transport faults in a distributed run (docs/faults.md).
@@ -35,12 +35,12 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from gcs.fault_flags import add_fault_flags, write_fault_scenario
-from gcs.launch_spec import add_signing_flags
+from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
+from gcs.mission.launch_spec import add_signing_flags
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.process_life import exit_now
-from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, Scenario
+from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario
 from swarm_common.zenoh_session import default_endpoint
 
 log = logging.getLogger(__name__)
@@ -50,7 +50,7 @@ EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 
 
 
 def _load(path: str, allow_infeasible: bool) -> Scenario:
-    from swarm_common.scenario import ScenarioError, load_scenario
+    from swarm_common.scenario.model import ScenarioError, load_scenario
 
     try:
         return load_scenario(path, allow_infeasible)
@@ -70,11 +70,11 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     if faulted is not None:
         sc = _load(str(faulted), sc.allow_infeasible)
     if not args.inproc:
-        from gcs.mission import cli_run
+        from gcs.mission.distributed import cli_run
 
         return cli_run(args, sc)
-    from gcs.inproc import run_inproc
-    from gcs.run_output import print_result
+    from gcs.mission.inproc import run_inproc
+    from gcs.mission.run_output import print_result
 
     res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True,
                      land_at=args.land_at)
@@ -86,8 +86,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
 
 
 def _run_one(job: tuple[str, bool, str, int, float | None]) -> dict[str, Any]:
-    from gcs.inproc import run_inproc
-    from swarm_common.scenario import load_scenario
+    from gcs.mission.inproc import run_inproc
+    from swarm_common.scenario.model import load_scenario
 
     path, allow_infeasible, method, seed, duration = job
     sc = load_scenario(path, allow_infeasible)
@@ -95,14 +95,14 @@ def _run_one(job: tuple[str, bool, str, int, float | None]) -> dict[str, Any]:
 
 
 def _gain_lines(sc: Scenario) -> list[str]:
-    from offboard.agent import FollowerAgent, make_agent
+    from offboard.agent.factory import FollowerAgent, make_agent
 
     ag = make_agent(sc, sc.follower_ids[0])
     return ag.gains.lines() if isinstance(ag, FollowerAgent) else []
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from gcs.router import run_router
+    from gcs.mission.router import run_router
 
     sc = None if args.scenario is None else _load(args.scenario, args.allow_infeasible)
     if (sc is None) != (args.secure_dir is None):
@@ -146,7 +146,7 @@ Outcome = tuple[dict[str, Any], dict[str, Any], list[str]]  # metrics, series, g
 
 
 def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome:
-    from gcs.inproc import run_inproc
+    from gcs.mission.inproc import run_inproc
 
     metrics: dict[str, Any] = {}
     series: dict[str, Any] = {}
@@ -163,8 +163,8 @@ def _compare_distributed(sc: Scenario, args: argparse.Namespace, out: Path) -> O
     """The three distributed runs, or an exit code (2 busy port, 1 a run failed)."""
     import numpy as np
 
-    from gcs.launch_spec import LaunchError
-    from gcs.mission import MissionError, run_and_score
+    from gcs.mission.distributed import MissionError, run_and_score
+    from gcs.mission.launch_spec import LaunchError
 
     metrics: dict[str, Any] = {}
     series: dict[str, Any] = {}
@@ -202,9 +202,9 @@ def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[s
 def cmd_mission_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario, args.allow_infeasible)
     _check_run_args(args, sc, "mission compare")
-    from gcs.report import compare_table, safety_table, write_report
-    from gcs.sweep_report import seeds_table
-    from offboard.bearing import formation_from_scenario
+    from gcs.report.comparison import compare_table, safety_table, write_report
+    from gcs.report.sweep import seeds_table
+    from offboard.estimation.bearing import formation_from_scenario
 
     out = Path(args.out or "runs/compare")
     outcome = (_compare_inproc if args.inproc else _compare_distributed)(sc, args, out)
@@ -268,7 +268,7 @@ def _int_in(lo: int, hi: int) -> Callable[[str], int]:
 
 
 def _port_offset(text: str) -> int:
-    from gcs.launch_spec import MAX_PORT_OFFSET
+    from gcs.mission.launch_spec import MAX_PORT_OFFSET
 
     return _int_in(0, MAX_PORT_OFFSET)(text)
 
@@ -278,7 +278,7 @@ _seed = _int_in(0, 2**32 - 1)
 
 def _check_run_args(args: argparse.Namespace, sc: Scenario, cmd: str) -> None:
     """Flags that need the scenario or the file system: exit 2 with one line."""
-    from gcs.run_output import out_dir_problem
+    from gcs.mission.run_output import out_dir_problem
 
     problem = None
     if args.duration is not None and args.duration < sc.control_dt:
@@ -348,7 +348,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="distributed: shift every port")
     _add_allow_infeasible(c)
     c.set_defaults(func=cmd_mission_compare)
-    from gcs.sweep import add_sweep_parser
+    from gcs.mission.sweep import add_sweep_parser
 
     add_sweep_parser(msub)
 

@@ -1,7 +1,7 @@
 """``gcs scenario grid|ring|sphere|helix``: formations of any size as scenario files.
 
 ``gcs scenario grid --agents 64 --leaders 4 --scramble 1 > grid64.toml`` writes a scenario
-that :func:`swarm_common.scenario.load_scenario` accepts (docs/scenarios.md, "Generated
+that :func:`swarm_common.scenario.model.load_scenario` accepts (docs/scenarios.md, "Generated
 formations"):
 
 * **vertices** of the shape, in metres, scaled so that the closest two are ``--spacing`` m
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from swarm_common.enums import GraphKind, Role, Shape
-from swarm_common.scenario import ScenarioError, dump_toml, parse_scenario
+from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
 
 EXIT_USAGE = 2
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
@@ -147,8 +147,7 @@ def _template(name: str, seed: int, duration: float, deadline: float) -> dict[st
 
 
 def _longest_edge(v: np.ndarray, graph: GraphKind, k: int) -> float:
-    from swarm_common import graphs
-
+    from swarm_common.scenario import graphs
     spec = graphs.GraphSpec(kind=str(graph), knn_k=k)
     edges = graphs.build_edges(v, spec, list(range(1, len(v) + 1)))
     return max(float(np.linalg.norm(v[i] - v[j])) for i, j in edges)

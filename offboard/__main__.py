@@ -1,5 +1,5 @@
 """``python -m offboard``: the daemon (:func:`offboard.cli.main`), after taking a start-up
-slot when the runner names a gate in ``$OFFBOARD_START_GATE`` (:mod:`offboard.start_gate`),
+slot when the runner names a gate in ``$OFFBOARD_START_GATE`` (:mod:`offboard.daemon.start_gate`),
 before the heavy imports. ``gcs mission run`` and ``gcs dashboard --launch`` start their
 daemons this way."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 
-from offboard import start_gate
+from offboard.daemon import start_gate
 from swarm_common.process_life import exit_now
 
 

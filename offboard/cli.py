@@ -1,7 +1,7 @@
 """``offboard --scenario S --agent ID [--mavlink URL] [--zenoh-connect EP ...]``.
 
 One daemon per agent (deployable on each vehicle's companion computer), or with
-``--agents 3-8`` several agents packed in one process (:mod:`offboard.daemon_host`: one
+``--agents 3-8`` several agents packed in one process (:mod:`offboard.daemon.host`: one
 Zenoh session and one event loop, each agent its own MAVLink link). Defaults
 match the simulator's port scheme (swarm_common/ports.py) and a local Zenoh router
 started by ``gcs mission run`` or ``gcs router`` on tcp/127.0.0.1:7447+offset.
@@ -21,25 +21,25 @@ import threading
 import time
 from typing import Any
 
-from offboard import start_gate
-from offboard.bearing import formation_from_scenario
-from offboard.daemon import WAIT_LOG_S, DaemonConfig, OffboardDaemon
-from offboard.daemon_agents import parse_agents
-from offboard.daemon_host import DaemonHost
-from offboard.mavlink_link import COMP_ONBOARD
-from offboard.mavlink_url import mavlink_url_problem
-from offboard.nav_check import MAX_NAV_GATE_M, MIN_NAV_GATE_M, NAV_GATE_M, NAV_GATE_STEPS
-from offboard.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
-from offboard.shared_batch import SharedBatch
-from offboard.shared_subs import SharedSubscriptions
-from offboard.warmup import warm_kernels
-from offboard.zenoh_link import FIFO_DEPTH, ZENOH_ERRORS
+from offboard.daemon import start_gate
+from offboard.daemon.core import WAIT_LOG_S, DaemonConfig, OffboardDaemon
+from offboard.daemon.host import DaemonHost
+from offboard.daemon.mavlink.link import COMP_ONBOARD
+from offboard.daemon.mavlink.url import mavlink_url_problem
+from offboard.daemon.nav_check import MAX_NAV_GATE_M, MIN_NAV_GATE_M, NAV_GATE_M, NAV_GATE_STEPS
+from offboard.daemon.packing import parse_agents
+from offboard.daemon.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
+from offboard.daemon.warmup import warm_kernels
+from offboard.daemon.zenoh.link import FIFO_DEPTH, ZENOH_ERRORS
+from offboard.daemon.zenoh.shared_batch import SharedBatch
+from offboard.daemon.zenoh.shared_subs import SharedSubscriptions
+from offboard.estimation.bearing import formation_from_scenario
 from swarm_common.blas import single_thread_blas
 from swarm_common.enums import Method, SensingSource
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.process_life import exit_now, freeze_startup
-from swarm_common.scenario import (
+from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
     Scenario,
     ScenarioError,
@@ -296,7 +296,7 @@ def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect
 
 def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
     """Build the daemons on ``session`` and run them: alone (``--agent``) or packed
-    (:class:`offboard.daemon_host.DaemonHost`). ``$OFFBOARD_PROFILE``: a developer aid,
+    (:class:`offboard.daemon.host.DaemonHost`). ``$OFFBOARD_PROFILE``: a developer aid,
     cProfile (the main thread's CPU time, not Zenoh's threads) of the whole run written
     to ``$OFFBOARD_PROFILE.<name>``."""
     single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
@@ -317,7 +317,7 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
                 d.close()
             return 2
     run = daemons[0].run if len(daemons) == 1 else DaemonHost(daemons).run
-    start_gate.release()  # the CPU-heavy start-up is over (offboard.start_gate)
+    start_gate.release()  # the CPU-heavy start-up is over (offboard.daemon.start_gate)
     freeze_startup()  # later collections skip the start-up's objects (process_life)
     prof_path = os.environ.get("OFFBOARD_PROFILE")
     if not prof_path:

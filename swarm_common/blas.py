@@ -6,7 +6,7 @@ and numpy's small products), so OpenBLAS's worker threads never help; on a loade
 machine waking them costs milliseconds per call. Measured in an in-process cube8 dcbf run
 at load average 8 on the 2-core machine: ``expm`` of the 12×12 exosystem matrix 6 ms
 median with the default two BLAS threads, 75 µs with one. The distributed children get
-the same through ``OPENBLAS_NUM_THREADS=1`` (gcs.procs), and ``offboard`` and
+the same through ``OPENBLAS_NUM_THREADS=1`` (gcs.mission.procs), and ``offboard`` and
 ``vehicle-sim`` started any other way (by hand, by a test) limit themselves at start; a
 process that has already loaded numpy and scipy needs threadpoolctl for that. Results
 are unchanged: OpenBLAS splits its work by output block, so each element is summed in

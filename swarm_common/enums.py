@@ -37,7 +37,7 @@ class GraphKind(StrEnum):
 
 
 class QPStatus(StrEnum):
-    """Outcome of one safety-filter step (``offboard.clf_rcbf.QPResult.status``)."""
+    """Outcome of one safety-filter step (``offboard.safety.rcbf.clf_rcbf.QPResult.status``)."""
 
     INACTIVE = "inactive"  # no QP was needed (no constraint near, or not rcbf)
     SOLVED = "solved"  # the QP was solved as posed (OSQP, or exactly: one active row, dcbf)
@@ -111,7 +111,7 @@ class SensingSource(StrEnum):
 
 class NavKind(StrEnum):
     """What the simulated vehicle's own position controller does with a
-    :class:`vehicle_sim.nav.NavTarget` (AUTO modes, missions, RTL)."""
+    :class:`vehicle_sim.autopilot.nav.NavTarget` (AUTO modes, missions, RTL)."""
 
     TAKEOFF = "takeoff"  # climb vertically to position_enu[2] above the current x, y
     GOTO = "goto"  # fly to position_enu and hold there

@@ -18,7 +18,7 @@ The random draws are reproducible: each injector has its own generator seeded by
 draws whatever the configuration. (In real time *which* message meets which draw still
 depends on scheduling.)
 
-A process that loads a scenario file (:func:`swarm_common.scenario.load_scenario`) installs
+A process that loads a scenario file (:func:`swarm_common.scenario.model.load_scenario`) installs
 its fault plan here (:func:`install`); the transports then ask :func:`injector_for`.
 """
 

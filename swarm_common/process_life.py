@@ -20,7 +20,7 @@ teardown, where it kept a stopped simulator and each stopped daemon alive for ab
   status kept.
 
 Standard library only: ``python -m offboard`` imports this before its start-up slot
-(:mod:`offboard.start_gate`).
+(:mod:`offboard.daemon.start_gate`).
 """
 
 from __future__ import annotations

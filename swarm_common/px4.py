@@ -13,7 +13,7 @@ import os
 from swarm_common.enums import VehicleMode
 
 # mavutil picks its MAVLink dialect version when first imported: every process of the
-# project speaks MAVLink 2 (the same setdefault as offboard/mavlink_link.py).
+# project speaks MAVLink 2 (the same setdefault as offboard/daemon/mavlink/link.py).
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 

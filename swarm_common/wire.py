@@ -135,7 +135,7 @@ class Estimate:
     # flies no safety filter, so the others avoid it alone (docs/lifecycle.md)
     cooperative: bool = True
     # the decoded float block z1..zeta are views of (None when built otherwise): one sum
-    # judges all of them finite (offboard.link_guard.payload_finite); not on the wire
+    # judges all of them finite (offboard.daemon.link_guard.payload_finite); not on the wire
     block: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 

@@ -21,7 +21,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from gcs.launch_spec import MAX_PORT_OFFSET  # noqa: E402
+from gcs.mission.launch_spec import MAX_PORT_OFFSET  # noqa: E402
 from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT  # noqa: E402
 
@@ -366,7 +366,7 @@ async def settle(app, pilot, pred, tries: int = 100) -> bool:
 def pytest_sessionstart(session: pytest.Session) -> None:
     """Compile the numba kernels before any test starts a daemon or a simulator: from a
     cold cache (a fresh clone) eight daemons would otherwise compile the same kernels at
-    once on a 2-core machine, inside their start-up timeouts (gcs.warmup)."""
-    from gcs.warmup import compile_kernels
+    once on a 2-core machine, inside their start-up timeouts (gcs.mission.warmup)."""
+    from gcs.mission.warmup import compile_kernels
 
     compile_kernels()

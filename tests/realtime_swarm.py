@@ -27,9 +27,9 @@ os.environ.setdefault("MAVLINK20", "1")
 from conftest import CUBE8, ROOT, free_port_offset, stop_processes  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
-from gcs.launch_spec import LaunchSpec  # noqa: E402
+from gcs.mission.launch_spec import LaunchSpec  # noqa: E402
 from swarm_common.ports import GCS_PORT  # noqa: E402
-from swarm_common.scenario import load_scenario  # noqa: E402
+from swarm_common.scenario.model import load_scenario  # noqa: E402
 
 ARMED_FLAG = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 AUTOPILOT = mavutil.mavlink.MAV_COMP_ID_AUTOPILOT1

@@ -24,7 +24,7 @@ from swarm_common.enums import DefaultStreams, FailsafeAction
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
 from swarm_common.process_life import exit_now, freeze_startup
-from swarm_common.scenario import (
+from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
     Scenario,
     ScenarioError,
@@ -177,7 +177,7 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
 
 def _server(args: argparse.Namespace) -> SimServer:
     """Load the scenario and open every socket; :class:`_Fatal` with one line if not."""
-    from vehicle_sim.mavlink_link import LinkError
+    from vehicle_sim.link.endpoint import LinkError
     from vehicle_sim.server import SimServer
 
     try:
@@ -210,7 +210,7 @@ def _attach_params_file(server: SimServer, path: str | None) -> None:
     """``--params-file``: validate it, apply it to every vehicle, save on every change."""
     if path is None or not server.vehicles:
         return
-    from vehicle_sim.params import ParamFile, ParamFileError, read_param_file
+    from vehicle_sim.autopilot.params import ParamFile, ParamFileError, read_param_file
 
     try:
         stored = read_param_file(path, server.vehicles[0].params)

@@ -6,7 +6,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from swarm_common.enums import DefaultStreams, FailsafeAction
-from swarm_common.scenario import Scenario
+from swarm_common.scenario.model import Scenario
 
 
 @dataclass
@@ -32,7 +32,7 @@ class SimOptions:
     signing_key: bytes | None = field(default=None, repr=False)  # never printed
     unsigned_gcs: bool = False  # GCS link: unsigned telemetry requests allowed
     # --default-streams: a link's default remote gets the telemetry always (PX4) or only
-    # once a client there has spoken (HEARTBEAT before that; vehicle_sim.server_io)
+    # once a client there has spoken (HEARTBEAT before that; vehicle_sim.link.server_io)
     default_streams: DefaultStreams = DefaultStreams.ALWAYS
 
 

@@ -10,7 +10,7 @@ Per control step k (t_k = k / control_hz), in both clock modes:
    vehicle, or ``step_timeout`` wall seconds. Real time: the loop waits for the wall clock.
 
 Telemetry streams (HEARTBEAT 1 Hz etc.) run on the wall clock in both modes, per peer
-(:mod:`vehicle_sim.streams`), to the default remotes and the peers that spoke within
+(:mod:`vehicle_sim.autopilot.streams`), to the default remotes and the peers that spoke within
 ``mavlink_link.PEER_TIMEOUT_S``. With ``--signing-key`` every link verifies signatures and
 every frame sent is signed; rejected frames are reported by a STATUSTEXT at most every
 ``REJECT_REPORT_S`` per vehicle, and in the stats (docs/security.md).
@@ -29,14 +29,14 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, signing, wire
 from swarm_common.ports import vehicle_ports
-from swarm_common.scenario import Scenario
+from swarm_common.scenario.model import Scenario
 from vehicle_sim import stats
 from vehicle_sim.clock import LockstepClock, RealTimeClock
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.mavlink_link import MavlinkLink
+from vehicle_sim.link.endpoint import MavlinkLink
+from vehicle_sim.link.server_io import ServerIO
+from vehicle_sim.link.truth import TruthPublisher
 from vehicle_sim.options import SimOptions, restrict
-from vehicle_sim.server_io import ServerIO
-from vehicle_sim.truth import TruthPublisher
+from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle, VehicleConfig
 
 log = logging.getLogger(__name__)

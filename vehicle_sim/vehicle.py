@@ -9,10 +9,12 @@ is appended to :attr:`Vehicle.outbox` as ``(message, dest)``; ``dest`` is ``None
 
 Modes (PX4 custom_mode = main << 16 | sub << 24): POSCTL (default; armed = position hold,
 there are no sticks), ALTCTL, OFFBOARD, AUTO.TAKEOFF, AUTO.LOITER ("HOLD"), AUTO.MISSION,
-AUTO.RTL and AUTO.LAND ("LAND"); their logic is :mod:`vehicle_sim.modes`, the setpoint
-messages are parsed in :mod:`vehicle_sim.setpoints`. Offboard rules, failsafe and lockstep:
+AUTO.RTL and AUTO.LAND ("LAND"); their logic is :mod:`vehicle_sim.autopilot.modes`, the setpoint
+messages are parsed in :mod:`vehicle_sim.autopilot.setpoints`. Offboard rules, failsafe and
+lockstep:
 docs/conventions.md and docs/px4/modes.md. The messages it sends are built in
-:mod:`vehicle_sim.telemetry`, the commands it answers in :mod:`vehicle_sim.commands`.
+:mod:`vehicle_sim.autopilot.telemetry`, the commands it answers in
+:mod:`vehicle_sim.services.command`.
 
 Times: ``wall`` (monotonic seconds) drives the telemetry schedule; ``sim_t`` (seconds of
 simulation time) drives everything about flight: offboard setpoint freshness and loss,
@@ -32,18 +34,19 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, px4
 from swarm_common.enums import FailsafeAction, VehicleMode
-from vehicle_sim import commands, modes, nav_flight, setpoint_input, telemetry
-from vehicle_sim.commands import Command
-from vehicle_sim.failsafe_controller import FailsafeController
-from vehicle_sim.mission_service import MissionService
-from vehicle_sim.nav import NavTarget
-from vehicle_sim.nav_flight import RtlPlan
-from vehicle_sim.param_defaults import default_param_specs
-from vehicle_sim.params import ParamStore
-from vehicle_sim.position_control import PositionController, PositionSetpoint, SpeedLimits
-from vehicle_sim.services import attach_services
-from vehicle_sim.setpoint_input import SetpointKind
-from vehicle_sim.streams import PeerKey, PeerStreams
+from vehicle_sim.autopilot import modes, nav_flight, setpoint_input, telemetry
+from vehicle_sim.autopilot.nav import NavTarget
+from vehicle_sim.autopilot.nav_flight import RtlPlan
+from vehicle_sim.autopilot.param_defaults import default_param_specs
+from vehicle_sim.autopilot.params import ParamStore
+from vehicle_sim.autopilot.setpoint_input import SetpointKind
+from vehicle_sim.autopilot.streams import PeerKey, PeerStreams
+from vehicle_sim.physics.failsafe_controller import FailsafeController
+from vehicle_sim.physics.position_control import PositionController, PositionSetpoint, SpeedLimits
+from vehicle_sim.services import command as commands
+from vehicle_sim.services.command import Command
+from vehicle_sim.services.mission import MissionService
+from vehicle_sim.services.registry import attach_services
 
 CUSTOM_MODE = px4.CUSTOM_MODE  # re-exported: the short mode names -> PX4 custom_mode
 MSG_ODOMETRY = M.MAVLINK_MSG_ID_ODOMETRY
@@ -96,7 +99,7 @@ class VehicleCounters:
 class Vehicle:
     """One simulated PX4 vehicle, reading its state from ``dyn`` row ``idx``."""
 
-    mission: MissionService  # attached by vehicle_sim.services
+    mission: MissionService  # attached by vehicle_sim.services.registry
 
     def __init__(self, agent_id: int, idx: int, dyn: Any, cfg: VehicleConfig | None = None) -> None:
         self.id = int(agent_id)
@@ -117,7 +120,7 @@ class Vehicle:
         self.ever_armed = False
         self.release_requested = False  # server: take it off the spawn fixture
         self.landed_since: float | None = None
-        # AUTO modes (vehicle_sim.modes): the target the position controller flies
+        # AUTO modes (vehicle_sim.autopilot.modes): the target the position controller flies
         self.nav: NavTarget | None = None
         self.rtl: RtlPlan | None = None
         self.takeoff_alt: float | None = None  # NAV_TAKEOFF's altitude for the next entry
@@ -209,7 +212,7 @@ class Vehicle:
         return n >= self.cfg.setpoint_min_count
 
     # ==================================================================================
-    # modes and arming (vehicle_sim.modes)
+    # modes and arming (vehicle_sim.autopilot.modes)
     @property
     def landing(self) -> bool:
         """Armed and descending to land (EXTENDED_SYS_STATE: LANDING)."""
@@ -330,7 +333,7 @@ class Vehicle:
         return self.pc.update(sp, self.dyn.p[self.idx], self.dyn.v[self.idx], lim, dt)
 
     # ==================================================================================
-    # telemetry (vehicle_sim.telemetry builds the messages)
+    # telemetry (vehicle_sim.autopilot.telemetry builds the messages)
     def landed_state(self) -> int:
         return telemetry.landed_state(self)
 

@@ -227,7 +227,7 @@ class DashboardApp(App[int]):
             )
 
     def action_land(self) -> None:
-        """All vehicles with a Zenoh link up: the coordinated land-all (offboard.landing),
+        """All vehicles with a Zenoh link up: the coordinated land-all (offboard.agent.landing),
         starting LAND_LEAD_S after the swarm's latest mission time, safety filter active;
         otherwise MAV_CMD_NAV_LAND (AUTO.LAND) to each target, as before."""
         ids = self.targets()
@@ -241,7 +241,7 @@ class DashboardApp(App[int]):
 
     def action_takeoff(self) -> None:
         """Target ALL with a Zenoh link up: OFFBOARD then arm every vehicle, and once every
-        one ACKed, the coordinated take-off (offboard.takeoff) at the swarm's latest
+        one ACKed, the coordinated take-off (offboard.agent.takeoff) at the swarm's latest
         mission time + TAKEOFF_LEAD_S; the daemons of a ground start held on the pads
         climb from then on (an airborne start ignores it: this is then ``f`` + ``a``)."""
         ids = self.targets()

@@ -25,10 +25,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gcs.launch_spec import add_signing_flags
+from gcs.mission.launch_spec import add_signing_flags
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
-from swarm_common.scenario import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
+from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
 from swarm_common.signing import load_key
 from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 
@@ -99,7 +99,7 @@ def _err(msg: str) -> int:
 
 def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     """(app, source, launch, title) from parsed args; raises ValueError/OSError/RuntimeError."""
-    from gcs.launch_spec import SigningChoice
+    from gcs.mission.launch_spec import SigningChoice
 
     from .app import DashboardApp
     from .commands import LiveCommander

@@ -1,6 +1,6 @@
 """``gcs dashboard --launch``: start the swarm's processes, stop them on exit.
 
-Topology and command lines are :class:`gcs.launch_spec.LaunchSpec`'s, as for
+Topology and command lines are :class:`gcs.mission.launch_spec.LaunchSpec`'s, as for
 ``gcs mission run``, but on the wall clock: ``vehicle-sim`` without ``--lockstep`` and
 every offboard daemon with ``--realtime --manual-start`` (the operator arms and starts
 the formation from the dashboard). This process hosts the Zenoh router; the dashboard's
@@ -25,10 +25,10 @@ from typing import Any
 
 import zenoh
 
-from gcs.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
-from gcs.procs import ProcessGroup
-from gcs.router import open_router
-from swarm_common.scenario import Scenario
+from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
+from gcs.mission.procs import ProcessGroup
+from gcs.mission.router import open_router
+from swarm_common.scenario.model import Scenario
 from swarm_common.zenoh_session import write_swarm_security
 
 log = logging.getLogger(__name__)
@@ -71,7 +71,7 @@ class Launch:
     def start(self) -> Launch:
         """Check the ports (the GCS port too: the dashboard binds it), write the run's
         credentials and key, open the router, start the children. Raises
-        :class:`~gcs.launch_spec.LaunchError` (nothing left running, the private directory
+        :class:`~gcs.mission.launch_spec.LaunchError` (nothing left running, the private directory
         deleted) when a port is busy, a key is refused or the router cannot listen."""
         self.spec.check_ports(gcs_port=True)
         self.log_dir.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_common.enums import Method, QPStatus
-from swarm_common.scenario import Scenario, load_scenario
+from swarm_common.scenario.model import Scenario, load_scenario
 
 from .state import (
     DashEvent,

@@ -206,7 +206,8 @@ def test_stopped_right_after_a_ground_stations_offboard_it_takes_the_vehicle_bac
     process is stopped (SIGSTOP) as the ACK comes back, before the vehicle's 1 Hz HEARTBEAT
     can show it OFFBOARD, and the ground station arms it. The offboard-loss failsafe puts
     it in HOLD; resumed 2 s later, the daemon reads the vehicle's "failsafe: offboard
-    lost" and asks for OFFBOARD again (offboard.offboard_keeper: it once waited forever,
+    lost" and asks for OFFBOARD again (offboard.daemon.mavlink.offboard_keeper: it once waited
+    forever,
     having never seen OFFBOARD itself)."""
     off, gcs = one_vehicle_on_the_ground
     d = Daemon(off, tmp_path / "vehicle_1.tlog", ["--solo", "--manual-start"], GROUND8)

@@ -25,10 +25,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from conftest import CUBE8, free_port_offset, free_tcp_port  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
-from gcs.mission import recorded_metrics, run_distributed  # noqa: E402
+from gcs.mission.distributed import recorded_metrics, run_distributed  # noqa: E402
 from swarm_common import wire  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
-from swarm_common.scenario import Scenario, load_scenario  # noqa: E402
+from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
 from swarm_common.signing import generate_key  # noqa: E402
 from swarm_common.zenoh_session import default_endpoint, open_session  # noqa: E402
 

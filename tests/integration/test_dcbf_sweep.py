@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: E402
 
-from offboard.bearing import formation_from_scenario
-from offboard.safety_metrics import clipped_steps, true_barrier
-from swarm_common.scenario import load_scenario
+from gcs.report.safety_metrics import clipped_steps, true_barrier
+from offboard.estimation.bearing import formation_from_scenario
+from swarm_common.scenario.model import load_scenario
 
 CASES = [(name, seed) for name in ("swap_centre", "cube8") for seed in (1, 2, 3)]
 

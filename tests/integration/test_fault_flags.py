@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from conftest import CUBE8, ROOT
 
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 
 def gcs(*argv: str) -> subprocess.CompletedProcess[str]:

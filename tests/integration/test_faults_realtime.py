@@ -26,7 +26,7 @@ from typing import Any
 import pytest
 from conftest import CUBE8, ROOT, free_port_offset
 
-from gcs.sim_log import longest_out_of_offboard, vehicles_in_offboard
+from gcs.mission.sim_log import longest_out_of_offboard, vehicles_in_offboard
 
 pytestmark = pytest.mark.timeout(400)
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: E402
 
-from gcs.inproc import run_inproc
-from offboard.agent import make_agent
-from offboard.governor import governor_for
-from swarm_common.scenario import load_scenario
+from gcs.mission.inproc import run_inproc
+from offboard.agent.factory import make_agent
+from offboard.agent.governor import governor_for
+from swarm_common.scenario.model import load_scenario
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 

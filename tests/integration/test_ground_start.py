@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from gcs.inproc import run_inproc
-from offboard.takeoff import takeoff_plan
-from swarm_common.scenario import load_scenario
+from gcs.mission.inproc import run_inproc
+from offboard.agent.takeoff import takeoff_plan
+from swarm_common.scenario.model import load_scenario
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 

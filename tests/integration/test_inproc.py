@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: E402
 
-from gcs.inproc import f32, run_inproc, wire_to_command
-from gcs.metrics import METRIC_KEYS
-from offboard.agent import FollowerAgent, make_agent
-from offboard.attitude import setpoint_from_accel
-from swarm_common.scenario import load_scenario
+from gcs.mission.inproc import f32, run_inproc, wire_to_command
+from gcs.report.metrics import METRIC_KEYS
+from offboard.agent.attitude import setpoint_from_accel
+from offboard.agent.factory import FollowerAgent, make_agent
+from swarm_common.scenario.model import load_scenario
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 SERIES_KEYS = ("t", "p", "v", "p_des", "v_des", "z1", "z2", "lumped_est", "lumped_true", "u",

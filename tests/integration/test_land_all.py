@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from conftest import ROOT, free_port_offset  # noqa: E402
 
-from gcs.inproc import run_inproc
-from gcs.mission import recorded_metrics, run_distributed
-from offboard.landing import landing_plan
-from swarm_common.scenario import load_scenario
+from gcs.mission.distributed import recorded_metrics, run_distributed
+from gcs.mission.inproc import run_inproc
+from offboard.agent.landing import landing_plan
+from swarm_common.scenario.model import load_scenario
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 LAND_AT = 15.0
@@ -47,7 +47,8 @@ def test_land_all_cube8_safe_and_on_pads(tmp_path: Path, method: str, pad_tol: f
 
 
 def test_distributed_land_all_matches_inproc(tmp_path: Path) -> None:
-    """The Zenoh land command (gcs.mission, offboard.daemon) reproduces the in-process
+    """The Zenoh land command (gcs.mission.distributed, offboard.daemon.core) reproduces the
+    in-process
     land-all to float32 wire rounding (< 1e-6 m; test_mission_distributed)."""
     sc = load_scenario(CUBE8)
     ref = run_inproc(sc, "rcbf", duration=30.0, land_at=LAND_AT)

@@ -11,7 +11,7 @@ from gcs.dashboard.app import COMMAND_REPEATS, LAND_LEAD_S, DashboardApp
 from gcs.dashboard.commands import LiveCommander
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.zenoh_feed import ZenohFeed
-from offboard.zenoh_link import SwarmBus
+from offboard.daemon.zenoh.link import SwarmBus
 from swarm_common.wire import Command
 from swarm_common.zenoh_session import open_session
 
@@ -50,7 +50,7 @@ async def test_single_vehicle_or_no_zenoh_uses_auto_land() -> None:
 
 
 def test_feed_land_command_reaches_the_agents_bus() -> None:
-    """ZenohFeed (dashboard) -> offboard.zenoh_link.SwarmBus (daemon): the land command with
+    """ZenohFeed (dashboard) -> offboard.daemon.zenoh.link.SwarmBus (daemon): the land command with
     its at_s, and the feed's mission time from the agents' status."""
     ep = f"tcp/127.0.0.1:{free_tcp_port()}"
     agent_session = open_session(listen=[ep])

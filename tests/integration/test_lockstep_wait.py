@@ -12,7 +12,7 @@ import pytest
 from conftest import free_port_offset  # noqa: E402
 
 from swarm_common.enums import VehicleMode
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 from vehicle_sim.clock import LockstepClock
 from vehicle_sim.options import SimOptions
 from vehicle_sim.server import LOCKSTEP_SCAN_S, SimServer

@@ -19,10 +19,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
-from gcs.inproc import run_inproc  # noqa: E402
-from gcs.mission import MissionError, recorded_metrics, run_distributed  # noqa: E402
+from gcs.mission.distributed import MissionError, recorded_metrics, run_distributed  # noqa: E402
+from gcs.mission.inproc import run_inproc  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
-from swarm_common.scenario import load_scenario  # noqa: E402
+from swarm_common.scenario.model import load_scenario  # noqa: E402
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -63,7 +63,8 @@ def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
     while (msg := log.recv_match()) is not None:
         kinds[msg.get_type()] += 1
     assert {"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "SET_ATTITUDE_TARGET"} <= set(kinds)
-    # the daemon switched off the telemetry it does not read (offboard.stream_trim): the
+    # the daemon switched off the telemetry it does not read (offboard.daemon.mavlink.stream_trim):
+    # the
     # vehicle streams ATTITUDE at 15 Hz by default, i.e. more than one per ten ODOMETRY
     # over the wall time of any run; only what was in flight before the request remains
     assert kinds["REQUEST_DATA_STREAM"] >= 1 and kinds["DATA_STREAM"] >= 1

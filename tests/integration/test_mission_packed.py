@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from conftest import CUBE8, ROOT, free_port_offset
 
-from gcs.inproc import run_inproc
-from gcs.mission import recorded_metrics, run_distributed
-from swarm_common.scenario import load_scenario
+from gcs.mission.distributed import recorded_metrics, run_distributed
+from gcs.mission.inproc import run_inproc
+from swarm_common.scenario.model import load_scenario
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -42,7 +42,7 @@ def test_lockstep_packed_run_matches_inproc(tmp_path: Path) -> None:
 
 
 def test_sparse_graph_packed_run_matches_inproc(tmp_path: Path) -> None:
-    """grid27_knn (each daemon subscribes to its peers' keys only, offboard.daemon_peers)
+    """grid27_knn (each daemon subscribes to its peers' keys only, offboard.agent.peers)
     in three daemon processes: the in-process runner gives each agent the same peers'
     estimates, so the runs agree (before it did, they parted by 0.11 m within 2 s)."""
     sc = load_scenario(str(ROOT / "scenarios" / "grid27_knn.toml"))

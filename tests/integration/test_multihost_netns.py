@@ -33,7 +33,7 @@ from conftest import CUBE8, ROOT
 from netns import Lan, netns_lan, netns_unavailable
 
 from swarm_common.ports import vehicle_ports
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 from swarm_common.signing import generate_key
 from swarm_common.zenoh_session import (
     DEFAULT_ZENOH_PORT,
@@ -55,7 +55,7 @@ OBSERVER = r"""
 import json, sys, threading, time
 import numpy as np
 from swarm_common import wire
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import open_session
 ep, cfg, scen, last, timeout, out = sys.argv[1:7]
 sc = load_scenario(scen)

@@ -1,5 +1,5 @@
 """A daemon's odometry goes on Zenoh only while someone subscribes to it (the publisher's
-matching status, offboard.zenoh_link.SwarmBus.publish_odometry): real sessions over
+matching status, offboard.daemon.zenoh.link.SwarmBus.publish_odometry): real sessions over
 loopback TCP, one publishing agent and one subscriber that comes and goes."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from conftest import free_tcp_port, wait_for
 
-from offboard.zenoh_link import SwarmBus
+from offboard.daemon.zenoh.link import SwarmBus
 from swarm_common import wire
 from swarm_common.zenoh_session import open_session
 

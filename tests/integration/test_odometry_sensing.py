@@ -19,7 +19,7 @@ import pytest
 from conftest import CUBE8, ROOT, free_port_offset, stop_processes
 
 from swarm_common import wire
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import default_endpoint, open_session
 
 pytestmark = pytest.mark.timeout(400)

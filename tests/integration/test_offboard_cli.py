@@ -42,7 +42,7 @@ def test_bad_mavlink_url_exits_2_with_one_line(url: str, why: str) -> None:
 
 def test_good_url_forms_pass_the_check() -> None:
     """The check refuses nothing a daemon can open (the unit of the rule above)."""
-    from offboard.mavlink_url import mavlink_url_problem
+    from offboard.daemon.mavlink.url import mavlink_url_problem
 
     for url in ("udpin:127.0.0.1:14540", "udpout:127.0.0.1:14580", "udp:0.0.0.0:1",
                 "tcp:127.0.0.1:5760", "tcpin:127.0.0.1:65535"):

@@ -1,4 +1,4 @@
-"""A packed lockstep process's burst (offboard.output_burst): a pass's setpoint datagrams
+"""A packed lockstep process's burst (offboard.daemon.output_burst): a pass's setpoint datagrams
 and Zenoh puts go out together at its end, in order, and an agent's own odometry is
 never held. Real UDP on loopback, real Zenoh sessions over loopback TCP."""
 
@@ -14,10 +14,10 @@ from conftest import free_port_offset, free_tcp_port, received_frames, wait_for
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from offboard.link_guard import PayloadGuard  # noqa: E402
-from offboard.mavlink_link import VehicleLink  # noqa: E402
-from offboard.output_burst import OutputBurst  # noqa: E402
-from offboard.zenoh_link import SwarmBus  # noqa: E402
+from offboard.daemon.link_guard import PayloadGuard  # noqa: E402
+from offboard.daemon.mavlink.link import VehicleLink  # noqa: E402
+from offboard.daemon.output_burst import OutputBurst  # noqa: E402
+from offboard.daemon.zenoh.link import SwarmBus  # noqa: E402
 from swarm_common import wire  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.zenoh_session import open_session  # noqa: E402

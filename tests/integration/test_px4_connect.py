@@ -15,8 +15,8 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.ports import vehicle_ports
-from vehicle_sim import mavlink_extra
-from vehicle_sim.mavlink_link import PEER_TIMEOUT_S
+from vehicle_sim.autopilot import mavlink_extra
+from vehicle_sim.link.endpoint import PEER_TIMEOUT_S
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -17,10 +17,10 @@ from mavsdk_client import mavsdk_autopilot
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.ports import vehicle_ports
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.param_service import int32_to_wire, wire_to_int32
-from vehicle_sim.params import FILE_FORMAT, INT32
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.params import FILE_FORMAT, INT32
+from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.services.param import int32_to_wire, wire_to_int32
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 ONE = ["--no-zenoh", "--vehicles", "1"]

@@ -1,4 +1,4 @@
-"""Whom a daemon listens to (offboard.daemon_peers): a leader reads no estimate, so it
+"""Whom a daemon listens to (offboard.agent.peers): a leader reads no estimate, so it
 listens to the swarm only until it has heard from the agents it waits for before flying
 (``SwarmBus(ready=...)``, then ``end_readiness``); a follower keeps its peers' estimates
 and hears the others of its readiness set without keeping them. Real Zenoh sessions over
@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from conftest import free_tcp_port, wait_for
 
-from offboard.zenoh_link import SwarmBus
+from offboard.daemon.zenoh.link import SwarmBus
 from swarm_common import wire
 from swarm_common.zenoh_session import open_session
 

@@ -1,4 +1,4 @@
-"""The distributed run's recorder (gcs.recorder) reads its subscribers' Zenoh channels on
+"""The distributed run's recorder (gcs.mission.recorder) reads its subscribers' Zenoh channels on
 the runner's thread: what is published reaches the arrays at the next drain, garbage and
 out-of-run payloads are counted and dropped, and ``finalize`` (before the subscribers are
 undeclared) keeps what is still queued. Real Zenoh sessions over loopback TCP."""
@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 from conftest import free_tcp_port, wait_for
 
-from gcs.recorder import Recorder
+from gcs.mission.recorder import Recorder
 from swarm_common import wire
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import open_session
 
 SCEN = Path(__file__).resolve().parents[2] / "scenarios"

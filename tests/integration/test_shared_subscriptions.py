@@ -1,4 +1,5 @@
-"""The Zenoh subscriptions of a packed process (offboard.shared_subs): one subscriber per
+"""The Zenoh subscriptions of a packed process (offboard.daemon.zenoh.shared_subs): one subscriber
+per
 key for all its daemons, each daemon still judging what it is handed. Real Zenoh sessions
 over loopback TCP: one process-side session with two daemons' buses, one for the swarm."""
 
@@ -9,9 +10,9 @@ from typing import Any
 import numpy as np
 from conftest import free_tcp_port, wait_for
 
-from offboard.link_guard import PayloadGuard
-from offboard.shared_subs import SharedSubscriptions
-from offboard.zenoh_link import FIFO_DEPTH, SwarmBus
+from offboard.daemon.link_guard import PayloadGuard
+from offboard.daemon.zenoh.link import FIFO_DEPTH, SwarmBus
+from offboard.daemon.zenoh.shared_subs import SharedSubscriptions
 from swarm_common import wire
 from swarm_common.zenoh_session import open_session
 

@@ -14,9 +14,9 @@ from conftest import CUBE8
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.ports import vehicle_ports
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.mavlink_link import PARSE_ERRORS, MavlinkLink
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.link.endpoint import PARSE_ERRORS, MavlinkLink
+from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 pytestmark = pytest.mark.timeout(180)

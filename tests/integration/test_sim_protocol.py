@@ -571,8 +571,8 @@ def test_lockstep_timeouts_suspend_then_failsafe(sim_factory, mav_client):
 # ------------------------------------------------------------------------------------
 # the state machine without sockets
 def _vehicle(lockstep=False, **kw):
-    from swarm_common.scenario import load_scenario
-    from vehicle_sim.dynamics import SwarmDynamics
+    from swarm_common.scenario.model import load_scenario
+    from vehicle_sim.physics.dynamics import SwarmDynamics
     from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
     sc = load_scenario(CUBE8)
@@ -620,7 +620,6 @@ def test_unit_lockstep_only_current_step_applies():
 
 def test_unit_setpoint_frames_and_mask():
     from swarm_common import frames
-
     v = _vehicle()
     q = frames.quat_ned_from_euler_enu(0.1, -0.05, 0.3)
     v.handle(_sp(q=q, thrust=0.4), None, 0.0, 0.0)

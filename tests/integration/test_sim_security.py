@@ -19,7 +19,7 @@ from swarm_common import px4
 from swarm_common.enums import VehicleMode
 from swarm_common.ports import vehicle_ports
 from swarm_common.signing import generate_key, setup_signing
-from vehicle_sim.mavlink_link import AMPLIFICATION_LIMIT, LIVENESS_FREE_S
+from vehicle_sim.link.endpoint import AMPLIFICATION_LIMIT, LIVENESS_FREE_S
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: E402
 
-from gcs.inproc import run_inproc
-from offboard.bearing import formation_from_scenario
-from swarm_common.scenario import load_scenario
+from gcs.mission.inproc import run_inproc
+from offboard.estimation.bearing import formation_from_scenario
+from swarm_common.scenario.model import load_scenario
 
 GRID27 = ROOT / "scenarios" / "grid27_knn.toml"
 

@@ -1,4 +1,4 @@
-"""Start-up slots (offboard.start_gate) between real processes: never more holders than
+"""Start-up slots (offboard.daemon.start_gate) between real processes: never more holders than
 slots, a holder killed with SIGKILL frees its slot, and a real daemon started as
 ``python -m offboard`` waits for a slot before its imports and gives it back once started.
 
@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from conftest import CUBE8, ROOT, free_port_offset, stop_processes, wait_for
 
-from offboard import start_gate
+from offboard.daemon import start_gate
 from swarm_common.zenoh_session import default_endpoint, open_session
 
 pytestmark = pytest.mark.timeout(180)
@@ -25,7 +25,7 @@ pytestmark = pytest.mark.timeout(180)
 # a holder: takes a slot, appends "in <pid> <t>", holds it HOLD_S, appends "out <pid> <t>"
 HOLDER = """
 import os, sys, time
-from offboard import start_gate
+from offboard.daemon import start_gate
 start_gate.acquire(os.environ[start_gate.GATE_ENV])
 log = sys.argv[1]
 def mark(what):

@@ -15,8 +15,8 @@ from pathlib import Path
 import pytest
 from conftest import CUBE8, ROOT
 
-from gcs.sweep import Job, run_sweep
-from gcs.sweep_report import CSV_COLUMNS
+from gcs.mission.sweep import Job, run_sweep
+from gcs.report.sweep import CSV_COLUMNS
 
 pytestmark = pytest.mark.timeout(240)
 GCS = [sys.executable, "-m", "gcs.cli"]

@@ -23,8 +23,8 @@ from gcs.dashboard.app import COMMAND_REPEATS, TAKEOFF_LEAD_S, DashboardApp
 from gcs.dashboard.cli import build, configure_parser
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
-from offboard.takeoff import takeoff_plan
-from swarm_common.scenario import load_scenario
+from offboard.agent.takeoff import takeoff_plan
+from swarm_common.scenario.model import load_scenario
 from swarm_common.wire import Command, Truth, WireError, decode, key_truth
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
@@ -86,7 +86,7 @@ async def until(pilot, pred, timeout: float, each=lambda: None) -> bool:
 
 def _daemon_takeoffs(launch) -> dict[str, tuple[bool, list[float], bool]]:
     """Per daemon log: (held on its pad at start, take-off times it logged, whether the
-    command reached it late: offboard.daemon_commands, it then climbs from its step time)."""
+    command reached it late: offboard.daemon.commands, it then climbs from its step time)."""
     out = {}
     for c in launch.group.children[1:]:
         text = c.log_path.read_text(errors="replace")
@@ -130,7 +130,7 @@ def _stall_on_commands(app: DashboardApp, launch, agent: int) -> Callable[[], No
     """Stop (SIGSTOP) agent ``agent``'s daemon process as the dashboard publishes the
     take-off or the land-all command; the returned function resumes it (SIGCONT). A
     stalled companion computer: the command reaches that daemon only after it resumes,
-    late (offboard.daemon_commands)."""
+    late (offboard.daemon.commands)."""
     (child,) = [c for c in launch.group.children if c.name == f"offboard-{agent}"]
     publish = app.send_zenoh
 
@@ -147,7 +147,7 @@ def _stall_on_commands(app: DashboardApp, launch, agent: int) -> Callable[[], No
 @pytest.mark.parametrize("stalled", [None, 1], ids=["all", "daemon-1-stalled-3s"])
 async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None) -> None:
     """``stalled``: that daemon's process is stopped for STALL_S from the take-off command
-    on, and again from the land-all (offboard.daemon_commands: it then climbs, and lands
+    on, and again from the land-all (offboard.daemon.commands: it then climbs, and lands
     on its pad, timed from its own step)."""
     sc = load_scenario(GROUND8)
     plan = takeoff_plan(sc)
@@ -243,7 +243,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path, stalled: int | None)
     assert collisions == 0
     assert all(z > 1.5 for z in z_max.values()), z_max
     # every daemon held its agent and started the one plan at t0 (or, reached late after a
-    # stall of its loop, from its own step time; offboard.daemon_commands) ...
+    # stall of its loop, from its own step time; offboard.daemon.commands) ...
     assert all(h and len(t) == 1 and (late or t[0] == pytest.approx(t0))
                for h, t, late in held.values()), held
     # ... and the leaders climbed with the plan of t0 (2 m at t0 + 2.5 s), not from when

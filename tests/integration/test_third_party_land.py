@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 from conftest import CUBE8, MavClient, free_port_offset
 
-from gcs.launch_spec import SigningChoice
-from gcs.mission import recorded_metrics, run_distributed
+from gcs.mission.distributed import recorded_metrics, run_distributed
+from gcs.mission.launch_spec import SigningChoice
 from swarm_common import px4
 from swarm_common.ports import GCS_PORT
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 from swarm_common.signing import generate_key, load_key, setup_signing
 
 LANDER = 3  # top layer, vertex (0, 0, 1); follower 4 is below it

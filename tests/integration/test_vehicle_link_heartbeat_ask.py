@@ -13,7 +13,7 @@ from conftest import free_port_offset, received_frames, wait_for  # noqa: E402
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from offboard.mavlink_link import HEARTBEAT_ASK_S, VehicleLink  # noqa: E402
+from offboard.daemon.mavlink.link import HEARTBEAT_ASK_S, VehicleLink  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.signing import setup_signing  # noqa: E402
 

@@ -1,5 +1,6 @@
 """The daemon's vehicle link drops telemetry it does not read from the frames' headers
-(offboard.frame_peek) and still counts, locks and asks to stop streams as before: real
+(offboard.daemon.mavlink.frame_peek) and still counts, locks and asks to stop streams as before:
+real
 UDP on loopback, frames packed by pymavlink."""
 
 import os
@@ -10,7 +11,7 @@ from conftest import free_port_offset, wait_for  # noqa: E402
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from offboard.mavlink_link import VehicleLink  # noqa: E402
+from offboard.daemon.mavlink.link import VehicleLink  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 
 M = mavutil.mavlink

@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 
-from offboard.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
+from offboard.agent.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
 from swarm_common.frames import thrust_accel
-from swarm_common.scenario import VehicleConfig
+from swarm_common.scenario.model import VehicleConfig
 
 VEH = VehicleConfig(
     mass_kg=1.8, gravity_mps2=9.81, thrust_max_n=52.92, tilt_max_deg=30.0,
@@ -49,7 +49,7 @@ def test_inner_loop_model_converges_to_command():
 
 
 def test_fast_quaternion_equals_frames():
-    from offboard.attitude import quat_ned_fast
+    from offboard.agent.attitude import quat_ned_fast
     from swarm_common.frames import quat_ned_from_euler_enu
 
     rng = np.random.default_rng(9)

@@ -1,5 +1,5 @@
 """The compiled setpoint conversion, inner-loop model and frame conversions
-(offboard.attitude_kernel, swarm_common.frames_kernel) against the numpy/Python formulation
+(offboard.agent.attitude_kernel, swarm_common.frames_kernel) against the numpy/Python formulation
 they replaced, on random inputs.
 
 Bit for bit where the operations are the same floats in the same order (quaternion of the
@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from offboard.attitude import (
+from offboard.agent.attitude import (
     InnerLoopModel,
     Setpoint,
     accel_from_attitude,
@@ -35,7 +35,7 @@ from swarm_common.frames import (
     rotm_from_quat,
     thrust_to_norm,
 )
-from swarm_common.scenario import VehicleConfig
+from swarm_common.scenario.model import VehicleConfig
 
 VEH = VehicleConfig(
     mass_kg=1.8, gravity_mps2=9.81, thrust_max_n=52.92, tilt_max_deg=30.0,
@@ -230,7 +230,7 @@ def test_one_period_command_is_the_separate_calls_bitwise() -> None:
     setpoint, the clipping check against the realised acceleration (numpy's max, nan
     included), the inner loop's sub-steps and the rows' mean (numpy's reduce), with the
     model's state carried over from period to period in both."""
-    from offboard.agent_base import CLIP_TOL
+    from offboard.agent.base import CLIP_TOL
 
     rng = np.random.default_rng(21)
     for n_sub in (1, 4, 7):

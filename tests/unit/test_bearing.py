@@ -6,9 +6,14 @@ import numpy as np
 import pytest
 from conftest import CUBE8  # noqa: E402
 
-from offboard.bearing import RigidityError, build_formation, formation_from_scenario, projector
-from offboard.sensing import Sensor
-from swarm_common.scenario import load_scenario
+from offboard.estimation.bearing import (
+    RigidityError,
+    build_formation,
+    formation_from_scenario,
+    projector,
+)
+from offboard.estimation.sensing import Sensor
+from swarm_common.scenario.model import load_scenario
 
 
 @pytest.fixture(scope="module")

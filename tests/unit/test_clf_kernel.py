@@ -1,5 +1,6 @@
-"""The compiled CLF terms and nominal controller (offboard.clf_kernel through
-offboard.clf_rcbf.clf_terms) against the numpy formulation they replaced, kept here as the
+"""The compiled CLF terms and nominal controller (offboard.safety.clf_kernel through
+offboard.safety.rcbf.clf_rcbf.clf_terms) against the numpy formulation they replaced, kept here as
+the
 oracle: equal to rounding (the kernel sums dot products left to right, numpy used BLAS).
 Also checked numerically: V̇ = L_fV + L_gV u along the error dynamics, by finite
 differences."""
@@ -10,7 +11,7 @@ import math
 
 import numpy as np
 
-from offboard.clf_rcbf import AW_BRAKE_SHARE, AW_RESERVE, clf_terms
+from offboard.safety.rcbf.clf_rcbf import AW_BRAKE_SHARE, AW_RESERVE, clf_terms
 
 
 def anti_windup_numpy(e1, e2, ff, k_v, c, box, brake_share=AW_BRAKE_SHARE,
@@ -87,7 +88,7 @@ def test_vdot_is_lfv_plus_lgv_u_along_the_error_dynamics() -> None:
 def test_terms_of_a_reference_are_the_terms_of_its_errors_bitwise() -> None:
     """clf_terms_of_reference (errors and feed-forward formed in the kernel) against
     clf_terms of the errors and feed-forward formed in numpy, with and without the box."""
-    from offboard.clf_rcbf import clf_terms_of_reference
+    from offboard.safety.rcbf.clf_rcbf import clf_terms_of_reference
 
     rng = np.random.default_rng(12)
     lo, hi = np.array([-4.0, -4.0, -8.0]), np.array([4.0, 4.0, 6.0])

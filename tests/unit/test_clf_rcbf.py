@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from offboard.apf import apf_term
-from offboard.clf_rcbf import SafetyQP, barrier, clf_terms, rcbf_rows
+from offboard.safety.apf import apf_term
+from offboard.safety.rcbf.clf_rcbf import SafetyQP, barrier, clf_terms, rcbf_rows
 
 LO = np.array([-3.2, -3.2, -8.0])
 HI = np.array([3.2, 3.2, 8.0])
@@ -84,9 +84,9 @@ def _track_saturated(anti_windup: bool, e0: np.ndarray, v0: np.ndarray) -> np.nd
     with A = (1.6, 0.8, 0.4) m (needs ~2.6 of the box's 3.19 m/s²). Position errors (m)."""
     import math
 
-    from offboard.agent_base import control_box
-    from offboard.attitude import InnerLoopModel, setpoint_from_accel
-    from swarm_common.scenario import load_scenario
+    from offboard.agent.attitude import InnerLoopModel, setpoint_from_accel
+    from offboard.agent.base import control_box
+    from swarm_common.scenario.model import load_scenario
 
     sc = load_scenario("scenarios/cube8.toml")
     veh = sc.vehicle

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.launch_spec import LaunchError, LaunchSpec
-from offboard.bearing import formation_from_scenario
-from offboard.daemon_agents import format_agents, parse_agents
-from offboard.daemon_peers import peer_ids, ready_ids
-from offboard.zenoh_link import DecodeCache
+from gcs.mission.launch_spec import LaunchError, LaunchSpec
+from offboard.agent.peers import peer_ids, ready_ids
+from offboard.daemon.packing import format_agents, parse_agents
+from offboard.daemon.zenoh.link import DecodeCache
+from offboard.estimation.bearing import formation_from_scenario
 from swarm_common import wire
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 SCEN = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -71,7 +71,7 @@ def test_decode_cache_returns_the_decoded_payload_and_rejects_garbage() -> None:
 
 
 def test_decode_cache_judges_finiteness_once_per_payload() -> None:
-    from offboard.link_guard import PayloadGuard
+    from offboard.daemon.link_guard import PayloadGuard
 
     cache = DecodeCache()
     good = wire.Estimate(id=3, step=-1, t=0.0, role="follower", z1=np.ones(3),

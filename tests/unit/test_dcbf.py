@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from offboard.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
-from offboard.clf_rcbf import ClfTerms, barrier
-from offboard.dcbf import LagCoefficients, dcbf_rows, ground_rows, predict
-from offboard.dcbf_filter import GROUND_ACCEL_ERR, GROUND_GAMMA, input_set_of
-from offboard.dcbf_qp import DcbfQP
-from swarm_common.scenario import load_scenario
+from offboard.agent.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
+from offboard.safety.dcbf.filter import GROUND_ACCEL_ERR, GROUND_GAMMA, input_set_of
+from offboard.safety.dcbf.model import LagCoefficients, dcbf_rows, ground_rows, predict
+from offboard.safety.dcbf.qp import DcbfQP
+from offboard.safety.rcbf.clf_rcbf import ClfTerms, barrier
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
 VEH, CTL = SC.vehicle, SC.controller
@@ -167,10 +167,10 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
 
 
 def test_input_clipped_flag_and_neighbour_acceleration() -> None:
-    from offboard.agent_base import CLIP_TOL
-    from offboard.agent_types import NeighbourEstimate
-    from offboard.attitude import InnerLoopModel
-    from offboard.neighbour_accel import NeighbourAccel
+    from offboard.agent.attitude import InnerLoopModel
+    from offboard.agent.base import CLIP_TOL
+    from offboard.estimation.neighbour_accel import NeighbourAccel
+    from offboard.records import NeighbourEstimate
 
     inside, outside = np.array([2.0, 1.0, 0.0]), np.array([7.0, 0.0, -3.0])  # 30° cone
     for u, clipped in ((inside, False), (outside, True)):

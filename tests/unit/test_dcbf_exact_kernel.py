@@ -1,4 +1,4 @@
-"""The DCBF QP's compiled pre-solve step (offboard.dcbf_exact_kernel.pre_solve_kernel)
+"""The DCBF QP's compiled pre-solve step (offboard.safety.dcbf.exact_kernel.pre_solve_kernel)
 against the numpy formulation it replaced, written out here as the reference: the CLF
 row's bound from the projected nominal input, and the exact solution with one active
 barrier row, alone or with the CLF row. Bit for bit, on random problems that take every
@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from offboard.dcbf_exact_kernel import NO_EXACT, pre_solve_kernel
-from offboard.dcbf_filter import input_set_of
-from offboard.dcbf_kernel import rows_hold_kernel
-from swarm_common.scenario import load_scenario
+from offboard.safety.dcbf.exact_kernel import NO_EXACT, pre_solve_kernel
+from offboard.safety.dcbf.filter import input_set_of
+from offboard.safety.dcbf.kernel import rows_hold_kernel
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
 RHO = SC.controller.rho

@@ -1,4 +1,4 @@
-"""The dcbf follower's step up to the QP in one compiled call (offboard.dcbf_front) against
+"""The dcbf follower's step up to the QP in one compiled call (offboard.safety.dcbf.front) against
 the same step part by part (``FollowerAgent.fused = False``): whole in-process missions
 give the same bits, over the families whose steps take each branch (every pair sensed,
 dropouts held, predicted pairs, the solver called, the ground barrier, take-off and
@@ -15,13 +15,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-import offboard.dcbf_front as front_mod
-from gcs.inproc import MissionResult, run_inproc
-from offboard.dcbf_filter import DcbfFilter
-from offboard.dcbf_front import saturate_into
-from offboard.follower import FollowerAgent
-from offboard.safety_filter import saturate_norm
-from swarm_common.scenario import load_scenario
+import offboard.safety.dcbf.front as front_mod
+from gcs.mission.inproc import MissionResult, run_inproc
+from offboard.agent.follower import FollowerAgent
+from offboard.safety.dcbf.filter import DcbfFilter
+from offboard.safety.dcbf.front import saturate_into
+from offboard.safety.filter import saturate_norm
+from swarm_common.scenario.model import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 

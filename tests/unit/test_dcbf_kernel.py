@@ -1,4 +1,4 @@
-"""The compiled DCBF rows (offboard.dcbf_kernel) against the numpy formulation they
+"""The compiled DCBF rows (offboard.safety.dcbf.kernel) against the numpy formulation they
 replaced, on random pairs: the same rows to rounding (the kernel cubes by products and sums
 gᵀu_ref left to right, where numpy used its vectorised power and BLAS), so the compiled
 filter is the same filter.
@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from offboard.dcbf import InputSet, LagCoefficients, dcbf_rows, predict
-from offboard.dcbf_kernel import other_term_kernel, rows_hold_kernel
+from offboard.safety.dcbf.kernel import other_term_kernel, rows_hold_kernel
+from offboard.safety.dcbf.model import InputSet, LagCoefficients, dcbf_rows, predict
 
 TAU = np.array([0.15, 0.15, 0.03])
 
@@ -198,7 +198,8 @@ def test_input_set_projection_kernel_gives_the_numpy_bits() -> None:
 def ground_rows_numpy(z: float, vz: float, a0z: float, wz: float, floor: float,
                       lag: LagCoefficients, tau_s: float, gamma1: float,
                       accel_err: float) -> tuple[np.ndarray, np.ndarray]:
-    """The numpy formulation ``offboard.dcbf.ground_rows`` had before it was compiled."""
+    """The numpy formulation ``offboard.safety.dcbf.model.ground_rows`` had before it was
+    compiled."""
     t, k = lag.T, 2
     z_free = z + vz * t + lag.iia[k] * a0z + 0.5 * wz * t * t
     v_free = vz + lag.ia[k] * a0z + wz * t
@@ -219,7 +220,7 @@ def ground_rows_numpy(z: float, vz: float, a0z: float, wz: float, floor: float,
 
 
 def test_ground_rows_kernel_gives_the_numpy_bits() -> None:
-    from offboard.dcbf import ground_rows
+    from offboard.safety.dcbf.model import ground_rows
 
     rng = np.random.default_rng(22)
     for _ in range(400):

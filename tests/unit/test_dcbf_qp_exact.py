@@ -1,5 +1,5 @@
 """The DCBF QP's exact solution with one active barrier row, alone or with the CLF row
-(offboard.dcbf_exact_kernel.pre_solve_kernel, called by DcbfQP.solve), against OSQP on
+(offboard.safety.dcbf.exact_kernel.pre_solve_kernel, called by DcbfQP.solve), against OSQP on
 the same problems: where it applies, OSQP's answer is the same point (and slack) to its
 tolerance; where it does not (two barrier rows, the input set active, a multiplier of
 the wrong sign) OSQP runs."""
@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from offboard.clf_rcbf import ClfTerms
-from offboard.dcbf_filter import input_set_of
-from offboard.dcbf_qp import DcbfQP
+from offboard.safety.dcbf.filter import input_set_of
+from offboard.safety.dcbf.qp import DcbfQP
+from offboard.safety.rcbf.clf_rcbf import ClfTerms
 from swarm_common.enums import QPSolver, QPStatus
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
 

@@ -1,4 +1,4 @@
-"""The dcbf filter's fused rows kernel (offboard.dcbf_step_kernel) against the chain of
+"""The dcbf filter's fused rows kernel (offboard.safety.dcbf.step_kernel) against the chain of
 calls it replaced: barrier, its minimum, the deadlock breaker, the budget share, the other
 agents' accelerations, the pair rows and the ground rows, each through its public function
 (those are checked against their numpy formulations in test_dcbf_kernel.py and against
@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
-from offboard.clf_rcbf import barrier, tangential_term
-from offboard.dcbf import LagCoefficients, dcbf_rows, ground_rows
-from offboard.dcbf_kernel import other_term_kernel
-from offboard.dcbf_step_kernel import dcbf_filter_rows_into, dcbf_params
+from offboard.safety.dcbf.kernel import other_term_kernel
+from offboard.safety.dcbf.model import LagCoefficients, dcbf_rows, ground_rows
+from offboard.safety.dcbf.step_kernel import dcbf_filter_rows_into, dcbf_params
+from offboard.safety.rcbf.clf_rcbf import barrier, tangential_term
 
 TAU = np.array([0.15, 0.15, 0.03])
 N = 9  # agents in the scenario (per-index state)

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from conftest import CUBE8  # noqa: E402
 
-from offboard.bearing import formation_from_scenario
-from offboard.deso import (
+from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.deso import (
     DESO,
     F_HAT_MAX,
     GATE_E1,
@@ -18,10 +18,10 @@ from offboard.deso import (
     regressor,
     regressor_t_times,
 )
-from offboard.deso_gains import gain_report
-from offboard.peer_table import rows_of
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import regressor as sim_regressor
+from offboard.estimation.deso_gains import gain_report
+from offboard.estimation.peer_table import rows_of
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.physics.dynamics import regressor as sim_regressor
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +137,7 @@ def test_closed_loop_observer_converges_from_large_initial_error(sc, init_err, m
     """cube8: before the adaptive-law bounds, init_pos_error 1 m with μ = 0.005 made seed 1
     diverge (v̂ peaking → ζ̂ at its bound in one step → v̂ ~ 1000 m/s). (Seeds 1–3 with
     2 m and μ = 0.05 are in docs/estimation.md; one here to keep the unit suite short.)"""
-    from gcs.inproc import run_inproc
+    from gcs.mission.inproc import run_inproc
 
     s2 = sc.with_overrides(observer={"init_pos_error_m": init_err, "mu": mu})
     f = formation_from_scenario(s2)

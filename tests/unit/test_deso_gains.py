@@ -1,4 +1,4 @@
-"""The DESO gain check's network loop (offboard.deso_gains): the sparse one-period error
+"""The DESO gain check's network loop (offboard.estimation.deso_gains): the sparse one-period error
 transition against the real observers, and the spectral radius, dense and sparse."""
 
 import numpy as np
@@ -7,11 +7,11 @@ from conftest import CUBE8, ROOT  # noqa: E402
 from scipy import sparse
 from scipy.sparse.linalg import ArpackNoConvergence
 
-import offboard.deso_gains as gains
-from offboard.bearing import formation_from_scenario
-from offboard.deso import DESO
-from offboard.peer_table import rows_of
-from swarm_common.scenario import load_scenario
+import offboard.estimation.deso_gains as gains
+from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.deso import DESO
+from offboard.estimation.peer_table import rows_of
+from swarm_common.scenario.model import load_scenario
 
 GRID27 = ROOT / "scenarios" / "grid27_knn.toml"
 GRID64 = ROOT / "scenarios" / "grid64.toml"

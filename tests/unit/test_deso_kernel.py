@@ -1,10 +1,10 @@
-"""The compiled DESO period (offboard.deso_kernel) against the numpy formulation it
+"""The compiled DESO period (offboard.estimation.deso_kernel) against the numpy formulation it
 replaced: the same observer to rounding, over random states, neighbour sets (the empty set
 too: the dead-reckoned period), innovations inside and outside the adaptation gate, with the
 adaptive law on and off.
 
 The oracle below is the previous numpy implementation kept verbatim (compact): the adaptive
-model of ``offboard.deso_adaptive`` (C ``pow``, numpy ``clip``) and ``DESO.update``,
+model of ``offboard.estimation.deso_adaptive`` (C ``pow``, numpy ``clip``) and ``DESO.update``,
 ``coast`` and ``lumped`` (``einsum`` sums, BLAS ``@``). The matrices of a neighbour set
 are the class's own (numpy ``expm`` setup, unchanged). The kernels sum the products left
 to right and cube by products, so agreement is to rounding, not to the bit.
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from conftest import CUBE8  # noqa: E402
 
-from offboard.bearing import formation_from_scenario
-from offboard.deso import (
+from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.deso import (
     DESO,
     F_HAT_MAX,
     GATE_E1,
@@ -32,8 +32,8 @@ from offboard.deso import (
     model_accel,
     regressor_t_times,
 )
-from offboard.peer_table import rows_of
-from swarm_common.scenario import load_scenario
+from offboard.estimation.peer_table import rows_of
+from swarm_common.scenario.model import load_scenario
 
 RTOL = ATOL = 1e-12
 

@@ -1,4 +1,5 @@
-"""vehicle_sim.dynamics: the documented behaviour of the vehicle model (paper §2.2, §5.1)."""
+"""vehicle_sim.physics.dynamics: the documented behaviour of the vehicle model (paper §2.2,
+§5.1)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import pytest
 from conftest import CUBE8
 
 from swarm_common.enums import Role
-from swarm_common.scenario import AgentSpec, load_scenario
-from vehicle_sim.dynamics import SwarmDynamics, external_disturbance, regressor
+from swarm_common.scenario.model import AgentSpec, load_scenario
+from vehicle_sim.physics.dynamics import SwarmDynamics, external_disturbance, regressor
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""The compiled physics step (vehicle_sim.dynamics_kernel) against the numpy step it
+"""The compiled physics step (vehicle_sim.physics.dynamics_kernel) against the numpy step it
 replaced: the same step to rounding, from identical states (single steps over random
 states with held vehicles and ground contact) and over short rollouts with random
 commands, so the compiled simulator is the same simulator.
@@ -7,7 +7,7 @@ The oracle below is the previous numpy implementation of ``SwarmDynamics.step`` 
 ``thrust_accel``, ``lumped_accel`` and collision bookkeeping) kept verbatim, as functions
 of a :class:`SwarmDynamics`. The kernel differs from it in the last bit only: the C
 library's ``exp`` against numpy's AVX-512 one, cubes as products against numpy's ``pow``
-(module docstring of vehicle_sim.dynamics_kernel).
+(module docstring of vehicle_sim.physics.dynamics_kernel).
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import pytest
 from conftest import CUBE8
 
 from swarm_common.fastnp import einsum
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics, regressor
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.physics.dynamics import SwarmDynamics, regressor
 
 # the oracle: the previous numpy step, verbatim ----------------------------------------
 

@@ -1,5 +1,7 @@
-"""Load-time feasibility (swarm_common.feasibility): the desired motion against the formation
-maths of offboard (finite differences of p*(t)), the input set against offboard.dcbf, and
+"""Load-time feasibility (swarm_common.scenario.feasibility): the desired motion against the
+formation
+maths of offboard (finite differences of p*(t)), the input set against offboard.safety.dcbf.model,
+and
 the one-line refusals (key and numbers) of infeasible scenarios."""
 
 from __future__ import annotations
@@ -13,12 +15,12 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from gcs.launch_spec import LaunchSpec
-from offboard.bearing import formation_from_scenario
-from offboard.dcbf import InputSet
-from offboard.reference import LeaderTrajectory
-from offboard.takeoff import leader_origin
-from swarm_common.feasibility import (
+from gcs.mission.launch_spec import LaunchSpec
+from offboard.agent.takeoff import leader_origin
+from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.reference import LeaderTrajectory
+from offboard.safety.dcbf.model import InputSet
+from swarm_common.scenario.feasibility import (
     FEEDBACK_RESERVE,
     InputLimits,
     desired_origins,
@@ -26,7 +28,7 @@ from swarm_common.feasibility import (
     leader_origins,
     peak_acceleration,
 )
-from swarm_common.scenario import (
+from swarm_common.scenario.model import (
     InfeasibleScenarioError,
     Scenario,
     ScenarioError,
@@ -165,7 +167,7 @@ def test_infeasible_trajectory_refused_in_one_line_naming_the_key(tmp_path):
 
 def test_allow_infeasible_logs_a_warning_and_is_inherited(tmp_path, caplog):
     p = _write(tmp_path, "frequency_hz = 0.2", "frequency_hz = 0.4")
-    with caplog.at_level(logging.WARNING, logger="swarm_common.scenario"):
+    with caplog.at_level(logging.WARNING, logger="swarm_common.scenario.model"):
         sc = load_scenario(p, allow_infeasible=True)
     assert sc.allow_infeasible
     assert any("leader_trajectory.frequency_hz = 0.4" in r.getMessage() for r in caplog.records)

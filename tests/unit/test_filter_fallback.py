@@ -1,7 +1,8 @@
 """The safety filters' fallback: a step whose rows are not finite brakes on −w − 2 z2,
-projected into the realisable input set (dcbf, offboard.dcbf_qp.DcbfQP.solve) or clipped
-to the box (rcbf, offboard.clf_rcbf.SafetyQP.solve). The filters form the brake only when
-the fallback is taken (offboard.clf_rcbf.fallback_of); this checks it is still the
+projected into the realisable input set (dcbf, offboard.safety.dcbf.qp.DcbfQP.solve) or clipped
+to the box (rcbf, offboard.safety.rcbf.clf_rcbf.SafetyQP.solve). The filters form the brake only
+when
+the fallback is taken (offboard.safety.rcbf.clf_rcbf.fallback_of); this checks it is still the
 right one."""
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ import numpy as np
 import pytest
 from conftest import CUBE8
 
-from offboard.clf_rcbf import ClfTerms
-from offboard.dcbf_filter import DcbfFilter
-from offboard.safety_filter import RcbfFilter, SafetyInput
-from swarm_common.scenario import load_scenario
+from offboard.safety.dcbf.filter import DcbfFilter
+from offboard.safety.filter import RcbfFilter, SafetyInput
+from offboard.safety.rcbf.clf_rcbf import ClfTerms
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(CUBE8)
 BOX = np.full(3, SC.controller.u_max_mps2)

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 from conftest import CUBE8
 
-from gcs.inproc import f32, round_estimate, wire_to_command
-from offboard.agent import FollowerAgent, make_agent
-from offboard.bearing import formation_from_scenario
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
+from gcs.mission.inproc import f32, round_estimate, wire_to_command
+from offboard.agent.factory import FollowerAgent, make_agent
+from offboard.estimation.bearing import formation_from_scenario
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.physics.dynamics import SwarmDynamics
 
 VICTIM = 3  # scenario index of a follower
 

@@ -7,8 +7,8 @@ from dataclasses import replace
 import numpy as np
 from conftest import CUBE8
 
-from offboard.agent import FollowerAgent, make_agent
-from swarm_common.scenario import load_scenario
+from offboard.agent.factory import FollowerAgent, make_agent
+from swarm_common.scenario.model import load_scenario
 
 
 def test_a_neighbour_never_heard_from_gets_the_full_share() -> None:

@@ -1,4 +1,4 @@
-"""offboard.frame_peek: the unread frames of a datagram, from headers only, against
+"""offboard.daemon.mavlink.frame_peek: the unread frames of a datagram, from headers only, against
 frames packed by pymavlink (v1, v2, signed) and what its parser makes of them."""
 
 import os
@@ -8,8 +8,8 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from offboard.frame_peek import unread_frames  # noqa: E402
-from offboard.stream_trim import READ_KINDS  # noqa: E402
+from offboard.daemon.mavlink.frame_peek import unread_frames  # noqa: E402
+from offboard.daemon.mavlink.stream_trim import READ_KINDS  # noqa: E402
 from swarm_common.signing import setup_signing  # noqa: E402
 
 M = mavutil.mavlink

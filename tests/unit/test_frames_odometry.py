@@ -14,9 +14,9 @@ from pymavlink.dialects.v20 import common as M
 from scipy.spatial.transform import Rotation
 
 from swarm_common import frames
-from swarm_common.scenario import load_scenario
-from vehicle_sim import telemetry
-from vehicle_sim.dynamics import SwarmDynamics
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot import telemetry
+from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

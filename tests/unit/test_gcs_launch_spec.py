@@ -1,4 +1,4 @@
-"""gcs.launch_spec.LaunchSpec: one source for the ports and command lines of a swarm."""
+"""gcs.mission.launch_spec.LaunchSpec: one source for the ports and command lines of a swarm."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from gcs.dashboard.launch import dashboard_spec
-from gcs.launch_spec import LaunchSpec
-from swarm_common.scenario import load_scenario
+from gcs.mission.launch_spec import LaunchSpec
+from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

@@ -1,10 +1,10 @@
-"""gcs.progress.Progress: a redrawn bar on a terminal, occasional plain lines elsewhere."""
+"""gcs.mission.progress.Progress: a redrawn bar on a terminal, occasional plain lines elsewhere."""
 
 from __future__ import annotations
 
 import io
 
-from gcs.progress import Progress
+from gcs.mission.progress import Progress
 
 
 class FakeClock:

@@ -1,13 +1,19 @@
-"""gcs.sweep input parsing and gcs.sweep_report statistics (pure functions)."""
+"""gcs.mission.sweep input parsing and gcs.report.sweep statistics (pure functions)."""
 
 from __future__ import annotations
 
 import pytest
 from scipy.stats import binom
 
-from gcs.metrics import METRIC_KEYS
-from gcs.sweep import SweepInputError, parse_duration, parse_jobs, parse_methods, parse_seeds
-from gcs.sweep_report import (
+from gcs.mission.sweep import (
+    SweepInputError,
+    parse_duration,
+    parse_jobs,
+    parse_methods,
+    parse_seeds,
+)
+from gcs.report.metrics import METRIC_KEYS
+from gcs.report.sweep import (
     CSV_COLUMNS,
     clopper_pearson_upper,
     flat_row,

@@ -1,14 +1,14 @@
-"""Reference governor (offboard.governor, docs/saturation.md §3): κ from the load-time
+"""Reference governor (offboard.agent.governor, docs/saturation.md §3): κ from the load-time
 feasibility numbers, the slowed exosystem fits the input set."""
 
 import math
 
 import numpy as np
 
-from offboard.governor import _at_frequency, _origins, first_guess, governor_for
-from offboard.reference import LeaderTrajectory, exo_propagator
-from swarm_common.feasibility import FEEDBACK_RESERVE, InputLimits, acceleration_problem
-from swarm_common.scenario import load_scenario
+from offboard.agent.governor import _at_frequency, _origins, first_guess, governor_for
+from offboard.estimation.reference import LeaderTrajectory, exo_propagator
+from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, InputLimits, acceleration_problem
+from swarm_common.scenario.model import load_scenario
 
 CUBE8 = "scenarios/cube8.toml"
 
@@ -64,7 +64,7 @@ def test_slowed_exosystem_acceleration_fits_the_input_set():
 def test_governor_is_computed_once_per_scenario_object() -> None:
     from dataclasses import replace
 
-    import offboard.governor as gov_mod
+    import offboard.agent.governor as gov_mod
 
     sc = load_scenario(CUBE8)
     calls = []

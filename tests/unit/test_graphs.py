@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 from conftest import CUBE8, ROOT  # noqa: E402
 
-from offboard.bearing import (
+from offboard.estimation.bearing import (
     RigidityError,
     build_formation,
     check_observable,
     formation_from_scenario,
 )
-from offboard.deso import DESO, observer_weights
-from offboard.deso_gains import gain_report
-from offboard.peer_table import rows_of
-from offboard.reference import DesiredStateObserver, LeaderTrajectory
-from swarm_common import graphs
-from swarm_common.scenario import ScenarioError, load_scenario
+from offboard.estimation.deso import DESO, observer_weights
+from offboard.estimation.deso_gains import gain_report
+from offboard.estimation.peer_table import rows_of
+from offboard.estimation.reference import DesiredStateObserver, LeaderTrajectory
+from swarm_common.scenario import graphs
+from swarm_common.scenario.model import ScenarioError, load_scenario
 
 GRID27 = ROOT / "scenarios" / "grid27_knn.toml"
 GRID = np.array(list(itertools.product(range(3), repeat=3)), dtype=float)  # 27 vertices

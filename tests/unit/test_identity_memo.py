@@ -1,11 +1,11 @@
-"""offboard.identity_memo: once per (object, parameters) by identity, or per key by
+"""offboard.agent.identity_memo: once per (object, parameters) by identity, or per key by
 content; bounded."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-from offboard.identity_memo import ContentMemo, IdentityMemo
+from offboard.agent.identity_memo import ContentMemo, IdentityMemo
 
 
 def _recorded() -> tuple[list[int], Callable[[int], int]]:
@@ -51,8 +51,8 @@ def test_formation_digest_is_by_content() -> None:
 
     import numpy as np
 
-    from offboard.bearing import formation_from_scenario
-    from swarm_common.scenario import load_scenario
+    from offboard.estimation.bearing import formation_from_scenario
+    from swarm_common.scenario.model import load_scenario
 
     root = Path(__file__).resolve().parents[2]
     sc = load_scenario(root / "scenarios" / "cube8.toml")

@@ -10,14 +10,14 @@ import math
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.inproc import round_estimate, round_estimates, wire_to_command, wire_to_commands
-from gcs.run_output import empty_series, set_agent_rows
-from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.attitude import quat_ned_fast
+from gcs.mission.inproc import round_estimate, round_estimates, wire_to_command, wire_to_commands
+from gcs.mission.run_output import empty_series, set_agent_rows
+from offboard.agent.attitude import quat_ned_fast
+from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method, QPStatus
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.setpoints import parse_attitude
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.setpoints import parse_attitude
+from vehicle_sim.physics.dynamics import SwarmDynamics
 
 SC = load_scenario("scenarios/cube8.toml")
 
@@ -30,7 +30,7 @@ def _quats(rng: np.random.Generator, n: int) -> np.ndarray:
 
 def test_setpoints_decoded_at_once_are_the_simulators_decoding() -> None:
     """Each row equals what vehicle-sim makes of the SET_ATTITUDE_TARGET carrying it
-    (packed and parsed by pymavlink, then vehicle_sim.setpoints.parse_attitude), and
+    (packed and parsed by pymavlink, then vehicle_sim.autopilot.setpoints.parse_attitude), and
     wire_to_command (one agent) equals its row."""
     rng = np.random.default_rng(1)
     f_max = SC.vehicle.thrust_max_n
@@ -131,10 +131,10 @@ def test_followers_given_the_batch_equal_followers_given_dicts() -> None:
     what a daemon receives), through an outage where the batch gives nothing and the dict
     is empty. Truth moves on a fixed path (the agents' commands do not act on it), so
     every step is compared on the same inputs."""
-    from gcs.inproc import published_batch
-    from offboard.agent import make_agent
-    from offboard.bearing import formation_from_scenario
-    from offboard.daemon_peers import peer_ids
+    from gcs.mission.inproc import published_batch
+    from offboard.agent.factory import make_agent
+    from offboard.agent.peers import peer_ids
+    from offboard.estimation.bearing import formation_from_scenario
 
     form = formation_from_scenario(SC)
     pair = [[make_agent(SC, a.id, method="dcbf", form=form) for a in SC.agents] for _ in (0, 1)]

@@ -1,18 +1,18 @@
-"""Landing plan and reference (offboard.landing, docs/lifecycle.md)."""
+"""Landing plan and reference (offboard.agent.landing, docs/lifecycle.md)."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from offboard.landing import (
+from offboard.agent.landing import (
     V_D,
     LandingReference,
     landing_plan,
     planned_positions,
 )
-from offboard.takeoff import ramped_travel
-from swarm_common.scenario import load_scenario
+from offboard.agent.takeoff import ramped_travel
+from swarm_common.scenario.model import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))

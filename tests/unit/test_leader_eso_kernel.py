@@ -1,4 +1,4 @@
-"""The leader's velocity ESO (offboard.leader.velocity_eso_kernel) against the numpy
+"""The leader's velocity ESO (offboard.agent.leader.velocity_eso_kernel) against the numpy
 formulation it replaced: the same bits on random states and sub-step counts, and the
 observer converging on a constant disturbance (so the test could fail on wrong gains)."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.leader import velocity_eso_kernel
+from offboard.agent.leader import velocity_eso_kernel
 
 
 def eso_numpy(v: np.ndarray, v_hat: np.ndarray, d_hat: np.ndarray, u_sub: np.ndarray,

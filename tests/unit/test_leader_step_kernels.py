@@ -1,4 +1,4 @@
-"""The leader's command and one-period prediction (offboard.leader.leader_control_kernel,
+"""The leader's command and one-period prediction (offboard.agent.leader.leader_control_kernel,
 leader_prediction_kernel) against the numpy formulation they replaced: the same bits,
 signs of zeros and NaN included, on random states; and the command driving a double
 integrator onto a moving reference (so a wrong gain or sign fails)."""
@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.leader import leader_control_kernel, leader_prediction_kernel
+from offboard.agent.leader import leader_control_kernel, leader_prediction_kernel
 
 TAU, KP, KD = 0.08, 4.0, 3.0
 

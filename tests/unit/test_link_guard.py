@@ -1,4 +1,4 @@
-"""offboard.link_guard: stamp and field validators, Zenoh payload guard, the non-blocking
+"""offboard.daemon.link_guard: stamp and field validators, Zenoh payload guard, the non-blocking
 command retry, the OFFBOARD keeper (start-up and failsafe recovery policy)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from offboard.link_guard import (
+from offboard.daemon.link_guard import (
     MAX_JUMP_PERIODS,
     REANCHOR_COUNT,
     STEP_AHEAD,
@@ -18,7 +18,7 @@ from offboard.link_guard import (
     StampGuard,
     odometry_fields_ok,
 )
-from offboard.offboard_keeper import Backoff, OffboardKeeper, VehicleView
+from offboard.daemon.mavlink.offboard_keeper import Backoff, OffboardKeeper, VehicleView
 from swarm_common import wire
 
 HZ = 50
@@ -305,7 +305,7 @@ def test_no_warning_while_the_heartbeat_still_shows_the_old_mode(
 
 
 def test_all_finite_one_reduction_per_array() -> None:
-    from offboard.link_guard import all_finite
+    from offboard.daemon.link_guard import all_finite
 
     ok = (np.zeros(3), np.full((4, 3), 3.4e38), np.array([-3.4e38]))
     assert all_finite(ok)
@@ -322,7 +322,7 @@ def test_decoded_estimate_is_judged_by_its_block() -> None:
     """A decoded estimate's vectors are views of one block, judged by one sum; a non-finite
     value in any of its 27 floats on the wire makes it non-finite, and an estimate built
     from separate arrays is judged vector by vector."""
-    from offboard.link_guard import payload_finite
+    from offboard.daemon.link_guard import payload_finite
 
     good = wire.Estimate(id=2, step=7, t=0.14, role="follower", z1=np.ones(3),
                          z2=np.ones(3), z3=np.ones(3), xi=np.ones(12), zeta=np.ones(6))

@@ -1,11 +1,12 @@
-"""gcs.metrics on synthetic series: true barrier, fixed-window tracking, phases."""
+"""gcs.report.metrics on synthetic series: true barrier, fixed-window tracking, phases."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from gcs.metrics import (
+from gcs.mission.run_output import empty_series
+from gcs.report.metrics import (
     METRIC_KEYS,
     PHASES,
     SafetySpec,
@@ -16,7 +17,6 @@ from gcs.metrics import (
     pair_barrier,
     window_tracking,
 )
-from gcs.run_output import empty_series
 from swarm_common.enums import QPStatus
 
 TAU, D = 0.8, 0.5

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from conftest import CUBE8, ROOT
 
-from gcs.inproc import f32, round_estimate, wire_to_command
-from offboard.agent import FollowerAgent, make_agent
-from offboard.bearing import formation_from_scenario
-from offboard.dcbf_filter import DcbfFilter
-from offboard.dcbf_step_kernel import P_DT
+from gcs.mission.inproc import f32, round_estimate, wire_to_command
+from offboard.agent.factory import FollowerAgent, make_agent
+from offboard.estimation.bearing import formation_from_scenario
+from offboard.safety.dcbf.filter import DcbfFilter
+from offboard.safety.dcbf.step_kernel import P_DT
 from swarm_common.enums import Method
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.physics.dynamics import SwarmDynamics
 
 GROUND8 = str(ROOT / "scenarios" / "ground8.toml")
 

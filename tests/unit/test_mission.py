@@ -11,14 +11,14 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.enums import VehicleMode
-from swarm_common.scenario import load_scenario
-from vehicle_sim import geo
-from vehicle_sim import mission_items as mi
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.geofence import Circle, Geofence, Polygon, fence_from_items
-from vehicle_sim.mission_executor import MissionExecutor
-from vehicle_sim.mission_transfer import RETRY_S, TIMEOUT_S, MissionTransfer
-from vehicle_sim.nav import NavKind
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.nav import NavKind
+from vehicle_sim.physics import geo
+from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.services import mission_items as mi
+from vehicle_sim.services.geofence import Circle, Geofence, Polygon, fence_from_items
+from vehicle_sim.services.mission_executor import MissionExecutor
+from vehicle_sim.services.mission_transfer import RETRY_S, TIMEOUT_S, MissionTransfer
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

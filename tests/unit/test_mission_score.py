@@ -1,4 +1,4 @@
-"""A recorded run as the in-process runner's Series (gcs.mission_score.recorder_series):
+"""A recorded run as the in-process runner's Series (gcs.mission.score.recorder_series):
 the truth's derived rows for the recorded steps, and a recording with no truth yet (an
 aborted start) giving an empty Series rather than an error."""
 
@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 from conftest import CUBE8
 
-from gcs.mission_score import recorder_series
-from gcs.recorder import Recorder
-from gcs.run_output import tilt_deg
-from offboard.bearing import formation_from_scenario
-from swarm_common.scenario import load_scenario
+from gcs.mission.recorder import Recorder
+from gcs.mission.run_output import tilt_deg
+from gcs.mission.score import recorder_series
+from offboard.estimation.bearing import formation_from_scenario
+from swarm_common.scenario.model import load_scenario
 
 
 def test_a_recording_without_truth_gives_an_empty_series() -> None:
@@ -44,7 +44,7 @@ def test_recorded_truth_rows_give_the_desired_states_and_tilt_of_each_step() -> 
 
 
 def test_late_steps_reads_the_simulators_lockstep_timeouts() -> None:
-    from gcs.mission_score import late_steps
+    from gcs.mission.score import late_steps
 
     assert late_steps({}) == 0 and late_steps({"run": {"simulator": None}}) == 0
     assert late_steps({"run": {"simulator": {"lockstep_timeouts": 339}}}) == 339

@@ -1,4 +1,4 @@
-"""offboard.nav_check and the runner-loss hold it starts: a follower whose estimate left its
+"""offboard.daemon.nav_check and the runner-loss hold it starts: a follower whose estimate left its
 vehicle's odometry is held on odometry and landed, and truth coming back does not give it
 back to the estimate."""
 
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offboard.follower import MAX_COAST_PERIODS
-from offboard.nav_check import NAV_GATE_M, NAV_GATE_STEPS, NAV_GRACE_S, NavigationCheck
-from offboard.runner_loss import RunnerLoss
+from offboard.agent.follower import MAX_COAST_PERIODS
+from offboard.daemon.nav_check import NAV_GATE_M, NAV_GATE_STEPS, NAV_GRACE_S, NavigationCheck
+from offboard.daemon.runner_loss import RunnerLoss
 
 P = np.array([1.0, 2.0, 3.0])
 HZ = 50

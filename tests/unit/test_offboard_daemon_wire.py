@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.agent_types import AgentOutput, AgentStatus, NeighbourEstimate
-from offboard.mavlink_link import Odometry
-from offboard.wire_convert import (
+from offboard.daemon.mavlink.link import Odometry
+from offboard.daemon.wire_convert import (
     estimate_to_wire,
     estimates_from_wire,
     measured_state,
     status_to_wire,
 )
+from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common import wire
 from swarm_common.enums import Method, QPStatus
 

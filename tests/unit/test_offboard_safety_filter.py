@@ -1,4 +1,4 @@
-"""Safety filters by method (offboard.safety_filter), the method switch, the dropout hold."""
+"""Safety filters by method (offboard.safety.filter), the method switch, the dropout hold."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from offboard.agent import FollowerAgent, LeaderAgent, make_agent
-from offboard.clf_rcbf import clf_terms
-from offboard.dcbf_filter import DcbfFilter
-from offboard.safety_filter import (
+from offboard.agent.factory import FollowerAgent, LeaderAgent, make_agent
+from offboard.estimation.sensing import DropoutHold
+from offboard.safety.dcbf.filter import DcbfFilter
+from offboard.safety.filter import (
     SAFETY_FILTERS,
     ApfFilter,
     NoFilter,
@@ -21,9 +21,9 @@ from offboard.safety_filter import (
     parse_method,
     saturate_norm,
 )
-from offboard.sensing import DropoutHold
+from offboard.safety.rcbf.clf_rcbf import clf_terms
 from swarm_common.enums import Method, QPStatus
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 LO, HI = np.full(3, -3.0), np.full(3, 3.0)

@@ -1,4 +1,5 @@
-"""offboard.osqp_call: the extension-object path answers what OSQP's public API answers,
+"""offboard.safety.solvers.osqp_call: the extension-object path answers what OSQP's public API
+answers,
 bit for bit (and the public API is what it falls back to without ``_solver``)."""
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ import numpy as np
 import osqp
 import scipy.sparse as sp
 
-from offboard.osqp_call import update_solve
+from offboard.safety.solvers.osqp_call import update_solve
 
 P = sp.csc_matrix(np.diag([1.0, 2.0, 3.0]))
 A = sp.csc_matrix(np.array([[1.0, 1.0, 0.0], [0.0, 1.0, 1.0], [1.0, 0.0, -1.0]]))

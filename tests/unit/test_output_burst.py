@@ -1,8 +1,8 @@
-"""offboard.output_burst.OutputBurst: held sends go out only on flush, in order."""
+"""offboard.daemon.output_burst.OutputBurst: held sends go out only on flush, in order."""
 
 from __future__ import annotations
 
-from offboard.output_burst import OutputBurst
+from offboard.daemon.output_burst import OutputBurst
 
 
 def test_burst_keeps_order_and_sends_only_on_flush() -> None:

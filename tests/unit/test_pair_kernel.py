@@ -1,4 +1,4 @@
-"""The compiled per-pair terms (offboard.pair_kernel) against their numpy formulations.
+"""The compiled per-pair terms (offboard.safety.pair_kernel) against their numpy formulations.
 
 The oracles are the previous numpy implementations, kept verbatim. The kernels sum dot
 products left to right, ``einsum`` and BLAS in their own orders: equal to rounding.
@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from offboard.clf_rcbf import barrier, tangential_term
+from offboard.safety.rcbf.clf_rcbf import barrier, tangential_term
 
 
 def barrier_numpy(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:

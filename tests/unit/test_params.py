@@ -1,4 +1,5 @@
-"""vehicle_sim.params (store, file) and vehicle_sim.param_service (the MAVLink protocol)."""
+"""vehicle_sim.autopilot.params (store, file) and vehicle_sim.services.param (the MAVLink
+protocol)."""
 
 from __future__ import annotations
 
@@ -8,15 +9,8 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as M
 
-from swarm_common.scenario import load_scenario
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.param_service import (
-    LIST_BURST_MAX,
-    LIST_PER_STEP,
-    int32_to_wire,
-    wire_to_int32,
-)
-from vehicle_sim.params import (
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.params import (
     FILE_FORMAT,
     INT32,
     REAL32,
@@ -27,6 +21,13 @@ from vehicle_sim.params import (
     ParamStore,
     parse_param_file,
     read_param_file,
+)
+from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.services.param import (
+    LIST_BURST_MAX,
+    LIST_PER_STEP,
+    int32_to_wire,
+    wire_to_int32,
 )
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 

@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 
-from offboard.agent_types import NeighbourEstimate
-from offboard.neighbour_accel import NeighbourAccel
-from offboard.peer_table import EstimateBatch
-from offboard.predictor import NeighbourPredictor
+from offboard.estimation.neighbour_accel import NeighbourAccel
+from offboard.estimation.peer_table import EstimateBatch
+from offboard.estimation.predictor import NeighbourPredictor
+from offboard.records import NeighbourEstimate
 
 IDS = [3, 5, 8, 13, 21]
 A_MAX = 6.0
@@ -118,8 +118,8 @@ def test_unsensed_candidates_pass_over_only_what_is_certainly_out_of_range() -> 
     """unsensed_candidates keeps, in the order heard, every heard agent but the own one
     and the sensed ones, except current rows farther than the range (with its margin)
     from z1: never a stale row, never a row the exact norm puts within range."""
-    from offboard.peer_table import ROW, unsensed_candidates
-    from offboard.unsensed import RANGE_MARGIN
+    from offboard.agent.unsensed import RANGE_MARGIN
+    from offboard.estimation.peer_table import ROW, unsensed_candidates
 
     rng = np.random.default_rng(6)
     passed_over = 0
@@ -151,7 +151,7 @@ def test_unsensed_candidates_pass_over_only_what_is_certainly_out_of_range() -> 
 def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
     import pytest
 
-    from offboard.peer_table import PeerTable, unsensed_candidates
+    from offboard.estimation.peer_table import PeerTable, unsensed_candidates
 
     tab = PeerTable(3)
     b = EstimateBatch.empty(3)
@@ -174,7 +174,7 @@ def test_full_share_rows_equal_the_numpy_mask() -> None:
     tables (never-heard stamps included), and refuses an index outside the table."""
     import pytest
 
-    from offboard.peer_table import full_share_rows
+    from offboard.estimation.peer_table import full_share_rows
 
     rng = np.random.default_rng(12)
     for _ in range(300):

@@ -1,4 +1,4 @@
-"""vehicle_sim.position_control and the AUTO modes, flown on the real dynamics.
+"""vehicle_sim.physics.position_control and the AUTO modes, flown on the real dynamics.
 
 One vehicle of ground8 (on its pad at z = 0), stepped as the server steps it: the
 vehicle's update, its command, physics_hz / control_hz dynamics steps."""
@@ -13,12 +13,12 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.enums import VehicleMode
-from swarm_common.scenario import load_scenario
-from vehicle_sim import geo
-from vehicle_sim.commands import Command, execute
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.nav_flight import OFFBOARD_LIMITS
-from vehicle_sim.position_control import PositionController, PositionSetpoint, SpeedLimits
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.nav_flight import OFFBOARD_LIMITS
+from vehicle_sim.physics import geo
+from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.physics.position_control import PositionController, PositionSetpoint, SpeedLimits
+from vehicle_sim.services.command import Command, execute
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 GROUND8 = Path(__file__).resolve().parents[2] / "scenarios" / "ground8.toml"

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from offboard.agent_types import NeighbourEstimate
-from offboard.peer_table import XI, Z1, Z2
-from offboard.predictor import NeighbourPredictor, error_accel_gain
-from offboard.reference import exo_propagator, xi_a, xi_p, xi_v
+from offboard.estimation.peer_table import XI, Z1, Z2
+from offboard.estimation.predictor import NeighbourPredictor, error_accel_gain
+from offboard.estimation.reference import exo_propagator, xi_a, xi_p, xi_v
+from offboard.records import NeighbourEstimate
 
 OMEGA = 2 * np.pi * 0.2
 DT = 0.02
@@ -168,7 +168,7 @@ def test_an_outage_computes_nothing_new_in_the_control_loop() -> None:
     predicting a leader and a follower through an outage as long as max_age adds nothing
     to the process-wide caches (left to the first outage, c_r's sweep alone took ~15 ms
     inside one control step); the cached values are those the functions give."""
-    import offboard.predictor as predictor
+    import offboard.estimation.predictor as predictor
 
     for cache in (predictor._EXO_CACHE, predictor._ERR_CACHE, predictor._CR_CACHE):
         cache.clear()

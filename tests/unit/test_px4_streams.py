@@ -10,12 +10,12 @@ from types import SimpleNamespace
 import pytest
 from pymavlink.dialects.v20 import common as M
 
-from swarm_common.scenario import load_scenario
-from vehicle_sim import mavlink_extra, telemetry
-from vehicle_sim.battery import BatteryModel
-from vehicle_sim.commands import Command, execute
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.streams import PeerStreams
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot import mavlink_extra, telemetry
+from vehicle_sim.autopilot.streams import PeerStreams
+from vehicle_sim.physics.battery import BatteryModel
+from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.services.command import Command, execute
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

@@ -1,4 +1,5 @@
-"""Safety QPs that start small and grow on demand (offboard.clf_rcbf._ClfRowsQP.fit_rows):
+"""Safety QPs that start small and grow on demand
+(offboard.safety.rcbf.clf_rcbf._ClfRowsQP.fit_rows):
 a grown problem answers what a problem built at full size answers, every row is kept, and
 the growth stops at the limit."""
 
@@ -8,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from offboard.clf_rcbf import ClfTerms, SafetyQP, clf_terms, rcbf_rows
-from offboard.dcbf_filter import input_set_of
-from offboard.dcbf_qp import DcbfQP
-from swarm_common.scenario import load_scenario
+from offboard.safety.dcbf.filter import input_set_of
+from offboard.safety.dcbf.qp import DcbfQP
+from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP, clf_terms, rcbf_rows
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
 VEH, CTL = SC.vehicle, SC.controller

@@ -1,4 +1,4 @@
-"""The safety QPs' compiled data bookkeeping (offboard.qp_rows_kernel) against the numpy
+"""The safety QPs' compiled data bookkeeping (offboard.safety.qp_rows_kernel) against the numpy
 slice assignments and finiteness tests it replaced, on random rows: the same matrix,
 bounds and cost bit for bit (nan and inf included), and the same guard verdicts."""
 
@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from offboard.daqp_call import DAQP_INF
-from offboard.qp_rows_kernel import rows_finite_kernel, write_rows_kernel
+from offboard.safety.qp_rows_kernel import rows_finite_kernel, write_rows_kernel
+from offboard.safety.solvers.daqp_call import DAQP_INF
 
 
 def _write_numpy(

@@ -1,5 +1,5 @@
-"""The safety QPs' two solvers on shared test problems (offboard.daqp_call beside
-offboard.osqp_call, ``[controller] qp_solver``): DAQP's answer meets every row, is no
+"""The safety QPs' two solvers on shared test problems (offboard.safety.solvers.daqp_call beside
+offboard.safety.solvers.osqp_call, ``[controller] qp_solver``): DAQP's answer meets every row, is no
 worse than OSQP's and is the same point as OSQP's at a tight tolerance (1e-9, polished),
 for the RCBF and the DCBF QP, with the hard rows feasible or relaxed and the CLF row and
 the input set active or not; when DAQP reports no optimum, OSQP answers."""
@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from offboard import clf_rcbf
-from offboard.clf_rcbf import ClfTerms, SafetyQP, _ClfRowsQP, clf_terms, rcbf_rows
-from offboard.dcbf_filter import input_set_of
-from offboard.dcbf_qp import DcbfQP
+from offboard.safety.dcbf.filter import input_set_of
+from offboard.safety.dcbf.qp import DcbfQP
+from offboard.safety.rcbf import clf_rcbf
+from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP, _ClfRowsQP, clf_terms, rcbf_rows
 from swarm_common.enums import QPSolver, QPStatus
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
 LO = np.array([-3.2, -3.2, -8.0])
@@ -138,7 +138,7 @@ def test_daqp_on_hostile_data_answers_finite_or_not_at_all() -> None:
     """Extreme magnitudes (1e-300 … 1e300), zero and duplicate rows, infinite bounds and
     infeasible problems: the adapter returns a finite x or None (then OSQP runs), never a
     non-finite x, and the extension does not crash."""
-    from offboard.daqp_call import daqp_solve
+    from offboard.safety.solvers.daqp_call import daqp_solve
 
     rng = np.random.default_rng(17)
     h = np.diag([1.0, 1.0, 1.0, 2.0 * RHO, 200.0])
@@ -180,7 +180,8 @@ def _dcbf_problems(
 
 
 def test_osqp_set_up_on_first_use_is_the_solver_set_up_with_the_problem() -> None:
-    """OSQP is set up on first use (offboard.clf_rcbf._ClfRowsQP.solver) from the data the
+    """OSQP is set up on first use (offboard.safety.rcbf.clf_rcbf._ClfRowsQP.solver) from the data
+    the
     problem was built with, not from the rows written since: a solver first used after
     rows were written answers every later problem with the same bits as one set up when
     the problem was built."""

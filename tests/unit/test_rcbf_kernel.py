@@ -1,14 +1,14 @@
-"""The RCBF filter's compiled rows (offboard.rcbf_kernel): the fused call against the chain
+"""The RCBF filter's compiled rows (offboard.safety.rcbf.kernel): the fused call against the chain
 of calls it replaced, the rows against the numpy formulation, and the filter's inputs."""
 
 import numpy as np
 import pytest
 
-from offboard.clf_rcbf import barrier, rcbf_rows, tangential_term
-from offboard.pair_kernel import FULL_SHARE, SPLIT_SHARE
-from offboard.rcbf_kernel import rcbf_filter_rows_kernel, rcbf_params, rcbf_rows_kernel
-from offboard.safety_filter import RcbfFilter, SafetyInput
-from swarm_common.scenario import load_scenario
+from offboard.safety.filter import RcbfFilter, SafetyInput
+from offboard.safety.pair_kernel import FULL_SHARE, SPLIT_SHARE
+from offboard.safety.rcbf.clf_rcbf import barrier, rcbf_rows, tangential_term
+from offboard.safety.rcbf.kernel import rcbf_filter_rows_kernel, rcbf_params, rcbf_rows_kernel
+from swarm_common.scenario.model import load_scenario
 
 TAU, D_SAFE, GAMMA, SIDE_GAIN, SIDE_H = 0.8, 0.5, 0.6, 0.7, 3.0
 

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from conftest import CUBE8  # noqa: E402
 
-from offboard.bearing import formation_from_scenario
-from offboard.peer_table import rows_of
-from offboard.reference import DesiredStateObserver, LeaderTrajectory, exo_propagator
-from swarm_common.scenario import load_scenario
+from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.peer_table import rows_of
+from offboard.estimation.reference import DesiredStateObserver, LeaderTrajectory, exo_propagator
+from swarm_common.scenario.model import load_scenario
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_desired_state_observer_converges(sc):
 def test_compiled_observer_step_equals_numpy_formulation(sc):
     """observer_step against the numpy update it replaced (einsum of the stacked P*_ij,
     two BLAS matrix-vector products): equal to rounding, for every neighbour subset."""
-    from offboard.reference import observer_step
+    from offboard.estimation.reference import observer_step
 
     f = formation_from_scenario(sc)
     i = f.follower_idx[0]

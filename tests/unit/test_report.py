@@ -1,4 +1,4 @@
-"""The comparison report (gcs.report) on a tiny synthetic input: files, legends, text."""
+"""The comparison report (gcs.report.comparison) on a tiny synthetic input: files, legends, text."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.report import (
+from gcs.report.comparison import (
     closest_approach,
     compare_legend,
     compare_table,
@@ -17,8 +17,8 @@ from gcs.report import (
     safety_table,
     write_report,
 )
-from gcs.report_plots import snapshot_times
-from gcs.sweep_report import seeds_legend, seeds_table
+from gcs.report.plots import snapshot_times
+from gcs.report.sweep import seeds_legend, seeds_table
 
 D_SAFE = 0.5
 FOLLOWERS = [2, 3]

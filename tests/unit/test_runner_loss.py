@@ -1,4 +1,4 @@
-"""offboard.runner_loss: loss detection, the land time, the commit, and the odometry
+"""offboard.daemon.runner_loss: loss detection, the land time, the commit, and the odometry
 lander flying its slot of the landing plan down to idle (a point-mass model, no I/O)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from offboard.landing import landing_plan
-from offboard.runner_loss import (
+from offboard.agent.landing import landing_plan
+from offboard.daemon.runner_loss import (
     LEAD_S,
     RUNNER_LOST_PERIODS,
     STALLED_PERIODS,
@@ -19,7 +19,7 @@ from offboard.runner_loss import (
     RunnerLoss,
     loss_landing_plan,
 )
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 HZ = 50
@@ -122,7 +122,7 @@ class _Link:
     command queue, sending into a list."""
 
     def __init__(self) -> None:
-        from offboard.vehicle_commands import VehicleCommands
+        from offboard.daemon.mavlink.commands import VehicleCommands
 
         self.custom_mode, self.in_offboard, self.armed, self.failsafe_texts = 0, False, True, 0
         self.sent: list[Any] = []
@@ -130,9 +130,9 @@ class _Link:
 
 
 def test_disarm_outcome_is_not_taken_for_an_arm() -> None:
-    from offboard.mavlink_link import mavlink
-    from offboard.mode_requests import ModeRequests
-    from offboard.offboard_keeper import OffboardKeeper
+    from offboard.daemon.mavlink.link import mavlink
+    from offboard.daemon.mavlink.mode_requests import ModeRequests
+    from offboard.daemon.mavlink.offboard_keeper import OffboardKeeper
 
     link = _Link()
     keeper = OffboardKeeper(0.6, manual_start=True)

@@ -9,7 +9,7 @@ import pytest
 from conftest import CUBE8, ROOT
 from scenario_variants import CASES, scenario_variant
 
-from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.scenario.model import ScenarioError, load_scenario
 
 
 def test_cube8_loads():
@@ -26,7 +26,7 @@ def test_cube8_loads():
 
 @pytest.mark.parametrize("path", sorted((ROOT / "scenarios").glob("*.toml")), ids=lambda p: p.stem)
 def test_every_shipped_scenario_loads(path):
-    """Valid and feasible (swarm_common.feasibility): no --allow-infeasible needed."""
+    """Valid and feasible (swarm_common.scenario.feasibility): no --allow-infeasible needed."""
     sc = load_scenario(path)
     assert sc.n >= 2 and not sc.allow_infeasible
 

@@ -19,7 +19,7 @@ from gcs.scenario_gen import (
     vertices,
 )
 from swarm_common.enums import GraphKind
-from swarm_common.scenario import dump_toml, parse_scenario
+from swarm_common.scenario.model import dump_toml, parse_scenario
 
 
 def _args(*argv: str) -> argparse.Namespace:

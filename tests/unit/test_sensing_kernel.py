@@ -1,4 +1,5 @@
-"""The compiled sensing (offboard.sensing_kernel) against the numpy formulation it replaced,
+"""The compiled sensing (offboard.estimation.sensing_kernel) against the numpy formulation it
+replaced,
 on random swarms: the same measurements (bit for bit where numpy's einsum sums rows of
 three as the kernel does, ``(a0 b0 + a2 b2) + a1 b1``; else to rounding), the same
 validity masks, and the same draws from the seeded generator (same shapes, same order), so
@@ -13,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offboard.sensing import DropoutHold, Sensor
-from swarm_common.scenario import SensingConfig
+from offboard.estimation.sensing import DropoutHold, Sensor
+from swarm_common.scenario.model import SensingConfig
 
 
 def _dots(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -193,7 +194,7 @@ def test_pair_rows_are_the_negated_rows_of_the_selected_pairs() -> None:
     """pair_rows(sel, rel_p, rel_v, dp, dv) writes numpy's -rel_p[sel], -rel_v[sel] bit for
     bit into the first rows of dp, dv (any order, repeats, none; the rest untouched), and
     an index outside the rows or outputs too short are a ValueError."""
-    from offboard.sensing_kernel import pair_rows
+    from offboard.estimation.sensing_kernel import pair_rows
 
     rng = np.random.default_rng(11)
     for _ in range(200):

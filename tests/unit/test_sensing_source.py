@@ -1,4 +1,4 @@
-"""offboard.sensing_source.SwarmSensing (one class; the Zenoh bus is a stand-in): in a
+"""offboard.daemon.sensing_source.SwarmSensing (one class; the Zenoh bus is a stand-in): in a
 lockstep run on odometry, our own odometry of step k is put again while we wait for the
 others', so a peer whose subscription came after our first put still gets it."""
 
@@ -10,11 +10,11 @@ from collections.abc import Callable
 import numpy as np
 from conftest import CUBE8
 
-from offboard.runner_loss import RunnerLoss
-from offboard.sensing_source import OWN_REPUT_S, SwarmSensing
+from offboard.daemon.runner_loss import RunnerLoss
+from offboard.daemon.sensing_source import OWN_REPUT_S, SwarmSensing
 from swarm_common import wire
 from swarm_common.enums import SensingSource
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 
 class _Bus:

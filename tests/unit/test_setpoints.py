@@ -1,4 +1,4 @@
-"""vehicle_sim.setpoints: PX4's type_mask rules for SET_POSITION_TARGET_*, and the
+"""vehicle_sim.autopilot.setpoints: PX4's type_mask rules for SET_POSITION_TARGET_*, and the
 vehicle's bookkeeping of a position setpoint (counted, keeps OFFBOARD alive)."""
 
 from __future__ import annotations
@@ -12,10 +12,11 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4
 from swarm_common.enums import VehicleMode
-from swarm_common.scenario import load_scenario
-from vehicle_sim import geo, setpoints
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.setpoint_input import SetpointKind
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot import setpoints
+from vehicle_sim.autopilot.setpoint_input import SetpointKind
+from vehicle_sim.physics import geo
+from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

@@ -1,4 +1,4 @@
-"""offboard.shared_batch.SharedBatch against a batch of each daemon's own
+"""offboard.daemon.zenoh.shared_batch.SharedBatch against a batch of each daemon's own
 (wire_convert.estimates_from_wire): at every daemon's peer indices, the rows its agent
 reads are the same, over random packed steps with shared, conflicting, missing and
 foreign payloads."""
@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from offboard.peer_table import EstimateBatch
-from offboard.shared_batch import SharedBatch
-from offboard.wire_convert import estimates_from_wire
+from offboard.daemon.wire_convert import estimates_from_wire
+from offboard.daemon.zenoh.shared_batch import SharedBatch
+from offboard.estimation.peer_table import EstimateBatch
 from swarm_common import wire
 
 N = 12

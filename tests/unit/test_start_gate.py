@@ -1,4 +1,4 @@
-"""offboard.start_gate's value parsing (unit test of one module; the slots themselves are
+"""offboard.daemon.start_gate's value parsing (unit test of one module; the slots themselves are
 tested with real processes in tests/integration/test_start_gate.py)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from offboard import start_gate
+from offboard.daemon import start_gate
 
 
 def test_a_value_names_its_slots_and_directory(tmp_path: Path) -> None:
@@ -41,6 +41,6 @@ def test_acquire_then_release_frees_the_slot(tmp_path: Path) -> None:
 def test_a_run_gates_at_least_eight_daemons_at_once() -> None:
     """A cube8 run starts its 8 daemons together (fewer slots cost real-time runs their
     start on a busy machine: docs/performance.md, twentieth round)."""
-    from gcs.procs import MIN_START_SLOTS, start_slots
+    from gcs.mission.procs import MIN_START_SLOTS, start_slots
 
     assert MIN_START_SLOTS == 8 and start_slots() >= MIN_START_SLOTS

@@ -1,4 +1,5 @@
-"""offboard.step_store.StepStore against a plain dict trimmed by scanning every key (the
+"""offboard.daemon.zenoh.step_store.StepStore against a plain dict trimmed by scanning every key
+(the
 rule it replaces), over random inserts, trims and deletions from outside."""
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from offboard.step_store import StepStore
+from offboard.daemon.zenoh.step_store import StepStore
 
 
 def _model_keep_within(d: dict[int, int], lo: float, hi: float) -> None:

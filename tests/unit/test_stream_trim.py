@@ -1,9 +1,10 @@
-"""offboard.stream_trim: which vehicle messages retrigger the stop-streams request, and
+"""offboard.daemon.mavlink.stream_trim: which vehicle messages retrigger the stop-streams request,
+and
 its rate limit."""
 
 from __future__ import annotations
 
-from offboard.stream_trim import RETRY_S, StreamTrim, stop_streams_message
+from offboard.daemon.mavlink.stream_trim import RETRY_S, StreamTrim, stop_streams_message
 
 
 def test_group_telemetry_retriggers_at_most_once_per_period() -> None:

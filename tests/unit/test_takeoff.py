@@ -1,4 +1,5 @@
-"""Coordinated take-off plan (offboard/takeoff.py, docs/lifecycle.md) and ground-start pads."""
+"""Coordinated take-off plan (offboard/agent/takeoff.py, docs/lifecycle.md) and ground-start
+pads."""
 
 from __future__ import annotations
 
@@ -9,12 +10,11 @@ import numpy as np
 import pytest
 from conftest import CUBE8, ROOT
 
-from gcs.metrics import min_distance_by_phase
-from offboard.agent import make_agent
-from offboard.daemon import OffboardDaemon
-from offboard.landing import LandingReference, landing_plan
-from offboard.leader import LeaderAgent
-from offboard.takeoff import (
+from gcs.report.metrics import min_distance_by_phase
+from offboard.agent.factory import make_agent
+from offboard.agent.landing import LandingReference, landing_plan
+from offboard.agent.leader import LeaderAgent
+from offboard.agent.takeoff import (
     climb_xi,
     follower_xi,
     is_ground_start,
@@ -22,8 +22,9 @@ from offboard.takeoff import (
     min_column_separation,
     takeoff_plan,
 )
+from offboard.daemon.core import OffboardDaemon
 from swarm_common import wire
-from swarm_common.scenario import ScenarioError, load_scenario
+from swarm_common.scenario.model import ScenarioError, load_scenario
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from offboard.vehicle_commands import VehicleCommands, mavlink
+from offboard.daemon.mavlink.commands import VehicleCommands, mavlink
 
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
 

@@ -1,4 +1,5 @@
-"""vehicle_sim.telemetry / streams / commands: the tables behind the vehicle state machine."""
+"""vehicle_sim.autopilot.telemetry / streams / commands: the tables behind the vehicle state
+machine."""
 
 from __future__ import annotations
 
@@ -10,11 +11,11 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4
 from swarm_common.enums import FailsafeAction, VehicleMode
-from swarm_common.scenario import load_scenario
-from vehicle_sim import telemetry
-from vehicle_sim.commands import Command, execute
-from vehicle_sim.dynamics import SwarmDynamics
-from vehicle_sim.streams import StreamSchedule
+from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot import telemetry
+from vehicle_sim.autopilot.streams import StreamSchedule
+from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.services.command import Command, execute
 from vehicle_sim.vehicle import Vehicle, VehicleConfig
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

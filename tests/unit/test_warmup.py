@@ -1,4 +1,4 @@
-"""The daemon's kernel warm-up (offboard.warmup): it steps throwaway agents and leaves
+"""The daemon's kernel warm-up (offboard.daemon.warmup): it steps throwaway agents and leaves
 nothing behind, and a failure in it is a warning, never a daemon that does not start."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import offboard.warmup as warmup
-from offboard.bearing import formation_from_scenario
-from swarm_common.scenario import load_scenario
+import offboard.daemon.warmup as warmup
+from offboard.estimation.bearing import formation_from_scenario
+from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
 
@@ -50,8 +50,8 @@ def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
 
     root = Path(__file__).resolve().parents[2]
     code = (
-        "from swarm_common.scenario import load_scenario\n"
-        "from vehicle_sim.dynamics_kernel import steps_kernel\n"
+        "from swarm_common.scenario.model import load_scenario\n"
+        "from vehicle_sim.physics.dynamics_kernel import steps_kernel\n"
         "from vehicle_sim.server import load_kernels\n"
         "assert not steps_kernel.signatures\n"
         f"load_kernels(load_scenario({str(root / 'scenarios' / 'cube8.toml')!r}))\n"
@@ -65,7 +65,7 @@ def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
 
 def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
     """warm_kernels steps the throwaway follower through the fused dcbf step
-    (offboard.dcbf_front) and part by part (a step with a predicted pair), so the kernels
+    (offboard.safety.dcbf.front) and part by part (a step with a predicted pair), so the kernels
     of both are loaded, the QP's past its shortcut among them (the throwaway follower's
     steps at rest reach it), and the neighbour prediction of an outage (its last period
     is silent); checked in a fresh process, where nothing else has loaded them."""
@@ -74,15 +74,15 @@ def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
 
     root = Path(__file__).resolve().parents[2]
     code = (
-        "from swarm_common.scenario import load_scenario\n"
-        "from offboard.bearing import formation_from_scenario\n"
-        "from offboard.clf_kernel import nominal_into\n"
-        "from offboard.dcbf_front import dcbf_front_into\n"
-        "from offboard.dcbf_step_kernel import dcbf_filter_rows_into\n"
-        "from offboard.dcbf_exact_kernel import pre_solve_kernel\n"
-        "from offboard.qp_rows_kernel import write_rows_kernel\n"
-        "from offboard.warmup import warm_kernels\n"
-        "from offboard.predictor import predict_row_into\n"
+        "from swarm_common.scenario.model import load_scenario\n"
+        "from offboard.estimation.bearing import formation_from_scenario\n"
+        "from offboard.safety.clf_kernel import nominal_into\n"
+        "from offboard.safety.dcbf.front import dcbf_front_into\n"
+        "from offboard.safety.dcbf.step_kernel import dcbf_filter_rows_into\n"
+        "from offboard.safety.dcbf.exact_kernel import pre_solve_kernel\n"
+        "from offboard.safety.qp_rows_kernel import write_rows_kernel\n"
+        "from offboard.daemon.warmup import warm_kernels\n"
+        "from offboard.estimation.predictor import predict_row_into\n"
         "ks = (dcbf_front_into, nominal_into, dcbf_filter_rows_into, pre_solve_kernel,\n"
         "      write_rows_kernel, predict_row_into)\n"
         "assert not any(k.signatures for k in ks)\n"

@@ -20,7 +20,7 @@ from gcs.dashboard.commands import LiveCommander
 from gcs.dashboard.mavlink_gcs import MavlinkGcs
 from gcs.dashboard.state import LiveSource
 from gcs.dashboard.widgets import EventLog
-from swarm_common.scenario import load_scenario
+from swarm_common.scenario.model import load_scenario
 
 SCENARIO = ROOT / "scenarios" / "cube8.toml"
 

@@ -155,7 +155,7 @@ def test_a_stalled_feed_on_the_router_session_does_not_stall_the_router():
     callback's thread, about 256 of them), the router forwarded nothing more once that
     queue was full: the daemons got truth up to step 258 of 1000 here until the lock was
     released."""
-    from gcs.router import open_router
+    from gcs.mission.router import open_router
 
     LAST = 1000
     ep = f"tcp/127.0.0.1:{free_tcp_port()}"

@@ -1,0 +1,14 @@
+"""Running a mission: in process, distributed, or many runs as a sweep.
+
+Entry points:
+
+* :func:`gcs.mission.inproc.run_inproc` - dynamics and every agent in one process, lockstep.
+* :func:`gcs.mission.distributed.run_and_score` - ``vehicle-sim``, a Zenoh router and one
+  ``offboard`` daemon per agent (or packed) as real processes; :mod:`.recorder` records them
+  and :mod:`.score` scores the record as the in-process runner would.
+* :func:`gcs.mission.sweep.run_sweep` - many in-process runs in parallel.
+
+Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.procs` (child
+processes), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
+:mod:`.sim_log`, :mod:`.warmup`.
+"""

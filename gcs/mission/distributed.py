@@ -1,0 +1,430 @@
+"""Distributed mission runs: ``gcs mission run SCENARIO`` without ``--inproc``.
+
+Starts, as real processes: one ``vehicle-sim`` (lockstep by default) and one
+``offboard`` daemon per agent; hosts the Zenoh router itself (clients connect to it);
+records every step's truth, estimates and statuses from Zenoh; shows a progress bar
+(:mod:`gcs.mission.progress`); stops everything at the end, on Ctrl-C, or when a child dies
+(naming it, exit 1). Ports and command lines come from :class:`gcs.mission.launch_spec.LaunchSpec`.
+
+Run directory: ``metrics.json``, ``series.npz`` (:mod:`gcs.mission.run_output`),
+``vehicle_<id>.tlog`` (each daemon's MAVLink link, readable by pymavlink's tools) and
+one ``<process>.log`` per child.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import resource
+import shutil
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
+from gcs.mission.procs import ProcessGroup
+from gcs.mission.progress import Progress
+from gcs.mission.recorder import Recorder
+from gcs.mission.router import open_router
+from gcs.mission.run_output import print_result, write_run
+from gcs.mission.score import (
+    default_out_dir,
+    late_steps,
+    recorded_metrics,
+    recorder_series,
+    score_run,
+)
+from gcs.mission.warmup import compile_kernels
+from offboard.daemon.packing import parse_agents
+from swarm_common import wire
+from swarm_common.enums import DefaultStreams
+from swarm_common.scenario.model import Scenario
+from swarm_common.zenoh_session import write_swarm_security
+
+log = logging.getLogger(__name__)
+# scoring lives in gcs.mission.score; these names stay importable from here
+__all__ = ["MissionError", "cli_run", "default_out_dir", "recorded_metrics", "recorder_series",
+           "run_and_score", "run_distributed"]
+
+
+class MissionError(RuntimeError):
+    """A run failed once started: a child died or the run stalled (exit 1). ``str()``
+    names the culprit."""
+
+
+AbortHook = Callable[[Recorder, dict[str, Any], str], None]
+STARTUP_TIMEOUT_S = 90.0  # wall: the start-up (to step 1) may take at least this long
+STARTUP_PER_PROCESS_S = 10.0  # wall, per child: its interpreter, imports and kernels
+
+
+def startup_timeout_s(processes: int) -> float:
+    """How long the start-up may take (wall s, from the start to step 1: every daemon
+    ready and the simulator's barrier at t_0 passed): :data:`STARTUP_TIMEOUT_S`, or
+    :data:`STARTUP_PER_PROCESS_S` per child process when that is longer (64 daemons,
+    one per agent, start in about 2 minutes on 2 loaded cores)."""
+    return max(STARTUP_TIMEOUT_S, STARTUP_PER_PROCESS_S * processes)
+
+CHECKPOINT_EVERY_S = 10.0  # wall: metrics.json + series.npz so far, marked aborted
+
+
+RUNNER_NAME = "gcs (router + recorder)"  # this process, in the run facts' process table
+
+
+def run_distributed(
+    sc: Scenario,
+    out_dir: Path,
+    method: str,
+    seed: int | None,
+    duration: float,
+    realtime: bool = False,
+    port_offset: int = 0,
+    kill_agent: int | None = None,
+    kill_at: float | None = None,
+    show_progress: bool = True,
+    stall_timeout: float = 20.0,
+    land_at: float | None = None,
+    on_abort: AbortHook | None = None,
+    secure: bool = True,
+    signing: SigningChoice | None = None,
+    processes: int | None = None,
+    default_streams: DefaultStreams = DefaultStreams.ALWAYS,
+    on_step: Callable[[int], None] | None = None,
+) -> tuple[Recorder, dict[str, Any]]:
+    """Run the mission as real processes; return the recorder and run facts.
+
+    ``land_at``: publish a Zenoh land-all command (``wire.Command`` kind "land", at_s =
+    land_at) until the run passes that mission time (docs/lifecycle.md). ``secure``: the
+    router authenticates every process (fresh per-run credentials) and enforces the ACL
+    (docs/security.md). ``signing``: MAVLink 2 signing of every vehicle link (default: on,
+    with a fresh per-run key). ``on_abort(rec, facts, reason)``: called after every child has
+    stopped when the run ends early (Ctrl-C, SIGTERM, the simulator's death, a stall),
+    and every :data:`CHECKPOINT_EVERY_S` during the run (reason "checkpoint").
+    ``processes``: pack the daemons into this many processes (None: one per agent;
+    :class:`~gcs.mission.launch_spec.LaunchSpec`); a packed process authenticates as one Zenoh
+    user that may publish its own agents' keys only. ``default_streams``: the simulator's
+    ``--default-streams`` (:class:`~gcs.mission.launch_spec.LaunchSpec`). ``on_step(k)``: called
+    by the supervising loop with the newest recorded step, about every 50 ms of wall time
+    while the run goes (a script's events at a mission time).
+
+    Raises :class:`~gcs.mission.launch_spec.LaunchError` before starting anything when a port is
+    busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
+    death is recorded in ``facts["failed_agents"]`` and the run goes on. Every child is
+    stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
+    """
+    signing = SigningChoice() if signing is None else signing
+    sec_dir = secure_dir() if secure or signing.enabled else None
+    try:
+        sec = None
+        if secure and sec_dir is not None:
+            packs = split_packs(list(sc.ids), processes) if processes else None
+            sec = write_swarm_security(sec_dir, _swarm(sc), sc.ids, packs=packs)
+        key_path = signing.key_file(sec_dir)
+        spec = LaunchSpec(
+            sc, port_offset, method=method, seed=seed, lockstep=not realtime, run_dir=out_dir,
+            sim_duration=duration + 1.0, zenoh_security=sec, signing_key=key_path,
+            unsigned_gcs_link=signing.unsigned_gcs_link, daemon_processes=processes,
+            default_streams=default_streams,
+        )
+        spec.check_ports()
+        out_dir.mkdir(parents=True, exist_ok=True)
+        router = open_router([spec.router_endpoint],
+                             config_file=None if sec is None else sec.router)
+    except (RuntimeError, ValueError, OSError) as exc:  # SigningKeyError is a ValueError
+        _remove(sec_dir)
+        raise LaunchError(str(exc)) from None
+    rec = Recorder(sc, int(round(duration * sc.run.control_hz)), seed=seed)
+    subs = rec.subscribe(router, spec.swarm_name)
+    group = ProcessGroup(out_dir)
+    facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False,
+                             "mavlink_signing": signing.describe(),
+                             "daemon_processes": len(spec.packs())}
+    t_wall0 = time.monotonic()
+    cpu0 = time.process_time()
+    reason = ""
+    try:
+        # compile (or load) the kernels here once, so the simulator and the daemons load
+        # them from the cache instead of all compiling them at once (gcs.mission.warmup)
+        log.debug("kernels ready in %.1f s", compile_kernels())
+        for name, argv in spec.processes():
+            group.start(name, argv, env=spec.child_env(name), gated=spec.is_daemon(name))
+        bar = Progress(duration, label=str(method)) if show_progress else None
+        land = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
+                                                          sc.control_dt)
+        hooks = [h for h in (land, on_step) if h is not None]
+        checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
+        victim = None if kill_agent is None else next(
+            spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
+        facts.update(
+            _supervise(rec, group, sc.control_dt, victim, kill_agent, kill_at, bar,
+                       stall_timeout, out_dir, _each(hooks), facts, checkpoint)
+        )
+        at_first = facts.get("processes_at_first_step", {}).get(RUNNER_NAME)
+        if at_first is not None:
+            at_first["cpu_s"] -= cpu0
+        facts["processes"] = group.usage()
+        facts["processes"][RUNNER_NAME] = {
+            "cpu_s": time.process_time() - cpu0,
+            "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        }
+    except KeyboardInterrupt:
+        reason = "interrupted (SIGINT)"
+        raise
+    except SystemExit as exc:
+        reason = f"terminated (exit {exc.code})"
+        raise
+    except MissionError as exc:
+        reason = str(exc).splitlines()[0]
+        raise
+    finally:
+        group.stop()
+        rec.finalize()  # what the subscribers' channels still hold, before undeclaring
+        for s in subs:
+            try:
+                s.undeclare()
+            except zenoh.ZError as exc:
+                log.debug("undeclare subscriber: %s", exc)
+        router.close()
+        _remove(sec_dir)
+        facts["wall_s"] = time.monotonic() - t_wall0
+        if reason and on_abort is not None:
+            facts["aborted"], facts["abort_reason"] = True, reason
+            on_abort(rec, facts, reason)
+    stats_path = spec.sim_stats_path
+    if stats_path is not None and stats_path.exists():
+        try:
+            facts["simulator"] = json.loads(stats_path.read_text())
+        except ValueError as exc:
+            log.warning("%s: not JSON (%s); run facts without simulator stats", stats_path, exc)
+    facts["recorder_dropped"] = rec.dropped
+    return rec, facts
+
+
+def _swarm(sc: Scenario) -> str:
+    return sc.name
+
+
+def _remove(path: Path | None) -> None:
+    """Delete the run's secure directory (the passwords and the per-run key die with the
+    run)."""
+    if path is not None:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def _each(hooks: list[Callable[[int], None]]) -> Callable[[int], None] | None:
+    """One on_step callback that calls every one of ``hooks`` in order (None: none)."""
+    if not hooks:
+        return None
+
+    def call(k: int) -> None:
+        for hook in hooks:
+            hook(k)
+
+    return call
+
+
+def _land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callable[[int], None]:
+    """on_step callback: (re)publish the land command every 0.5 s (wall) from step 1 on
+    (every agent subscribed) until the run is 1 s past ``land_at``; the daemons keep the
+    first one they receive."""
+    key = wire.key_cmd(swarm, "land")
+    payload = wire.encode(wire.Command(kind="land", at_s=float(land_at)))
+    last = [0.0]
+
+    def send(k: int) -> None:
+        now = time.monotonic()
+        if k >= 1 and k * dt <= land_at + 1.0 and now - last[0] >= 0.5:
+            session.put(key, payload)
+            last[0] = now
+
+    return send
+
+
+def _supervise(
+    rec: Recorder,
+    group: ProcessGroup,
+    dt: float,
+    victim: str | None,
+    kill_agent: int | None,
+    kill_at: float | None,
+    bar: Progress | None,
+    stall_timeout: float,
+    out_dir: Path,
+    on_step: Callable[[int], None] | None,
+    facts: dict[str, Any],
+    checkpoint: Callable[[], None] | None = None,
+) -> dict[str, Any]:
+    """Watch a started run until step ``rec.steps``: drain the recorder, show progress,
+    kill the process ``victim`` (the one of ``kill_agent``) at ``kill_at`` (s), add a dead
+    daemon's agents to ``facts["failed_agents"]`` (the others fly on), raise
+    :class:`MissionError` when the simulator dies or the run stalls, call ``checkpoint`` every
+    :data:`CHECKPOINT_EVERY_S` (or 20 times its own cost, if longer). Returns the timing
+    facts (``run_wall_s``, ``stepping_wall_s``, ``stepping_realtime_factor``, and
+    ``processes_at_first_step`` / ``steps_from_first``: each process's CPU when stepping
+    began, so that the stepping cost can be told from the start-up)."""
+    out: dict[str, Any] = {}
+    startup_limit = startup_timeout_s(len(group.children))
+    failed: list[int] = facts["failed_agents"]
+    last_k = -1
+    last_change = t_run0 = next_ckpt = time.monotonic()
+    next_ckpt += CHECKPOINT_EVERY_S
+    t_first: float | None = None
+    k_first = 0
+    try:
+        while True:
+            time.sleep(0.05)
+            rec.drain()
+            with rec.lock:
+                k = rec.max_step
+            if k >= 1 and t_first is None:
+                t_first, k_first = time.monotonic(), k
+                # CPU so far (start-up): what the stepping cost is measured from
+                out["steps_from_first"] = rec.steps - k_first
+                out["processes_at_first_step"] = {
+                    **group.usage(),
+                    RUNNER_NAME: {"cpu_s": time.process_time(), "peak_rss_mib": 0.0},
+                }
+            if k != last_k:
+                last_change, last_k = time.monotonic(), k
+                if bar is not None:
+                    bar.update(max(k, 0) * dt)
+            if k >= rec.steps:
+                break
+            if on_step is not None:
+                on_step(k)
+            if victim is not None and not facts["killed_agents"] and k * dt >= (kill_at or 0.0):
+                group.kill(victim)
+                facts["killed_agents"].append(kill_agent)
+            _check_children(group, failed, max(k, 0) * dt)
+            if failed and k < 1:  # the start barrier waits for every vehicle: it never passes
+                raise MissionError(
+                    f"the daemon of agent(s) {', '.join(map(str, failed))} exited before the "
+                    "start; the simulator starts when every vehicle is armed in OFFBOARD, so "
+                    f"the run cannot start; see logs in {out_dir}"
+                )
+            # the start-up, to step 1: the simulator offers t_0 (truth of step 0) until
+            # every daemon is up and answers in OFFBOARD (its barrier)
+            limit = stall_timeout if k >= 1 else max(stall_timeout, startup_limit)
+            if time.monotonic() - last_change > limit:
+                raise MissionError(
+                    f"run stalled at step {k} for {limit:.0f} s; see logs in {out_dir}"
+                )
+            if checkpoint is not None and time.monotonic() >= next_ckpt:
+                t0 = time.monotonic()
+                checkpoint()
+                next_ckpt = time.monotonic() + max(CHECKPOINT_EVERY_S,
+                                                   20.0 * (time.monotonic() - t0))
+    finally:
+        if bar is not None:
+            bar.close()
+    out["run_wall_s"] = time.monotonic() - t_run0
+    if t_first is not None:
+        stepping = time.monotonic() - t_first
+        out["stepping_wall_s"] = stepping
+        out["stepping_realtime_factor"] = (rec.steps - k_first) * dt / stepping
+    return out
+
+
+def _check_children(group: ProcessGroup, failed: list[int], t: float) -> None:
+    """A dead daemon: its agent joins ``failed`` (once, with a warning naming its log); a
+    dead simulator ends the run (:class:`MissionError`)."""
+    for child in group.dead():
+        if not child.name.startswith("offboard-"):
+            raise MissionError(
+                f"{child.name} exited with code {child.proc.returncode}; "
+                f"last lines of {child.log_path}:\n{group.tail(child)}"
+            )
+        for aid in parse_agents(child.name.removeprefix("offboard-")):
+            if aid not in failed:
+                failed.append(aid)
+                then = "the run goes on without it" if t > 0 else "before the start"
+                log.warning("agent %d's daemon exited (code %s) at t = %.2f s, %s (see %s)",
+                            aid, child.proc.returncode, t, then, child.log_path)
+
+
+def run_and_score(
+    sc: Scenario,
+    out_dir: Path,
+    method: str,
+    seed: int | None,
+    duration: float,
+    realtime: bool = False,
+    port_offset: int = 0,
+    kill_agent: int | None = None,
+    kill_at: float | None = None,
+    show_progress: bool = True,
+    land_at: float | None = None,
+    signing: SigningChoice | None = None,
+    processes: int | None = None,
+    default_streams: DefaultStreams = DefaultStreams.ALWAYS,
+) -> dict[str, Any]:
+    """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
+
+    The files are also written every :data:`CHECKPOINT_EVERY_S` during the run and when it
+    ends early, with ``"aborted": true`` (what ran so far), so a run killed even with
+    SIGKILL leaves its last checkpoint behind."""
+
+    def write_partial(rec: Recorder, facts: dict[str, Any], reason: str) -> None:
+        part = {**facts, "aborted": True, "abort_reason": reason}
+        try:
+            doc, ser = score_run(rec, sc, part, method, seed, realtime, land_at, duration)
+            write_run(out_dir, doc, ser)
+        except (OSError, ValueError) as exc:
+            log.warning("could not write the %s metrics to %s: %s", reason, out_dir, exc)
+
+    rec, facts = run_distributed(
+        sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
+        kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
+        on_abort=write_partial, signing=signing, processes=processes,
+        default_streams=default_streams,
+    )
+    doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
+    write_run(out_dir, doc, ser)
+    return doc
+
+
+def cli_run(args: Any, sc: Scenario) -> int:
+    """``gcs mission run SCENARIO`` (distributed). Exit 2: bad input or a busy port;
+    1: a child died or the run stalled (see :mod:`gcs.cli` for the table)."""
+    method = str(args.method or sc.controller.method)
+    duration = float(sc.run.duration_s if args.duration is None else args.duration)
+    if args.kill_agent is not None and args.kill_agent not in sc.ids:
+        print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
+              f"{sc.ids}", file=sys.stderr)
+        return 2
+    if args.kill_at is not None and args.kill_agent is None:
+        print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
+        return 2
+    try:
+        out = Path(args.out) if args.out else default_out_dir(sc, method)
+        signing = SigningChoice.from_args(args)
+    except (ValueError, LaunchError) as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 2
+    try:
+        doc = run_and_score(
+            sc, out, method, args.seed, duration, realtime=args.realtime,
+            port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
+            show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
+            processes=getattr(args, "processes", None),
+            default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
+        )
+    except LaunchError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 2
+    except MissionError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 1
+    log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
+    if doc["run"]["failed_agents"]:
+        log.warning("failed agents: %s", doc["run"]["failed_agents"])
+    if (late := late_steps(doc)) and not args.realtime:
+        log.warning("the simulator stepped %d time(s) without every answer (lockstep "
+                    "timeouts: a daemon too slow for this machine), so this run may differ "
+                    "from the in-process run; fewer daemon processes (--processes N) avoid "
+                    "it", late)
+    print_result(doc, args.json)
+    return 0

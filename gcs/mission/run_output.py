@@ -1,0 +1,156 @@
+"""What a mission run leaves behind: the recorded :class:`~gcs.report.metrics.Series` and the run
+directory (``metrics.json`` + ``series.npz``), for in-process and distributed runs alike.
+
+``series.npz`` holds one array per :class:`~gcs.report.metrics.Series` field (``t``, ``p``, ``v``,
+``p_des``, ``v_des``, ``z1``, ``z2``, ``lumped_est``, ``lumped_true``, ``u``, ``thrust``,
+``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``, ``input_clipped``).
+``metrics.json`` is :func:`run_document`: ``scenario``, ``method``, ``seed``, ``metrics`` (keys
+:data:`~gcs.report.metrics.METRIC_KEYS`) and the runner's extras (in process: ``gains``,
+``collision_pairs``; distributed: ``mode``, ``run``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs.report.metrics import SafetySpec, Series
+from offboard.estimation.bearing import Formation
+from offboard.records import AgentOutput
+from swarm_common.enums import QPStatus
+from swarm_common.scenario.model import Scenario
+
+log = logging.getLogger(__name__)
+
+
+def safety_spec(sc: Scenario, clipped_known: bool = True) -> SafetySpec:
+    """The scenario's barrier τ (s), D (m) and tracking deadline (s) for
+    :func:`~gcs.report.metrics.compute_metrics`; ``clipped_known``: the statuses carried
+    ``input_clipped``."""
+    return SafetySpec(sc.controller.tau_safe_s, sc.controller.d_safe_m,
+                      sc.run.formation_deadline_s, clipped_known)
+
+
+def tilt_deg(att: np.ndarray) -> np.ndarray:
+    """Tilt of each vehicle from vertical (deg): arccos(cos φ cos θ) of (..., 3) ENU
+    roll/pitch/yaw in rad (the angle between body z and world z)."""
+    return np.degrees(np.arccos(np.clip(np.cos(att[..., 0]) * np.cos(att[..., 1]), -1, 1)))
+
+
+def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
+    """A :class:`Series` of ``len(t)`` steps for ``n`` agents, every value ``fill``
+    (NaN where rows may stay unknown, as in a recorded run); ``fallback`` and
+    ``input_clipped`` all False."""
+    kk = len(t)
+
+    def z(*shape: int) -> np.ndarray:
+        return np.full((kk, *shape), fill)
+
+    return Series(
+        t=t, p=z(n, 3), v=z(n, 3), p_des=z(n, 3), v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3),
+        lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n), tilt_deg=z(n),
+        min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((kk, n), bool),
+        input_clipped=np.zeros((kk, n), bool),
+    )
+
+
+def set_truth_rows(
+    ser: Series,
+    form: Formation,
+    p: np.ndarray,
+    v: np.ndarray,
+    lumped: np.ndarray,
+    thrust: np.ndarray,
+    att: np.ndarray,
+) -> None:
+    """Every row of the simulator's truth, (K, N, ...) each: positions/velocities (m, m/s,
+    ENU), the desired ones from the leaders' (paper eq. 5), true lumped disturbance
+    (m/s²), thrust (N) and the tilt from the (K, N, 3) attitudes (rad). One product per
+    quantity for the whole run (the in-process runner and a recorded run alike)."""
+    lid = form.leader_idx
+    ser.p[:], ser.v[:] = p, v
+    ser.p_des[:] = form.desired_positions_series(p[:, lid])
+    ser.v_des[:] = form.desired_positions_series(v[:, lid])
+    ser.lumped_true[:] = lumped
+    ser.thrust[:] = thrust
+    ser.tilt_deg[:] = tilt_deg(att)
+
+
+# QPStatus.degraded by status (a StrEnum: its value looks up the same entry), without
+# constructing the enum per agent and step
+_DEGRADED: dict[str, bool] = {s: s.degraded for s in QPStatus}
+
+
+def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
+    """Row ``r`` of every agent's status, ``outs`` in scenario order: virtual control u
+    (m/s²), estimated lumped disturbance, smallest barrier value, QP time (µs), whether the
+    QP degraded, and whether the setpoint conversion changed u (tilt/thrust clip)."""
+    ser.u[r] = [o.u for o in outs]
+    ser.lumped_est[r] = [o.lumped for o in outs]
+    ser.h_min[r] = [o.status.h_min for o in outs]
+    ser.solve_us[r] = [o.status.solve_us for o in outs]
+    ser.fallback[r] = [_DEGRADED[o.status.qp_status] for o in outs]
+    ser.input_clipped[r] = [bool(o.status.input_clipped) for o in outs]
+
+
+def run_document(
+    scenario: str, method: str, seed: int, metrics: Mapping[str, Any], **extra: Any
+) -> dict[str, Any]:
+    """The ``metrics.json`` document of one run (also what ``--json`` prints)."""
+    return {"scenario": scenario, "method": str(method), "seed": seed, "metrics": metrics,
+            **extra}
+
+
+def json_default(x: Any) -> Any:
+    """``json.dumps`` hook: numpy scalars as Python numbers."""
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(f"{type(x).__name__} is not JSON serializable")
+
+
+def run_dir_inside(parent: Path, leaf: str) -> Path:
+    """``parent/leaf``, refused (``ValueError``, one line) unless it stays inside ``parent``
+    (no separator, ``..`` or absolute path in ``leaf``, no symlink out)."""
+    if not leaf or leaf in (".", "..") or "/" in leaf or "\\" in leaf or "\0" in leaf:
+        raise ValueError(f"run directory name {leaf!r}: must be one plain path component")
+    base = parent.resolve()
+    out = (base / leaf).resolve()
+    if out.parent != base:
+        raise ValueError(f"run directory {parent / leaf}: resolves outside {parent}")
+    return parent / leaf
+
+
+def out_dir_problem(out: Path) -> str | None:
+    """Why ``out`` cannot be a run directory (it exists and is not a directory), or None."""
+    if out.exists() and not out.is_dir():
+        return f"--out {out}: exists and is not a directory"
+    return None
+
+
+def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
+    """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``,
+    each through a temporary file renamed over the old one, so a reader (or a run killed
+    while writing) never sees half a file."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, Any] = series.as_dict()
+    tmp = out_dir / ".series.tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, out_dir / "series.npz")
+    tmp = out_dir / ".metrics.json.tmp"
+    tmp.write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
+    os.replace(tmp, out_dir / "metrics.json")
+
+
+def print_result(doc: Mapping[str, Any], as_json: bool) -> None:
+    """stdout of ``gcs mission run``: the document as one JSON line, or a metrics table."""
+    if as_json:
+        print(json.dumps(doc, default=json_default))
+    else:
+        for k, v in doc["metrics"].items():
+            print(f"{k:24s} {v}")

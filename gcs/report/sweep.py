@@ -1,0 +1,257 @@
+"""What ``gcs mission sweep`` writes: ``runs.csv``, ``summary.md`` and ``summary.png``.
+
+``runs.csv``: one row per (scenario, method, seed), columns :data:`CSV_COLUMNS` (the run's
+metrics of :mod:`gcs.report.metrics`, the per-phase minimum distances flattened to
+``min_distance_<phase>_m``; empty cells for null values and for crashed runs).
+
+``summary.md``: per scenario × method, percentiles p0/p5/p50 of the minimum distance and of
+the true barrier minimum h_min, runs with a barrier violation, collisions, and the 95 %
+Clopper–Pearson upper bound on the per-run probability of a violation
+(:func:`clopper_pearson_upper`). Definitions: docs/metrics.md. Also the seed table of
+``gcs mission compare --seeds N`` (:func:`seeds_table`).
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs.report.comparison import FORMED_TOL_M, LABELS, md_legend
+from gcs.report.metrics import METRIC_KEYS, PHASES
+from swarm_common.scenario.model import Scenario
+
+ID_COLUMNS = ("scenario", "method", "seed", "status", "error", "duration_s")
+METRIC_COLUMNS = tuple(
+    c for k in METRIC_KEYS
+    for c in ([f"min_distance_{p}_m" for p in PHASES] if k == "min_distance_by_phase_m" else [k])
+)
+CSV_COLUMNS = ID_COLUMNS + METRIC_COLUMNS
+PERCENTILES = (0, 5, 50)
+CONFIDENCE = 0.95
+
+
+def flat_row(metrics: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's metrics as flat CSV cells (per-phase distances spread over columns)."""
+    row = {k: v for k, v in metrics.items() if k != "min_distance_by_phase_m"}
+    phases = metrics.get("min_distance_by_phase_m") or {}
+    row.update({f"min_distance_{p}_m": phases.get(p) for p in PHASES})
+    return row
+
+
+def clopper_pearson_upper(x: int, n: int, conf: float = CONFIDENCE) -> float:
+    """One-sided upper confidence bound on a probability from ``x`` events in ``n`` trials
+    (Clopper–Pearson, exact): the p with P(X ≤ x | n, p) = 1 − conf, i.e. the ``conf``
+    quantile of Beta(x + 1, n − x). With x = 0 this is 1 − (1 − conf)^(1/n) ≈ 3/n."""
+    if n <= 0:
+        return 1.0
+    if x >= n:
+        return 1.0
+    from scipy.stats import beta  # here: importing scipy.stats costs every gcs command 0.3 s
+
+    return float(beta.ppf(conf, x + 1, n - x))
+
+
+def seeds_table(dist: dict[str, list[dict]], d_safe: float = 0.5) -> str:
+    """Markdown table of the min-distance distribution over seeds per method."""
+    out = (
+        "| Method | Seeds | Min dist: min / median / max (m) | Runs < D_safe | Collisions "
+        "(total) | ∫Σ‖u‖²dt median (m²/s³) | Formed at median (s) |\n"
+        "|---|---|---|---|---|---|---|\n"
+    )
+    for m, runs in dist.items():
+        md = np.array([r["min_distance_m"] for r in runs])
+        col = sum(r["collisions"] for r in runs)
+        eu = np.median([r["energy_u"] for r in runs])
+        ft = [r["formation_time_s"] for r in runs if r["formation_time_s"] is not None]
+        ftm = f"{np.median(ft):.1f} ({len(ft)}/{len(runs)} formed)" if ft else "never"
+        out += (
+            f"| {LABELS.get(m, m)} | {len(runs)} | {md.min():.3f} / {np.median(md):.3f} / "
+            f"{md.max():.3f} | {int(np.sum(md < d_safe))} | {col} | {eu:.1f} | {ftm} |\n"
+        )
+    return out
+
+
+def seeds_legend(d_safe: float = 0.5) -> str:
+    """Definition and unit of every column of :func:`seeds_table`."""
+    return md_legend(
+        [
+            (
+                "Seeds",
+                "number of runs, each with its own random seed (sensing noise, "
+                "disturbances); the scenario is otherwise the same.",
+            ),
+            (
+                "Min dist: min / median / max (m)",
+                "over the runs, of each run's smallest distance between any two vehicles.",
+            ),
+            ("Runs < D_safe", f"runs whose smallest distance is below D_safe = {d_safe:g} m."),
+            (
+                "Collisions (total)",
+                "contact events (closer than the collision radius) summed over all runs.",
+            ),
+            (
+                "∫Σ‖u‖²dt median (m²/s³)",
+                "median over the runs of the integral of the followers' squared virtual control.",
+            ),
+            (
+                "Formed at median (s)",
+                f"median over the runs that formed (every follower within "
+                f"{FORMED_TOL_M:g} m to the end) of the formation time, with how many formed.",
+            ),
+        ]
+    )
+
+
+def write_csv(path: Path, rows: Iterable[Mapping[str, Any]]) -> None:
+    """``runs.csv``, sorted by scenario, method, seed; None → empty cell."""
+    ordered = sorted(rows, key=lambda r: (r["scenario"], r["method"], r["seed"]))
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(CSV_COLUMNS), extrasaction="ignore")
+        w.writeheader()
+        for r in ordered:
+            w.writerow({k: "" if r.get(k) is None else r.get(k) for k in CSV_COLUMNS})
+
+
+def _pcts(values: list[float]) -> str:
+    if not values:
+        return "–"
+    return " / ".join(f"{np.percentile(values, q):.3f}" for q in PERCENTILES)
+
+
+def group_stats(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Statistics of the runs of one scenario × method (crashed runs counted apart)."""
+    ok = [r for r in rows if r["status"] == "ok"]
+    n = len(ok)
+    viol = sum(1 for r in ok if (r.get("barrier_violation_steps") or 0) > 0)
+    coll_runs = sum(1 for r in ok if (r.get("collisions") or 0) > 0)
+    return {
+        "runs": n,
+        "crashed": len(rows) - n,
+        "min_distance_m": [float(r["min_distance_m"]) for r in ok],
+        "h_min": [float(r["h_min"]) for r in ok if r.get("h_min") is not None],
+        "violation_runs": viol,
+        "violation_steps": sum(int(r.get("barrier_violation_steps") or 0) for r in ok),
+        "collision_runs": coll_runs,
+        "collisions": sum(int(r.get("collisions") or 0) for r in ok),
+        "ground_strikes": sum(int(r.get("ground_strikes") or 0) for r in ok),
+        "clipped_steps": sum(int(r.get("input_clipped_steps") or 0) for r in ok),
+        "formed": sum(1 for r in ok if r.get("formation_time_s") not in (None, "")),
+        "violation_p_upper": clopper_pearson_upper(viol, n) if n else None,
+        "collision_p_upper": clopper_pearson_upper(coll_runs, n) if n else None,
+    }
+
+
+SUMMARY_HEAD = (
+    "| Scenario | Method | Runs (crashed) | Min dist p0 / p5 / p50 (m) | "
+    "True h_min p0 / p5 / p50 (m²) | Runs with h<0 | Steps h<0 (total) | "
+    "Runs with collision (contacts) | P(violation) 95 % UB | P(collision) 95 % UB | "
+    "Ground strikes | Clipped steps | Formed |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+)
+
+
+def summary_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
+    """The markdown table of ``summary.md`` (one line per scenario × method)."""
+    out = SUMMARY_HEAD
+    for scen in sorted({r["scenario"] for r in rows}):
+        for m in methods:
+            grp = [r for r in rows if r["scenario"] == scen and r["method"] == m]
+            if not grp:
+                continue
+            g = group_stats(grp)
+            ub = "–" if g["violation_p_upper"] is None else f"{g['violation_p_upper']:.3f}"
+            cub = "–" if g["collision_p_upper"] is None else f"{g['collision_p_upper']:.3f}"
+            out += (
+                f"| {scen} | {m} | {g['runs']} ({g['crashed']}) | {_pcts(g['min_distance_m'])} | "
+                f"{_pcts(g['h_min'])} | {g['violation_runs']}/{g['runs']} | "
+                f"{g['violation_steps']} | {g['collision_runs']}/{g['runs']} "
+                f"({g['collisions']}) | {ub} | {cub} | {g['ground_strikes']} | "
+                f"{g['clipped_steps']} | {g['formed']}/{g['runs']} |\n"
+            )
+    return out
+
+
+def summary_markdown(
+    rows: Sequence[Mapping[str, Any]], specs: Mapping[str, Scenario], methods: list[str],
+    wall_s: float,
+) -> str:
+    """``summary.md``: the table, the scenarios' τ and D, the crashed runs and a legend."""
+    seeds = sorted({int(r["seed"]) for r in rows})
+    lines = [
+        "# Seed sweep",
+        "",
+        f"{len(rows)} in-process runs ({len(seeds)} seeds: {seeds[0]}–{seeds[-1]}) in "
+        f"{wall_s:.0f} s wall time. Per-run rows: runs.csv. Definitions: docs/metrics.md.",
+        "",
+        summary_table(rows, methods),
+        "Barrier parameters: "
+        + "; ".join(f"{n}: τ = {sc.controller.tau_safe_s:g} s, D = {sc.controller.d_safe_m:g} m,"
+                    f" formation deadline {sc.run.formation_deadline_s:g} s"
+                    for n, sc in sorted(specs.items())) + ".",
+        "",
+        "* **Min dist p0 / p5 / p50**: percentiles over the runs (linear interpolation) of each "
+        "run's smallest distance between any two vehicles, over the physics steps.",
+        "* **True h_min**: the same percentiles of each run's smallest true barrier "
+        "h = ‖Δp‖² + 2τ ΔvᵀΔp − D² over all pairs and control steps.",
+        "* **Runs with h<0**: runs in which the true barrier of some pair went negative at "
+        "least once; **Steps h<0**: control steps with some negative pair, summed over runs.",
+        f"* **P(violation) 95 % UB**: one-sided {CONFIDENCE:.0%} Clopper–Pearson upper bound on "
+        "the probability that a run has a barrier violation (with 0 of n: 1 − 0.05^(1/n) ≈ 3/n); "
+        "**P(collision)** the same for runs with a contact.",
+        "",
+    ]
+    crashed = [r for r in rows if r["status"] != "ok"]
+    if crashed:
+        lines += ["## Crashed runs", ""]
+        lines += [f"* {r['scenario']} {r['method']} seed {r['seed']}: {r['error']}"
+                  for r in crashed]
+        lines.append("")
+    lines += ["![summary](summary.png)", ""]
+    return "\n".join(lines)
+
+
+def plot_summary(
+    rows: Sequence[Mapping[str, Any]], specs: Mapping[str, Scenario], methods: list[str], path: Path
+) -> None:
+    """Per scenario: min distance and true h_min of every run, one column of dots per
+    method (the D_safe line and h = 0 dashed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scens = sorted({r["scenario"] for r in rows})
+    fig, axes = plt.subplots(2, len(scens), figsize=(4.5 * len(scens), 6.5), squeeze=False)
+    for c, scen in enumerate(scens):
+        for r_i, (key, label) in enumerate((("min_distance_m", "min distance (m)"),
+                                            ("h_min", "true h_min (m²)"))):
+            ax = axes[r_i, c]
+            for k, m in enumerate(methods):
+                vals = [float(r[key]) for r in rows if r["scenario"] == scen
+                        and r["method"] == m and r["status"] == "ok" and r.get(key) is not None]
+                jitter = np.linspace(-0.15, 0.15, len(vals)) if len(vals) > 1 else [0.0]
+                ax.scatter(np.asarray(jitter[: len(vals)]) + k, vals, s=10, color=f"C{k}")
+            ref = 0.0 if key == "h_min" else specs[scen].controller.d_safe_m
+            ax.axhline(ref, color="r", ls="--", lw=0.8)
+            ax.set_xticks(range(len(methods)), methods)
+            ax.set(ylabel=label, title=scen if r_i == 0 else "")
+            ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_outputs(
+    out: Path, rows: list[dict[str, Any]], specs: Mapping[str, Scenario], methods: list[str],
+    wall_s: float,
+) -> None:
+    """``runs.csv``, ``summary.md`` and ``summary.png`` into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "runs.csv", rows)
+    (out / "summary.md").write_text(summary_markdown(rows, specs, methods, wall_s))
+    plot_summary(rows, specs, methods, out / "summary.png")
+

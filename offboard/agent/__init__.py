@@ -1,0 +1,12 @@
+"""One agent's control step, shared by the in-process runner and the daemons.
+
+Entry point: :func:`offboard.agent.factory.make_agent` returns a
+:class:`~offboard.agent.follower.FollowerAgent` or a :class:`~offboard.agent.leader.LeaderAgent`;
+both derive from :class:`offboard.agent.base.AgentBase`.
+
+* :mod:`.attitude` - virtual control to attitude/thrust, and the inner-loop model.
+* :mod:`.takeoff`, :mod:`.landing` - coordinated take-off from pads and land-all.
+* :mod:`.governor` - slows an infeasible leader trajectory until it fits the input set.
+* :mod:`.peers` - whose estimates an agent needs and waits for.
+* :mod:`.unsensed` - neighbours in range by prediction but not sensed now.
+"""

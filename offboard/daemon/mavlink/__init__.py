@@ -1,0 +1,8 @@
+"""The daemon's MAVLink side: its link to its own vehicle (companion-computer view).
+
+Entry point: :class:`offboard.daemon.mavlink.link.VehicleLink`.
+
+* :mod:`.url` - the ``--mavlink`` URL; :mod:`.commands` - COMMAND_LONG, never blocking.
+* :mod:`.mode_requests`, :mod:`.offboard_keeper` - OFFBOARD/arm at start-up and after a failsafe.
+* :mod:`.frame_peek`, :mod:`.stream_trim` - frames the daemon does not read.
+"""

@@ -1,0 +1,133 @@
+"""Synthetic onboard relative sensing (paper §3 inputs; Departure 6).
+
+For agent i and every other agent j within ``formation.sensing_range_m`` the sensor gives
+the bearing ``g_ij``, the bearing rate ``ġ_ij = P_ij (v_j − v_i)/d_ij``, the distance
+``d_ij`` and the range rate ``ḋ_ij = g_ijᵀ (v_j − v_i)``, each with seeded Gaussian noise
+(``[sensing]``), and independent per-pair dropouts. From them the relative position and
+velocity follow: ``p_j − p_i = g_ij d_ij`` and ``v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij``.
+
+Reproducibility: the generator is ``np.random.default_rng([seed, agent_id, 0x5E])`` and
+every call draws the same count of numbers (N×8 normals and N uniforms) whatever is in
+range, so runs with the same seed are identical.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from offboard.estimation.sensing_kernel import hold_kernel, measure_into
+from swarm_common.fastnp import rows3
+from swarm_common.scenario.model import SensingConfig
+
+
+@dataclass
+class Measurements:
+    """Relative measurements of one agent to all N agents (rows for itself are invalid)."""
+
+    valid: np.ndarray  # (N,) bool: in range, not dropped, not self
+    g: np.ndarray  # (N,3) bearings g_ij
+    g_dot: np.ndarray  # (N,3) bearing rates
+    d: np.ndarray  # (N,) distances
+    d_dot: np.ndarray  # (N,) range rates
+    rel_p: np.ndarray  # (N,3) p_j − p_i = g_ij d_ij (m), from the measured ones
+    rel_v: np.ndarray  # (N,3) v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij (m/s), likewise
+
+    def rel_pos(self) -> np.ndarray:
+        """(N,3) measured p_j − p_i = g_ij d_ij."""
+        return self.rel_p
+
+    def rel_vel(self) -> np.ndarray:
+        """(N,3) measured v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij."""
+        return self.rel_v
+
+
+class Sensor:
+    """Bearing / bearing-rate / range / range-rate sensor of agent ``index``."""
+
+    def __init__(
+        self,
+        index: int,
+        agent_id: int,
+        n: int,
+        sensing: SensingConfig,
+        sensing_range_m: float,
+        seed: int,
+    ) -> None:
+        self.index = index
+        self.n = n
+        self.range = float(sensing_range_m)
+        self.sig = np.array(
+            [  # noise standard deviations (rad, rad/s, m, m/s)
+                sensing.bearing_noise_rad,
+                sensing.bearing_rate_noise_radps,
+                sensing.distance_noise_m,
+                sensing.range_rate_noise_mps,
+            ],
+            dtype=float,
+        )
+        self._sig = tuple(float(x) for x in self.sig)  # plain floats: no numpy scalars
+        self.dropout = float(sensing.dropout_prob)
+        self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
+        # the draws of a call, written in place (``out=``: the same numbers as drawing new
+        # arrays of that shape, without the allocations); read only within the call
+        self._noise = np.empty((n, 8))
+        self._drop = np.empty(n)
+
+    def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:
+        """Measurements from ground-truth (N,3) ENU positions (m) and velocities (m/s).
+
+        The noise is drawn here (N×8 standard normals, then N uniforms: the same draws for
+        the same seed); the geometry, the noisy measurements and the validity mask are the
+        compiled :func:`offboard.estimation.sensing_kernel.measure_into`.
+        """
+        n = self.n
+        p, v = np.asarray(p), np.asarray(v)
+        if p.shape != (n, 3) or v.shape != (n, 3):  # the kernel writes n rows, unchecked
+            raise ValueError(f"truth of shapes {p.shape} and {v.shape}, expected ({n}, 3)")
+        noise = self.rng.standard_normal(out=self._noise)
+        drop = self.rng.random(out=self._drop)
+        sb, sr, sd, sdd = self._sig
+        vec, sca = np.empty((4, n, 3)), np.empty((2, n))  # C-contiguous (n,3) and (n,) views
+        out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
+                           vec[3])
+        measure_into(
+            rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
+            self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
+        )
+        return out
+
+
+class DropoutHold:
+    """Keeps a dropped pair in the safety constraints for ``hold_s`` seconds.
+
+    A pair dropped this step but sensed within ``hold_s`` is extrapolated with its last
+    measured relative velocity (dropouts must not switch a barrier off). ``enabled`` is
+    False when the scenario has no dropouts (then nothing is tracked). The bookkeeping is
+    the compiled :func:`offboard.estimation.sensing_kernel.hold_kernel`.
+    """
+
+    def __init__(self, n: int, index: int, hold_s: float, enabled: bool) -> None:
+        self.index = index
+        self.hold_s = hold_s
+        self.enabled = enabled
+        self._last_seen = np.full(n, -np.inf)
+        self._last_rp = np.zeros((n, 3))
+        self._last_rv = np.zeros((n, 3))
+
+    def pairs(
+        self, t: float, valid: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(sel, rp, rv): indices of the pairs to constrain at ``t`` (s) and the (N,3)
+        relative positions p_j − p_i (m) / velocities (m/s) to use for them."""
+        if not self.enabled:
+            return valid.nonzero()[0], rel_p, rel_v
+        sel, rp_s, rv_s, n_held = hold_kernel(
+            float(t), np.ascontiguousarray(valid, dtype=np.bool_),
+            np.ascontiguousarray(rel_p, dtype=float), np.ascontiguousarray(rel_v, dtype=float),
+            self._last_seen, self._last_rp, self._last_rv, self.index, float(self.hold_s),
+        )
+        if n_held == 0:
+            return sel, rel_p, rel_v
+        return sel, rp_s, rv_s

@@ -1,0 +1,175 @@
+"""``Method.DCBF``: the sampled-data CBF safety filter (docs/safety.md).
+
+Per step: the barrier rows of :func:`offboard.safety.dcbf.model.dcbf_rows` on the relative state
+predicted one attitude lag plus one control period ahead, from the inner-loop model's
+realised acceleration and the other agents' estimated actual accelerations, in the QP
+:class:`offboard.safety.dcbf.qp.DcbfQP` over the realisable input set.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from offboard.safety.dcbf.model import InputSet, LagCoefficients
+from offboard.safety.dcbf.qp import DcbfQP
+from offboard.safety.dcbf.step_kernel import P_DT, dcbf_filter_rows_into, dcbf_params
+from offboard.safety.filter import (
+    W_SAFE,
+    SafetyFilter,
+    SafetyInput,
+    SafetyOutput,
+    register_filter,
+    saturate_norm,
+)
+from offboard.safety.rcbf.clf_rcbf import ClfTerms
+from swarm_common.enums import Method
+from swarm_common.fastnp import f64, rows3, vec3
+from swarm_common.scenario.model import ControllerConfig, VehicleConfig
+
+# rows the QP is first built with (it grows on demand,
+# offboard.safety.rcbf.clf_rcbf._ClfRowsQP.fit_rows):
+# 8 pairs and the ground, so up to 9 agents never grow
+QP_INITIAL_ROWS = 18
+REL_ACC_SMOOTH = 0.5  # low-pass weight of the previous relative-acceleration estimate
+# ground barrier (offboard.safety.dcbf.model.ground_rows): its class-K gain (1/s) and the bound on
+# the
+# error of the predicted own vertical acceleration (m/s²): thrust lag τ_F = 0.03 s makes
+# the vertical channel fast, and the error is the disturbance estimate's (saturated at
+# W_SAFE) plus the tilt–thrust coupling; at rest the floor is kept by h_g ≥ ē(T+τ)/γ
+GROUND_GAMMA = 2.0
+GROUND_ACCEL_ERR = 1.0
+# dcbf_filter_rows_into's arguments from params to side_out (DcbfFilter.rows_state)
+RowsState = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                  np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
+    """The realisable input polytope of ``[vehicle]`` with ``ctl.dcbf_cone_sides`` sides."""
+    return InputSet.from_vehicle(
+        veh.mass_kg, veh.gravity_mps2, veh.thrust_max_n, veh.tilt_max_deg, ctl.u_max_mps2,
+        ctl.dcbf_cone_sides,
+    )
+
+
+@register_filter
+class DcbfFilter(SafetyFilter):
+    """Sampled-data CBF over the input polytope; needs :meth:`configure` before use."""
+
+    method = Method.DCBF
+
+    def __init__(
+        self, ctl: ControllerConfig, u_lo: np.ndarray, u_hi: np.ndarray, leader_mask: np.ndarray
+    ) -> None:
+        super().__init__(ctl, u_lo, u_hi, leader_mask)
+        if ctl.tau_safe_s <= 0.0:
+            raise ValueError("controller.tau_safe_s must be > 0 for the DCBF (relative degree 1)")
+        self.qp: DcbfQP | None = None
+        self.lag: LagCoefficients | None = None
+        self.brake_gain = 2.0
+        n = len(leader_mask)
+        # per scenario index j: Δv sensed the step before (valid where _prev_ok) and the
+        # low-passed relative acceleration (valid where _rel_ok), read and updated by the
+        # compiled rows (offboard.safety.dcbf.kernel.other_term_kernel)
+        self._prev_dv = np.zeros((n, 3))
+        self._prev_ok = np.zeros(n, dtype=bool)
+        self._rel_acc = np.zeros((n, 3))
+        self._rel_ok = np.zeros(n, dtype=bool)
+        self._params = np.zeros(0)  # the compiled rows' parameters, set by configure
+        self._dt = 0.0  # control period (s), set by configure
+        # the rows' buffers (two per other agent, two for the ground) and the sidestep,
+        # rewritten each step: the QP reads them within the step
+        self._g = np.zeros((2 * n + 2, 3))
+        self._rhs = np.zeros(2 * n + 2)
+        self._side = np.zeros(3)
+
+    def configure(self, veh: VehicleConfig, dt: float) -> None:
+        """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
+        the prediction horizon is T = τ_rp + dt."""
+        uset = input_set_of(self.ctl, veh)
+        rows = 2 * (len(self.leader_mask) - 1) + 2  # two per other agent, two for the ground
+        self.qp = DcbfQP(min(rows, QP_INITIAL_ROWS), uset, self.ctl.rho, self.ctl.clf_c,
+                         limit=rows, solver=self.ctl.qp_solver)
+        tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
+        self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
+        self._dt = float(dt)
+        ctl = self.ctl
+        self._params = dcbf_params(
+            ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
+            ctl.dcbf_accel_error_mps2, ctl.deadlock_gain, ctl.deadlock_h_m2, dt,
+            REL_ACC_SMOOTH, GROUND_GAMMA, GROUND_ACCEL_ERR, self.lag.T,
+        )
+
+    def set_span(self, periods: int) -> None:
+        """The step before was ``periods`` control periods ago (1 in process and in
+        lockstep; more where a real-time daemon missed steps, whose vehicle meanwhile
+        flew the last command: :meth:`offboard.agent.follower.FollowerAgent._coast_missed`).
+        The relative acceleration's finite difference then spans that time, and the
+        caller's ``a_mean`` the same span: dividing by one period made a step after m
+        missed ones see an m-fold relative acceleration, spurious barrier rows and
+        saturated escapes (docs/faults.md)."""
+        if self.lag is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        self._params[P_DT] = self._dt * periods
+
+    def forget_history(self) -> None:
+        """No pair's relative velocity of the step before is used (a gap too long to
+        difference across): each pair starts afresh, from the broadcast estimates."""
+        self._prev_ok[:] = False
+
+    def apply(self, x: SafetyInput) -> SafetyOutput:
+        """The barrier rows of this step (one compiled call,
+        :func:`offboard.safety.dcbf.step_kernel.dcbf_filter_rows_into`) in the QP.
+
+        The other agent's acceleration enters the rows as ``a_j − w_i`` (the own lumped
+        disturbance is not lagged, so it is an offset of the other's acceleration). Where
+        the pair was sensed the step before it comes from the sensed relative velocity:
+        ``Δa = (Δv_k − Δv_{k−1})/dt = a_i − a_j`` over the last period with
+        ``a_i = ā_i + w_i`` (ā_i the inner-loop model's mean realised control), so
+        ``a_j − w_i = ā_i − Δa``, low-passed, with no disturbance estimate needed.
+        Otherwise it is the other's broadcast-velocity estimate minus the own estimate
+        saturated at W_SAFE."""
+        if self.qp is None or self.lag is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        n = len(x.pairs)
+        lm = self.leader_mask[x.pairs] if x.full_share is None else x.full_share
+        # saturated: a start-up transient of the observer cannot cancel a row
+        w_safe = saturate_norm(x.w, W_SAFE)
+        ground = x.floor_m is not None and x.z1 is not None  # airborne: the ground barrier
+        k, h_min = dcbf_filter_rows_into(
+            rows3(x.dp), rows3(x.dv), np.asarray(x.pairs, dtype=np.int64),
+            np.asarray(lm, dtype=np.bool_),
+            np.zeros(n, dtype=np.bool_) if x.predicted is None
+            else np.asarray(x.predicted, dtype=np.bool_),
+            np.zeros(n) if x.margin is None else f64(x.margin),
+            np.zeros((n, 3)) if x.other_acc is None else rows3(x.other_acc),
+            vec3(x.a_real), vec3(x.u_prev), vec3(x.a_mean), vec3(w_safe), ground,
+            float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
+            float(x.floor_m) if ground and x.floor_m is not None else 0.0,
+            *self.rows_state(),
+        )
+        return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
+
+    def solve_rows(
+        self, u_try: np.ndarray, clf: ClfTerms, k: int, h_min: float, w: np.ndarray,
+        z2: np.ndarray, unheld: bool = False,
+    ) -> SafetyOutput:
+        """The QP over the K rows in the buffers, from ``u_try`` = u_nom + sidestep (m/s²);
+        its fallback brakes on ``−w − gain·z2`` (w the saturated disturbance estimate,
+        z2 the velocity estimate). ``unheld``: :meth:`DcbfQP.solve`'s."""
+        if self.qp is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        gain = self.brake_gain
+        res = self.qp.solve(u_try, clf, self._g[:k], self._rhs[:k], h_min,
+                            lambda: -w - gain * z2, unheld)  # the fallback, formed if taken
+        return SafetyOutput(
+            res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
+        )
+
+    def rows_state(self) -> RowsState:
+        """The arguments of :func:`dcbf_filter_rows_into` from ``params`` to ``side_out``:
+        the parameters, lag tables, per-pair state and row buffers, updated in place (the
+        arrays themselves never change after :meth:`configure`)."""
+        if self.lag is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        return (self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
+                self._rel_acc, self._rel_ok, self._g, self._rhs, self._side)

@@ -1,0 +1,114 @@
+"""The DCBF filter's QP (DAQP, or OSQP): CLF + sampled-data CBF rows over the input polytope.
+
+Variables x = [u (3), δ, σ] (docs/safety.md §4)::
+
+    min ½‖u − u_nom‖² + ρ δ² + ρ_σ σ² + M σ
+    s.t.  L_gV u − δ ≤ −L_fV − cV            (soft CLF, as the RCBF QP, Departures 10–11)
+          gᵀu + σ ≥ r                       per sensed pair
+          (:func:`offboard.safety.dcbf.model.dcbf_rows`)
+          A_U u ∈ [lo, hi]                  input polytope
+          (:class:`offboard.safety.dcbf.model.InputSet`)
+          σ ≥ 0
+
+Unlike the RCBF QP the input rows are never relaxed (σ acts on the barrier rows only), so
+the answer is always realisable; if the solve fails the fallback brake is projected into the set.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from offboard.safety.dcbf.exact_kernel import NO_EXACT, pre_solve_kernel
+from offboard.safety.dcbf.kernel import rows_hold_kernel
+from offboard.safety.dcbf.model import InputSet
+from offboard.safety.qp_rows_kernel import rows_finite_kernel
+from offboard.safety.rcbf.clf_rcbf import Brake, ClfTerms, QPResult, _ClfRowsQP, fallback_of
+from swarm_common.enums import QPSolver, QPStatus
+from swarm_common.fastnp import f64, rows3, vec3
+
+
+class DcbfQP(_ClfRowsQP):
+    """One agent's OSQP problem with room for ``max_pairs`` barrier rows."""
+
+    def __init__(
+        self, max_pairs: int, uset: InputSet, rho: float, clf_c: float,
+        violation_weight: float = 100.0, eps: float = 1e-5, limit: int | None = None,
+        solver: QPSolver | str = QPSolver.DAQP,
+    ) -> None:
+        """Room for ``max_pairs`` barrier rows, grown on demand up to ``limit`` rows
+        (default: ``max_pairs``; :meth:`_ClfRowsQP.fit_rows`), solved by ``solver``."""
+        self.uset = uset
+        self.c = float(clf_c)
+        self.lin_sigma = max(1e3, 50.0 * rho)
+        self._half_inv_rho = 0.5 / float(rho)  # the CLF slack's δ = ν/(2ρ) (pre_solve_kernel)
+        self._start(max_pairs, limit, rho, violation_weight, eps, solver)
+
+    def _setup(self, m: int) -> None:
+        """(Re)build the OSQP problem with room for ``m`` barrier rows."""
+        self.m = m
+        eps = self._weights[2]
+        uset = self.uset
+        a_u, lo_u, hi_u = uset.rows()
+        self.a_u, self.lo_u, self.hi_u = a_u, lo_u, hi_u
+        nu = len(lo_u)
+        self.nrow = nrow = 1 + m + nu + 1
+        pat = np.zeros((nrow, 5))
+        pat[0, 0:4] = 1.0
+        pat[1 : 1 + m, 0:3] = 1.0
+        pat[1 : 1 + m, 4] = 1.0
+        pat[1 + m : 1 + m + nu, 0:3] = np.where(a_u != 0.0, 1.0, 0.0)
+        pat[nrow - 1, 4] = 1.0
+        self._mask_t = (pat != 0).T
+        self._a = pat.copy()
+        self._a[1 + m : 1 + m + nu, 0:3] = a_u
+        self.l = np.full(nrow, -np.inf)
+        self.u = np.full(nrow, np.inf)
+        self.l[1 + m : 1 + m + nu] = lo_u
+        self.u[1 + m : 1 + m + nu] = hi_u
+        self.l[nrow - 1] = 0.0
+        self.q = np.zeros(5)
+        self.q[4] = self.lin_sigma
+        self._defer_osqp(pat, self._a.T[self._mask_t], eps)
+
+    def solve(
+        self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,
+        h_min: float, brake: Brake, unheld: bool = False,
+    ) -> QPResult:
+        """Solve for u (always inside the input set); ``brake`` (3,) is the fallback, or a
+        function giving it (:func:`offboard.safety.rcbf.clf_rcbf.fallback_of`). ``unheld``: the
+        caller
+        already found that u_nom breaks a row or the input set (the shortcut's test,
+        :func:`~offboard.safety.dcbf.kernel.rows_hold_kernel`, made in
+        :mod:`offboard.safety.dcbf.front`),
+        so it is not made again."""
+        t0 = time.perf_counter()
+        self.fit_rows(len(rhs))
+        k = min(len(rhs), self.m)
+        if not unheld and rows_hold_kernel(self.a_u, self.lo_u, self.hi_u, g, rhs, k, u_nom):
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u_nom.copy(), QPStatus.INACTIVE, 0, us, h_min, clf.V, 0.0, 0.0,
+                            False)
+        u_nom3, g3, rhs1, lgv3 = vec3(u_nom), rows3(g), f64(rhs), vec3(clf.lgv)
+        lfv, v = float(clf.lfv), float(clf.V)
+        if not rows_finite_kernel(u_nom3, g3, rhs1, k, lgv3, lfv, v):
+            u = self.uset.project(np.nan_to_num(fallback_of(brake), posinf=0.0, neginf=0.0))
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u, QPStatus.FALLBACK, -1, us, h_min, clf.V, 0.0, 0.0, True)
+        viol = rhs[:k] - g[:k] @ u_nom  # BLAS's order: pre_solve_kernel takes it as it is
+        u = np.empty(3)
+        proj, cos_a, sin_a = self.uset.projection
+        clf_rhs, delta = pre_solve_kernel(
+            u_nom3, g3, rhs1, viol, k, lgv3, lfv, v, self.c, self._half_inv_rho,
+            self.lin_sigma, self.a_u, self.lo_u, self.hi_u, proj, cos_a, sin_a, u,
+        )
+        if delta != NO_EXACT:  # one barrier row active, alone or with the CLF row: exact
+            us = (time.perf_counter() - t0) * 1e6
+            return QPResult(u, QPStatus.SOLVED, 0, us, h_min, clf.V, delta, 0.0, False)
+        sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
+        # the solver's answer up to its tolerance; project() is a no-op inside the set
+        u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(fallback_of(brake)))
+        out = self._result(sv, x, u, h_min, clf)
+        out.solve_us = (time.perf_counter() - t0) * 1e6
+        return out

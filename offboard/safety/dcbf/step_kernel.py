@@ -1,0 +1,137 @@
+"""The dcbf filter's rows of one step in one compiled call (``Method.DCBF``; docs/safety.md).
+
+:func:`dcbf_filter_rows_into` chains, in one call, the kernels the filter used to call
+one by one from Python: the barrier now (:func:`offboard.safety.pair_kernel.barrier_kernel`), its
+minimum, the deadlock breaker (:func:`offboard.safety.pair_kernel.tangential_kernel`), the
+budget share per pair, the other agents' accelerations
+(:func:`offboard.safety.dcbf.kernel.other_term_kernel`), the pair rows
+(:func:`offboard.safety.dcbf.kernel.dcbf_rows_kernel`) and the ground rows
+(:func:`offboard.safety.dcbf.kernel.ground_rows_kernel`). It calls those same kernels with the
+same arguments, so it gives the same bits as the chain of calls it replaced
+(``tests/unit/test_dcbf_step_kernel.py``); what it saves is a dozen Python-level calls and
+temporary arrays per follower step. It writes the rows into the filter's own buffers, so
+no new array is boxed for them.
+
+The scalar parameters travel in one array, laid out by the ``P_*`` indices below
+(:func:`dcbf_params`), so a call passes a handful of arguments.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from offboard.safety.dcbf.kernel import dcbf_rows_kernel, ground_rows_kernel, other_term_kernel
+from offboard.safety.pair_kernel import FULL_SHARE, SPLIT_SHARE, barrier_kernel, tangential_kernel
+from swarm_common.jit import kernel
+
+# layout of the parameter array (dcbf_params)
+P_TAU = 0  # look-ahead τ of the barrier (s)
+P_D_SAFE = 1  # safety distance D (m)
+P_GAMMA1 = 2  # α(h) = γ1 h + γ3 h³: γ1 (1/s)
+P_GAMMA3 = 3  # γ3 (1/(m⁴ s))
+P_ACCEL_ERR = 4  # ē, bound on the relative-acceleration error (m/s²)
+P_SIDE_GAIN = 5  # deadlock breaker gain (m/s²)
+P_SIDE_H = 6  # barrier value below which it acts (m²)
+P_DT = 7  # control period (s)
+P_SMOOTH = 8  # low-pass weight of the previous relative-acceleration estimate
+P_GROUND_GAMMA = 9  # the ground barrier's class-K gain (1/s)
+P_GROUND_ERR = 10  # error bound on the predicted own vertical acceleration (m/s²)
+P_HORIZON = 11  # prediction horizon T = τ_rp + dt (s)
+N_PARAMS = 12
+
+
+def dcbf_params(
+    tau_s: float, d_safe: float, gamma1: float, gamma3: float, accel_err: float,
+    side_gain: float, side_h: float, dt: float, smooth: float, ground_gamma: float,
+    ground_err: float, horizon: float,
+) -> np.ndarray:
+    """The parameter array of :func:`dcbf_filter_rows_into` (units at the ``P_*``)."""
+    out = np.empty(N_PARAMS)
+    out[P_TAU], out[P_D_SAFE], out[P_GAMMA1], out[P_GAMMA3] = tau_s, d_safe, gamma1, gamma3
+    out[P_ACCEL_ERR], out[P_SIDE_GAIN], out[P_SIDE_H] = accel_err, side_gain, side_h
+    out[P_DT], out[P_SMOOTH], out[P_GROUND_GAMMA] = dt, smooth, ground_gamma
+    out[P_GROUND_ERR], out[P_HORIZON] = ground_err, horizon
+    return out
+
+
+@kernel
+def _min_or_nan(h: np.ndarray) -> float:
+    """``float(h.min())`` as numpy gives it (nan if any element is nan), inf if empty."""
+    out = math.inf
+    for i in range(h.shape[0]):
+        if math.isnan(h[i]):
+            return math.nan
+        if h[i] < out:
+            out = h[i]
+    return out
+
+
+@kernel
+def dcbf_filter_rows_into(
+    dp: np.ndarray, dv: np.ndarray, pairs: np.ndarray, full_share: np.ndarray,
+    predicted: np.ndarray, margin: np.ndarray, other_acc: np.ndarray, a_real: np.ndarray,
+    u_prev: np.ndarray, a_mean: np.ndarray, w_safe: np.ndarray, ground: bool, z: float,
+    vz: float, floor: float, params: np.ndarray, lag: np.ndarray, sens: np.ndarray,
+    prev_dv: np.ndarray, prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray,
+    g_out: np.ndarray, r_out: np.ndarray, side_out: np.ndarray,
+) -> tuple[int, float]:
+    """The K = 2M [+2] rows of one dcbf step, ``g_iᵀu ≥ r_i``, into the caller's buffers
+    (no new arrays boxed per step): g in the first K rows of ``g_out`` (≥ K, 3), r (m/s²)
+    in those of ``r_out`` (≥ K,), the sidestep (m/s²) in ``side_out`` (3,). Returns
+    (K, h_min (m²)); buffers too small are refused before any state is touched.
+
+    Rows (M): dp, dv relative position (m) and velocity (m/s), pairs the scenario index j,
+    full_share True where this agent takes the whole budget (share 1, else ½), predicted
+    True for rows from prediction, margin (m) added to D, other_acc the other's broadcast
+    acceleration estimate (m/s²). Own (3,): the inner-loop model's realised virtual
+    control a_real, the previous command u_prev, the mean realised control over the last
+    period a_mean and the saturated disturbance estimate w_safe (m/s²). When ``ground``,
+    the two ground rows for altitude z (m), vertical velocity vz (m/s) and ``floor`` (m)
+    follow the pair rows. ``lag`` (6,3) and ``sens`` (3,2,3): the lag table and
+    sensitivities of :class:`offboard.safety.dcbf.model.LagCoefficients`. prev_dv, prev_ok, rel_acc,
+    rel_ok: the per-index state of :func:`offboard.safety.dcbf.kernel.other_term_kernel`, read
+    and updated in place.
+    """
+    m = dp.shape[0]
+    k = 2 * m + 2 if ground else 2 * m
+    if g_out.shape[0] < k or r_out.shape[0] < k or g_out.shape[1] != 3 or side_out.shape[0] != 3:
+        raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
+    tau = params[P_TAU]
+    h = barrier_kernel(dp, dv, tau, params[P_D_SAFE])
+    h_min = _min_or_nan(h)
+    for c in range(3):
+        side_out[c] = 0.0
+    if params[P_SIDE_GAIN] > 0.0 and m > 0:
+        side = tangential_kernel(dp, h, params[P_SIDE_GAIN], params[P_SIDE_H])
+        for c in range(3):
+            side_out[c] = side[c]
+    share = np.empty(m)
+    d = np.empty(m)
+    for i in range(m):
+        share[i] = FULL_SHARE if full_share[i] else SPLIT_SHARE
+        d[i] = params[P_D_SAFE] + margin[i]
+    other = other_term_kernel(
+        pairs, predicted, dv, other_acc, w_safe, a_mean, params[P_DT], params[P_SMOOTH],
+        prev_dv, prev_ok, rel_acc, rel_ok,
+    )
+    g, rhs = dcbf_rows_kernel(
+        dp, dv, a_real, u_prev, other, share, d, lag, sens, params[P_HORIZON], tau,
+        params[P_GAMMA1], params[P_GAMMA3], params[P_ACCEL_ERR],
+    )
+    for r in range(2 * m):
+        r_out[r] = rhs[r]
+        for c in range(3):
+            g_out[r, c] = g[r, c]
+    if ground:
+        gg, rg = ground_rows_kernel(
+            z, vz, a_real[2], w_safe[2], floor, params[P_HORIZON], lag[5, 2], lag[4, 2],
+            lag[3, 2], lag[2, 2], lag[1, 2], lag[0, 2], tau, params[P_GROUND_GAMMA],
+            params[P_GROUND_ERR],
+        )
+        for r in range(2):
+            r_out[2 * m + r] = rg[r]
+            for c in range(3):
+                g_out[2 * m + r, c] = gg[r, c]
+    return k, h_min

@@ -1,0 +1,74 @@
+"""Compiled bookkeeping of the safety QPs' data (:class:`offboard.safety.rcbf.clf_rcbf._ClfRowsQP`).
+
+:func:`write_rows_kernel` writes this step's CLF row and safety rows into the QP's
+constraint matrix, bounds and linear cost, and the bounds as DAQP reads them (clamped to
+±1e30), in one call instead of a dozen numpy slice assignments per solve;
+:func:`rows_finite_kernel` is the QPs' finiteness guard in one call. Both copy and compare
+floats only (one division per element of the CLF row, as numpy's), so the QP data are the
+same bits as before (``tests/unit/test_qp_rows_kernel.py``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_common.jit import kernel
+
+
+@kernel
+def write_rows_kernel(
+    a: np.ndarray, lo: np.ndarray, hi: np.ndarray, q: np.ndarray, lgv: np.ndarray,
+    lgv_norm: float, clf_rhs: float, g: np.ndarray, rhs: np.ndarray, k: int, m: int,
+    u_nom: np.ndarray, lo_clamped: np.ndarray, hi_clamped: np.ndarray, inf_clamp: float,
+) -> None:
+    """Row 0: the CLF row ``L_gV/‖L_gV‖ u − δ ≤ clf_rhs/‖L_gV‖`` (no row when
+    ``lgv_norm`` ≤ 1e-9: zero coefficients, no upper bound); rows 1..k: ``g_j u + σ ≥ r_j``;
+    rows k+1..m unused (zero coefficients, no lower bound); ``q[0:3] = −u_nom``. a (rows,5),
+    lo, hi, q (5,) are written in place (the columns and rows not named keep their
+    values); lo_clamped, hi_clamped (rows,) receive lo, hi clamped to ±inf_clamp (nan
+    kept)."""
+    if lgv_norm > 1e-9:
+        for c in range(3):
+            a[0, c] = lgv[c] / lgv_norm
+        hi[0] = clf_rhs / lgv_norm
+    else:
+        for c in range(3):
+            a[0, c] = 0.0
+        hi[0] = math.inf
+    a[0, 3] = -1.0
+    for r in range(k):
+        for c in range(3):
+            a[1 + r, c] = g[r, c]
+        lo[1 + r] = rhs[r]
+    for r in range(k, m):
+        for c in range(3):
+            a[1 + r, c] = 0.0
+        lo[1 + r] = -math.inf
+    for c in range(3):
+        q[c] = -u_nom[c]
+    for r in range(lo.shape[0]):
+        x = lo[r]
+        lo_clamped[r] = -inf_clamp if x < -inf_clamp else x
+        x = hi[r]
+        hi_clamped[r] = inf_clamp if x > inf_clamp else x
+
+
+@kernel
+def rows_finite_kernel(
+    u_nom: np.ndarray, g: np.ndarray, rhs: np.ndarray, k: int, lgv: np.ndarray, lfv: float,
+    v: float,
+) -> bool:
+    """True if u_nom (3,), the first k rows of g (M,3) and rhs (M,), L_gV (3,), L_fV and V
+    are all finite."""
+    for c in range(3):
+        if not (math.isfinite(u_nom[c]) and math.isfinite(lgv[c])):
+            return False
+    for r in range(k):
+        if not math.isfinite(rhs[r]):
+            return False
+        for c in range(g.shape[1]):
+            if not math.isfinite(g[r, c]):
+                return False
+    return math.isfinite(lfv) and math.isfinite(v)

@@ -1,0 +1,244 @@
+"""Feasibility of a scenario at load time: can every vehicle fly its desired trajectory
+inside the input set it can realise? Pure (no I/O); derivation in docs/scenarios.md.
+
+Desired motion. Every leader flies ``p_L(t) = p_L(0) + A(1 − cos ωt)`` (ω = 2πf) from its
+origin (``position``; for a ground start its staging point above the pad, as
+:mod:`offboard.agent.takeoff` plans it). Every follower's target is the bearing-formation
+solution ``p*_f = −L_ff⁻¹ L_fl p_L`` (paper §2.1). The bearing Laplacian annihilates
+translations (``L(1⊗δ) = 0``), so a common leader offset δ(t) moves every target by the
+same δ(t): ``p*_i(t) = p*_i(0) + A(1 − cos ωt)`` for every agent i, with the same
+acceleration ``a(t) = Aω² cos ωt`` (peak ‖A‖ω²) and jerk ``j(t) = −Aω³ sin ωt``.
+
+Needed command. Through the inner loop ``ȧ = (u − a)/τ`` (τ_rp horizontally, τ_F
+vertically) the command that tracks a(t) exactly is ``u_ff = a + τ ȧ``. On top of it the
+controller must cancel the disturbance (per axis at most ``amplitude_n/m``, horizontally
+exactly ``amplitude_n/m`` in norm) and the unmodeled dynamics ``f̃ = Φ(p*, v*) ζ`` with every
+|ζ_k| up to ``|ζ_nom,k| (1 + zeta_spread)``; their bound ``e`` is added to ``|u_ff|``.
+
+Input set (the dcbf polytope, :class:`offboard.safety.dcbf.model.InputSet`): ``u_z ∈ [−min(u_max,
+0.9g),
+min(u_max, (F_max/m) cos θ − g)]`` and ``‖u_h‖ ≤ (g + u_z) tan θ cos(π/K)``, capped at
+``u_max``. A share :data:`FEEDBACK_RESERVE` of it is kept for feedback: the need must lie in
+the set scaled by ``1 − r`` about hover (u = 0). Sampled at :data:`PHASE_SAMPLES` phases of
+one period, per agent.
+
+Reachability. A desired position below the ground clearance ``controller.d_safe_m`` at any
+time of the trajectory (``min_t z = z(0) + min(0, 2A_z)``) is unreachable.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from swarm_common.enums import StartMode
+from swarm_common.scenario import graphs
+from swarm_common.unmodeled import regressor
+
+if TYPE_CHECKING:
+    from swarm_common.scenario.model import Scenario
+
+FEEDBACK_RESERVE = 0.2  # share of the input set kept for feedback (1 − r scales the set)
+PHASE_SAMPLES = 180  # samples of ωt over one period (2°: sampled peaks within 2e-4)
+
+
+@dataclass(frozen=True)
+class InputLimits:
+    """The realisable virtual controls (m/s², ENU): the dcbf input polytope's numbers."""
+
+    uz_min: float  # −min(u_max, 0.9 g)
+    uz_max: float  # min(u_max, (F_max/m) cos θ − g)
+    cone_slope: float  # tan θ cos(π/K): ‖u_h‖ ≤ (g + u_z) · slope
+    u_max: float  # controller.u_max_mps2, caps ‖u_h‖ too
+    g: float
+
+    @classmethod
+    def of(cls, sc: Scenario) -> InputLimits:
+        veh, ctl = sc.vehicle, sc.controller
+        th = math.radians(veh.tilt_max_deg)
+        g = veh.gravity_mps2
+        uz_max = min(ctl.u_max_mps2, veh.thrust_max_n / veh.mass_kg * math.cos(th) - g)
+        slope = math.tan(th) * math.cos(math.pi / ctl.dcbf_cone_sides)
+        return cls(-min(ctl.u_max_mps2, 0.9 * g), uz_max, slope, ctl.u_max_mps2, g)
+
+    def horizontal(self, uz: np.ndarray, reserve: float = FEEDBACK_RESERVE) -> np.ndarray:
+        """Largest ‖u_h‖ (m/s²) at vertical command ``uz`` in the set scaled by 1 − reserve."""
+        k = 1.0 - reserve
+        return np.minimum(k * self.u_max, (k * self.g + np.asarray(uz)) * self.cone_slope)
+
+
+# ---------------------------------------------------------------------------
+# Desired motion
+# ---------------------------------------------------------------------------
+def formation_map(sc: Scenario) -> np.ndarray | None:
+    """K = −L_ff⁻¹ L_fl (3F × 3L, scenario order of followers and leaders) with
+    ``p*_f = K p_L`` (paper §2.1) over the scenario's neighbour graph (any
+    ``formation.graph`` kind, :mod:`swarm_common.scenario.graphs`); None when the graph cannot be
+    built or L_ff is singular (the leaders do not fix the followers; the loader refuses
+    such a scenario before this check, :func:`swarm_common.scenario.model.graph_problem`)."""
+    v = sc.vertices()
+    lead = [sc.index_of(i) for i in sc.leader_ids]
+    foll = [sc.index_of(i) for i in sc.follower_ids]
+    spec = graphs.graph_spec(sc.formation, sc.initial_positions(), v, lead)
+    try:
+        edges = graphs.build_edges(v, spec, sc.ids)
+    except ValueError:
+        return None
+    lap = graphs.sparse_laplacian(v, edges)
+    fb, lb = graphs.blocks(foll), graphs.blocks(lead)
+    if not len(fb):
+        return np.zeros((0, len(lb)))
+    l_ff = lap[fb][:, fb].toarray()
+    try:
+        chol = np.linalg.cholesky(l_ff)
+    except np.linalg.LinAlgError:
+        return None
+    if np.min(np.abs(np.diag(chol))) ** 2 <= graphs.zero_tol(lap[fb][:, fb]):
+        return None
+    rhs = lap[fb][:, lb].toarray()
+    return -np.linalg.solve(l_ff, rhs)
+
+
+def leader_origins(sc: Scenario) -> np.ndarray:
+    """(L, 3) p_L(0) of the leaders (scenario order): ``position``, or for a ground start
+    the staging point above the pad at ``takeoff_altitude_m + s (v_z − min v_z)`` (s = pad
+    separation over vertex separation of the first two leaders; offboard.agent.takeoff)."""
+    pos = sc.initial_positions()
+    lead = [sc.index_of(i) for i in sc.leader_ids]
+    out = pos[lead].copy()
+    if sc.lifecycle.start is StartMode.GROUND:
+        v = sc.vertices()
+        k1, k2 = (sc.index_of(i) for i in sc.formation.leaders[:2])
+        s = float(np.linalg.norm(pos[k1] - pos[k2]) / np.linalg.norm(v[k1] - v[k2]))
+        out[:, 2] = sc.lifecycle.takeoff_altitude_m + s * (v[lead, 2] - v[:, 2].min())
+    return out
+
+
+def desired_origins(sc: Scenario) -> np.ndarray | None:
+    """(N, 3) p*_i(0) of every agent (scenario order) at the start of the leaders'
+    trajectory; None when the formation does not fix the followers (:func:`formation_map`)."""
+    kmap = formation_map(sc)
+    if kmap is None:
+        return None
+    out = np.zeros((sc.n, 3))
+    lp = leader_origins(sc)
+    out[[sc.index_of(i) for i in sc.leader_ids]] = lp
+    out[[sc.index_of(i) for i in sc.follower_ids]] = (kmap @ lp.reshape(-1)).reshape(-1, 3)
+    return out
+
+
+def peak_acceleration(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis peak desired acceleration |A|ω² (m/s²) and jerk |A|ω³ (m/s³), the same for
+    every agent (module docstring)."""
+    lt = sc.leader_trajectory
+    w = 2.0 * math.pi * lt.frequency_hz
+    amp = np.abs(np.array(lt.amplitude_m))
+    return amp * w * w, amp * w**3
+
+
+# ---------------------------------------------------------------------------
+# Checks
+# ---------------------------------------------------------------------------
+def _fmt(x: tuple[float, ...]) -> str:
+    return "[" + ", ".join(f"{v:g}" for v in x) + "]"
+
+
+def clearance_problem(sc: Scenario, origins: np.ndarray, idx: list[int]) -> str | None:
+    """One line naming the key if the desired position of an agent in ``idx`` (origins
+    (N, 3) as :func:`desired_origins`) goes below ``d_safe_m`` (the ground clearance) at any
+    time of the trajectory, leaders first; else None."""
+    clear = sc.controller.d_safe_m
+    az = sc.leader_trajectory.amplitude_m[2]
+    zmin = origins[:, 2] + min(0.0, 2.0 * az)
+    lead = [sc.index_of(i) for i in sc.leader_ids]
+    for k in sorted(idx, key=lambda k: k not in lead):
+        if zmin[k] >= clear:
+            continue
+        a = sc.agents[k]
+        tail = (f"goes down to z = {zmin[k]:.2f} m (leader_trajectory.amplitude_m z = {az:g}), "
+                f"below the ground clearance controller.d_safe_m = {clear:g}")
+        if k not in lead:
+            return (f"agent[{k}].vertex = {_fmt(tuple(a.vertex))}: follower id {a.id}'s "
+                    f"desired position in the formation {tail}")
+        if sc.lifecycle.start is StartMode.GROUND:
+            return (f"lifecycle.takeoff_altitude_m = {sc.lifecycle.takeoff_altitude_m:g}: "
+                    f"leader id {a.id}'s trajectory from its staging point {tail}")
+        return (f"agent[{k}].position = {_fmt(tuple(a.position))}: leader id {a.id}'s "
+                f"trajectory {tail}")
+    return None
+
+
+def _uncertainty(sc: Scenario, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Bounds (m/s²) on what the controller must cancel at desired states p, v (..., 3):
+    horizontal norm and vertical, disturbance and unmodeled parts separately."""
+    d = sc.disturbance.amplitude_n / sc.vehicle.mass_kg
+    um = sc.unmodeled
+    zeta = np.abs(np.array(um.zeta_nominal)) * (1.0 + um.zeta_spread)
+    f = np.abs(regressor(p, v, um.ground_effect_height_m)) @ zeta  # (..., 3)
+    return np.full(f.shape[:-1], d), np.linalg.norm(f[..., :2], axis=-1), f[..., 2]
+
+
+def acceleration_problem(sc: Scenario, origins: np.ndarray, idx: list[int]) -> str | None:
+    """One line naming the key and the numbers if the needed command of an agent in ``idx``
+    leaves the input set kept after the feedback reserve at some phase of the trajectory;
+    else None."""
+    lt, veh = sc.leader_trajectory, sc.vehicle
+    w = 2.0 * math.pi * lt.frequency_hz
+    amp = np.array(lt.amplitude_m)
+    ph = 2.0 * math.pi * np.arange(PHASE_SAMPLES) / PHASE_SAMPLES
+    c, s = np.cos(ph)[:, None], np.sin(ph)[:, None]
+    tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
+    u = amp * w * w * c - tau * amp * w**3 * s  # (M, 3): u_ff = a + τ ȧ
+    p = origins[None, idx, :] + (amp * (1.0 - c))[:, None, :]  # (M, n, 3)
+    vel = np.broadcast_to((amp * w * s)[:, None, :], p.shape)
+    e_d, e_fh, e_fz = _uncertainty(sc, p, vel)
+    e_h, e_z = e_d + e_fh, e_d + e_fz  # (M, N)
+    lim = InputLimits.of(sc)
+    k = 1.0 - FEEDBACK_RESERVE
+    uz, uh = u[:, 2:3], np.linalg.norm(u[:, :2], axis=1)[:, None]
+    shape = e_h.shape
+    checks = (  # (name, need, allowed, trajectory part) each (M, n)
+        ("upward", uz + e_z, np.full(shape, k * lim.uz_max), np.broadcast_to(uz, shape)),
+        ("downward", e_z - uz, np.full(shape, -k * lim.uz_min), np.broadcast_to(-uz, shape)),
+        ("horizontally", uh + e_h, lim.horizontal(uz - e_z), np.broadcast_to(uh, shape)),
+    )  # vertical first: within them the horizontal allowance is > 0
+    for name, need, allowed, traj in checks:
+        over = need - allowed
+        m, n = np.unravel_index(int(np.argmax(over)), over.shape)
+        if over[m, n] <= 0.0:
+            continue
+        e = float(need[m, n] - traj[m, n])
+        if traj[m, n] >= e:
+            key = (f"leader_trajectory.frequency_hz = {lt.frequency_hz:g} "
+                   f"(amplitude_m = {_fmt(lt.amplitude_m)})")
+        elif e_d[m, n] >= e - e_d[m, n]:
+            key = f"disturbance.amplitude_n = {sc.disturbance.amplitude_n:g}"
+        else:
+            key = f"unmodeled.zeta_nominal = {_fmt(sc.unmodeled.zeta_nominal)}"
+        t = float(ph[m] / w) if w > 0.0 else 0.0
+        return (
+            f"{key}: agent id {sc.agents[idx[n]].id} needs {need[m, n]:.2f} m/s² {name} at "
+            f"t = {t:.2f} s of the trajectory ({traj[m, n]:.2f} to fly it through the "
+            f"inner-loop lag, {e:.2f} to cancel disturbance and unmodeled dynamics), the "
+            f"input set allows {allowed[m, n]:.2f} m/s² (vehicle.tilt_max_deg = "
+            f"{veh.tilt_max_deg:g}, vehicle.thrust_max_n = {veh.thrust_max_n:g}, "
+            f"controller.u_max_mps2 = {sc.controller.u_max_mps2:g}, "
+            f"{FEEDBACK_RESERVE:.0%} kept for feedback)"
+        )
+    return None
+
+
+def feasibility_problem(sc: Scenario) -> str | None:
+    """The first feasibility problem of ``sc`` as one line naming the key and the numbers
+    (no file name), or None when it is feasible. Followers are skipped when the formation
+    does not fix them (:func:`formation_map`); only the leaders are checked then."""
+    origins = desired_origins(sc)
+    idx = list(range(sc.n))
+    if origins is None:
+        idx = [sc.index_of(i) for i in sc.leader_ids]
+        origins = np.zeros((sc.n, 3))
+        origins[idx] = leader_origins(sc)
+    return clearance_problem(sc, origins, idx) or acceleration_problem(sc, origins, idx)

@@ -1,0 +1,317 @@
+"""Neighbour (sensing) graphs of a bearing formation and their rigidity check (paper §2.1;
+Departure 3; docs/graphs.md). Pure numpy/scipy, no product package imported: the scenario
+loader, the feasibility check and ``offboard.estimation.bearing`` all build the graph from here.
+
+Kinds (``formation.graph``, :class:`~swarm_common.enums.GraphKind`), over the agents'
+``vertex`` coordinates (scenario order, index pairs ``i < j``):
+
+* ``cube_face_diagonals``: pairs at the shortest vertex distance or √2 times it;
+* ``complete``: every pair;
+* ``knn``: every vertex to its ``formation.knn_k`` nearest vertices (a vertex tied with the
+  k-th nearest is included too, so the graph does not depend on the agents' order),
+  symmetrised (an edge if either end chose the other);
+* ``range``: every pair within ``formation.sensing_range_m`` in the desired formation (the
+  vertices scaled by the leaders' separation, Departure 1);
+* ``edges``: the pairs of agent ids listed in ``formation.edges``.
+
+Check (:func:`rigidity_problem`): the sparse bearing Laplacian L (§2.1) must have rank
+3N − 4 (null space: translations and scaling; checked as L + QQᵀ positive definite, Q an
+orthonormal basis of those four motions) and its follower block L_ff must be positive
+definite (the leaders fix every follower's desired position). Small matrices use a dense
+eigen-decomposition; larger ones the smallest eigenvalue by shift-invert Lanczos over a
+sparse LU (scipy.sparse), so the check stays cheap for a few hundred agents.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator, eigsh, splu
+
+from swarm_common.scenario.schema import FormationConfig
+
+DIST_TOL = 1e-6  # relative tolerance on vertex distances (ties, ranges)
+EIG_TOL = 1e-9  # eigenvalue counted as zero below EIG_TOL · max(1, Gershgorin bound)
+DENSE_MAX = 60  # matrices up to this size are checked densely
+SHIFT = -0.1  # shift-invert point (below the spectrum of a positive semidefinite matrix)
+LEGACY_KINDS = ("cube_edges",)  # accepted by the builders (tests), not by scenario files
+
+
+@dataclass(frozen=True)
+class GraphSpec:
+    """Which graph to build: ``kind`` plus the keys it reads (``formation.*``).
+
+    ``scale`` (m per vertex unit) converts ``sensing_range_m`` to vertex units; both are
+    only needed by ``range`` and by :func:`sensed_sets` (inf range: unlimited)."""
+
+    kind: str
+    knn_k: int = 6
+    edges: tuple[tuple[int, int], ...] = ()  # agent ids
+    sensing_range_m: float = math.inf
+    scale: float = 1.0
+
+    @property
+    def range_vu(self) -> float:
+        """Sensing range in vertex units."""
+        return self.sensing_range_m / self.scale
+
+    def describe(self) -> str:
+        """The key that chose the graph, for one-line errors."""
+        head = f'formation.graph = "{self.kind}"'
+        if self.kind == "knn":
+            return f"{head} (knn_k = {self.knn_k})"
+        if self.kind == "range":
+            return f"{head} (sensing_range_m = {self.sensing_range_m:g})"
+        if self.kind == "edges":
+            return f"{head} (formation.edges, {len(self.edges)} pairs)"
+        return head
+
+
+def formation_scale(positions: np.ndarray, vertices: np.ndarray, k1: int, k2: int) -> float:
+    """Metres per vertex unit: the separation of agents ``k1``, ``k2`` (the first two
+    leaders) over their vertex separation (Departure 1)."""
+    p, v = np.asarray(positions, float), np.asarray(vertices, float)
+    return float(np.linalg.norm(p[k1] - p[k2]) / np.linalg.norm(v[k1] - v[k2]))
+
+
+def _dist(v: np.ndarray) -> np.ndarray:
+    diff = v[:, None, :] - v[None, :, :]
+    return np.sqrt(np.einsum("ijk,ijk->ij", diff, diff))
+
+
+def _upper_pairs(adj: np.ndarray) -> list[tuple[int, int]]:
+    i, j = np.nonzero(np.triu(adj | adj.T, 1))
+    return [(int(a), int(b)) for a, b in zip(i, j, strict=True)]
+
+
+def shell_edges(v: np.ndarray, multiples: Sequence[float]) -> list[tuple[int, int]]:
+    """Pairs whose distance is one of ``multiples`` times the shortest vertex distance."""
+    d = _dist(v)
+    off = ~np.eye(len(v), dtype=bool)
+    edge = float(d[off].min())
+    tol = DIST_TOL * max(1.0, edge)
+    adj = np.zeros_like(off)
+    for a in multiples:
+        adj |= off & (np.abs(d - a * edge) <= tol)
+    return _upper_pairs(adj)
+
+
+def knn_edges(v: np.ndarray, k: int) -> list[tuple[int, int]]:
+    """Each vertex to its ``k`` nearest (ties with the k-th included), symmetrised."""
+    if k < 1:
+        raise ValueError(f"knn_k = {k}: must be >= 1")
+    d = _dist(v)
+    n = len(v)
+    np.fill_diagonal(d, np.inf)
+    kk = min(k, n - 1)
+    kth = np.sort(d, axis=1)[:, kk - 1]
+    adj = d <= (kth * (1.0 + DIST_TOL))[:, None]
+    return _upper_pairs(adj)
+
+
+def range_edges(v: np.ndarray, r: float) -> list[tuple[int, int]]:
+    """Pairs at most ``r`` apart (vertex units)."""
+    d = _dist(v)
+    adj = d <= r * (1.0 + DIST_TOL)
+    np.fill_diagonal(adj, False)
+    return _upper_pairs(adj)
+
+
+def id_edges(ids: Sequence[int], pairs: Sequence[Sequence[int]]) -> list[tuple[int, int]]:
+    """Index pairs (i < j, sorted, unique) of id pairs; ValueError for an unknown id, a
+    self-loop or a repeated pair (one line naming ``formation.edges``)."""
+    pos = {int(a): k for k, a in enumerate(ids)}
+    out: set[tuple[int, int]] = set()
+    for n, pr in enumerate(pairs):
+        a, b = (int(x) for x in pr)
+        for x in (a, b):
+            if x not in pos:
+                raise ValueError(f"formation.edges[{n}] = [{a}, {b}]: id {x} is not an agent id")
+        if a == b:
+            raise ValueError(f"formation.edges[{n}] = [{a}, {b}]: self-loop")
+        e = (min(pos[a], pos[b]), max(pos[a], pos[b]))
+        if e in out:
+            raise ValueError(f"formation.edges[{n}] = [{a}, {b}]: pair listed twice")
+        out.add(e)
+    return sorted(out)
+
+
+def build_edges(v: np.ndarray, spec: GraphSpec, ids: Sequence[int]) -> list[tuple[int, int]]:
+    """Undirected edges (i < j) of the graph ``spec`` over vertices ``v`` (N, 3)."""
+    v = np.asarray(v, dtype=float)
+    kind = str(spec.kind)
+    if kind == "complete":
+        return [(i, j) for i in range(len(v)) for j in range(i + 1, len(v))]
+    if kind == "cube_face_diagonals":
+        return shell_edges(v, (1.0, math.sqrt(2.0)))
+    if kind == "cube_edges":
+        return shell_edges(v, (1.0,))
+    if kind == "knn":
+        return knn_edges(v, spec.knn_k)
+    if kind == "range":
+        return range_edges(v, spec.range_vu)
+    if kind == "edges":
+        return id_edges(ids, spec.edges)
+    raise ValueError(
+        f"unknown formation graph {kind!r}; use cube_face_diagonals, complete, knn, range "
+        "or edges"
+    )
+
+
+def sensed_sets(
+    v: np.ndarray, edges: Sequence[tuple[int, int]], range_vu: float
+) -> list[list[int]]:
+    """Per index, the agents it senses in the desired formation: graph neighbours and every
+    agent within ``range_vu`` (vertex units). Sorted."""
+    n = len(v)
+    near = _dist(np.asarray(v, float)) <= range_vu * (1.0 + DIST_TOL) if math.isfinite(
+        range_vu) else np.ones((n, n), dtype=bool)
+    for i, j in edges:
+        near[i, j] = near[j, i] = True
+    np.fill_diagonal(near, False)
+    return [sorted(int(j) for j in np.nonzero(near[i])[0]) for i in range(n)]
+
+
+def long_edges(
+    v: np.ndarray, edges: Sequence[tuple[int, int]], range_vu: float
+) -> list[tuple[int, int, float]]:
+    """Edges longer than ``range_vu`` (never sensed in the desired formation), with their
+    length in vertex units."""
+    v = np.asarray(v, float)
+    out = []
+    for i, j in edges:
+        d = float(np.linalg.norm(v[i] - v[j]))
+        if d > range_vu * (1.0 + DIST_TOL):
+            out.append((i, j, d))
+    return out
+
+
+def sparse_laplacian(v: np.ndarray, edges: Sequence[tuple[int, int]]) -> sp.csr_matrix:
+    """(3N, 3N) bearing Laplacian (§2.1): −P*_ij off the diagonal, Σ_k P*_ik on it."""
+    v = np.asarray(v, dtype=float)
+    n = len(v)
+    rows: list[np.ndarray] = []
+    cols: list[np.ndarray] = []
+    vals: list[np.ndarray] = []
+    r3, c3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    for i, j in edges:
+        g = v[j] - v[i]
+        g = g / np.linalg.norm(g)
+        p = np.eye(3) - np.outer(g, g)
+        for a, b, s in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
+            rows.append((3 * a + r3).ravel())
+            cols.append((3 * b + c3).ravel())
+            vals.append((s * p).ravel())
+    if not rows:
+        return sp.csr_matrix((3 * n, 3 * n))
+    m = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n)
+    )
+    return m.tocsr()
+
+
+def blocks(idx: Sequence[int]) -> np.ndarray:
+    """Row indices of the 3×3 blocks of the agents ``idx``."""
+    return np.array([3 * i + k for i in idx for k in range(3)], dtype=int)
+
+
+def smallest_eig(m: sp.spmatrix, deflate: np.ndarray | None = None) -> float:
+    """Smallest eigenvalue of ``m + Q Qᵀ`` (``Q = deflate``, orthonormal columns, or none),
+    ``m`` symmetric positive semidefinite: dense up to DENSE_MAX, else shift-invert Lanczos
+    about SHIFT with the rank-``q`` term applied by the Woodbury identity (sparse LU only)."""
+    n = m.shape[0]
+    q = np.zeros((n, 0)) if deflate is None else np.asarray(deflate, float)
+    if n <= DENSE_MAX:
+        return float(np.linalg.eigvalsh(m.toarray() + q @ q.T)[0])
+    a = (m - SHIFT * sp.identity(n)).tocsc()
+    lu = splu(a)
+    ainv_q = lu.solve(q) if q.shape[1] else q
+    cap = np.eye(q.shape[1]) + q.T @ ainv_q
+
+    def solve(x: np.ndarray) -> np.ndarray:
+        y = lu.solve(np.asarray(x, float).reshape(-1))
+        return y - ainv_q @ np.linalg.solve(cap, q.T @ y) if q.shape[1] else y
+
+    op = LinearOperator((n, n), matvec=lambda x: m @ x + q @ (q.T @ x), dtype=float)
+    opinv = LinearOperator((n, n), matvec=solve, dtype=float)
+    v0 = np.random.default_rng(0).standard_normal(n)
+    ev = eigsh(op, k=1, sigma=SHIFT, which="LM", OPinv=opinv, v0=v0, return_eigenvectors=False)
+    return float(ev[0])
+
+
+def trivial_null_space(v: np.ndarray) -> np.ndarray:
+    """(3N, 4) orthonormal basis of the motions every bearing Laplacian of ``v`` annihilates:
+    the three translations and the scaling about the centroid (§2.1)."""
+    v = np.asarray(v, float)
+    n = len(v)
+    q = np.zeros((3 * n, 4))
+    for a in range(3):
+        q[a::3, a] = 1.0 / math.sqrt(n)
+    c = (v - v.mean(axis=0)).reshape(-1)
+    q[:, 3] = c / np.linalg.norm(c)
+    return q
+
+
+def zero_tol(m: sp.spmatrix) -> float:
+    """Threshold below which an eigenvalue of ``m`` counts as zero (Gershgorin-scaled)."""
+    bound = float(np.max(np.abs(m).sum(axis=1))) if m.shape[0] else 0.0
+    return EIG_TOL * max(1.0, bound)
+
+
+def free_followers(l_ff: np.ndarray, follower_ids: Sequence[int]) -> list[int]:
+    """Ids of the followers with a component in the null space of ``l_ff`` (dense)."""
+    w, vec = np.linalg.eigh(l_ff)
+    null = vec[:, w <= EIG_TOL * max(1.0, float(w[-1]))]
+    weight = np.sum(null.reshape(len(follower_ids), 3, -1) ** 2, axis=(1, 2))
+    return [int(a) for a, x in zip(follower_ids, weight, strict=True) if x > 1e-6]
+
+
+def rigidity_problem(
+    v: np.ndarray, edges: Sequence[tuple[int, int]], ids: Sequence[int],
+    leader_idx: Sequence[int],
+) -> str | None:
+    """What is wrong with the graph (one line, without the key), or None: λ_min(L_ff) > 0
+    (naming the followers the leaders leave free) and rank L = 3N − 4 are required (§2.1,
+    Departure 3)."""
+    n = len(v)
+    lap = sparse_laplacian(v, edges)
+    fol = [k for k in range(n) if k not in set(leader_idx)]
+    if fol:
+        fb = blocks(fol)
+        l_ff = lap[fb][:, fb]
+        if smallest_eig(l_ff) <= zero_tol(l_ff):
+            free = free_followers(l_ff.toarray(), [ids[k] for k in fol])
+            names = ", ".join(str(a) for a in free[:12])
+            more = f" ({len(free)} in all)" if len(free) > 12 else ""
+            return (
+                "the bearing Laplacian's follower block is singular: the leaders do not fix "
+                f"followers {names}{more}"
+            )
+    # rank 3N − 4 ⇔ L + Q Qᵀ is positive definite (Q: the trivial null space)
+    if n >= 2 and smallest_eig(lap, trivial_null_space(v)) <= zero_tol(lap):
+        rank = int(np.sum(np.linalg.eigvalsh(lap.toarray()) > zero_tol(lap)))
+        return (
+            f"not bearing rigid: the bearing Laplacian has rank {rank}, need 3N-4 = "
+            f"{3 * n - 4} (N = {n}); add edges"
+        )
+    return None
+
+
+def graph_spec(
+    formation: FormationConfig, positions: np.ndarray, vertices: np.ndarray,
+    leader_idx: Sequence[int],
+) -> GraphSpec:
+    """The :class:`GraphSpec` of a scenario's ``[formation]`` (scale from the first two
+    leaders' start positions, Departure 1)."""
+    k1, k2 = leader_idx[0], leader_idx[1]
+    return GraphSpec(
+        kind=str(formation.graph),
+        knn_k=int(formation.knn_k),
+        edges=tuple(formation.edges),
+        sensing_range_m=float(formation.sensing_range_m),
+        scale=formation_scale(positions, vertices, k1, k2),
+    )

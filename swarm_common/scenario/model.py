@@ -1,0 +1,386 @@
+"""Scenario files (TOML under ``scenarios/``): schema, validation and typed access.
+
+Every key is declared once in :mod:`swarm_common.scenario.schema` (``SCHEMA``, generated
+from one frozen dataclass per section) with its type and allowed range. Loading
+rejects an unknown key, a wrong type or an out-of-range value with one
+:class:`ScenarioError` line naming the key and what is allowed, e.g.::
+
+    scenarios/bad.toml: controller.gamma = -1.0: must be a number in (0, 100]
+
+Vectors are in the paper's world frame (ENU-style, z up); see docs/conventions.md.
+"""
+
+from __future__ import annotations
+
+import logging
+import tomllib
+from dataclasses import MISSING, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from swarm_common import faults
+from swarm_common.enums import Role, StartMode
+from swarm_common.faults import FaultError, FaultPlan
+from swarm_common.scenario.checks import (
+    check_feasible,
+    check_pads,
+    check_separation,
+    graph_problem,
+)
+from swarm_common.scenario.files import (
+    ALLOW_INFEASIBLE_FLAG,
+    MAX_SCENARIO_BYTES,
+    MAX_TOML_NESTING,
+    SWARM_NAME_RE,
+    SWARM_NAME_RULE,
+    InfeasibleScenarioError,
+    ScenarioError,
+    dump_toml,
+    read_scenario_text,
+    swarm_name_problem,
+)
+from swarm_common.scenario.schema import (
+    AGENT_SCHEMA,
+    OPTIONAL_SECTIONS,
+    SCHEMA,
+    SECTIONS,
+    CommunicationConfig,
+    ControllerConfig,
+    DisturbanceConfig,
+    FormationConfig,
+    LeaderTrajectoryConfig,
+    LifecycleConfig,
+    ObserverConfig,
+    RunConfig,
+    SensingConfig,
+    UnmodeledConfig,
+    VehicleConfig,
+    check_value,
+    describe_spec,
+    toml_value,
+    typed_value,
+)
+
+__all__ = [
+    "ALLOW_INFEASIBLE_FLAG",
+    "MAX_SCENARIO_BYTES",
+    "MAX_TOML_NESTING",
+    "SCHEMA",
+    "SWARM_NAME_RULE",
+    "FaultPlan",
+    "check_feasible",
+    "dump_toml",
+    "graph_problem",
+    "read_scenario_text",
+    "swarm_name_problem",
+    "AgentSpec",
+    "CommunicationConfig",
+    "ControllerConfig",
+    "DisturbanceConfig",
+    "FormationConfig",
+    "InfeasibleScenarioError",
+    "LeaderTrajectoryConfig",
+    "LifecycleConfig",
+    "ObserverConfig",
+    "RunConfig",
+    "Scenario",
+    "SWARM_NAME_RE",
+    "ScenarioError",
+    "SensingConfig",
+    "UnmodeledConfig",
+    "VehicleConfig",
+    "load_scenario",
+    "parse_scenario",
+]
+
+
+log = logging.getLogger(__name__)
+
+# ---------------------------------------------------------------------------
+# Typed view
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AgentSpec:
+    """One agent. ``id`` is 1-based and is the MAVLink system id."""
+
+    id: int
+    role: Role
+    position: np.ndarray  # (3,) ENU m
+    velocity: np.ndarray  # (3,) ENU m/s
+    vertex: np.ndarray  # (3,) formation vertex (unit-free; bearings come from it)
+
+    @property
+    def is_leader(self) -> bool:
+        return self.role is Role.LEADER
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario: one typed, frozen section per TOML table (``sc.controller.kp``)."""
+
+    path: str
+    run: RunConfig
+    vehicle: VehicleConfig
+    disturbance: DisturbanceConfig
+    unmodeled: UnmodeledConfig
+    formation: FormationConfig
+    leader_trajectory: LeaderTrajectoryConfig
+    sensing: SensingConfig
+    communication: CommunicationConfig
+    observer: ObserverConfig
+    controller: ControllerConfig
+    agents: tuple[AgentSpec, ...]
+    lifecycle: LifecycleConfig = LifecycleConfig()
+    # [faults] (optional, docs/faults.md): injected transport faults, none by default
+    faults: FaultPlan = field(default_factory=FaultPlan)
+    # loaded with the feasibility check waived (--allow-infeasible); children inherit it
+    allow_infeasible: bool = False
+
+    def section(self, name: str) -> Any:
+        """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
+        return self.run if name == "scenario" else getattr(self, name)
+
+    def to_toml_dict(self) -> dict[str, Any]:
+        """The scenario as a TOML document (sections and ``agent`` list)."""
+        data: dict[str, Any] = {
+            name: {f.name: toml_value(getattr(self.section(name), f.name)) for f in fields(cls)}
+            for name, cls in SECTIONS.items()
+        }
+        data["agent"] = [
+            {
+                "id": a.id,
+                "role": str(a.role),
+                "position": a.position.tolist(),
+                "velocity": a.velocity.tolist(),
+                "vertex": a.vertex.tolist(),
+            }
+            for a in self.agents
+        ]
+        if self.faults.active:
+            data["faults"] = self.faults.as_toml()
+        return data
+
+    # Convenience accessors used everywhere --------------------------------
+    @property
+    def name(self) -> str:
+        return self.run.name
+
+    @property
+    def seed(self) -> int:
+        return self.run.seed
+
+    @property
+    def outages(self) -> tuple[tuple[float, float], ...]:
+        return self.communication.outages_s
+
+    @property
+    def n(self) -> int:
+        return len(self.agents)
+
+    @property
+    def ids(self) -> list[int]:
+        return [a.id for a in self.agents]
+
+    @property
+    def leader_ids(self) -> list[int]:
+        return [a.id for a in self.agents if a.is_leader]
+
+    @property
+    def follower_ids(self) -> list[int]:
+        return [a.id for a in self.agents if not a.is_leader]
+
+    @property
+    def control_dt(self) -> float:
+        return 1.0 / float(self.run.control_hz)
+
+    @property
+    def physics_dt(self) -> float:
+        return 1.0 / float(self.run.physics_hz)
+
+    @property
+    def substeps_per_control(self) -> int:
+        return self.run.physics_hz // self.run.control_hz
+
+    @property
+    def steps(self) -> int:
+        return int(round(self.run.duration_s * self.run.control_hz))
+
+    def index_of(self, agent_id: int) -> int:
+        for k, a in enumerate(self.agents):
+            if a.id == agent_id:
+                return k
+        raise KeyError(agent_id)
+
+    def initial_positions(self) -> np.ndarray:
+        return np.array([a.position for a in self.agents], dtype=float)
+
+    def initial_velocities(self) -> np.ndarray:
+        return np.array([a.velocity for a in self.agents], dtype=float)
+
+    def vertices(self) -> np.ndarray:
+        return np.array([a.vertex for a in self.agents], dtype=float)
+
+    def with_overrides(self, **sections: dict[str, Any]) -> Scenario:
+        """A copy with some keys replaced (validated like a file)."""
+        data = self.to_toml_dict()
+        for sec, kv in sections.items():
+            data.setdefault(sec, {}).update(kv)
+        return parse_scenario(data, self.path, self.allow_infeasible)
+
+
+def parse_scenario(
+    data: dict[str, Any], path: str = "<scenario>", allow_infeasible: bool = False
+) -> Scenario:
+    """Validate a decoded TOML document and return a :class:`Scenario`.
+
+    A valid scenario the vehicles cannot fly (:func:`check_feasible`) raises
+    :class:`InfeasibleScenarioError`, or only logs a warning with ``allow_infeasible``."""
+
+    def fail(msg: str) -> ScenarioError:
+        return ScenarioError(f"{path}: {msg}")
+
+    for section in data:
+        if section not in ("agent", "faults") and section not in SCHEMA:
+            allowed = ", ".join(sorted([*SCHEMA, "agent", "faults"]))
+            raise fail(f"unknown section [{section}]; allowed: {allowed}")
+    raw: dict[str, dict[str, Any]] = {}
+    for section, keys in SCHEMA.items():
+        given = data.get(section)
+        if given is None and section in OPTIONAL_SECTIONS:
+            given = {f.name: f.default for f in fields(SECTIONS[section])}
+        if given is None:
+            raise fail(f"missing section [{section}]")
+        if not isinstance(given, dict):
+            raise fail(f"[{section}] must be a table")
+        for key in given:
+            if key not in keys:
+                raise fail(f"unknown key {section}.{key}; allowed: {', '.join(keys)}")
+        out: dict[str, Any] = {}
+        cls_fields = fields(SECTIONS[section])
+        defaults = {f.name: f.default for f in cls_fields if f.default is not MISSING}
+        for key, spec in keys.items():
+            if key not in given and key not in defaults:
+                raise fail(f"missing key {section}.{key} ({describe_spec(spec)})")
+            v = given[key] if key in given else toml_value(defaults[key])
+            if not check_value(v, spec):
+                raise fail(f"{section}.{key} = {v!r}: must be {describe_spec(spec)}")
+            out[key] = v
+        raw[section] = out
+
+    sc = raw["scenario"]
+    name_problem = swarm_name_problem(sc["name"])
+    if name_problem is not None:
+        raise fail(f"scenario.name = {sc['name']!r}: {name_problem}")
+    if sc["physics_hz"] % sc["control_hz"] != 0:
+        raise fail(
+            f"scenario.physics_hz = {sc['physics_hz']}: must be a multiple of "
+            f"scenario.control_hz = {sc['control_hz']}"
+        )
+    veh = raw["vehicle"]
+    if veh["thrust_max_n"] <= veh["mass_kg"] * veh["gravity_mps2"]:
+        raise fail(
+            f"vehicle.thrust_max_n = {veh['thrust_max_n']}: must exceed the weight "
+            f"mass_kg * gravity_mps2 = {veh['mass_kg'] * veh['gravity_mps2']:.2f} N"
+        )
+
+    agents_raw = data.get("agent")
+    if not isinstance(agents_raw, list) or len(agents_raw) < 2:
+        raise fail("[[agent]] must list at least 2 agents")
+    agents: list[AgentSpec] = []
+    seen: set[int] = set()
+    for k, a in enumerate(agents_raw):
+        where = f"agent[{k}]"
+        if not isinstance(a, dict):
+            raise fail(f"{where} must be a table")
+        for key in a:
+            if key not in AGENT_SCHEMA:
+                raise fail(f"unknown key {where}.{key}; allowed: {', '.join(AGENT_SCHEMA)}")
+        for key, spec in AGENT_SCHEMA.items():
+            if key not in a:
+                raise fail(f"missing key {where}.{key} ({describe_spec(spec)})")
+            if not check_value(a[key], spec):
+                raise fail(f"{where}.{key} = {a[key]!r}: must be {describe_spec(spec)}")
+        if a["id"] in seen:
+            raise fail(f"{where}.id = {a['id']}: duplicate agent id")
+        seen.add(a["id"])
+        agents.append(
+            AgentSpec(
+                id=int(a["id"]),
+                role=Role(a["role"]),
+                position=np.array(a["position"], dtype=float),
+                velocity=np.array(a["velocity"], dtype=float),
+                vertex=np.array(a["vertex"], dtype=float),
+            )
+        )
+    leaders = raw["formation"]["leaders"]
+    if len(set(leaders)) != len(leaders):
+        raise fail(f"formation.leaders = {leaders}: duplicate agent id")
+    if len(set(leaders)) >= len(agents):
+        raise fail(f"formation.leaders = {leaders}: every agent is a leader; need a follower")
+    for lid in leaders:
+        if lid not in seen:
+            raise fail(f"formation.leaders = {leaders}: id {lid} is not an [[agent]] id")
+    for a in agents:
+        if a.is_leader != (a.id in leaders):
+            raise fail(
+                f"agent id {a.id}: role = {a.role!r} disagrees with formation.leaders = {leaders}"
+            )
+    if len(leaders) < 2:
+        raise fail(f"formation.leaders = {leaders}: need at least 2 leaders (bearing scale)")
+    verts = np.array([a.vertex for a in agents])
+    for i in range(len(agents)):
+        for j in range(i + 1, len(agents)):
+            if np.linalg.norm(verts[i] - verts[j]) < 1e-9:
+                raise fail(
+                    f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
+                )
+    check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
+    if raw["lifecycle"]["start"] == StartMode.GROUND:
+        check_pads(agents, float(raw["controller"]["d_safe_m"]), fail)
+    plan = _parse_faults(data.get("faults", {}), seen, fail)
+    typed = {
+        ("run" if name == "scenario" else name): cls(
+            **{f.name: typed_value(f, raw[name][f.name]) for f in fields(cls)}
+        )
+        for name, cls in SECTIONS.items()
+    }
+    scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible,
+                    faults=plan, **typed)
+    problem = graph_problem(scen)
+    if problem is not None:
+        raise fail(problem)
+    check_feasible(scen)
+    return scen
+
+
+def _parse_faults(table: object, ids: set[int], fail: Any) -> FaultPlan:
+    """The ``[faults]`` table (:class:`swarm_common.faults.FaultPlan`), per-agent tables
+    naming agents of this scenario only."""
+    try:
+        plan = FaultPlan.parse(table)
+    except FaultError as exc:
+        raise fail(str(exc)) from None
+    for aid in plan.agents:
+        if aid not in ids:
+            raise fail(f"faults.agent.{aid}: {aid} is not an [[agent]] id")
+    return plan
+
+
+def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
+    """Read and validate a scenario TOML file (``allow_infeasible``: :func:`parse_scenario`).
+
+    Its ``[faults]`` plan becomes this process's (:func:`swarm_common.faults.install`): the
+    MAVLink and Zenoh links the process opens afterwards inject those faults."""
+    p = Path(path)
+    text = read_scenario_text(p)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{p}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise ScenarioError(f"{p}: not a valid scenario (nested too deep)") from None
+    sc = parse_scenario(data, str(p), allow_infeasible)
+    faults.install(sc.faults, sc.seed)  # the transports this process opens apply it
+    return sc

@@ -1,0 +1,259 @@
+"""Flight modes, arming and mode transitions of one simulated PX4 vehicle.
+
+Functions of the :class:`~vehicle_sim.vehicle.Vehicle` (which delegates to them); its
+state (``mode``, ``armed``, ``nav``, ``rtl`` …) stays on the vehicle. docs/px4/modes.md
+describes every mode; in short:
+
+* POSCTL, ALTCTL (no sticks: armed = hold), AUTO.LOITER without a target ("HOLD") and
+  AUTO.LAND fly the onboard hold/land controller (:mod:`vehicle_sim.physics.failsafe_controller`),
+  exactly as before the AUTO modes existed;
+* AUTO.TAKEOFF, AUTO.LOITER with a target (DO_REPOSITION, the end of a take-off),
+  AUTO.RTL and AUTO.MISSION fly a :class:`~vehicle_sim.autopilot.nav.NavTarget` (``vehicle.nav``)
+  with the position controller (:mod:`vehicle_sim.physics.position_control`);
+* OFFBOARD flies the client's setpoints; losing them for ``COM_OF_LOSS_T`` seconds
+  (simulated time) triggers ``COM_OBL_RC_ACT``: 3 return, 4 land, anything else hold
+  (there are no sticks, so PX4's position/altitude/manual actions hold too).
+
+After touching down in a landing (AUTO.LAND, a mission's LAND, RTL's last phase) the
+vehicle disarms once it has been on the ground for ``COM_DISARM_LAND`` seconds (a
+negative value: never).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pymavlink.dialects.v20 import common as M
+
+from swarm_common import px4
+from swarm_common.enums import FailsafeAction, VehicleMode
+from vehicle_sim.autopilot import nav_flight
+from vehicle_sim.autopilot.nav import NavKind, NavTarget
+from vehicle_sim.autopilot.param_defaults import OBL_ACT_LAND, OBL_ACT_RETURN
+
+if TYPE_CHECKING:
+    from vehicle_sim.vehicle import Vehicle
+
+HOLD_MODES = (VehicleMode.POSCTL, VehicleMode.ALTCTL, VehicleMode.HOLD)
+NAV_MODES = (VehicleMode.TAKEOFF, VehicleMode.RTL, VehicleMode.MISSION)
+
+
+# -- entering modes -------------------------------------------------------------------------
+def takeoff_target(v: Vehicle, alt_m: float | None) -> NavTarget:
+    """Climb over the current point to ``alt_m`` above home (None: MIS_TAKEOFF_ALT), never
+    lower than the vehicle is now."""
+    alt = float(v.params.get("MIS_TAKEOFF_ALT")) if alt_m is None else float(alt_m)
+    p = v.p()
+    return NavTarget(NavKind.TAKEOFF, np.array([p[0], p[1], max(alt, float(p[2]))]))
+
+
+def rtl_plan(v: Vehicle) -> nav_flight.RtlPlan:
+    """A return from here to the nearest rally point, else home."""
+    dest = nav_flight.nearest_xy(v.p(), v.home_enu, v.mission.rally_points_enu())
+    return nav_flight.RtlPlan(v.p(), dest, float(v.params.get("RTL_RETURN_ALT")))
+
+
+def engage_onboard(v: Vehicle) -> None:
+    """Point the controllers at the current mode, from here (on a mode change, on arming)."""
+    if v.mode in HOLD_MODES:
+        v.fs.engage(FailsafeAction.HOLD, v.p(), v.yaw())
+    elif v.mode == VehicleMode.LAND:
+        v.fs.gains.land_speed = float(v.params.get("MPC_LAND_SPEED"))
+        v.fs.engage(FailsafeAction.LAND, v.p(), v.yaw())
+    v.pc.reset(v.yaw())
+
+
+def enter_mode(
+    v: Vehicle, mode: VehicleMode, why: str = "", nav: NavTarget | None = None
+) -> None:
+    """Switch to ``mode``; ``nav``: the target an AUTO.LOITER flies (None: hold here)."""
+    prev = v.mode
+    v.mode = mode
+    keep_integral = nav is not None and (prev in NAV_MODES or v.nav is not None)
+    v.nav = nav
+    v.rtl = None
+    if not keep_integral:
+        engage_onboard(v)
+    if mode == VehicleMode.TAKEOFF:
+        v.nav = takeoff_target(v, v.takeoff_alt)
+    elif mode == VehicleMode.RTL:
+        v.rtl = rtl_plan(v)
+        v.nav = v.rtl.target(v.p(), v.dyn.v[v.idx])
+    v.takeoff_alt = None
+    v.landed_since = None
+    if prev != mode or why:
+        v.event(f"mode {prev} -> {mode}{(' (' + why + ')') if why else ''}")
+
+
+def request_mode(v: Vehicle, main: int, sub: int, sim_t: float) -> int:
+    """Switch on a PX4 (main, sub) custom mode. Returns a MAV_RESULT."""
+    target = px4.vehicle_mode(main, sub)
+    if target is None:
+        return M.MAV_RESULT_UNSUPPORTED
+    if v.terminated:
+        return M.MAV_RESULT_DENIED
+    if target == VehicleMode.OFFBOARD and not v.setpoints_streaming(sim_t):
+        v.event("OFFBOARD refused: no setpoint stream", M.MAV_SEVERITY_WARNING)
+        return M.MAV_RESULT_TEMPORARILY_REJECTED
+    if target == VehicleMode.RTL and not v.armed:
+        v.event("RTL refused: not armed", M.MAV_SEVERITY_WARNING)
+        return M.MAV_RESULT_DENIED
+    if target == VehicleMode.MISSION and target != v.mode:
+        res = int(v.mission.start(sim_t))
+        if res != M.MAV_RESULT_ACCEPTED:
+            v.event("MISSION refused: no mission", M.MAV_SEVERITY_WARNING)
+            return res
+    v.failsafe = False
+    if target != v.mode:
+        enter_mode(v, target)
+    return M.MAV_RESULT_ACCEPTED
+
+
+def takeoff(v: Vehicle, alt_m: float | None) -> int:
+    """NAV_TAKEOFF: AUTO.TAKEOFF to ``alt_m`` above home (None: MIS_TAKEOFF_ALT)."""
+    if v.terminated:
+        return M.MAV_RESULT_DENIED
+    v.failsafe = False
+    v.takeoff_alt = alt_m
+    enter_mode(v, VehicleMode.TAKEOFF, "takeoff")
+    return M.MAV_RESULT_ACCEPTED
+
+
+def reposition(v: Vehicle, target: NavTarget) -> int:
+    """DO_REPOSITION: AUTO.LOITER flying to ``target`` (armed vehicles only, as PX4)."""
+    if v.terminated or not v.armed:
+        return M.MAV_RESULT_DENIED
+    v.failsafe = False
+    enter_mode(v, VehicleMode.HOLD, "reposition", nav=target)
+    return M.MAV_RESULT_ACCEPTED
+
+
+def start_mission(v: Vehicle, sim_t: float) -> int:
+    """MISSION_START: (re)start the stored mission in AUTO.MISSION."""
+    if v.terminated:
+        return M.MAV_RESULT_DENIED
+    res = int(v.mission.start(sim_t))
+    if res == M.MAV_RESULT_ACCEPTED:
+        v.failsafe = False
+        enter_mode(v, VehicleMode.MISSION, "mission start")
+    return res
+
+
+# -- arming ---------------------------------------------------------------------------------
+def arm(v: Vehicle, sim_t: float) -> int:
+    if v.terminated:
+        v.event("arming denied: flight terminated", M.MAV_SEVERITY_CRITICAL)
+        return M.MAV_RESULT_DENIED
+    if v.armed:
+        return M.MAV_RESULT_ACCEPTED
+    if v.mode == VehicleMode.RTL:
+        v.event("arming denied: not in an armable mode", M.MAV_SEVERITY_WARNING)
+        return M.MAV_RESULT_DENIED
+    v.armed = True
+    if not v.ever_armed:
+        v.ever_armed = True
+        v.release_requested = True
+    engage_onboard(v)
+    if v.mode == VehicleMode.TAKEOFF:
+        v.nav = takeoff_target(v, None if v.nav is None else float(v.nav.position_enu[2]))
+    v.landed_since = None
+    v.event("armed")
+    return M.MAV_RESULT_ACCEPTED
+
+
+def disarm(v: Vehicle, force: bool, why: str = "") -> int:
+    if not v.armed:
+        return M.MAV_RESULT_ACCEPTED
+    if not force and not v.on_ground():
+        v.event("disarm denied: not landed", M.MAV_SEVERITY_WARNING)
+        return M.MAV_RESULT_DENIED
+    v.armed = False
+    v.failsafe = False
+    if v.mode not in (VehicleMode.TAKEOFF, VehicleMode.MISSION):
+        v.nav = None
+    v.rtl = None
+    v.release_requested = True  # a forced disarm drops it, fixture or not
+    v.event("disarmed" + (f" ({why})" if why else ""))
+    return M.MAV_RESULT_ACCEPTED
+
+
+def terminate(v: Vehicle) -> int:
+    v.terminated = True
+    v.armed = False
+    v.failsafe = False
+    v.release_requested = True
+    v.event("FLIGHT TERMINATION: motors off", M.MAV_SEVERITY_EMERGENCY)
+    return M.MAV_RESULT_ACCEPTED
+
+
+# -- per step ---------------------------------------------------------------------------------
+def offboard_loss(v: Vehicle, sim_t: float) -> None:
+    """In OFFBOARD without a valid setpoint for COM_OF_LOSS_T: COM_OBL_RC_ACT."""
+    timeout = float(v.params.get("COM_OF_LOSS_T"))
+    if (
+        v.mode == VehicleMode.OFFBOARD
+        and not v.failsafe
+        and (v.last_sp_t is None or sim_t - v.last_sp_t > timeout)
+    ):
+        v.ctr.failsafes += 1
+        act = int(v.params.get("COM_OBL_RC_ACT"))
+        target = VehicleMode.HOLD
+        if act == OBL_ACT_LAND:
+            target = VehicleMode.LAND
+        elif act == OBL_ACT_RETURN and v.armed:
+            target = VehicleMode.RTL
+        v.event(f"failsafe: offboard lost, {target.lower()}", M.MAV_SEVERITY_CRITICAL)
+        enter_mode(v, target)
+        v.failsafe = True
+
+
+def advance_auto(v: Vehicle, sim_t: float) -> None:
+    """AUTO modes: take-off complete -> loiter there; RTL phases; the mission's target."""
+    if not v.armed:
+        return
+    p = v.p()
+    if v.mode == VehicleMode.TAKEOFF and v.nav is not None:
+        if nav_flight.takeoff_reached(v.nav, p):
+            loiter = NavTarget(NavKind.LOITER, np.array(v.nav.position_enu, dtype=float))
+            enter_mode(v, VehicleMode.HOLD, "takeoff complete", nav=loiter)
+    elif v.mode == VehicleMode.RTL and v.rtl is not None:
+        v.nav = v.rtl.target(p, v.dyn.v[v.idx])
+    elif v.mode == VehicleMode.MISSION:
+        t = v.mission.nav_target(p, v.dyn.v[v.idx], sim_t)
+        if t is not None and t.kind == NavKind.RTL:
+            enter_mode(v, VehicleMode.RTL, "mission")
+        elif t is not None:
+            v.nav = t
+        elif not v.on_ground():
+            enter_mode(v, VehicleMode.HOLD, "mission complete")
+        else:
+            v.nav = None
+
+
+def landing(v: Vehicle) -> bool:
+    """Armed and descending to land (AUTO.LAND, a mission LAND, RTL's last phase)."""
+    if not v.armed or v.mode == VehicleMode.OFFBOARD:
+        return False
+    return v.mode == VehicleMode.LAND or (v.nav is not None and v.nav.kind == NavKind.LAND)
+
+
+def taking_off(v: Vehicle) -> bool:
+    """Armed and climbing to a take-off altitude (AUTO.TAKEOFF, a mission TAKEOFF)."""
+    if not v.armed or v.mode == VehicleMode.OFFBOARD:
+        return False
+    return v.nav is not None and v.nav.kind == NavKind.TAKEOFF
+
+
+def auto_disarm(v: Vehicle, sim_t: float) -> None:
+    """Disarm after COM_DISARM_LAND seconds on the ground in a landing."""
+    delay = float(v.params.get("COM_DISARM_LAND"))
+    if not landing(v) or delay < 0:
+        return
+    if v.on_ground():
+        if v.landed_since is None:
+            v.landed_since = sim_t
+        elif sim_t - v.landed_since >= delay:
+            disarm(v, force=False, why="landed")
+    else:
+        v.landed_since = None

@@ -1,0 +1,109 @@
+"""The geofence the simulator enforces (pure: ENU geometry, no I/O).
+
+Built from the stored FENCE items (:func:`fence_from_items`): polygons
+(``MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION/EXCLUSION``, ``param1`` consecutive vertices)
+and circles (``MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION/EXCLUSION``, ``param1`` = radius, m),
+plus the two PX4 limits ``GF_MAX_HOR_DIST`` (horizontal distance from home, m) and
+``GF_MAX_VER_DIST`` (height above home, m); 0 turns a limit off.
+
+Semantics: with at least one inclusion zone, the vehicle must be inside at least one of
+them (the inclusion zones form one union: MAVLink's inclusion *groups*, ``param2``, are not
+distinguished); it must be outside every exclusion zone. Zones are 2-D (no altitude).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import common as M
+
+from vehicle_sim.services.mission_items import FENCE_CIRCLE, FENCE_POLYGON, Item, item_position_enu
+
+
+@dataclass(frozen=True)
+class Polygon:
+    """Vertices (N, 2) ENU x/y (m), in order; ``inclusion``: inside is allowed."""
+
+    xy: np.ndarray
+    inclusion: bool
+
+    def contains(self, x: float, y: float) -> bool:
+        """Even-odd ray casting (a point on an edge may fall either way)."""
+        inside = False
+        n = len(self.xy)
+        for i in range(n):
+            x1, y1 = self.xy[i]
+            x2, y2 = self.xy[(i + 1) % n]
+            if (y1 > y) != (y2 > y):
+                x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+                if x < x_cross:
+                    inside = not inside
+        return inside
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Centre ENU x/y (m) and radius (m); ``inclusion``: inside is allowed."""
+
+    cx: float
+    cy: float
+    radius: float
+    inclusion: bool
+
+    def contains(self, x: float, y: float) -> bool:
+        return math.hypot(x - self.cx, y - self.cy) <= self.radius
+
+
+@dataclass
+class Geofence:
+    """Zones plus the distance limits; :meth:`breach` names the first violation."""
+
+    zones: list[Polygon | Circle] = field(default_factory=list)
+
+    def __bool__(self) -> bool:
+        return bool(self.zones)
+
+    def breach(
+        self, p_enu: np.ndarray, home_enu: np.ndarray, max_hor_m: float = 0.0,
+        max_ver_m: float = 0.0,
+    ) -> str | None:  # fmt: skip
+        """None inside the fence, else a short reason (for STATUSTEXT)."""
+        x, y, z = (float(c) for c in p_enu[:3])
+        if max_hor_m > 0 and math.hypot(x - home_enu[0], y - home_enu[1]) > max_hor_m:
+            return f"more than {max_hor_m:g} m from home"
+        if max_ver_m > 0 and z - float(home_enu[2]) > max_ver_m:
+            return f"more than {max_ver_m:g} m above home"
+        inclusions = [zn for zn in self.zones if zn.inclusion]
+        if inclusions and not any(zn.contains(x, y) for zn in inclusions):
+            return "outside the inclusion zone"
+        for zn in self.zones:
+            if not zn.inclusion and zn.contains(x, y):
+                return "inside an exclusion zone"
+        return None
+
+
+def fence_from_items(cfg: Any, items: Sequence[Item]) -> Geofence:
+    """The :class:`Geofence` of a validated FENCE item list (return points are ignored)."""
+    zones: list[Polygon | Circle] = []
+    i = 0
+    while i < len(items):
+        it = items[i]
+        if it.command in FENCE_POLYGON:
+            n = int(it.param1)
+            pts = [item_position_enu(cfg, v) for v in items[i : i + n]]
+            xy = np.array([[0.0, 0.0] if q is None else [q[0], q[1]] for q in pts])
+            inc = it.command == M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+            zones.append(Polygon(xy, inc))
+            i += n
+            continue
+        if it.command in FENCE_CIRCLE:
+            q = item_position_enu(cfg, it)
+            cx, cy = (0.0, 0.0) if q is None else (float(q[0]), float(q[1]))
+            inc = it.command == M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION
+            zones.append(Circle(cx, cy, float(it.param1), inc))
+        i += 1
+    return Geofence(zones)
