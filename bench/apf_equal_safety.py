@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from gcs.mission.inproc import run_inproc
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 
 SCENARIO = "scenarios/cube8.toml"
 TUNED_APF = {"apf_gain": 16.0, "apf_velocity_gain": 16.0, "apf_radius_m": 3.0}
@@ -36,7 +36,7 @@ def _one(job: tuple[str, int, float]) -> tuple[str, int, dict[str, Any]]:
     method, overrides = VARIANTS[name]
     sc = load_scenario(SCENARIO)
     if overrides:
-        sc = sc.with_overrides(controller=overrides)
+        sc = with_overrides(sc, controller=overrides)
     res = run_inproc(sc, method=method, seed=seed, duration=duration)
     return name, seed, res.metrics
 

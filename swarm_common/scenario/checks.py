@@ -19,7 +19,7 @@ from swarm_common.scenario.feasibility import feasibility_problem
 from swarm_common.scenario.files import ALLOW_INFEASIBLE_FLAG, InfeasibleScenarioError
 
 if TYPE_CHECKING:
-    from swarm_common.scenario.model import AgentSpec, Scenario
+    from swarm_common.scenario.spec import AgentSpec, Scenario
 
 log = logging.getLogger(__name__)
 

@@ -39,7 +39,7 @@ from swarm_common.scenario import graphs
 from swarm_common.unmodeled import regressor
 
 if TYPE_CHECKING:
-    from swarm_common.scenario.model import Scenario
+    from swarm_common.scenario.spec import Scenario
 
 FEEDBACK_RESERVE = 0.2  # share of the input set kept for feedback (1 − r scales the set)
 PHASE_SAMPLES = 180  # samples of ωt over one period (2°: sampled peaks within 2e-4)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import tomllib
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +62,7 @@ from swarm_common.scenario.schema import (
     toml_value,
     typed_value,
 )
+from swarm_common.scenario.spec import AgentSpec, Scenario
 
 __all__ = [
     "ALLOW_INFEASIBLE_FLAG",
@@ -93,141 +94,12 @@ __all__ = [
     "VehicleConfig",
     "load_scenario",
     "parse_scenario",
+    "with_overrides",
 ]
 
 
 log = logging.getLogger(__name__)
 
-# ---------------------------------------------------------------------------
-# Typed view
-# ---------------------------------------------------------------------------
-@dataclass(frozen=True)
-class AgentSpec:
-    """One agent. ``id`` is 1-based and is the MAVLink system id."""
-
-    id: int
-    role: Role
-    position: np.ndarray  # (3,) ENU m
-    velocity: np.ndarray  # (3,) ENU m/s
-    vertex: np.ndarray  # (3,) formation vertex (unit-free; bearings come from it)
-
-    @property
-    def is_leader(self) -> bool:
-        return self.role is Role.LEADER
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """A validated scenario: one typed, frozen section per TOML table (``sc.controller.kp``)."""
-
-    path: str
-    run: RunConfig
-    vehicle: VehicleConfig
-    disturbance: DisturbanceConfig
-    unmodeled: UnmodeledConfig
-    formation: FormationConfig
-    leader_trajectory: LeaderTrajectoryConfig
-    sensing: SensingConfig
-    communication: CommunicationConfig
-    observer: ObserverConfig
-    controller: ControllerConfig
-    agents: tuple[AgentSpec, ...]
-    lifecycle: LifecycleConfig = LifecycleConfig()
-    # [faults] (optional, docs/faults.md): injected transport faults, none by default
-    faults: FaultPlan = field(default_factory=FaultPlan)
-    # loaded with the feasibility check waived (--allow-infeasible); children inherit it
-    allow_infeasible: bool = False
-
-    def section(self, name: str) -> Any:
-        """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
-        return self.run if name == "scenario" else getattr(self, name)
-
-    def to_toml_dict(self) -> dict[str, Any]:
-        """The scenario as a TOML document (sections and ``agent`` list)."""
-        data: dict[str, Any] = {
-            name: {f.name: toml_value(getattr(self.section(name), f.name)) for f in fields(cls)}
-            for name, cls in SECTIONS.items()
-        }
-        data["agent"] = [
-            {
-                "id": a.id,
-                "role": str(a.role),
-                "position": a.position.tolist(),
-                "velocity": a.velocity.tolist(),
-                "vertex": a.vertex.tolist(),
-            }
-            for a in self.agents
-        ]
-        if self.faults.active:
-            data["faults"] = self.faults.as_toml()
-        return data
-
-    # Convenience accessors used everywhere --------------------------------
-    @property
-    def name(self) -> str:
-        return self.run.name
-
-    @property
-    def seed(self) -> int:
-        return self.run.seed
-
-    @property
-    def outages(self) -> tuple[tuple[float, float], ...]:
-        return self.communication.outages_s
-
-    @property
-    def n(self) -> int:
-        return len(self.agents)
-
-    @property
-    def ids(self) -> list[int]:
-        return [a.id for a in self.agents]
-
-    @property
-    def leader_ids(self) -> list[int]:
-        return [a.id for a in self.agents if a.is_leader]
-
-    @property
-    def follower_ids(self) -> list[int]:
-        return [a.id for a in self.agents if not a.is_leader]
-
-    @property
-    def control_dt(self) -> float:
-        return 1.0 / float(self.run.control_hz)
-
-    @property
-    def physics_dt(self) -> float:
-        return 1.0 / float(self.run.physics_hz)
-
-    @property
-    def substeps_per_control(self) -> int:
-        return self.run.physics_hz // self.run.control_hz
-
-    @property
-    def steps(self) -> int:
-        return int(round(self.run.duration_s * self.run.control_hz))
-
-    def index_of(self, agent_id: int) -> int:
-        for k, a in enumerate(self.agents):
-            if a.id == agent_id:
-                return k
-        raise KeyError(agent_id)
-
-    def initial_positions(self) -> np.ndarray:
-        return np.array([a.position for a in self.agents], dtype=float)
-
-    def initial_velocities(self) -> np.ndarray:
-        return np.array([a.velocity for a in self.agents], dtype=float)
-
-    def vertices(self) -> np.ndarray:
-        return np.array([a.vertex for a in self.agents], dtype=float)
-
-    def with_overrides(self, **sections: dict[str, Any]) -> Scenario:
-        """A copy with some keys replaced (validated like a file)."""
-        data = self.to_toml_dict()
-        for sec, kv in sections.items():
-            data.setdefault(sec, {}).update(kv)
-        return parse_scenario(data, self.path, self.allow_infeasible)
 
 
 def parse_scenario(
@@ -384,3 +256,11 @@ def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
     sc = parse_scenario(data, str(p), allow_infeasible)
     faults.install(sc.faults, sc.seed)  # the transports this process opens apply it
     return sc
+
+
+def with_overrides(sc: Scenario, **sections: dict[str, Any]) -> Scenario:
+    """A copy of ``sc`` with some keys replaced (validated like a file)."""
+    data = sc.to_toml_dict()
+    for sec, kv in sections.items():
+        data.setdefault(sec, {}).update(kv)
+    return parse_scenario(data, sc.path, sc.allow_infeasible)

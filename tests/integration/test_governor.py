@@ -10,15 +10,15 @@ from conftest import ROOT  # noqa: E402
 from gcs.mission.inproc import run_inproc
 from offboard.agent.factory import make_agent
 from offboard.agent.governor import governor_for
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 
 
 @pytest.fixture(scope="module")
 def fast():
-    return load_scenario(CUBE8, allow_infeasible=True).with_overrides(
-        leader_trajectory={"frequency_hz": 0.4}
+    return with_overrides(
+        load_scenario(CUBE8, allow_infeasible=True), leader_trajectory={"frequency_hz": 0.4}
     )
 
 

@@ -12,7 +12,7 @@ from gcs.mission.inproc import f32, run_inproc, wire_to_command
 from gcs.report.metrics import METRIC_KEYS
 from offboard.agent.attitude import setpoint_from_accel
 from offboard.agent.factory import FollowerAgent, make_agent
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 SERIES_KEYS = ("t", "p", "v", "p_des", "v_des", "z1", "z2", "lumped_est", "lumped_true", "u",
@@ -93,7 +93,7 @@ def test_cli_run_json(tmp_path):
 
 
 def test_rcbf_safe_with_sensing_dropouts(sc):
-    s2 = sc.with_overrides(sensing={"dropout_prob": 0.1})
+    s2 = with_overrides(sc, sensing={"dropout_prob": 0.1})
     r = run_inproc(s2, "rcbf", duration=5.0)
     assert r.metrics["min_distance_m"] >= s2.controller.d_safe_m
     assert np.all(np.isfinite(r.series.u))

@@ -20,7 +20,7 @@ from offboard.estimation.deso import (
 )
 from offboard.estimation.deso_gains import gain_report
 from offboard.estimation.peer_table import rows_of
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 from vehicle_sim.physics.dynamics import regressor as sim_regressor
 
 
@@ -139,7 +139,7 @@ def test_closed_loop_observer_converges_from_large_initial_error(sc, init_err, m
     2 m and μ = 0.05 are in docs/estimation.md; one here to keep the unit suite short.)"""
     from gcs.mission.inproc import run_inproc
 
-    s2 = sc.with_overrides(observer={"init_pos_error_m": init_err, "mu": mu})
+    s2 = with_overrides(sc, observer={"init_pos_error_m": init_err, "mu": mu})
     f = formation_from_scenario(s2)
     fol = list(f.follower_idx)
     for seed in seeds:

@@ -11,7 +11,7 @@ import pytest
 from conftest import CUBE8
 
 from swarm_common.enums import Role
-from swarm_common.scenario.model import AgentSpec, load_scenario
+from swarm_common.scenario.model import AgentSpec, load_scenario, with_overrides
 from vehicle_sim.physics.dynamics import SwarmDynamics, external_disturbance, regressor
 
 
@@ -25,8 +25,7 @@ def quiet(sc, **zeta):
     z = [0.0] * 6
     for k, v in zeta.items():
         z[int(k[1:])] = v
-    return sc.with_overrides(
-        disturbance={"amplitude_n": 0.0},
+    return with_overrides(sc, disturbance={"amplitude_n": 0.0},
         unmodeled={"zeta_nominal": z, "zeta_spread": 0.0},
     )
 
@@ -121,7 +120,7 @@ def test_tilt_accelerates_horizontally(cube8):
 
 
 def test_external_disturbance_effect(cube8):
-    sc = cube8.with_overrides(unmodeled={"zeta_nominal": [0.0] * 6, "zeta_spread": 0.0})
+    sc = with_overrides(cube8, unmodeled={"zeta_nominal": [0.0] * 6, "zeta_spread": 0.0})
     dyn = SwarmDynamics(sc)
     a, w = sc.disturbance.amplitude_n, sc.disturbance.omega_rad_s
     for t in (0.0, 0.7, 2.0):

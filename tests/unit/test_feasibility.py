@@ -34,6 +34,7 @@ from swarm_common.scenario.model import (
     ScenarioError,
     load_scenario,
     parse_scenario,
+    with_overrides,
 )
 
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
@@ -171,7 +172,7 @@ def test_allow_infeasible_logs_a_warning_and_is_inherited(tmp_path, caplog):
         sc = load_scenario(p, allow_infeasible=True)
     assert sc.allow_infeasible
     assert any("leader_trajectory.frequency_hz = 0.4" in r.getMessage() for r in caplog.records)
-    assert sc.with_overrides(sensing={"dropout_prob": 0.1}).allow_infeasible
+    assert with_overrides(sc, sensing={"dropout_prob": 0.1}).allow_infeasible
     with pytest.raises(InfeasibleScenarioError):
         parse_scenario(sc.to_toml_dict(), str(p))
 

@@ -8,14 +8,14 @@ import numpy as np
 from offboard.agent.governor import _at_frequency, _origins, first_guess, governor_for
 from offboard.estimation.reference import LeaderTrajectory, exo_propagator
 from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, InputLimits, acceleration_problem
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 
 CUBE8 = "scenarios/cube8.toml"
 
 
 def _fast():
-    return load_scenario(CUBE8, allow_infeasible=True).with_overrides(
-        leader_trajectory={"frequency_hz": 0.4}
+    return with_overrides(
+        load_scenario(CUBE8, allow_infeasible=True), leader_trajectory={"frequency_hz": 0.4}
     )
 
 

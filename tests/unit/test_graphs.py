@@ -19,7 +19,7 @@ from offboard.estimation.deso_gains import gain_report
 from offboard.estimation.peer_table import rows_of
 from offboard.estimation.reference import DesiredStateObserver, LeaderTrajectory
 from swarm_common.scenario import graphs
-from swarm_common.scenario.model import ScenarioError, load_scenario
+from swarm_common.scenario.model import ScenarioError, load_scenario, with_overrides
 
 GRID27 = ROOT / "scenarios" / "grid27_knn.toml"
 GRID = np.array(list(itertools.product(range(3), repeat=3)), dtype=float)  # 27 vertices
@@ -127,12 +127,12 @@ def test_scenario_defaults_keep_old_files_valid():
 )
 def test_bad_graph_refused_at_load_naming_the_key(sc27, over, pattern):
     with pytest.raises(ScenarioError, match=pattern) as ei:
-        sc27.with_overrides(formation=over)
+        with_overrides(sc27, formation=over)
     assert "\n" not in str(ei.value)
 
 
 def test_range_graph_loads_and_is_the_range_rule(sc27):
-    sc = sc27.with_overrides(formation={"graph": "range", "sensing_range_m": 4.3})
+    sc = with_overrides(sc27, formation={"graph": "range", "sensing_range_m": 4.3})
     f = formation_from_scenario(sc)
     assert len(f.edges) == 54 + 72  # 4.3 m at 3 m per unit: axis edges and face diagonals
 
@@ -140,7 +140,7 @@ def test_range_graph_loads_and_is_the_range_rule(sc27):
 def test_edges_graph_builds_the_listed_pairs(sc27):
     f0 = formation_from_scenario(sc27)
     pairs = [[sc27.ids[i], sc27.ids[j]] for i, j in f0.edges]
-    sc = sc27.with_overrides(formation={"graph": "edges", "edges": pairs})
+    sc = with_overrides(sc27, formation={"graph": "edges", "edges": pairs})
     assert formation_from_scenario(sc).edges == f0.edges
 
 

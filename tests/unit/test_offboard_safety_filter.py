@@ -23,7 +23,7 @@ from offboard.safety.filter import (
 )
 from offboard.safety.rcbf.clf_rcbf import clf_terms
 from swarm_common.enums import Method, QPStatus
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 LO, HI = np.full(3, -3.0), np.full(3, 3.0)
@@ -110,7 +110,7 @@ def test_close_pair_changes_control_for_rcbf_and_apf_only(sc) -> None:
 
 
 def test_rcbf_needs_a_positive_tau(sc) -> None:
-    ctl = sc.with_overrides(controller={"tau_safe_s": 0.0}).controller
+    ctl = with_overrides(sc, controller={"tau_safe_s": 0.0}).controller
     with pytest.raises(ValueError, match="tau_safe_s"):
         RcbfFilter(ctl, LO, HI, np.zeros(sc.n, dtype=bool))
 

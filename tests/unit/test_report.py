@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from gcs.report.comparison import (
-    closest_approach,
     compare_legend,
     compare_table,
     paper_differences,
@@ -18,6 +17,7 @@ from gcs.report.comparison import (
     write_report,
 )
 from gcs.report.plots import snapshot_times
+from gcs.report.shared import closest_approach
 from gcs.report.sweep import seeds_legend, seeds_table
 
 D_SAFE = 0.5

@@ -1,0 +1,156 @@
+"""The typed view of a validated scenario: :class:`Scenario` and its :class:`AgentSpec`.
+
+Built by :func:`swarm_common.scenario.model.parse_scenario` (which validates and checks the
+file first); the checks in :mod:`swarm_common.scenario.checks` and
+:mod:`swarm_common.scenario.feasibility` read it, so it imports neither.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from swarm_common.enums import Role
+from swarm_common.faults import FaultPlan
+from swarm_common.scenario.schema import (
+    SECTIONS,
+    CommunicationConfig,
+    ControllerConfig,
+    DisturbanceConfig,
+    FormationConfig,
+    LeaderTrajectoryConfig,
+    LifecycleConfig,
+    ObserverConfig,
+    RunConfig,
+    SensingConfig,
+    UnmodeledConfig,
+    VehicleConfig,
+    toml_value,
+)
+
+
+# ---------------------------------------------------------------------------
+# Typed view
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AgentSpec:
+    """One agent. ``id`` is 1-based and is the MAVLink system id."""
+
+    id: int
+    role: Role
+    position: np.ndarray  # (3,) ENU m
+    velocity: np.ndarray  # (3,) ENU m/s
+    vertex: np.ndarray  # (3,) formation vertex (unit-free; bearings come from it)
+
+    @property
+    def is_leader(self) -> bool:
+        return self.role is Role.LEADER
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario: one typed, frozen section per TOML table (``sc.controller.kp``)."""
+
+    path: str
+    run: RunConfig
+    vehicle: VehicleConfig
+    disturbance: DisturbanceConfig
+    unmodeled: UnmodeledConfig
+    formation: FormationConfig
+    leader_trajectory: LeaderTrajectoryConfig
+    sensing: SensingConfig
+    communication: CommunicationConfig
+    observer: ObserverConfig
+    controller: ControllerConfig
+    agents: tuple[AgentSpec, ...]
+    lifecycle: LifecycleConfig = LifecycleConfig()
+    # [faults] (optional, docs/faults.md): injected transport faults, none by default
+    faults: FaultPlan = field(default_factory=FaultPlan)
+    # loaded with the feasibility check waived (--allow-infeasible); children inherit it
+    allow_infeasible: bool = False
+
+    def section(self, name: str) -> Any:
+        """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
+        return self.run if name == "scenario" else getattr(self, name)
+
+    def to_toml_dict(self) -> dict[str, Any]:
+        """The scenario as a TOML document (sections and ``agent`` list)."""
+        data: dict[str, Any] = {
+            name: {f.name: toml_value(getattr(self.section(name), f.name)) for f in fields(cls)}
+            for name, cls in SECTIONS.items()
+        }
+        data["agent"] = [
+            {
+                "id": a.id,
+                "role": str(a.role),
+                "position": a.position.tolist(),
+                "velocity": a.velocity.tolist(),
+                "vertex": a.vertex.tolist(),
+            }
+            for a in self.agents
+        ]
+        if self.faults.active:
+            data["faults"] = self.faults.as_toml()
+        return data
+
+    # Convenience accessors used everywhere --------------------------------
+    @property
+    def name(self) -> str:
+        return self.run.name
+
+    @property
+    def seed(self) -> int:
+        return self.run.seed
+
+    @property
+    def outages(self) -> tuple[tuple[float, float], ...]:
+        return self.communication.outages_s
+
+    @property
+    def n(self) -> int:
+        return len(self.agents)
+
+    @property
+    def ids(self) -> list[int]:
+        return [a.id for a in self.agents]
+
+    @property
+    def leader_ids(self) -> list[int]:
+        return [a.id for a in self.agents if a.is_leader]
+
+    @property
+    def follower_ids(self) -> list[int]:
+        return [a.id for a in self.agents if not a.is_leader]
+
+    @property
+    def control_dt(self) -> float:
+        return 1.0 / float(self.run.control_hz)
+
+    @property
+    def physics_dt(self) -> float:
+        return 1.0 / float(self.run.physics_hz)
+
+    @property
+    def substeps_per_control(self) -> int:
+        return self.run.physics_hz // self.run.control_hz
+
+    @property
+    def steps(self) -> int:
+        return int(round(self.run.duration_s * self.run.control_hz))
+
+    def index_of(self, agent_id: int) -> int:
+        for k, a in enumerate(self.agents):
+            if a.id == agent_id:
+                return k
+        raise KeyError(agent_id)
+
+    def initial_positions(self) -> np.ndarray:
+        return np.array([a.position for a in self.agents], dtype=float)
+
+    def initial_velocities(self) -> np.ndarray:
+        return np.array([a.velocity for a in self.agents], dtype=float)
+
+    def vertices(self) -> np.ndarray:
+        return np.array([a.vertex for a in self.agents], dtype=float)
