@@ -17,22 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from swarm_common.enums import Method
+from gcs.report.shared import FORMED_TOL_M, LABELS, PAPER_TABLE3, md_legend
 
-PAPER_TABLE3: dict[str, tuple[float, float]] = {
-    Method.RCBF: (0.75, 236.41),
-    Method.APF: (0.37, 1115.23),
-    Method.NONE: (0.10, 189.52),
-}
-LABELS: dict[str, str] = {
-    Method.RCBF: "Proposed RCBF",
-    Method.DCBF: "Sampled-data CBF (ours)",
-    Method.APF: "Improved APF",
-    Method.NONE: "No collision avoidance",
-}
 DEPARTURES = "docs/paper-departures.md"
-FORMED_TOL_M = 0.1  # gcs.report.metrics.formation_time tolerance
-
 
 def _f(x: Any, nd: int = 2) -> str:
     if x is None:
@@ -40,11 +27,6 @@ def _f(x: Any, nd: int = 2) -> str:
     if isinstance(x, float):
         return f"{x:.{nd}f}"
     return str(x)
-
-
-def md_legend(rows: list[tuple[str, str]]) -> str:
-    """A markdown definition list: one ``* **column**: meaning`` line per column."""
-    return "".join(f"* **{name}**: {text}\n" for name, text in rows)
 
 
 def compare_table(metrics: dict[str, dict], d_safe: float = 0.5) -> str:
@@ -187,16 +169,6 @@ def safety_legend(d_safe: float, tau: float, deadline_s: float) -> str:
             ),
         ]
     )
-
-
-def closest_approach(s: dict) -> tuple[int, float, tuple[int, int]]:
-    """(index, distance m, vehicle index pair) of the run's smallest pair distance."""
-    k = int(np.argmin(s["min_dist"]))
-    p = s["p"][k]
-    d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-    d[np.diag_indices(len(p))] = np.inf
-    a, b = np.unravel_index(int(np.argmin(d)), d.shape)
-    return k, float(s["min_dist"][k]), (int(a), int(b))
 
 
 def _duration(t: np.ndarray) -> float:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.report.comparison import LABELS, PAPER_TABLE3, closest_approach
+from gcs.report.shared import LABELS, PAPER_TABLE3, closest_approach
 
 ZOOM_S = 0.6  # half-width of the closest-approach zoom (s)
 TRAIL_S = 1.0  # length of the path drawn behind each vehicle in a snapshot (s)

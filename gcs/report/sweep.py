@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from gcs.report.comparison import FORMED_TOL_M, LABELS, md_legend
 from gcs.report.metrics import METRIC_KEYS, PHASES
+from gcs.report.shared import FORMED_TOL_M, LABELS, md_legend
 from swarm_common.scenario.model import Scenario
 
 ID_COLUMNS = ("scenario", "method", "seed", "status", "error", "duration_s")
