@@ -15,8 +15,9 @@ from pathlib import Path
 
 from swarm_common import wire
 from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.physics.dynamics import SwarmDynamics
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,7 +43,7 @@ def main() -> None:
 
     # a full control step as the server runs it (without sockets)
     dyn = SwarmDynamics(sc, held=False)
-    veh = [Vehicle(aid, i, dyn, VehicleConfig()) for i, aid in enumerate(sc.ids)]
+    veh = [Vehicle(aid, i, dyn, AutopilotConfig()) for i, aid in enumerate(sc.ids)]
     for v in veh:
         v.arm(0.0)
     n = max(500, a.steps // 10)

@@ -31,13 +31,14 @@ from swarm_common import frames, signing, wire
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario.model import Scenario
 from vehicle_sim import stats
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.clock import LockstepClock, RealTimeClock
 from vehicle_sim.link.endpoint import MavlinkLink
 from vehicle_sim.link.server_io import ServerIO
 from vehicle_sim.link.truth import TruthPublisher
 from vehicle_sim.options import SimOptions, restrict
 from vehicle_sim.physics.dynamics import SwarmDynamics
-from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle, VehicleConfig
+from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +115,7 @@ class SimServer(ServerIO):
     def _open_links(self) -> None:
         o = self.opts
         for idx, aid in enumerate(self.sc.ids):
-            cfg = VehicleConfig(
+            cfg = AutopilotConfig(
                 offboard_timeout=o.offboard_timeout,
                 failsafe=o.failsafe,
                 odometry_hz=o.odometry_hz,

@@ -13,15 +13,17 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Iterable, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
+from vehicle_sim.clock import LockstepClock, RealTimeClock
+from vehicle_sim.link.endpoint import MavlinkLink
+from vehicle_sim.link.truth import TruthPublisher
+from vehicle_sim.options import SimOptions
+from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle
-
-if TYPE_CHECKING:
-    from vehicle_sim.server import SimServer
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +34,29 @@ SUMMARY_KEYS = (
     "commands_unsigned_refused", "peers_refused", "throttled",
 )  # fmt: skip
 LATENCY_PERCENTILES = (50, 90, 99)
+
+
+class RunState(Protocol):
+    """What the statistics read of a running simulator (:class:`vehicle_sim.server.SimServer`)."""
+
+    @property
+    def opts(self) -> SimOptions: ...
+    @property
+    def clock(self) -> LockstepClock | RealTimeClock: ...
+    @property
+    def dyn(self) -> SwarmDynamics: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def links(self) -> Sequence[MavlinkLink]: ...
+    @property
+    def vehicles(self) -> Sequence[Vehicle]: ...
+    @property
+    def truth_pub(self) -> TruthPublisher: ...
+    @property
+    def lockstep_timeouts(self) -> int: ...
+    @property
+    def handler_errors(self) -> int: ...
 
 
 def latency_stats(vehicles: Iterable[Vehicle], dt: float) -> dict[str, Any]:
@@ -51,7 +76,7 @@ def latency_stats(vehicles: Iterable[Vehicle], dt: float) -> dict[str, Any]:
     }
 
 
-def summary(sim: SimServer) -> str:
+def summary(sim: RunState) -> str:
     """The ``stats:`` line: server counters, then link and vehicle counters summed."""
     tot: dict[str, int] = {}
     for link in sim.links:
@@ -68,7 +93,7 @@ def summary(sim: SimServer) -> str:
     )
 
 
-def _link_totals(sim: SimServer) -> dict[str, int]:
+def _link_totals(sim: RunState) -> dict[str, int]:
     """Every link counter summed over the vehicles (signing rejects per reason, peers
     refused, streams throttled by the amplification bound, ...)."""
     tot: dict[str, int] = {}
@@ -78,7 +103,7 @@ def _link_totals(sim: SimServer) -> dict[str, int]:
     return tot
 
 
-def write_stats(sim: SimServer, path: str) -> None:
+def write_stats(sim: RunState, path: str) -> None:
     """``--stats-out``: mode, steps, timeouts, collisions, latency and the summary line."""
     doc = {
         "mode": "lockstep" if sim.opts.lockstep else "realtime",

@@ -7,13 +7,14 @@ The server feeds it decoded MAVLink messages (:meth:`Vehicle.handle`), calls
 is appended to :attr:`Vehicle.outbox` as ``(message, dest)``; ``dest`` is ``None`` for
 "every link, every peer" or ``(link_name, addr)`` for a reply to one requester.
 
+Its state and the helpers that read it are :class:`vehicle_sim.autopilot.state.VehicleState`
+(which it extends), its settings :class:`vehicle_sim.autopilot.config.AutopilotConfig`.
 Modes (PX4 custom_mode = main << 16 | sub << 24): POSCTL (default; armed = position hold,
 there are no sticks), ALTCTL, OFFBOARD, AUTO.TAKEOFF, AUTO.LOITER ("HOLD"), AUTO.MISSION,
-AUTO.RTL and AUTO.LAND ("LAND"); their logic is :mod:`vehicle_sim.autopilot.modes`, the setpoint
-messages are parsed in :mod:`vehicle_sim.autopilot.setpoints`. Offboard rules, failsafe and
-lockstep:
-docs/conventions.md and docs/px4/modes.md. The messages it sends are built in
-:mod:`vehicle_sim.autopilot.telemetry`, the commands it answers in
+AUTO.RTL and AUTO.LAND ("LAND"); their logic is :mod:`vehicle_sim.autopilot.modes`, the
+setpoint messages are parsed in :mod:`vehicle_sim.autopilot.setpoints`. Offboard rules,
+failsafe and lockstep: docs/conventions.md and docs/px4/modes.md. The messages it sends
+are built in :mod:`vehicle_sim.autopilot.telemetry`, the commands it answers in
 :mod:`vehicle_sim.services.command`.
 
 Times: ``wall`` (monotonic seconds) drives the telemetry schedule; ``sim_t`` (seconds of
@@ -24,133 +25,38 @@ landing, time stamps (``time_boot_ms`` = sim time).
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 from pymavlink.dialects.v20 import common as M
 
-from swarm_common import frames, px4
-from swarm_common.enums import FailsafeAction, VehicleMode
+from swarm_common import px4
+from swarm_common.enums import VehicleMode
 from vehicle_sim.autopilot import modes, nav_flight, setpoint_input, telemetry
-from vehicle_sim.autopilot.nav import NavTarget
-from vehicle_sim.autopilot.nav_flight import RtlPlan
-from vehicle_sim.autopilot.param_defaults import default_param_specs
-from vehicle_sim.autopilot.params import ParamStore
-from vehicle_sim.autopilot.setpoint_input import SetpointKind
-from vehicle_sim.autopilot.streams import PeerKey, PeerStreams
-from vehicle_sim.physics.failsafe_controller import FailsafeController
-from vehicle_sim.physics.position_control import PositionController, PositionSetpoint, SpeedLimits
+from vehicle_sim.autopilot.config import AutopilotConfig
+from vehicle_sim.autopilot.setpoints import SetpointKind
+from vehicle_sim.autopilot.state import Dest, VehicleState
+from vehicle_sim.physics.position_control import PositionSetpoint, SpeedLimits
 from vehicle_sim.services import command as commands
 from vehicle_sim.services.command import Command
 from vehicle_sim.services.mission import MissionService
 from vehicle_sim.services.registry import attach_services
 
-CUSTOM_MODE = px4.CUSTOM_MODE  # re-exported: the short mode names -> PX4 custom_mode
 MSG_ODOMETRY = M.MAVLINK_MSG_ID_ODOMETRY
-
-# (link name, peer address); peer None = every destination of that link
-Dest = tuple[str, tuple[str, int] | None] | None
 COMPONENT_AUTOPILOT = M.MAV_COMP_ID_AUTOPILOT1
-STATUSTEXT_LEN = 50
-ODOM_STAMP_KEEP = 256  # ODOMETRY stamps whose send time is kept for the latency
-LATENCY_KEEP = 200_000
 
 
-@dataclass
-class VehicleConfig:
-    # defaults of COM_OF_LOSS_T, COM_OBL_RC_ACT and COM_DISARM_LAND (the vehicle reads
-    # the parameters, which a client may change)
-    offboard_timeout: float = 0.5  # s (sim time) without setpoint in OFFBOARD -> failsafe
-    failsafe: FailsafeAction = FailsafeAction.HOLD
-    odometry_hz: float = 50.0
-    lockstep: bool = False
-    setpoint_window: float = 0.5  # s: OFFBOARD needs >= setpoint_min_count in this window
-    setpoint_min_count: int = 2
-    land_disarm_delay: float = 1.0  # s on the ground in LAND before auto-disarm
-    home_lat: float = 47.397742  # PX4 SITL default home (Zurich)
-    home_lon: float = 8.545594
-    home_alt: float = 488.0
-    uid_base: int = 0x4253574152000000  # "BSWAR" + offset << 8 + id
-    port_offset: int = 0
-    # default stream rates (Hz); 0 = off. ODOMETRY uses odometry_hz.
-    rates: dict[int, float] = field(default_factory=lambda: dict(telemetry.DEFAULT_RATES))
-
-
-@dataclass
-class VehicleCounters:
-    setpoints: int = 0
-    setpoints_rejected: int = 0
-    setpoints_stale: int = 0
-    setpoints_unsupported: int = 0
-    commands: int = 0
-    commands_unsupported: int = 0
-    commands_foreign: int = 0
-    commands_unsigned_refused: int = 0  # flight commands on an unsigned link: DENIED
-    lockstep_timeouts: int = 0
-    failsafes: int = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return dict(self.__dict__)
-
-
-class Vehicle:
-    """One simulated PX4 vehicle, reading its state from ``dyn`` row ``idx``."""
+class Vehicle(VehicleState):
+    """One simulated PX4 vehicle, reading its state from ``dyn`` row ``idx``: the
+    autopilot's state (:class:`~vehicle_sim.autopilot.state.VehicleState`), its MAVLink
+    message handlers and its services."""
 
     mission: MissionService  # attached by vehicle_sim.services.registry
 
-    def __init__(self, agent_id: int, idx: int, dyn: Any, cfg: VehicleConfig | None = None) -> None:
-        self.id = int(agent_id)
-        self.idx = int(idx)
-        self.dyn = dyn
-        self.cfg = cfg or VehicleConfig()
-        self.ctr = VehicleCounters()
-        self.outbox: list[tuple[M.MAVLink_message, Dest]] = []
-        # telemetry streams: None = every destination on the default schedule
-        self.stream_out: list[tuple[M.MAVLink_message, PeerKey | None]] = []
-        self.events: list[tuple[int, str]] = []  # (MAV_SEVERITY, line) for the server's log
-        self.encs: dict[str, M.MAVLink] = {}  # per link (encoder())
-
-        self.armed = False
-        self.mode = VehicleMode.POSCTL
-        self.failsafe = False  # in HOLD/LAND because the offboard stream was lost
-        self.terminated = False
-        self.ever_armed = False
-        self.release_requested = False  # server: take it off the spawn fixture
-        self.landed_since: float | None = None
-        # AUTO modes (vehicle_sim.autopilot.modes): the target the position controller flies
-        self.nav: NavTarget | None = None
-        self.rtl: RtlPlan | None = None
-        self.takeoff_alt: float | None = None  # NAV_TAKEOFF's altitude for the next entry
-        self.speed_override: float | None = None  # DO_CHANGE_SPEED, m/s
-
-        # setpoints (ENU/FLU, newtons)
-        self.sp_att = np.array([0.0, 0.0, float(dyn.att[idx, 2])])
-        self.sp_thrust = float(dyn.hold_thrust())
-        self.sp_times: deque[float] = deque(maxlen=64)  # sim time of valid setpoints
-        self.sp_kind = SetpointKind.ATTITUDE
-        self.sp_traj = PositionSetpoint()
-        self.last_sp_t: float | None = None
-        self.last_sp_ms: int | None = None
-        # lockstep
-        self.expect_ms = 0  # the step a setpoint must echo (server sets it)
-        self.answered_ms: int | None = None
-        # setpoint-to-odometry latency: wall time each ODOMETRY stamp was built, and the
-        # delay until the first valid setpoint echoing that stamp arrived (seconds)
-        self.odom_wall: dict[int, float] = {}
-        self.latency: deque[float] = deque(maxlen=LATENCY_KEEP)
-        self.ever_answered = False
-        self.consecutive_timeouts = 0
-        self.wait_suspended = False
-
-        self.fs = FailsafeController(dyn.mass, dyn.g, dyn.tilt_max, dyn.f_max)
-        self.fs.engage(FailsafeAction.HOLD, dyn.p[idx], float(dyn.att[idx, 2]))
-        self.home_enu = np.array([dyn.p[idx, 0], dyn.p[idx, 1], 0.0])
-        self.home_ned = frames.enu_to_ned(self.home_enu)
-        self.streams = PeerStreams(self.cfg.rates, self.cfg.odometry_hz)
-        self.uid = self.cfg.uid_base | ((self.cfg.port_offset & 0xFFFF) << 8) | self.id
+    def __init__(
+        self, agent_id: int, idx: int, dyn: Any, cfg: AutopilotConfig | None = None
+    ) -> None:
+        super().__init__(agent_id, idx, dyn, cfg)
         self._handlers: dict[int, Callable[[Any, Dest, float, float], None]] = {
             M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self._on_setpoint,
             M.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_position_target,
@@ -160,69 +66,18 @@ class Vehicle:
             M.MAVLINK_MSG_ID_SET_MODE: self._on_set_mode,
             M.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
         }
-        self.params = ParamStore(default_param_specs(self.id, self.cfg, dyn))
-        self.pc = PositionController(
-            dyn.g, dyn.f_max, dyn.tilt_max, float(self.params.get("MPC_THR_HOVER"))
-        )
-        self.pc.reset(self.yaw())
         self.services = attach_services(self)
-        self.command_handlers: dict[int, Any] = {}
         for svc in self.services:
             self._handlers.update(svc.handlers())
             self.command_handlers.update(svc.command_handlers())
-
-    # ==================================================================================
-    # state helpers
-    @property
-    def custom_mode(self) -> int:
-        return CUSTOM_MODE[self.mode]
-
-    @property
-    def active(self) -> bool:
-        """Lockstep: the server waits for this vehicle's answer each step."""
-        return self.armed and self.mode == VehicleMode.OFFBOARD and not self.failsafe
-
-    def lockstep_should_wait(self) -> bool:
-        return self.active and self.ever_answered and not self.wait_suspended
-
-    def p(self) -> np.ndarray:
-        return self.dyn.p[self.idx]
-
-    def yaw(self) -> float:
-        return float(self.dyn.att[self.idx, 2])
-
-    def on_ground(self) -> bool:
-        return bool(self.dyn.p[self.idx, 2] <= 1e-6)
-
-    def event(self, text: str, severity: int = M.MAV_SEVERITY_INFO) -> None:
-        """Log line for the server and STATUSTEXT to every link."""
-        self.events.append((severity, f"vehicle {self.id}: {text}"))
-        msg = M.MAVLink_statustext_message(severity, text[:STATUSTEXT_LEN].encode())
-        self.outbox.append((msg, None))
 
     def _ack(self, src: Dest, cmd: int, result: int, m: Any = None) -> None:
         ts = m.get_srcSystem() if m is not None else 0
         tc = m.get_srcComponent() if m is not None else 0
         self.outbox.append((M.MAVLink_command_ack_message(cmd, result, 0, 0, ts, tc), src))
 
-    def setpoints_streaming(self, sim_t: float) -> bool:
-        """>= ``setpoint_min_count`` valid setpoints within the last ``setpoint_window``."""
-        lo = sim_t - self.cfg.setpoint_window
-        n = sum(1 for t in self.sp_times if t >= lo)
-        return n >= self.cfg.setpoint_min_count
-
     # ==================================================================================
     # modes and arming (vehicle_sim.autopilot.modes)
-    @property
-    def landing(self) -> bool:
-        """Armed and descending to land (EXTENDED_SYS_STATE: LANDING)."""
-        return modes.landing(self)
-
-    @property
-    def taking_off(self) -> bool:
-        """Armed and climbing to a take-off altitude (EXTENDED_SYS_STATE: TAKEOFF)."""
-        return modes.taking_off(self)
-
     def request_mode(self, main: int, sub: int, sim_t: float) -> int:
         """Switch on a PX4 (main, sub) custom mode. Returns a MAV_RESULT."""
         return modes.request_mode(self, main, sub, sim_t)

@@ -18,10 +18,11 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.params import FILE_FORMAT, INT32
 from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.services.param import int32_to_wire, wire_to_int32
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 ONE = ["--no-zenoh", "--vehicles", "1"]
 
@@ -29,7 +30,7 @@ ONE = ["--no-zenoh", "--vehicles", "1"]
 def _table(agent_id: int = 1) -> Vehicle:
     """An in-process vehicle of the same scenario: the table the simulator exposes."""
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    return Vehicle(agent_id, agent_id - 1, dyn, VehicleConfig())
+    return Vehicle(agent_id, agent_id - 1, dyn, AutopilotConfig())
 
 
 @pytest.fixture

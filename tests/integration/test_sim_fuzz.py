@@ -15,9 +15,10 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common.ports import vehicle_ports
 from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.link.endpoint import PARSE_ERRORS, MavlinkLink
 from vehicle_sim.physics.dynamics import SwarmDynamics
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -112,7 +113,7 @@ def test_vehicle_state_machine_fuzz():
     """In-process: 20 000 hostile messages straight into a Vehicle + dynamics."""
     sc = load_scenario(CUBE8)
     dyn = SwarmDynamics(sc, held=True)
-    veh = [Vehicle(a, i, dyn, VehicleConfig()) for i, a in enumerate(sc.ids)]
+    veh = [Vehicle(a, i, dyn, AutopilotConfig()) for i, a in enumerate(sc.ids)]
     parser = M.MAVLink(None, srcSystem=1, srcComponent=1)
     parser.robust_parsing = True
     t = 0.0

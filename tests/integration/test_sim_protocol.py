@@ -572,12 +572,13 @@ def test_lockstep_timeouts_suspend_then_failsafe(sim_factory, mav_client):
 # the state machine without sockets
 def _vehicle(lockstep=False, **kw):
     from swarm_common.scenario.model import load_scenario
+    from vehicle_sim.autopilot.config import AutopilotConfig
     from vehicle_sim.physics.dynamics import SwarmDynamics
-    from vehicle_sim.vehicle import Vehicle, VehicleConfig
+    from vehicle_sim.vehicle import Vehicle
 
     sc = load_scenario(CUBE8)
     dyn = SwarmDynamics(sc, held=True)
-    return Vehicle(1, 0, dyn, VehicleConfig(lockstep=lockstep, **kw))
+    return Vehicle(1, 0, dyn, AutopilotConfig(lockstep=lockstep, **kw))
 
 
 def _sp(q=(1.0, 0.0, 0.0, 0.0), thrust=HOVER_NORM, ms=0, mask=7):

@@ -16,8 +16,9 @@ from scipy.spatial.transform import Rotation
 from swarm_common import frames
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot import telemetry
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.physics.dynamics import SwarmDynamics
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 
@@ -79,7 +80,7 @@ def test_odometry_fields_against_scipy_and_the_float32_wire() -> None:
 
 def test_odometry_message_carries_the_kernel_fields() -> None:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    veh = Vehicle(1, 0, dyn, VehicleConfig())
+    veh = Vehicle(1, 0, dyn, AutopilotConfig())
     dyn.att[0] = [0.1, -0.2, 0.7]
     dyn.cmd_att[0] = [0.15, -0.1, 0.6]
     dyn.v[0] = [1.0, -2.0, 0.5]

@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common.enums import VehicleMode
 from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.nav import NavKind
 from vehicle_sim.physics import geo
 from vehicle_sim.physics.dynamics import SwarmDynamics
@@ -19,7 +20,7 @@ from vehicle_sim.services import mission_items as mi
 from vehicle_sim.services.geofence import Circle, Geofence, Polygon, fence_from_items
 from vehicle_sim.services.mission_executor import MissionExecutor
 from vehicle_sim.services.mission_transfer import RETRY_S, TIMEOUT_S, MissionTransfer
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 CFG = SimpleNamespace(home_lat=47.397742, home_lon=8.545594, home_alt=488.0)
@@ -282,7 +283,7 @@ def test_fence_from_items() -> None:
 # the service on a vehicle
 def _vehicle() -> Vehicle:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    return Vehicle(1, 0, dyn, VehicleConfig())
+    return Vehicle(1, 0, dyn, AutopilotConfig())
 
 
 def _sent(v: Vehicle, kind: str):

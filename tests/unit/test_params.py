@@ -10,6 +10,7 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.params import (
     FILE_FORMAT,
     INT32,
@@ -29,7 +30,7 @@ from vehicle_sim.services.param import (
     int32_to_wire,
     wire_to_int32,
 )
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 GCS = ("gcs", ("127.0.0.1", 14550))
@@ -38,7 +39,7 @@ OTHER = ("api", ("127.0.0.1", 14540))
 
 def _vehicle(agent_id: int = 1, **kw) -> Vehicle:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    return Vehicle(agent_id, agent_id - 1, dyn, VehicleConfig(**kw))
+    return Vehicle(agent_id, agent_id - 1, dyn, AutopilotConfig(**kw))
 
 
 def _out(v: Vehicle, mid: int) -> list[tuple[object, object]]:

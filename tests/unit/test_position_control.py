@@ -14,12 +14,13 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common.enums import VehicleMode
 from swarm_common.scenario.model import load_scenario
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.nav_flight import OFFBOARD_LIMITS
 from vehicle_sim.physics import geo
 from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.physics.position_control import PositionController, PositionSetpoint, SpeedLimits
 from vehicle_sim.services.command import Command, execute
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 GROUND8 = Path(__file__).resolve().parents[2] / "scenarios" / "ground8.toml"
 NAN = math.nan
@@ -29,7 +30,7 @@ class Sim:
     def __init__(self) -> None:
         sc = load_scenario(GROUND8)
         self.dyn = SwarmDynamics(sc, held=True)
-        self.v = Vehicle(1, 0, self.dyn, VehicleConfig())
+        self.v = Vehicle(1, 0, self.dyn, AutopilotConfig())
         self.dt = 1.0 / sc.run.control_hz
         self.sub = sc.substeps_per_control
         self.t = 0.0

@@ -12,11 +12,12 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot import mavlink_extra, telemetry
+from vehicle_sim.autopilot.config import DEFAULT_RATES, AutopilotConfig
 from vehicle_sim.autopilot.streams import PeerStreams
 from vehicle_sim.physics.battery import BatteryModel
 from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.services.command import Command, execute
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 ATT, VFR, ALT, BAT = (
@@ -31,7 +32,7 @@ GCS_PEER = ("gcs", ("127.0.0.1", 40000))
 
 
 def _vehicle() -> Vehicle:
-    return Vehicle(1, 0, SwarmDynamics(load_scenario(CUBE8), held=True), VehicleConfig())
+    return Vehicle(1, 0, SwarmDynamics(load_scenario(CUBE8), held=True), AutopilotConfig())
 
 
 def _wire(msg, sysid: int = 255, compid: int = 190):
@@ -43,7 +44,7 @@ def _wire(msg, sysid: int = 255, compid: int = 190):
 def test_new_streams_are_on_by_default_and_build() -> None:
     v = _vehicle()
     for mid in (ATT, VFR, ALT, BAT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE):
-        assert telemetry.DEFAULT_RATES[mid] > 0
+        assert DEFAULT_RATES[mid] > 0
         msg = telemetry.build(v, mid, 3.0)
         assert msg is not None and msg.get_msgId() == mid
         v.pack(msg)
@@ -157,7 +158,7 @@ def test_protocol_version_message_round_trips() -> None:
 
 
 def test_rate_set_by_a_peer_ends_when_it_goes_silent() -> None:
-    s = PeerStreams(telemetry.DEFAULT_RATES, 50.0)
+    s = PeerStreams(DEFAULT_RATES, 50.0)
     tgt = M.MAVLINK_MSG_ID_ATTITUDE_TARGET
     s.for_peer(GCS_PEER, create=True).set_interval(tgt, 100_000, 0.0)
     s.forget([GCS_PEER])

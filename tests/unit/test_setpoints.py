@@ -14,10 +14,11 @@ from swarm_common import px4
 from swarm_common.enums import VehicleMode
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot import setpoints
-from vehicle_sim.autopilot.setpoint_input import SetpointKind
+from vehicle_sim.autopilot.config import AutopilotConfig
+from vehicle_sim.autopilot.setpoints import SetpointKind
 from vehicle_sim.physics import geo
 from vehicle_sim.physics.dynamics import SwarmDynamics
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 P = setpoints.POS_BITS[0] | setpoints.POS_BITS[1] | setpoints.POS_BITS[2]
@@ -84,7 +85,7 @@ def test_non_finite_given_component_is_rejected_ignored_one_is_not() -> None:
 
 def test_global_int_relative_and_amsl() -> None:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    cfg = Vehicle(1, 0, dyn, VehicleConfig()).cfg
+    cfg = Vehicle(1, 0, dyn, AutopilotConfig()).cfg
     lat, lon = geo.latlon_e7(cfg, np.array([30.0, -4.0, 0.0]))
     for frame, alt in ((M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 7.0),
                        (M.MAV_FRAME_GLOBAL_INT, cfg.home_alt + 7.0)):  # fmt: skip
@@ -97,7 +98,7 @@ def test_global_int_relative_and_amsl() -> None:
 
 def test_vehicle_counts_and_streams_position_setpoints() -> None:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    v = Vehicle(1, 0, dyn, VehicleConfig())
+    v = Vehicle(1, 0, dyn, AutopilotConfig())
     v.handle(local(P | V | A), None, 0.0, 0.0)
     assert v.ctr.setpoints_rejected == 1 and v.ctr.setpoints == 0
     v.handle(local(P | V | setpoints.FORCE_BIT), None, 0.0, 0.0)
@@ -115,7 +116,7 @@ def test_vehicle_counts_and_streams_position_setpoints() -> None:
 
 def test_lockstep_echo_applies_to_position_setpoints() -> None:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    v = Vehicle(1, 0, dyn, VehicleConfig(lockstep=True))
+    v = Vehicle(1, 0, dyn, AutopilotConfig(lockstep=True))
     v.expect_ms = 40
     v.handle(local(P | A | YAW | RATE, t_ms=20), None, 0.0, 0.04)
     assert v.ctr.setpoints_stale == 1 and v.answered_ms is None

@@ -13,10 +13,11 @@ from swarm_common import px4
 from swarm_common.enums import FailsafeAction, VehicleMode
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot import telemetry
+from vehicle_sim.autopilot.config import DEFAULT_RATES, AutopilotConfig
 from vehicle_sim.autopilot.streams import StreamSchedule
 from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.services.command import Command, execute
-from vehicle_sim.vehicle import Vehicle, VehicleConfig
+from vehicle_sim.vehicle import Vehicle
 
 CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 HB = M.MAVLINK_MSG_ID_HEARTBEAT
@@ -25,12 +26,12 @@ ODOM = M.MAVLINK_MSG_ID_ODOMETRY
 
 def _vehicle(**kw) -> Vehicle:
     dyn = SwarmDynamics(load_scenario(CUBE8), held=True)
-    return Vehicle(1, 0, dyn, VehicleConfig(**kw))
+    return Vehicle(1, 0, dyn, AutopilotConfig(**kw))
 
 
 def test_every_default_stream_has_a_builder_of_that_id() -> None:
     v = _vehicle()
-    for mid in [*telemetry.DEFAULT_RATES, ODOM, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION]:
+    for mid in [*DEFAULT_RATES, ODOM, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION]:
         msg = telemetry.build(v, mid, 1.234)
         assert msg is not None and msg.get_msgId() == mid
         v.pack(msg)  # every field fits its wire type

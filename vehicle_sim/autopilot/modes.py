@@ -1,8 +1,9 @@
 """Flight modes, arming and mode transitions of one simulated PX4 vehicle.
 
-Functions of the :class:`~vehicle_sim.vehicle.Vehicle` (which delegates to them); its
-state (``mode``, ``armed``, ``nav``, ``rtl`` …) stays on the vehicle. docs/px4/modes.md
-describes every mode; in short:
+Functions of a :class:`~vehicle_sim.autopilot.state.VehicleState` (the
+:class:`~vehicle_sim.vehicle.Vehicle` delegates to them); the state (``mode``, ``armed``,
+``nav``, ``rtl`` …) stays on the vehicle. docs/px4/modes.md describes every mode; in
+short:
 
 * POSCTL, ALTCTL (no sticks: armed = hold), AUTO.LOITER without a target ("HOLD") and
   AUTO.LAND fly the onboard hold/land controller (:mod:`vehicle_sim.physics.failsafe_controller`),
@@ -21,8 +22,6 @@ negative value: never).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
@@ -31,16 +30,14 @@ from swarm_common.enums import FailsafeAction, VehicleMode
 from vehicle_sim.autopilot import nav_flight
 from vehicle_sim.autopilot.nav import NavKind, NavTarget
 from vehicle_sim.autopilot.param_defaults import OBL_ACT_LAND, OBL_ACT_RETURN
-
-if TYPE_CHECKING:
-    from vehicle_sim.vehicle import Vehicle
+from vehicle_sim.autopilot.state import VehicleState
 
 HOLD_MODES = (VehicleMode.POSCTL, VehicleMode.ALTCTL, VehicleMode.HOLD)
 NAV_MODES = (VehicleMode.TAKEOFF, VehicleMode.RTL, VehicleMode.MISSION)
 
 
 # -- entering modes -------------------------------------------------------------------------
-def takeoff_target(v: Vehicle, alt_m: float | None) -> NavTarget:
+def takeoff_target(v: VehicleState, alt_m: float | None) -> NavTarget:
     """Climb over the current point to ``alt_m`` above home (None: MIS_TAKEOFF_ALT), never
     lower than the vehicle is now."""
     alt = float(v.params.get("MIS_TAKEOFF_ALT")) if alt_m is None else float(alt_m)
@@ -48,13 +45,13 @@ def takeoff_target(v: Vehicle, alt_m: float | None) -> NavTarget:
     return NavTarget(NavKind.TAKEOFF, np.array([p[0], p[1], max(alt, float(p[2]))]))
 
 
-def rtl_plan(v: Vehicle) -> nav_flight.RtlPlan:
+def rtl_plan(v: VehicleState) -> nav_flight.RtlPlan:
     """A return from here to the nearest rally point, else home."""
     dest = nav_flight.nearest_xy(v.p(), v.home_enu, v.mission.rally_points_enu())
     return nav_flight.RtlPlan(v.p(), dest, float(v.params.get("RTL_RETURN_ALT")))
 
 
-def engage_onboard(v: Vehicle) -> None:
+def engage_onboard(v: VehicleState) -> None:
     """Point the controllers at the current mode, from here (on a mode change, on arming)."""
     if v.mode in HOLD_MODES:
         v.fs.engage(FailsafeAction.HOLD, v.p(), v.yaw())
@@ -65,7 +62,7 @@ def engage_onboard(v: Vehicle) -> None:
 
 
 def enter_mode(
-    v: Vehicle, mode: VehicleMode, why: str = "", nav: NavTarget | None = None
+    v: VehicleState, mode: VehicleMode, why: str = "", nav: NavTarget | None = None
 ) -> None:
     """Switch to ``mode``; ``nav``: the target an AUTO.LOITER flies (None: hold here)."""
     prev = v.mode
@@ -86,7 +83,7 @@ def enter_mode(
         v.event(f"mode {prev} -> {mode}{(' (' + why + ')') if why else ''}")
 
 
-def request_mode(v: Vehicle, main: int, sub: int, sim_t: float) -> int:
+def request_mode(v: VehicleState, main: int, sub: int, sim_t: float) -> int:
     """Switch on a PX4 (main, sub) custom mode. Returns a MAV_RESULT."""
     target = px4.vehicle_mode(main, sub)
     if target is None:
@@ -110,7 +107,7 @@ def request_mode(v: Vehicle, main: int, sub: int, sim_t: float) -> int:
     return M.MAV_RESULT_ACCEPTED
 
 
-def takeoff(v: Vehicle, alt_m: float | None) -> int:
+def takeoff(v: VehicleState, alt_m: float | None) -> int:
     """NAV_TAKEOFF: AUTO.TAKEOFF to ``alt_m`` above home (None: MIS_TAKEOFF_ALT)."""
     if v.terminated:
         return M.MAV_RESULT_DENIED
@@ -120,7 +117,7 @@ def takeoff(v: Vehicle, alt_m: float | None) -> int:
     return M.MAV_RESULT_ACCEPTED
 
 
-def reposition(v: Vehicle, target: NavTarget) -> int:
+def reposition(v: VehicleState, target: NavTarget) -> int:
     """DO_REPOSITION: AUTO.LOITER flying to ``target`` (armed vehicles only, as PX4)."""
     if v.terminated or not v.armed:
         return M.MAV_RESULT_DENIED
@@ -129,7 +126,7 @@ def reposition(v: Vehicle, target: NavTarget) -> int:
     return M.MAV_RESULT_ACCEPTED
 
 
-def start_mission(v: Vehicle, sim_t: float) -> int:
+def start_mission(v: VehicleState, sim_t: float) -> int:
     """MISSION_START: (re)start the stored mission in AUTO.MISSION."""
     if v.terminated:
         return M.MAV_RESULT_DENIED
@@ -141,7 +138,7 @@ def start_mission(v: Vehicle, sim_t: float) -> int:
 
 
 # -- arming ---------------------------------------------------------------------------------
-def arm(v: Vehicle, sim_t: float) -> int:
+def arm(v: VehicleState, sim_t: float) -> int:
     if v.terminated:
         v.event("arming denied: flight terminated", M.MAV_SEVERITY_CRITICAL)
         return M.MAV_RESULT_DENIED
@@ -162,7 +159,7 @@ def arm(v: Vehicle, sim_t: float) -> int:
     return M.MAV_RESULT_ACCEPTED
 
 
-def disarm(v: Vehicle, force: bool, why: str = "") -> int:
+def disarm(v: VehicleState, force: bool, why: str = "") -> int:
     if not v.armed:
         return M.MAV_RESULT_ACCEPTED
     if not force and not v.on_ground():
@@ -178,7 +175,7 @@ def disarm(v: Vehicle, force: bool, why: str = "") -> int:
     return M.MAV_RESULT_ACCEPTED
 
 
-def terminate(v: Vehicle) -> int:
+def terminate(v: VehicleState) -> int:
     v.terminated = True
     v.armed = False
     v.failsafe = False
@@ -188,7 +185,7 @@ def terminate(v: Vehicle) -> int:
 
 
 # -- per step ---------------------------------------------------------------------------------
-def offboard_loss(v: Vehicle, sim_t: float) -> None:
+def offboard_loss(v: VehicleState, sim_t: float) -> None:
     """In OFFBOARD without a valid setpoint for COM_OF_LOSS_T: COM_OBL_RC_ACT."""
     timeout = float(v.params.get("COM_OF_LOSS_T"))
     if (
@@ -208,7 +205,7 @@ def offboard_loss(v: Vehicle, sim_t: float) -> None:
         v.failsafe = True
 
 
-def advance_auto(v: Vehicle, sim_t: float) -> None:
+def advance_auto(v: VehicleState, sim_t: float) -> None:
     """AUTO modes: take-off complete -> loiter there; RTL phases; the mission's target."""
     if not v.armed:
         return
@@ -231,24 +228,10 @@ def advance_auto(v: Vehicle, sim_t: float) -> None:
             v.nav = None
 
 
-def landing(v: Vehicle) -> bool:
-    """Armed and descending to land (AUTO.LAND, a mission LAND, RTL's last phase)."""
-    if not v.armed or v.mode == VehicleMode.OFFBOARD:
-        return False
-    return v.mode == VehicleMode.LAND or (v.nav is not None and v.nav.kind == NavKind.LAND)
-
-
-def taking_off(v: Vehicle) -> bool:
-    """Armed and climbing to a take-off altitude (AUTO.TAKEOFF, a mission TAKEOFF)."""
-    if not v.armed or v.mode == VehicleMode.OFFBOARD:
-        return False
-    return v.nav is not None and v.nav.kind == NavKind.TAKEOFF
-
-
-def auto_disarm(v: Vehicle, sim_t: float) -> None:
+def auto_disarm(v: VehicleState, sim_t: float) -> None:
     """Disarm after COM_DISARM_LAND seconds on the ground in a landing."""
     delay = float(v.params.get("COM_DISARM_LAND"))
-    if not landing(v) or delay < 0:
+    if not v.landing or delay < 0:
         return
     if v.on_ground():
         if v.landed_since is None:

@@ -1,6 +1,6 @@
 """Navigation targets: what the vehicle's own position controller flies in the AUTO modes.
 
-The mode logic (:mod:`vehicle_sim.vehicle`) and the mission executor
+The mode logic (:mod:`vehicle_sim.autopilot.modes`) and the mission executor
 (:mod:`vehicle_sim.services.mission`) speak this small vocabulary, so a mission item, a
 MAVSDK ``goto_location``, a ``DO_REPOSITION`` or an RTL all become one
 :class:`NavTarget` in the simulator's local ENU frame (metres, z up, origin = the
@@ -16,7 +16,7 @@ import numpy as np
 
 from swarm_common.enums import NavKind
 
-__all__ = ["NavKind", "NavSource", "NavTarget", "VehicleService"]
+__all__ = ["MissionControl", "NavKind", "NavSource", "NavTarget", "VehicleService"]
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,19 @@ class NavSource(Protocol):
 
     def nav_target(self, p_enu: np.ndarray, v_enu: np.ndarray, sim_t: float) -> NavTarget | None:
         """The current target, advancing items that are reached (None: mission over)."""
+        ...
+
+
+class MissionControl(NavSource, Protocol):
+    """What the mode logic asks of the vehicle's mission service
+    (:class:`vehicle_sim.services.mission.MissionService`)."""
+
+    def start(self, sim_t: float) -> int:
+        """(Re)start the stored mission; a MAV_RESULT (ACCEPTED, or why not)."""
+        ...
+
+    def rally_points_enu(self) -> list[np.ndarray]:
+        """The stored rally points (ENU, m): where an RTL may return to."""
         ...
 
 

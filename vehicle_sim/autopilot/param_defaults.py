@@ -23,7 +23,7 @@ OBL_ACT_HOLD = 5
 
 
 def default_param_specs(agent_id: int, cfg: Any, dyn: Any) -> list[ParamSpec]:
-    """Every exposed parameter, defaults from ``cfg`` (VehicleConfig) and ``dyn``."""
+    """Every exposed parameter, defaults from ``cfg`` (AutopilotConfig) and ``dyn``."""
     hover = float(dyn.hold_thrust()) / float(dyn.f_max)
     tilt_deg = math.degrees(float(dyn.tilt_max))
     obl = OBL_ACT_LAND if cfg.failsafe == FailsafeAction.LAND else OBL_ACT_HOLD

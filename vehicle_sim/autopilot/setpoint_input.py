@@ -14,26 +14,17 @@ a position/velocity/acceleration setpoint is flown by the vehicle's position con
 from __future__ import annotations
 
 import time
-from enum import StrEnum
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from vehicle_sim.autopilot import setpoints
-
-if TYPE_CHECKING:
-    from vehicle_sim.vehicle import Vehicle
-
-
-class SetpointKind(StrEnum):
-    """What the last valid offboard setpoint asked for."""
-
-    ATTITUDE = "attitude"  # SET_ATTITUDE_TARGET: attitude + thrust, applied as they are
-    TRAJECTORY = "trajectory"  # SET_POSITION_TARGET_*: the position controller flies it
+from vehicle_sim.autopilot.setpoints import SetpointKind
+from vehicle_sim.autopilot.state import VehicleState
 
 
-def _accept(v: Vehicle, m: Any) -> bool:
+def _accept(v: VehicleState, m: Any) -> bool:
     """Latency, lockstep echo and count of one valid setpoint; False for a stale lockstep
     answer (counted, not applied)."""
     w = v.odom_wall.pop(int(m.time_boot_ms), None)
@@ -51,19 +42,19 @@ def _accept(v: Vehicle, m: Any) -> bool:
     return True
 
 
-def _stamp(v: Vehicle, m: Any, sim_t: float) -> None:
+def _stamp(v: VehicleState, m: Any, sim_t: float) -> None:
     v.sp_times.append(sim_t)
     v.last_sp_t = sim_t
     v.last_sp_ms = int(m.time_boot_ms)
 
 
-def _reject(v: Vehicle, exc: setpoints.Rejected) -> None:
+def _reject(v: VehicleState, exc: setpoints.Rejected) -> None:
     if exc.unsupported:
         v.ctr.setpoints_unsupported += 1
     v.ctr.setpoints_rejected += 1
 
 
-def on_attitude_target(v: Vehicle, m: Any, sim_t: float) -> None:
+def on_attitude_target(v: VehicleState, m: Any, sim_t: float) -> None:
     """SET_ATTITUDE_TARGET (docs/conventions.md)."""
     try:
         att, thrust = setpoints.parse_attitude(m, v.dyn.f_max)
@@ -80,7 +71,7 @@ def on_attitude_target(v: Vehicle, m: Any, sim_t: float) -> None:
     _stamp(v, m, sim_t)
 
 
-def on_position_target(v: Vehicle, m: Any, sim_t: float) -> None:
+def on_position_target(v: VehicleState, m: Any, sim_t: float) -> None:
     """SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT (PX4's type_mask rules)."""
     try:
         if m.get_msgId() == M.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT:

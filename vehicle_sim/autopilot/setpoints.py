@@ -15,11 +15,13 @@
 
 A rejected message raises :class:`Rejected` (``unsupported`` when the message is well
 formed but asks for something the simulator does not do); the vehicle counts it.
+:class:`SetpointKind` names what the last valid setpoint asked for.
 """
 
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -28,6 +30,14 @@ from pymavlink.dialects.v20 import common as M
 from swarm_common import frames
 from vehicle_sim.physics import geo
 from vehicle_sim.physics.position_control import PositionSetpoint
+
+
+class SetpointKind(StrEnum):
+    """What the last valid offboard setpoint asked for."""
+
+    ATTITUDE = "attitude"  # SET_ATTITUDE_TARGET: attitude + thrust, applied as they are
+    TRAJECTORY = "trajectory"  # SET_POSITION_TARGET_*: the position controller flies it
+
 
 TM_RATES_IGNORE = (
     M.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
@@ -182,7 +192,7 @@ def parse_local_ned(m: Any, p_enu: np.ndarray, yaw_enu: float) -> PositionSetpoi
 
 def parse_global_int(m: Any, cfg: Any) -> PositionSetpoint:
     """SET_POSITION_TARGET_GLOBAL_INT -> ENU setpoint (``cfg``: the vehicle's
-    VehicleConfig, whose geodetic origin is the world origin; the ground is home_alt)."""
+    AutopilotConfig, whose geodetic origin is the world origin; the ground is home_alt)."""
     tm = int(m.type_mask)
     frame = int(m.coordinate_frame)
     if frame not in GLOBAL_AMSL_FRAMES + GLOBAL_RELATIVE_FRAMES:

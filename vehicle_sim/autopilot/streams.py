@@ -1,7 +1,7 @@
 """Telemetry stream schedule of one vehicle (MAV_CMD_SET/GET_MESSAGE_INTERVAL).
 
 Intervals are wall-clock seconds (0 = off). Every stream starts at its default rate
-(``telemetry.DEFAULT_RATES``, ODOMETRY at ``odometry_hz``); SET_MESSAGE_INTERVAL changes
+(``config.DEFAULT_RATES``, ODOMETRY at ``odometry_hz``); SET_MESSAGE_INTERVAL changes
 one (-1 µs: off, 0: back to the default, else clamped to [10 ms, 2000 s]: no stream
 faster than 100 Hz, whatever is asked). HEARTBEAT is the link's liveness: never off, at
 least 1 Hz, at most 50 Hz.

@@ -3,9 +3,10 @@
 :data:`BUILDERS` maps a message id (``MAVLINK_MSG_ID_*``) to a function
 ``(vehicle, sim_t) -> message`` that reads the vehicle's state (dynamics row, mode,
 setpoint); :func:`build` looks it up (``None`` for a message the vehicle does not send).
-:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with on both of its links
-(Hz, 0 = off; close to PX4's "normal" link mode). The ODOMETRY rate comes from
-``VehicleConfig.odometry_hz``. Rates, health bits and the battery: docs/px4/streams.md.
+:data:`vehicle_sim.autopilot.config.DEFAULT_RATES` holds the stream rates a vehicle starts
+with on both of its links (Hz, 0 = off; close to PX4's "normal" link mode). The ODOMETRY
+rate comes from ``AutopilotConfig.odometry_hz``. Rates, health bits and the battery:
+docs/px4/streams.md.
 
 Frames: the dynamics are ENU / FLU (z up); every message is NED / FRD. Time stamps are
 simulation time (``time_boot_ms`` = round(sim_t · 1000), ``time_usec`` = round(sim_t · 1e6)).
@@ -16,25 +17,23 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames
 from swarm_common.enums import VehicleMode
+from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.mavlink_extra import (
     MAVLINK_MSG_ID_PROTOCOL_VERSION as MSG_ID_PROTOCOL_VERSION,
 )
 from vehicle_sim.autopilot.mavlink_extra import MAVLink_protocol_version_message
 from vehicle_sim.autopilot.setpoints import TM_RATES_IGNORE
+from vehicle_sim.autopilot.state import ODOM_STAMP_KEEP, VehicleState
 from vehicle_sim.physics import geo
 from vehicle_sim.physics.battery import BatteryModel
 
-if TYPE_CHECKING:
-    from vehicle_sim.vehicle import Vehicle, VehicleConfig
-
-Builder = Callable[["Vehicle", float], M.MAVLink_message]
+Builder = Callable[[VehicleState, float], M.MAVLink_message]
 
 SENSORS = (
     M.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -71,22 +70,6 @@ USB_VENDOR_ID, USB_PRODUCT_ID = 0x1209, 0x5353
 ODOMETRY_QUALITY = 100  # %
 INT16_MAX = 32767
 
-DEFAULT_RATES: dict[int, float] = {
-    M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
-    M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 20.0,
-    M.MAVLINK_MSG_ID_ATTITUDE: 15.0,
-    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 20.0,
-    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
-    M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
-    M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
-    M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
-    M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.0,
-}
-
 
 # -- state in MAVLink frames ----------------------------------------------------------
 def _t_ms(sim_t: float) -> int:
@@ -97,38 +80,38 @@ def _t_us(sim_t: float) -> int:
     return int(round(sim_t * 1e6))
 
 
-def _p_ned(v: Vehicle) -> np.ndarray:
+def _p_ned(v: VehicleState) -> np.ndarray:
     return frames.enu_to_ned(v.dyn.p[v.idx])
 
 
-def _v_ned(v: Vehicle) -> np.ndarray:
+def _v_ned(v: VehicleState) -> np.ndarray:
     return frames.enu_to_ned(v.dyn.v[v.idx])
 
 
-def q_ned(v: Vehicle) -> np.ndarray:
+def q_ned(v: VehicleState) -> np.ndarray:
     """Attitude quaternion (w, x, y, z), body FRD -> NED."""
     r, p, y = v.dyn.att[v.idx]
     return frames.quat_ned_from_euler_enu(float(r), float(p), float(y))
 
 
-def rates_frd(v: Vehicle) -> tuple[float, float, float]:
+def rates_frd(v: VehicleState) -> tuple[float, float, float]:
     """Body rates (FRD, rad/s) approximated by the Euler-angle rates of the attitude lag."""
     d, i = v.dyn, v.idx
     return frames.lag_rates_frd(d.att[i], d.cmd_att[i], d.tau)
 
 
-def latlon(cfg: VehicleConfig, ned: np.ndarray) -> tuple[int, int]:
+def latlon(cfg: AutopilotConfig, ned: np.ndarray) -> tuple[int, int]:
     """(lat, lon) in degE7 of a NED offset from the geodetic origin
     (:mod:`vehicle_sim.physics.geo`)."""
     return geo.latlon_e7(cfg, ned)
 
 
-def _alt_mm(cfg: VehicleConfig, pn: np.ndarray) -> int:
+def _alt_mm(cfg: AutopilotConfig, pn: np.ndarray) -> int:
     """AMSL altitude (mm) of a NED position."""
     return int(round((cfg.home_alt - pn[2]) * 1000))
 
 
-def landed_state(v: Vehicle) -> int:
+def landed_state(v: VehicleState) -> int:
     """MAV_LANDED_STATE: TAKEOFF (armed, climbing to a take-off altitude: AUTO.TAKEOFF, a
     mission TAKEOFF), ON_GROUND, LANDING (armed, in the air, descending to land: AUTO.LAND,
     a mission LAND, the last leg of RTL) or IN_AIR."""
@@ -141,13 +124,13 @@ def landed_state(v: Vehicle) -> int:
     return M.MAV_LANDED_STATE_IN_AIR
 
 
-def battery(v: Vehicle) -> BatteryModel:
+def battery(v: VehicleState) -> BatteryModel:
     """The vehicle's battery (kept by its information service); a full one if it has none."""
     b = getattr(getattr(v, "info", None), "battery", None)
     return b if isinstance(b, BatteryModel) else BatteryModel()
 
 
-def health(v: Vehicle) -> int:
+def health(v: VehicleState) -> int:
     """SYS_STATUS.onboard_control_sensors_health: every present sensor healthy except the
     geofence while breached (``vehicle.mission.fence_breached``), the battery below
     :data:`BATTERY_CRITICAL`, and the pre-arm check after a flight termination."""
@@ -162,7 +145,7 @@ def health(v: Vehicle) -> int:
 
 
 # -- builders ---------------------------------------------------------------------------
-def heartbeat(v: Vehicle, sim_t: float = 0.0) -> M.MAVLink_heartbeat_message:
+def heartbeat(v: VehicleState, sim_t: float = 0.0) -> M.MAVLink_heartbeat_message:
     base = (
         M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
         | M.MAV_MODE_FLAG_STABILIZE_ENABLED
@@ -186,12 +169,12 @@ def heartbeat(v: Vehicle, sim_t: float = 0.0) -> M.MAVLink_heartbeat_message:
     )  # fmt: skip
 
 
-def odometry(v: Vehicle, sim_t: float) -> M.MAVLink_odometry_message:
+def odometry(v: VehicleState, sim_t: float) -> M.MAVLink_odometry_message:
     """ODOMETRY stamped ``sim_t``; the wall time of its first send is kept for the
-    setpoint-to-odometry latency (``Vehicle.odom_wall``)."""
+    setpoint-to-odometry latency (``VehicleState.odom_wall``)."""
     stamp = int(round(sim_t * 1000))
     if stamp not in v.odom_wall:  # a re-send keeps the first send time
-        if len(v.odom_wall) > 256:
+        if len(v.odom_wall) > ODOM_STAMP_KEEP:
             v.odom_wall.clear()
         v.odom_wall[stamp] = time.monotonic()
     d, i = v.dyn, v.idx
@@ -206,19 +189,19 @@ def odometry(v: Vehicle, sim_t: float) -> M.MAVLink_odometry_message:
     )  # fmt: skip
 
 
-def attitude_quaternion(v: Vehicle, sim_t: float) -> M.MAVLink_attitude_quaternion_message:
+def attitude_quaternion(v: VehicleState, sim_t: float) -> M.MAVLink_attitude_quaternion_message:
     q = q_ned(v)
     return M.MAVLink_attitude_quaternion_message(
         _t_ms(sim_t), float(q[0]), float(q[1]), float(q[2]), float(q[3]), *rates_frd(v)
     )
 
 
-def attitude(v: Vehicle, sim_t: float) -> M.MAVLink_attitude_message:
+def attitude(v: VehicleState, sim_t: float) -> M.MAVLink_attitude_message:
     rn, pn, yn = frames.euler_from_rotm(frames.rotm_from_quat(q_ned(v)))
     return M.MAVLink_attitude_message(_t_ms(sim_t), rn, pn, yn, *rates_frd(v))
 
 
-def local_position_ned(v: Vehicle, sim_t: float) -> M.MAVLink_local_position_ned_message:
+def local_position_ned(v: VehicleState, sim_t: float) -> M.MAVLink_local_position_ned_message:
     pn, vn = _p_ned(v), _v_ned(v)
     return M.MAVLink_local_position_ned_message(
         _t_ms(sim_t), float(pn[0]), float(pn[1]), float(pn[2]),
@@ -226,7 +209,7 @@ def local_position_ned(v: Vehicle, sim_t: float) -> M.MAVLink_local_position_ned
     )  # fmt: skip
 
 
-def global_position_int(v: Vehicle, sim_t: float) -> M.MAVLink_global_position_int_message:
+def global_position_int(v: VehicleState, sim_t: float) -> M.MAVLink_global_position_int_message:
     pn, vn = _p_ned(v), _v_ned(v)
     lat, lon = latlon(v.cfg, pn)
     yaw_ned = math.pi / 2 - float(v.dyn.att[v.idx, 2])
@@ -237,7 +220,7 @@ def global_position_int(v: Vehicle, sim_t: float) -> M.MAVLink_global_position_i
     )
 
 
-def gps_raw_int(v: Vehicle, sim_t: float) -> M.MAVLink_gps_raw_int_message:
+def gps_raw_int(v: VehicleState, sim_t: float) -> M.MAVLink_gps_raw_int_message:
     pn = _p_ned(v)
     lat, lon = latlon(v.cfg, pn)
     return M.MAVLink_gps_raw_int_message(
@@ -246,7 +229,7 @@ def gps_raw_int(v: Vehicle, sim_t: float) -> M.MAVLink_gps_raw_int_message:
     )  # fmt: skip
 
 
-def home_position(v: Vehicle, sim_t: float) -> M.MAVLink_home_position_message:
+def home_position(v: VehicleState, sim_t: float) -> M.MAVLink_home_position_message:
     h = v.home_ned
     lat, lon = latlon(v.cfg, h)
     return M.MAVLink_home_position_message(
@@ -256,11 +239,11 @@ def home_position(v: Vehicle, sim_t: float) -> M.MAVLink_home_position_message:
     )  # fmt: skip
 
 
-def extended_sys_state(v: Vehicle, sim_t: float) -> M.MAVLink_extended_sys_state_message:
+def extended_sys_state(v: VehicleState, sim_t: float) -> M.MAVLink_extended_sys_state_message:
     return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed_state(v))
 
 
-def sys_status(v: Vehicle, sim_t: float) -> M.MAVLink_sys_status_message:
+def sys_status(v: VehicleState, sim_t: float) -> M.MAVLink_sys_status_message:
     b = battery(v)
     return M.MAVLink_sys_status_message(
         SENSORS, SENSORS, health(v), SYS_LOAD_PERMILLE, int(round(b.voltage * 1000)),
@@ -268,7 +251,7 @@ def sys_status(v: Vehicle, sim_t: float) -> M.MAVLink_sys_status_message:
     )  # fmt: skip
 
 
-def battery_status(v: Vehicle, sim_t: float) -> M.MAVLink_battery_status_message:
+def battery_status(v: VehicleState, sim_t: float) -> M.MAVLink_battery_status_message:
     """BATTERY_STATUS of the simulated pack (:mod:`vehicle_sim.physics.battery`)."""
     b = battery(v)
     cell_mv = min(UINT16_MAX - 1, int(round(b.cell_voltage * 1000)))
@@ -282,7 +265,7 @@ def battery_status(v: Vehicle, sim_t: float) -> M.MAVLink_battery_status_message
     )  # fmt: skip
 
 
-def vfr_hud(v: Vehicle, sim_t: float) -> M.MAVLink_vfr_hud_message:
+def vfr_hud(v: VehicleState, sim_t: float) -> M.MAVLink_vfr_hud_message:
     """VFR_HUD: no wind, so airspeed = ground speed (m/s); throttle = thrust / f_max (%)."""
     pn, vn = _p_ned(v), _v_ned(v)
     yaw_ned = math.pi / 2 - float(v.dyn.att[v.idx, 2])
@@ -294,7 +277,7 @@ def vfr_hud(v: Vehicle, sim_t: float) -> M.MAVLink_vfr_hud_message:
     return M.MAVLink_vfr_hud_message(gs, gs, heading, max(0, min(100, throttle)), alt, climb)
 
 
-def altitude(v: Vehicle, sim_t: float) -> M.MAVLink_altitude_message:
+def altitude(v: VehicleState, sim_t: float) -> M.MAVLink_altitude_message:
     """ALTITUDE (m): flat ground at home altitude, so terrain height = local altitude."""
     up = -float(_p_ned(v)[2])
     amsl = v.cfg.home_alt + up
@@ -302,14 +285,14 @@ def altitude(v: Vehicle, sim_t: float) -> M.MAVLink_altitude_message:
     return M.MAVLink_altitude_message(_t_us(sim_t), amsl, amsl, up, rel, up, up)
 
 
-def protocol_version(v: Vehicle, sim_t: float) -> MAVLink_protocol_version_message:
+def protocol_version(v: VehicleState, sim_t: float) -> MAVLink_protocol_version_message:
     """PROTOCOL_VERSION: MAVLink 2 active, versions 1 to 2 understood."""
     return MAVLink_protocol_version_message(
         MAVLINK_VERSION_ACTIVE, MAVLINK_VERSION_MIN, MAVLINK_VERSION_MAX, [0] * 8, [0] * 8
     )
 
 
-def autopilot_version(v: Vehicle, sim_t: float) -> M.MAVLink_autopilot_version_message:
+def autopilot_version(v: VehicleState, sim_t: float) -> M.MAVLink_autopilot_version_message:
     caps = (
         M.MAV_PROTOCOL_CAPABILITY_MAVLINK2
         | M.MAV_PROTOCOL_CAPABILITY_MISSION_INT
@@ -330,7 +313,7 @@ def autopilot_version(v: Vehicle, sim_t: float) -> M.MAVLink_autopilot_version_m
     )  # fmt: skip
 
 
-def attitude_target(v: Vehicle, sim_t: float) -> M.MAVLink_attitude_target_message:
+def attitude_target(v: VehicleState, sim_t: float) -> M.MAVLink_attitude_target_message:
     """The setpoint being applied (what PX4 reports back)."""
     r, p, y = (float(a) for a in v.sp_att)
     q = frames.quat_ned_from_euler_enu(r, p, y)
@@ -360,7 +343,7 @@ BUILDERS: dict[int, Builder] = {
 }
 
 
-def build(v: Vehicle, mid: int, sim_t: float) -> M.MAVLink_message | None:
+def build(v: VehicleState, mid: int, sim_t: float) -> M.MAVLink_message | None:
     """Message ``mid`` built from the vehicle's current state (None if not supported)."""
     builder = BUILDERS.get(mid)
     return None if builder is None else builder(v, sim_t)

@@ -20,8 +20,9 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import signing
 from swarm_common.enums import DefaultStreams
+from vehicle_sim.autopilot.state import STATUSTEXT_LEN
 from vehicle_sim.link.endpoint import MavlinkLink
-from vehicle_sim.vehicle import STATUSTEXT_LEN, Vehicle
+from vehicle_sim.vehicle import Vehicle
 
 ERRORS_LOGGED = 10  # per-packet errors logged before only counting them
 REJECT_REPORT_S = 5.0  # at most one "rejected frames" STATUSTEXT per vehicle this often

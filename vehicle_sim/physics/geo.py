@@ -1,9 +1,10 @@
 """Geodetic <-> local conversion around the simulator's geodetic origin (flat earth).
 
 The world origin (ENU 0, 0, 0) is at ``(home_lat, home_lon, home_alt)`` of the
-:class:`~vehicle_sim.vehicle.VehicleConfig` for every vehicle, so all vehicles share one
-map. Local offsets here are NED (north, east, down, metres), the MAVLink side; turn them
-into our ENU maths frame with :func:`swarm_common.frames.ned_to_enu`.
+autopilot's configuration (:class:`~vehicle_sim.autopilot.config.AutopilotConfig`) for
+every vehicle, so all vehicles share one map. Local offsets here are NED (north, east,
+down, metres), the MAVLink side; turn them into our ENU maths frame with
+:func:`swarm_common.frames.ned_to_enu`.
 """
 
 from __future__ import annotations

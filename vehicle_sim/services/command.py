@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as M
@@ -22,10 +22,8 @@ from pymavlink.dialects.v20 import common as M
 from swarm_common import px4
 from vehicle_sim.autopilot import modes, nav_flight, setpoints, telemetry
 from vehicle_sim.autopilot.nav import NavKind, NavTarget
+from vehicle_sim.autopilot.state import VehicleState
 from vehicle_sim.physics import geo
-
-if TYPE_CHECKING:
-    from vehicle_sim.vehicle import Vehicle
 
 Outcome = tuple[int, M.MAVLink_message | None]
 MSG_ID_LIMIT = 1 << 24  # MAVLink 2 message ids are 24 bits
@@ -59,32 +57,32 @@ class Command:
     frame: int = M.MAV_FRAME_GLOBAL  # COMMAND_INT's frame; COMMAND_LONG: global, AMSL
 
 
-def _arm_disarm(v: Vehicle, c: Command) -> Outcome:
+def _arm_disarm(v: VehicleState, c: Command) -> Outcome:
     want = finite(c.p[0])
     force = finite(c.p[1], 0.0) == px4.FORCE_MAGIC
     if want is None:
         return M.MAV_RESULT_DENIED, None
     if want > TRUE_THRESHOLD:
-        return v.arm(c.sim_t), None
-    return v.disarm(force, "forced" if force else ""), None
+        return modes.arm(v, c.sim_t), None
+    return modes.disarm(v, force, "forced" if force else ""), None
 
 
-def _set_mode(v: Vehicle, c: Command) -> Outcome:
+def _set_mode(v: VehicleState, c: Command) -> Outcome:
     base, main, sub = finite(c.p[0]), finite(c.p[1]), _flag(c.p[2], 0.0)
     if base is None or main is None or not (int(base) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED):
         return M.MAV_RESULT_UNSUPPORTED, None
-    return v.request_mode(int(main), int(sub), c.sim_t), None
+    return modes.request_mode(v, int(main), int(sub), c.sim_t), None
 
 
-def _land(v: Vehicle, c: Command) -> Outcome:
-    return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LAND, c.sim_t), None
+def _land(v: VehicleState, c: Command) -> Outcome:
+    return modes.request_mode(v, px4.MAIN_AUTO, px4.SUB_AUTO_LAND, c.sim_t), None
 
 
-def _loiter(v: Vehicle, c: Command) -> Outcome:
-    return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_LOITER, c.sim_t), None
+def _loiter(v: VehicleState, c: Command) -> Outcome:
+    return modes.request_mode(v, px4.MAIN_AUTO, px4.SUB_AUTO_LOITER, c.sim_t), None
 
 
-def _altitude_enu(v: Vehicle, c: Command, alt: float | None) -> float | None:
+def _altitude_enu(v: VehicleState, c: Command, alt: float | None) -> float | None:
     """ENU z (m above the ground/home) of a command's altitude in its frame; None when the
     altitude is not given. Raises ValueError for a frame without an altitude we know."""
     if alt is None:
@@ -96,7 +94,7 @@ def _altitude_enu(v: Vehicle, c: Command, alt: float | None) -> float | None:
     raise ValueError(f"frame {c.frame}")
 
 
-def _takeoff(v: Vehicle, c: Command) -> Outcome:
+def _takeoff(v: VehicleState, c: Command) -> Outcome:
     """NAV_TAKEOFF: p7 altitude (AMSL; NaN: MIS_TAKEOFF_ALT above home)."""
     try:
         alt = _altitude_enu(v, c, finite(c.p[6]))
@@ -105,11 +103,11 @@ def _takeoff(v: Vehicle, c: Command) -> Outcome:
     return modes.takeoff(v, alt), None
 
 
-def _rtl(v: Vehicle, c: Command) -> Outcome:
-    return v.request_mode(px4.MAIN_AUTO, px4.SUB_AUTO_RTL, c.sim_t), None
+def _rtl(v: VehicleState, c: Command) -> Outcome:
+    return modes.request_mode(v, px4.MAIN_AUTO, px4.SUB_AUTO_RTL, c.sim_t), None
 
 
-def _reposition(v: Vehicle, c: Command) -> Outcome:
+def _reposition(v: VehicleState, c: Command) -> Outcome:
     """DO_REPOSITION: p1 ground speed (m/s, < 0 default), p4 yaw (deg NED, NaN keep),
     p5/p6 latitude/longitude (deg; NaN: here), p7 altitude (frame; NaN: here)."""
     p = v.p()
@@ -135,14 +133,14 @@ def _reposition(v: Vehicle, c: Command) -> Outcome:
     return modes.reposition(v, target), None
 
 
-def _mission_start(v: Vehicle, c: Command) -> Outcome:
+def _mission_start(v: VehicleState, c: Command) -> Outcome:
     return modes.start_mission(v, c.sim_t), None
 
 
 SPEED_RESET = -2.0  # DO_CHANGE_SPEED p2: back to the default (-1: no change)
 
 
-def _change_speed(v: Vehicle, c: Command) -> Outcome:
+def _change_speed(v: VehicleState, c: Command) -> Outcome:
     """DO_CHANGE_SPEED: p1 speed type (air or ground speed; climb/descent unsupported),
     p2 speed m/s (-1 no change, -2 default)."""
     kind, speed = finite(c.p[0], float(M.SPEED_TYPE_GROUNDSPEED)), finite(c.p[1])
@@ -159,9 +157,9 @@ def _change_speed(v: Vehicle, c: Command) -> Outcome:
     return M.MAV_RESULT_ACCEPTED, None
 
 
-def _terminate(v: Vehicle, c: Command) -> Outcome:
+def _terminate(v: VehicleState, c: Command) -> Outcome:
     on = _flag(c.p[0], 0.0) > TRUE_THRESHOLD
-    return (v.terminate() if on else M.MAV_RESULT_ACCEPTED), None
+    return (modes.terminate(v) if on else M.MAV_RESULT_ACCEPTED), None
 
 
 def _peer_key(c: Command) -> Any:
@@ -172,7 +170,7 @@ def _peer_key(c: Command) -> Any:
     return None
 
 
-def _set_interval(v: Vehicle, c: Command) -> Outcome:
+def _set_interval(v: VehicleState, c: Command) -> Outcome:
     mid, interval_us = finite(c.p[0]), finite(c.p[1])
     if mid is None or interval_us is None or int(mid) not in v.streams:
         return M.MAV_RESULT_UNSUPPORTED, None
@@ -180,7 +178,7 @@ def _set_interval(v: Vehicle, c: Command) -> Outcome:
     return M.MAV_RESULT_ACCEPTED, None
 
 
-def _get_interval(v: Vehicle, c: Command) -> Outcome:
+def _get_interval(v: VehicleState, c: Command) -> Outcome:
     mid = finite(c.p[0])
     if mid is None or int(mid) not in v.streams:
         return M.MAV_RESULT_UNSUPPORTED, None
@@ -189,7 +187,7 @@ def _get_interval(v: Vehicle, c: Command) -> Outcome:
     return M.MAV_RESULT_ACCEPTED, reply
 
 
-def _request_message(v: Vehicle, c: Command) -> Outcome:
+def _request_message(v: VehicleState, c: Command) -> Outcome:
     mid = finite(c.p[0])
     msg = None
     if mid is not None and 0 <= mid < MSG_ID_LIMIT:
@@ -199,7 +197,7 @@ def _request_message(v: Vehicle, c: Command) -> Outcome:
     return M.MAV_RESULT_ACCEPTED, msg
 
 
-def _request_capabilities(v: Vehicle, c: Command) -> Outcome:
+def _request_capabilities(v: VehicleState, c: Command) -> Outcome:
     if _flag(c.p[0], 1.0) > TRUE_THRESHOLD:
         return M.MAV_RESULT_ACCEPTED, telemetry.autopilot_version(v, c.sim_t)
     return M.MAV_RESULT_ACCEPTED, None
@@ -215,7 +213,7 @@ TELEMETRY_COMMANDS = frozenset({
     M.MAV_CMD_GET_HOME_POSITION,
 })  # fmt: skip
 
-HANDLERS: dict[int, Callable[[Vehicle, Command], Outcome]] = {
+HANDLERS: dict[int, Callable[[VehicleState, Command], Outcome]] = {
     M.MAV_CMD_COMPONENT_ARM_DISARM: _arm_disarm,
     M.MAV_CMD_DO_SET_MODE: _set_mode,
     M.MAV_CMD_NAV_LAND: _land,
@@ -233,8 +231,10 @@ HANDLERS: dict[int, Callable[[Vehicle, Command], Outcome]] = {
 }
 
 
-def execute(v: Vehicle, c: Command) -> Outcome:
-    """Run one command; UNSUPPORTED for a command the vehicle does not implement."""
+def execute(v: VehicleState, c: Command) -> Outcome:
+    """Run one command: the vehicle's services' handler for it
+    (``v.command_handlers``), else :data:`HANDLERS`; UNSUPPORTED for a command the
+    vehicle does not implement."""
     handler = v.command_handlers.get(c.cmd) or HANDLERS.get(c.cmd)
     if handler is None:
         return M.MAV_RESULT_UNSUPPORTED, None

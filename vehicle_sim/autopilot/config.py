@@ -1,0 +1,57 @@
+"""The settings of one simulated autopilot: its protocol side, as the command line sets it.
+
+:class:`AutopilotConfig` is what ``vehicle-sim`` tells each PX4-style vehicle it runs
+(offboard-loss defaults, ODOMETRY rate, lockstep, geodetic origin, unique id, stream
+rates). It is not the scenario's physical vehicle (mass, thrust, tilt: that is
+:class:`swarm_common.scenario.schema.VehicleConfig`, which the dynamics read).
+
+:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with on both of its links
+(Hz, 0 = off; close to PX4's "normal" link mode; ODOMETRY uses
+``AutopilotConfig.odometry_hz``). docs/px4/streams.md lists them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pymavlink.dialects.v20 import common as M
+
+from swarm_common.enums import FailsafeAction
+
+DEFAULT_RATES: dict[int, float] = {
+    M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 20.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 15.0,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 20.0,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
+    M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+    M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.0,
+}
+
+
+@dataclass
+class AutopilotConfig:
+    """One vehicle's autopilot settings (protocol, not physics)."""
+
+    # defaults of COM_OF_LOSS_T, COM_OBL_RC_ACT and COM_DISARM_LAND (the vehicle reads
+    # the parameters, which a client may change)
+    offboard_timeout: float = 0.5  # s (sim time) without setpoint in OFFBOARD -> failsafe
+    failsafe: FailsafeAction = FailsafeAction.HOLD
+    odometry_hz: float = 50.0
+    lockstep: bool = False
+    setpoint_window: float = 0.5  # s: OFFBOARD needs >= setpoint_min_count in this window
+    setpoint_min_count: int = 2
+    land_disarm_delay: float = 1.0  # s on the ground in LAND before auto-disarm
+    home_lat: float = 47.397742  # PX4 SITL default home (Zurich)
+    home_lon: float = 8.545594
+    home_alt: float = 488.0
+    uid_base: int = 0x4253574152000000  # "BSWAR" + offset << 8 + id
+    port_offset: int = 0
+    # default stream rates (Hz); 0 = off. ODOMETRY uses odometry_hz.
+    rates: dict[int, float] = field(default_factory=lambda: dict(DEFAULT_RATES))
