@@ -41,10 +41,13 @@ def _names(prefix: str) -> dict[int, str]:
     }
 
 
-# PX4 main modes (px4_custom_mode.h); TERMINATION is absent from pymavlink's list.
-MAIN_MODES = _names("PX4_CUSTOM_MAIN_MODE_") | {10: "TERMINATION"}
+# PX4 main modes (px4_custom_mode.h); SIMPLE and TERMINATION are absent from pymavlink's list.
+MAIN_MODES = _names("PX4_CUSTOM_MAIN_MODE_") | {
+    px4.MAIN_SIMPLE: "SIMPLE",
+    px4.MAIN_TERMINATION: "TERMINATION",
+}
 # AUTO sub-modes; PRECLAND is absent from pymavlink's list.
-AUTO_SUB_MODES = _names("PX4_CUSTOM_SUB_MODE_AUTO_") | {9: "PRECLAND"}
+AUTO_SUB_MODES = _names("PX4_CUSTOM_SUB_MODE_AUTO_") | {px4.SUB_AUTO_PRECLAND: "PRECLAND"}
 
 MAV_RESULT_NAMES = {
     k: e.name.removeprefix("MAV_RESULT_")
