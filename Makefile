@@ -1,7 +1,15 @@
 # Quick start: `make mission` (the cube-mission comparison) and `make test` (all tests).
+# `make check` is the quick tier (lint, types, unit tests, one distributed smoke run).
 PY ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
+PYTEST := $(VENV)/bin/python -m pytest -q
+# test processes: the unit tests are CPU-bound (one worker per core); the integration
+# tests mostly wait on their own subprocesses and sockets, so more workers than cores
+# overlap those waits (docs/testing.md)
+UNIT_JOBS ?= 2
+INTEGRATION_JOBS ?= 3
+SMOKE_DIR := $(VENV)/smoke
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -9,20 +17,26 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-.PHONY: venv mission test test-unit lint typecheck bench
+.PHONY: venv mission test check smoke test-unit test-integration lint typecheck bench
 venv: $(STAMP)
 
 mission: $(STAMP)
 	$(VENV)/bin/gcs mission compare scenarios/cube8.toml --out runs/compare
 
-test: $(STAMP)
-	$(VENV)/bin/ruff check .
-	$(VENV)/bin/mypy
-	$(VENV)/bin/python -m pytest -q tests/unit
-	$(VENV)/bin/python -m pytest -q tests/integration
+test: lint typecheck test-unit test-integration
+
+check: lint typecheck test-unit smoke
 
 test-unit: $(STAMP)
-	$(VENV)/bin/python -m pytest -q tests/unit
+	$(PYTEST) -n $(UNIT_JOBS) tests/unit
+
+test-integration: $(STAMP)
+	$(PYTEST) -n $(INTEGRATION_JOBS) tests/integration
+
+# one distributed run: vehicle-sim, a Zenoh router and eight daemons as processes
+smoke: $(STAMP)
+	rm -rf $(SMOKE_DIR)
+	$(VENV)/bin/gcs mission run scenarios/cube8.toml --method dcbf --duration 2 --out $(SMOKE_DIR)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -131,6 +131,13 @@ def free_port_offset(n_vehicles: int = 8) -> int:
     raise RuntimeError("no free port offset found")
 
 
+@pytest.fixture
+def port_offset() -> int:
+    """A port offset whose ports are free now, claimed until the test ends (against
+    other workers and other copies of the suite, see :func:`free_port_offset`)."""
+    return free_port_offset()
+
+
 @pytest.fixture(autouse=True)
 def _port_offset_claims() -> Iterator[None]:
     """Release this test's port-offset claims when it ends (its processes are stopped by
@@ -179,7 +186,9 @@ class SimProcess:
                     return None
                 self._cv.wait(min(left, 0.2))
 
-    def wait_ready(self, timeout: float = 15.0) -> None:
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        # start-up is import and compile time: seconds idle, tens of seconds on a loaded
+        # 2-core machine running the suite in parallel (a wait, not a timing assertion)
         if self.wait_log(r"vehicles, (real-time|lockstep)", timeout) is None:
             raise RuntimeError("vehicle-sim did not start:\n" + "\n".join(self.lines[-20:]))
 
