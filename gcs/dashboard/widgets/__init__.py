@@ -1,4 +1,9 @@
-"""Small composable Textual widgets of the dashboard."""
+"""Small composable Textual widgets of the dashboard, one per module.
+
+:class:`VehicleTable` (per-vehicle rows), :class:`FormationView` (the swarm seen from
+above), :class:`MinDistancePlot`, :class:`EventLog`, :class:`StatusBar`, and the modal
+screens :class:`ConfirmScreen` and :class:`ChoiceScreen`; :mod:`.fmt` formats numbers.
+"""
 
 from .distance_plot import MinDistancePlot
 from .event_log import EventLog
