@@ -134,3 +134,13 @@ class DefaultStreams(StrEnum):
 
     ALWAYS = "always"  # to the link's default remote whether or not anyone listens (PX4)
     ON_CONTACT = "on-contact"  # HEARTBEAT only, until a client there speaks
+
+
+class CommandKind(StrEnum):
+    """A ground-station ``wire.Command``'s ``kind``: the word on the wire and the last part
+    of its Zenoh key (docs/lifecycle.md)."""
+
+    METHOD = "method"  # switch the followers' collision-avoidance method
+    OUTAGE = "outage"  # inject a communication outage of duration_s
+    LAND = "land"  # coordinated land-all at at_s
+    TAKEOFF = "takeoff"  # coordinated take-off of a ground start at at_s

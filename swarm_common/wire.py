@@ -30,6 +30,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
+from swarm_common.enums import CommandKind
+
 VERSION = 1
 DEFAULT_ROOT = "swarm"
 
@@ -175,7 +177,8 @@ class Odometry:
     v: np.ndarray  # (3,) m/s
 
 
-COMMAND_KINDS = ("method", "outage", "land", "takeoff")  # Command.kind; others fail decode
+# Command.kind (swarm_common.enums.CommandKind); others fail decode
+COMMAND_KINDS = tuple(k.value for k in CommandKind)
 
 
 @dataclass

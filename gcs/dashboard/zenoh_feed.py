@@ -35,7 +35,7 @@ from typing import Any
 import zenoh
 from pymavlink.dialects.v20 import common as mavlink
 
-from swarm_common.enums import Method
+from swarm_common.enums import CommandKind, Method
 from swarm_common.wire import (
     COMMAND_KINDS,
     Command,
@@ -313,7 +313,8 @@ class ZenohFeed:
             return max((st.t for st, _ in self.status.values()), default=None)
 
     def switch_method(self, method: str, agent: int = 0) -> str:
-        return self.publish(Command(kind="method", agent=agent, method=method))
+        return self.publish(Command(kind=CommandKind.METHOD, agent=agent, method=method))
 
     def inject_outage(self, duration_s: float, agent: int = 0) -> str:
-        return self.publish(Command(kind="outage", agent=agent, duration_s=float(duration_s)))
+        return self.publish(Command(kind=CommandKind.OUTAGE, agent=agent,
+                                    duration_s=float(duration_s)))

@@ -41,7 +41,7 @@ from gcs.mission.score import (
 from gcs.mission.warmup import compile_kernels
 from offboard.daemon.packing import parse_agents
 from swarm_common import wire
-from swarm_common.enums import DefaultStreams
+from swarm_common.enums import CommandKind, DefaultStreams
 from swarm_common.scenario.model import Scenario
 from swarm_common.zenoh_session import write_swarm_security
 
@@ -230,8 +230,8 @@ def _land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callabl
     """on_step callback: (re)publish the land command every 0.5 s (wall) from step 1 on
     (every agent subscribed) until the run is 1 s past ``land_at``; the daemons keep the
     first one they receive."""
-    key = wire.key_cmd(swarm, "land")
-    payload = wire.encode(wire.Command(kind="land", at_s=float(land_at)))
+    key = wire.key_cmd(swarm, CommandKind.LAND)
+    payload = wire.encode(wire.Command(kind=CommandKind.LAND, at_s=float(land_at)))
     last = [0.0]
 
     def send(k: int) -> None:
