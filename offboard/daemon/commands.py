@@ -1,21 +1,22 @@
 """Ground-station commands as the offboard daemon applies them (docs/lifecycle.md): the
 collision-avoidance method, injected outages, the coordinated land-all and take-off, and
-the scenario's communication outages; and the starts they lead to (the landing plan, the
-leaders' real-time trajectory start). A mixin of :class:`offboard.daemon.core.OffboardDaemon`
-(it uses the daemon's agent, bus and identity); bad fields are counted and dropped."""
+the scenario's communication outages; and the landing they lead to. One handler per
+:class:`swarm_common.enums.CommandKind` in a dispatch table; a command of a kind without
+one (decoding rejects those, so a local caller's mistake) is counted and logged, and bad
+fields are counted and dropped: never a crash."""
 
 from __future__ import annotations
 
 import dataclasses
 import logging
 import math
+from collections.abc import Callable, Iterable
 
 from offboard.agent.factory import FollowerAgent, LeaderAgent
 from offboard.agent.landing import landing_plan
-from offboard.daemon.mavlink.link import VehicleLink
-from offboard.daemon.zenoh.link import SwarmBus
 from offboard.safety.filter import parse_method
 from swarm_common import wire
+from swarm_common.enums import CommandKind
 from swarm_common.scenario.model import Scenario
 
 log = logging.getLogger(__name__)
@@ -29,49 +30,75 @@ TAKEOFF_LEAD_S = 60.0  # s, a take-off command's at_s may lie at most this far a
 LAND_LATE_S = 1.0
 
 
-class DaemonCommands:
-    """Command handling of one daemon (the attributes below are the daemon's)."""
+Handler = Callable[[wire.Command, float], None]
 
-    id: int
-    sc: Scenario
-    agent: LeaderAgent | FollowerAgent
-    bus: SwarmBus
-    land_at: float | None
-    extra_outages: list[tuple[float, float]]
-    bad_commands: int
-    trajectory_started: bool
-    link: VehicleLink
+
+class GroundCommands:
+    """The ground-station commands of one agent and what they set: the land-all time, the
+    injected outages, the counts of dropped commands."""
+
+    def __init__(self, sc: Scenario, agent: LeaderAgent | FollowerAgent, agent_id: int,
+                 land_at: float | None = None) -> None:
+        self.sc = sc
+        self.agent = agent
+        self.id = agent_id
+        self.land_at = land_at  # mission time (s) of the coordinated land-all, once known
+        self.extra_outages: list[tuple[float, float]] = []  # injected [a, b) of mission time
+        self.bad_commands = 0  # commands with unusable fields: counted, logged, dropped
+        self.unknown_commands = 0  # commands of a kind without a handler: counted, logged
+        self.handlers: dict[CommandKind, Handler] = {
+            CommandKind.METHOD: self._method_command,
+            CommandKind.OUTAGE: self._outage_command,
+            CommandKind.LAND: self._land_command,
+            CommandKind.TAKEOFF: self._takeoff_command,
+        }
 
     def comm_ok(self, t: float) -> bool:
+        """False inside a communication outage (the scenario's or an injected one)."""
         for a, b in (*self.sc.outages, *self.extra_outages):
             if a <= t < b:
                 return False
         return True
 
-    def _apply_commands(self, t: float) -> None:
-        for cmd in self.bus.pop_commands():
-            if cmd.kind == "method":
-                try:
-                    method = parse_method(cmd.method)
-                except ValueError as exc:
-                    log.warning("agent %d: command ignored: %s", self.id, exc)
-                    continue
-                self.agent.set_method(method)
-                log.info("agent %d: method -> %s", self.id, method)
-            elif cmd.kind == "outage" and cmd.duration_s > 0:
-                self.extra_outages.append((t, t + cmd.duration_s))
-                log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
-            elif cmd.kind == "land" and self.land_at is None:
-                self._land_command(cmd, t)
-            elif cmd.kind == "takeoff":
-                self._takeoff_command(cmd, t)
+    def apply(self, cmds: Iterable[wire.Command], t: float) -> None:
+        """Apply ``cmds`` in order at the step of mission time ``t``."""
+        for cmd in cmds:
+            try:
+                kind = CommandKind(cmd.kind)
+            except ValueError:
+                kind = None
+            handler = None if kind is None else self.handlers.get(kind)
+            if handler is None:
+                self.unknown_commands += 1
+                log.warning("agent %d: command of unknown kind %r dropped", self.id, cmd.kind)
+                continue
+            handler(cmd, t)
+
+    def _method_command(self, cmd: wire.Command, t: float) -> None:
+        """Switch the collision-avoidance method (an unknown name is ignored)."""
+        try:
+            method = parse_method(cmd.method)
+        except ValueError as exc:
+            log.warning("agent %d: command ignored: %s", self.id, exc)
+            return
+        self.agent.set_method(method)
+        log.info("agent %d: method -> %s", self.id, method)
+
+    def _outage_command(self, cmd: wire.Command, t: float) -> None:
+        """A communication outage of ``duration_s`` from now (none: ignored)."""
+        if cmd.duration_s > 0:
+            self.extra_outages.append((t, t + cmd.duration_s))
+            log.info("agent %d: injected outage %.2f s at t=%.2f", self.id, cmd.duration_s, t)
 
     def _bad_command(self, cmd: wire.Command, why: str) -> None:
         self.bad_commands += 1
         log.warning("agent %d: %s command dropped: %s", self.id, cmd.kind, why)
 
     def _land_command(self, cmd: wire.Command, t: float) -> None:
-        """Coordinated land-all at ``at_s`` (negative: now); ignored while on the pad."""
+        """Coordinated land-all at ``at_s`` (negative: now); ignored while on the pad and
+        once a land-all time is set."""
+        if self.land_at is not None:
+            return
         if not math.isfinite(cmd.at_s):
             self._bad_command(cmd, f"at_s = {cmd.at_s!r}")
         elif not self.agent.takeoff_held:
@@ -98,7 +125,7 @@ class DaemonCommands:
         if self.agent.start_takeoff(t0):
             log.info("agent %d: take-off at t=%.2f s", self.id, t0)
 
-    def _maybe_start_landing(self, t: float) -> None:
+    def maybe_start_landing(self, t: float) -> None:
         """From the first step at or after ``land_at``: the common plan of offboard.agent.landing,
         computed for t_L = ``land_at`` (the same on every agent, no communication). A step
         more than LAND_LATE_S after t_L (this daemon's loop stalled across it) keeps the
@@ -113,17 +140,3 @@ class DaemonCommands:
                 plan = dataclasses.replace(plan, t_land=t)
             self.agent.start_landing(plan)
             log.info("agent %d: landing at t=%.2f s (transit %.2f s)", self.id, t, plan.t_h)
-
-    def _maybe_start_trajectory(self, t: float) -> None:
-        """Real time: hold p_L(0) until flying in OFFBOARD, then start the trajectory at
-        the next whole period (both leaders pick the same instant)."""
-        assert isinstance(self.agent, LeaderAgent)
-        if self.trajectory_started:
-            return
-        if self.link.armed and self.link.in_offboard:
-            period = 1.0 / float(self.sc.leader_trajectory.frequency_hz)
-            self.agent.start_time = math.ceil(t / period) * period
-            self.trajectory_started = True
-            log.info("agent %d: trajectory starts at t = %.2f s", self.id, self.agent.start_time)
-        else:
-            self.agent.start_time = math.inf

@@ -22,7 +22,7 @@ from offboard.agent.takeoff import (
     min_column_separation,
     takeoff_plan,
 )
-from offboard.daemon.core import OffboardDaemon
+from offboard.daemon.commands import GroundCommands
 from swarm_common import wire
 from swarm_common.scenario.model import ScenarioError, load_scenario
 
@@ -171,66 +171,53 @@ def test_held_agents_idle_on_the_pad_until_start_takeoff() -> None:
     assert not airborne.hold_for_takeoff() and not airborne.start_takeoff(1.0)
 
 
-class _Bus:
-    def __init__(self, cmds: list[wire.Command]) -> None:
-        self.cmds = cmds
-
-    def pop_commands(self) -> list[wire.Command]:
-        out, self.cmds = self.cmds, []
-        return out
-
-
-def _daemon(cmds: list[wire.Command]) -> OffboardDaemon:
-    """OffboardDaemon's command handling alone (no links): a held ground8 leader."""
-    d = OffboardDaemon.__new__(OffboardDaemon)
-    d.id, d.land_at, d.bad_commands, d.extra_outages = 1, None, 0, []
-    d.sc = load_scenario(GROUND8)
-    d.agent = make_agent(d.sc, 1)
-    d.agent.hold_for_takeoff()
-    d.bus = _Bus(cmds)  # type: ignore[assignment]
-    return d
+def _daemon() -> GroundCommands:
+    """An offboard daemon's command handling alone (no links): a held ground8 leader."""
+    sc = load_scenario(GROUND8)
+    agent = make_agent(sc, 1)
+    agent.hold_for_takeoff()
+    return GroundCommands(sc, agent, 1)
 
 
 @pytest.mark.parametrize("at_s", [float("nan"), float("inf"), 500.0])
 def test_daemon_drops_a_bad_takeoff_time(at_s: float) -> None:
-    d = _daemon([wire.Command(kind="takeoff", at_s=at_s)])
-    d._apply_commands(10.0)  # 500: 490 s ahead
+    d = _daemon()
+    d.apply([wire.Command(kind="takeoff", at_s=at_s)], 10.0)  # 500: 490 s ahead
     assert d.bad_commands == 1 and d.agent.takeoff_held
 
 
 def test_late_takeoff_climbs_from_now_without_a_jump(caplog: pytest.LogCaptureFixture) -> None:
     """A daemon whose loop stalled gets the command 7 s after its at_s: it climbs the same
     plan from its step time, not from 7 s into the plan (its reference would jump up)."""
-    d = _daemon([wire.Command(kind="takeoff", at_s=3.0)])
+    d = _daemon()
     pad = d.agent.current_reference(10.0)[0:3].copy()
     with caplog.at_level(logging.WARNING):
-        d._apply_commands(10.0)
+        d.apply([wire.Command(kind="takeoff", at_s=3.0)], 10.0)
     assert d.bad_commands == 0 and not d.agent.takeoff_held
     assert d.agent.takeoff is not None and d.agent.takeoff.t0 == 10.0
     assert "arrived late" in caplog.text
     assert np.allclose(d.agent.current_reference(10.0)[0:3], pad)  # still on the pad, at rest
     assert np.allclose(d.agent.current_reference(10.0)[3:], 0.0)
     # a late copy of it changes nothing; 0.9 s late joins the common plan
-    d.bus.cmds = [wire.Command(kind="takeoff", at_s=3.0)]  # type: ignore[attr-defined]
-    d._apply_commands(11.0)
+    d.apply([wire.Command(kind="takeoff", at_s=3.0)], 11.0)
     assert d.agent.takeoff.t0 == 10.0 and d.bad_commands == 0
-    d = _daemon([wire.Command(kind="takeoff", at_s=9.1)])
-    d._apply_commands(10.0)
+    d = _daemon()
+    d.apply([wire.Command(kind="takeoff", at_s=9.1)], 10.0)
     assert d.agent.takeoff is not None and d.agent.takeoff.t0 == 9.1
 
 
 def test_daemon_takeoff_and_land_commands() -> None:
-    d = _daemon([wire.Command(kind="land", at_s=12.0), wire.Command(kind="takeoff", at_s=10.5)])
-    d._apply_commands(10.0)
+    d = _daemon()
+    d.apply([wire.Command(kind="land", at_s=12.0), wire.Command(kind="takeoff", at_s=10.5)], 10.0)
     assert d.land_at is None  # on the pad: the land-all is ignored
     assert not d.agent.takeoff_held and d.agent.takeoff is not None
     assert d.agent.takeoff.t0 == 10.5 and d.bad_commands == 0
-    d.bus.cmds = [wire.Command(kind="takeoff", at_s=-1.0), wire.Command(kind="land", at_s=-1.0)]
-    d._apply_commands(30.0)  # a second take-off changes nothing; land now
+    # a second take-off changes nothing; land now
+    d.apply([wire.Command(kind="takeoff", at_s=-1.0), wire.Command(kind="land", at_s=-1.0)], 30.0)
     assert d.agent.takeoff.t0 == 10.5 and d.land_at == 30.0
-    d = _daemon([wire.Command(kind="land", at_s=float("nan"))])
+    d = _daemon()
     d.agent.start_takeoff(0.0)
-    d._apply_commands(30.0)
+    d.apply([wire.Command(kind="land", at_s=float("nan"))], 30.0)
     assert d.bad_commands == 1 and d.land_at is None
 
 
@@ -243,12 +230,12 @@ def test_late_land_all_keeps_the_common_pad_and_flies_it_from_now(
     sc = load_scenario(GROUND8)
     common = landing_plan(sc, 20.0)
     for late, t_land in ((4.0, 24.0), (0.5, 20.0)):
-        d = _daemon([])
+        d = _daemon()
         d.agent.start_takeoff(0.0)
         d.land_at = 20.0
         held = d.agent.current_reference(20.0 + late).copy()
         with caplog.at_level(logging.WARNING):
-            d._maybe_start_landing(20.0 + late)
+            d.maybe_start_landing(20.0 + late)
         landing = d.agent.landing
         assert landing is not None and landing.plan.t_land == t_land
         assert np.array_equal(landing.plan.pads, common.pads)

@@ -1,0 +1,127 @@
+"""The offboard daemon's ground-station commands (offboard.daemon.commands: one handler
+per CommandKind) and its drivers' setpoint freshness rules (offboard.daemon.drivers)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from typing import SupportsFloat
+
+import numpy as np
+import pytest
+from conftest import CUBE8
+
+from offboard.agent.factory import make_agent
+from offboard.daemon.commands import GroundCommands
+from offboard.daemon.drivers import LockstepDriver, RealtimeDriver
+from offboard.daemon.mavlink.link import Odometry
+from offboard.daemon.mavlink.offboard_keeper import OffboardKeeper
+from offboard.daemon.runner_loss import RunnerLoss
+from offboard.daemon.stream import SetpointStream
+from swarm_common import wire
+from swarm_common.enums import CommandKind, Method
+from swarm_common.scenario.model import load_scenario
+
+
+def _commands(agent_id: int = 2) -> GroundCommands:
+    sc = load_scenario(CUBE8)
+    return GroundCommands(sc, make_agent(sc, agent_id), agent_id)
+
+
+def test_every_kind_on_the_wire_has_a_handler() -> None:
+    assert wire.COMMAND_KINDS == ("method", "outage", "land", "takeoff")  # the wire's words
+    assert [k.value for k in CommandKind] == list(wire.COMMAND_KINDS)
+    assert set(_commands().handlers) == set(CommandKind)
+    for kind in CommandKind:  # a StrEnum member is its word on the wire
+        raw = wire.encode(wire.Command(kind=kind, at_s=1.0))
+        assert raw == wire.encode(wire.Command(kind=kind.value, at_s=1.0))
+        assert wire.key_cmd("cube8", kind) == f"swarm/cube8/cmd/{kind.value}"
+
+
+def test_unknown_kind_is_counted_and_logged_not_a_crash(caplog: pytest.LogCaptureFixture) -> None:
+    c = _commands()
+    with caplog.at_level(logging.WARNING):
+        c.apply([wire.Command(kind="selfdestruct"), wire.Command(kind="land", at_s=12.0)], 5.0)
+    assert c.unknown_commands == 1 and c.bad_commands == 0
+    assert "unknown kind 'selfdestruct'" in caplog.text
+    assert c.land_at == 12.0  # the next command of the batch still applies
+
+
+def test_outage_and_method_commands() -> None:
+    c = _commands()
+    assert c.comm_ok(3.0)
+    c.apply([wire.Command(kind=CommandKind.OUTAGE, duration_s=0.0)], 3.0)  # none: ignored
+    assert c.extra_outages == []
+    c.apply([wire.Command(kind=CommandKind.OUTAGE, duration_s=1.5)], 3.0)
+    assert c.extra_outages == [(3.0, 4.5)]
+    assert not c.comm_ok(3.0) and not c.comm_ok(4.49) and c.comm_ok(4.5)
+    follower = c.agent
+    c.apply([wire.Command(kind=CommandKind.METHOD, method="no-such-method")], 4.0)
+    c.apply([wire.Command(kind=CommandKind.METHOD, method="apf")], 4.0)
+    assert follower.method is Method.APF
+    assert c.bad_commands == 0 and c.unknown_commands == 0
+
+
+def test_land_command_keeps_the_first_land_time() -> None:
+    c = _commands()
+    c.apply([wire.Command(kind=CommandKind.LAND, at_s=-1.0)], 7.0)
+    c.apply([wire.Command(kind=CommandKind.LAND, at_s=20.0)], 8.0)
+    assert c.land_at == 7.0
+
+
+class _Vehicle:
+    """The VehiclePort of a test: records the setpoints sent."""
+
+    def __init__(self) -> None:
+        self.odometry: Odometry | None = None
+        self.armed = False
+        self.in_offboard = False
+        self.offboard_reported = False
+        self.custom_mode = 0
+        self.sent: list[int] = []
+
+    def send_attitude_target(self, time_boot_ms: int, q_wxyz: Iterable[SupportsFloat],
+                             thrust_norm: SupportsFloat) -> None:
+        self.sent.append(time_boot_ms)
+
+
+def _stream(driver: LockstepDriver | RealtimeDriver | None, vehicle: _Vehicle,
+            loss: RunnerLoss) -> SetpointStream:
+    assert driver is not None
+    return SetpointStream(2, vehicle, OffboardKeeper(0.6, False), loss, driver.answer_fresh)
+
+
+def test_lockstep_answer_is_fresh_for_its_own_step_only() -> None:
+    vehicle, loss = _Vehicle(), RunnerLoss(50)
+    driver = LockstepDriver(None, 2, [], {}, None, solo=True,  # type: ignore[arg-type]
+                            startup_timeout=1.0, neighbour_timeout=0.45, stopped=lambda: False)
+    s = _stream(driver, vehicle, loss)
+    s.send()
+    assert vehicle.sent == []  # no answer yet
+    s.vehicle_step = 4
+    s.set_answer((80, np.zeros(4, np.float32), np.float32(0.5)), 4, from_loss=False)
+    s.send()
+    s.answer_at -= 10.0  # however old: lockstep's clock waits for it
+    s.send()
+    assert vehicle.sent == [80, 80] and s.streaming
+    s.vehicle_step = 5  # the vehicle moved on: the answer no longer goes out
+    s.send()
+    assert vehicle.sent == [80, 80] and not driver.fallback_step(5, 0.1, 100, s)
+
+
+def test_realtime_answer_is_fresh_for_one_period() -> None:
+    sc = load_scenario(CUBE8)
+    vehicle, loss = _Vehicle(), RunnerLoss(50)
+    driver = RealtimeDriver(sc, make_agent(sc, 2), 2, vehicle, None,  # type: ignore[arg-type]
+                            {}, keeper=OffboardKeeper(0.6, False), modes=None,  # type: ignore[arg-type]
+                            loss=loss, nav_gate_m=0.0, manual_start=False)
+    s = _stream(driver, vehicle, loss)
+    s.vehicle_step = 4
+    s.set_answer((80, np.zeros(4, np.float32), np.float32(0.5)), 4, from_loss=False)
+    s.vehicle_step = 6  # the vehicle's clock ran on: still fresh within a period
+    s.send()
+    assert vehicle.sent == [80]
+    s.answer_at -= 0.03  # older than one period (20 ms)
+    s.send()
+    assert vehicle.sent == [80] and driver.summary() == ""
+    assert not driver.fallback_step(6, 0.12, 120, s)  # the runner is not lost
