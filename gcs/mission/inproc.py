@@ -195,7 +195,8 @@ def run_inproc(
         for k in range(n_steps):
             t = k * dt
             if land_at is not None and t >= land_at and agents[0].landing is None:
-                plan = landing_plan(sc, land_at, form)  # t_L = land_at, as in offboard.daemon.core
+                # t_L = land_at, as in offboard.daemon.commands
+                plan = landing_plan(sc, land_at, form)
                 log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
                 for ag in agents:
                     ag.start_landing(plan)
