@@ -1,7 +1,8 @@
 """The DCBF QP's compiled pre-solve step (offboard.safety.dcbf.exact_kernel.pre_solve_kernel)
 against the numpy formulation it replaced, written out here as the reference: the CLF
 row's bound from the projected nominal input, and the exact solution with one active
-barrier row, alone or with the CLF row. Bit for bit, on random problems that take every
+barrier row, alone or with the CLF row. Within rounding (``tests/reference/close.py``: two
+implementations may sum in different orders), on random problems that take every
 branch (no row violated, two violated, one violated with and without the CLF row, a
 multiplier of the wrong sign, a row of non-unit length, the input set broken, an L_gV
 too small to normalise)."""
@@ -12,6 +13,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from reference.close import assert_close
 
 from offboard.safety.dcbf.exact_kernel import NO_EXACT, pre_solve_kernel
 from offboard.safety.dcbf.filter import input_set_of
@@ -63,7 +65,7 @@ def _reference(u_nom, g, rhs, k, lgv, lfv, v, uset, a_u, lo_u, hi_u):  # type: i
     return clf_rhs, (u, delta)
 
 
-def test_pre_solve_kernel_equals_the_numpy_formulation_bit_for_bit() -> None:
+def test_pre_solve_kernel_equals_the_numpy_formulation() -> None:
     uset = input_set_of(SC.controller, SC.vehicle)
     a_u, lo_u, hi_u = uset.rows()
     proj, cos_a, sin_a = uset.projection
@@ -91,12 +93,14 @@ def test_pre_solve_kernel_equals_the_numpy_formulation_bit_for_bit() -> None:
             u_nom, g, rhs, viol, k, lgv, lfv, v, CLF_C, 0.5 / RHO, LIN_SIGMA, a_u, lo_u, hi_u,
             proj, cos_a, sin_a, u,
         )
-        assert clf_rhs == ref_rhs, trial  # == on floats: the same bits (both finite)
+        # two implementations (kernel loops vs numpy's @): within rounding (close.py)
+        assert_close(clf_rhs, ref_rhs, trial)
         if ref is None:
             assert delta == NO_EXACT, trial
             seen["none"] += 1
         else:
-            assert delta == ref[1] and np.array_equal(u, ref[0]), (trial, u, ref)
+            assert_close(delta, ref[1], trial)
+            assert_close(u, ref[0], (trial, u, ref))
             seen["exact"] += 1
             seen["with_clf"] += ref[1] > 0.0
     assert min(seen.values()) > 300, seen  # every branch taken often

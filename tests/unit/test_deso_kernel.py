@@ -190,8 +190,10 @@ def test_adaptive_model_equals_numpy() -> None:
         new = adapt_step(zeta, phte_np, fro2_np, mu, sigma, dt)
         assert _close(new, adapt_step_np(zeta, phte_np, fro2_np, mu, sigma, dt)), trial
     inf = np.full(3, np.inf)  # non-finite inputs take the same guards
-    assert np.array_equal(model_accel(np.zeros(3), inf, ZETA_HI, 0.8),
-                          model_accel_np(np.zeros(3), inf, ZETA_HI, 0.8))
+    assert np.array_equal(np.isnan(model_accel(np.zeros(3), inf, ZETA_HI, 0.8)),
+                          np.isnan(model_accel_np(np.zeros(3), inf, ZETA_HI, 0.8)))
+    assert _close(model_accel(np.zeros(3), inf, ZETA_HI, 0.8),
+                  model_accel_np(np.zeros(3), inf, ZETA_HI, 0.8))
     bad = np.array([np.nan, 0, 0, 0, 0, 0])
     zeta = np.full(6, 0.05)
     assert np.array_equal(adapt_step(zeta, bad, 1.0, 1.0, 0.1, 0.02), zeta)

@@ -1,12 +1,14 @@
 """The safety QPs' compiled data bookkeeping (offboard.safety.qp_rows_kernel) against the numpy
 slice assignments and finiteness tests it replaced, on random rows: the same matrix,
-bounds and cost bit for bit (nan and inf included), and the same guard verdicts."""
+bounds and cost (nan and inf included) within rounding (tests/reference/close.py: two
+implementations), and the same guard verdicts."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from reference.close import assert_close
 
 from offboard.safety.qp_rows_kernel import rows_finite_kernel, write_rows_kernel
 from offboard.safety.solvers.daqp_call import DAQP_INF
@@ -59,9 +61,9 @@ def test_rows_written_as_numpy_wrote_them() -> None:
         write_rows_kernel(got[0], got[1], got[2], got[3], lgv, nrm, clf_rhs, g, rhs, k, m,
                           u_nom, lo_c, hi_c, DAQP_INF)
         for x, y in zip(got, want, strict=True):
-            assert np.array_equal(x, y, equal_nan=True), trial
-        assert np.array_equal(lo_c, lo_c_want, equal_nan=True), trial
-        assert np.array_equal(hi_c, hi_c_want, equal_nan=True), trial
+            assert_close(x, y, trial)
+        assert_close(lo_c, lo_c_want, trial)
+        assert_close(hi_c, hi_c_want, trial)
 
 
 def test_finite_guard_is_the_numpy_guard() -> None:
