@@ -31,12 +31,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gcs.mission.inproc import run_inproc  # noqa: E402
-from offboard import clf_rcbf  # noqa: E402
 from offboard.agent.factory import FollowerAgent  # noqa: E402
 from offboard.agent.leader import LeaderAgent  # noqa: E402
 from offboard.estimation.deso import DESO  # noqa: E402
 from offboard.estimation.reference import DesiredStateObserver  # noqa: E402
 from offboard.estimation.sensing import Sensor  # noqa: E402
+from offboard.safety.rcbf import clf_rcbf  # noqa: E402
 from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
 
 Store = dict[str, list[float]]

@@ -30,9 +30,10 @@ from offboard.estimation.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.estimation.sensing import DropoutHold, Sensor
 from offboard.estimation.sensing_kernel import pair_rows
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
+from offboard.safety.base import SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.dcbf.front import DcbfFront
-from offboard.safety.filter import SafetyInput, SafetyOutput, make_filters, saturate_norm
+from offboard.safety.dcbf.front import DcbfFront, InnerMotion, Measured, Silence, unsensed_rows
+from offboard.safety.filter import make_filters
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
@@ -55,9 +56,6 @@ class FollowerAgent(AgentBase):
     """Follower: sensing → DESO (§3) + desired-state observer (§4.1) → CLF–RCBF QP (§4.4)."""
 
     is_leader = False
-    # the dcbf step up to the QP in one compiled call, offboard.safety.dcbf.front (False: part
-    # by part, the same bits; the tests compare the two, and the kernel warm-up steps both)
-    fused = True
 
     def __init__(
         self, sc: Scenario, agent_id: int, method: Method | str | None = None,
@@ -185,11 +183,7 @@ class FollowerAgent(AgentBase):
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         extra = (self.unsensed.pairs(t, sel, self.deso.z1, self.deso.z2)
                  if self.method == Method.DCBF else None)
-        front = self._front if self.fused and self.method == Method.DCBF else None
-        if front is not None and extra is None:
-            w_raw, w, v_clf, res = self._front_step(front, t, sel, rp, rv)
-        else:
-            w_raw, w, v_clf, res = self._composed_step(t, sel, rp, rv, rows, have, extra)
+        w_raw, w, v_clf, res = self._filter_step(t, sel, rp, rv, rows, have, extra)
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf)
         u = self._use_filter_output(res, w, status)
         if self.landing is not None:
@@ -247,6 +241,17 @@ class FollowerAgent(AgentBase):
             if forget:
                 dcbf.forget_history()
 
+    def _filter_step(
+        self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
+        have: np.ndarray, extra: PredictedPairs | None,
+    ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
+        """The step from the state to the filter's output: (w_raw, w, V, output). The dcbf
+        filter's in one compiled call (:meth:`_front_step`), the others' part by part
+        (:meth:`_composed_step`)."""
+        if self.method == Method.DCBF and self._front is not None:
+            return self._front_step(self._front, t, sel, rp, rv, extra)
+        return self._composed_step(t, sel, rp, rv, rows, have, extra)
+
     def _composed_step(
         self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
         have: np.ndarray, extra: PredictedPairs | None,
@@ -264,18 +269,19 @@ class FollowerAgent(AgentBase):
         return w_raw, w, clf.V, self.filters[self.method].apply(x)
 
     def _front_step(
-        self, front: DcbfFront, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray
+        self, front: DcbfFront, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray,
+        extra: PredictedPairs | None,
     ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
-        """:meth:`_composed_step` of the dcbf filter in one compiled call
-        (:mod:`offboard.safety.dcbf.front`; every pair sensed), the same bits. A step the
-        shortcut settles reports the call's time as ``solve_us``."""
+        """The dcbf filter's step in one compiled call (:mod:`offboard.safety.dcbf.front`):
+        the sensed pairs, then ``extra``, the neighbours predicted into range but not
+        sensed. A step the shortcut settles reports the call's time as ``solve_us``."""
         since, others_heard = self._silence(t)
-        margin, predicted = self._no_margin(len(sel))
         t0 = time.perf_counter()
         lumped, w, clf, k, h_min, held, u_try = front.run(
-            f64(self._reference_xi(t)), sel, rows3(rp), rows3(rv), self._full_mask(),
-            self.pred.table.t, since, others_heard, vec3(self.a_real), vec3(self.u_prev),
-            vec3(self.a_mean), self._ground_floor(), margin, predicted,
+            f64(self._reference_xi(t)), Measured(sel, rows3(rp), rows3(rv)),
+            Silence(self._full_mask(), self.pred.table.t, since, others_heard),
+            InnerMotion(vec3(self.a_real), vec3(self.u_prev), vec3(self.a_mean)),
+            self._ground_floor(), unsensed_rows(extra),
         )
         if held:
             res = SafetyOutput(u_try, h_min, QPStatus.INACTIVE,

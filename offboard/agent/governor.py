@@ -19,7 +19,7 @@ for
 every scenario that passes the load-time check; κ < 1 only for one loaded with
 ``allow_infeasible``. When slowing cannot help (the disturbance and unmodeled bounds alone
 exceed the set) κ stays 1 and the anti-windup of the nominal controller
-(:func:`offboard.safety.rcbf.clf_rcbf.clf_terms`) keeps the error bounded.
+(:func:`offboard.safety.rcbf.clf_rcbf.clf_terms_of_reference`) keeps the error bounded.
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@ A numba kernel is loaded from its on-disk cache (or compiled, on a machine's fir
 on its first call in a process: 0.3–0.5 s of CPU for the follower's kernels, 2–5 s when
 compiling. Left to the first control step, that time lands inside the control loop: a
 late first answer in real time, and a start-up cost counted as control. :func:`warm_kernels`
-steps throwaway agents of the scenario (one follower, through its fused dcbf step and part
-by part, and one leader) for a few control periods on the scenario's initial state, the
-last of them silent as in an outage, before the daemon starts, so the real agents' first
+steps throwaway agents of the scenario (one follower, through its dcbf step in one
+compiled call, and one leader) for a few control periods on the scenario's initial state,
+the last of them silent as in an outage, before the daemon starts, so the real agents' first
 step runs loaded code. The throwaway agents share nothing with the real ones but the
 process-wide caches (gain reports, propagators), and their log lines are muted.
 """
@@ -19,7 +19,6 @@ import time
 import numpy as np
 
 from offboard.agent.factory import make_agent
-from offboard.agent.follower import FollowerAgent
 from offboard.estimation.bearing import Formation
 from offboard.estimation.reference import xi_at_rest
 from offboard.records import NeighbourEstimate
@@ -59,19 +58,14 @@ def _step_throwaway_agents(sc: Scenario, method: str | None, form: Formation) ->
     previous = logging.root.manager.disable
     logging.disable(logging.INFO)  # the throwaway agents' start-up lines are not the run's
     try:
-        # the follower twice: its dcbf step in one call (offboard.safety.dcbf.front) and part by
-        # part (the path of a step with a predicted pair), so both paths' kernels load
         for aid in ids:
-            for front in (True, False) if aid in sc.follower_ids else (True,):
-                agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
-                if isinstance(agent, FollowerAgent):
-                    agent.fused = front
-                for k in range(PERIODS + 1):
-                    t = k * sc.control_dt
-                    nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)
-                            for j, e in ests.items() if j != aid}
-                    # the last period silent, as in an outage: the neighbours' data is a
-                    # period old and predicted (offboard.estimation.predictor.predict_row_into)
-                    agent.step(k, t, p, v, nbrs, k < PERIODS)
+            agent = make_agent(sc, aid, method=method, seed=sc.seed, form=form)
+            for k in range(PERIODS + 1):
+                t = k * sc.control_dt
+                nbrs = {j: NeighbourEstimate(e.id, t, e.z1, e.z2, e.z3, e.xi, e.is_leader)
+                        for j, e in ests.items() if j != aid}
+                # the last period silent, as in an outage: the neighbours' data is a
+                # period old and predicted (offboard.estimation.predictor.predict_row_into)
+                agent.step(k, t, p, v, nbrs, k < PERIODS)
     finally:
         logging.disable(previous)

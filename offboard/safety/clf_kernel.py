@@ -1,5 +1,6 @@
-"""Compiled CLF terms and nominal controller (:func:`offboard.safety.rcbf.clf_rcbf.clf_terms`;
-Departure 10, docs/saturation.md §2).
+"""Compiled CLF terms and nominal controller
+(:func:`offboard.safety.rcbf.clf_rcbf.clf_terms_of_reference`; Departure 10,
+docs/saturation.md §2).
 
 One call gives V, L_fV, L_gV and u_nom, with or without the anti-windup box, using the
 operations of the numpy formulation it replaced; dot products are summed left to right

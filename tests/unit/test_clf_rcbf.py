@@ -1,9 +1,10 @@
 """CLF–RCBF QP (paper §4.2–4.4; Departures 10–14): constraints checked independently of OSQP."""
 
 import numpy as np
+from reference.clf_rows import clf_terms, rcbf_rows
 
 from offboard.safety.apf import apf_term
-from offboard.safety.rcbf.clf_rcbf import SafetyQP, barrier, clf_terms, rcbf_rows
+from offboard.safety.rcbf.clf_rcbf import SafetyQP, barrier
 
 LO = np.array([-3.2, -3.2, -8.0])
 HI = np.array([3.2, 3.2, 8.0])

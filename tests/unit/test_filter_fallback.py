@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 from conftest import CUBE8
 
+from offboard.safety.base import SafetyInput
 from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.filter import RcbfFilter, SafetyInput
 from offboard.safety.rcbf.clf_rcbf import ClfTerms
+from offboard.safety.rcbf.filter import RcbfFilter
 from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(CUBE8)

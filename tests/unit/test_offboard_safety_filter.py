@@ -7,21 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from reference.clf_rows import clf_terms
 
 from offboard.agent.factory import FollowerAgent, LeaderAgent, make_agent
 from offboard.estimation.sensing import DropoutHold
+from offboard.safety.apf import ApfFilter, NoFilter
+from offboard.safety.base import SafetyInput, saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.filter import (
-    SAFETY_FILTERS,
-    ApfFilter,
-    NoFilter,
-    RcbfFilter,
-    SafetyInput,
-    make_filters,
-    parse_method,
-    saturate_norm,
-)
-from offboard.safety.rcbf.clf_rcbf import clf_terms
+from offboard.safety.filter import SAFETY_FILTERS, make_filters, parse_method
+from offboard.safety.rcbf.filter import RcbfFilter
 from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario.model import load_scenario, with_overrides
 

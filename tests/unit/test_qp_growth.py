@@ -8,10 +8,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from reference.clf_rows import clf_terms, rcbf_rows
 
 from offboard.safety.dcbf.filter import input_set_of
 from offboard.safety.dcbf.qp import DcbfQP
-from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP, clf_terms, rcbf_rows
+from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP
 from swarm_common.scenario.model import load_scenario
 
 SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")

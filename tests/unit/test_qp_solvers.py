@@ -10,11 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from reference.clf_rows import clf_terms, rcbf_rows
 
 from offboard.safety.dcbf.filter import input_set_of
 from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.rcbf import clf_rcbf
-from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP, _ClfRowsQP, clf_terms, rcbf_rows
+from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP, _ClfRowsQP
 from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.scenario.model import load_scenario
 

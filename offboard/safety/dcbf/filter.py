@@ -1,25 +1,30 @@
 """``Method.DCBF``: the sampled-data CBF safety filter (docs/safety.md).
 
-Per step: the barrier rows of :func:`offboard.safety.dcbf.model.dcbf_rows` on the relative state
-predicted one attitude lag plus one control period ahead, from the inner-loop model's
-realised acceleration and the other agents' estimated actual accelerations, in the QP
-:class:`offboard.safety.dcbf.qp.DcbfQP` over the realisable input set.
+Per step: the barrier rows of :func:`offboard.safety.dcbf.kernel.dcbf_rows_kernel` on the
+relative state predicted one attitude lag plus one control period ahead, from the
+inner-loop model's realised acceleration and the other agents' estimated actual
+accelerations, in the QP :class:`offboard.safety.dcbf.qp.DcbfQP` over the realisable
+input set. A follower reaches
+them through :mod:`offboard.safety.dcbf.front` (one compiled call from its state);
+:class:`DcbfFilter` keeps the QP, the lag tables, the per-pair state and the row buffers.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.model import InputSet, LagCoefficients
 from offboard.safety.dcbf.qp import DcbfQP
-from offboard.safety.dcbf.step_kernel import P_DT, dcbf_filter_rows_into, dcbf_params
-from offboard.safety.filter import (
-    W_SAFE,
-    SafetyFilter,
-    SafetyInput,
-    SafetyOutput,
-    register_filter,
-    saturate_norm,
+from offboard.safety.dcbf.step_kernel import (
+    P_DT,
+    GroundInput,
+    OwnMotion,
+    PairRows,
+    RowsOut,
+    RowsState,
+    dcbf_filter_rows_into,
+    dcbf_params,
 )
 from offboard.safety.rcbf.clf_rcbf import ClfTerms
 from swarm_common.enums import Method
@@ -31,16 +36,13 @@ from swarm_common.scenario.model import ControllerConfig, VehicleConfig
 # 8 pairs and the ground, so up to 9 agents never grow
 QP_INITIAL_ROWS = 18
 REL_ACC_SMOOTH = 0.5  # low-pass weight of the previous relative-acceleration estimate
-# ground barrier (offboard.safety.dcbf.model.ground_rows): its class-K gain (1/s) and the bound on
-# the
-# error of the predicted own vertical acceleration (m/s²): thrust lag τ_F = 0.03 s makes
-# the vertical channel fast, and the error is the disturbance estimate's (saturated at
-# W_SAFE) plus the tilt–thrust coupling; at rest the floor is kept by h_g ≥ ē(T+τ)/γ
+# ground barrier (offboard.safety.dcbf.kernel.ground_rows_kernel): its class-K gain (1/s)
+# and the bound on the error of the predicted own vertical acceleration (m/s²): thrust lag
+# τ_F = 0.03 s makes the vertical channel fast, and the error is the disturbance
+# estimate's (saturated at W_SAFE) plus the tilt–thrust coupling; at rest the floor is
+# kept by h_g ≥ ē(T+τ)/γ
 GROUND_GAMMA = 2.0
 GROUND_ACCEL_ERR = 1.0
-# dcbf_filter_rows_into's arguments from params to side_out (DcbfFilter.rows_state)
-RowsState = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                  np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
@@ -51,7 +53,6 @@ def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
     )
 
 
-@register_filter
 class DcbfFilter(SafetyFilter):
     """Sampled-data CBF over the input polytope; needs :meth:`configure` before use."""
 
@@ -118,7 +119,11 @@ class DcbfFilter(SafetyFilter):
 
     def apply(self, x: SafetyInput) -> SafetyOutput:
         """The barrier rows of this step (one compiled call,
-        :func:`offboard.safety.dcbf.step_kernel.dcbf_filter_rows_into`) in the QP.
+        :func:`offboard.safety.dcbf.step_kernel.dcbf_filter_rows_into`) in the QP, from a
+        :class:`SafetyInput` whose nominal control is already made. A follower's step
+        does not come here: it makes the same rows with the same kernel inside the one
+        compiled call of :func:`offboard.safety.dcbf.front.dcbf_front_into`, from its
+        state, then :meth:`solve_rows`.
 
         The other agent's acceleration enters the rows as ``a_j − w_i`` (the own lumped
         disturbance is not lagged, so it is an offset of the other's acceleration). Where
@@ -135,18 +140,20 @@ class DcbfFilter(SafetyFilter):
         # saturated: a start-up transient of the observer cannot cancel a row
         w_safe = saturate_norm(x.w, W_SAFE)
         ground = x.floor_m is not None and x.z1 is not None  # airborne: the ground barrier
-        k, h_min = dcbf_filter_rows_into(
+        rows = PairRows(
             rows3(x.dp), rows3(x.dv), np.asarray(x.pairs, dtype=np.int64),
             np.asarray(lm, dtype=np.bool_),
             np.zeros(n, dtype=np.bool_) if x.predicted is None
             else np.asarray(x.predicted, dtype=np.bool_),
             np.zeros(n) if x.margin is None else f64(x.margin),
             np.zeros((n, 3)) if x.other_acc is None else rows3(x.other_acc),
-            vec3(x.a_real), vec3(x.u_prev), vec3(x.a_mean), vec3(w_safe), ground,
-            float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
-            float(x.floor_m) if ground and x.floor_m is not None else 0.0,
-            *self.rows_state(),
         )
+        own = OwnMotion(vec3(x.a_real), vec3(x.u_prev), vec3(x.a_mean), vec3(w_safe))
+        floor = GroundInput(
+            ground, float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
+            float(x.floor_m) if ground and x.floor_m is not None else 0.0,
+        )
+        k, h_min = dcbf_filter_rows_into(rows, own, floor, self.rows_state(), self.rows_out())
         return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
 
     def solve_rows(
@@ -166,10 +173,14 @@ class DcbfFilter(SafetyFilter):
         )
 
     def rows_state(self) -> RowsState:
-        """The arguments of :func:`dcbf_filter_rows_into` from ``params`` to ``side_out``:
-        the parameters, lag tables, per-pair state and row buffers, updated in place (the
-        arrays themselves never change after :meth:`configure`)."""
+        """The parameters, lag tables and per-pair state of :func:`dcbf_filter_rows_into`,
+        updated in place (the arrays themselves never change after :meth:`configure`)."""
         if self.lag is None:
             raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
-        return (self._params, self.lag.table, self.lag.sens3, self._prev_dv, self._prev_ok,
-                self._rel_acc, self._rel_ok, self._g, self._rhs, self._side)
+        return RowsState(self._params, self.lag.table, self.lag.sens3, self._prev_dv,
+                         self._prev_ok, self._rel_acc, self._rel_ok)
+
+    def rows_out(self) -> RowsOut:
+        """The row buffers and the sidestep of :func:`dcbf_filter_rows_into` (rewritten
+        each step; the QP reads them within the step)."""
+        return RowsOut(self._g, self._rhs, self._side)

@@ -1,34 +1,41 @@
 """The dcbf follower's step from its state to the QP in one compiled call (issue 11).
 
 Between its measurements and the QP solver a dcbf follower's step (``Method.DCBF``,
-:meth:`offboard.agent.follower.FollowerAgent.step`) used to be nine compiled calls, three
-dataclasses and two dozen argument conversions from Python. :func:`dcbf_front_into` is
-that stretch as one compiled call. It calls the same kernels with the same arguments, in
-the same order, so it gives the same bits (``tests/unit/test_dcbf_front.py`` runs whole
-missions both ways):
+:meth:`offboard.agent.follower.FollowerAgent.step`) is one compiled call,
+:func:`dcbf_front_into`, the only path of the dcbf filter from the follower's state to
+its QP. It chains these kernels:
 
 1. the lumped-disturbance estimate ``[f̂, z3 + f̂]``
-(:func:`offboard.estimation.deso_kernel.lumped_into`);
+   (:func:`offboard.estimation.deso_kernel.lumped_into`);
 2. its saturation at ``W_MAX`` for the controller (:func:`saturate_into`, the same
-   in-order sum as :func:`offboard.safety.filter.saturate_norm`);
+   in-order sum as :func:`offboard.safety.base.saturate_norm`);
 3. the CLF terms and the nominal control (:func:`offboard.safety.clf_kernel.nominal_into`);
-4. Δp, Δv of the pairs (:func:`offboard.estimation.sensing_kernel.pair_rows`);
+4. Δp, Δv of the sensed pairs (:func:`offboard.estimation.sensing_kernel.pair_rows`),
+   followed by the rows of the neighbours that are not sensed but predicted into range
+   (docs/safety.md §5c; their margins, flagged as predicted);
 5. the full-share mask (:func:`offboard.estimation.peer_table.full_share_rows`);
 6. the others' accelerations (:func:`offboard.estimation.neighbour_accel.neighbour_accel_rows`);
 7. the estimate saturated again at ``W_SAFE`` and the barrier rows
    (:func:`offboard.safety.dcbf.step_kernel.dcbf_filter_rows_into`);
 8. the QP's shortcut: whether ``u_nom`` plus the sidestep keeps every row and the input
-   set (:func:`offboard.safety.dcbf.kernel.rows_hold_kernel`); in about 70 % of cube8's steps it
-   does, and the step needs no solver.
+   set (:func:`offboard.safety.dcbf.kernel.rows_hold_kernel`); in about 70 % of cube8's
+   steps it does, and the step needs no solver.
 
-:class:`DcbfFront` keeps the call's constant arguments and output buffers per follower.
-The follower takes this path when no pair comes from prediction (docs/safety.md §5c);
-otherwise, and for the other methods, it composes the same parts from Python.
+The call's arguments travel in typed groups (``typing.NamedTuple``): :class:`DesoState`,
+:class:`Measured`, :class:`Unsensed`, :class:`Silence`, :class:`AccSlots`,
+:class:`InnerMotion`, :class:`InputRows`, :class:`FrontOut` here and the rows'
+:class:`~offboard.safety.dcbf.step_kernel.RowsState` and
+:class:`~offboard.safety.dcbf.step_kernel.RowsOut`. The kernel unpacks each group by
+position, and :class:`DcbfFront` (which keeps the call's constant groups and output
+buffers per follower) passes them as plain tuples in their fields' order: numba types a
+NamedTuple argument from Python on its slow path, which doubled the call's time.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,12 +44,20 @@ from offboard.estimation.deso_kernel import lumped_into
 from offboard.estimation.neighbour_accel import NeighbourAccel, neighbour_accel_rows
 from offboard.estimation.peer_table import full_share_rows
 from offboard.estimation.sensing_kernel import pair_rows
+from offboard.safety.base import W_SAFE
 from offboard.safety.clf_kernel import nominal_into
 from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.dcbf.kernel import rows_hold_kernel
-from offboard.safety.dcbf.step_kernel import dcbf_filter_rows_into
-from offboard.safety.filter import W_SAFE
+from offboard.safety.dcbf.step_kernel import (
+    GroundInput,
+    OwnMotion,
+    PairRows,
+    RowsOut,
+    RowsState,
+    dcbf_filter_rows_into,
+)
 from offboard.safety.rcbf.clf_rcbf import AW_BRAKE_SHARE, AW_RESERVE, CLF_OUT, NO_BOX
+from swarm_common.fastnp import f64, rows3
 from swarm_common.jit import kernel
 from swarm_common.scenario.model import ControllerConfig
 
@@ -56,10 +71,82 @@ F_A_MAX = 9  # bound on an other agent's estimated acceleration (m/s²)
 F_DESO_H = 10  # the DESO's ground-effect height (m)
 N_FRONT = 11
 
+
+class DesoState(NamedTuple):
+    """The DESO's state (:class:`offboard.estimation.deso.DESO`), read only."""
+
+    z1: np.ndarray  # (3,) position estimate (m)
+    z2: np.ndarray  # (3,) velocity estimate (m/s)
+    zeta: np.ndarray  # (6,) ζ̂
+    z3: np.ndarray  # (3,) disturbance state (m/s²)
+
+
+class Measured(NamedTuple):
+    """The sensed pairs of the step."""
+
+    sel: np.ndarray  # (M,) int64 scenario indices
+    rel_p: np.ndarray  # (N,3) measured p_j − p_i (m)
+    rel_v: np.ndarray  # (N,3) measured v_j − v_i (m/s)
+
+
+class Unsensed(NamedTuple):
+    """The E neighbours predicted into sensing range but not sensed
+    (:class:`offboard.agent.unsensed.UnsensedNeighbours`); E may be 0."""
+
+    idx: np.ndarray  # (E,) int64 scenario indices
+    dp: np.ndarray  # (E,3) predicted Δp = p_i − p_j (m)
+    dv: np.ndarray  # (E,3) predicted Δv (m/s)
+    margin: np.ndarray  # (E,) the prediction's error bound (m)
+
+
+class Silence(NamedTuple):
+    """The full-share inputs (:func:`offboard.estimation.peer_table.full_share_rows`)."""
+
+    full: np.ndarray  # (N,) bool: leader, never heard from or not cooperating
+    t_tab: np.ndarray  # (N,) each agent's newest stamp (s)
+    since: float  # an agent silent since before this (s) ...
+    others_heard: bool  # ... stands out when others were heard since
+
+
+class AccSlots(NamedTuple):
+    """The neighbours' two newest velocity estimates (:class:`NeighbourAccel`'s table)."""
+
+    t: np.ndarray  # (2,N) their times (s)
+    z2: np.ndarray  # (2,N,3) velocities (m/s)
+
+
+class InnerMotion(NamedTuple):
+    """The inner-loop model's own motion, each (3,) (m/s²)."""
+
+    a_real: np.ndarray  # realised virtual control now
+    u_prev: np.ndarray  # the previous command
+    a_mean: np.ndarray  # mean realised control over the last period
+
+
+class InputRows(NamedTuple):
+    """The QP's input set rows ``lo ≤ A_U u ≤ hi`` and its row capacity."""
+
+    a_u: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    k_cap: int
+
+
+class FrontOut(NamedTuple):
+    """The caller's output buffers of :func:`dcbf_front_into`."""
+
+    lumped: np.ndarray  # (2,3) [f̂, z3 + f̂]
+    w: np.ndarray  # (3,) the estimate saturated at W_MAX
+    clf: np.ndarray  # (CLF_OUT,) [V, L_fV, L_gV, u_nom]
+    dp: np.ndarray  # (≥ M + E, 3) Δp of the rows, sensed then predicted
+    dv: np.ndarray  # (≥ M + E, 3) Δv
+    u_try: np.ndarray  # (3,) u_nom + sidestep
+
+
 @kernel
 def saturate_into(x: np.ndarray, bound: float, out: np.ndarray) -> None:
     """``out`` = x (3,) scaled down to Euclidean norm ``bound`` if longer, else x: the
-    bits of :func:`offboard.safety.filter.saturate_norm` (the squares summed in order,
+    bits of :func:`offboard.safety.base.saturate_norm` (the squares summed in order,
     ``(x0² + x1²) + x2²``; a nan norm leaves x as it is)."""
     n = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
     if n > bound:
@@ -73,52 +160,61 @@ def saturate_into(x: np.ndarray, bound: float, out: np.ndarray) -> None:
 
 @kernel
 def dcbf_front_into(
-    prm: np.ndarray, z1: np.ndarray, z2: np.ndarray, zeta: np.ndarray, z3: np.ndarray,
-    xi: np.ndarray, sel: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray,
-    full: np.ndarray, t_tab: np.ndarray, since: float, others_heard: bool,
-    acc_t: np.ndarray, acc_z2: np.ndarray, predicted: np.ndarray, margin: np.ndarray,
-    a_real: np.ndarray, u_prev: np.ndarray, a_mean: np.ndarray, ground: bool, floor: float,
-    rows_prm: np.ndarray, lag: np.ndarray, sens: np.ndarray, prev_dv: np.ndarray,
-    prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray, g_out: np.ndarray,
-    r_out: np.ndarray, side_out: np.ndarray, a_u: np.ndarray, lo_u: np.ndarray,
-    hi_u: np.ndarray, k_cap: int, lumped: np.ndarray, w: np.ndarray, clf: np.ndarray,
-    dp: np.ndarray, dv: np.ndarray, full_out: np.ndarray, acc_out: np.ndarray,
-    u_try: np.ndarray,
+    prm: np.ndarray, deso: DesoState, xi: np.ndarray, meas: Measured, unsensed: Unsensed,
+    silence: Silence, acc: AccSlots, inner: InnerMotion, ground: bool, floor: float,
+    state: RowsState, rows_out: RowsOut, input_rows: InputRows, out: FrontOut,
 ) -> tuple[int, float, bool]:
     """Steps 1–8 of the module docstring; returns (K rows, h_min (m²), held).
 
-    In: ``prm`` (N_FRONT,) the ``F_*`` scalars; the DESO state z1 (m), z2 (m/s), ζ̂ (6,),
-    z3 (m/s²); the desired state ξ (12,); the pairs ``sel`` (M,) int64 and the (N,3)
-    measured p_j − p_i, v_j − v_i; the full-share inputs (``full`` (N,) bool, the
-    stamps ``t_tab`` (N,), ``since`` (s), ``others_heard``); the acceleration slots
-    ``acc_t`` (2,N), ``acc_z2`` (2,N,3); (M,) ``predicted`` (all False here) and
-    ``margin`` (all 0); the inner-loop model's a_real, u_prev, a_mean (m/s²); the ground
-    barrier (``ground``, ``floor`` (m)); the filter's parameters, lag tables and per-pair
-    state (read and updated as :func:`dcbf_filter_rows_into` does); the input set rows
-    (A_U, lo, hi) and ``k_cap`` the QP's row capacity.
-
-    Out (the caller's buffers): ``lumped`` (2,3) [f̂, z3 + f̂]; ``w`` (3,) the estimate
-    saturated at W_MAX; ``clf`` (CLF_OUT,) [V, L_fV, L_gV, u_nom]; Δp, Δv in the first M
-    rows of ``dp``, ``dv``; ``full_out`` (M,); ``acc_out`` (M,3); the rows in ``g_out``,
-    ``r_out``, the sidestep in ``side_out``; ``u_try`` = u_nom + sidestep.
+    ``prm`` (N_FRONT,) the ``F_*`` scalars; ξ (12,) the desired state; ``ground`` adds
+    the ground barrier at ``floor`` (m); ``state`` the filter's parameters, lag tables
+    and per-pair state (read and updated as :func:`dcbf_filter_rows_into` does); the
+    rows go to ``rows_out``, the rest to ``out`` (each group's fields give units).
     """
+    # each group unpacked by position: the caller may pass plain tuples in the groups'
+    # order (DcbfFront.run does; module docstring)
+    z1, z2, zeta, z3 = deso
+    sel, rel_p, rel_v = meas
+    u_idx, u_dp, u_dv, u_margin = unsensed
+    full, t_tab, since, others_heard = silence
+    acc_t, acc_z2 = acc
+    a_real, u_prev, a_mean = inner
+    a_u, lo_u, hi_u, k_cap = input_rows
+    lumped, w, clf, dp, dv, u_try = out
     lumped_into(z1, z2, zeta, prm[F_DESO_H], z3, lumped)
     saturate_into(lumped[1], prm[F_W_MAX], w)
     nominal_into(
         z1, z2, xi, prm[F_TAU_FF], w, prm[F_KP], prm[F_KD], prm[F_LAMBDA], prm[F_KS], False,
         NO_BOX, NO_BOX, prm[F_BRAKE_SHARE], prm[F_RESERVE], clf,
     )
-    m = sel.shape[0]
+    m, e = sel.shape[0], u_idx.shape[0]
+    n = m + e
     pair_rows(sel, rel_p, rel_v, dp, dv)
-    full_share_rows(sel, full, t_tab, since, others_heard, full_out)
-    neighbour_accel_rows(sel, acc_t, acc_z2, prm[F_A_MAX], acc_out)
+    pairs = np.empty(n, dtype=np.int64)
+    predicted = np.zeros(n, dtype=np.bool_)
+    margin = np.zeros(n)
+    for r in range(m):
+        pairs[r] = sel[r]
+    for r in range(e):  # the predicted rows follow the sensed ones
+        pairs[m + r] = u_idx[r]
+        predicted[m + r] = True
+        margin[m + r] = u_margin[r]
+        for c in range(3):
+            dp[m + r, c] = u_dp[r, c]
+            dv[m + r, c] = u_dv[r, c]
+    full_out = np.empty(n, dtype=np.bool_)
+    acc_out = np.empty((n, 3))
+    full_share_rows(pairs, full, t_tab, since, others_heard, full_out)
+    neighbour_accel_rows(pairs, acc_t, acc_z2, prm[F_A_MAX], acc_out)
     w_safe = np.empty(3)
     saturate_into(w, prm[F_W_SAFE], w_safe)
     k, h_min = dcbf_filter_rows_into(
-        dp[:m], dv[:m], sel, full_out, predicted, margin, acc_out, a_real, u_prev, a_mean,
-        w_safe, ground, z1[2] if ground else 0.0, z2[2], floor if ground else 0.0,
-        rows_prm, lag, sens, prev_dv, prev_ok, rel_acc, rel_ok, g_out, r_out, side_out,
+        PairRows(dp[:n], dv[:n], pairs, full_out, predicted, margin, acc_out),
+        OwnMotion(a_real, u_prev, a_mean, w_safe),
+        GroundInput(ground, z1[2] if ground else 0.0, z2[2], floor if ground else 0.0),
+        state, rows_out,
     )
+    g_out, r_out, side_out = rows_out
     for c in range(3):
         u_try[c] = clf[5 + c] + side_out[c]
     held = rows_hold_kernel(a_u, lo_u, hi_u, g_out, r_out, min(k, k_cap), u_try)
@@ -136,6 +232,27 @@ def front_params(ctl: ControllerConfig, tau_ff: float, w_max: float, a_max: floa
     return out
 
 
+# dcbf_front_into as DcbfFront.run calls it: each group a plain tuple in the order of its
+# NamedTuple's fields. numba types a NamedTuple argument from Python on its slow path
+# (about 2 µs each: with the eight groups the call took twice as long), a plain tuple on
+# its fast one; the kernel unpacks each group by position, so both work.
+_front_call: Callable[..., tuple[int, float, bool]] = dcbf_front_into
+
+NO_UNSENSED = Unsensed(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
+                       np.zeros(0))  # every pair sensed (never written)
+
+
+def unsensed_rows(
+    extra: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None,
+) -> Unsensed:
+    """:class:`Unsensed` of :meth:`offboard.agent.unsensed.UnsensedNeighbours.pairs`'s
+    (idx, Δp, Δv, margin), or :data:`NO_UNSENSED` for None."""
+    if extra is None:
+        return NO_UNSENSED
+    idx, dp, dv, margin = extra
+    return Unsensed(np.asarray(idx, dtype=np.int64), rows3(dp), rows3(dv), f64(margin))
+
+
 class DcbfFront:
     """One dcbf follower's constant arguments and buffers of :func:`dcbf_front_into`."""
 
@@ -148,32 +265,30 @@ class DcbfFront:
             raise RuntimeError("DcbfFront: the filter is not configured")
         self.deso, self.filt, self.acc, self.qp = deso, filt, acc, filt.qp
         self.prm = front_params(ctl, tau_ff, w_max, acc.a_max, float(deso.h))
-        self.rows_state = filt.rows_state()
+        # the constant groups as plain tuples, made once (_front_call)
+        self._rows_state = tuple(filt.rows_state())
+        self._rows_out = tuple(filt.rows_out())
         self.dp, self.dv = dp, dv
 
     def run(
-        self, xi: np.ndarray, sel: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray,
-        full: np.ndarray, t_tab: np.ndarray, since: float, others_heard: bool,
-        a_real: np.ndarray, u_prev: np.ndarray, a_mean: np.ndarray, floor: float | None,
-        margin: np.ndarray, predicted: np.ndarray,
+        self, xi: np.ndarray, meas: Measured, silence: Silence, inner: InnerMotion,
+        floor: float | None, unsensed: Unsensed = NO_UNSENSED,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, bool, np.ndarray]:
         """One call of :func:`dcbf_front_into` (arguments as there; ``floor`` None: no
         ground barrier): (lumped (2,3), w (3,), clf (CLF_OUT,), K, h_min, held, u_try
         (3,)). The DESO keeps f̂ for its update, as after
         :meth:`~offboard.estimation.deso.DESO.lumped`; the rows are in the filter's buffers."""
         d, qp = self.deso, self.qp
-        m = len(sel)
+        m = len(meas.sel) + len(unsensed.idx)
         ground = floor is not None
-        qp.fit_rows(2 * m + 2 if ground else 2 * m)  # as the composed path's solve()
+        qp.fit_rows(2 * m + 2 if ground else 2 * m)  # room for every row before the call
         lumped, w, clf, u_try = np.empty((2, 3)), np.empty(3), np.empty(CLF_OUT), np.empty(3)
-        full_out, acc_out = np.empty(m, dtype=np.bool_), np.empty((m, 3))
         tab = self.acc.table
-        k, h_min, held = dcbf_front_into(
-            self.prm, d.z1, d.z2, d.zeta, d.z3, xi, sel, rel_p, rel_v, full, t_tab, since,
-            others_heard, tab.acc_t, tab.acc_z2, predicted, margin, a_real, u_prev, a_mean,
-            ground, 0.0 if floor is None else float(floor), *self.rows_state, qp.a_u,
-            qp.lo_u, qp.hi_u, qp.m, lumped, w, clf, self.dp, self.dv, full_out, acc_out,
-            u_try,
+        k, h_min, held = _front_call(  # the groups in their order, as plain tuples
+            self.prm, (d.z1, d.z2, d.zeta, d.z3), xi, tuple(meas), tuple(unsensed),
+            tuple(silence), (tab.acc_t, tab.acc_z2), tuple(inner), ground,
+            0.0 if floor is None else float(floor), self._rows_state, self._rows_out,
+            (qp.a_u, qp.lo_u, qp.hi_u, qp.m), (lumped, w, clf, self.dp, self.dv, u_try),
         )
         d.adopt_lumped(lumped)
         return lumped, w, clf, k, h_min, held, u_try

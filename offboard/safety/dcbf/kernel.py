@@ -1,15 +1,13 @@
 """Compiled barrier rows of the sampled-data CBF (``Method.DCBF``; docs/safety.md §4).
 
-:func:`dcbf_rows_kernel` is :func:`offboard.safety.dcbf.model.dcbf_rows` pair by pair in one
-compiled
-loop: the prediction T ahead (:func:`offboard.safety.dcbf.model.predict`), the sensitivities of
-``ḣ_T`` and ``ĥ_T`` to a constant acceleration error and to the command, and the two rows
-(C1), (C2) per pair. The operations and their order are those of the numpy formulation
-it replaced, but for two: cubes are products (numpy's ``**3`` is its own vectorised
-power) and dot products are summed left to right (numpy's ``einsum`` and ``@`` sum in
-their own orders). The rows agree
-with that formulation to rounding (``tests/unit/test_dcbf_kernel.py``, random pairs), and
-every process that runs the kernel computes the same bits.
+:func:`dcbf_rows_kernel` makes the rows pair by pair in one compiled loop: the prediction
+T ahead, the sensitivities of ``ḣ_T`` and ``ĥ_T`` to a constant acceleration error and to
+the command, and the two rows (C1), (C2) per pair. The operations and their order are
+those of the numpy formulation it replaced (kept in ``tests/reference/dcbf_rows.py``),
+but for two: cubes are products (numpy's ``**3`` is its own vectorised power) and dot
+products are summed left to right (numpy's ``einsum`` and ``@`` sum in their own orders).
+The rows agree with that formulation to rounding (``tests/unit/test_dcbf_kernel.py``,
+random pairs), and every process that runs the kernel computes the same bits.
 """
 
 from __future__ import annotations
@@ -33,8 +31,23 @@ def dcbf_rows_kernel(
     share: np.ndarray, d_safe: np.ndarray, lag: np.ndarray, sens: np.ndarray,
     horizon: float, tau_s: float, gamma1: float, gamma3: float, accel_err: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Rows ``gᵀu ≥ r`` of :func:`offboard.safety.dcbf.model.dcbf_rows`: (g (2M,3) unit rows, r
-    (2M,)).
+    """Rows ``gᵀu ≥ r`` (g (2M,3) unit rows, r (2M,) m/s²): first the M (C1) rows, then
+    the M (C2) rows, pair by pair in the order of ``dp``.
+
+    The relative state is predicted T ahead: the own acceleration from a0 toward u through
+    the lag, the other agent at constant acceleration a_other; h and ḣ (§2.3) there, ĥ_T
+    and ḣ_T. With α(h) = γ1 h + γ3 h³ and h0 the barrier now, two conditions per pair:
+
+    * (C1) ``f(u) = ḣ_T − ‖∂ḣ_T/∂a‖ ē + α(ĥ_T − ‖∂ĥ_T/∂a‖ ē) ≥ 0`` (the CBF condition at
+      x̂_T; α increasing, so the error enters α exactly, not through α'(ĥ_T), which for
+      the cubic term made every pair within ≈ 2.9 m repel: docs/safety.md §4);
+    * (C2) ``ĥ_T − ‖∂ĥ_T/∂a‖ ē ≥ h0 − min(T α(h0), h0/2)`` (h0 > 0; ``h0 − T α(h0)``
+      for h0 ≤ 0, which demands growth): h does not dip over the horizon.
+
+    Each linearised at ``u_ref``: ``gᵀ(u − u_ref) ≥ −share·c(u_ref)``. ``ē`` (m/s²) bounds
+    the error of the assumed relative acceleration over [0, T] (model, estimates). The
+    sensitivities are those of ``sens``: [0] a constant relative-acceleration error e
+    over [0, T] (moves Δv̂ by eT, Δp̂ by eT²/2), [1] the command u through the lag.
 
     dp, dv (M,3) relative position (m) and velocity (m/s) now; a0, u_ref (3,) realised
     acceleration and linearisation command (m/s²); a_other (M,3) the other agent's assumed
@@ -197,9 +210,21 @@ def ground_rows_kernel(
     ia: float, ea: float, cp: float, cv: float, ca: float, tau_s: float, gamma1: float,
     accel_err: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The two ground-barrier rows of :func:`offboard.safety.dcbf.model.ground_rows` (g (2,3) = e_z,
-    r (2,) m/s²) from the z-axis lag coefficients over T = ``t`` (s); the arithmetic and
-    its order are those of the numpy formulation (the same bits)."""
+    """The two ground-barrier rows ``gᵀu ≥ r`` (g (2,3) = e_z, r (2,) m/s²) keeping an
+    airborne agent at altitude z (m), vertical velocity vz (m/s) above ``floor`` (m),
+    from the z-axis lag coefficients over T = ``t`` (s); the arithmetic and its order
+    are those of the numpy formulation (``tests/reference/dcbf_rows.py``).
+
+    The ground barrier ``h_g = z − floor + τ v_z`` (m; τ = ``tau_s``, the same look-ahead
+    as the pair barrier) is linear in the state, so its prediction T ahead is linear in
+    u_z and the rows are exact (no linearisation): with the own disturbance ``wz``
+    (m/s²) held and the error bound ē on the vertical acceleration over [0, T]::
+
+        ẑ_T = z + v_z T + iia a0 + cp u_z + wz T²/2,  v̂_T = v_z + ia a0 + cv u_z + wz T
+        â_T = E a0 + ca u_z + wz
+        (C1) v̂_T + τ â_T − ē(T + τ) + γ1 (ĥ_gT − ē(T²/2 + τT)) ≥ 0
+        (C2) ĥ_gT − ē(T²/2 + τT) ≥ h_g0 − min(T γ1 h_g0, h_g0/2)    (h_g0 − Tγ1h_g0 if ≤ 0)
+    """
     z_free = z + vz * t + iia * a0z + 0.5 * wz * t * t
     v_free = vz + ia * a0z + wz * t
     a_free = ea * a0z + wz

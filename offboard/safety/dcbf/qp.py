@@ -5,7 +5,7 @@ Variables x = [u (3), δ, σ] (docs/safety.md §4)::
     min ½‖u − u_nom‖² + ρ δ² + ρ_σ σ² + M σ
     s.t.  L_gV u − δ ≤ −L_fV − cV            (soft CLF, as the RCBF QP, Departures 10–11)
           gᵀu + σ ≥ r                       per sensed pair
-          (:func:`offboard.safety.dcbf.model.dcbf_rows`)
+          (:func:`offboard.safety.dcbf.kernel.dcbf_rows_kernel`)
           A_U u ∈ [lo, hi]                  input polytope
           (:class:`offboard.safety.dcbf.model.InputSet`)
           σ ≥ 0

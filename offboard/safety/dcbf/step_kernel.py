@@ -12,13 +12,18 @@ same arguments, so it gives the same bits as the chain of calls it replaced
 temporary arrays per follower step. It writes the rows into the filter's own buffers, so
 no new array is boxed for them.
 
-The scalar parameters travel in one array, laid out by the ``P_*`` indices below
-(:func:`dcbf_params`), so a call passes a handful of arguments.
+Its arguments travel in five typed groups (``typing.NamedTuple``, which numba passes as
+one tuple of arrays and scalars): the step's pair rows (:class:`PairRows`), the own
+motion (:class:`OwnMotion`), the ground barrier's input (:class:`GroundInput`), the
+filter's parameters, lag tables and per-pair state (:class:`RowsState`) and the output
+buffers (:class:`RowsOut`). The scalar parameters travel in one array, laid out by the
+``P_*`` indices below (:func:`dcbf_params`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -40,6 +45,57 @@ P_GROUND_GAMMA = 9  # the ground barrier's class-K gain (1/s)
 P_GROUND_ERR = 10  # error bound on the predicted own vertical acceleration (m/s²)
 P_HORIZON = 11  # prediction horizon T = τ_rp + dt (s)
 N_PARAMS = 12
+
+
+class PairRows(NamedTuple):
+    """The M pair rows of one step."""
+
+    dp: np.ndarray  # (M,3) Δp = p_i − p_j (m)
+    dv: np.ndarray  # (M,3) Δv = v_i − v_j (m/s)
+    pairs: np.ndarray  # (M,) int64 scenario index j
+    full_share: np.ndarray  # (M,) bool: this agent takes the whole budget (share 1, else ½)
+    predicted: np.ndarray  # (M,) bool: the row comes from prediction, not sensing
+    margin: np.ndarray  # (M,) distance margin (m) added to D
+    other_acc: np.ndarray  # (M,3) the other's broadcast acceleration estimate (m/s²)
+
+
+class OwnMotion(NamedTuple):
+    """The own agent's inner-loop model and disturbance estimate, each (3,) (m/s²)."""
+
+    a_real: np.ndarray  # realised virtual control now
+    u_prev: np.ndarray  # the previous command
+    a_mean: np.ndarray  # mean realised control over the last period
+    w_safe: np.ndarray  # disturbance estimate saturated at W_SAFE
+
+
+class GroundInput(NamedTuple):
+    """The ground barrier: ``on`` adds its two rows for altitude ``z`` (m), vertical
+    velocity ``vz`` (m/s) and ``floor`` (m)."""
+
+    on: bool
+    z: float
+    vz: float
+    floor: float
+
+
+class RowsState(NamedTuple):
+    """The filter's constant tables and per-index state (:class:`DcbfFilter`)."""
+
+    params: np.ndarray  # (N_PARAMS,) the ``P_*`` scalars
+    lag: np.ndarray  # (6,3) lag table of LagCoefficients
+    sens: np.ndarray  # (3,2,3) its sensitivities
+    prev_dv: np.ndarray  # (N,3) Δv sensed the step before, per scenario index
+    prev_ok: np.ndarray  # (N,) bool: prev_dv valid
+    rel_acc: np.ndarray  # (N,3) low-passed relative acceleration
+    rel_ok: np.ndarray  # (N,) bool: rel_acc valid
+
+
+class RowsOut(NamedTuple):
+    """The caller's buffers for the rows ``gᵀu ≥ r`` and the sidestep."""
+
+    g: np.ndarray  # (≥ K, 3)
+    rhs: np.ndarray  # (≥ K,) (m/s²)
+    side: np.ndarray  # (3,) sidestep (m/s²)
 
 
 def dcbf_params(
@@ -70,32 +126,27 @@ def _min_or_nan(h: np.ndarray) -> float:
 
 @kernel
 def dcbf_filter_rows_into(
-    dp: np.ndarray, dv: np.ndarray, pairs: np.ndarray, full_share: np.ndarray,
-    predicted: np.ndarray, margin: np.ndarray, other_acc: np.ndarray, a_real: np.ndarray,
-    u_prev: np.ndarray, a_mean: np.ndarray, w_safe: np.ndarray, ground: bool, z: float,
-    vz: float, floor: float, params: np.ndarray, lag: np.ndarray, sens: np.ndarray,
-    prev_dv: np.ndarray, prev_ok: np.ndarray, rel_acc: np.ndarray, rel_ok: np.ndarray,
-    g_out: np.ndarray, r_out: np.ndarray, side_out: np.ndarray,
+    rows: PairRows, own: OwnMotion, ground: GroundInput, state: RowsState, out: RowsOut,
 ) -> tuple[int, float]:
     """The K = 2M [+2] rows of one dcbf step, ``g_iᵀu ≥ r_i``, into the caller's buffers
-    (no new arrays boxed per step): g in the first K rows of ``g_out`` (≥ K, 3), r (m/s²)
-    in those of ``r_out`` (≥ K,), the sidestep (m/s²) in ``side_out`` (3,). Returns
-    (K, h_min (m²)); buffers too small are refused before any state is touched.
+    ``out`` (no new arrays boxed per step): g in the first K rows of ``out.g``, r (m/s²)
+    in those of ``out.rhs``, the sidestep (m/s²) in ``out.side``. Returns (K, h_min (m²));
+    buffers too small are refused before any state is touched.
 
-    Rows (M): dp, dv relative position (m) and velocity (m/s), pairs the scenario index j,
-    full_share True where this agent takes the whole budget (share 1, else ½), predicted
-    True for rows from prediction, margin (m) added to D, other_acc the other's broadcast
-    acceleration estimate (m/s²). Own (3,): the inner-loop model's realised virtual
-    control a_real, the previous command u_prev, the mean realised control over the last
-    period a_mean and the saturated disturbance estimate w_safe (m/s²). When ``ground``,
-    the two ground rows for altitude z (m), vertical velocity vz (m/s) and ``floor`` (m)
-    follow the pair rows. ``lag`` (6,3) and ``sens`` (3,2,3): the lag table and
-    sensitivities of :class:`offboard.safety.dcbf.model.LagCoefficients`. prev_dv, prev_ok, rel_acc,
-    rel_ok: the per-index state of :func:`offboard.safety.dcbf.kernel.other_term_kernel`, read
-    and updated in place.
+    ``rows`` the M pair rows, ``own`` the own motion; when ``ground.on`` the two ground
+    rows follow the pair rows. ``state``: the parameters, the lag table and sensitivities
+    of :class:`offboard.safety.dcbf.model.LagCoefficients` and the per-index state of
+    :func:`offboard.safety.dcbf.kernel.other_term_kernel`, read and updated in place.
     """
+    # unpacked by position, so plain tuples in the groups' order serve as well (numba
+    # types a NamedTuple argument from Python on its slow path: :mod:`.front`)
+    dp, dv, pairs, full_share, predicted, margin, other_acc = rows
+    a_real, u_prev, a_mean, w_safe = own
+    ground_on, z, vz, floor = ground
+    params, lag, sens, prev_dv, prev_ok, rel_acc, rel_ok = state
+    g_out, r_out, side_out = out
     m = dp.shape[0]
-    k = 2 * m + 2 if ground else 2 * m
+    k = 2 * m + 2 if ground_on else 2 * m
     if g_out.shape[0] < k or r_out.shape[0] < k or g_out.shape[1] != 3 or side_out.shape[0] != 3:
         raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
     tau = params[P_TAU]
@@ -124,10 +175,11 @@ def dcbf_filter_rows_into(
         r_out[r] = rhs[r]
         for c in range(3):
             g_out[r, c] = g[r, c]
-    if ground:
+    if ground_on:
         gg, rg = ground_rows_kernel(
-            z, vz, a_real[2], w_safe[2], floor, params[P_HORIZON], lag[5, 2], lag[4, 2],
-            lag[3, 2], lag[2, 2], lag[1, 2], lag[0, 2], tau, params[P_GROUND_GAMMA],
+            z, vz, a_real[2], w_safe[2], floor, params[P_HORIZON],
+            lag[5, 2], lag[4, 2], lag[3, 2], lag[2, 2], lag[1, 2], lag[0, 2], tau,
+            params[P_GROUND_GAMMA],
             params[P_GROUND_ERR],
         )
         for r in range(2):

@@ -55,10 +55,9 @@ import numpy as np
 import osqp
 from scipy import sparse
 
-from offboard.safety.clf_kernel import CLF_OUT, clf_into, nominal_into
+from offboard.safety.clf_kernel import CLF_OUT, nominal_into
 from offboard.safety.pair_kernel import barrier_kernel, tangential_kernel
 from offboard.safety.qp_rows_kernel import write_rows_kernel
-from offboard.safety.rcbf.kernel import RCBF_ROW_MARGIN, rcbf_rows_kernel
 from offboard.safety.solvers.daqp_call import DAQP_INF, daqp_solve
 from offboard.safety.solvers.osqp_call import update_solve
 from swarm_common.enums import QPSolver, QPStatus
@@ -90,35 +89,13 @@ AW_RESERVE = 0.1  # share of each axis' half-range the feed-forward leaves to fe
 AW_BRAKE_SHARE = 0.5  # β: share of the braking budget the error-velocity reference may need
 
 
-def clf_terms(
-    e1: np.ndarray,
-    e2: np.ndarray,
-    w: np.ndarray,
-    a_ref: np.ndarray,
-    kp: float,
-    kd: float,
-    lam: float,
-    ks: float,
-    box: tuple[np.ndarray, np.ndarray] | None = None,
-) -> ClfTerms:
-    """CLF of Departure 10 and the nominal formation controller (see module docstring);
-    with ``box`` = (lo, hi) (m/s², per axis) the nominal control has anti-windup
-    (docs/saturation.md §2) and lies in the box. Compiled:
-    :func:`offboard.safety.clf_kernel.clf_into`."""
-    lo, hi = box if box is not None else (NO_BOX, NO_BOX)
-    out = np.empty(CLF_OUT)
-    clf_into(
-        vec3(e1), vec3(e2), vec3(w), vec3(a_ref), float(kp), float(kd), float(lam),
-        float(ks), box is not None, vec3(lo), vec3(hi), AW_BRAKE_SHARE, AW_RESERVE, out,
-    )
-    return clf_terms_from(out)
-
-
 def clf_terms_of_reference(
     z1: np.ndarray, z2: np.ndarray, xi: np.ndarray, tau_ff: float, w: np.ndarray, kp: float,
     kd: float, lam: float, ks: float, box: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> ClfTerms:
-    """:func:`clf_terms` of the estimate (z1 (m), z2 (m/s)) tracking the desired state
+    """The CLF terms and nominal control (module docstring; with ``box`` = (lo, hi) (m/s², per
+    axis) the nominal control has anti-windup, docs/saturation.md §2, and lies in the box)
+    of the estimate (z1 (m), z2 (m/s)) tracking the desired state
     ξ = [p*, v*, a*, j*] (12,): ``e1 = z1 − p*``, ``e2 = z2 − v*`` and the reference
     acceleration taken ``tau_ff`` (s) ahead, ``a* + tau_ff j*`` (m/s²). One compiled call
     (:func:`offboard.safety.clf_kernel.nominal_into`), the same bits as forming them in numpy."""
@@ -145,37 +122,6 @@ def barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.nda
     ``‖Δp‖² + 2τ ΔvᵀΔp − D²`` (m²), compiled
     (:func:`offboard.safety.pair_kernel.barrier_kernel`)."""
     return barrier_kernel(rows3(dp), rows3(dv), float(tau), float(d_safe))
-
-
-def rcbf_rows(
-    dp: np.ndarray,
-    dv: np.ndarray,
-    w_i: np.ndarray,
-    a_other: np.ndarray,
-    share: np.ndarray,
-    tau: float,
-    d_safe: float,
-    gamma: float,
-    margin: float = RCBF_ROW_MARGIN,
-    h: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """RCBF rows ``n̂ᵀu ≥ r`` for agent i (Departures 12–13) and h per pair.
-
-    dp, dv (M,3): Δp = p_i − p_j, Δv = v_i − v_j; w_i (3,): own lumped disturbance
-    estimate; a_other (M,3): other agent's acceleration taken as known (leaders'
-    broadcast, zeros for followers); share (M,): 0.5 follower–follower, 1.0 vs leader.
-    ``margin`` (m/s²) tightens the rows against solver tolerance. Compiled
-    (:func:`offboard.safety.rcbf.kernel.rcbf_rows_kernel`).
-    """
-    if h is None:
-        h = barrier(dp, dv, tau, d_safe)
-    dp, dv, a_other = rows3(dp), rows3(dv), rows3(a_other)
-    share, h = np.ascontiguousarray(share, float), np.ascontiguousarray(h, float)
-    if not len(dv) == len(a_other) == len(share) == len(h) == len(dp):  # read unchecked
-        raise ValueError("rcbf_rows: dp, dv, a_other, share and h differ in length")
-    n_hat, rhs = rcbf_rows_kernel(dp, dv, vec3(w_i), a_other, share, h, float(tau),
-                                  float(gamma), float(margin))
-    return n_hat, rhs, h
 
 
 def tangential_term(dp: np.ndarray, h: np.ndarray, gain: float, h_on: float) -> np.ndarray:
