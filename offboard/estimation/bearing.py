@@ -56,18 +56,9 @@ def build_edges(
 
 
 def bearing_laplacian(vertices: np.ndarray, edges: list[tuple[int, int]]) -> np.ndarray:
-    """(3N, 3N) bearing Laplacian of the desired bearings (§2.1), dense (the rigidity check
-    uses the sparse one, :func:`graphs.sparse_laplacian`)."""
-    v = np.asarray(vertices, dtype=float)
-    n = len(v)
-    lap = np.zeros((3 * n, 3 * n))
-    for i, j in edges:
-        pij = projector(bearing(v[i], v[j]))
-        lap[3 * i : 3 * i + 3, 3 * j : 3 * j + 3] -= pij
-        lap[3 * j : 3 * j + 3, 3 * i : 3 * i + 3] -= pij
-        lap[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] += pij
-        lap[3 * j : 3 * j + 3, 3 * j : 3 * j + 3] += pij
-    return lap
+    """(3N, 3N) bearing Laplacian of the desired bearings (§2.1), dense: the one
+    implementation, :func:`swarm_common.scenario.graphs.sparse_laplacian`, made dense."""
+    return graphs.sparse_laplacian(np.asarray(vertices, dtype=float), edges).toarray()
 
 
 def _blocks(idx: list[int]) -> np.ndarray:

@@ -191,27 +191,28 @@ def long_edges(
 
 
 def sparse_laplacian(v: np.ndarray, edges: Sequence[tuple[int, int]]) -> sp.csr_matrix:
-    """(3N, 3N) bearing Laplacian (§2.1): −P*_ij off the diagonal, Σ_k P*_ik on it."""
+    """(3N, 3N) bearing Laplacian (§2.1): −P*_ij off the diagonal, Σ_k P*_ik on it, with
+    P*_ij = I − g gᵀ of the unit bearing g from vertex i to vertex j.
+
+    The one implementation (the dense form is ``.toarray()``): every 3×3 block is summed
+    in edge order, so the same vertices and edges give the same bits in either form."""
     v = np.asarray(v, dtype=float)
     n = len(v)
-    rows: list[np.ndarray] = []
-    cols: list[np.ndarray] = []
-    vals: list[np.ndarray] = []
-    r3, c3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    blocks: dict[tuple[int, int], np.ndarray] = {}
     for i, j in edges:
-        g = v[j] - v[i]
-        g = g / np.linalg.norm(g)
+        d = v[j] - v[i]
+        g = d / np.linalg.norm(d)
         p = np.eye(3) - np.outer(g, g)
-        for a, b, s in ((i, i, 1.0), (j, j, 1.0), (i, j, -1.0), (j, i, -1.0)):
-            rows.append((3 * a + r3).ravel())
-            cols.append((3 * b + c3).ravel())
-            vals.append((s * p).ravel())
-    if not rows:
+        for a, b, s in ((i, j, -1.0), (j, i, -1.0), (i, i, 1.0), (j, j, 1.0)):
+            blocks[a, b] = blocks.get((a, b), np.zeros((3, 3))) + s * p
+    if not blocks:
         return sp.csr_matrix((3 * n, 3 * n))
-    m = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(3 * n, 3 * n)
-    )
-    return m.tocsr()
+    r3, c3 = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    keys = list(blocks)
+    rows = np.concatenate([(3 * a + r3).ravel() for a, _ in keys])
+    cols = np.concatenate([(3 * b + c3).ravel() for _, b in keys])
+    vals = np.concatenate([blocks[k].ravel() for k in keys])
+    return sp.coo_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n)).tocsr()
 
 
 def blocks(idx: Sequence[int]) -> np.ndarray:

@@ -239,3 +239,24 @@ def test_build_formation_plain_kinds_still_work():
     f = build_formation(sc.ids, sc.leader_ids, sc.vertices(), "knn")
     assert f.rank == 3 * sc.n - 4 and len(f.edges) >= 8 * 6 // 2
     assert all(len(f.anchor_leaders(i)) == 2 for i in f.follower_idx)  # no range given
+
+
+def test_the_dense_bearing_laplacian_is_the_sparse_one_and_annihilates_the_formation():
+    """One implementation: the dense form is the sparse one made dense, bit for bit; and
+    numerically what a bearing Laplacian must be (§2.1): symmetric, positive semidefinite,
+    zero on translations and on the desired formation itself (L p* = 0)."""
+    from offboard.estimation.bearing import bearing_laplacian
+
+    e = graphs.knn_edges(GRID, 6)
+    dense = bearing_laplacian(GRID, e)
+    assert np.array_equal(dense, graphs.sparse_laplacian(GRID, e).toarray())
+    assert np.allclose(dense, dense.T, atol=0.0)
+    assert np.linalg.eigvalsh(dense).min() > -1e-12
+    for k in range(3):
+        shift = np.zeros((len(GRID), 3))
+        shift[:, k] = 1.0
+        assert np.abs(dense @ shift.ravel()).max() < 1e-12
+    assert np.abs(dense @ (3.0 * GRID).ravel()).max() < 1e-12
+    moved = GRID.copy()
+    moved[0] += 0.3  # one vertex off its bearings: no longer in the null space
+    assert np.abs(dense @ moved.ravel()).max() > 1e-3
