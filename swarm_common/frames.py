@@ -78,10 +78,10 @@ def rotm_from_quat(q: np.ndarray) -> np.ndarray:
 
 def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """ENU/FLU Euler attitude -> NED/FRD quaternion [w, x, y, z] (what MAVLink carries):
-    ``quat(T R D)`` (compiled: ``frames_kernel.quat_ned_from_euler_enu_kernel``)."""
-    return quat_ned_from_euler_enu_kernel(
-        float(roll), float(pitch), float(yaw), T_ENU_NED, D_FRD_FLU
-    )
+    ``quat(T R D)``, w ≥ 0, in closed form (compiled:
+    ``frames_kernel.quat_ned_from_euler_enu_kernel``; the controller's setpoints and the
+    simulator's telemetry both use it)."""
+    return quat_ned_from_euler_enu_kernel(float(roll), float(pitch), float(yaw))
 
 
 def odometry_ned(p: np.ndarray, v: np.ndarray, att: np.ndarray) -> np.ndarray:

@@ -20,6 +20,8 @@ import numpy as np
 
 from swarm_common.jit import kernel
 
+_S2 = math.sqrt(0.5)  # the half turn about (1,1,0)/√2 of ENU→NED
+
 
 @kernel
 def py_max(a: float, b: float) -> float:
@@ -179,13 +181,33 @@ def with_w_nonnegative(q: np.ndarray) -> np.ndarray:
 
 
 @kernel
-def quat_ned_from_euler_enu_kernel(
-    roll: float, pitch: float, yaw: float, t_enu_ned: np.ndarray, d_frd_flu: np.ndarray
-) -> np.ndarray:
-    """ENU/FLU ZYX Euler (rad) → NED/FRD quaternion (4,) [w, x, y, z], w ≥ 0:
-    ``quat(T R(roll, pitch, yaw) D)`` (frames.quat_ned_from_euler_enu)."""
-    r = matmul3(matmul3(t_enu_ned, rotm_from_euler_kernel(roll, pitch, yaw)), d_frd_flu)
-    return quat_from_rotm_kernel(r)
+def quat_ned_from_euler_enu_kernel(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """NED/FRD quaternion (4,) [w, x, y, z], w ≥ 0, of the ENU/FLU ZYX Euler angles (rad).
+
+    ``q_ned = q_T ⊗ q_zyx(roll, pitch, yaw) ⊗ q_D`` with T (ENU→NED) a half turn about
+    (1,1,0)/√2 and D (FRD→FLU) a half turn about x: ``quat(T R(roll, pitch, yaw) D)`` in
+    closed form, the one ENU→NED attitude conversion (frames.quat_ned_from_euler_enu).
+    """
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    bw = cr * cp * cy + sr * sp * sy
+    bx = sr * cp * cy - cr * sp * sy
+    by = cr * sp * cy + sr * cp * sy
+    bz = cr * cp * sy - sr * sp * cy
+    # q_T ⊗ b, q_T = (0, s, s, 0): the products of the general ⊗, zero terms included
+    aw, ax, ay, az = 0.0, _S2, _S2, 0.0
+    tw = aw * bw - ax * bx - ay * by - az * bz
+    tx = aw * bx + ax * bw + ay * bz - az * by
+    ty = aw * by - ax * bz + ay * bw + az * bx
+    tz = aw * bz + ax * by - ay * bx + az * bw
+    # (q_T ⊗ b) ⊗ q_D, q_D = (0, 1, 0, 0)
+    q = np.empty(4)
+    q[0] = tw * 0.0 - tx * 1.0 - ty * 0.0 - tz * 0.0
+    q[1] = tw * 1.0 + tx * 0.0 + ty * 0.0 - tz * 0.0
+    q[2] = tw * 0.0 - tx * 0.0 + ty * 0.0 + tz * 1.0
+    q[3] = tw * 0.0 + tx * 0.0 - ty * 1.0 + tz * 0.0
+    return with_w_nonnegative(q)
 
 
 @kernel
@@ -199,7 +221,7 @@ def odometry_ned_kernel(
     out = np.empty(10)
     out[0], out[1], out[2] = p[1], p[0], -p[2]
     vn0, vn1, vn2 = v[1], v[0], -v[2]
-    q = quat_ned_from_euler_enu_kernel(att[0], att[1], att[2], t_enu_ned, d_frd_flu)
+    q = quat_ned_from_euler_enu_kernel(att[0], att[1], att[2])
     out[3:7] = q
     r = rotm_from_quat_kernel(q[0], q[1], q[2], q[3])
     out[7] = r[0, 0] * vn0 + r[1, 0] * vn1 + r[2, 0] * vn2

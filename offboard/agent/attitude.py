@@ -23,7 +23,6 @@ from offboard.agent.attitude_kernel import (
     accel_from_attitude_kernel,
     command_kernel,
     inner_loop_kernel,
-    quat_ned_kernel,
     setpoint_kernel,
 )
 from swarm_common.fastnp import f64
@@ -41,16 +40,6 @@ class Setpoint:
     thrust_n: float
     q_ned: np.ndarray  # (4,) float32 [w, x, y, z]
     thrust_norm: np.float32
-
-
-def quat_ned_fast(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Closed form of :func:`swarm_common.frames.quat_ned_from_euler_enu` (w ≥ 0).
-
-    ``q_ned = q_T ⊗ q_zyx(roll, pitch, yaw) ⊗ q_D`` with T (ENU→NED) a half turn about
-    (1,1,0)/√2 and D (FRD→FLU) a half turn about x; equal to the frames version to ~1e-16.
-    Compiled: :func:`offboard.agent.attitude_kernel.quat_ned_kernel`.
-    """
-    return quat_ned_kernel(float(roll), float(pitch), float(yaw))
 
 
 def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> tuple[float, ...]:
@@ -77,7 +66,8 @@ def setpoint_from_accel(
     Angles/thrust are the commanded values, or (``decode=True``) the values decoded from the
     float32 wire form (differ by ~1e-7; the agent's inner-loop model does not need them).
     The conversion (:func:`swarm_common.frames.accel_to_attitude`, the quaternion of
-    :func:`quat_ned_fast`, :func:`swarm_common.frames.thrust_to_norm`) is the compiled
+    :func:`swarm_common.frames.quat_ned_from_euler_enu`,
+    :func:`swarm_common.frames.thrust_to_norm`) is the compiled
     :func:`offboard.agent.attitude_kernel.setpoint_kernel`.
     """
     ua = _virtual_control(u)

@@ -3,7 +3,8 @@
 * :func:`setpoint_kernel`: virtual control u → (roll, pitch, yaw, F) within the tilt and
   thrust limits (:func:`swarm_common.frames_kernel.accel_to_attitude_kernel`, the kernel
   behind :func:`swarm_common.frames.accel_to_attitude`), the NED/FRD wire quaternion
-  rounded to float32 (:func:`quat_ned_kernel`) and the normalised thrust;
+  rounded to float32
+  (:func:`swarm_common.frames_kernel.quat_ned_from_euler_enu_kernel`) and the normalised thrust;
 * :func:`accel_from_attitude_kernel`: ``R e3 F/m − g e_z`` (ENU);
 * :func:`inner_loop_kernel`: the sub-steps of the first-order attitude/thrust lags;
 * :func:`command_kernel`: the three above for one control period of a command, with the
@@ -24,40 +25,9 @@ from swarm_common.frames_kernel import (
     accel_to_attitude_kernel,
     py_max,
     py_min,
-    with_w_nonnegative,
+    quat_ned_from_euler_enu_kernel,
 )
 from swarm_common.jit import kernel
-
-_S2 = math.sqrt(0.5)
-
-
-@kernel
-def quat_ned_kernel(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """NED/FRD quaternion (4,) [w, x, y, z], w ≥ 0, of the ENU/FLU ZYX Euler angles (rad).
-
-    ``q_ned = q_T ⊗ q_zyx(roll, pitch, yaw) ⊗ q_D`` with T (ENU→NED) a half turn about
-    (1,1,0)/√2 and D (FRD→FLU) a half turn about x (:func:`offboard.agent.attitude.quat_ned_fast`).
-    """
-    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-    bw = cr * cp * cy + sr * sp * sy
-    bx = sr * cp * cy - cr * sp * sy
-    by = cr * sp * cy + sr * cp * sy
-    bz = cr * cp * sy - sr * sp * cy
-    # q_T ⊗ b, q_T = (0, s, s, 0): the products of the general ⊗, zero terms included
-    aw, ax, ay, az = 0.0, _S2, _S2, 0.0
-    tw = aw * bw - ax * bx - ay * by - az * bz
-    tx = aw * bx + ax * bw + ay * bz - az * by
-    ty = aw * by - ax * bz + ay * bw + az * bx
-    tz = aw * bz + ax * by - ay * bx + az * bw
-    # (q_T ⊗ b) ⊗ q_D, q_D = (0, 1, 0, 0)
-    q = np.empty(4)
-    q[0] = tw * 0.0 - tx * 1.0 - ty * 0.0 - tz * 0.0
-    q[1] = tw * 1.0 + tx * 0.0 + ty * 0.0 - tz * 0.0
-    q[2] = tw * 0.0 - tx * 0.0 + ty * 0.0 + tz * 1.0
-    q[3] = tw * 0.0 + tx * 0.0 - ty * 1.0 + tz * 0.0
-    return with_w_nonnegative(q)
 
 
 @kernel
@@ -74,7 +44,7 @@ def setpoint_kernel(
     roll, pitch, yaw_c, f = accel_to_attitude_kernel(
         u, yaw, gravity, mass, tilt_max_rad, thrust_max_n, 0.1
     )
-    q = quat_ned_kernel(roll, pitch, yaw_c).astype(np.float32)
+    q = quat_ned_from_euler_enu_kernel(roll, pitch, yaw_c).astype(np.float32)
     tn = py_min(1.0, py_max(0.0, f / thrust_max_n))
     return roll, pitch, yaw_c, f, q, tn
 

@@ -48,11 +48,20 @@ def test_inner_loop_model_converges_to_command():
     assert np.allclose(out[-1], u, atol=1e-6)
 
 
-def test_fast_quaternion_equals_frames():
-    from offboard.agent.attitude import quat_ned_fast
-    from swarm_common.frames import quat_ned_from_euler_enu
+def test_closed_form_quaternion_is_the_rotation_t_r_d():
+    """The one ENU/FLU Euler -> NED/FRD conversion (closed form) against the rotation it
+    stands for, ``quat(T R(roll, pitch, yaw) D)`` built from matrices here."""
+    from swarm_common.frames import (
+        D_FRD_FLU,
+        T_ENU_NED,
+        quat_from_rotm,
+        quat_ned_from_euler_enu,
+        rotm_from_euler,
+    )
 
     rng = np.random.default_rng(9)
     for _ in range(200):
         r, p, y = rng.uniform(-0.6, 0.6), rng.uniform(-0.6, 0.6), rng.uniform(-3.1, 3.1)
-        assert np.allclose(quat_ned_fast(r, p, y), quat_ned_from_euler_enu(r, p, y), atol=1e-12)
+        ref = quat_from_rotm(T_ENU_NED @ rotm_from_euler(r, p, y) @ D_FRD_FLU)
+        ref = ref if ref[0] >= 0 else -ref
+        assert np.allclose(quat_ned_from_euler_enu(r, p, y), ref, atol=1e-12)

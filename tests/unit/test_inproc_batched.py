@@ -12,9 +12,9 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from gcs.mission.inproc import round_estimate, round_estimates, wire_to_command, wire_to_commands
 from gcs.mission.run_output import empty_series, set_agent_rows
-from offboard.agent.attitude import quat_ned_fast
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method, QPStatus
+from swarm_common.frames import quat_ned_from_euler_enu
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot.setpoints import parse_attitude
 from vehicle_sim.physics.dynamics import SwarmDynamics
@@ -23,7 +23,7 @@ SC = load_scenario("scenarios/cube8.toml")
 
 
 def _quats(rng: np.random.Generator, n: int) -> np.ndarray:
-    q = np.array([quat_ned_fast(*rng.uniform(-3.2, 3.2, 3)) for _ in range(n)])
+    q = np.array([quat_ned_from_euler_enu(*rng.uniform(-3.2, 3.2, 3)) for _ in range(n)])
     q[0] *= 1.0 + 1e-3  # not quite unit: normalised by the decoder
     return q.astype(np.float32)
 
