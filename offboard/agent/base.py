@@ -3,7 +3,6 @@ model of the attitude/thrust lags, the method switch and the output record."""
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from typing import ClassVar
@@ -17,24 +16,10 @@ from offboard.estimation.peer_table import EstimateBatch
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.safety.filter import parse_method
 from swarm_common.enums import Method
+from swarm_common.scenario.input_set import control_box
 from swarm_common.scenario.model import Scenario
 
 CLIP_TOL = 1e-3  # m/s², a setpoint realising u farther than this counts as input_clipped
-
-
-def control_box(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """Box on u that the tilt/thrust limits can realise (paper §4.4 ‖u‖∞ ≤ u_max, tightened).
-
-    z in [−u_max, u_max]; horizontal per axis ``(g − 2) tan(tilt)/√2`` (tilt cone at
-    u_z ≥ −2 m/s²), at most u_max (all m/s²).
-    """
-    veh, ctl = sc.vehicle, sc.controller
-    umax = ctl.u_max_mps2
-    g = veh.gravity_mps2
-    uz_lo = min(umax, 0.9 * g)
-    uz_hi = min(umax, veh.thrust_max_n / veh.mass_kg - g)
-    uh = min(umax, (g - 2.0) * math.tan(math.radians(veh.tilt_max_deg)) / math.sqrt(2.0))
-    return np.array([-uh, -uh, -uz_lo]), np.array([uh, uh, uz_hi])
 
 
 class AgentBase(ABC):
@@ -55,7 +40,7 @@ class AgentBase(ABC):
         self.method = parse_method(method or sc.controller.method)
         self.substeps = sc.observer.substeps
         self.inner = InnerLoopModel(self.veh, self.dt / self.substeps)
-        self.u_lo, self.u_hi = control_box(sc)
+        self.u_lo, self.u_hi = control_box(sc.vehicle, sc.controller)
         self.yaw = 0.0
         self.landing: LandingReference | None = None
         # ground start (offboard.agent.takeoff): the common take-off plan, else None

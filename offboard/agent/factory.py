@@ -34,7 +34,7 @@ setup), :mod:`offboard.agent.follower`, :mod:`offboard.agent.leader`,
 from __future__ import annotations
 
 from offboard.agent.attitude import accel_from_attitude
-from offboard.agent.base import AgentBase, control_box
+from offboard.agent.base import AgentBase
 from offboard.agent.follower import FollowerAgent
 from offboard.agent.leader import LeaderAgent
 from offboard.estimation.bearing import Formation
@@ -68,6 +68,5 @@ __all__ = [
     "NeighbourEstimate",
     "NeighbourPredictor",
     "accel_from_attitude",
-    "control_box",
     "make_agent",
 ]

@@ -33,12 +33,12 @@ import numpy as np
 from offboard.agent.identity_memo import IdentityMemo
 from swarm_common.scenario.feasibility import (
     FEEDBACK_RESERVE,
-    InputLimits,
     acceleration_problem,
     desired_origins,
     leader_origins,
     peak_acceleration,
 )
+from swarm_common.scenario.input_set import InputSet
 from swarm_common.scenario.model import Scenario
 
 log = logging.getLogger(__name__)
@@ -89,7 +89,8 @@ def first_guess(sc: Scenario) -> float:
     acc, _ = peak_acceleration(sc)
     d = sc.disturbance.amplitude_n / sc.vehicle.mass_kg
     need = float(np.linalg.norm(acc[:2])) + d
-    avail = float(InputLimits.of(sc).horizontal(np.asarray(0.0), FEEDBACK_RESERVE))
+    limits = InputSet.of(sc.vehicle, sc.controller)
+    avail = float(limits.horizontal(np.asarray(0.0), FEEDBACK_RESERVE))
     if need <= 0.0 or avail <= 0.0:
         return 1.0
     return min(1.0, math.sqrt(avail / need))

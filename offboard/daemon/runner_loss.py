@@ -45,9 +45,9 @@ from dataclasses import replace
 import numpy as np
 
 from offboard.agent.attitude import Setpoint, setpoint_from_accel
-from offboard.agent.base import control_box
 from offboard.agent.landing import LandingPlan, LandingReference, landed, landing_plan
 from offboard.estimation.reference import xi_a, xi_at_rest, xi_j, xi_p, xi_v
+from swarm_common.scenario.input_set import control_box
 from swarm_common.scenario.model import Scenario
 
 log = logging.getLogger(__name__)
@@ -197,7 +197,7 @@ class OdometryFlight:
         self.ref = ref
         self.veh = sc.vehicle
         self.kp, self.kd = sc.controller.leader_kp, sc.controller.leader_kd
-        self.u_lo, self.u_hi = control_box(sc)
+        self.u_lo, self.u_hi = control_box(sc.vehicle, sc.controller)
         self.dt = sc.control_dt
         self.v_hat: np.ndarray | None = None
         self.d_hat = np.zeros(3)

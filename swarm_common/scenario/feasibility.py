@@ -15,11 +15,11 @@ controller must cancel the disturbance (per axis at most ``amplitude_n/m``, hori
 exactly ``amplitude_n/m`` in norm) and the unmodeled dynamics ``f̃ = Φ(p*, v*) ζ`` with every
 |ζ_k| up to ``|ζ_nom,k| (1 + zeta_spread)``; their bound ``e`` is added to ``|u_ff|``.
 
-Input set (the dcbf polytope, :class:`offboard.safety.dcbf.model.InputSet`): ``u_z ∈ [−min(u_max,
-0.9g),
-min(u_max, (F_max/m) cos θ − g)]`` and ``‖u_h‖ ≤ (g + u_z) tan θ cos(π/K)``, capped at
-``u_max``. A share :data:`FEEDBACK_RESERVE` of it is kept for feedback: the need must lie in
-the set scaled by ``1 − r`` about hover (u = 0). Sampled at :data:`PHASE_SAMPLES` phases of
+Input set (the dcbf polytope, :class:`swarm_common.scenario.input_set.InputSet`):
+``u_z ∈ [−min(u_max, 0.9g), min(u_max, (F_max/m) cos θ − g)]`` and
+``‖u_h‖ ≤ (g + u_z) tan θ cos(π/K)``, capped at ``u_max``. A share :data:`FEEDBACK_RESERVE`
+of it is kept for feedback: the need must lie in the set scaled by ``1 − r`` about hover
+(u = 0). Sampled at :data:`PHASE_SAMPLES` phases of
 one period, per agent.
 
 Reachability. A desired position below the ground clearance ``controller.d_safe_m`` at any
@@ -29,13 +29,13 @@ time of the trajectory (``min_t z = z(0) + min(0, 2A_z)``) is unreachable.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from swarm_common.enums import StartMode
 from swarm_common.scenario import graphs
+from swarm_common.scenario.input_set import InputSet
 from swarm_common.unmodeled import regressor
 
 if TYPE_CHECKING:
@@ -43,31 +43,6 @@ if TYPE_CHECKING:
 
 FEEDBACK_RESERVE = 0.2  # share of the input set kept for feedback (1 − r scales the set)
 PHASE_SAMPLES = 180  # samples of ωt over one period (2°: sampled peaks within 2e-4)
-
-
-@dataclass(frozen=True)
-class InputLimits:
-    """The realisable virtual controls (m/s², ENU): the dcbf input polytope's numbers."""
-
-    uz_min: float  # −min(u_max, 0.9 g)
-    uz_max: float  # min(u_max, (F_max/m) cos θ − g)
-    cone_slope: float  # tan θ cos(π/K): ‖u_h‖ ≤ (g + u_z) · slope
-    u_max: float  # controller.u_max_mps2, caps ‖u_h‖ too
-    g: float
-
-    @classmethod
-    def of(cls, sc: Scenario) -> InputLimits:
-        veh, ctl = sc.vehicle, sc.controller
-        th = math.radians(veh.tilt_max_deg)
-        g = veh.gravity_mps2
-        uz_max = min(ctl.u_max_mps2, veh.thrust_max_n / veh.mass_kg * math.cos(th) - g)
-        slope = math.tan(th) * math.cos(math.pi / ctl.dcbf_cone_sides)
-        return cls(-min(ctl.u_max_mps2, 0.9 * g), uz_max, slope, ctl.u_max_mps2, g)
-
-    def horizontal(self, uz: np.ndarray, reserve: float = FEEDBACK_RESERVE) -> np.ndarray:
-        """Largest ‖u_h‖ (m/s²) at vertical command ``uz`` in the set scaled by 1 − reserve."""
-        k = 1.0 - reserve
-        return np.minimum(k * self.u_max, (k * self.g + np.asarray(uz)) * self.cone_slope)
 
 
 # ---------------------------------------------------------------------------
@@ -196,14 +171,15 @@ def acceleration_problem(sc: Scenario, origins: np.ndarray, idx: list[int]) -> s
     vel = np.broadcast_to((amp * w * s)[:, None, :], p.shape)
     e_d, e_fh, e_fz = _uncertainty(sc, p, vel)
     e_h, e_z = e_d + e_fh, e_d + e_fz  # (M, N)
-    lim = InputLimits.of(sc)
+    lim = InputSet.of(sc.vehicle, sc.controller)
     k = 1.0 - FEEDBACK_RESERVE
     uz, uh = u[:, 2:3], np.linalg.norm(u[:, :2], axis=1)[:, None]
     shape = e_h.shape
     checks = (  # (name, need, allowed, trajectory part) each (M, n)
         ("upward", uz + e_z, np.full(shape, k * lim.uz_max), np.broadcast_to(uz, shape)),
         ("downward", e_z - uz, np.full(shape, -k * lim.uz_min), np.broadcast_to(-uz, shape)),
-        ("horizontally", uh + e_h, lim.horizontal(uz - e_z), np.broadcast_to(uh, shape)),
+        ("horizontally", uh + e_h, lim.horizontal(uz - e_z, FEEDBACK_RESERVE),
+         np.broadcast_to(uh, shape)),
     )  # vertical first: within them the horizontal allowance is > 0
     for name, need, allowed, traj in checks:
         over = need - allowed

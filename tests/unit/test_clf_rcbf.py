@@ -86,12 +86,12 @@ def _track_saturated(anti_windup: bool, e0: np.ndarray, v0: np.ndarray) -> np.nd
     import math
 
     from offboard.agent.attitude import InnerLoopModel, setpoint_from_accel
-    from offboard.agent.base import control_box
+    from swarm_common.scenario.input_set import control_box
     from swarm_common.scenario.model import load_scenario
 
     sc = load_scenario("scenarios/cube8.toml")
     veh = sc.vehicle
-    lo, hi = control_box(sc)
+    lo, hi = control_box(sc.vehicle, sc.controller)
     amp, om = np.array([1.6, 0.8, 0.4]), 2.0 * math.pi * 0.2
     dt, ns = 0.02, 4
     inner = InnerLoopModel(veh, dt / ns)

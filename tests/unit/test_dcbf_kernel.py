@@ -18,7 +18,8 @@ from reference.close import assert_close
 from reference.dcbf_rows import dcbf_rows, ground_rows, predict
 
 from offboard.safety.dcbf.kernel import other_term_kernel, rows_hold_kernel
-from offboard.safety.dcbf.model import InputSet, LagCoefficients
+from offboard.safety.dcbf.model import LagCoefficients
+from offboard.safety.dcbf.model import ProjectedInputSet as InputSet
 
 TAU = np.array([0.15, 0.15, 0.03])
 

@@ -19,15 +19,15 @@ from gcs.mission.launch_spec import LaunchSpec
 from offboard.agent.takeoff import leader_origin
 from offboard.estimation.bearing import formation_from_scenario
 from offboard.estimation.reference import LeaderTrajectory
-from offboard.safety.dcbf.model import InputSet
+from offboard.safety.dcbf.filter import input_set_of
 from swarm_common.scenario.feasibility import (
     FEEDBACK_RESERVE,
-    InputLimits,
     desired_origins,
     feasibility_problem,
     leader_origins,
     peak_acceleration,
 )
+from swarm_common.scenario.input_set import InputSet
 from swarm_common.scenario.model import (
     InfeasibleScenarioError,
     Scenario,
@@ -114,19 +114,31 @@ def test_peak_acceleration_and_jerk_match_finite_differences_of_the_formation():
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
-def test_input_limits_are_the_dcbf_input_set(path):
+def test_the_load_time_input_set_is_the_dcbf_filters_and_is_realisable(path):
+    """One input set: the feasibility check's is the dcbf filter's; and every point of it is
+    realisable, checked numerically against the vehicle's tilt and thrust limits."""
     sc = load_scenario(path)
     veh, ctl = sc.vehicle, sc.controller
-    ref = InputSet.from_vehicle(veh.mass_kg, veh.gravity_mps2, veh.thrust_max_n,
-                                veh.tilt_max_deg, ctl.u_max_mps2, ctl.dcbf_cone_sides)
-    lim = InputLimits.of(sc)
-    assert (lim.uz_min, lim.uz_max, lim.u_max) == (ref.uz_min, ref.uz_max, ref.uh_max)
-    assert lim.cone_slope == pytest.approx(ref.tan_tilt * math.cos(math.pi / ref.sides))
-    # the set scaled by 1 − r about hover: a point on its horizontal edge is in InputSet
+    lim = InputSet.of(veh, ctl)
+    dcbf = input_set_of(ctl, veh)
+    assert isinstance(dcbf, InputSet)
+    assert (lim.uz_min, lim.uz_max, lim.tan_tilt, lim.sides, lim.uh_max, lim.g) == (
+        dcbf.uz_min, dcbf.uz_max, dcbf.tan_tilt, dcbf.sides, dcbf.uh_max, dcbf.g)
+    rng = np.random.default_rng(4)
+    a, lo, hi = lim.rows()
+    for _ in range(500):
+        u = rng.uniform(-2 * lim.uh_max, 2 * lim.uh_max, 3)
+        if not ((a @ u <= hi).all() and (a @ u >= lo).all()):
+            continue
+        thrust_dir = u + np.array([0.0, 0.0, lim.g])  # specific force the rotors make
+        tilt = math.degrees(math.atan2(np.linalg.norm(thrust_dir[:2]), thrust_dir[2]))
+        assert tilt <= veh.tilt_max_deg + 1e-9
+        assert veh.mass_kg * np.linalg.norm(thrust_dir) <= veh.thrust_max_n + 1e-9
+    # the set scaled by 1 − r about hover: a point on its horizontal edge is in the set
     uz = -1.0
     r = float(lim.horizontal(np.array(uz), reserve=0.0))
-    assert ref.contains(np.array([r, 0.0, uz]), tol=1e-9)
-    assert not ref.contains(np.array([r + 0.05, 0.0, uz]))
+    assert dcbf.contains(np.array([r, 0.0, uz]), tol=1e-9)
+    assert not dcbf.contains(np.array([r + 0.05, 0.0, uz]))
 
 
 def _numbers(msg: str, word: str) -> tuple[float, float]:

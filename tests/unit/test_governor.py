@@ -7,7 +7,8 @@ import numpy as np
 
 from offboard.agent.governor import _at_frequency, _origins, first_guess, governor_for
 from offboard.estimation.reference import LeaderTrajectory, exo_propagator
-from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, InputLimits, acceleration_problem
+from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, acceleration_problem
+from swarm_common.scenario.input_set import InputSet
 from swarm_common.scenario.model import load_scenario, with_overrides
 
 CUBE8 = "scenarios/cube8.toml"
@@ -47,7 +48,7 @@ def test_slowed_exosystem_acceleration_fits_the_input_set():
     phi = exo_propagator(gov.omega, dt)
     xi = traj.state(0.0)
     tau = np.array([sc.vehicle.tau_rollpitch_s] * 2 + [sc.vehicle.tau_thrust_s])
-    lim = InputLimits.of(sc)
+    lim = InputSet.of(sc.vehicle, sc.controller)
     peak = 0.0
     for k in range(1, int(1.0 / gov.frequency_hz / dt) + 1):
         xi = phi @ xi  # the followers' exosystem generates the leaders' governed motion

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput, saturate_norm
-from offboard.safety.dcbf.model import InputSet, LagCoefficients
+from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.dcbf.step_kernel import (
     P_DT,
@@ -45,9 +45,9 @@ GROUND_GAMMA = 2.0
 GROUND_ACCEL_ERR = 1.0
 
 
-def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> InputSet:
+def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> ProjectedInputSet:
     """The realisable input polytope of ``[vehicle]`` with ``ctl.dcbf_cone_sides`` sides."""
-    return InputSet.from_vehicle(
+    return ProjectedInputSet.from_vehicle(
         veh.mass_kg, veh.gravity_mps2, veh.thrust_max_n, veh.tilt_max_deg, ctl.u_max_mps2,
         ctl.dcbf_cone_sides,
     )

@@ -37,52 +37,13 @@ import numpy as np
 
 from offboard.safety.dcbf.kernel import project_into
 from swarm_common.fastnp import vec3
+from swarm_common.scenario.input_set import InputSet
 
 
 @dataclass(frozen=True)
-class InputSet:
-    """Polytope inner approximation of the realisable virtual controls (m/s², ENU)."""
-
-    uz_min: float  # lowest u_z (m/s²)
-    uz_max: float  # (F_max/m) cos θ − g (m/s²)
-    tan_tilt: float
-    sides: int  # K half-planes of the tilt cone
-    uh_max: float  # per-axis horizontal bound (m/s², the ‖u‖∞ bound of §4.4)
-    g: float  # gravity (m/s²)
-    shrink: float = 0.02  # m/s², rows tightened so solver tolerance stays inside
-
-    @classmethod
-    def from_vehicle(
-        cls, mass: float, g: float, f_max: float, tilt_deg: float, u_max: float, sides: int,
-    ) -> InputSet:
-        """The set of a vehicle: mass (kg), gravity (m/s²), F_max (N), tilt limit (deg)."""
-        th = math.radians(tilt_deg)
-        uz_max = min(u_max, f_max / mass * math.cos(th) - g)
-        return cls(-min(u_max, 0.9 * g), uz_max, math.tan(th), int(sides), u_max, g)
-
-    def rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(A, lo, hi) with ``lo ≤ A u ≤ hi``: K cone rows, then u_z, u_x, u_y bounds."""
-        k, s = self.sides, self.shrink
-        c = self.tan_tilt * math.cos(math.pi / k)
-        ang = 2.0 * math.pi * np.arange(k) / k
-        a = np.zeros((k + 3, 3))
-        a[:k, 0], a[:k, 1], a[:k, 2] = np.cos(ang), np.sin(ang), -c
-        lo = np.full(k + 3, -np.inf)
-        hi = np.empty(k + 3)
-        hi[:k] = self.g * c - s
-        a[k, 2] = 1.0
-        lo[k], hi[k] = self.uz_min + s, self.uz_max - s
-        a[k + 1, 0] = a[k + 2, 1] = 1.0
-        lo[k + 1 :] = -self.uh_max + s
-        hi[k + 1 :] = self.uh_max - s
-        return a, lo, hi
-
-    def contains(self, u: np.ndarray, tol: float = 0.0) -> bool:
-        """True if ``u`` satisfies every row, the shrink margin not counted, up to ``tol``."""
-        a, lo, hi = self.rows()
-        y = a @ u
-        s = self.shrink + tol
-        return bool((y <= hi + s).all() and (y >= lo - s).all())
+class ProjectedInputSet(InputSet):
+    """The dcbf filter's input set (:class:`swarm_common.scenario.input_set.InputSet`) with
+    its compiled projection."""
 
     @cached_property
     def projection(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

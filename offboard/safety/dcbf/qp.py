@@ -7,7 +7,7 @@ Variables x = [u (3), δ, σ] (docs/safety.md §4)::
           gᵀu + σ ≥ r                       per sensed pair
           (:func:`offboard.safety.dcbf.kernel.dcbf_rows_kernel`)
           A_U u ∈ [lo, hi]                  input polytope
-          (:class:`offboard.safety.dcbf.model.InputSet`)
+          (:class:`offboard.safety.dcbf.model.ProjectedInputSet`)
           σ ≥ 0
 
 Unlike the RCBF QP the input rows are never relaxed (σ acts on the barrier rows only), so
@@ -22,7 +22,7 @@ import numpy as np
 
 from offboard.safety.dcbf.exact_kernel import NO_EXACT, pre_solve_kernel
 from offboard.safety.dcbf.kernel import rows_hold_kernel
-from offboard.safety.dcbf.model import InputSet
+from offboard.safety.dcbf.model import ProjectedInputSet
 from offboard.safety.qp_rows_kernel import rows_finite_kernel
 from offboard.safety.rcbf.clf_rcbf import Brake, ClfTerms, QPResult, _ClfRowsQP, fallback_of
 from swarm_common.enums import QPSolver, QPStatus
@@ -33,7 +33,7 @@ class DcbfQP(_ClfRowsQP):
     """One agent's OSQP problem with room for ``max_pairs`` barrier rows."""
 
     def __init__(
-        self, max_pairs: int, uset: InputSet, rho: float, clf_c: float,
+        self, max_pairs: int, uset: ProjectedInputSet, rho: float, clf_c: float,
         violation_weight: float = 100.0, eps: float = 1e-5, limit: int | None = None,
         solver: QPSolver | str = QPSolver.DAQP,
     ) -> None:
