@@ -375,7 +375,12 @@ async def settle(app, pilot, pred, tries: int = 100) -> bool:
 def pytest_sessionstart(session: pytest.Session) -> None:
     """Compile the numba kernels before any test starts a daemon or a simulator: from a
     cold cache (a fresh clone) eight daemons would otherwise compile the same kernels at
-    once on a 2-core machine, inside their start-up timeouts (gcs.mission.warmup)."""
+    once on a 2-core machine, inside their start-up timeouts (gcs.mission.warmup).
+
+    Under pytest-xdist the controller compiles (its hook runs before the workers start)
+    and the workers load what they use from the on-disk cache: one compilation per run."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return
     from gcs.mission.warmup import compile_kernels
 
     compile_kernels()
