@@ -3,7 +3,7 @@
     python bench/bench_control.py [--scenario scenarios/cube8.toml] [--duration 20]
                                   [--profile-s 20] [--repeats 2] [--methods dcbf,rcbf,apf]
 
-Prints, with no assertions (figures for docs/performance.md, "Control core"):
+Prints, with no assertions (figures for docs/performance.md, "In process"):
 
 1. in-process mission × real time per method (``run_inproc``, no instrumentation), each
    run ``--repeats`` times (the 2-core machine is shared: give the range);

@@ -6,7 +6,7 @@
 Each run is a fresh child process (so its peak RSS is its own): the scenario comes from
 ``gcs scenario grid --agents N --leaders L --scramble SEED --mix F`` (sparse ``knn`` graph,
 the smallest rigid ``knn_k`` ≥ 6), then ``run_inproc`` for ``--duration`` simulated seconds.
-Prints, with no assertions (figures for docs/performance.md, "Scaling (issue 11)"):
+Prints, with no assertions (figures for docs/performance.md, "Scaling in process"):
 
 * setup: wall seconds to build the agents (run wall − stepping wall; loading excluded);
 * stepping wall (s), whole-process CPU (s, user + system), peak RSS (MiB);
