@@ -8,7 +8,7 @@ on the wire, ZYX Euler, quaternions [w, x, y, z]).
 The operations and their order are those of the numpy/Python formulation they replaced,
 but for: dot products summed left to right (numpy's BLAS dot) and ``math.hypot`` being the
 C library's, as ``np.hypot`` is (CPython's ``math.hypot`` rounds its own way, within an
-ulp). Results agree to rounding (``tests/unit/test_attitude_kernel.py``), and every
+ulp). Results agree to rounding (``tests/unit/agent/test_attitude_kernel.py``), and every
 process (controller and simulator) runs the same kernels.
 """
 

@@ -12,7 +12,7 @@
 
 The operations and their order are those of the Python formulation they replaced (the
 same products and sums of floats), so results agree with it to rounding
-(``tests/unit/test_attitude_kernel.py``), and every process computes the same bits.
+(``tests/unit/agent/test_attitude_kernel.py``), and every process computes the same bits.
 """
 
 from __future__ import annotations

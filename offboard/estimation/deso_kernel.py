@@ -14,7 +14,7 @@ The operations and their order are those of the numpy formulation they replaced,
 two: powers are products (``v**3``, ``v**6`` were C ``pow``), and the matrix-vector products
 and dot products are summed left to right (numpy's ``@``, ``einsum`` and ``dot`` went to
 BLAS / its own loops). The results agree with that formulation to rounding
-(``tests/unit/test_deso_kernel.py`` keeps it as the oracle), and every process that runs
+(``tests/unit/estimation/test_deso_kernel.py`` keeps it as the oracle), and every process that runs
 the kernels computes the same bits (in-process and distributed runs stay equal).
 
 The limits of the adaptive law and of the gate are defined here, not imported: a compiled

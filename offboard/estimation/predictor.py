@@ -266,7 +266,7 @@ def predict_row_into(src: np.ndarray, xi_n: np.ndarray, m: np.ndarray, out: np.n
     (given: numpy's product, BLAS's order) and m (2,2) the error loop's propagator,
     ``p = p*_n + m₀₀ e1 + m₀₁ e2``, ``v = v*_n + m₁₀ e1 + m₁₁ e2`` with ``e1 = z1 − p*``,
     ``e2 = z2 − v*``, and ξ_n; z3 is left as ``out`` holds it. The operations of the numpy
-    formulation (kept in tests/unit/test_predictor.py) in its order, so the same bits."""
+    formulation (kept in tests/unit/estimation/test_predictor.py) in its order, so the same bits."""
     for c in range(3):
         e1 = src[c] - src[XI_COL + c]
         e2 = src[3 + c] - src[XI_COL + 3 + c]

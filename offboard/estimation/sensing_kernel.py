@@ -9,7 +9,7 @@ computes the relative geometry, the noisy measurements and the validity mask row
 The operations and their order are those of the numpy formulation they replaced, the
 three-term dot products included: :func:`dot3` sums them as numpy's ``einsum("ij,ij->i")``
 does for rows of three (its two-lane loop: ``(a0 b0 + a2 b2) + a1 b1``). So the results
-are numpy's bit for bit (``tests/unit/test_sensing_kernel.py``; to rounding, should a
+are numpy's bit for bit (``tests/unit/estimation/test_sensing_kernel.py``; to rounding, should a
 numpy sum otherwise), and every process computes the same bits.
 """
 

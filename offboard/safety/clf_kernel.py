@@ -4,7 +4,8 @@ docs/saturation.md §2).
 
 One call gives V, L_fV, L_gV and u_nom, with or without the anti-windup box, using the
 operations of the numpy formulation it replaced; dot products are summed left to right
-(numpy's ``@`` went to BLAS), so the two agree to rounding (``tests/unit/test_clf_kernel.py``).
+(numpy's ``@`` went to BLAS), so the two agree to rounding
+(``tests/unit/safety/test_clf_kernel.py``).
 """
 
 from __future__ import annotations

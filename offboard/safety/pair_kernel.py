@@ -3,7 +3,7 @@ tangential deadlock breaker (:func:`offboard.safety.rcbf.clf_rcbf.tangential_ter
 
 Pair by pair in one compiled loop, with the operations of the numpy formulations they
 replaced; 3-element dot products are summed left to right (numpy's ``einsum`` loop sums in
-another order), so the two agree to rounding (``tests/unit/test_pair_kernel.py``).
+another order), so the two agree to rounding (``tests/unit/safety/test_pair_kernel.py``).
 """
 
 from __future__ import annotations

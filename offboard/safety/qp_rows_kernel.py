@@ -5,7 +5,7 @@ constraint matrix, bounds and linear cost, and the bounds as DAQP reads them (cl
 ±1e30), in one call instead of a dozen numpy slice assignments per solve;
 :func:`rows_finite_kernel` is the QPs' finiteness guard in one call. Both copy and compare
 floats only (one division per element of the CLF row, as numpy's), so the QP data are the
-same bits as before (``tests/unit/test_qp_rows_kernel.py``).
+same bits as before (``tests/unit/safety/test_qp_rows_kernel.py``).
 """
 
 from __future__ import annotations

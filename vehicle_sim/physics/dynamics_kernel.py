@@ -8,8 +8,8 @@ Euler, ground contact, the spawn fixture (held vehicles), and the pair distances
 collision bookkeeping. The class around it keeps the state, the commands and the names.
 
 The operations and their order are those of the numpy formulation it replaced, with
-these exceptions, each a last-bit difference at most (``tests/unit/test_dynamics_kernel.py``
-steps the previous numpy step side by side):
+these exceptions, each a last-bit difference at most
+(``tests/unit/vehicle_sim/test_dynamics_kernel.py`` steps the previous numpy step side by side):
 
 * ``exp`` is the C library's (numpy's AVX-512 ``exp`` differs from it in the last bit for
   a few percent of arguments); ``sin``/``cos`` agree with numpy's bit for bit;

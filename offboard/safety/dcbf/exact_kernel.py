@@ -10,7 +10,7 @@ BLAS's dgemv, whose order of summation is its own and differs between processors
 repeats every other operation, and its order, of the numpy formulation it replaced: 3-vector
 dot products summed left to right (as numpy's ``dot`` of two 3-vectors sums them), no
 fused multiply-adds (numba contracts none without ``fastmath``). So the answers are the
-same bits as before (``tests/unit/test_dcbf_exact_kernel.py``).
+same bits as before (``tests/unit/safety/test_dcbf_exact_kernel.py``).
 """
 
 from __future__ import annotations

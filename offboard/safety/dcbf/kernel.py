@@ -6,7 +6,7 @@ the command, and the two rows (C1), (C2) per pair. The operations and their orde
 those of the numpy formulation it replaced (kept in ``tests/reference/dcbf_rows.py``),
 but for two: cubes are products (numpy's ``**3`` is its own vectorised power) and dot
 products are summed left to right (numpy's ``einsum`` and ``@`` sum in their own orders).
-The rows agree with that formulation to rounding (``tests/unit/test_dcbf_kernel.py``,
+The rows agree with that formulation to rounding (``tests/unit/safety/test_dcbf_kernel.py``,
 random pairs), and every process that runs the kernel computes the same bits.
 """
 

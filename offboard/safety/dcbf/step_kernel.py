@@ -8,7 +8,7 @@ budget share per pair, the other agents' accelerations
 (:func:`offboard.safety.dcbf.kernel.dcbf_rows_kernel`) and the ground rows
 (:func:`offboard.safety.dcbf.kernel.ground_rows_kernel`). It calls those same kernels with the
 same arguments, so it gives the same bits as the chain of calls it replaced
-(``tests/unit/test_dcbf_step_kernel.py``); what it saves is a dozen Python-level calls and
+(``tests/unit/safety/test_dcbf_step_kernel.py``); what it saves is a dozen Python-level calls and
 temporary arrays per follower step. It writes the rows into the filter's own buffers, so
 no new array is boxed for them.
 

@@ -20,7 +20,7 @@ from offboard.safety.dcbf.filter import input_set_of
 from offboard.safety.dcbf.kernel import rows_hold_kernel
 from swarm_common.scenario.model import load_scenario
 
-SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SC = load_scenario(Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml")
 RHO = SC.controller.rho
 CLF_C = SC.controller.clf_c
 LIN_SIGMA = max(1e3, 50.0 * RHO)

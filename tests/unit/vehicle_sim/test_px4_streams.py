@@ -19,7 +19,7 @@ from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.services.command import Command, execute
 from vehicle_sim.vehicle import Vehicle
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 ATT, VFR, ALT, BAT = (
     M.MAVLINK_MSG_ID_ATTITUDE,
     M.MAVLINK_MSG_ID_VFR_HUD,

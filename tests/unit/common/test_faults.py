@@ -13,7 +13,7 @@ from swarm_common import faults
 from swarm_common.faults import FaultConfig, FaultError, FaultInjector, FaultPlan
 from swarm_common.scenario.model import ScenarioError, dump_toml, load_scenario, parse_scenario
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 
 

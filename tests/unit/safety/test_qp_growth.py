@@ -15,7 +15,7 @@ from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP
 from swarm_common.scenario.model import load_scenario
 
-SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SC = load_scenario(Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml")
 VEH, CTL = SC.vehicle, SC.controller
 
 LO = np.array([-3.2, -3.2, -8.0])

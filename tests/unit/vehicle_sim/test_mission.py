@@ -22,7 +22,7 @@ from vehicle_sim.services.mission_executor import MissionExecutor
 from vehicle_sim.services.mission_transfer import RETRY_S, TIMEOUT_S, MissionTransfer
 from vehicle_sim.vehicle import Vehicle
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 CFG = SimpleNamespace(home_lat=47.397742, home_lon=8.545594, home_alt=488.0)
 GCS = (255, 190)
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

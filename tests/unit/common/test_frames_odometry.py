@@ -20,7 +20,7 @@ from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 
 
 def _attitudes(n: int, seed: int) -> np.ndarray:

@@ -17,7 +17,7 @@ from vehicle_sim.clock import LockstepClock
 from vehicle_sim.options import SimOptions
 from vehicle_sim.server import LOCKSTEP_SCAN_S, SimServer
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 
 
 @pytest.fixture

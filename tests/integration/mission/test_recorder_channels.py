@@ -16,7 +16,7 @@ from swarm_common import wire
 from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import open_session
 
-SCEN = Path(__file__).resolve().parents[2] / "scenarios"
+SCEN = Path(__file__).resolve().parents[3] / "scenarios"
 SWARM = "rec"
 
 

@@ -19,7 +19,7 @@ from offboard.safety.rcbf.filter import RcbfFilter
 from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario.model import load_scenario, with_overrides
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 LO, HI = np.full(3, -3.0), np.full(3, 3.0)
 
 

@@ -14,7 +14,7 @@ import offboard.daemon.warmup as warmup
 from offboard.estimation.bearing import formation_from_scenario
 from swarm_common.scenario.model import load_scenario
 
-SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SC = load_scenario(Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml")
 # un-jitted (NUMBA_DISABLE_JIT=1) the kernels are plain functions: nothing to load
 needs_jit = pytest.mark.skipif(bool(numba.config.DISABLE_JIT),
                                reason="NUMBA_DISABLE_JIT: no compiled kernels to load")
@@ -53,7 +53,7 @@ def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     code = (
         "from swarm_common.scenario.model import load_scenario\n"
         "from vehicle_sim.physics.dynamics_kernel import steps_kernel\n"
@@ -79,7 +79,7 @@ def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
     import subprocess
     import sys
 
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     code = (
         "from swarm_common.scenario.model import load_scenario\n"
         "from offboard.estimation.bearing import formation_from_scenario\n"

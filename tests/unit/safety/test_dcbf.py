@@ -18,7 +18,7 @@ from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, barrier
 from swarm_common.scenario.model import load_scenario
 
-SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SC = load_scenario(Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml")
 VEH, CTL = SC.vehicle, SC.controller
 DT, NSUB = SC.control_dt, SC.observer.substeps
 TAU = np.array([VEH.tau_rollpitch_s, VEH.tau_rollpitch_s, VEH.tau_thrust_s])

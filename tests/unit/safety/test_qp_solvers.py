@@ -19,7 +19,7 @@ from offboard.safety.rcbf.clf_rcbf import ClfTerms, SafetyQP, _ClfRowsQP
 from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.scenario.model import load_scenario
 
-SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SC = load_scenario(Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml")
 LO = np.array([-3.2, -3.2, -8.0])
 HI = np.array([3.2, 3.2, 8.0])
 RHO, CLF_C = 10.0, 1.0
@@ -123,7 +123,7 @@ def test_no_daqp_optimum_falls_back_to_osqp(monkeypatch: pytest.MonkeyPatch) -> 
 
 
 def test_solver_choice_is_validated_on_load(tmp_path: Path) -> None:
-    src = (Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml").read_text()
+    src = (Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml").read_text()
     assert 'qp_solver' not in src  # optional: the default applies
     assert SC.controller.qp_solver is QPSolver.DAQP
     bad = tmp_path / "bad.toml"

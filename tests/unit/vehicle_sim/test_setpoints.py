@@ -20,7 +20,7 @@ from vehicle_sim.physics import geo
 from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.vehicle import Vehicle
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 P = setpoints.POS_BITS[0] | setpoints.POS_BITS[1] | setpoints.POS_BITS[2]
 V = setpoints.VEL_BITS[0] | setpoints.VEL_BITS[1] | setpoints.VEL_BITS[2]
 A = setpoints.ACC_BITS[0] | setpoints.ACC_BITS[1] | setpoints.ACC_BITS[2]

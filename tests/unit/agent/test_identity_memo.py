@@ -54,7 +54,7 @@ def test_formation_digest_is_by_content() -> None:
     from offboard.estimation.bearing import formation_from_scenario
     from swarm_common.scenario.model import load_scenario
 
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     sc = load_scenario(root / "scenarios" / "cube8.toml")
     a, b = formation_from_scenario(sc), formation_from_scenario(sc)
     assert a is not b and a.content_digest() == b.content_digest()

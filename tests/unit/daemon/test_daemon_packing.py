@@ -15,7 +15,7 @@ from offboard.estimation.bearing import formation_from_scenario
 from swarm_common import wire
 from swarm_common.scenario.model import load_scenario
 
-SCEN = Path(__file__).resolve().parents[2] / "scenarios"
+SCEN = Path(__file__).resolve().parents[3] / "scenarios"
 
 
 def test_parse_and_format_agents() -> None:

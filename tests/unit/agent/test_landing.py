@@ -14,7 +14,7 @@ from offboard.agent.landing import (
 from offboard.agent.takeoff import ramped_travel
 from swarm_common.scenario.model import load_scenario
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 
 

@@ -22,7 +22,7 @@ from vehicle_sim.physics.position_control import PositionController, PositionSet
 from vehicle_sim.services.command import Command, execute
 from vehicle_sim.vehicle import Vehicle
 
-GROUND8 = Path(__file__).resolve().parents[2] / "scenarios" / "ground8.toml"
+GROUND8 = Path(__file__).resolve().parents[3] / "scenarios" / "ground8.toml"
 NAN = math.nan
 
 

@@ -32,7 +32,7 @@ from vehicle_sim.services.param import (
 )
 from vehicle_sim.vehicle import Vehicle
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 GCS = ("gcs", ("127.0.0.1", 14550))
 OTHER = ("api", ("127.0.0.1", 14540))
 

@@ -11,7 +11,7 @@ from gcs.mission.launch_spec import LaunchSpec
 from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from offboard.daemon.runner_loss import (
 )
 from swarm_common.scenario.model import load_scenario
 
-CUBE8 = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+CUBE8 = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 HZ = 50
 
 

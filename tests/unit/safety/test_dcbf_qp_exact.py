@@ -16,7 +16,7 @@ from offboard.safety.rcbf.clf_rcbf import ClfTerms
 from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.scenario.model import load_scenario
 
-SC = load_scenario(Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml")
+SC = load_scenario(Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml")
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

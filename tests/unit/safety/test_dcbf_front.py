@@ -24,7 +24,7 @@ from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.dcbf.front import saturate_into
 from swarm_common.scenario.model import load_scenario
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 # Both paths call the same kernels with the same arguments in the same order, so here
 # they give the same bits; the comparison allows a relative 1e-9 (about 4.5e6 ulp at
 # 1.0) so that a platform whose Python-side additions or copies round differently in the
