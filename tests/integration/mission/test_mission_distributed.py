@@ -149,13 +149,16 @@ def test_cli_mission_run_json(tmp_path: Path) -> None:
     assert (tmp_path / "vehicle-sim.log").exists()
 
 
+# four distributed runs in a row: minutes when other workers load the machine (a limit on
+# the wait, not a timing assertion)
+@pytest.mark.timeout(600)
 def test_cli_compare_distributed_writes_report(tmp_path: Path) -> None:
     """The README's main command, shortened: three distributed runs and the report."""
     off = free_port_offset()
     out = subprocess.run(
         [sys.executable, "-m", "gcs.cli", "mission", "compare", CUBE8, "--duration", "1.0",
          "--out", str(tmp_path), "--port-offset", str(off)],
-        cwd=ROOT, capture_output=True, text=True, timeout=240,
+        cwd=ROOT, capture_output=True, text=True, timeout=540,
     )
     assert out.returncode == 0, out.stderr[-2000:]
     report = (tmp_path / "report.md").read_text()

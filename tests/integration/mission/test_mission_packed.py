@@ -48,7 +48,9 @@ def test_sparse_graph_packed_run_matches_inproc(tmp_path: Path) -> None:
     sc = load_scenario(str(ROOT / "scenarios" / "grid27_knn.toml"))
     dur = 2.0
     ref = run_inproc(sc, None, duration=dur)
-    rec, facts = run_distributed(sc, tmp_path, None, None, dur, port_offset=free_port_offset(),
+    # every one of the 27 vehicles' ports claimed, not the first eight's
+    rec, facts = run_distributed(sc, tmp_path, None, None, dur,
+                                 port_offset=free_port_offset(sc.n),
                                  show_progress=False, processes=3)
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
     assert facts["failed_agents"] == []
