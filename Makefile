@@ -4,11 +4,11 @@ PY ?= python3
 VENV := .venv
 STAMP := $(VENV)/.installed
 PYTEST := $(VENV)/bin/python -m pytest -q
-# test processes: the unit tests are CPU-bound (one worker per core); the integration
-# tests mostly wait on their own subprocesses and sockets, so more workers than cores
-# overlap those waits (docs/testing.md)
+# test processes, one per core: the suite is CPU-bound (its integration tests start
+# simulators and daemons), and more workers than cores starve lockstep runs into timeouts
+# on a loaded machine (docs/testing.md)
 UNIT_JOBS ?= 2
-INTEGRATION_JOBS ?= 3
+INTEGRATION_JOBS ?= 2
 SMOKE_DIR := $(VENV)/smoke
 
 $(STAMP): pyproject.toml
