@@ -1,0 +1,14 @@
+"""Formation missions: waypoints of a formation pose (centroid, scale, yaw) flown in time.
+
+Entry points: :func:`~swarm_common.mission.config.parse_mission` validates a ``[mission]``
+table into a :class:`~swarm_common.mission.config.MissionConfig` (errors:
+:class:`~swarm_common.mission.config.MissionError`);
+:func:`~swarm_common.mission.plan.build_plan` times it into a
+:class:`~swarm_common.mission.plan.MissionPlan` that gives each agent's desired state.
+
+* :mod:`.config` - the ``[mission]`` TOML table: validation, typed view, back to TOML.
+* :mod:`.profile` - the septic rest-to-rest profile sigma(tau) and its peak derivatives.
+* :mod:`.plan` - leg timing under speed/acceleration/jerk limits; pose and agent jets at t.
+"""
+
+__all__ = ["config", "plan", "profile"]
