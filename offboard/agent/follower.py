@@ -16,7 +16,6 @@ import numpy as np
 from offboard.agent.attitude import Setpoint
 from offboard.agent.base import CLIP_TOL, AgentBase
 from offboard.agent.governor import governor_for, log_governor
-from offboard.agent.identity_memo import ContentMemo
 from offboard.agent.peers import peer_ids
 from offboard.agent.takeoff import follower_xi
 from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours
@@ -37,6 +36,7 @@ from offboard.safety.filter import make_filters
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
+from swarm_common.memo import ContentMemo
 from swarm_common.scenario.model import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller

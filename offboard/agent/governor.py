@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from offboard.agent.identity_memo import IdentityMemo
+from swarm_common.memo import IdentityMemo
 from swarm_common.scenario.feasibility import (
     FEEDBACK_RESERVE,
     acceleration_problem,

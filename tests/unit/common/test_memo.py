@@ -1,11 +1,11 @@
-"""offboard.agent.identity_memo: once per (object, parameters) by identity, or per key by
+"""swarm_common.memo: once per (object, parameters) by identity, or per key by
 content; bounded."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-from offboard.agent.identity_memo import ContentMemo, IdentityMemo
+from swarm_common.memo import ContentMemo, IdentityMemo
 
 
 def _recorded() -> tuple[list[int], Callable[[int], int]]:
