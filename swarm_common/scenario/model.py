@@ -23,6 +23,7 @@ import numpy as np
 from swarm_common import faults
 from swarm_common.enums import Role, StartMode
 from swarm_common.faults import FaultError, FaultPlan
+from swarm_common.mission.config import MissionConfig, MissionError, parse_mission
 from swarm_common.scenario.checks import (
     check_feasible,
     check_pads,
@@ -41,6 +42,7 @@ from swarm_common.scenario.files import (
     read_scenario_text,
     swarm_name_problem,
 )
+from swarm_common.scenario.mission_check import mission_problem
 from swarm_common.scenario.schema import (
     AGENT_SCHEMA,
     OPTIONAL_SECTIONS,
@@ -99,6 +101,8 @@ __all__ = [
 
 
 log = logging.getLogger(__name__)
+# top-level tables besides the schema's sections: agents, [faults], [mission]
+EXTRA_SECTIONS = ("agent", "faults", "mission")
 
 
 
@@ -114,12 +118,15 @@ def parse_scenario(
         return ScenarioError(f"{path}: {msg}")
 
     for section in data:
-        if section not in ("agent", "faults") and section not in SCHEMA:
-            allowed = ", ".join(sorted([*SCHEMA, "agent", "faults"]))
+        if section not in EXTRA_SECTIONS and section not in SCHEMA:
+            allowed = ", ".join(sorted([*SCHEMA, *EXTRA_SECTIONS]))
             raise fail(f"unknown section [{section}]; allowed: {allowed}")
+    mission = _parse_mission(data, fail)
     raw: dict[str, dict[str, Any]] = {}
     for section, keys in SCHEMA.items():
         given = data.get(section)
+        if given is None and section == "leader_trajectory" and mission is not None:
+            given = {"frequency_hz": 0.0, "amplitude_m": [0.0, 0.0, 0.0]}  # the mission flies
         if given is None and section in OPTIONAL_SECTIONS:
             given = {f.name: f.default for f in fields(SECTIONS[section])}
         if given is None:
@@ -218,13 +225,30 @@ def parse_scenario(
         )
         for name, cls in SECTIONS.items()
     }
+    lt = typed["leader_trajectory"]
+    if mission is not None and lt.frequency_hz > 0.0 and any(lt.amplitude_m):
+        raise fail("[mission] and [leader_trajectory] both move the leaders: keep one "
+                   "(a mission replaces the sinusoid; remove [leader_trajectory])")
     scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible,
-                    faults=plan, **typed)
+                    faults=plan, mission=mission, **typed)
     problem = graph_problem(scen)
+    if problem is not None:
+        raise fail(problem)
+    problem = mission_problem(scen)
     if problem is not None:
         raise fail(problem)
     check_feasible(scen)
     return scen
+
+
+def _parse_mission(data: dict[str, Any], fail: Any) -> MissionConfig | None:
+    """The ``[mission]`` table (:mod:`swarm_common.mission.config`), None when absent."""
+    if "mission" not in data:
+        return None
+    try:
+        return parse_mission(data["mission"])
+    except MissionError as exc:
+        raise fail(str(exc)) from None
 
 
 def _parse_faults(table: object, ids: set[int], fail: Any) -> FaultPlan:

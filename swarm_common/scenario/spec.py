@@ -14,6 +14,7 @@ import numpy as np
 
 from swarm_common.enums import Role
 from swarm_common.faults import FaultPlan
+from swarm_common.mission.config import MissionConfig, mission_toml
 from swarm_common.scenario.schema import (
     SECTIONS,
     CommunicationConfig,
@@ -70,6 +71,9 @@ class Scenario:
     faults: FaultPlan = field(default_factory=FaultPlan)
     # loaded with the feasibility check waived (--allow-infeasible); children inherit it
     allow_infeasible: bool = False
+    # [mission] (optional, docs/missions.md): formation waypoints the leaders fly instead of
+    # the [leader_trajectory] sinusoid
+    mission: MissionConfig | None = None
 
     def section(self, name: str) -> Any:
         """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
@@ -93,6 +97,8 @@ class Scenario:
         ]
         if self.faults.active:
             data["faults"] = self.faults.as_toml()
+        if self.mission is not None:
+            data["mission"] = mission_toml(self.mission)
         return data
 
     # Convenience accessors used everywhere --------------------------------

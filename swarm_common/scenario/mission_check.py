@@ -1,0 +1,99 @@
+"""A scenario's formation mission: its timed plan, and the load-time check that the vehicles
+can fly it (docs/missions.md).
+
+The plan (:func:`plan_for`) is built from the scenario alone, so every process (the
+in-process runner, each daemon, the report) computes the same one. The shape it flies is
+the desired formation at the start: the leaders' ``position`` and the followers where the
+bearings put them (:func:`~swarm_common.scenario.feasibility.desired_origins`).
+
+Limits (:func:`mission_limits`): every agent's speed, acceleration and jerk as the
+``[mission]`` table sets them; the floor is the dcbf ground clearance plus the collision
+radius; no two agents closer than ``controller.d_safe_m`` at any waypoint. The table's
+acceleration and jerk must leave the feedback its share of the input set: with the attitude
+lag τ the needed command is about a + τ j, which must stay within (1 − FEEDBACK_RESERVE) of
+min(u_max, g tan(tilt_max)).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarm_common.memo import IdentityMemo
+from swarm_common.mission.config import MissionError
+from swarm_common.mission.plan import Limits, MissionPlan, build_plan
+from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, desired_origins
+from swarm_common.scenario.spec import Scenario
+
+_PLANS: IdentityMemo[MissionPlan] = IdentityMemo()
+
+
+def mission_limits(sc: Scenario) -> Limits:
+    """The :class:`~swarm_common.mission.plan.Limits` of ``sc``'s mission (module docstring)."""
+    m = sc.mission
+    assert m is not None
+    ctl, veh = sc.controller, sc.vehicle
+    return Limits(
+        max_speed_mps=m.max_speed_mps, max_accel_mps2=m.max_accel_mps2,
+        max_jerk_mps3=m.max_jerk_mps3,
+        floor_m=ctl.dcbf_ground_clearance_m + veh.collision_radius_m,
+        min_separation_m=ctl.d_safe_m,
+    )
+
+
+def available_accel(sc: Scenario) -> float:
+    """What a mission may use of the input set (m/s²): (1 − FEEDBACK_RESERVE) ×
+    min(u_max, g tan(tilt_max))."""
+    veh = sc.vehicle
+    a = min(sc.controller.u_max_mps2,
+            veh.gravity_mps2 * math.tan(math.radians(veh.tilt_max_deg)))
+    return (1.0 - FEEDBACK_RESERVE) * a
+
+
+def mission_shape(sc: Scenario) -> np.ndarray:
+    """(N, 3) the formation the mission moves: every agent's desired start position (m)."""
+    shape = desired_origins(sc)
+    if shape is None:
+        raise MissionError("mission: the formation does not fix every follower "
+                           "(formation.graph), so it cannot be moved as one")
+    return shape
+
+
+def plan_for(sc: Scenario) -> MissionPlan:
+    """The timed plan of ``sc``'s mission (built once per scenario object in a process)."""
+    if sc.mission is None:
+        raise ValueError(f"{sc.path}: the scenario has no [mission]")
+    mission = sc.mission
+    return _PLANS.get(sc, (), lambda: build_plan(mission, mission_shape(sc), mission_limits(sc)))
+
+
+def mission_problem(sc: Scenario) -> str | None:
+    """One line naming the key when ``sc``'s mission cannot be flown, else None (no mission:
+    None)."""
+    m = sc.mission
+    if m is None:
+        return None
+    need = m.max_accel_mps2 + sc.vehicle.tau_rollpitch_s * m.max_jerk_mps3
+    avail = available_accel(sc)
+    if need > avail:
+        return (f"mission.max_accel_mps2 = {m.max_accel_mps2:g} with max_jerk_mps3 = "
+                f"{m.max_jerk_mps3:g} needs {need:.2f} m/s² (a + τ j, τ = "
+                f"vehicle.tau_rollpitch_s), above the {avail:.2f} m/s² the vehicle leaves "
+                f"after the feedback reserve")
+    if any(w.yaw_deg != 0.0 for w in m.waypoints):
+        shape = mission_shape(sc)
+        a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
+        if float(np.hypot(*(shape[b, :2] - shape[a, :2]))) < 1e-3:
+            return ("mission: a waypoint turns the formation (yaw_deg), but the first two "
+                    "leaders are stacked vertically: their offset cannot carry the yaw")
+    try:
+        plan_for(sc)
+    except MissionError as exc:
+        return str(exc)
+    return None
+
+
+def yaws(sc: Scenario) -> bool:
+    """True when ``sc``'s mission turns the formation (some waypoint's yaw is not 0)."""
+    return sc.mission is not None and any(w.yaw_deg != 0.0 for w in sc.mission.waypoints)
