@@ -22,6 +22,7 @@ from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours
 from offboard.estimation.bearing import Formation, formation_from_scenario
 from offboard.estimation.deso import DESO
 from offboard.estimation.deso_gains import GainReport, gain_report
+from offboard.estimation.formation_frame import FormationFrameObserver, formation_frame_observer
 from offboard.estimation.neighbour_accel import NeighbourAccel
 from offboard.estimation.peer_table import XI, EstimateBatch, full_share_rows
 from offboard.estimation.predictor import NeighbourPredictor
@@ -37,6 +38,7 @@ from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of
 from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
 from swarm_common.memo import ContentMemo
+from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -83,9 +85,11 @@ class FollowerAgent(AgentBase):
         self.governor = governor_for(sc)
         log_governor(self.governor, agent_id)
         omega = self.governor.omega
-        self.ref = DesiredStateObserver(
+        self.ref: DesiredStateObserver | FormationFrameObserver = DesiredStateObserver(
             self.form, self.index, omega, obs.reference_gain, self.dt, xi_at_rest(z1)
         )
+        if mission_yaws(sc):  # the bearings turn with the formation (docs/missions.md)
+            self.ref = formation_frame_observer(sc, self.ref)
         lam, ks = ctl.clf_lambda, ctl.ks
         self.pred = NeighbourPredictor(
             sc.ids, omega, self.dt, (ks * lam + ctl.kp / ctl.kd, lam + ks),

@@ -17,11 +17,13 @@ from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method
 from swarm_common.fastnp import f64
 from swarm_common.jit import kernel
+from swarm_common.scenario.mission_check import plan_for
 from swarm_common.scenario.model import Scenario
 
 
 class LeaderAgent(AgentBase):
-    """Leader: tracks p_L(t) = p_L(0) + A(1 − cos ωt) with its own state (Departure 4)."""
+    """Leader: tracks p_L(t) = p_L(0) + A(1 − cos ωt) with its own state (Departure 4), or
+    its share of the scenario's formation mission (docs/missions.md)."""
 
     is_leader = True
 
@@ -39,6 +41,8 @@ class LeaderAgent(AgentBase):
         self.traj = LeaderTrajectory(
             leader_origin(sc, self.index), np.array(lt.amplitude_m), self.governor.frequency_hz
         )
+        # a [mission] replaces the sinusoid: the plan gives this leader's ξ at mission time
+        self.plan = plan_for(sc) if sc.mission is not None else None
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
         self.v_hat = sc.agents[self.index].velocity.astype(float).copy()
@@ -62,8 +66,15 @@ class LeaderAgent(AgentBase):
                 return climb_xi(self.takeoff, self.index, tk)
             t_start = max(self.start_time, self.takeoff.t_traj)
         if t < self.start_time:
-            return xi_at_rest(xi_p(self.traj.state(0.0)))
-        return self.traj.state(t - t_start)
+            return xi_at_rest(xi_p(self.trajectory_state(0.0)))
+        return self.trajectory_state(t - t_start)
+
+    def trajectory_state(self, tau: float) -> np.ndarray:
+        """ξ (12,) ``tau`` (s) after the trajectory's start: the mission plan's for this
+        leader, else the sinusoid's."""
+        if self.plan is not None:
+            return self.plan.agent_xi(tau, self.index)
+        return self.traj.state(tau)
 
     def current_reference(self, t: float) -> np.ndarray:
         """The landing reference once landing, else :meth:`reference`."""
@@ -75,7 +86,7 @@ class LeaderAgent(AgentBase):
         spec = self.sc.agents[self.index]
         return NeighbourEstimate(
             self.id, 0.0, spec.position.astype(float).copy(), spec.velocity.astype(float).copy(),
-            np.zeros(3), self.reference(0.0) if self.takeoff else self.traj.state(0.0), True,
+            np.zeros(3), self.reference(0.0) if self.takeoff else self.trajectory_state(0.0), True,
         )
 
     def step(

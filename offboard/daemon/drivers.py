@@ -198,7 +198,8 @@ class RealtimeDriver:
         if self.trajectory_started:
             return
         if self.vehicle.armed and self.vehicle.in_offboard:
-            period = 1.0 / float(self.sc.leader_trajectory.frequency_hz)
+            f_hz = float(self.sc.leader_trajectory.frequency_hz)
+            period = 1.0 / f_hz if f_hz > 0.0 else 1.0  # a mission starts on a whole second
             agent.start_time = math.ceil(t / period) * period
             self.trajectory_started = True
             log.info("agent %d: trajectory starts at t = %.2f s", self.id, agent.start_time)
