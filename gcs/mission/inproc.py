@@ -30,7 +30,9 @@ import numpy as np
 from gcs.mission.progress import Progress
 from gcs.mission.run_output import (
     empty_series,
+    formation_yaw,
     run_document,
+    run_mission_metrics,
     safety_spec,
     set_agent_rows,
     set_truth_rows,
@@ -221,7 +223,8 @@ def run_inproc(
                 bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
         if bar is not None:
             bar.close()
-        set_truth_rows(ser, form, ser.p, ser.v, lumped_true, thrust, att)
+        set_truth_rows(ser, form, ser.p, ser.v, lumped_true, thrust, att,
+                       formation_yaw(sc, ser.p, ser.v))
         wall = time.perf_counter() - t_wall
     zeta_est = np.zeros((n, 6))
     fallbacks = 0
@@ -233,7 +236,7 @@ def run_inproc(
         ser, form.follower_idx, dt, veh.mass_kg, veh.gravity_mps2, dyn.collisions,
         dyn.zeta, zeta_est, fallbacks, wall, dur, safety_spec(sc),
         takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
-        land_at_s=land_at,
+        land_at_s=land_at, mission=run_mission_metrics(sc, ser, form.follower_idx),
     )
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,

@@ -21,9 +21,11 @@ from typing import Any
 import numpy as np
 
 from gcs.report.metrics import SafetySpec, Series
+from gcs.report.mission_metrics import leader_yaw, mission_metrics, yawed_desired
 from offboard.estimation.bearing import Formation
 from offboard.records import AgentOutput
 from swarm_common.enums import QPStatus
+from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
 
 log = logging.getLogger(__name__)
@@ -68,15 +70,20 @@ def set_truth_rows(
     lumped: np.ndarray,
     thrust: np.ndarray,
     att: np.ndarray,
+    yaw: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> None:
     """Every row of the simulator's truth, (K, N, ...) each: positions/velocities (m, m/s,
     ENU), the desired ones from the leaders' (paper eq. 5), true lumped disturbance
-    (m/s²), thrust (N) and the tilt from the (K, N, 3) attitudes (rad). One product per
-    quantity for the whole run (the in-process runner and a recorded run alike)."""
+    (m/s²), thrust (N) and the tilt from the (K, N, 3) attitudes (rad); ``yaw``: (ψ, ψ')
+    (K,) each of a turning formation (:func:`~gcs.report.mission_metrics.leader_yaw`). One
+    product per quantity for the whole run (the in-process runner and a recorded run alike)."""
     lid = form.leader_idx
     ser.p[:], ser.v[:] = p, v
-    ser.p_des[:] = form.desired_positions_series(p[:, lid])
-    ser.v_des[:] = form.desired_positions_series(v[:, lid])
+    if yaw is not None:  # a turning formation's bearings turn with it
+        ser.p_des[:], ser.v_des[:] = yawed_desired(form, lid, p, v, *yaw)
+    else:
+        ser.p_des[:] = form.desired_positions_series(p[:, lid])
+        ser.v_des[:] = form.desired_positions_series(v[:, lid])
     ser.lumped_true[:] = lumped
     ser.thrust[:] = thrust
     ser.tilt_deg[:] = tilt_deg(att)
@@ -154,3 +161,15 @@ def print_result(doc: Mapping[str, Any], as_json: bool) -> None:
     else:
         for k, v in doc["metrics"].items():
             print(f"{k:24s} {v}")
+
+
+def formation_yaw(
+    sc: Scenario, p: np.ndarray, v: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(ψ, ψ') of the rows when ``sc``'s mission turns the formation, else None."""
+    return leader_yaw(sc, p, v) if mission_yaws(sc) else None
+
+
+def run_mission_metrics(sc: Scenario, ser: Series, follower_idx: list[int]) -> dict[str, Any]:
+    """The mission keys of a finished run's series (:mod:`gcs.report.mission_metrics`)."""
+    return mission_metrics(sc, ser.t, ser.p, ser.p_des, follower_idx)

@@ -14,8 +14,10 @@ import numpy as np
 from gcs.mission.recorder import Recorder
 from gcs.mission.run_output import (
     empty_series,
+    formation_yaw,
     run_dir_inside,
     run_document,
+    run_mission_metrics,
     safety_spec,
     set_truth_rows,
 )
@@ -37,9 +39,10 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
     form = formation_from_scenario(sc)
     steps = np.flatnonzero(rec.have_truth[: rec.steps])
     ser = empty_series(rec.t[steps].copy(), sc.n, fill=np.nan)
-    set_truth_rows(ser, form, rec.p[steps].astype(float), rec.v[steps].astype(float),
-                   rec.lumped_true[steps].astype(float), rec.thrust[steps].astype(float),
-                   rec.att[steps].astype(float))
+    p, v = rec.p[steps].astype(float), rec.v[steps].astype(float)
+    set_truth_rows(ser, form, p, v, rec.lumped_true[steps].astype(float),
+                   rec.thrust[steps].astype(float), rec.att[steps].astype(float),
+                   formation_yaw(sc, p, v))
     nxt = steps + 1
     ser.min_dist[:] = np.where(rec.have_truth[nxt], rec.min_dist[nxt], np.nan)
     ser.z1[:], ser.z2[:] = rec.z1[steps], rec.z2[steps]  # estimates valid at t_k
@@ -78,7 +81,7 @@ def recorded_metrics(
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
         safety_spec(sc, bool(rec.last_status)),
         takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
-        land_at_s=land_at,
+        land_at_s=land_at, mission=run_mission_metrics(sc, ser, form.follower_idx),
     )
     return metrics, ser
 

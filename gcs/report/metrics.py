@@ -45,7 +45,13 @@ METRIC_KEYS = (
     "qp_fallbacks",
     "wall_s",
     "realtime_factor",
+    # a formation mission's (gcs.report.mission_metrics; None without a [mission])
+    "mission_completed",
+    "mission_time_s",
+    "transit_error_rms_m",
+    "transit_error_max_m",
 )
+MISSION_KEYS = METRIC_KEYS[-4:]
 PHASES = ("takeoff", "formation", "mission", "landing")  # keys of min_distance_by_phase_m
 TRACK_TOL_M = 0.1  # m, tolerance of formation_time_s and tracking_time_above_0p1_s
 
@@ -201,9 +207,12 @@ def compute_metrics(
     est_after_s: float = 5.0,
     takeoff_end_s: float | None = None,
     land_at_s: float | None = None,
+    mission: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The metrics dict (keys :data:`METRIC_KEYS`; definitions in docs/metrics.md).
-    ``takeoff_end_s`` / ``land_at_s`` (s): phase bounds of ``min_distance_by_phase_m``."""
+    ``takeoff_end_s`` / ``land_at_s`` (s): phase bounds of ``min_distance_by_phase_m``;
+    ``mission``: the formation mission's keys (:mod:`gcs.report.mission_metrics`), None
+    each when not given."""
     f = follower_idx
     # formation tracking ends where the land-all begins (the landing reference is not the
     # formation): the window is [deadline, land_at_s), fixed before the run
@@ -242,4 +251,5 @@ def compute_metrics(
         "qp_fallbacks": int(fallbacks),
         "wall_s": float(wall_s),
         "realtime_factor": float(duration_s / wall_s) if wall_s > 0 else None,
+        **(mission if mission is not None else dict.fromkeys(MISSION_KEYS)),
     }
