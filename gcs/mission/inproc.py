@@ -43,7 +43,7 @@ from offboard.agent.factory import FollowerAgent, NeighbourEstimate, make_agent
 from offboard.agent.landing import landing_plan
 from offboard.agent.takeoff import is_ground_start, takeoff_plan
 from offboard.estimation.bearing import formation_from_scenario
-from offboard.estimation.peer_table import ROW, EstimateBatch
+from offboard.estimation.peer_table import ROW, XI_COL, EstimateBatch
 from swarm_common.blas import single_thread_blas
 from swarm_common.frames import euler_enu_from_quats_ned
 from swarm_common.scenario.model import Scenario
@@ -207,6 +207,7 @@ def run_inproc(
             ser.p[k], ser.v[k], lumped_true[k] = dyn.p, dyn.v, dyn.lumped_accel()
             thrust[k], att[k] = dyn.thrust, dyn.att
             ser.z1[k], ser.z2[k] = published.rows[:, 0:3], published.rows[:, 3:6]
+            ser.xi_p[k] = published.rows[:, XI_COL:XI_COL + 3]
             outs = [ag.step(k, t, tp, tv, published, comm) for ag in agents]
             # the commands, estimates and records of all agents at once (each agent's
             # step reads the estimates of the step before and never the dynamics)
@@ -236,7 +237,7 @@ def run_inproc(
         ser, form.follower_idx, dt, veh.mass_kg, veh.gravity_mps2, dyn.collisions,
         dyn.zeta, zeta_est, fallbacks, wall, dur, safety_spec(sc),
         takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
-        land_at_s=land_at, mission=run_mission_metrics(sc, ser, form.follower_idx),
+        land_at_s=land_at, extra=run_mission_metrics(sc, ser, form),
     )
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,

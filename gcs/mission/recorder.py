@@ -76,6 +76,7 @@ class Recorder:
         # estimates published at step k in row k + 1 (row 0: the initial ones, step −1),
         # i.e. row k holds the estimates valid at t_k
         self.z1, self.z2 = arr(n, 3), arr(n, 3)
+        self.xi_p = arr(n, 3)  # the desired position each agent estimates (ξ̂_p)
         self.u, self.lumped_est = arr(n, 3), arr(n, 3)  # statuses of step k
         self.h_min, self.solve_us = arr(n), arr(n)
         self.degraded = np.zeros((rows, n), bool)
@@ -165,6 +166,7 @@ class Recorder:
         if not all_finite((e.z1, e.z2)):
             return False
         self.z1[k + 1, i], self.z2[k + 1, i] = e.z1, e.z2
+        self.xi_p[k + 1, i] = e.xi[:3]
         if k == self.steps - 1 and np.all(np.isfinite(e.zeta)):
             self.zeta_last[i] = e.zeta
         return True

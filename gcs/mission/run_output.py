@@ -21,7 +21,12 @@ from typing import Any
 import numpy as np
 
 from gcs.report.metrics import SafetySpec, Series
-from gcs.report.mission_metrics import leader_yaw, mission_metrics, yawed_desired
+from gcs.report.mission_metrics import (
+    leader_yaw,
+    mission_metrics,
+    observer_metrics,
+    yawed_desired,
+)
 from offboard.estimation.bearing import Formation
 from offboard.records import AgentOutput
 from swarm_common.enums import QPStatus
@@ -56,6 +61,7 @@ def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
 
     return Series(
         t=t, p=z(n, 3), v=z(n, 3), p_des=z(n, 3), v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3),
+        xi_p=z(n, 3),
         lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n), tilt_deg=z(n),
         min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((kk, n), bool),
         input_clipped=np.zeros((kk, n), bool),
@@ -170,6 +176,9 @@ def formation_yaw(
     return leader_yaw(sc, p, v) if mission_yaws(sc) else None
 
 
-def run_mission_metrics(sc: Scenario, ser: Series, follower_idx: list[int]) -> dict[str, Any]:
-    """The mission keys of a finished run's series (:mod:`gcs.report.mission_metrics`)."""
-    return mission_metrics(sc, ser.t, ser.p, ser.p_des, follower_idx)
+def run_mission_metrics(sc: Scenario, ser: Series, form: Formation) -> dict[str, Any]:
+    """The keys of :data:`~gcs.report.metrics.EXTRA_KEYS` of a finished run's series: the
+    desired-state observer's error and the mission's (:mod:`gcs.report.mission_metrics`)."""
+    f = form.follower_idx
+    return (observer_metrics(sc, form, ser.t, ser.xi_p)
+            | mission_metrics(sc, ser.t, ser.p, ser.p_des, f))

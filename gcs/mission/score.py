@@ -46,12 +46,13 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
     nxt = steps + 1
     ser.min_dist[:] = np.where(rec.have_truth[nxt], rec.min_dist[nxt], np.nan)
     ser.z1[:], ser.z2[:] = rec.z1[steps], rec.z2[steps]  # estimates valid at t_k
+    ser.xi_p[:] = rec.xi_p[steps]
     ser.u[:], ser.lumped_est[:] = rec.u[steps], rec.lumped_est[steps]
     ser.h_min[:], ser.solve_us[:] = rec.h_min[steps], rec.solve_us[steps]
     ser.fallback[:], ser.input_clipped[:] = rec.degraded[steps], rec.clipped[steps]
     # Real time: an agent may skip a stamp (late cycle), leaving a row without its
     # message; hold the last value (lockstep runs have none missing).
-    for arr in (ser.z1, ser.z2, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
+    for arr in (ser.z1, ser.z2, ser.xi_p, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
         for r in range(1, len(steps)):
             gap = np.isnan(arr[r])
             if np.any(gap):
@@ -81,7 +82,7 @@ def recorded_metrics(
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
         safety_spec(sc, bool(rec.last_status)),
         takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
-        land_at_s=land_at, mission=run_mission_metrics(sc, ser, form.follower_idx),
+        land_at_s=land_at, extra=run_mission_metrics(sc, ser, form),
     )
     return metrics, ser
 

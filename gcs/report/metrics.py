@@ -39,6 +39,8 @@ METRIC_KEYS = (
     "est_pos_max_m",
     "est_vel_max_mps",
     "est_dist_max_mps2",
+    "ref_est_rms_m",
+    "ref_est_max_m",
     "zeta_rel_err",
     "max_tilt_deg",
     "max_thrust_n",
@@ -52,6 +54,8 @@ METRIC_KEYS = (
     "transit_error_max_m",
 )
 MISSION_KEYS = METRIC_KEYS[-4:]
+# computed beside compute_metrics from the scenario (gcs.report.mission_metrics), None here
+EXTRA_KEYS = ("ref_est_rms_m", "ref_est_max_m", *MISSION_KEYS)
 PHASES = ("takeoff", "formation", "mission", "landing")  # keys of min_distance_by_phase_m
 TRACK_TOL_M = 0.1  # m, tolerance of formation_time_s and tracking_time_above_0p1_s
 
@@ -67,6 +71,7 @@ class Series:
     v_des: np.ndarray
     z1: np.ndarray  # (K,N,3) estimates valid at t_k (published at k−1); leaders: NaN-free copy
     z2: np.ndarray
+    xi_p: np.ndarray  # (K,N,3) desired positions estimated, valid at t_k: followers' ξ̂_p
     lumped_est: np.ndarray  # (K,N,3) z3 + Φζ̂ used at t_k
     lumped_true: np.ndarray  # (K,N,3) Φζ + d/m at t_k
     u: np.ndarray  # (K,N,3) virtual control commanded
@@ -207,11 +212,12 @@ def compute_metrics(
     est_after_s: float = 5.0,
     takeoff_end_s: float | None = None,
     land_at_s: float | None = None,
-    mission: dict[str, Any] | None = None,
+    extra: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The metrics dict (keys :data:`METRIC_KEYS`; definitions in docs/metrics.md).
     ``takeoff_end_s`` / ``land_at_s`` (s): phase bounds of ``min_distance_by_phase_m``;
-    ``mission``: the formation mission's keys (:mod:`gcs.report.mission_metrics`), None
+    ``extra``: the keys of :data:`EXTRA_KEYS` computed from the scenario (the desired-state
+    observer's error, the formation mission's; :mod:`gcs.report.mission_metrics`), None
     each when not given."""
     f = follower_idx
     # formation tracking ends where the land-all begins (the landing reference is not the
@@ -245,11 +251,13 @@ def compute_metrics(
         "est_pos_max_m": float(ep.max()) if ep.size else None,
         "est_vel_max_mps": float(ev.max()) if ev.size else None,
         "est_dist_max_mps2": float(ed.max()) if ed.size else None,
+        "ref_est_rms_m": None,
+        "ref_est_max_m": None,
         "zeta_rel_err": zrel,
         "max_tilt_deg": float(s.tilt_deg.max()),
         "max_thrust_n": float(s.thrust.max()),
         "qp_fallbacks": int(fallbacks),
         "wall_s": float(wall_s),
         "realtime_factor": float(duration_s / wall_s) if wall_s > 0 else None,
-        **(mission if mission is not None else dict.fromkeys(MISSION_KEYS)),
-    }
+        **dict.fromkeys(MISSION_KEYS),
+    } | (extra or {})  # a union keeps the keys' order

@@ -27,7 +27,7 @@ import numpy as np
 
 from gcs.report.metrics import MISSION_KEYS
 from offboard.estimation.bearing import Formation
-from swarm_common.scenario.mission_check import mission_shape, plan_for
+from swarm_common.scenario.mission_check import mission_shape, plan_for, yaws
 from swarm_common.scenario.spec import Scenario
 
 
@@ -98,3 +98,26 @@ def mission_metrics(
         "transit_error_rms_m": float(np.sqrt(np.mean(err**2))) if err.size else None,
         "transit_error_max_m": float(err.max()) if err.size else None,
     }
+
+
+def observer_metrics(
+    sc: Scenario, form: Formation, t: np.ndarray, xi_p: np.ndarray, after_s: float = 5.0,
+) -> dict[str, Any]:
+    """``ref_est_rms_m``, ``ref_est_max_m``: the followers' desired-state observer error
+    ‖ξ̂_p,i − p*_i‖ (m) over every step t ≥ ``after_s`` (the estimate metrics' window), p*
+    the formation that the leaders' broadcast reference positions define (turned by their
+    yaw for a turning mission): what the observer estimates. ``xi_p`` (K,N,3): every
+    agent's ξ̂_p (the leaders' own reference)."""
+    late = t >= after_s - 1e-9
+    x = xi_p[late]
+    f = form.follower_idx
+    if not len(x) or not f or not np.all(np.isfinite(x[:, form.leader_idx])):
+        return {"ref_est_rms_m": None, "ref_est_max_m": None}
+    if yaws(sc):
+        psi, _ = leader_yaw(sc, x, np.zeros_like(x))
+        want, _ = yawed_desired(form, form.leader_idx, x, np.zeros_like(x), psi,
+                                np.zeros_like(psi))
+    else:
+        want = form.desired_positions_series(x[:, form.leader_idx])
+    err = np.linalg.norm(x[:, f] - want[:, f], axis=2)
+    return {"ref_est_rms_m": float(np.sqrt(np.mean(err**2))), "ref_est_max_m": float(err.max())}

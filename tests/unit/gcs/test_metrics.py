@@ -138,6 +138,11 @@ def test_compute_metrics_schema_and_clipped_steps() -> None:
     assert m["input_clipped_steps"] == 5  # rows 0, 10, 20, 30, 40
     assert m["h_min"] < 0 < m["barrier_violation_steps"]
     assert m["tracking_max_m"] == 0.0 and m["tracking_time_above_0p1_s"] == 0.0
+    extra = compute_metrics(s, [1], DT, 1.8, 9.81, 0, zeta, zeta, 0, 1.0, 4.0, spec,
+                            extra={"mission_completed": True, "ref_est_max_m": 0.25})
+    assert tuple(extra) == METRIC_KEYS
+    assert extra["mission_completed"] is True and extra["ref_est_max_m"] == 0.25
+    assert m["mission_completed"] is None and m["ref_est_max_m"] is None
     unknown = compute_metrics(s, [1], DT, 1.8, 9.81, 0, zeta, zeta, 0, 1.0, 4.0,
                               SafetySpec(TAU, D, 2.0, clipped_known=False))
     assert unknown["input_clipped_steps"] is None
