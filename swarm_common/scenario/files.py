@@ -126,20 +126,32 @@ def _toml_scalar(v: Any) -> str:
     raise ValueError(f"cannot write {type(v).__name__} to TOML")
 
 
+def _is_table_array(v: Any) -> bool:
+    return isinstance(v, list | tuple) and bool(v) and all(isinstance(x, Mapping) for x in v)
+
+
 def _toml_table(prefix: str, table: Mapping[str, Any], out: list[str]) -> None:
-    plain = {k: v for k, v in table.items() if not isinstance(v, Mapping)}
+    plain = {k: v for k, v in table.items()
+             if not isinstance(v, Mapping) and not _is_table_array(v)}
     subs = {k: v for k, v in table.items() if isinstance(v, Mapping)}
-    if plain or not subs:
+    arrays = {k: v for k, v in table.items() if _is_table_array(v)}
+    if plain or not (subs or arrays):
         out.append(f"[{prefix}]")
         out.extend(f"{k} = {_toml_scalar(v)}" for k, v in plain.items())
         out.append("")
     for k, v in subs.items():
         _toml_table(f"{prefix}.{k}", v, out)
+    for k, rows in arrays.items():  # an array of tables: [[prefix.k]] per row
+        for row in rows:
+            out.append(f"[[{prefix}.{k}]]")
+            out.extend(f"{kk} = {_toml_scalar(vv)}" for kk, vv in row.items())
+            out.append("")
 
 
 def dump_toml(doc: Mapping[str, Any]) -> str:
-    """A scenario document (tables of scalars and lists, nested tables, and the ``agent``
-    array of tables) as TOML text that :mod:`tomllib` reads back to ``doc``."""
+    """A scenario document (tables of scalars and lists, nested tables, arrays of tables of
+    scalars such as ``mission.waypoint``, and the ``agent`` array of tables) as TOML text
+    that :mod:`tomllib` reads back to ``doc``."""
     out: list[str] = []
     for name, value in doc.items():
         if name == "agent":

@@ -12,7 +12,7 @@ import pytest
 from swarm_common.scenario.feasibility import desired_origins
 from swarm_common.scenario.files import ScenarioError
 from swarm_common.scenario.mission_check import plan_for
-from swarm_common.scenario.model import load_scenario, parse_scenario
+from swarm_common.scenario.model import dump_toml, load_scenario, parse_scenario
 
 ROOT = Path(__file__).resolve().parents[3]
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
@@ -86,3 +86,11 @@ def test_a_yaw_needs_leaders_apart_horizontally():
             a["vertex"], a["position"] = [1, 1, 1], [4.0, 4.0, 6.0]
     with pytest.raises(ScenarioError, match="stacked vertically"):
         parse_scenario(data)
+
+
+def test_a_mission_survives_the_toml_writer():
+    """Distributed runs hand their children a written scenario (dump_toml): the mission's
+    array of waypoint tables must come back as it was."""
+    sc = parse_scenario(cube8_with(GOOD))
+    back = parse_scenario(tomllib.loads(dump_toml(sc.to_toml_dict())))
+    assert back.mission == sc.mission
