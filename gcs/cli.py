@@ -205,6 +205,7 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     from gcs.report.comparison import compare_table, safety_table, write_report
     from gcs.report.sweep import seeds_table
     from offboard.estimation.bearing import formation_from_scenario
+    from swarm_common.scenario.mission_check import plan_for
 
     out = Path(args.out or "runs/compare")
     outcome = (_compare_inproc if args.inproc else _compare_distributed)(sc, args, out)
@@ -219,7 +220,8 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
                         mode="in-process" if args.inproc else
                         "distributed (vehicle-sim + one offboard process per agent, lockstep)",
                         tau_safe_s=sc.controller.tau_safe_s,
-                        deadline_s=sc.run.formation_deadline_s)
+                        deadline_s=sc.run.formation_deadline_s,
+                        mission=plan_for(sc) if sc.mission is not None else None)
     print(compare_table(metrics, d_safe))
     print(safety_table(metrics))
     if seeds:

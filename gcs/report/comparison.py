@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from gcs.report.shared import FORMED_TOL_M, LABELS, PAPER_TABLE3, md_legend
+from swarm_common.mission.plan import MissionPlan
 
 DEPARTURES = "docs/paper-departures.md"
 
@@ -278,6 +279,29 @@ def paper_differences(
     )
 
 
+def mission_table(metrics: dict[str, dict], plan: MissionPlan) -> str:
+    """Per method: completed, time of the last arrival, transit error (rms, max) and the
+    desired-state observer's largest error (docs/missions.md)."""
+    t0, t1 = plan.transit_window
+    rows = [
+        f"Planned: {len(plan.legs)} waypoints, last arrival at {plan.arrival_s[-1]:.1f} s; "
+        f"transit window {t0:.1f}–{t1:.1f} s.",
+        "",
+        "| method | completed | last waypoint at (s) | transit error rms (m) | max (m) "
+        "| observer error max (m) |",
+        "|---|---|---|---|---|---|",
+    ]
+
+    def num(x: Any) -> str:
+        return "–" if x is None else f"{x:.3f}"
+
+    for m, mt in metrics.items():
+        rows.append(f"| {LABELS.get(m, m)} | {'yes' if mt.get('mission_completed') else 'NO'} "
+                    f"| {num(mt.get('mission_time_s'))} | {num(mt.get('transit_error_rms_m'))} "
+                    f"| {num(mt.get('transit_error_max_m'))} | {num(mt.get('ref_est_max_m'))} |")
+    return "\n".join(rows)
+
+
 def write_report(
     out_dir: str | Path,
     scenario_name: str,
@@ -292,13 +316,16 @@ def write_report(
     *,
     tau_safe_s: float,
     deadline_s: float,
+    mission: MissionPlan | None = None,
 ) -> Path:
     """Write report.md and the PNG plots into ``out_dir``; returns the report path
-    (``tau_safe_s``, ``deadline_s``: the scenario's barrier τ and tracking-window start, s)."""
+    (``tau_safe_s``, ``deadline_s``: the scenario's barrier τ and tracking-window start, s;
+    ``mission``: the scenario's mission plan, for its section and path plot)."""
     from gcs.report.plots import (
         plot_energy,
         plot_errors,
         plot_min_distance,
+        plot_mission_path,
         plot_snapshots,
         snapshot_times,
     )
@@ -326,6 +353,16 @@ def write_report(
         safety_legend(d_safe, tau_safe_s, deadline_s),
         paper_differences(metrics, series, d_safe, follower_idx),
     ]
+    if mission is not None:
+        plot_mission_path(series, mission, d / "mission_path.png")
+        lines += [
+            "## Formation mission",
+            "",
+            mission_table(metrics, mission),
+            "",
+            "![mission path](mission_path.png)",
+            "",
+        ]
     if seeds:
         lines += [
             "## Distribution over seeds",

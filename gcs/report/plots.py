@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from gcs.report.shared import LABELS, PAPER_TABLE3, closest_approach
+from swarm_common.mission.plan import MissionPlan
 
 ZOOM_S = 0.6  # half-width of the closest-approach zoom (s)
 TRAIL_S = 1.0  # length of the path drawn behind each vehicle in a snapshot (s)
@@ -163,6 +164,35 @@ def plot_energy(metrics: dict[str, dict], path: Path) -> None:
         ax.set_xlabel("method")
         ax.title.set_fontsize(9)
         ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_mission_path(series: dict[str, dict], plan: MissionPlan, path: Path) -> None:
+    """The formation mission from above (ENU x east, y north, m): the planned centroid path,
+    each method's flown centroid (the mean of every agent's true position) and the
+    waypoints, numbered from 0 in file order."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.4, 5.6))
+    t = np.linspace(0.0, plan.end_s, max(200, int(plan.end_s * 20)))
+    planned = np.array([plan.centroid_at(x) for x in t])
+    ax.plot(planned[:, 0], planned[:, 1], "k--", lw=1.2, label="planned centroid")
+    for m, s in series.items():
+        c = s["p"].mean(axis=1)
+        ax.plot(c[:, 0], c[:, 1], lw=1.0, label=f"flown centroid ({m})")
+        last = s["p"][-1]
+        ax.scatter(last[:, 0], last[:, 1], s=8, alpha=0.6)
+    for k, leg in enumerate(plan.legs):
+        x, y = leg.end.centroid[0], leg.end.centroid[1]
+        ax.plot(x, y, "o", mfc="none", mec="r", ms=9)
+        ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(6, 6), fontsize=8)
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title("Formation mission from above (red circles: waypoints; dots: agents at the end)",
+                 fontsize=8)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

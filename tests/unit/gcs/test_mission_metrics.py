@@ -76,3 +76,20 @@ def test_transit_error_is_over_the_window_only_and_a_short_run_is_not_complete()
     short = t < plan.arrival_s[-1] - 5.0
     cut = mission_metrics(sc, t[short], p[short], p[short], [2, 3])
     assert cut["mission_completed"] is False and cut["mission_time_s"] is None
+
+
+def test_the_mission_table_and_path_plot(tmp_path):
+    from gcs.report.comparison import mission_table
+    from gcs.report.plots import plot_mission_path
+
+    sc = course()
+    plan = plan_for(sc)
+    t = np.arange(0.0, plan.end_s, 0.1)
+    p, _ = planned(sc, t)
+    plot_mission_path({"dcbf": {"t": t, "p": p}}, plan, tmp_path / "path.png")
+    assert (tmp_path / "path.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    m = mission_metrics(sc, t, p, p, [1, 2, 3])
+    table = mission_table({"dcbf": {**m, "ref_est_max_m": None}}, plan)
+    row = table.splitlines()[-1]
+    assert row.startswith("| Sampled-data CBF (ours) | yes |") and row.endswith("| – |")
+    assert f"{m['mission_time_s']:.3f}" in row
