@@ -175,6 +175,45 @@ def summary_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
     return out
 
 
+MISSION_HEAD = (
+    "| Scenario | Method | Runs | Completed | P(not completed) 95 % UB | "
+    "Transit rms p50 / max (m) | Transit max, worst run (m) | Observer error, worst run (m) |\n"
+    "|---|---|---|---|---|---|---|---|\n"
+)
+
+
+def mission_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str | None:
+    """The formation missions' table of ``summary.md`` (docs/missions.md): per scenario ×
+    method with a mission, completed runs, the transit error and the observer's error; None
+    when no scenario of the sweep has a mission."""
+    out = MISSION_HEAD
+    any_mission = False
+    for scen in sorted({r["scenario"] for r in rows}):
+        for m in methods:
+            ok = [r for r in rows if r["scenario"] == scen and r["method"] == m
+                  and r["status"] == "ok" and r.get("mission_completed") is not None]
+            if not ok:
+                continue
+            any_mission = True
+            n = len(ok)
+            done = sum(1 for r in ok if r["mission_completed"] is True)
+            rms = [float(r["transit_error_rms_m"]) for r in ok
+                   if r.get("transit_error_rms_m") is not None]
+            tmax = [float(r["transit_error_max_m"]) for r in ok
+                    if r.get("transit_error_max_m") is not None]
+            ref = [float(r["ref_est_max_m"]) for r in ok if r.get("ref_est_max_m") is not None]
+            out += (
+                f"| {scen} | {m} | {n} | {done}/{n} | {clopper_pearson_upper(n - done, n):.3f} "
+                f"| {_stat(rms, 50)} / {_stat(rms, 100)} | {_stat(tmax, 100)} "
+                f"| {_stat(ref, 100)} |\n"
+            )
+    return out if any_mission else None
+
+
+def _stat(values: list[float], q: float) -> str:
+    return f"{np.percentile(values, q):.3f}" if values else "–"
+
+
 def summary_markdown(
     rows: Sequence[Mapping[str, Any]], specs: Mapping[str, Scenario], methods: list[str],
     wall_s: float,
@@ -204,6 +243,19 @@ def summary_markdown(
         "**P(collision)** the same for runs with a contact.",
         "",
     ]
+    missions = mission_table(rows, methods)
+    if missions is not None:
+        lines += [
+            "## Formation missions",
+            "",
+            missions,
+            "* **Completed**: runs whose formation centroid reached every waypoint in order "
+            "(docs/missions.md); **P(not completed) 95 % UB** the Clopper–Pearson bound on the "
+            "probability that a run does not. **Transit**: each run's formation error over the "
+            "fixed transit window, p50 and max of the runs' rms, and the largest single error. "
+            "**Observer error**: the largest desired-state observer error of any run.",
+            "",
+        ]
     crashed = [r for r in rows if r["status"] != "ok"]
     if crashed:
         lines += ["## Crashed runs", ""]

@@ -93,3 +93,22 @@ def test_the_mission_table_and_path_plot(tmp_path):
     row = table.splitlines()[-1]
     assert row.startswith("| Sampled-data CBF (ours) | yes |") and row.endswith("| – |")
     assert f"{m['mission_time_s']:.3f}" in row
+
+
+def test_the_sweep_summary_counts_missions_and_skips_sweeps_without():
+    from gcs.report.sweep import mission_table as sweep_missions
+
+    def row(seed, done, rms, scen="course", ref=0.01):
+        return {"scenario": scen, "method": "dcbf", "seed": seed, "status": "ok",
+                "mission_completed": done, "transit_error_rms_m": rms,
+                "transit_error_max_m": 2 * rms, "ref_est_max_m": ref}
+
+    rows = [row(1, True, 0.01), row(2, True, 0.03), row(3, False, 0.02, ref=0.2),
+            {"scenario": "course", "method": "dcbf", "seed": 4, "status": "crashed"}]
+    table = sweep_missions(rows, ["dcbf"])
+    line = table.splitlines()[-1]
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[:4] == ["course", "dcbf", "3", "2/3"]
+    assert cells[5] == "0.020 / 0.030" and cells[6] == "0.060" and cells[7] == "0.200"
+    plain = [{**r, "mission_completed": None} for r in rows[:3]]
+    assert sweep_missions(plain, ["dcbf"]) is None
