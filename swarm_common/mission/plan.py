@@ -265,6 +265,24 @@ class MissionPlan:
         """(12,): agent ``i``'s (0-based row of the shape) [p, p', p'', p'''] at ``t`` (s)."""
         return self._xi(t, self.shape_offsets[i : i + 1])[0]
 
+    def at_rest_from(self, t: float) -> float:
+        """The first time >= ``t`` (s) at which the formation is at rest: ``t`` itself
+        while it holds (before a departure, at a waypoint, after the end), else the arrival
+        of the leg it is flying."""
+        _, leg, _ = self._locate(t)
+        return t if leg is None else max(t, leg.arrival_s)
+
+    def rest_pose(self, t: float) -> Pose:
+        """The pose (s) at a time ``t`` when the formation is at rest (:meth:`at_rest_from`)."""
+        pose, leg, _ = self._locate(t)
+        if leg is not None:
+            raise ValueError(f"t = {t:g} s: the formation is moving")
+        return pose
+
+    def waypoint_at(self, t: float) -> int:
+        """How many waypoints the formation has reached by ``t`` (s)."""
+        return sum(1 for a in self.arrival_s if a <= t)
+
     def yaw_jet(self, t: float) -> np.ndarray:
         """(4,): yaw (rad) and its first three time derivatives at ``t`` (s)."""
         return self.pose_jet(t)[2]
@@ -307,24 +325,29 @@ def _check_waypoint(k: int, pose: Pose, q: np.ndarray, limits: Limits) -> None:
         )
 
 
-def build_plan(cfg: MissionConfig, shape: np.ndarray, limits: Limits) -> MissionPlan:
+def build_plan(
+    cfg: MissionConfig, shape: np.ndarray, limits: Limits, start: Pose | None = None,
+    start_s: float | None = None,
+) -> MissionPlan:
     """Time ``cfg`` for the formation ``shape`` ((N, 3) m at scale 1, yaw 0) under ``limits``.
 
-    Leg 0 leaves the initial pose (centroid = mean(shape), scale 1, yaw 0) at ``cfg.start_s``
-    for waypoint 0; leg k leaves waypoint k-1 at its departure. Each leg takes
-    :func:`leg_duration` with the waypoint's cruise speed (or the mission's). Raises
-    :class:`MissionError` naming the waypoint where an agent is below ``limits.floor_m`` or
-    two agents are closer than ``limits.min_separation_m`` (see :func:`_check_waypoint`)."""
+    Leg 0 leaves ``start`` (default: the initial pose, centroid = mean(shape), scale 1, yaw
+    0) at ``start_s`` (default ``cfg.start_s``) for waypoint 0; leg k leaves waypoint k-1 at
+    its departure. Each leg takes :func:`leg_duration` with the waypoint's cruise speed (or
+    the mission's). Raises :class:`MissionError` naming the waypoint where an agent is below
+    ``limits.floor_m`` or two agents are closer than ``limits.min_separation_m`` (see
+    :func:`_check_waypoint`)."""
     pts = np.asarray(shape, dtype=float)
     if pts.ndim != 2 or pts.shape[0] < 1 or pts.shape[1] != 3 or not np.all(np.isfinite(pts)):
         raise MissionError(f"shape of shape {pts.shape}: must be a finite (N, 3) array, N >= 1")
     q = pts - pts.mean(axis=0)
-    start = Pose(pts.mean(axis=0), 1.0, 0.0)
+    if start is None:
+        start = Pose(pts.mean(axis=0), 1.0, 0.0)
     poses = [_waypoint_pose(cfg, k) for k in range(len(cfg.waypoints))]
     for k, pose in enumerate(poses):
         _check_waypoint(k, pose, q, limits)
     legs: list[Leg] = []
-    t0, prev = float(cfg.start_s), start
+    t0, prev = float(cfg.start_s if start_s is None else start_s), start
     for k, (w, pose) in enumerate(zip(cfg.waypoints, poses, strict=True)):
         cruise = w.speed_mps if w.speed_mps is not None else cfg.speed_mps
         leg = Leg(k, t0, leg_duration(prev, pose, q, limits, cruise), w.hold_s, prev, pose)
