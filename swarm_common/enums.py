@@ -144,3 +144,5 @@ class CommandKind(StrEnum):
     OUTAGE = "outage"  # inject a communication outage of duration_s
     LAND = "land"  # coordinated land-all at at_s
     TAKEOFF = "takeoff"  # coordinated take-off of a ground start at at_s
+    MISSION = "mission"  # the leaders fly these formation waypoints from at_s (docs/missions.md)
+    HOLD = "hold"  # the formation stops at its next rest from at_s and stays there

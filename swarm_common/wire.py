@@ -13,6 +13,8 @@ key                                    payload                                  
 ``<root>/<swarm>/cmd/outage``          :class:`Command` kind="outage"              gcs
 ``<root>/<swarm>/cmd/land``            :class:`Command` kind="land"                gcs
 ``<root>/<swarm>/cmd/takeoff``         :class:`Command` kind="takeoff"             gcs
+``<root>/<swarm>/cmd/mission``         :class:`Command` kind="mission"             gcs
+``<root>/<swarm>/cmd/hold``            :class:`Command` kind="hold"                gcs
 =====================================  ==========================================  ==========
 
 Payloads are msgpack maps with a version field ``"v": 1``; every float vector is
@@ -55,6 +57,17 @@ def key_status(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> str
 
 def key_odometry(swarm: str, agent_id: int | str, root: str = DEFAULT_ROOT) -> str:
     return f"{root}/{swarm}/agent/{agent_id}/odometry"
+
+
+MAX_MISSION_TEXT = 1 << 18  # bytes of a command's mission JSON (1000 waypoints fit)
+
+
+def _mission_text(x: Any) -> str:
+    """A command's mission text, refused (WireError) unless a string of at most
+    MAX_MISSION_TEXT bytes (its content is validated where it is used)."""
+    if not isinstance(x, str) or len(x.encode()) > MAX_MISSION_TEXT:
+        raise WireError(f"command mission: not a string of at most {MAX_MISSION_TEXT} bytes")
+    return x
 
 
 def key_cmd(swarm: str, kind: str, root: str = DEFAULT_ROOT) -> str:
@@ -186,14 +199,17 @@ class Command:
     """A ground-station command to the swarm: ``kind`` = "method", "outage", "land"
     (coordinated land-all, docs/lifecycle.md: every agent starts its landing reference at
     mission time ``at_s``) or "takeoff" (coordinated take-off of a ground start held on its
-    pads: the climbs start at mission time ``at_s``); a negative ``at_s`` means at the step
-    the command arrives."""
+    pads: the climbs start at mission time ``at_s``), "mission" (the leaders fly the
+    formation waypoints of ``mission``, a ``[mission]`` table as JSON text, from the first
+    rest at or after ``at_s``; docs/missions.md) or "hold" (the formation stops at its next
+    rest after ``at_s``); a negative ``at_s`` means at the step the command arrives."""
 
     kind: str
     agent: int = 0  # 0 = all
     method: str = ""
     duration_s: float = 0.0
     at_s: float = -1.0
+    mission: str = ""  # kind "mission": the [mission] table as JSON (MAX_MISSION_TEXT bytes)
 
 
 Payload = Truth | Estimate | Status | Command | Odometry
@@ -276,6 +292,8 @@ def encode(obj: Payload) -> bytes:
             "dur": float(obj.duration_s),
             "at": float(obj.at_s),
         }
+        if obj.mission:
+            d["mis"] = obj.mission
     else:
         raise TypeError(f"cannot encode {type(obj).__name__}")
     return msgpack.packb(d, use_bin_type=True)
@@ -359,6 +377,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 method=str(d["method"]),
                 duration_s=float(d["dur"]),
                 at_s=float(d.get("at", -1.0)),
+                mission=_mission_text(d.get("mis", "")),
             )
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, WireError):

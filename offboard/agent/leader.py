@@ -3,6 +3,7 @@ disturbance (Departure 4). It publishes its state predicted for t_{k+1} and ξ_L
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -17,7 +18,14 @@ from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method
 from swarm_common.fastnp import f64
 from swarm_common.jit import kernel
-from swarm_common.scenario.mission_check import plan_for
+from swarm_common.mission.config import MissionConfig, MissionError
+from swarm_common.mission.timeline import MissionTimeline
+from swarm_common.scenario.mission_check import (
+    mission_limits,
+    mission_shape,
+    plan_for,
+    turn_problem,
+)
 from swarm_common.scenario.model import Scenario
 
 
@@ -41,8 +49,10 @@ class LeaderAgent(AgentBase):
         self.traj = LeaderTrajectory(
             leader_origin(sc, self.index), np.array(lt.amplitude_m), self.governor.frequency_hz
         )
-        # a [mission] replaces the sinusoid: the plan gives this leader's ξ at mission time
-        self.plan = plan_for(sc) if sc.mission is not None else None
+        # a [mission] replaces the sinusoid: its timeline (the plan, then what ground-station
+        # commands change) gives this leader's ξ at mission time
+        self.timeline = (MissionTimeline(plan_for(sc), mission_shape(sc), mission_limits(sc))
+                         if sc.mission is not None else None)
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
         self.v_hat = sc.agents[self.index].velocity.astype(float).copy()
@@ -72,9 +82,35 @@ class LeaderAgent(AgentBase):
     def trajectory_state(self, tau: float) -> np.ndarray:
         """ξ (12,) ``tau`` (s) after the trajectory's start: the mission plan's for this
         leader, else the sinusoid's."""
-        if self.plan is not None:
-            return self.plan.agent_xi(tau, self.index)
+        if self.timeline is not None:
+            return self.timeline.agent_xi(tau, self.index)
         return self.traj.state(tau)
+
+    def fly_mission(self, cfg: MissionConfig, at_s: float) -> float:
+        """Fly ``cfg``'s formation waypoints from the first rest at or after mission time
+        ``at_s`` (:meth:`MissionTimeline.fly`); returns when (mission time, s). Raises
+        :class:`MissionError` (nothing changed) when it cannot be flown from there, or when
+        the scenario has no mission (the sinusoid cannot be left mid-way)."""
+        problem = turn_problem(self.sc, cfg)
+        if problem is not None:
+            raise MissionError(problem)
+        return self._mission_time(self._timeline().fly(cfg, at_s - self._t0()))
+
+    def hold_formation(self, at_s: float) -> float:
+        """Stop at the first rest at or after mission time ``at_s``; returns when (s)."""
+        return self._mission_time(self._timeline().hold(at_s - self._t0()))
+
+    def _timeline(self) -> MissionTimeline:
+        if self.timeline is None:
+            raise MissionError("the scenario has no [mission]: its leaders fly the sinusoid")
+        return self.timeline
+
+    def _t0(self) -> float:
+        """Mission time (s) of the trajectory's start (0 in lockstep and in process)."""
+        return self.start_time if math.isfinite(self.start_time) else 0.0
+
+    def _mission_time(self, tau: float) -> float:
+        return tau + self._t0()
 
     def current_reference(self, t: float) -> np.ndarray:
         """The landing reference once landing, else :meth:`reference`."""

@@ -8,6 +8,7 @@ fields are counted and dropped: never a crash."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import math
 from collections.abc import Callable, Iterable
@@ -17,6 +18,7 @@ from offboard.agent.landing import landing_plan
 from offboard.safety.filter import parse_method
 from swarm_common import wire
 from swarm_common.enums import CommandKind
+from swarm_common.mission.config import parse_mission
 from swarm_common.scenario.model import Scenario
 
 log = logging.getLogger(__name__)
@@ -51,6 +53,8 @@ class GroundCommands:
             CommandKind.OUTAGE: self._outage_command,
             CommandKind.LAND: self._land_command,
             CommandKind.TAKEOFF: self._takeoff_command,
+            CommandKind.MISSION: self._mission_command,
+            CommandKind.HOLD: self._hold_command,
         }
 
     def comm_ok(self, t: float) -> bool:
@@ -124,6 +128,43 @@ class GroundCommands:
             t0 = t
         if self.agent.start_takeoff(t0):
             log.info("agent %d: take-off at t=%.2f s", self.id, t0)
+
+    def _formation_at(self, cmd: wire.Command, t: float) -> float | None:
+        """The mission time of a formation command (negative ``at_s``: now), or None
+        (counted, logged) when it is not finite or more than TAKEOFF_LEAD_S ahead."""
+        if not math.isfinite(cmd.at_s) or cmd.at_s - t > TAKEOFF_LEAD_S:
+            self._bad_command(cmd, f"at_s = {cmd.at_s!r} at t = {t:.2f} s")
+            return None
+        return cmd.at_s if cmd.at_s >= 0.0 else t
+
+    def _mission_command(self, cmd: wire.Command, t: float) -> None:
+        """The leaders fly the command's formation waypoints from the first rest at or after
+        ``at_s`` (docs/missions.md); followers have nothing to change (they read the
+        formation from the leaders). A table that does not parse or cannot be flown from
+        there is counted, logged and dropped: the formation flies on as before."""
+        at = self._formation_at(cmd, t)
+        if at is None or not isinstance(self.agent, LeaderAgent):
+            return
+        try:
+            cfg = parse_mission(json.loads(cmd.mission))
+            start = self.agent.fly_mission(cfg, at)
+        except (ValueError, RecursionError) as exc:  # MissionError, JSON errors
+            self._bad_command(cmd, str(exc).splitlines()[0][:300])
+            return
+        log.info("agent %d: mission of %d waypoints from t=%.2f s", self.id,
+                 len(cfg.waypoints), start)
+
+    def _hold_command(self, cmd: wire.Command, t: float) -> None:
+        """The formation stops at its next rest at or after ``at_s`` and stays there."""
+        at = self._formation_at(cmd, t)
+        if at is None or not isinstance(self.agent, LeaderAgent):
+            return
+        try:
+            start = self.agent.hold_formation(at)
+        except ValueError as exc:
+            self._bad_command(cmd, str(exc).splitlines()[0][:300])
+            return
+        log.info("agent %d: formation holds from t=%.2f s", self.id, start)
 
     def maybe_start_landing(self, t: float) -> None:
         """From the first step at or after ``land_at``: the common plan of offboard.agent.landing,

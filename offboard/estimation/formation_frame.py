@@ -32,11 +32,11 @@ import numpy as np
 from offboard.estimation.peer_table import XI_COL
 from offboard.estimation.reference import DesiredStateObserver
 from swarm_common.jit import kernel
-from swarm_common.scenario.mission_check import mission_shape
+from swarm_common.scenario.mission_check import MIN_YAW_OFFSET_M, mission_shape
 from swarm_common.scenario.spec import Scenario
 
 # |r₀| (m) below which the leaders' horizontal offset cannot carry the yaw
-MIN_LEADER_OFFSET_M = 1e-3
+MIN_LEADER_OFFSET_M = MIN_YAW_OFFSET_M
 
 
 def yaw_jet_from_offset(r: list[complex], arg0: float) -> np.ndarray:

@@ -269,15 +269,18 @@ class MissionPlan:
         """The first time >= ``t`` (s) at which the formation is at rest: ``t`` itself
         while it holds (before a departure, at a waypoint, after the end), else the arrival
         of the leg it is flying."""
-        _, leg, _ = self._locate(t)
-        return t if leg is None else max(t, leg.arrival_s)
+        _, leg, tau = self._locate(t)
+        # the first instant of a leg is at rest too (rest-to-rest legs: zero derivatives)
+        return t if leg is None or tau == 0.0 else leg.arrival_s
 
     def rest_pose(self, t: float) -> Pose:
         """The pose (s) at a time ``t`` when the formation is at rest (:meth:`at_rest_from`)."""
-        pose, leg, _ = self._locate(t)
-        if leg is not None:
-            raise ValueError(f"t = {t:g} s: the formation is moving")
-        return pose
+        pose, leg, tau = self._locate(t)
+        if leg is None:
+            return pose
+        if tau == 0.0:
+            return leg.start
+        raise ValueError(f"t = {t:g} s: the formation is moving")
 
     def waypoint_at(self, t: float) -> int:
         """How many waypoints the formation has reached by ``t`` (s)."""

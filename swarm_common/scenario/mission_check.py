@@ -21,12 +21,13 @@ import math
 import numpy as np
 
 from swarm_common.memo import IdentityMemo
-from swarm_common.mission.config import MissionError
+from swarm_common.mission.config import MissionConfig, MissionError
 from swarm_common.mission.plan import Limits, MissionPlan, build_plan
 from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, desired_origins
 from swarm_common.scenario.spec import Scenario
 
 _PLANS: IdentityMemo[MissionPlan] = IdentityMemo()
+MIN_YAW_OFFSET_M = 1e-3  # m: leaders closer horizontally cannot carry the yaw
 
 
 def mission_limits(sc: Scenario) -> Limits:
@@ -81,12 +82,9 @@ def mission_problem(sc: Scenario) -> str | None:
                 f"{m.max_jerk_mps3:g} needs {need:.2f} m/s² (a + τ j, τ = "
                 f"vehicle.tau_rollpitch_s), above the {avail:.2f} m/s² the vehicle leaves "
                 f"after the feedback reserve")
-    if any(w.yaw_deg != 0.0 for w in m.waypoints):
-        shape = mission_shape(sc)
-        a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
-        if float(np.hypot(*(shape[b, :2] - shape[a, :2]))) < 1e-3:
-            return ("mission: a waypoint turns the formation (yaw_deg), but the first two "
-                    "leaders are stacked vertically: their offset cannot carry the yaw")
+    problem = turn_problem(sc, m)
+    if problem is not None:
+        return problem
     try:
         plan_for(sc)
     except MissionError as exc:
@@ -94,6 +92,24 @@ def mission_problem(sc: Scenario) -> str | None:
     return None
 
 
+def leaders_carry_yaw(sc: Scenario) -> bool:
+    """True when the first two leaders are apart horizontally in the mission's shape, so
+    their offset carries the formation's yaw (docs/missions.md)."""
+    shape = mission_shape(sc)
+    a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
+    return float(np.hypot(*(shape[b, :2] - shape[a, :2]))) >= MIN_YAW_OFFSET_M
+
+
 def yaws(sc: Scenario) -> bool:
-    """True when ``sc``'s mission turns the formation (some waypoint's yaw is not 0)."""
-    return sc.mission is not None and any(w.yaw_deg != 0.0 for w in sc.mission.waypoints)
+    """True when ``sc``'s formation may turn: it has a mission (a ground station may turn it
+    in flight) and its leaders carry the yaw. Its followers then run their desired-state
+    observer in the formation's frame."""
+    return sc.mission is not None and leaders_carry_yaw(sc)
+
+
+def turn_problem(sc: Scenario, cfg: MissionConfig) -> str | None:
+    """One line when mission ``cfg`` turns a formation whose leaders cannot carry the yaw."""
+    if any(w.yaw_deg != 0.0 for w in cfg.waypoints) and not leaders_carry_yaw(sc):
+        return ("mission: a waypoint turns the formation (yaw_deg), but the first two "
+                "leaders are stacked vertically: their offset cannot carry the yaw")
+    return None

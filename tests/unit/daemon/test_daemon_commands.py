@@ -29,7 +29,7 @@ def _commands(agent_id: int = 2) -> GroundCommands:
 
 
 def test_every_kind_on_the_wire_has_a_handler() -> None:
-    assert wire.COMMAND_KINDS == ("method", "outage", "land", "takeoff")  # the wire's words
+    assert wire.COMMAND_KINDS == ("method", "outage", "land", "takeoff", "mission", "hold")
     assert [k.value for k in CommandKind] == list(wire.COMMAND_KINDS)
     assert set(_commands().handlers) == set(CommandKind)
     for kind in CommandKind:  # a StrEnum member is its word on the wire
@@ -125,3 +125,67 @@ def test_realtime_answer_is_fresh_for_one_period() -> None:
     s.send()
     assert vehicle.sent == [80] and driver.summary() == ""
     assert not driver.fallback_step(6, 0.12, 120, s)  # the runner is not lost
+
+
+def _mission_leader(agent_id: int = 1) -> GroundCommands:
+    sc = load_scenario(CUBE8.replace("cube8.toml", "course8.toml"))
+    return GroundCommands(sc, make_agent(sc, agent_id), agent_id)
+
+
+def _goto(x: float, y: float, z: float, **extra: float) -> str:
+    import json
+
+    return json.dumps({"speed_mps": 1.5, "max_speed_mps": 3.0,
+                       "waypoint": [{"centroid": [x, y, z], **extra}]})
+
+
+def test_a_mission_command_replans_every_leader_alike_and_followers_ignore_it() -> None:
+    a, b, f = _mission_leader(1), _mission_leader(2), _mission_leader(3)
+    cmd = wire.roundtrip(wire.Command(kind="mission", at_s=5.0,
+                                      mission=_goto(2.0, 2.0, 6.0, scale=1.2, yaw_deg=30.0)))
+    assert isinstance(cmd, wire.Command)
+    for c in (a, b, f):
+        c.apply([cmd], 1.0)
+        assert c.bad_commands == 0
+    # course8 holds at its first waypoint until 10 s: the new plan starts at 5 s from there
+    t_end = 40.0
+    xa, xb = a.agent.reference(t_end), b.agent.reference(t_end)
+    la, lb = a.agent, b.agent
+    assert isinstance(la, type(lb))
+    offset = xb[:2] - xa[:2]  # leader 2 − leader 1: (0, 4) m at scale 1, yaw 0
+    assert np.hypot(*offset) == pytest.approx(4.0 * 1.2, abs=1e-9)
+    assert np.degrees(np.arctan2(offset[1], offset[0])) == pytest.approx(90.0 + 30.0, abs=1e-9)
+    assert np.all(xa[3:] == 0.0)  # arrived and at rest
+
+
+def test_bad_mission_commands_are_counted_and_change_nothing(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    c = _mission_leader(1)
+    before = c.agent.reference(30.0).copy()
+    bad = [
+        wire.Command(kind="mission", at_s=5.0, mission="{not json"),
+        wire.Command(kind="mission", at_s=5.0, mission=_goto(2.0, 2.0, 0.1)),  # under floor
+        wire.Command(kind="mission", at_s=5.0, mission='{"speed_mps": 1.5}'),  # no waypoint
+        wire.Command(kind="mission", at_s=float("nan"), mission=_goto(2.0, 2.0, 6.0)),
+        wire.Command(kind="hold", at_s=1e9),
+    ]
+    with caplog.at_level(logging.WARNING):
+        c.apply(bad, 1.0)
+    assert c.bad_commands == len(bad)
+    assert "waypoint[0]" in caplog.text
+    np.testing.assert_array_equal(c.agent.reference(30.0), before)
+    # a scenario without a mission flies its sinusoid: a mission command is refused
+    s = _commands(1)
+    s.apply([wire.Command(kind="mission", at_s=5.0, mission=_goto(4.0, 2.0, 4.0))], 1.0)
+    assert s.bad_commands == 1
+
+
+def test_hold_stops_at_the_next_rest() -> None:
+    c = _mission_leader(1)
+    plan_arrival = 27.85  # course8's second waypoint (docs/missions.md)
+    c.apply([wire.Command(kind="hold", at_s=15.0)], 14.0)  # flying leg 1
+    assert c.bad_commands == 0
+    held = c.agent.reference(plan_arrival + 30.0)
+    np.testing.assert_allclose(held[:3], c.agent.reference(plan_arrival)[:3], atol=1e-9)
+    assert np.all(held[3:] == 0.0)
