@@ -332,6 +332,10 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="the simulator's default telemetry: always (as PX4: to the GCS port "
                    "whether or not anyone listens) or on-contact (HEARTBEAT only until a "
                    "ground station there speaks; cheaper for large batch runs)")
+    d.add_argument("--formation-vehicle", action="store_true",
+                   help="serve the formation as one MAVLink vehicle (system id 200) on UDP "
+                   "14560 + offset for QGroundControl, MAVProxy or MAVSDK (needs a scenario "
+                   "with a [mission]; docs/missions.md)")
     add_signing_flags(d)
     add_fault_flags(d)
     _add_allow_infeasible(r)

@@ -10,5 +10,6 @@ Entry points:
 
 Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.procs` (child
 processes), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
-:mod:`.sim_log`, :mod:`.warmup`.
+:mod:`.sim_log`, :mod:`.warmup`; :mod:`.formation_link` serves the formation vehicle
+(:mod:`gcs.formation`) from a distributed run.
 """

@@ -25,6 +25,8 @@ from typing import Any
 
 import zenoh
 
+from gcs.formation.vehicle import FORMATION_PORT
+from gcs.mission.formation_link import formation_hook
 from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
 from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
@@ -93,6 +95,7 @@ def run_distributed(
     processes: int | None = None,
     default_streams: DefaultStreams = DefaultStreams.ALWAYS,
     on_step: Callable[[int], None] | None = None,
+    formation_port: int | None = None,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
@@ -138,6 +141,15 @@ def run_distributed(
         raise LaunchError(str(exc)) from None
     rec = Recorder(sc, int(round(duration * sc.run.control_hz)), seed=seed)
     subs = rec.subscribe(router, spec.swarm_name)
+    formation = None
+    if formation_port is not None:  # gcs.formation: the formation as one MAVLink vehicle
+        try:
+            formation = formation_hook(sc, rec, router, spec.swarm_name, formation_port,
+                                       key_path)
+        except (OSError, ValueError) as exc:  # a busy port, a scenario without a mission
+            router.close()
+            _remove(sec_dir)
+            raise LaunchError(f"formation vehicle on UDP {formation_port}: {exc}") from None
     group = ProcessGroup(out_dir)
     facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False,
                              "mavlink_signing": signing.describe(),
@@ -154,7 +166,7 @@ def run_distributed(
         bar = Progress(duration, label=str(method)) if show_progress else None
         land = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
                                                           sc.control_dt)
-        hooks = [h for h in (land, on_step) if h is not None]
+        hooks = [h for h in (land, on_step, formation and formation[0]) if h is not None]
         checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
         victim = None if kill_agent is None else next(
             spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
@@ -187,6 +199,9 @@ def run_distributed(
                 s.undeclare()
             except zenoh.ZError as exc:
                 log.debug("undeclare subscriber: %s", exc)
+        if formation is not None:
+            formation[1].close()
+            facts["formation_commands"] = [c.kind for c in formation[1].sent_commands]
         router.close()
         _remove(sec_dir)
         facts["wall_s"] = time.monotonic() - t_wall0
@@ -360,6 +375,7 @@ def run_and_score(
     signing: SigningChoice | None = None,
     processes: int | None = None,
     default_streams: DefaultStreams = DefaultStreams.ALWAYS,
+    formation_port: int | None = None,
 ) -> dict[str, Any]:
     """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
 
@@ -379,7 +395,7 @@ def run_and_score(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
         on_abort=write_partial, signing=signing, processes=processes,
-        default_streams=default_streams,
+        default_streams=default_streams, formation_port=formation_port,
     )
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
@@ -411,6 +427,8 @@ def cli_run(args: Any, sc: Scenario) -> int:
             show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
             processes=getattr(args, "processes", None),
             default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
+            formation_port=(FORMATION_PORT + args.port_offset
+                            if getattr(args, "formation_vehicle", False) else None),
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)

@@ -1,0 +1,356 @@
+"""The formation as one MAVLink vehicle (docs/missions.md, "The formation as one vehicle").
+
+A ground station (QGroundControl, MAVProxy, MAVSDK, pymavlink) talks to the whole formation
+as to one PX4 vehicle, system id :data:`FORMATION_SYSID`, on UDP :data:`FORMATION_PORT` +
+offset on the ground-station host. It sees the formation's centroid as the vehicle's position.
+It uploads, downloads and starts a mission, sends it somewhere (``DO_REPOSITION``), holds it
+(``DO_SET_MODE`` AUTO.LOITER), changes its speed (``DO_CHANGE_SPEED``) and its scale (the
+``FORM_SCALE`` parameter). Each of these becomes a Zenoh ``mission`` or ``hold`` command to
+the leaders, timed :data:`COMMAND_LEAD_S` of mission time ahead so that every leader applies
+it at the same step (:mod:`swarm_common.mission.timeline`).
+
+The vehicle keeps a replica of the leaders' timeline. It refuses a mission or command that the
+leaders could not fly (a waypoint under the floor, too dense, too fast) with
+``MAV_MISSION_INVALID`` or ``MAV_RESULT_DENIED``, before anything is sent. The mission transfer
+protocol is the simulator's own (:mod:`vehicle_sim.services.mission_transfer`).
+
+With a signing key, every frame it sends is signed and every frame it takes must carry a valid
+signature of that key: the formation is flown only by a ground station that holds the key.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import math
+import socket
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as M
+
+from gcs.formation.translate import checked, items_to_table, mission_table, yaw_of_heading
+from swarm_common import frames, px4, wire
+from swarm_common.enums import CommandKind
+from swarm_common.mission.config import MissionError
+from swarm_common.mission.timeline import MissionTimeline
+from swarm_common.scenario.mission_check import mission_limits, mission_shape, plan_for
+from swarm_common.scenario.spec import Scenario
+from swarm_common.signing import setup_signing
+from vehicle_sim.autopilot.config import AutopilotConfig
+from vehicle_sim.physics import geo
+from vehicle_sim.services import mission_items as mi
+from vehicle_sim.services.mission_transfer import MissionTransfer
+
+log = logging.getLogger(__name__)
+
+FORMATION_SYSID = 200
+FORMATION_PORT = 14560  # + offset; free in the vehicles' port scheme (swarm_common.ports)
+COMMAND_LEAD_S = 1.0  # s of mission time between a command and when the leaders apply it
+HEARTBEAT_S = 1.0
+POSITION_S = 0.25
+REPEATS, REPEAT_S = 3, 0.2  # copies of each command after the first, and their spacing (s)
+MAX_DATAGRAM = 2048
+Publish = Callable[[wire.Command], None]
+
+
+class FormationVehicle:
+    """The formation's MAVLink endpoint. Call :meth:`serve` often (the runner's step hook):
+    it reads what came in, answers it, publishes commands and sends telemetry."""
+
+    def __init__(
+        self, sc: Scenario, publish: Publish, port: int, host: str = "127.0.0.1",
+        key: bytes | None = None,
+    ) -> None:
+        if sc.mission is None:
+            raise MissionError("the formation vehicle needs a scenario with a [mission]")
+        self.sc, self.publish = sc, publish
+        self.base = sc.mission
+        self.timeline = MissionTimeline(plan_for(sc), mission_shape(sc), mission_limits(sc))
+        self.geo = AutopilotConfig()
+        self.transfer = MissionTransfer(self.geo)
+        self.mav = M.MAVLink(None, srcSystem=FORMATION_SYSID, srcComponent=1)
+        if key is not None:
+            setup_signing(self.mav, key, 0)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((host, port))
+        self.sock.setblocking(False)
+        self.clients: set[tuple[str, int]] = set()
+        self.t = 0.0  # mission time of the latest truth (s)
+        self.centroid = np.full(3, np.nan)
+        self.velocity = np.zeros(3)
+        self.scale = 1.0
+        self.yaw_deg = 0.0
+        self.speed = self.base.speed_mps
+        self.holding = False
+        self.bad_frames = 0
+        self.live = False  # the swarm is stepping (a truth came): commands reach the leaders
+        self.sent_commands: list[wire.Command] = []
+        self._pending: list[tuple[float, wire.Command, int]] = []  # (due, command, copies left)
+        self._next_hb = self._next_pos = 0.0
+        self._t_boot = time.monotonic()
+
+    def close(self) -> None:
+        self.sock.close()
+
+    # -- the loop ------------------------------------------------------------------
+    def serve(self, t: float, p: np.ndarray | None, v: np.ndarray | None) -> None:
+        """Take the truth of mission time ``t`` (every agent's p, v (N, 3), or None), answer
+        what came in, send what is due."""
+        self.t = float(t)
+        if p is not None and np.all(np.isfinite(p)):
+            self.centroid = p.mean(axis=0)
+            self.live = True
+            if v is not None and np.all(np.isfinite(v)):
+                self.velocity = v.mean(axis=0)
+        now = time.monotonic()
+        self._repeat(now)
+        while True:
+            try:
+                data, addr = self.sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:  # e.g. ICMP port unreachable of a gone client
+                log.debug("formation vehicle: %s", exc)
+                break
+            if self.live:  # before the swarm steps nobody would hear a command: silent
+                self._take(data, addr)
+        if not self.live:
+            return
+        for m, dest in self.transfer.tick(now):
+            self._send(m, dest)
+        self._transfer_errors()
+        if now >= self._next_hb:
+            self._next_hb = now + HEARTBEAT_S
+            self._broadcast(self._heartbeat())
+            self._broadcast(M.MAVLink_mission_current_message(self._progress()))
+        if now >= self._next_pos and np.all(np.isfinite(self.centroid)):
+            self._next_pos = now + POSITION_S
+            for m in self._position():
+                self._broadcast(m)
+
+    def _take(self, data: bytes, addr: tuple[str, int]) -> None:
+        try:
+            msgs = self.mav.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - pymavlink raises many kinds on garbage
+            self.bad_frames += 1
+            return
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                self.bad_frames += 1
+                continue
+            self.clients.add(addr)
+            try:
+                self._handle(m, addr)
+            except (ValueError, OverflowError) as exc:  # fields no handler can use
+                self.bad_frames += 1
+                log.info("formation vehicle: %s dropped (%s)", m.get_type(), exc)
+
+    # -- messages in ---------------------------------------------------------------
+    def _handle(self, m: Any, addr: tuple[str, int]) -> None:
+        kind = m.get_type()
+        target = getattr(m, "target_system", FORMATION_SYSID)
+        if target not in (0, FORMATION_SYSID):
+            return
+        now = time.monotonic()
+        out: list[tuple[Any, Any]] = []
+        if kind == "MISSION_COUNT":
+            out = self.transfer.on_count(m, addr, now)
+        elif kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+            before = list(self.transfer.stores[mi.MISSION])
+            out = self.transfer.on_item(m, addr, now, kind == "MISSION_ITEM_INT")
+            out = self._check_upload(out, before)
+        elif kind == "MISSION_REQUEST_LIST":
+            out = self.transfer.on_request_list(m, addr)
+        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            out = self.transfer.on_request(m, addr, kind == "MISSION_REQUEST_INT")
+        elif kind == "MISSION_CLEAR_ALL":
+            out = self.transfer.on_clear_all(m, addr)
+        elif kind == "MISSION_ACK":
+            self.transfer.on_client_ack(m)
+        elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+            out = [(self._command(m, kind == "COMMAND_INT"), addr)]
+        elif kind == "PARAM_REQUEST_LIST":
+            out = [(self._param_value(), addr)]
+        elif kind == "PARAM_REQUEST_READ":
+            out = [(self._param_value(), addr)]
+        elif kind == "PARAM_SET":
+            out = [(self._param_set(m), addr)]
+        self.transfer.changed.clear()
+        for msg, dest in out:
+            self._send(msg, dest)
+
+    def _check_upload(self, out: list[tuple[Any, Any]], before: list[Any]) -> list[Any]:
+        """An upload the transfer accepted must also be a flyable formation mission: else
+        the old store comes back and the final ACK says MAV_MISSION_INVALID."""
+        if mi.MISSION not in self.transfer.changed or not self.transfer.stores[mi.MISSION]:
+            return out
+        try:
+            self._dry_run(self._store_table())
+        except MissionError as exc:
+            self.transfer.stores[mi.MISSION] = before
+            log.warning("formation vehicle: mission refused: %s", exc)
+            return [(M.MAVLink_mission_ack_message(m.target_system, m.target_component,
+                                                   M.MAV_MISSION_INVALID, mi.MISSION), d)
+                    if m.get_type() == "MISSION_ACK" else (m, d) for m, d in out]
+        return out
+
+    def _store_table(self) -> dict[str, Any]:
+        return items_to_table(self.geo, self.transfer.stores[mi.MISSION], self.speed,
+                              self.scale, self.yaw_deg, self.base)
+
+    def _dry_run(self, table: dict[str, Any]) -> None:
+        """Refuse (MissionError) what the leaders could not fly from their next rest."""
+        cfg = checked(table)
+        copy.deepcopy(self.timeline).fly(cfg, self._at())
+
+    def _at(self) -> float:
+        return self.t + COMMAND_LEAD_S
+
+    # -- commands --------------------------------------------------------------------
+    def _command(self, m: Any, is_int: bool) -> Any:
+        cmd = int(m.command)
+        result = M.MAV_RESULT_UNSUPPORTED
+        try:
+            if cmd == M.MAV_CMD_MISSION_START:
+                result = self._fly(self._store_table())
+            elif cmd == M.MAV_CMD_DO_REPOSITION:
+                result = self._reposition(m, is_int)
+            elif cmd == M.MAV_CMD_DO_CHANGE_SPEED:
+                speed = float(m.param2)
+                if not (math.isfinite(speed) and 0.0 < speed <= self.base.max_speed_mps):
+                    raise MissionError(f"speed {speed!r}: must be in (0, "
+                                       f"{self.base.max_speed_mps:g}] m/s")
+                self.speed, result = speed, M.MAV_RESULT_ACCEPTED
+            elif cmd == M.MAV_CMD_DO_SET_MODE:
+                result = self._set_mode(m)
+        except MissionError as exc:
+            log.warning("formation vehicle: command %d denied: %s", cmd, exc)
+            result = M.MAV_RESULT_DENIED
+        return M.MAVLink_command_ack_message(cmd, result, 0, 0, m.get_srcSystem(),
+                                             m.get_srcComponent())
+
+    def _reposition(self, m: Any, is_int: bool) -> int:
+        lat, lon = (m.x / 1e7, m.y / 1e7) if is_int else (float(m.param5), float(m.param6))
+        alt = float(m.z) if is_int else float(m.param7)
+        if not all(math.isfinite(x) for x in (lat, lon, alt)):
+            raise MissionError("reposition: latitude, longitude and altitude must be numbers")
+        north, east = geo.ned_from_latlon(self.geo, lat, lon)
+        frame = int(getattr(m, "frame", M.MAV_FRAME_GLOBAL))
+        up = alt if frame in mi.RELATIVE_FRAMES else -geo.down_from_amsl(self.geo, alt)
+        if float(m.param1) > 0.0:
+            self.speed = min(float(m.param1), self.base.max_speed_mps)
+        self.yaw_deg = yaw_of_heading(float(m.param4), self.yaw_deg)
+        return self._fly(mission_table(
+            [{"centroid": [east, north, up], "scale": self.scale, "yaw_deg": self.yaw_deg}],
+            self.speed, self.base))
+
+    def _set_mode(self, m: Any) -> int:
+        main, sub = int(m.param2), int(m.param3)
+        if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_LOITER:
+            return self._send_command(wire.Command(kind=CommandKind.HOLD, at_s=self._at()),
+                                      lambda: self.timeline.hold(self._at()), True)
+        if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_MISSION:
+            return self._fly(self._store_table())
+        return M.MAV_RESULT_UNSUPPORTED
+
+    def _fly(self, table: dict[str, Any]) -> int:
+        cfg = checked(table)
+        return self._send_command(
+            wire.Command(kind=CommandKind.MISSION, at_s=self._at(), mission=json.dumps(table)),
+            lambda: self.timeline.fly(cfg, self._at()), False)
+
+    def _send_command(self, cmd: wire.Command, apply: Callable[[], float], hold: bool) -> int:
+        """Apply ``cmd`` to the replica (MissionError: denied, nothing sent), then publish it."""
+        start = apply()
+        self.publish(cmd)
+        self._pending.append((time.monotonic() + REPEAT_S, cmd, REPEATS))
+        self.sent_commands.append(cmd)
+        self.holding = hold
+        log.info("formation vehicle: %s from t=%.2f s", cmd.kind, start)
+        return M.MAV_RESULT_ACCEPTED
+
+    def _repeat(self, now: float) -> None:
+        """Publish each command again REPEATS times, REPEAT_S apart: a Zenoh put is lost to
+        a daemon whose link is reconnecting, and the leaders apply copies (the same at_s)
+        idempotently (:mod:`swarm_common.mission.timeline`)."""
+        keep = []
+        for due, cmd, left in self._pending:
+            if now >= due:
+                self.publish(cmd)
+                due, left = now + REPEAT_S, left - 1
+            if left > 0:
+                keep.append((due, cmd, left))
+        self._pending = keep
+
+    # -- parameters ------------------------------------------------------------------
+    def _param_value(self) -> Any:
+        return M.MAVLink_param_value_message(b"FORM_SCALE", self.scale,
+                                             M.MAV_PARAM_TYPE_REAL32, 1, 0)
+
+    def _param_set(self, m: Any) -> Any:
+        name = bytes(m.param_id, "ascii", "replace") if isinstance(m.param_id, str) else m.param_id
+        if name.rstrip(b"\0") != b"FORM_SCALE":
+            return self._param_value()
+        value = float(m.param_value)
+        old = self.scale
+        try:
+            if not (math.isfinite(value) and 0.0 < value <= 10.0):
+                raise MissionError(f"FORM_SCALE {value!r}: must be in (0, 10]")
+            self.scale = value
+            c = self.timeline.plan_at(self._at()).rest_pose(
+                self.timeline.plan_at(self._at()).at_rest_from(self._at())).centroid
+            self._fly(mission_table([{"centroid": [float(x) for x in c], "scale": value,
+                                      "yaw_deg": self.yaw_deg}], self.speed, self.base))
+        except MissionError as exc:
+            self.scale = old
+            log.warning("formation vehicle: FORM_SCALE refused: %s", exc)
+        return self._param_value()
+
+    # -- telemetry -------------------------------------------------------------------
+    def _progress(self) -> int:
+        plan = self.timeline.plan_at(self.t)
+        return min(plan.waypoint_at(self.t), max(len(plan.legs) - 1, 0))
+
+    def _heartbeat(self) -> Any:
+        sub = px4.SUB_AUTO_LOITER if self.holding else px4.SUB_AUTO_MISSION
+        custom = (px4.MAIN_AUTO << 16) | (sub << 24)
+        base = (mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+                | mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+                | mavutil.mavlink.MAV_MODE_FLAG_AUTO_ENABLED)
+        return M.MAVLink_heartbeat_message(M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4, base,
+                                           custom, M.MAV_STATE_ACTIVE, 3)
+
+    def _position(self) -> list[Any]:
+        ned = frames.enu_to_ned(self.centroid)
+        vel = frames.enu_to_ned(self.velocity)
+        ms = int((time.monotonic() - self._t_boot) * 1000) & 0xFFFFFFFF
+        lat, lon = geo.latlon_e7(self.geo, ned)
+        alt_mm = int(round(-float(ned[2]) * 1000))
+        return [
+            M.MAVLink_local_position_ned_message(ms, *(float(x) for x in ned),
+                                                 *(float(x) for x in vel)),
+            M.MAVLink_global_position_int_message(
+                ms, lat, lon, int(round((self.geo.home_alt - float(ned[2])) * 1000)), alt_mm,
+                *(int(round(float(x) * 100)) for x in vel), 65535),
+        ]
+
+    # -- sending ---------------------------------------------------------------------
+    def _send(self, m: Any, dest: Any) -> None:
+        try:
+            self.sock.sendto(m.pack(self.mav), dest)
+        except OSError as exc:
+            log.debug("formation vehicle: send to %s: %s", dest, exc)
+
+    def _broadcast(self, m: Any) -> None:
+        for c in list(self.clients):
+            self._send(m, c)
+
+    def _transfer_errors(self) -> None:
+        for line in self.transfer.errors:
+            log.info("formation vehicle: %s", line)
+        self.transfer.errors.clear()

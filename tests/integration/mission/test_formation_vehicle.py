@@ -1,0 +1,125 @@
+"""The formation as one MAVLink vehicle (gcs.formation, docs/missions.md): an unmodified
+pymavlink client uploads a 3-waypoint mission to system 200 on UDP 14560 + offset and starts
+it, in a distributed lockstep run; the formation's centroid passes within 0.5 m of each
+waypoint. A mission under the floor is refused with MAV_MISSION_INVALID and changes nothing.
+
+The swarm is signed (the default); the client is a ground station of the same operator and
+holds the key. The run packs the eight daemons into two processes (test_mission_packed:
+the same run as one process per agent)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT, free_port_offset
+from pymavlink import mavutil
+
+from gcs.formation.vehicle import FORMATION_PORT, FORMATION_SYSID
+from gcs.mission.distributed import recorded_metrics, run_distributed
+from gcs.mission.launch_spec import SigningChoice
+from swarm_common import frames
+from swarm_common.scenario.model import dump_toml, load_scenario, with_overrides
+from swarm_common.signing import generate_key, load_key, setup_signing
+from vehicle_sim.autopilot.config import AutopilotConfig
+from vehicle_sim.physics import geo
+
+pytestmark = pytest.mark.timeout(300)
+MAV = mavutil.mavlink
+WAYPOINTS = [(6.0, 2.0, 4.0), (6.0, 6.0, 4.5), (2.0, 6.0, 4.0)]  # ENU centroids (m)
+BAD = [(6.0, 2.0, 0.3)]  # the formation's lowest layer would be under the floor
+DURATION_S = 40.0
+
+
+class GroundStation(threading.Thread):
+    """Waits for the formation's heartbeat, uploads BAD (expects MAV_MISSION_INVALID), then
+    WAYPOINTS, and starts the mission; records every result."""
+
+    def __init__(self, port: int, key: bytes) -> None:
+        super().__init__(daemon=True)
+        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=245,
+                                               source_component=190)
+        setup_signing(self.conn.mav, key, 9)
+        self.results: dict[str, int | None] = {}
+        self.error: str | None = None
+
+    def recv(self, kind: str, timeout: float = 20.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            m = self.conn.recv_match(type=kind, blocking=True, timeout=0.25)
+            if m is not None and m.get_srcSystem() == FORMATION_SYSID:
+                return m
+            self.conn.mav.heartbeat_send(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        return None
+
+    def upload(self, points: list[tuple[float, float, float]]) -> int | None:
+        cfg = AutopilotConfig()
+        self.conn.mav.mission_count_send(FORMATION_SYSID, 1, len(points),
+                                         MAV.MAV_MISSION_TYPE_MISSION)
+        for _ in points:
+            req = self.recv("MISSION_REQUEST_INT")
+            if req is None:
+                return None
+            e, n, u = points[req.seq]
+            lat, lon = geo.latlon_e7(cfg, frames.enu_to_ned(np.array([e, n, u])))
+            self.conn.mav.mission_item_int_send(
+                FORMATION_SYSID, 1, req.seq, MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                MAV.MAV_CMD_NAV_WAYPOINT, 0, 1, 1.0, 0.0, 0.0, float("nan"), lat, lon, u,
+                MAV.MAV_MISSION_TYPE_MISSION)
+            if req.seq == len(points) - 1:
+                break
+        ack = self.recv("MISSION_ACK")
+        return None if ack is None else int(ack.type)
+
+    def run(self) -> None:
+        try:
+            if self.recv("HEARTBEAT", timeout=60.0) is None:
+                self.error = "no heartbeat from the formation"
+                return
+            self.results["bad"] = self.upload(BAD)
+            self.results["good"] = self.upload(WAYPOINTS)
+            self.conn.mav.command_long_send(FORMATION_SYSID, 1, MAV.MAV_CMD_MISSION_START, 0,
+                                            0, 0, 0, 0, 0, 0, 0)
+            ack = self.recv("COMMAND_ACK")
+            self.results["start"] = None if ack is None else int(ack.result)
+        except Exception as exc:  # noqa: BLE001 - reported by the test
+            self.error = repr(exc)
+
+
+def test_a_pymavlink_ground_station_flies_the_formation(tmp_path: Path) -> None:
+    base = load_scenario(ROOT / "scenarios" / "course8.toml")
+    sc = with_overrides(base, mission={"speed_mps": 1.5, "waypoint": [
+        {"centroid": [2.0, 2.0, 4.0], "hold_s": 1.0}]})  # form where it starts, then wait
+    path = tmp_path / "wait8.toml"
+    path.write_text(dump_toml(sc.to_toml_dict()))
+    sc = load_scenario(path)
+    off = free_port_offset()
+    key_path = tmp_path / "keys" / "swarm.key"
+    generate_key(key_path)
+    gs = GroundStation(FORMATION_PORT + off, load_key(key_path))
+    gs.start()
+    try:
+        rec, facts = run_distributed(
+            sc, tmp_path / "run", "dcbf", None, DURATION_S, port_offset=off,
+            show_progress=False, signing=SigningChoice(key=key_path), processes=2,
+            formation_port=FORMATION_PORT + off,
+        )
+    finally:
+        gs.join(5)
+        gs.conn.close()
+    assert gs.error is None, gs.error
+    assert gs.results == {"bad": MAV.MAV_MISSION_INVALID, "good": MAV.MAV_MISSION_ACCEPTED,
+                          "start": MAV.MAV_RESULT_ACCEPTED}
+    assert facts["formation_commands"] == ["mission"]  # the refused upload sent nothing
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], DURATION_S)
+    centroid = ser.p.mean(axis=1)
+    k = 0
+    for wp in WAYPOINTS:  # in order
+        d = np.linalg.norm(centroid[k:] - np.array(wp), axis=1)
+        hit = np.flatnonzero(d <= 0.5)
+        assert hit.size, f"the centroid never came within 0.5 m of {wp} (closest {d.min():.2f})"
+        k += int(hit[0])
+    assert m["collisions"] == 0 and m["h_min"] >= 0.0
