@@ -123,3 +123,104 @@ def test_a_pymavlink_ground_station_flies_the_formation(tmp_path: Path) -> None:
         assert hit.size, f"the centroid never came within 0.5 m of {wp} (closest {d.min():.2f})"
         k += int(hit[0])
     assert m["collisions"] == 0 and m["h_min"] >= 0.0
+
+
+class MavsdkGroundStation(threading.Thread):
+    """An unmodified MAVSDK (native binding) on the formation vehicle's port: uploads
+    MAVSDK_LEGS as a mission with a speed, starts it, waits (on MAVSDK's own telemetry) until
+    the centroid is at the last leg, then sends ``goto_location`` to GOTO."""
+
+    def __init__(self, port: int) -> None:
+        super().__init__(daemon=True)
+        self.port = port
+        self.done: list[str] = []
+        self.error: str | None = None
+
+    def run(self) -> None:
+        try:
+            self._run()
+        except Exception as exc:  # noqa: BLE001 - reported by the test
+            self.error = repr(exc)
+
+    def _run(self) -> None:
+        import mavsdk
+        from mavsdk.plugins.action import Action
+        from mavsdk.plugins.mission import Mission, MissionItem, MissionPlan
+        from mavsdk.plugins.telemetry import Telemetry
+
+        cfg = mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION)
+        m = mavsdk.Mavsdk(cfg)
+        try:
+            m.add_any_connection(f"udpout://127.0.0.1:{self.port}")
+            system = m.first_autopilot(60.0)
+            assert system is not None, "MAVSDK found no autopilot"
+            geo_cfg = AutopilotConfig()
+            items = []
+            for e, n, u in MAVSDK_LEGS:
+                lat, lon = geo.latlon_e7(geo_cfg, frames.enu_to_ned(np.array([e, n, u])))
+                items.append(MissionItem(
+                    latitude_deg=lat / 1e7, longitude_deg=lon / 1e7, relative_altitude_m=u,
+                    speed_m_s=2.0, is_fly_through=False, acceptance_radius_m=0.5))
+            mission = Mission(system)
+            mission.upload_mission(MissionPlan(items))
+            self.done.append("upload")
+            mission.start_mission()
+            self.done.append("start")
+            tel = Telemetry(system)
+            last = MAVSDK_LEGS[-1]
+            deadline = time.monotonic() + 120.0
+            while time.monotonic() < deadline:
+                p = tel.position()
+                if np.isfinite(p.latitude_deg):
+                    ned = geo.ned_from_latlon(geo_cfg, p.latitude_deg, p.longitude_deg)
+                    if np.hypot(ned[1] - last[0], ned[0] - last[1]) < 0.3:
+                        break
+                time.sleep(0.05)
+            else:
+                raise AssertionError("MAVSDK never saw the formation at the last leg")
+            e, n, u = GOTO
+            lat, lon = geo.latlon_e7(geo_cfg, frames.enu_to_ned(np.array([e, n, u])))
+            Action(system).goto_location(lat / 1e7, lon / 1e7, geo_cfg.home_alt + u,
+                                         float("nan"))
+            self.done.append("goto")
+        finally:
+            m.destroy()
+
+
+MAVSDK_LEGS = [(6.0, 2.0, 4.0), (6.0, 6.0, 4.0)]
+GOTO = (2.0, 6.0, 4.5)
+
+
+def test_mavsdk_uploads_starts_and_sends_the_formation_somewhere(tmp_path: Path) -> None:
+    pytest.importorskip("mavsdk")
+    base = load_scenario(ROOT / "scenarios" / "course8.toml")
+    sc = with_overrides(base, mission={"speed_mps": 1.5, "waypoint": [
+        {"centroid": [2.0, 2.0, 4.0], "hold_s": 1.0}]})
+    path = tmp_path / "wait8.toml"
+    path.write_text(dump_toml(sc.to_toml_dict()))
+    sc = load_scenario(path)
+    off = free_port_offset()
+    gs = MavsdkGroundStation(FORMATION_PORT + off)
+    gs.start()
+    try:  # MAVSDK does not sign: a swarm whose links are unsigned (--no-signing)
+        rec, facts = run_distributed(
+            sc, tmp_path / "run", "dcbf", None, 70.0, port_offset=off, show_progress=False,
+            signing=SigningChoice(enabled=False), processes=2,
+            formation_port=FORMATION_PORT + off,
+        )
+    finally:
+        gs.join(10)
+    assert gs.error is None, gs.error
+    assert gs.done == ["upload", "start", "goto"]
+    # MAVSDK's goto on a PX4 autopilot switches to HOLD (AUTO.LOITER) before DO_REPOSITION
+    kinds = facts["formation_commands"]
+    assert kinds[0] == kinds[-1] == "mission" and set(kinds) <= {"mission", "hold"}, kinds
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], 70.0)
+    centroid = ser.p.mean(axis=1)
+    k = 0
+    for wp in [*MAVSDK_LEGS, GOTO]:
+        d = np.linalg.norm(centroid[k:] - np.array(wp), axis=1)
+        hit = np.flatnonzero(d <= 0.5)
+        assert hit.size, f"the centroid never came within 0.5 m of {wp} (closest {d.min():.2f})"
+        k += int(hit[0])
+    assert m["collisions"] == 0 and m["h_min"] >= 0.0
