@@ -134,11 +134,18 @@ class FormationVehicle:
                 self._broadcast(m)
 
     def _take(self, data: bytes, addr: tuple[str, int]) -> None:
+        """One datagram: whole frames only (a datagram's leftover bytes are a bad frame,
+        dropped, never joined with the next datagram's)."""
         try:
             msgs = self.mav.parse_buffer(data) or []
         except Exception:  # noqa: BLE001 - pymavlink raises many kinds on garbage
+            msgs = None
+        if msgs is None or self.mav.buf_len() > 0:
             self.bad_frames += 1
-            return
+            self.mav.buf, self.mav.buf_index = bytearray(), 0
+            self.mav.expected_length = M.HEADER_LEN_V1 + 2
+            if msgs is None:
+                return
         for m in msgs:
             if m.get_type() == "BAD_DATA":
                 self.bad_frames += 1
