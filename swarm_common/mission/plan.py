@@ -19,11 +19,13 @@ p''' = P''' sigma_t^3 + 3 P'' sigma_t sigma_tt + P' sigma_ttt with sigma_t = sig
 from __future__ import annotations
 
 import bisect
+import cmath
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from swarm_common.jit import kernel
 from swarm_common.mission.config import MissionConfig, MissionError
 from swarm_common.mission.profile import SIGMA1_PEAK, sigma_jet, sigma_jets
 
@@ -101,47 +103,6 @@ def _positions(pose: Pose, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def _sigma_derivs(start: Pose, end: Pose, sig: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(4, n, N, 3): P, dP/dsigma, d2P/dsigma2, d3P/dsigma3 (m) of every agent (offsets ``q``
-    (N, 3)) at each ``sig`` (n,) along the leg ``start`` -> ``end``."""
-    dc = end.centroid - start.centroid
-    ds = end.scale - start.scale
-    dpsi = end.yaw_rad - start.yaw_rad
-    sig = np.asarray(sig, dtype=float)
-    scale = start.scale + sig * ds  # (n,)
-    base = np.exp(1j * (start.yaw_rad + sig * dpsi))[:, None] * (q[:, 0] + 1j * q[:, 1])[None]
-    c_xy = complex(start.centroid[0], start.centroid[1])
-    dc_xy = complex(dc[0], dc[1])
-    s_col = scale[:, None]
-    xy = (
-        c_xy + sig[:, None] * dc_xy + s_col * base,
-        dc_xy + (ds + 1j * s_col * dpsi) * base,
-        (2j * ds * dpsi - s_col * dpsi**2) * base,
-        (-3.0 * ds * dpsi**2 - 1j * s_col * dpsi**3) * base,
-    )
-    out = np.zeros((4, sig.shape[0], q.shape[0], 3))
-    for k in range(4):
-        out[k, ..., 0] = xy[k].real
-        out[k, ..., 1] = xy[k].imag
-    out[0, ..., 2] = start.centroid[2] + sig[:, None] * dc[2] + s_col * q[None, :, 2]
-    out[1, ..., 2] = dc[2] + ds * q[None, :, 2]
-    return out
-
-
-def _chain(p: np.ndarray, st: np.ndarray) -> np.ndarray:
-    """(4, n, N, 3) time jet [p, p', p'', p'''] from the sigma jet ``p`` (4, n, N, 3) and the
-    time derivatives of sigma ``st`` (n, 4) = [sigma, sigma_t, sigma_tt, sigma_ttt]."""
-    s1, s2, s3 = (st[:, k, None, None] for k in (1, 2, 3))
-    return np.stack(
-        (
-            p[0],
-            p[1] * s1,
-            p[2] * s1**2 + p[1] * s2,
-            p[3] * s1**3 + 3.0 * p[2] * s1 * s2 + p[1] * s3,
-        )
-    )
-
-
 def _moves(start: Pose, end: Pose) -> bool:
     return bool(
         np.max(np.abs(end.centroid - start.centroid)) > _STILL
@@ -163,8 +124,17 @@ def leg_duration(start: Pose, end: Pose, q: np.ndarray, limits: Limits, cruise: 
     turn = abs(end.yaw_rad - start.yaw_rad)
     n = max(SAMPLES_PER_LEG, int(math.ceil(32.0 * SIGMA1_PEAK * turn)) + 1)
     jets = sigma_jets(np.linspace(0.0, 1.0, n))  # tau derivatives = time derivatives at T = 1
-    unit = _chain(_sigma_derivs(start, end, jets[:, 0], q), jets)
-    peak = np.max(np.linalg.norm(unit[1:], axis=-1), axis=(1, 2)) if q.shape[0] else np.zeros(3)
+    q = np.ascontiguousarray(q, dtype=float)
+    peak = np.zeros(3)
+    out = np.empty((q.shape[0], 12))
+    for st in jets:  # the agents' time jets at T = 1 (the one implementation of the jet)
+        agent_xi_kernel(start.centroid, end.centroid - start.centroid, start.scale,
+                        end.scale - start.scale, start.yaw_rad, end.yaw_rad - start.yaw_rad,
+                        q, np.ascontiguousarray(st), out)
+        for k in range(3):
+            if q.shape[0]:
+                peak[k] = max(peak[k], float(np.max(np.linalg.norm(
+                    out[:, 3 * k + 3:3 * k + 6], axis=1))))
     centroid_peak = float(np.linalg.norm(end.centroid - start.centroid)) * SIGMA1_PEAK
     t = max(
         peak[0] / limits.max_speed_mps,
@@ -248,14 +218,20 @@ class MissionPlan:
         return c, s, y
 
     def _xi(self, t: float, q: np.ndarray) -> np.ndarray:
+        """(N, 12) the jets of the agents of offsets ``q`` (N, 3) at ``t`` (compiled:
+        :func:`agent_xi_kernel`, one call for all of them)."""
         pose, leg, tau = self._locate(t)
         out = np.zeros((q.shape[0], 12))
         if leg is None:
             out[:, 0:3] = _positions(pose, q)
             return out
-        st = self._sigma_time(leg, tau)
-        jet = _chain(_sigma_derivs(leg.start, leg.end, st[:1], q), st[None, :])[:, 0]
-        return np.concatenate(list(jet), axis=-1)
+        d = leg.duration_s
+        s0, s1, s2, s3 = sigma_jet(tau)
+        st = np.array((s0, s1 / d, s2 / (d * d), s3 / (d * d * d)))
+        a, b = leg.start, leg.end
+        agent_xi_kernel(a.centroid, b.centroid - a.centroid, a.scale, b.scale - a.scale,
+                        a.yaw_rad, b.yaw_rad - a.yaw_rad, np.ascontiguousarray(q), st, out)
+        return out
 
     def all_xi(self, t: float) -> np.ndarray:
         """(N, 12): every agent's [p, p', p'', p'''] (m, m/s, m/s^2, m/s^3) at ``t`` (s)."""
@@ -357,3 +333,35 @@ def build_plan(
         legs.append(leg)
         t0, prev = leg.departure_s, pose
     return MissionPlan(legs=tuple(legs), start_pose=start, shape_offsets=q)
+
+
+@kernel
+def agent_xi_kernel(
+    c0: np.ndarray, dc: np.ndarray, s0: float, ds: float, psi0: float, dpsi: float,
+    q: np.ndarray, st: np.ndarray, out: np.ndarray,
+) -> None:
+    """Every agent's time jet [p, ṗ, p̈, p⃛] into the rows of ``out`` (N, 12) on a moving
+    leg (module docstring): centroid ``c0`` + σ ``dc``, scale ``s0`` + σ ``ds``, yaw ``psi0`` +
+    σ ``dpsi`` (rad), offsets ``q`` (N, 3) m, ``st`` = [σ, σ_t, σ_tt, σ_ttt] (1/s^k)."""
+    sig, s1, s2, s3 = st[0], st[1], st[2], st[3]
+    scale = s0 + sig * ds
+    e = cmath.exp(complex(0.0, psi0 + sig * dpsi))
+    c_xy = complex(c0[0], c0[1])
+    dc_xy = complex(dc[0], dc[1])
+    k1 = complex(ds, scale * dpsi)
+    k2 = complex(-scale * dpsi * dpsi, 2.0 * ds * dpsi)
+    k3 = complex(-3.0 * ds * dpsi * dpsi, -scale * dpsi * dpsi * dpsi)
+    for i in range(q.shape[0]):
+        base = e * complex(q[i, 0], q[i, 1])
+        p0 = c_xy + sig * dc_xy + scale * base
+        p1 = dc_xy + k1 * base
+        p2 = k2 * base
+        p3 = k3 * base
+        t1 = p1 * s1
+        t2 = p2 * s1 * s1 + p1 * s2
+        t3 = p3 * s1 * s1 * s1 + 3.0 * p2 * s1 * s2 + p1 * s3
+        z1 = dc[2] + ds * q[i, 2]
+        out[i, 0], out[i, 1], out[i, 2] = p0.real, p0.imag, c0[2] + sig * dc[2] + scale * q[i, 2]
+        out[i, 3], out[i, 4], out[i, 5] = t1.real, t1.imag, z1 * s1
+        out[i, 6], out[i, 7], out[i, 8] = t2.real, t2.imag, z1 * s2
+        out[i, 9], out[i, 10], out[i, 11] = t3.real, t3.imag, z1 * s3
