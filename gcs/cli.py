@@ -70,7 +70,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     if faulted is not None:
         sc = _load(str(faulted), sc.allow_infeasible)
     if not args.inproc:
-        from gcs.mission.distributed import cli_run
+        from gcs.mission.run_cli import cli_run
 
         return cli_run(args, sc)
     from gcs.mission.inproc import run_inproc

@@ -17,7 +17,6 @@ import json
 import logging
 import resource
 import shutil
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -25,31 +24,28 @@ from typing import Any
 
 import zenoh
 
-from gcs.formation.vehicle import FORMATION_PORT
-from gcs.mission.formation_link import formation_hook
 from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
 from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
 from gcs.mission.recorder import Recorder
 from gcs.mission.router import open_router
-from gcs.mission.run_output import print_result, write_run
+from gcs.mission.run_output import write_run
 from gcs.mission.score import (
     default_out_dir,
-    late_steps,
     recorded_metrics,
     recorder_series,
     score_run,
 )
+from gcs.mission.step_hooks import each, formation_hook, land_sender
 from gcs.mission.warmup import compile_kernels
 from offboard.daemon.packing import parse_agents
-from swarm_common import wire
-from swarm_common.enums import CommandKind, DefaultStreams
+from swarm_common.enums import DefaultStreams
 from swarm_common.scenario.model import Scenario
 from swarm_common.zenoh_session import write_swarm_security
 
 log = logging.getLogger(__name__)
 # scoring lives in gcs.mission.score; these names stay importable from here
-__all__ = ["MissionError", "cli_run", "default_out_dir", "recorded_metrics", "recorder_series",
+__all__ = ["MissionError", "default_out_dir", "recorded_metrics", "recorder_series",
            "run_and_score", "run_distributed"]
 
 
@@ -164,7 +160,7 @@ def run_distributed(
         for name, argv in spec.processes():
             group.start(name, argv, env=spec.child_env(name), gated=spec.is_daemon(name))
         bar = Progress(duration, label=str(method)) if show_progress else None
-        land = None if land_at is None else _land_sender(router, spec.swarm_name, land_at,
+        land = None if land_at is None else land_sender(router, spec.swarm_name, land_at,
                                                           sc.control_dt)
         hooks = [h for h in (land, on_step, formation and formation[0]) if h is not None]
         checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
@@ -172,7 +168,7 @@ def run_distributed(
             spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
         facts.update(
             _supervise(rec, group, sc.control_dt, victim, kill_agent, kill_at, bar,
-                       stall_timeout, out_dir, _each(hooks), facts, checkpoint)
+                       stall_timeout, out_dir, each(hooks), facts, checkpoint)
         )
         at_first = facts.get("processes_at_first_step", {}).get(RUNNER_NAME)
         if at_first is not None:
@@ -227,35 +223,6 @@ def _remove(path: Path | None) -> None:
     run)."""
     if path is not None:
         shutil.rmtree(path, ignore_errors=True)
-
-
-def _each(hooks: list[Callable[[int], None]]) -> Callable[[int], None] | None:
-    """One on_step callback that calls every one of ``hooks`` in order (None: none)."""
-    if not hooks:
-        return None
-
-    def call(k: int) -> None:
-        for hook in hooks:
-            hook(k)
-
-    return call
-
-
-def _land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callable[[int], None]:
-    """on_step callback: (re)publish the land command every 0.5 s (wall) from step 1 on
-    (every agent subscribed) until the run is 1 s past ``land_at``; the daemons keep the
-    first one they receive."""
-    key = wire.key_cmd(swarm, CommandKind.LAND)
-    payload = wire.encode(wire.Command(kind=CommandKind.LAND, at_s=float(land_at)))
-    last = [0.0]
-
-    def send(k: int) -> None:
-        now = time.monotonic()
-        if k >= 1 and k * dt <= land_at + 1.0 and now - last[0] >= 0.5:
-            session.put(key, payload)
-            last[0] = now
-
-    return send
 
 
 def _supervise(
@@ -400,49 +367,3 @@ def run_and_score(
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
     return doc
-
-
-def cli_run(args: Any, sc: Scenario) -> int:
-    """``gcs mission run SCENARIO`` (distributed). Exit 2: bad input or a busy port;
-    1: a child died or the run stalled (see :mod:`gcs.cli` for the table)."""
-    method = str(args.method or sc.controller.method)
-    duration = float(sc.run.duration_s if args.duration is None else args.duration)
-    if args.kill_agent is not None and args.kill_agent not in sc.ids:
-        print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
-              f"{sc.ids}", file=sys.stderr)
-        return 2
-    if args.kill_at is not None and args.kill_agent is None:
-        print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
-        return 2
-    try:
-        out = Path(args.out) if args.out else default_out_dir(sc, method)
-        signing = SigningChoice.from_args(args)
-    except (ValueError, LaunchError) as exc:
-        print(f"gcs mission run: {exc}", file=sys.stderr)
-        return 2
-    try:
-        doc = run_and_score(
-            sc, out, method, args.seed, duration, realtime=args.realtime,
-            port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
-            show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
-            processes=getattr(args, "processes", None),
-            default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
-            formation_port=(FORMATION_PORT + args.port_offset
-                            if getattr(args, "formation_vehicle", False) else None),
-        )
-    except LaunchError as exc:
-        print(f"gcs mission run: {exc}", file=sys.stderr)
-        return 2
-    except MissionError as exc:
-        print(f"gcs mission run: {exc}", file=sys.stderr)
-        return 1
-    log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
-    if doc["run"]["failed_agents"]:
-        log.warning("failed agents: %s", doc["run"]["failed_agents"])
-    if (late := late_steps(doc)) and not args.realtime:
-        log.warning("the simulator stepped %d time(s) without every answer (lockstep "
-                    "timeouts: a daemon too slow for this machine), so this run may differ "
-                    "from the in-process run; fewer daemon processes (--processes N) avoid "
-                    "it", late)
-    print_result(doc, args.json)
-    return 0

@@ -1,7 +1,10 @@
-"""The formation vehicle in a distributed run: served from the runner's step hook."""
+"""The distributed runner's step hooks (``on_step(k)``, called while the run goes): the
+land-all sender, and the formation vehicle (:mod:`gcs.formation`) served from the recorder's
+truth."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -9,6 +12,7 @@ from typing import Any
 from gcs.formation.vehicle import FormationVehicle
 from gcs.mission.recorder import Recorder
 from swarm_common import wire
+from swarm_common.enums import CommandKind
 from swarm_common.scenario.spec import Scenario
 from swarm_common.signing import load_key
 
@@ -36,3 +40,32 @@ def formation_hook(
         fv.serve(row * sc.control_dt, p, v)
 
     return on_step, fv
+
+
+def each(hooks: list[Callable[[int], None]]) -> Callable[[int], None] | None:
+    """One on_step callback that calls every one of ``hooks`` in order (None: none)."""
+    if not hooks:
+        return None
+
+    def call(k: int) -> None:
+        for hook in hooks:
+            hook(k)
+
+    return call
+
+
+def land_sender(session: Any, swarm: str, land_at: float, dt: float) -> Callable[[int], None]:
+    """on_step callback: (re)publish the land command every 0.5 s (wall) from step 1 on
+    (every agent subscribed) until the run is 1 s past ``land_at``; the daemons keep the
+    first one they receive."""
+    key = wire.key_cmd(swarm, CommandKind.LAND)
+    payload = wire.encode(wire.Command(kind=CommandKind.LAND, at_s=float(land_at)))
+    last = [0.0]
+
+    def send(k: int) -> None:
+        now = time.monotonic()
+        if k >= 1 and k * dt <= land_at + 1.0 and now - last[0] >= 0.5:
+            session.put(key, payload)
+            last[0] = now
+
+    return send

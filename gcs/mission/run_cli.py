@@ -1,0 +1,65 @@
+"""``gcs mission run SCENARIO`` without ``--inproc``: one distributed run from the command
+line, its exit status and what it prints (the table of exit codes: :mod:`gcs.cli`)."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+from gcs.formation.vehicle import FORMATION_PORT
+from gcs.mission.distributed import MissionError, run_and_score
+from gcs.mission.launch_spec import LaunchError, SigningChoice
+from gcs.mission.run_output import print_result
+from gcs.mission.score import default_out_dir, late_steps
+from swarm_common.enums import DefaultStreams
+from swarm_common.scenario.model import Scenario
+
+log = logging.getLogger(__name__)
+
+
+def cli_run(args: Any, sc: Scenario) -> int:
+    """``gcs mission run SCENARIO`` (distributed). Exit 2: bad input or a busy port;
+    1: a child died or the run stalled (see :mod:`gcs.cli` for the table)."""
+    method = str(args.method or sc.controller.method)
+    duration = float(sc.run.duration_s if args.duration is None else args.duration)
+    if args.kill_agent is not None and args.kill_agent not in sc.ids:
+        print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
+              f"{sc.ids}", file=sys.stderr)
+        return 2
+    if args.kill_at is not None and args.kill_agent is None:
+        print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
+        return 2
+    try:
+        out = Path(args.out) if args.out else default_out_dir(sc, method)
+        signing = SigningChoice.from_args(args)
+    except (ValueError, LaunchError) as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 2
+    try:
+        doc = run_and_score(
+            sc, out, method, args.seed, duration, realtime=args.realtime,
+            port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
+            show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
+            processes=getattr(args, "processes", None),
+            default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
+            formation_port=(FORMATION_PORT + args.port_offset
+                            if getattr(args, "formation_vehicle", False) else None),
+        )
+    except LaunchError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 2
+    except MissionError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return 1
+    log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
+    if doc["run"]["failed_agents"]:
+        log.warning("failed agents: %s", doc["run"]["failed_agents"])
+    if (late := late_steps(doc)) and not args.realtime:
+        log.warning("the simulator stepped %d time(s) without every answer (lockstep "
+                    "timeouts: a daemon too slow for this machine), so this run may differ "
+                    "from the in-process run; fewer daemon processes (--processes N) avoid "
+                    "it", late)
+    print_result(doc, args.json)
+    return 0
