@@ -33,7 +33,6 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
-from typing import Any
 
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
@@ -85,22 +84,6 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _run_one(job: tuple[str, bool, str, int, float | None]) -> dict[str, Any]:
-    from gcs.mission.inproc import run_inproc
-    from swarm_common.scenario.model import load_scenario
-
-    path, allow_infeasible, method, seed, duration = job
-    sc = load_scenario(path, allow_infeasible)
-    return run_inproc(sc, method, seed=seed, duration=duration).metrics
-
-
-def _gain_lines(sc: Scenario) -> list[str]:
-    from offboard.agent.factory import FollowerAgent, make_agent
-
-    ag = make_agent(sc, sc.follower_ids[0])
-    return ag.gains.lines() if isinstance(ag, FollowerAgent) else []
-
-
 def cmd_router(args: argparse.Namespace) -> int:
     from gcs.mission.router import run_router
 
@@ -142,92 +125,12 @@ def add_dashboard(sub: argparse._SubParsersAction) -> None:
     add_dashboard_parser(sub)
 
 
-Outcome = tuple[dict[str, Any], dict[str, Any], list[str]]  # metrics, series, gains
-
-
-def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome:
-    from gcs.mission.inproc import run_inproc
-
-    metrics: dict[str, Any] = {}
-    series: dict[str, Any] = {}
-    gains: list[str] = []
-    for m in METHODS:
-        log.info("running %s in process ...", m)
-        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
-        res.save(out / m)
-        metrics[m], series[m], gains = res.metrics, res.series.as_dict(), res.gains
-    return metrics, series, gains
-
-
-def _compare_distributed(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome | int:
-    """The three distributed runs, or an exit code (2 busy port, 1 a run failed)."""
-    import numpy as np
-
-    from gcs.mission.distributed import MissionError, run_and_score
-    from gcs.mission.launch_spec import LaunchError
-
-    metrics: dict[str, Any] = {}
-    series: dict[str, Any] = {}
-    duration = float(sc.run.duration_s if args.duration is None else args.duration)
-    for m in METHODS:
-        log.info("running %s: vehicle-sim + %d offboard daemons, lockstep ...", m, sc.n)
-        try:
-            doc = run_and_score(sc, out / m, m, args.seed, duration,
-                                port_offset=args.port_offset, show_progress=True)
-        except LaunchError as exc:
-            print(f"gcs mission compare: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        except MissionError as exc:
-            print(f"gcs mission compare: {exc}", file=sys.stderr)
-            return EXIT_RUN_FAILED
-        metrics[m] = doc["metrics"]
-        with np.load(out / m / "series.npz") as z:
-            series[m] = {k: z[k] for k in z.files}
-    return metrics, series, _gain_lines(sc)
-
-
-def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
-    from concurrent.futures import ProcessPoolExecutor
-
-    base = sc.seed if args.seed is None else args.seed
-    jobs = [(args.scenario, sc.allow_infeasible, m, base + s, args.duration) for m in METHODS
-            for s in range(args.seeds)]
-    log.info("seed sweep: %d runs ...", len(jobs))
-    with ProcessPoolExecutor(max_workers=args.jobs) as ex:
-        res_all = list(ex.map(_run_one, jobs))
-    return {m: [r for (_, _, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
-            for m in METHODS}
-
-
 def cmd_mission_compare(args: argparse.Namespace) -> int:
     sc = _load(args.scenario, args.allow_infeasible)
     _check_run_args(args, sc, "mission compare")
-    from gcs.report.comparison import compare_table, safety_table, write_report
-    from gcs.report.sweep import seeds_table
-    from offboard.estimation.bearing import formation_from_scenario
-    from swarm_common.scenario.mission_check import plan_for
+    from gcs.mission.compare_cli import compare
 
-    out = Path(args.out or "runs/compare")
-    outcome = (_compare_inproc if args.inproc else _compare_distributed)(sc, args, out)
-    if isinstance(outcome, int):
-        return outcome
-    metrics, series, gains = outcome
-    seeds = _seed_sweep(sc, args) if args.seeds and args.seeds > 1 else None
-    form = formation_from_scenario(sc)
-    d_safe = sc.controller.d_safe_m
-    path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
-                        gains, seeds,
-                        mode="in-process" if args.inproc else
-                        "distributed (vehicle-sim + one offboard process per agent, lockstep)",
-                        tau_safe_s=sc.controller.tau_safe_s,
-                        deadline_s=sc.run.formation_deadline_s,
-                        mission=plan_for(sc) if sc.mission is not None else None)
-    print(compare_table(metrics, d_safe))
-    print(safety_table(metrics))
-    if seeds:
-        print(seeds_table(seeds, d_safe))
-    log.info("wrote %s", path)
-    return EXIT_OK
+    return compare(sc, args)
 
 
 def _seconds(text: str, allow_zero: bool) -> float:

@@ -10,6 +10,7 @@ Entry points:
 
 Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.procs` (child
 processes), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
-:mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``);
+:mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
+:mod:`.compare_cli` (``gcs mission compare``);
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`).
 """
