@@ -243,7 +243,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     add_fault_flags(d)
     _add_allow_infeasible(r)
     r.set_defaults(func=cmd_mission_run)
-    c = msub.add_parser("compare", help="run rcbf, apf and none and write a report")
+    c = msub.add_parser("compare", help="run every method and write a report")
     c.add_argument("scenario")
     c.add_argument("--inproc", action="store_true")
     c.add_argument("--seed", type=_seed, default=None)
@@ -255,6 +255,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
     c.add_argument("--port-offset", type=_port_offset, default=0,
                    help="distributed: shift every port")
+    c.add_argument("--processes", type=_int_in(1, 10_000), default=None, metavar="N",
+                   help="distributed: pack the daemons into N processes (default: one per "
+                   "agent)")
     _add_allow_infeasible(c)
     c.set_defaults(func=cmd_mission_compare)
     from gcs.mission.sweep import add_sweep_parser

@@ -64,7 +64,8 @@ def _compare_distributed(sc: Scenario, args: argparse.Namespace, out: Path) -> O
         log.info("running %s: vehicle-sim + %d offboard daemons, lockstep ...", m, sc.n)
         try:
             doc = run_and_score(sc, out / m, m, args.seed, duration,
-                                port_offset=args.port_offset, show_progress=True)
+                                port_offset=args.port_offset, show_progress=True,
+                                processes=getattr(args, "processes", None))
         except LaunchError as exc:
             print(f"gcs mission compare: {exc}", file=sys.stderr)
             return EXIT_USAGE
@@ -90,6 +91,13 @@ def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[s
             for m in METHODS}
 
 
+def _layout(args: argparse.Namespace) -> str:
+    """How a distributed comparison ran, for the report."""
+    n = getattr(args, "processes", None)
+    daemons = "one offboard process per agent" if n is None else f"{n} offboard processes"
+    return f"distributed (vehicle-sim + {daemons}, lockstep)"
+
+
 def compare(sc: Scenario, args: argparse.Namespace) -> int:
     """``gcs mission compare`` of a loaded, checked scenario: every method's run, the
     report, the tables on stdout; the exit code (0, 1 a run failed, 2 a busy port)."""
@@ -108,8 +116,7 @@ def compare(sc: Scenario, args: argparse.Namespace) -> int:
     d_safe = sc.controller.d_safe_m
     path = write_report(out, sc.name, metrics, series, form.follower_idx, form.edges, d_safe,
                         gains, seeds,
-                        mode="in-process" if args.inproc else
-                        "distributed (vehicle-sim + one offboard process per agent, lockstep)",
+                        mode="in-process" if args.inproc else _layout(args),
                         tau_safe_s=sc.controller.tau_safe_s,
                         deadline_s=sc.run.formation_deadline_s,
                         mission=plan_for(sc) if sc.mission is not None else None)

@@ -138,7 +138,7 @@ def test_cli_mission_run_json(tmp_path: Path) -> None:
     off = free_port_offset()
     out = subprocess.run(
         [sys.executable, "-m", "gcs.cli", "mission", "run", CUBE8, "--duration", "1.0",
-         "--json", "--out", str(tmp_path), "--port-offset", str(off)],
+         "--json", "--out", str(tmp_path), "--port-offset", str(off), "--processes", "2"],
         cwd=ROOT, capture_output=True, text=True, timeout=180,
     )
     assert out.returncode == 0, out.stderr[-2000:]
@@ -157,7 +157,7 @@ def test_cli_compare_distributed_writes_report(tmp_path: Path) -> None:
     off = free_port_offset()
     out = subprocess.run(
         [sys.executable, "-m", "gcs.cli", "mission", "compare", CUBE8, "--duration", "1.0",
-         "--out", str(tmp_path), "--port-offset", str(off)],
+         "--out", str(tmp_path), "--port-offset", str(off), "--processes", "2"],
         cwd=ROOT, capture_output=True, text=True, timeout=540,
     )
     assert out.returncode == 0, out.stderr[-2000:]

@@ -28,7 +28,7 @@ FORCE_DISARM = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM param2: disarm even in fl
 
 def _run(tmp_path: Path, *extra: str) -> subprocess.Popen[str]:
     argv = [sys.executable, "-m", "gcs.cli", "mission", "run", CUBE8, "--out",
-            str(tmp_path / "run"), "--json", *extra]  # fmt: skip
+            str(tmp_path / "run"), "--json", "--processes", "2", *extra]  # fmt: skip
     return subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)  # fmt: skip
 
