@@ -21,6 +21,7 @@ from conftest import ROOT, free_port_offset
 from gcs.mission.distributed import recorded_metrics, run_distributed
 from gcs.mission.inproc import run_inproc
 from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.formation_frame import turn_xi
 from swarm_common.scenario.mission_check import plan_for
 from swarm_common.scenario.model import dump_toml, load_scenario, with_overrides
 
@@ -45,13 +46,20 @@ def short_mission(tmp_path: Path):
 
 
 def observer_bound(sc) -> float:
-    """The bound, with the snap by central differences of the plan's jerk (h = 1 ms)."""
+    """The bound, with the snap of the followers' desired paths in the formation frame (the
+    observer's frame) by central differences of their turned jerk (h = 1 ms)."""
     plan, form = plan_for(sc), formation_from_scenario(sc)
     f, h = form.follower_idx, 1e-3
-    snap = max(
-        float(np.linalg.norm((plan.all_xi(t + h)[f, 9:12] - plan.all_xi(t - h)[f, 9:12]) / (2 * h)))
-        for t in np.arange(h, plan.end_s, 0.01)
-    )
+
+    def jerk_f(t: float) -> np.ndarray:
+        xi, yaw = plan.all_xi(t), plan.yaw_jet(t)
+        out = np.empty((len(f), 12))
+        for n, i in enumerate(f):
+            turn_xi(xi[i], yaw, -1.0, out[n])
+        return out[:, 9:12]
+
+    snap = max(float(np.linalg.norm((jerk_f(t + h) - jerk_f(t - h)) / (2 * h)))
+               for t in np.arange(h, plan.end_s, 0.01))
     return snap / (sc.observer.reference_gain * form.lambda_min) ** 4
 
 
