@@ -44,9 +44,12 @@ from textual.reactive import reactive
 from textual.screen import Screen
 from textual.widgets import Footer, Header
 
+from gcs.formation.steer import FormationSteer
+from swarm_common.mission.config import MissionError
 from swarm_common.wire import Command
 
 from .mavlink_gcs import CommandResult
+from .navigate import CHOICES, command_for
 from .px4modes import COMMANDS
 from .state import DashEvent, SwarmView
 from .widgets import (
@@ -92,6 +95,7 @@ class DashboardApp(App[int]):
         Binding("x", "estop", "E-STOP"),
         Binding("m", "method", "Method"),
         Binding("o", "outage", "Outage"),
+        Binding("n", "navigate", "Navigate"),
         Binding("t", "toggle_target", "One/All"),
         Binding("q", "quit", "Quit"),
     ]
@@ -104,8 +108,10 @@ class DashboardApp(App[int]):
         commander: Any = None,
         poll_s: float = 0.25,
         title: str | None = None,
+        steer: FormationSteer | None = None,
     ) -> None:
         super().__init__()
+        self.steer = steer  # a mission scenario's formation steering (n), else None
         self.source = source
         self.commander = commander
         self.poll_s = poll_s
@@ -303,6 +309,29 @@ class DashboardApp(App[int]):
             ChoiceScreen(f"Collision avoidance for {who}:", [(m, m) for m in METHODS]),
             done,
         )
+
+    def action_navigate(self) -> None:
+        """The navigation menu (gcs.dashboard.navigate): a step, scale or turn of the whole
+        formation, hold or resume; needs a launched scenario with a [mission] and Zenoh."""
+        up = getattr(self.commander, "zenoh_up", None)
+        t_now = getattr(self.commander, "mission_time", lambda: None)()
+        steer = self.steer
+        if steer is None or not (callable(up) and up()) or t_now is None:
+            self.log_event(0, "cmd", "navigation needs a launched scenario with a [mission] "
+                           "and a live Zenoh feed", WARNING)
+            return
+
+        def done(choice: str | None) -> None:
+            if not choice:
+                return
+            try:
+                cmd = command_for(steer, choice, float(t_now))
+            except MissionError as exc:
+                self.log_event(0, "cmd", f"navigation {choice} refused: {exc}", ERROR)
+                return
+            self.send_zenoh(cmd)
+
+        self.push_screen(ChoiceScreen("Fly the formation:", CHOICES), done)
 
     def action_outage(self) -> None:
         ids = self.targets()

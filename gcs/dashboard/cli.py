@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from gcs.formation.steer import FormationSteer
 from gcs.mission.launch_spec import add_signing_flags
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
@@ -147,7 +148,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     commander = LiveCommander(link, feed, timeout_s=args.ack_timeout, retries=args.retries)
     title = f"{sc.name} · offset {offset}" + (" · launched" if launch else "")
     title += " · signed" if link.signed else ""
-    return DashboardApp(source, commander, title=title), source, launch, title
+    steer = FormationSteer(sc) if sc.mission is not None else None
+    return DashboardApp(source, commander, title=title, steer=steer), source, launch, title
 
 
 def run_dashboard(args: argparse.Namespace) -> int:

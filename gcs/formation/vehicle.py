@@ -6,8 +6,8 @@ offset on the ground-station host. It sees the formation's centroid as the vehic
 It uploads, downloads and starts a mission, sends it somewhere (``DO_REPOSITION``), holds it
 (``DO_SET_MODE`` AUTO.LOITER), changes its speed (``DO_CHANGE_SPEED``) and its scale (the
 ``FORM_SCALE`` parameter). Each of these becomes a Zenoh ``mission`` or ``hold`` command to
-the leaders, timed :data:`COMMAND_LEAD_S` of mission time ahead so that every leader applies
-it at the same step (:mod:`swarm_common.mission.timeline`).
+the leaders, timed :data:`gcs.formation.steer.COMMAND_LEAD_S` of mission time ahead so
+that every leader applies it at the same step (:mod:`swarm_common.mission.timeline`).
 
 The vehicle keeps a replica of the leaders' timeline. It refuses a mission or command that the
 leaders could not fly (a waypoint under the floor, too dense, too fast) with
@@ -21,7 +21,6 @@ signature of that key: the formation is flown only by a ground station that hold
 from __future__ import annotations
 
 import copy
-import json
 import logging
 import math
 import socket
@@ -33,12 +32,10 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
-from gcs.formation.translate import checked, items_to_table, mission_table, yaw_of_heading
+from gcs.formation.steer import FormationSteer
+from gcs.formation.translate import items_to_table, yaw_of_heading
 from swarm_common import frames, px4, wire
-from swarm_common.enums import CommandKind
 from swarm_common.mission.config import MissionError
-from swarm_common.mission.timeline import MissionTimeline
-from swarm_common.scenario.mission_check import mission_limits, mission_shape, plan_for
 from swarm_common.scenario.spec import Scenario
 from swarm_common.signing import setup_signing
 from vehicle_sim.autopilot.config import AutopilotConfig
@@ -50,7 +47,6 @@ log = logging.getLogger(__name__)
 
 FORMATION_SYSID = 200
 FORMATION_PORT = 14560  # + offset; free in the vehicles' port scheme (swarm_common.ports)
-COMMAND_LEAD_S = 1.0  # s of mission time between a command and when the leaders apply it
 HEARTBEAT_S = 1.0
 POSITION_S = 0.25
 REPEATS, REPEAT_S = 3, 0.2  # copies of each command after the first, and their spacing (s)
@@ -66,11 +62,9 @@ class FormationVehicle:
         self, sc: Scenario, publish: Publish, port: int, host: str = "127.0.0.1",
         key: bytes | None = None,
     ) -> None:
-        if sc.mission is None:
-            raise MissionError("the formation vehicle needs a scenario with a [mission]")
         self.sc, self.publish = sc, publish
-        self.base = sc.mission
-        self.timeline = MissionTimeline(plan_for(sc), mission_shape(sc), mission_limits(sc))
+        self.steer = FormationSteer(sc)  # raises MissionError without a [mission]
+        self.base = self.steer.base
         self.geo = AutopilotConfig()
         self.transfer = MissionTransfer(self.geo)
         self.mav = M.MAVLink(None, srcSystem=FORMATION_SYSID, srcComponent=1)
@@ -83,10 +77,6 @@ class FormationVehicle:
         self.t = 0.0  # mission time of the latest truth (s)
         self.centroid = np.full(3, np.nan)
         self.velocity = np.zeros(3)
-        self.scale = 1.0
-        self.yaw_deg = 0.0
-        self.speed = self.base.speed_mps
-        self.holding = False
         self.bad_frames = 0
         self.live = False  # the swarm is stepping (a truth came): commands reach the leaders
         self.sent_commands: list[wire.Command] = []
@@ -207,16 +197,13 @@ class FormationVehicle:
         return out
 
     def _store_table(self) -> dict[str, Any]:
-        return items_to_table(self.geo, self.transfer.stores[mi.MISSION], self.speed,
-                              self.scale, self.yaw_deg, self.base)
+        st = self.steer
+        return items_to_table(self.geo, self.transfer.stores[mi.MISSION], st.speed, st.scale,
+                              st.yaw_deg, self.base)
 
     def _dry_run(self, table: dict[str, Any]) -> None:
         """Refuse (MissionError) what the leaders could not fly from their next rest."""
-        cfg = checked(table)
-        copy.deepcopy(self.timeline).fly(cfg, self._at())
-
-    def _at(self) -> float:
-        return self.t + COMMAND_LEAD_S
+        copy.deepcopy(self.steer).fly(table, self.t)
 
     # -- commands --------------------------------------------------------------------
     def _command(self, m: Any, is_int: bool) -> Any:
@@ -232,7 +219,7 @@ class FormationVehicle:
                 if not (math.isfinite(speed) and 0.0 < speed <= self.base.max_speed_mps):
                     raise MissionError(f"speed {speed!r}: must be in (0, "
                                        f"{self.base.max_speed_mps:g}] m/s")
-                self.speed, result = speed, M.MAV_RESULT_ACCEPTED
+                self.steer.speed, result = speed, M.MAV_RESULT_ACCEPTED
             elif cmd == M.MAV_CMD_DO_SET_MODE:
                 result = self._set_mode(m)
         except MissionError as exc:
@@ -250,35 +237,28 @@ class FormationVehicle:
         frame = int(getattr(m, "frame", M.MAV_FRAME_GLOBAL))
         up = alt if frame in mi.RELATIVE_FRAMES else -geo.down_from_amsl(self.geo, alt)
         if float(m.param1) > 0.0:
-            self.speed = min(float(m.param1), self.base.max_speed_mps)
-        self.yaw_deg = yaw_of_heading(float(m.param4), self.yaw_deg)
-        return self._fly(mission_table(
-            [{"centroid": [east, north, up], "scale": self.scale, "yaw_deg": self.yaw_deg}],
-            self.speed, self.base))
+            self.steer.speed = min(float(m.param1), self.base.max_speed_mps)
+        yaw = yaw_of_heading(float(m.param4), self.steer.yaw_deg)
+        return self._publish_cmd(self.steer.goto(np.array([east, north, up]), self.t, yaw))
 
     def _set_mode(self, m: Any) -> int:
         main, sub = int(m.param2), int(m.param3)
         if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_LOITER:
-            return self._send_command(wire.Command(kind=CommandKind.HOLD, at_s=self._at()),
-                                      lambda: self.timeline.hold(self._at()), True)
+            return self._publish_cmd(self.steer.hold(self.t))
         if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_MISSION:
             return self._fly(self._store_table())
         return M.MAV_RESULT_UNSUPPORTED
 
     def _fly(self, table: dict[str, Any]) -> int:
-        cfg = checked(table)
-        return self._send_command(
-            wire.Command(kind=CommandKind.MISSION, at_s=self._at(), mission=json.dumps(table)),
-            lambda: self.timeline.fly(cfg, self._at()), False)
+        return self._publish_cmd(self.steer.fly(table, self.t))
 
-    def _send_command(self, cmd: wire.Command, apply: Callable[[], float], hold: bool) -> int:
-        """Apply ``cmd`` to the replica (MissionError: denied, nothing sent), then publish it."""
-        start = apply()
+    def _publish_cmd(self, cmd: wire.Command) -> int:
+        """Publish a command the steering accepted (a refused one raised MissionError: the
+        caller answers DENIED, nothing sent), and its repeats later."""
         self.publish(cmd)
         self._pending.append((time.monotonic() + REPEAT_S, cmd, REPEATS))
         self.sent_commands.append(cmd)
-        self.holding = hold
-        log.info("formation vehicle: %s from t=%.2f s", cmd.kind, start)
+        log.info("formation vehicle: %s at t=%.2f s", cmd.kind, cmd.at_s)
         return M.MAV_RESULT_ACCEPTED
 
     def _repeat(self, now: float) -> None:
@@ -296,7 +276,7 @@ class FormationVehicle:
 
     # -- parameters ------------------------------------------------------------------
     def _param_value(self) -> Any:
-        return M.MAVLink_param_value_message(b"FORM_SCALE", self.scale,
+        return M.MAVLink_param_value_message(b"FORM_SCALE", self.steer.scale,
                                              M.MAV_PARAM_TYPE_REAL32, 1, 0)
 
     def _param_set(self, m: Any) -> Any:
@@ -304,27 +284,22 @@ class FormationVehicle:
         if name.rstrip(b"\0") != b"FORM_SCALE":
             return self._param_value()
         value = float(m.param_value)
-        old = self.scale
         try:
             if not (math.isfinite(value) and 0.0 < value <= 10.0):
                 raise MissionError(f"FORM_SCALE {value!r}: must be in (0, 10]")
-            self.scale = value
-            c = self.timeline.plan_at(self._at()).rest_pose(
-                self.timeline.plan_at(self._at()).at_rest_from(self._at())).centroid
-            self._fly(mission_table([{"centroid": [float(x) for x in c], "scale": value,
-                                      "yaw_deg": self.yaw_deg}], self.speed, self.base))
+            self._publish_cmd(self.steer.nudge(self.t, scale_by=value / self.steer.rest_pose(
+                self.t).scale))
         except MissionError as exc:
-            self.scale = old
             log.warning("formation vehicle: FORM_SCALE refused: %s", exc)
         return self._param_value()
 
     # -- telemetry -------------------------------------------------------------------
     def _progress(self) -> int:
-        plan = self.timeline.plan_at(self.t)
+        plan = self.steer.timeline.plan_at(self.t)
         return min(plan.waypoint_at(self.t), max(len(plan.legs) - 1, 0))
 
     def _heartbeat(self) -> Any:
-        sub = px4.SUB_AUTO_LOITER if self.holding else px4.SUB_AUTO_MISSION
+        sub = px4.SUB_AUTO_LOITER if self.steer.holding else px4.SUB_AUTO_MISSION
         custom = (px4.MAIN_AUTO << 16) | (sub << 24)
         base = (mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
                 | mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED

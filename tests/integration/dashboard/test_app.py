@@ -197,3 +197,36 @@ async def test_recorded_rows_and_silent_vehicle():
         assert v.row(6).link_lost and v.row(6).failsafe == "LINK"
         assert v.row(8).status_missing and v.row(8).failsafe == "NO-OFB"
         assert app.query_one(EventLog).count >= 10
+
+
+async def test_navigation_menu_sends_a_checked_mission_command():
+    """n (gcs.dashboard.navigate) on a mission scenario: a step north goes out as one Zenoh
+    "mission" command from the swarm's mission time + 1 s; without a mission it is refused
+    with a line in the event log and nothing is sent."""
+    import json
+    from pathlib import Path
+
+    from dashboard_fakes import FakeCommander as ZenohCommander
+
+    from gcs.formation.steer import FormationSteer
+    from swarm_common.scenario.model import load_scenario
+
+    root = Path(__file__).resolve().parents[3]
+    cmd = ZenohCommander()  # Zenoh up, mission time 4 s
+    app = DashboardApp(recorded_source(), cmd,
+                       steer=FormationSteer(load_scenario(root / "scenarios" / "course8.toml")))
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("n")
+        assert isinstance(app.screen, ChoiceScreen)
+        await pilot.press("enter")  # the first choice: north
+        assert await settle(app, pilot, lambda: cmd.zenoh_calls)
+        c = cmd.zenoh_calls[-1]
+        assert c.kind == "mission" and c.at_s == 5.0
+        assert json.loads(c.mission)["waypoint"][0]["centroid"] == [2.0, 4.0, 4.0]
+    plain = ZenohCommander()
+    app = DashboardApp(recorded_source(), plain)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("n")
+        assert await settle(app, pilot, lambda: "navigation needs" in
+                            "\n".join(app.query_one(EventLog).lines_text))
+        assert plain.zenoh_calls == []
