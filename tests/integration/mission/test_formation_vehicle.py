@@ -31,7 +31,7 @@ pytestmark = pytest.mark.timeout(300)
 MAV = mavutil.mavlink
 WAYPOINTS = [(6.0, 2.0, 4.0), (6.0, 6.0, 4.5), (2.0, 6.0, 4.0)]  # ENU centroids (m)
 BAD = [(6.0, 2.0, 0.3)]  # the formation's lowest layer would be under the floor
-DURATION_S = 40.0
+DURATION_S = 50.0  # s of mission time: 3 legs of about 6 s, and the wall-clock upload
 
 
 class GroundStation(threading.Thread):
@@ -188,6 +188,9 @@ class MavsdkGroundStation(threading.Thread):
 
 
 MAVSDK_LEGS = [(6.0, 2.0, 4.0), (6.0, 6.0, 4.0)]
+# s of mission time: the lockstep run goes on while MAVSDK connects and uploads in wall time
+# (seconds on a loaded machine), then two legs, the go-to and its lead
+MAVSDK_S = 100.0
 GOTO = (2.0, 6.0, 4.5)
 
 
@@ -204,7 +207,7 @@ def test_mavsdk_uploads_starts_and_sends_the_formation_somewhere(tmp_path: Path)
     gs.start()
     try:  # MAVSDK does not sign: a swarm whose links are unsigned (--no-signing)
         rec, facts = run_distributed(
-            sc, tmp_path / "run", "dcbf", None, 70.0, port_offset=off, show_progress=False,
+            sc, tmp_path / "run", "dcbf", None, MAVSDK_S, port_offset=off, show_progress=False,
             signing=SigningChoice(enabled=False), processes=2,
             formation_port=FORMATION_PORT + off,
         )
@@ -215,7 +218,7 @@ def test_mavsdk_uploads_starts_and_sends_the_formation_somewhere(tmp_path: Path)
     # MAVSDK's goto on a PX4 autopilot switches to HOLD (AUTO.LOITER) before DO_REPOSITION
     kinds = facts["formation_commands"]
     assert kinds[0] == kinds[-1] == "mission" and set(kinds) <= {"mission", "hold"}, kinds
-    m, ser = recorded_metrics(rec, sc, facts["wall_s"], 70.0)
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], MAVSDK_S)
     centroid = ser.p.mean(axis=1)
     k = 0
     for wp in [*MAVSDK_LEGS, GOTO]:
