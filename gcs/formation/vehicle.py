@@ -49,7 +49,7 @@ FORMATION_SYSID = 200
 FORMATION_PORT = 14560  # + offset; free in the vehicles' port scheme (swarm_common.ports)
 HEARTBEAT_S = 1.0
 POSITION_S = 0.25
-REPEATS, REPEAT_S = 3, 0.2  # copies of each command after the first, and their spacing (s)
+REPEATS, REPEAT_S = 5, 0.5  # copies of each command after the first, and their spacing (s)
 MAX_DATAGRAM = 2048
 Publish = Callable[[wire.Command], None]
 

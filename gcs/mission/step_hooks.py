@@ -22,8 +22,10 @@ def formation_hook(
     key_path: Path | None,
 ) -> tuple[Callable[[int], None], FormationVehicle]:
     """(the runner's on_step callback, the vehicle): each step the vehicle takes the latest
-    truth the recorder holds and publishes its commands on ``session``. Raises OSError
-    when its port is busy, MissionError when the scenario has no mission."""
+    truth the recorder holds and publishes its commands on ``session``. The vehicle stays
+    silent (the truth withheld) until every leader's daemon has reported a status: truth
+    flows before the daemons step, and a command put before they take commands is lost.
+    Raises OSError when its port is busy, MissionError when the scenario has no mission."""
 
     def publish(cmd: wire.Command) -> None:
         session.put(wire.key_cmd(swarm, cmd.kind), wire.encode(cmd))
@@ -31,10 +33,15 @@ def formation_hook(
     key = load_key(key_path) if key_path is not None else None
     fv = FormationVehicle(sc, publish, port, key=key)
 
+    leaders = [sc.index_of(i) for i in sc.leader_ids]
+    flying = [False]  # every leader's daemon has stepped (a status of a step >= 1)
+
     def on_step(k: int) -> None:
         with rec.lock:
             row = min(max(k, 0), rec.steps)
-            have = bool(rec.have_truth[row])
+            if not flying[0] and row >= 1:
+                flying[0] = bool(rec.have_status[1:row + 1][:, leaders].any(axis=0).all())
+            have = flying[0] and bool(rec.have_truth[row])
             p = rec.p[row].astype(float) if have else None
             v = rec.v[row].astype(float) if have else None
         fv.serve(row * sc.control_dt, p, v)
