@@ -22,8 +22,7 @@ from swarm_common import wire
 from swarm_common.enums import CommandKind
 from swarm_common.mission.config import MissionConfig, MissionError, mission_toml
 from swarm_common.mission.plan import Pose
-from swarm_common.mission.timeline import MissionTimeline
-from swarm_common.scenario.mission_check import mission_limits, mission_shape, plan_for
+from swarm_common.scenario.mission_check import timeline_for
 from swarm_common.scenario.spec import Scenario
 
 COMMAND_LEAD_S = 1.0  # s of mission time between a command and when the leaders apply it
@@ -39,7 +38,7 @@ class FormationSteer:
         if sc.mission is None:
             raise MissionError("steering the formation needs a scenario with a [mission]")
         self.base: MissionConfig = sc.mission
-        self.timeline = MissionTimeline(plan_for(sc), mission_shape(sc), mission_limits(sc))
+        self.timeline = timeline_for(sc)
         self.scale = 1.0
         self.yaw_deg = 0.0
         self.speed = self.base.speed_mps

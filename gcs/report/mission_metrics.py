@@ -27,16 +27,15 @@ import numpy as np
 
 from gcs.report.metrics import MISSION_KEYS
 from offboard.estimation.bearing import Formation
-from swarm_common.scenario.mission_check import mission_shape, plan_for, yaws
+from swarm_common.scenario.mission_check import plan_for, yaw_leaders, yaws
 from swarm_common.scenario.spec import Scenario
 
 
 def leader_yaw(sc: Scenario, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(ψ (K,) rad, ψ' (K,) rad/s) of the formation from K rows of every agent's position and
     velocity (K,N,3): the first two leaders' horizontal offset against the mission's shape."""
-    a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
-    shape = mission_shape(sc)
-    r0 = complex(*(shape[b, :2] - shape[a, :2]))
+    a, b, offset = yaw_leaders(sc)
+    r0 = complex(*offset[:2])
     r = (p[:, b, 0] - p[:, a, 0]) + 1j * (p[:, b, 1] - p[:, a, 1])
     rd = (v[:, b, 0] - v[:, a, 0]) + 1j * (v[:, b, 1] - v[:, a, 1])
     return np.angle(r / r0), (rd / r).imag

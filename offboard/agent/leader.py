@@ -20,12 +20,7 @@ from swarm_common.fastnp import f64
 from swarm_common.jit import kernel
 from swarm_common.mission.config import MissionConfig, MissionError
 from swarm_common.mission.timeline import MissionTimeline
-from swarm_common.scenario.mission_check import (
-    mission_limits,
-    mission_shape,
-    plan_for,
-    turn_problem,
-)
+from swarm_common.scenario.mission_check import timeline_for, turn_problem
 from swarm_common.scenario.model import Scenario
 
 
@@ -51,8 +46,7 @@ class LeaderAgent(AgentBase):
         )
         # a [mission] replaces the sinusoid: its timeline (the plan, then what ground-station
         # commands change) gives this leader's ξ at mission time
-        self.timeline = (MissionTimeline(plan_for(sc), mission_shape(sc), mission_limits(sc))
-                         if sc.mission is not None else None)
+        self.timeline = timeline_for(sc) if sc.mission is not None else None
         self._last_xi: tuple[float, object, np.ndarray] | None = None
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0

@@ -32,7 +32,7 @@ import numpy as np
 from offboard.estimation.peer_table import XI_COL
 from offboard.estimation.reference import DesiredStateObserver
 from swarm_common.jit import kernel
-from swarm_common.scenario.mission_check import MIN_YAW_OFFSET_M, mission_shape
+from swarm_common.scenario.mission_check import MIN_YAW_OFFSET_M, yaw_leaders
 from swarm_common.scenario.spec import Scenario
 
 # |r₀| (m) below which the leaders' horizontal offset cannot carry the yaw
@@ -208,6 +208,5 @@ class FormationFrameObserver:
 def formation_frame_observer(sc: Scenario, inner: DesiredStateObserver) -> FormationFrameObserver:
     """``inner`` run in the formation frame of ``sc``'s mission: the yaw read from the first
     two leaders' offset in the mission's shape."""
-    shape = mission_shape(sc)
-    a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
-    return FormationFrameObserver(inner, (a, b), shape[b] - shape[a])
+    a, b, offset = yaw_leaders(sc)
+    return FormationFrameObserver(inner, (a, b), offset)

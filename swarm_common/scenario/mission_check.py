@@ -23,6 +23,7 @@ import numpy as np
 from swarm_common.memo import IdentityMemo
 from swarm_common.mission.config import MissionConfig, MissionError
 from swarm_common.mission.plan import Limits, MissionPlan, build_plan
+from swarm_common.mission.timeline import MissionTimeline
 from swarm_common.scenario.feasibility import FEEDBACK_RESERVE, desired_origins
 from swarm_common.scenario.spec import Scenario
 
@@ -92,12 +93,24 @@ def mission_problem(sc: Scenario) -> str | None:
     return None
 
 
+def yaw_leaders(sc: Scenario) -> tuple[int, int, np.ndarray]:
+    """(a, b, offset): the scenario indices of the first two leaders, whose horizontal
+    offset carries the formation's yaw, and their offset p_b − p_a (m) in the mission's
+    shape (yaw 0)."""
+    shape = mission_shape(sc)
+    a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
+    return a, b, shape[b] - shape[a]
+
+
 def leaders_carry_yaw(sc: Scenario) -> bool:
     """True when the first two leaders are apart horizontally in the mission's shape, so
     their offset carries the formation's yaw (docs/missions.md)."""
-    shape = mission_shape(sc)
-    a, b = (sc.index_of(i) for i in sc.formation.leaders[:2])
-    return float(np.hypot(*(shape[b, :2] - shape[a, :2]))) >= MIN_YAW_OFFSET_M
+    return float(np.hypot(*yaw_leaders(sc)[2][:2])) >= MIN_YAW_OFFSET_M
+
+
+def timeline_for(sc: Scenario) -> MissionTimeline:
+    """A fresh timeline of ``sc``'s mission: its plan, then what commands change."""
+    return MissionTimeline(plan_for(sc), mission_shape(sc), mission_limits(sc))
 
 
 def yaws(sc: Scenario) -> bool:
