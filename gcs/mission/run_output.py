@@ -178,7 +178,12 @@ def formation_yaw(
 
 def run_mission_metrics(sc: Scenario, ser: Series, form: Formation) -> dict[str, Any]:
     """The keys of :data:`~gcs.report.metrics.EXTRA_KEYS` of a finished run's series: the
-    desired-state observer's error and the mission's (:mod:`gcs.report.mission_metrics`)."""
+    desired-state observer's error and the mission's (:mod:`gcs.report.mission_metrics`).
+    A mission that did not reach every waypoint is also a warning in the log."""
     f = form.follower_idx
-    return (observer_metrics(sc, form, ser.t, ser.xi_p)
-            | mission_metrics(sc, ser.t, ser.p, ser.p_des, f))
+    out = (observer_metrics(sc, form, ser.t, ser.xi_p)
+           | mission_metrics(sc, ser.t, ser.p, ser.p_des, f))
+    if out["mission_completed"] is False:
+        log.warning("%s: the formation did not reach every mission waypoint within %.1f s "
+                    "(mission_completed false)", sc.name, float(ser.t[-1]) if len(ser.t) else 0.0)
+    return out

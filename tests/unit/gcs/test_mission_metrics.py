@@ -112,3 +112,29 @@ def test_the_sweep_summary_counts_missions_and_skips_sweeps_without():
     assert cells[5] == "0.020 / 0.030" and cells[6] == "0.060" and cells[7] == "0.200"
     plain = [{**r, "mission_completed": None} for r in rows[:3]]
     assert sweep_missions(plain, ["dcbf"]) is None
+
+
+def test_an_incomplete_mission_is_a_warning_in_the_log(caplog):
+    import logging
+
+    from gcs.mission.run_output import empty_series, run_mission_metrics
+    from offboard.estimation.bearing import formation_from_scenario
+
+    sc = course()
+    plan = plan_for(sc)
+    t = np.arange(0.0, plan.arrival_s[-1] - 5.0, 0.1)  # the run ends before the last arrival
+    ser = empty_series(t, sc.n)
+    ser.p[:], _ = planned(sc, t)
+    ser.p_des[:] = ser.p
+    with caplog.at_level(logging.WARNING):
+        m = run_mission_metrics(sc, ser, formation_from_scenario(sc))
+    assert m["mission_completed"] is False
+    assert "did not reach every mission waypoint" in caplog.text
+    caplog.clear()
+    t = np.arange(0.0, plan.end_s + 1.0, 0.1)
+    ser = empty_series(t, sc.n)
+    ser.p[:], _ = planned(sc, t)
+    ser.p_des[:] = ser.p
+    with caplog.at_level(logging.WARNING):
+        assert run_mission_metrics(sc, ser, formation_from_scenario(sc))["mission_completed"]
+    assert "did not reach" not in caplog.text
