@@ -125,7 +125,7 @@ def test_an_incomplete_mission_is_a_warning_in_the_log(caplog):
     t = np.arange(0.0, plan.arrival_s[-1] - 5.0, 0.1)  # the run ends before the last arrival
     ser = empty_series(t, sc.n)
     ser.p[:], _ = planned(sc, t)
-    ser.p_des[:] = ser.p
+    ser.p_des[:] = ser.xi_p[:] = ser.p
     with caplog.at_level(logging.WARNING):
         m = run_mission_metrics(sc, ser, formation_from_scenario(sc))
     assert m["mission_completed"] is False
@@ -134,7 +134,7 @@ def test_an_incomplete_mission_is_a_warning_in_the_log(caplog):
     t = np.arange(0.0, plan.end_s + 1.0, 0.1)
     ser = empty_series(t, sc.n)
     ser.p[:], _ = planned(sc, t)
-    ser.p_des[:] = ser.p
+    ser.p_des[:] = ser.xi_p[:] = ser.p
     with caplog.at_level(logging.WARNING):
         assert run_mission_metrics(sc, ser, formation_from_scenario(sc))["mission_completed"]
     assert "did not reach" not in caplog.text
