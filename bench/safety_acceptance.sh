@@ -12,7 +12,8 @@ OUT=${3:-runs/safety-acceptance}
 # 25 s, 10-seed sweep in docs/safety.md)
 .venv/bin/gcs mission sweep scenarios/cube8.toml scenarios/swap_centre.toml \
   scenarios/grid12.toml scenarios/cube8_dist5.toml scenarios/cube8_noise5.toml \
-  --seeds "$SEEDS" --methods dcbf --jobs "$JOBS" --duration 15 --out "$OUT/airborne"
+  --seeds "$SEEDS" --methods dcbf --jobs "$JOBS" --duration 15 --out "$OUT/airborne" \
+  --allow-unsafe  # cube8_noise5 is outside the noise bound on purpose (docs/safety.md)
 # ground start, take-off, formation, mission, land-all at 22 s: the scenario's 36 s
 .venv/bin/gcs mission sweep scenarios/ground8.toml \
   --seeds "$SEEDS" --methods dcbf --jobs "$JOBS" --out "$OUT/ground"

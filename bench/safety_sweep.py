@@ -46,7 +46,8 @@ def one(job: tuple[str, str, int, float]) -> dict[str, Any]:
     from swarm_common.scenario.model import load_scenario
 
     name, method, seed, dur = job
-    sc = load_scenario(ROOT / "scenarios" / f"{name}.toml")
+    # cube8_noise5 is outside the load-time noise bound on purpose (docs/safety.md)
+    sc = load_scenario(ROOT / "scenarios" / f"{name}.toml", allow_unsafe=True)
     res = run_inproc(sc, method, seed=seed, duration=dur)
     fol = formation_from_scenario(sc).follower_idx
     s = res.series

@@ -9,15 +9,8 @@
 ``mission run --fault-drop P --fault-delay-ms MS ... --fault-link mavlink|zenoh|both``
 injects transport faults in a distributed run (docs/faults.md).
 
-Exit codes (every command):
-
-====  =====================================================================================
-0     success
-1     a distributed run failed once started: a child process died or the run stalled
-2     bad input: a bad flag or scenario, a busy port, a refused Zenoh endpoint
-130   interrupted by Ctrl-C (SIGINT); every child process was stopped first
-143   ``mission`` stopped by SIGTERM; every child process was stopped first
-====  =====================================================================================
+Exit codes (every command): :mod:`gcs.exit_codes` (3: a safety filter's run whose safety
+verdict is not "safe").
 
 Subcommands are registered in :data:`COMMANDS` as ``name -> add_parser(subparsers)``;
 each ``add_parser`` sets ``func`` on its parser (``func(args) -> int``).
@@ -34,32 +27,38 @@ from collections.abc import Callable
 from pathlib import Path
 from types import FrameType
 
+from gcs.exit_codes import (
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    EXIT_USAGE,
+)
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
+from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.process_life import exit_now
-from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario
+from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, ALLOW_UNSAFE_FLAG, Scenario
 from swarm_common.zenoh_session import default_endpoint
 
 log = logging.getLogger(__name__)
 
 METHODS = [str(m) for m in Method]
-EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 130, 143
 
 
-def _load(path: str, allow_infeasible: bool) -> Scenario:
+def _load(path: str, allow_infeasible: bool, allow_unsafe: bool) -> Scenario:
+    """Load ``path`` or exit 2 with one line (``--allow-infeasible``, ``--allow-unsafe``)."""
     from swarm_common.scenario.model import ScenarioError, load_scenario
 
     try:
-        return load_scenario(path, allow_infeasible)
+        return load_scenario(path, allow_infeasible, allow_unsafe)
     except ScenarioError as exc:
         print(f"gcs: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
 
 
 def cmd_mission_run(args: argparse.Namespace) -> int:
-    sc = _load(args.scenario, args.allow_infeasible)
+    sc = _load(args.scenario, args.allow_infeasible, args.allow_unsafe)
     _check_run_args(args, sc, "mission run")
     try:
         faulted = write_fault_scenario(args, sc)
@@ -67,7 +66,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_USAGE
     if faulted is not None:
-        sc = _load(str(faulted), sc.allow_infeasible)
+        sc = _load(str(faulted), sc.allow_infeasible, sc.allow_unsafe)
     if not args.inproc:
         from gcs.mission.run_cli import cli_run
 
@@ -81,13 +80,14 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         res.save(args.out)
         log.info("wrote %s/metrics.json, series.npz", args.out)
     print_result(res.document(), args.json)
-    return EXIT_OK
+    return safety_exit_status(res.metrics, res.method)
 
 
 def cmd_router(args: argparse.Namespace) -> int:
     from gcs.mission.router import run_router
 
-    sc = None if args.scenario is None else _load(args.scenario, args.allow_infeasible)
+    sc = (None if args.scenario is None
+          else _load(args.scenario, args.allow_infeasible, args.allow_unsafe))
     if (sc is None) != (args.secure_dir is None):
         print("gcs router: --scenario and --secure-dir go together", file=sys.stderr)
         return EXIT_USAGE
@@ -126,7 +126,7 @@ def add_dashboard(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_mission_compare(args: argparse.Namespace) -> int:
-    sc = _load(args.scenario, args.allow_infeasible)
+    sc = _load(args.scenario, args.allow_infeasible, args.allow_unsafe)
     _check_run_args(args, sc, "mission compare")
     from gcs.mission.compare_cli import compare
 
@@ -204,6 +204,9 @@ def _add_allow_infeasible(p: argparse.ArgumentParser) -> None:
     p.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                    help="run a scenario that fails the feasibility check (docs/scenarios.md), "
                    "with a warning")
+    p.add_argument(ALLOW_UNSAFE_FLAG, action="store_true",
+                   help="run a scenario that breaks a load-time safety assumption "
+                   "(docs/safety.md), with a warning per assumption")
 
 
 def add_mission_parser(sub: argparse._SubParsersAction) -> None:

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
+from gcs.exit_codes import EXIT_USAGE
 from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
 
-EXIT_USAGE = 2
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
 JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
 RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this

@@ -41,6 +41,7 @@ from swarm_common.ports import vehicle_ports
 from swarm_common.process_life import exit_now, freeze_startup
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
     Scenario,
     ScenarioError,
     load_scenario,
@@ -175,6 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "own odometry published by its daemon (no simulator truth needed)")
     ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                     help="run a scenario that fails the feasibility check, with a warning")
+    ap.add_argument(ALLOW_UNSAFE_FLAG, action="store_true",
+                    help="run a scenario that breaks a load-time safety assumption, with a "
+                    "warning")
     add_log_level_argument(ap)
     return ap
 
@@ -199,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"offboard: --signing-key: {exc}", file=sys.stderr)
             return 2
     try:
-        sc = load_scenario(args.scenario, args.allow_infeasible)
+        sc = load_scenario(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except ScenarioError as exc:
         print(f"offboard: {exc}", file=sys.stderr)
         return 2

@@ -48,6 +48,7 @@ class AgentStatus:
     n_used: int = 0
     comm_ok: bool = True
     input_clipped: bool = False  # setpoint conversion changed u (tilt/thrust clip)
+    alarms: int = 0  # AgentAlarm bits raised this step (offboard.safety.monitor)
 
 
 @dataclass

@@ -7,7 +7,7 @@ member and a type checker sees the closed set.
 
 from __future__ import annotations
 
-from enum import StrEnum
+from enum import IntFlag, StrEnum
 
 
 class Method(StrEnum):
@@ -146,3 +146,27 @@ class CommandKind(StrEnum):
     TAKEOFF = "takeoff"  # coordinated take-off of a ground start at at_s
     MISSION = "mission"  # the leaders fly these formation waypoints from at_s (docs/missions.md)
     HOLD = "hold"  # the formation stops at its next rest from at_s and stays there
+
+
+class AgentAlarm(IntFlag):
+    """Safety alarms an agent raises in flight: a bitmask in its status record, one bit per
+    assumption of docs/safety.md found broken at that step. Scored per run into
+    ``metrics.json`` ``safety_alarms`` (docs/metrics.md)."""
+
+    RESIDUAL = 1  # the observer's residual over its bound: its estimates may be diverging
+    NEAR_ENTRY = 2  # a neighbour first heard closer than the distance it must be heard at
+    FALLBACK = 4  # the agent left formation control for its safe fallback (hold, then land)
+
+
+class SafetyAlarmKind(StrEnum):
+    """The ``assumption`` of one ``metrics.json`` ``safety_alarms`` entry (docs/metrics.md):
+    what the run found broken, from the truth (the first four) or from an agent's own
+    alarm bits (:class:`AgentAlarm`)."""
+
+    BARRIER = "barrier"  # a pair's true barrier h < 0
+    OWN_BARRIER = "own_barrier"  # an agent's barrier from its own estimates < 0: margin used up
+    COLLISION = "collision"  # two vehicles closer than the collision radius
+    GROUND_STRIKE = "ground_strike"  # a vehicle hit the ground faster than a landing
+    RESIDUAL = "residual"  # AgentAlarm.RESIDUAL
+    NEAR_ENTRY = "near_entry"  # AgentAlarm.NEAR_ENTRY
+    FALLBACK = "fallback"  # AgentAlarm.FALLBACK

@@ -358,14 +358,17 @@ class FaultInjector:
 
 # -- the process's plan ------------------------------------------------------------------
 _installed: tuple[FaultPlan, int] | None = None
+_announced = False  # "fault injection on" logged by this process (once, at its first link)
 
 
 def install(plan: FaultPlan, seed: int) -> None:
-    """Make ``plan`` (seeded by the scenario seed) this process's fault plan."""
-    global _installed
+    """Make ``plan`` (seeded by the scenario seed) this process's fault plan. Nothing is
+    logged here: a process that opens no faulted link (the in-process runner, a ground
+    station) injects nothing, and says so where it matters; the first link that does
+    logs "fault injection on" (:func:`injector_for`)."""
+    global _installed, _announced
     _installed = (plan, int(seed)) if plan.active else None
-    if plan.active:
-        log.warning("fault injection on: %s", plan.as_toml())
+    _announced = False
 
 
 def injector_for(link: str, agent_id: int, endpoint: str = "") -> FaultInjector | None:
@@ -379,4 +382,8 @@ def injector_for(link: str, agent_id: int, endpoint: str = "") -> FaultInjector 
     if not cfg.active:
         return None
     name = f"{link}.{endpoint}" if endpoint else link
+    global _announced
+    if not _announced:
+        _announced = True
+        log.warning("fault injection on: %s", plan.as_toml())
     return FaultInjector(cfg, seed, agent_id, name)

@@ -175,6 +175,7 @@ class Status:
     comm_ok: bool = True
     lumped: np.ndarray = field(default_factory=lambda: np.zeros(3))  # z3 + Φζ̂ used, m/s²
     input_clipped: bool = False  # the setpoint conversion changed the commanded u this step
+    alarms: int = 0  # enums.AgentAlarm bits the agent raised this step (docs/safety.md)
 
 
 @dataclass
@@ -272,6 +273,7 @@ def encode(obj: Payload) -> bytes:
             "comm": bool(obj.comm_ok),
             "lump": _pack_vec(obj.lumped),
             "clip": bool(obj.input_clipped),
+            "alarm": int(obj.alarms),
         }
     elif isinstance(obj, Odometry):
         d = {
@@ -363,6 +365,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 comm_ok=bool(d["comm"]),
                 lumped=_unpack_vec(d["lump"], (3,)) if "lump" in d else np.zeros(3),
                 input_clipped=bool(d.get("clip", False)),
+                alarms=int(d.get("alarm", 0)),
             )
         if kind == "odo":
             x = _unpack_vec(d["x"], (6,))

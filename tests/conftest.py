@@ -23,10 +23,21 @@ from pymavlink import mavutil  # noqa: E402
 
 from gcs.mission.launch_spec import MAX_PORT_OFFSET  # noqa: E402
 from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
+from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CUBE8 = str(ROOT / "scenarios" / "cube8.toml")
+# shipped stress families outside a load-time safety assumption on purpose, run with
+# --allow-unsafe (docs/safety.md, "Load-time checks"): cube8_noise5's sensing noise exceeds
+# the margin the noise bound asks for (measured, it kept h >= 0 over 100 seeds)
+OUTSIDE_ASSUMPTIONS = frozenset({"cube8_noise5"})
+
+
+def load_shipped(path: str | Path) -> Scenario:
+    """A shipped scenario, loaded with ``allow_unsafe`` where it is one of
+    :data:`OUTSIDE_ASSUMPTIONS`."""
+    return load_scenario(path, allow_unsafe=Path(path).stem in OUTSIDE_ASSUMPTIONS)
 SIM_CMD = [sys.executable, "-m", "vehicle_sim.cli"]
 HOVER_NORM = 1.8 * 9.81 / 52.92
 

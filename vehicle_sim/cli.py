@@ -26,6 +26,7 @@ from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
 from swarm_common.process_life import exit_now, freeze_startup
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
     Scenario,
     ScenarioError,
     load_scenario,
@@ -66,6 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--seed", type=int, default=None, help="dynamics seed (default: scenario)")
     ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                     help="run a scenario that fails the feasibility check, with a warning")
+    ap.add_argument(ALLOW_UNSAFE_FLAG, action="store_true",
+                    help="run a scenario that breaks a load-time safety assumption, with a "
+                    "warning")
     ap.add_argument("--port-offset", type=int, default=0, help="shift every UDP/TCP port")
     ap.add_argument("--bind", default="127.0.0.1", help="address the vehicle sockets bind")
     ap.add_argument("--remote-host", default="127.0.0.1", help="where default streams go")
@@ -181,7 +185,7 @@ def _server(args: argparse.Namespace) -> SimServer:
     from vehicle_sim.server import SimServer
 
     try:
-        sc = load_scenario(args.scenario, args.allow_infeasible)
+        sc = load_scenario(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except ScenarioError as exc:
         raise _Fatal(str(exc)) from None
     opts = _options(args, sc)

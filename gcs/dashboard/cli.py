@@ -29,7 +29,12 @@ from gcs.formation.steer import FormationSteer
 from gcs.mission.launch_spec import add_signing_flags
 from swarm_common.enums import Method
 from swarm_common.logsetup import add_log_level_argument, configure_logging
-from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, ScenarioError, load_scenario
+from swarm_common.scenario.model import (
+    ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
+    ScenarioError,
+    load_scenario,
+)
 from swarm_common.signing import load_key
 from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 
@@ -67,6 +72,12 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         ALLOW_INFEASIBLE_FLAG,
         action="store_true",
         help="run a scenario that fails the feasibility check (docs/scenarios.md) with a warning",
+    )
+    p.add_argument(
+        ALLOW_UNSAFE_FLAG,
+        action="store_true",
+        help="run a scenario that breaks a load-time safety assumption (docs/safety.md) with "
+        "a warning",
     )
     p.add_argument(
         "--method",
@@ -113,7 +124,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     if args.demo:
         return DashboardApp(recorded_source(), None, title="demo (recorded)"), None, None, None
     path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
-    sc = load_scenario(path, allow_infeasible=args.allow_infeasible)
+    sc = load_scenario(path, allow_infeasible=args.allow_infeasible,
+                       allow_unsafe=args.allow_unsafe)
     offset = args.port_offset
     launch = None
     link = feed = None

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from swarm_common.enums import QPStatus, Role
+from swarm_common.enums import AgentAlarm, QPStatus, Role
 
 Vec3 = tuple[float, float, float]
 
@@ -145,7 +145,9 @@ def as_vec3(a: Any) -> Vec3:
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
-def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_text: bool) -> str:
+def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_text: bool,
+                   alarms: int = 0) -> str:
+    """The row's failsafe cell; ``alarms``: the agent's AgentAlarm bits (docs/safety.md)."""
     if row.link_lost:
         return "LINK"
     if row.mode in ("TERMINATION",):
@@ -154,6 +156,10 @@ def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_t
         return "FS"
     if zenoh_on and row.status_missing:
         return "NO-OFB"
+    if alarms & AgentAlarm.FALLBACK:
+        return "FALLBACK"
+    if alarms:
+        return "ALARM"
     if est_health not in (None, "ok"):
         return f"EST:{est_health}"[:8]
     if qp_degraded(row.qp_status):
@@ -303,7 +309,7 @@ class LiveSource:
             if i in vel:
                 r.vel = as_vec3(vel[i])
             st = status.get(i)
-            est_health = None
+            est_health, alarms = None, 0
             if st is not None:
                 s, ts = st
                 r.status_age = now - ts
@@ -313,7 +319,7 @@ class LiveSource:
                 r.qp_us = s.qp_solve_us
                 r.method = s.method
                 methods.add(s.method)
-                est_health = s.est_health
+                est_health, alarms = s.est_health, s.alarms
                 if np.all(np.isfinite(s.p_des)) and np.any(s.p_des != 0):
                     desired[i] = as_vec3(s.p_des)
                 z1 = s.z1 if np.any(s.z1 != 0) else None
@@ -327,7 +333,7 @@ class LiveSource:
             if r.p_des is not None and r.pos is not None:
                 r.track_err = float(np.linalg.norm(np.subtract(r.pos, r.p_des)))
             r.failsafe = failsafe_label(
-                r, self.feed is not None, est_health, self._fs_text.get(i, False)
+                r, self.feed is not None, est_health, self._fs_text.get(i, False), alarms
             )
             rows.append(r)
 

@@ -35,7 +35,8 @@ from typing import Any
 import zenoh
 from pymavlink.dialects.v20 import common as mavlink
 
-from swarm_common.enums import CommandKind, Method
+from offboard.safety.monitor import alarm_onsets
+from swarm_common.enums import AgentAlarm, CommandKind, Method
 from swarm_common.wire import (
     COMMAND_KINDS,
     Command,
@@ -234,6 +235,12 @@ class ZenohFeed:
         if s.est_health != prev.est_health:
             sev = INFO if s.est_health == "ok" else mavlink.MAV_SEVERITY_ERROR
             ev.append(FeedEvent(now, s.id, "estimator", f"estimator {s.est_health}", sev))
+        new = alarm_onsets(prev.alarms, s.alarms)  # docs/safety.md, in-flight alarms
+        if new:
+            sev = (mavlink.MAV_SEVERITY_CRITICAL if new & AgentAlarm.FALLBACK
+                   else mavlink.MAV_SEVERITY_ERROR)
+            text = "safety alarm " + "+".join(str(b.name) for b in new)
+            ev.append(FeedEvent(now, s.id, "safety", text, sev))
 
     # -- snapshots ---------------------------------------------------------------
     def missing(self, now: float | None = None) -> list[int]:

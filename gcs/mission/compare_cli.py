@@ -1,6 +1,6 @@
 """``gcs mission compare SCENARIO``: every method on one scenario, in process or
 distributed, then the comparison report (:mod:`gcs.report.comparison`) and, with
-``--seeds N``, an in-process seed sweep. Exit codes as :mod:`gcs.cli`'s table."""
+``--seeds N``, an in-process seed sweep. Exit codes: :mod:`gcs.exit_codes`."""
 
 from __future__ import annotations
 
@@ -10,22 +10,22 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gcs.exit_codes import EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE
 from swarm_common.enums import Method
 from swarm_common.scenario.model import Scenario
 
 log = logging.getLogger(__name__)
 
 METHODS = [str(m) for m in Method]
-EXIT_OK, EXIT_RUN_FAILED, EXIT_USAGE = 0, 1, 2  # gcs.cli's table
 Outcome = tuple[dict[str, Any], dict[str, Any], list[str]]  # metrics, series, gains
 
 
-def _run_one(job: tuple[str, bool, str, int, float | None]) -> dict[str, Any]:
+def _run_one(job: tuple[str, bool, bool, str, int, float | None]) -> dict[str, Any]:
     from gcs.mission.inproc import run_inproc
     from swarm_common.scenario.model import load_scenario
 
-    path, allow_infeasible, method, seed, duration = job
-    sc = load_scenario(path, allow_infeasible)
+    path, allow_infeasible, allow_unsafe, method, seed, duration = job
+    sc = load_scenario(path, allow_infeasible, allow_unsafe)
     return run_inproc(sc, method, seed=seed, duration=duration).metrics
 
 
@@ -82,12 +82,13 @@ def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[s
     from concurrent.futures import ProcessPoolExecutor
 
     base = sc.seed if args.seed is None else args.seed
-    jobs = [(args.scenario, sc.allow_infeasible, m, base + s, args.duration) for m in METHODS
+    jobs = [(args.scenario, sc.allow_infeasible, sc.allow_unsafe, m, base + s, args.duration)
+            for m in METHODS
             for s in range(args.seeds)]
     log.info("seed sweep: %d runs ...", len(jobs))
     with ProcessPoolExecutor(max_workers=args.jobs) as ex:
         res_all = list(ex.map(_run_one, jobs))
-    return {m: [r for (_, _, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
+    return {m: [r for (_, _, _, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
             for m in METHODS}
 
 
@@ -101,7 +102,8 @@ def _layout(args: argparse.Namespace) -> str:
 def compare(sc: Scenario, args: argparse.Namespace) -> int:
     """``gcs mission compare`` of a loaded, checked scenario: every method's run, the
     report, the tables on stdout; the exit code (0, 1 a run failed, 2 a busy port)."""
-    from gcs.report.comparison import compare_table, safety_table, write_report
+    from gcs.report.comparison import compare_table, write_report
+    from gcs.report.safety_table import safety_table
     from gcs.report.sweep import seeds_table
     from offboard.estimation.bearing import formation_from_scenario
     from swarm_common.scenario.mission_check import plan_for

@@ -29,7 +29,7 @@ from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
 from gcs.mission.recorder import Recorder
 from gcs.mission.router import open_router
-from gcs.mission.run_output import write_run
+from gcs.mission.run_output import warn_verdict, write_run
 from gcs.mission.score import (
     default_out_dir,
     recorded_metrics,
@@ -366,4 +366,5 @@ def run_and_score(
     )
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     write_run(out_dir, doc, ser)
+    warn_verdict(sc.name, method, doc["metrics"])
     return doc

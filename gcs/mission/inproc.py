@@ -36,6 +36,7 @@ from gcs.mission.run_output import (
     safety_spec,
     set_agent_rows,
     set_truth_rows,
+    warn_verdict,
     write_run,
 )
 from gcs.report.metrics import Series, compute_metrics
@@ -162,6 +163,9 @@ def run_inproc(
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
     dur = float(sc.run.duration_s if duration is None else duration)
+    if sc.faults.active:
+        log.warning("%s: the in-process runner has no links, so the scenario's [faults] table "
+                    "is NOT applied (a distributed run applies it; docs/faults.md)", sc.name)
     if land_at is None and sc.lifecycle.land_at_s > 0.0:
         land_at = sc.lifecycle.land_at_s
     dt = sc.control_dt
@@ -239,6 +243,7 @@ def run_inproc(
         takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
         land_at_s=land_at, extra=run_mission_metrics(sc, ser, form),
     )
+    warn_verdict(sc.name, str(method), metrics)
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,
         collision_pairs=list(dyn.collision_pairs),

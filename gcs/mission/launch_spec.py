@@ -25,7 +25,12 @@ from gcs.mission.procs import python_entry
 from offboard.daemon.packing import format_agents
 from swarm_common.enums import DefaultStreams
 from swarm_common.ports import GCS_PORT, MAX_ID, port_free, vehicle_ports
-from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario, swarm_name_problem
+from swarm_common.scenario.model import (
+    ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
+    Scenario,
+    swarm_name_problem,
+)
 from swarm_common.signing import generate_key, load_key
 from swarm_common.zenoh_session import (
     DEFAULT_ZENOH_PORT,
@@ -313,9 +318,11 @@ class LaunchSpec:
         return [] if self.signing_key is None else ["--signing-key", str(self.signing_key)]
 
     def _common_args(self) -> list[str]:
-        """``--seed`` if set; ``--allow-infeasible`` if the scenario was loaded with it."""
+        """``--seed`` if set; ``--allow-infeasible`` and ``--allow-unsafe`` if the scenario was
+        loaded with them."""
         argv = [] if self.seed is None else ["--seed", str(self.seed)]
-        return argv + ([ALLOW_INFEASIBLE_FLAG] if self.sc.allow_infeasible else [])
+        argv += [ALLOW_INFEASIBLE_FLAG] if self.sc.allow_infeasible else []
+        return argv + ([ALLOW_UNSAFE_FLAG] if self.sc.allow_unsafe else [])
 
 
 MAX_PORT_OFFSET = _max_port_offset()

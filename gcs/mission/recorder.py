@@ -81,6 +81,7 @@ class Recorder:
         self.h_min, self.solve_us = arr(n), arr(n)
         self.degraded = np.zeros((rows, n), bool)
         self.clipped = np.zeros((rows, n), bool)
+        self.alarms = np.zeros((rows, n), np.uint8)  # AgentAlarm bits of step k
         self.have_status = np.zeros((rows, n), bool)
         self.zeta_last = np.zeros((n, 6))  # ζ̂ of the estimates of step steps-1
         self.last_status: dict[int, wire.Status] = {}
@@ -179,6 +180,7 @@ class Recorder:
         self.u[k, i], self.lumped_est[k, i] = st.u, st.lumped
         self.h_min[k, i], self.solve_us[k, i] = st.h_min, st.qp_solve_us
         self.degraded[k, i], self.clipped[k, i] = degraded, bool(st.input_clipped)
+        self.alarms[k, i] = int(st.alarms) & 0xFF
         self.have_status[k, i] = True
         self.last_status[st.id] = st
         return True

@@ -8,11 +8,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gcs.exit_codes import EXIT_RUN_FAILED, EXIT_USAGE
 from gcs.formation.vehicle import FORMATION_PORT
 from gcs.mission.distributed import MissionError, run_and_score
 from gcs.mission.launch_spec import LaunchError, SigningChoice
 from gcs.mission.run_output import print_result
 from gcs.mission.score import default_out_dir, late_steps
+from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams
 from swarm_common.scenario.model import Scenario
 
@@ -21,22 +23,22 @@ log = logging.getLogger(__name__)
 
 def cli_run(args: Any, sc: Scenario) -> int:
     """``gcs mission run SCENARIO`` (distributed). Exit 2: bad input or a busy port;
-    1: a child died or the run stalled (see :mod:`gcs.cli` for the table)."""
+    1: a child died or the run stalled; 3: the safety verdict (:mod:`gcs.exit_codes`)."""
     method = str(args.method or sc.controller.method)
     duration = float(sc.run.duration_s if args.duration is None else args.duration)
     if args.kill_agent is not None and args.kill_agent not in sc.ids:
         print(f"gcs mission run: --kill-agent {args.kill_agent}: not an agent of {sc.path} "
               f"{sc.ids}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     if args.kill_at is not None and args.kill_agent is None:
         print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     try:
         out = Path(args.out) if args.out else default_out_dir(sc, method)
         signing = SigningChoice.from_args(args)
     except (ValueError, LaunchError) as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     try:
         doc = run_and_score(
             sc, out, method, args.seed, duration, realtime=args.realtime,
@@ -49,10 +51,10 @@ def cli_run(args: Any, sc: Scenario) -> int:
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_USAGE
     except MissionError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_RUN_FAILED
     log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
     if doc["run"]["failed_agents"]:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])
@@ -62,4 +64,4 @@ def cli_run(args: Any, sc: Scenario) -> int:
                     "from the in-process run; fewer daemon processes (--processes N) avoid "
                     "it", late)
     print_result(doc, args.json)
-    return 0
+    return safety_exit_status(doc["metrics"], method)

@@ -3,7 +3,9 @@ directory (``metrics.json`` + ``series.npz``), for in-process and distributed ru
 
 ``series.npz`` holds one array per :class:`~gcs.report.metrics.Series` field (``t``, ``p``, ``v``,
 ``p_des``, ``v_des``, ``z1``, ``z2``, ``lumped_est``, ``lumped_true``, ``u``, ``thrust``,
-``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``, ``input_clipped``).
+``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``, ``input_clipped``,
+``alarms``: the :class:`~swarm_common.enums.AgentAlarm` bits, uint8; files written before
+it have none, and no reader here needs it).
 ``metrics.json`` is :func:`run_document`: ``scenario``, ``method``, ``seed``, ``metrics`` (keys
 :data:`~gcs.report.metrics.METRIC_KEYS`) and the runner's extras (in process: ``gains``,
 ``collision_pairs``; distributed: ``mode``, ``run``).
@@ -27,6 +29,7 @@ from gcs.report.mission_metrics import (
     observer_metrics,
     yawed_desired,
 )
+from gcs.report.verdict import summary_line
 from offboard.estimation.bearing import Formation
 from offboard.records import AgentOutput
 from swarm_common.enums import QPStatus
@@ -41,7 +44,8 @@ def safety_spec(sc: Scenario, clipped_known: bool = True) -> SafetySpec:
     :func:`~gcs.report.metrics.compute_metrics`; ``clipped_known``: the statuses carried
     ``input_clipped``."""
     return SafetySpec(sc.controller.tau_safe_s, sc.controller.d_safe_m,
-                      sc.run.formation_deadline_s, clipped_known)
+                      sc.run.formation_deadline_s, clipped_known, tuple(sc.ids),
+                      sc.vehicle.collision_radius_m)
 
 
 def tilt_deg(att: np.ndarray) -> np.ndarray:
@@ -53,7 +57,7 @@ def tilt_deg(att: np.ndarray) -> np.ndarray:
 def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
     """A :class:`Series` of ``len(t)`` steps for ``n`` agents, every value ``fill``
     (NaN where rows may stay unknown, as in a recorded run); ``fallback`` and
-    ``input_clipped`` all False."""
+    ``input_clipped`` all False, ``alarms`` all 0."""
     kk = len(t)
 
     def z(*shape: int) -> np.ndarray:
@@ -64,7 +68,7 @@ def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
         xi_p=z(n, 3),
         lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n), tilt_deg=z(n),
         min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((kk, n), bool),
-        input_clipped=np.zeros((kk, n), bool),
+        input_clipped=np.zeros((kk, n), bool), alarms=np.zeros((kk, n), np.uint8),
     )
 
 
@@ -103,13 +107,15 @@ _DEGRADED: dict[str, bool] = {s: s.degraded for s in QPStatus}
 def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
     """Row ``r`` of every agent's status, ``outs`` in scenario order: virtual control u
     (m/s²), estimated lumped disturbance, smallest barrier value, QP time (µs), whether the
-    QP degraded, and whether the setpoint conversion changed u (tilt/thrust clip)."""
+    QP degraded, whether the setpoint conversion changed u (tilt/thrust clip) and the
+    agent's safety alarm bits (:class:`~swarm_common.enums.AgentAlarm`)."""
     ser.u[r] = [o.u for o in outs]
     ser.lumped_est[r] = [o.lumped for o in outs]
     ser.h_min[r] = [o.status.h_min for o in outs]
     ser.solve_us[r] = [o.status.solve_us for o in outs]
     ser.fallback[r] = [_DEGRADED[o.status.qp_status] for o in outs]
     ser.input_clipped[r] = [bool(o.status.input_clipped) for o in outs]
+    ser.alarms[r] = [int(o.status.alarms) for o in outs]
 
 
 def run_document(
@@ -187,3 +193,13 @@ def run_mission_metrics(sc: Scenario, ser: Series, form: Formation) -> dict[str,
         log.warning("%s: the formation did not reach every mission waypoint within %.1f s "
                     "(mission_completed false)", sc.name, float(ser.t[-1]) if len(ser.t) else 0.0)
     return out
+
+
+def warn_verdict(name: str, method: str, metrics: dict[str, Any]) -> bool:
+    """Log a finished run's safety verdict when it is not "safe" (one WARNING line naming the
+    first events: :func:`gcs.report.verdict.summary_line`); True when it was not."""
+    line = summary_line(metrics)
+    if line is None:
+        return False
+    log.warning("%s [%s]: %s", name, method, line)
+    return True

@@ -50,6 +50,7 @@ def recorder_series(rec: Recorder, sc: Scenario) -> Series:
     ser.u[:], ser.lumped_est[:] = rec.u[steps], rec.lumped_est[steps]
     ser.h_min[:], ser.solve_us[:] = rec.h_min[steps], rec.solve_us[steps]
     ser.fallback[:], ser.input_clipped[:] = rec.degraded[steps], rec.clipped[steps]
+    ser.alarms[:] = rec.alarms[steps]
     # Real time: an agent may skip a stamp (late cycle), leaving a row without its
     # message; hold the last value (lockstep runs have none missing).
     for arr in (ser.z1, ser.z2, ser.xi_p, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):

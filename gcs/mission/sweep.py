@@ -27,18 +27,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gcs.exit_codes import EXIT_USAGE
 from gcs.mission.progress import Progress
 from gcs.report.sweep import flat_row, write_outputs
 from swarm_common.enums import Method
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
     Scenario,
     ScenarioError,
     load_scenario,
 )
 
 log = logging.getLogger(__name__)
-EXIT_USAGE = 2
 
 
 class SweepInputError(ValueError):
@@ -55,6 +56,7 @@ class Job:
     seed: int
     duration_s: float
     allow_infeasible: bool = False  # --allow-infeasible: load the scenario with a warning
+    allow_unsafe: bool = False  # --allow-unsafe: load it with a warning per broken assumption
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -119,12 +121,14 @@ def parse_duration(text: str | None) -> float | None:
     return v
 
 
-def load_all(paths: list[str], allow_infeasible: bool = False) -> list[tuple[str, Scenario]]:
+def load_all(
+    paths: list[str], allow_infeasible: bool = False, allow_unsafe: bool = False
+) -> list[tuple[str, Scenario]]:
     """Load every scenario file up front (a bad one is bad input, before any run)."""
     out = []
     for p in paths:
         try:
-            out.append((p, load_scenario(p, allow_infeasible)))
+            out.append((p, load_scenario(p, allow_infeasible, allow_unsafe)))
         except ScenarioError as exc:
             raise SweepInputError(str(exc).replace("\n", " ")) from None
     return out
@@ -136,7 +140,7 @@ def make_jobs(
 ) -> list[Job]:
     return [
         Job(p, sc.name, m, s, float(sc.run.duration_s if duration is None else duration),
-            sc.allow_infeasible)
+            sc.allow_infeasible, sc.allow_unsafe)
         for p, sc in scenarios for m in methods for s in seeds
     ]
 
@@ -150,8 +154,8 @@ def run_job(job: Job) -> dict[str, Any]:
             "duration_s": job.duration_s}
     t0 = time.perf_counter()
     try:
-        res = run_inproc(load_scenario(job.path, job.allow_infeasible), job.method, seed=job.seed,
-                         duration=job.duration_s)
+        sc = load_scenario(job.path, job.allow_infeasible, job.allow_unsafe)
+        res = run_inproc(sc, job.method, seed=job.seed, duration=job.duration_s)
     except Exception as exc:  # any failure of a run is logged and recorded, never lost
         log.error("run %s/%s/seed %d crashed:\n%s", job.scenario, job.method, job.seed,
                   traceback.format_exc())
@@ -214,7 +218,7 @@ def cmd_mission_sweep(args: argparse.Namespace) -> int:
         methods = parse_methods(args.methods)
         workers = parse_jobs(args.jobs)
         duration = parse_duration(args.duration)
-        scenarios = load_all(args.scenario, args.allow_infeasible)
+        scenarios = load_all(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except SweepInputError as exc:
         print(f"gcs mission sweep: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -251,4 +255,6 @@ def add_sweep_parser(msub: argparse._SubParsersAction) -> None:
     s.add_argument("--out", default=None, help="output directory (default runs/sweep-TIME)")
     s.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                    help="run scenarios that fail the feasibility check, with a warning")
+    s.add_argument(ALLOW_UNSAFE_FLAG, action="store_true",
+                   help="run scenarios that break a load-time safety assumption, with a warning")
     s.set_defaults(func=cmd_mission_sweep)

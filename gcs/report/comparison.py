@@ -17,18 +17,12 @@ from typing import Any
 
 import numpy as np
 
+from gcs.report.safety_table import safety_legend, safety_table
 from gcs.report.shared import FORMED_TOL_M, LABELS, PAPER_TABLE3, md_legend
+from gcs.report.shared import fmt as _f
 from swarm_common.mission.plan import MissionPlan
 
 DEPARTURES = "docs/paper-departures.md"
-
-def _f(x: Any, nd: int = 2) -> str:
-    if x is None:
-        return "–"
-    if isinstance(x, float):
-        return f"{x:.{nd}f}"
-    return str(x)
-
 
 def compare_table(metrics: dict[str, dict], d_safe: float = 0.5) -> str:
     """Markdown table: paper Table 3 beside our metrics per method."""
@@ -109,64 +103,6 @@ def compare_legend(d_safe: float = 0.5) -> str:
                 "control steps, summed over the followers, where the RCBF "
                 "quadratic program had to be relaxed or the solver failed; always 0 for APF and "
                 "none, which solve no QP.",
-            ),
-        ]
-    )
-
-
-def safety_table(metrics: dict[str, dict]) -> str:
-    """Markdown table of the honest safety and tracking metrics (docs/metrics.md)."""
-    out = (
-        "| Method | True h_min (m²) | Steps h<0 | Pair-steps h<0 | Min dist formation / "
-        "mission (m) | Clipped agent-steps | Track RMS / max (m) | Time err > 0.1 m (s) |\n"
-        "|---|---|---|---|---|---|---|---|\n"
-    )
-    for m, met in metrics.items():
-        ph = met.get("min_distance_by_phase_m") or {}
-        out += (
-            f"| {LABELS.get(m, m)} | {_f(met.get('h_min'), 3)} | "
-            f"{_f(met.get('barrier_violation_steps'))} | "
-            f"{_f(met.get('barrier_violation_pair_steps'))} | "
-            f"{_f(ph.get('formation'), 3)} / {_f(ph.get('mission'), 3)} | "
-            f"{_f(met.get('input_clipped_steps'))} | {_f(met.get('tracking_rms_m'), 3)} / "
-            f"{_f(met.get('tracking_max_m'), 3)} | "
-            f"{_f(met.get('tracking_time_above_0p1_s'), 2)} |\n"
-        )
-    return out
-
-
-def safety_legend(d_safe: float, tau: float, deadline_s: float) -> str:
-    """Definition and unit of every column of :func:`safety_table`."""
-    return md_legend(
-        [
-            ("Method", "as above."),
-            (
-                "True h_min (m²)",
-                f"smallest barrier h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (τ = {tau:g} s, "
-                f"D = {d_safe:g} m) over every pair of vehicles and every control step, from "
-                "the simulator's true positions and velocities; negative: the safe set was left.",
-            ),
-            ("Steps h<0", "control steps at which some pair has a negative true barrier."),
-            ("Pair-steps h<0", "(pair, control step) samples with a negative true barrier."),
-            (
-                "Min dist formation / mission (m)",
-                f"smallest pair distance before / from t = {deadline_s:g} s "
-                "(`run.formation_deadline_s`); '–' for a phase the run does not reach.",
-            ),
-            (
-                "Clipped agent-steps",
-                "agent-steps where the attitude/thrust limits changed the commanded u; '–' "
-                "when the recorded statuses do not carry it.",
-            ),
-            (
-                "Track RMS / max (m)",
-                f"RMS and maximum of the followers' distance to their desired vertices over the "
-                f"fixed window [{deadline_s:g} s, end], whatever happens in it; '–' when the run "
-                "ends before the window starts.",
-            ),
-            (
-                "Time err > 0.1 m (s)",
-                "time in that window during which some follower is more than 0.1 m off.",
             ),
         ]
     )

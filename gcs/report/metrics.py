@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from gcs.report.verdict import ground_strike_steps, verdict_metrics
+
 METRIC_KEYS = (
     "min_distance_m",
     "min_distance_by_phase_m",
@@ -28,6 +30,11 @@ METRIC_KEYS = (
     "barrier_violation_pair_steps",
     "collisions",
     "ground_strikes",
+    # the safety verdict (gcs.report.verdict; docs/metrics.md, "Safety verdict")
+    "own_h_min",
+    "safety_verdict",
+    "safety_alarm_count",
+    "safety_alarms",
     "input_clipped_steps",
     "energy_u",
     "energy_thrust",
@@ -54,6 +61,7 @@ METRIC_KEYS = (
     "transit_error_max_m",
 )
 MISSION_KEYS = METRIC_KEYS[-4:]
+LIST_KEYS = ("safety_alarms",)  # a list of events: in metrics.json, not a CSV column
 # computed beside compute_metrics from the scenario (gcs.report.mission_metrics), None here
 EXTRA_KEYS = ("ref_est_rms_m", "ref_est_max_m", *MISSION_KEYS)
 PHASES = ("takeoff", "formation", "mission", "landing")  # keys of min_distance_by_phase_m
@@ -82,6 +90,7 @@ class Series:
     solve_us: np.ndarray  # (K,N)
     fallback: np.ndarray  # (K,N) bool
     input_clipped: np.ndarray  # (K,N) bool: the setpoint conversion changed the commanded u
+    alarms: np.ndarray  # (K,N) uint8 AgentAlarm bits the agent raised at t_k
 
     def as_dict(self) -> dict[str, np.ndarray]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -179,21 +188,13 @@ class SafetySpec:
     d_safe_m: float  # m, barrier distance D
     formation_deadline_s: float  # s, start of the tracking window and of phase "mission"
     clipped_known: bool = True  # False: the statuses did not carry input_clipped
-
-
-GROUND_Z_M = 0.02  # m, an agent this low is on the ground
-STRIKE_SPEED_MPS = 0.5  # m/s, descent speed above which a touchdown is a ground strike
+    ids: tuple[int, ...] = ()  # the agents' ids in column order (the verdict's events name them)
+    collision_radius_m: float = 0.0  # m, a pair closer than this is in contact
 
 
 def ground_strikes(p: np.ndarray, v: np.ndarray) -> int:
-    """Touchdowns faster than :data:`STRIKE_SPEED_MPS`: steps where an agent that was above
-    :data:`GROUND_Z_M` is at or below it, having descended faster than that the step
-    before (a landing at the landing reference's 0.6 m/s ends slower than this)."""
-    if len(p) < 2:
-        return 0
-    z, vz = p[:, :, 2], v[:, :, 2]
-    hit = (z[1:] <= GROUND_Z_M) & (z[:-1] > GROUND_Z_M) & (vz[:-1] < -STRIKE_SPEED_MPS)
-    return int(np.sum(hit))
+    """Touchdowns faster than a landing (:func:`gcs.report.verdict.ground_strike_steps`)."""
+    return len(ground_strike_steps(p, v)[0])
 
 
 def compute_metrics(
@@ -242,6 +243,11 @@ def compute_metrics(
         **barrier_metrics(s.p, s.v, spec.tau_safe_s, spec.d_safe_m),
         "collisions": int(collisions),
         "ground_strikes": ground_strikes(s.p, s.v),
+        **verdict_metrics(
+            s.t, s.p, s.v, s.min_dist, s.h_min, s.alarms,
+            list(spec.ids) or list(range(s.p.shape[1])), f, spec.tau_safe_s, spec.d_safe_m,
+            spec.collision_radius_m,
+        ),
         "input_clipped_steps": int(np.sum(s.input_clipped)) if spec.clipped_known else None,
         "energy_u": float(np.sum(s.u[:, f] ** 2) * dt),
         "energy_thrust": float(np.sum(thr**2) * dt),

@@ -3,6 +3,8 @@ tolerance, the legend format and the closest approach of a run."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from swarm_common.enums import Method
@@ -34,3 +36,12 @@ def closest_approach(s: dict) -> tuple[int, float, tuple[int, int]]:
     d[np.diag_indices(len(p))] = np.inf
     a, b = np.unravel_index(int(np.argmin(d)), d.shape)
     return k, float(s["min_dist"][k]), (int(a), int(b))
+
+
+def fmt(x: Any, nd: int = 2) -> str:
+    """A table cell: "–" for None, a float with ``nd`` decimals, anything else as text."""
+    if x is None:
+        return "–"
+    if isinstance(x, float):
+        return f"{x:.{nd}f}"
+    return str(x)

@@ -20,13 +20,13 @@ from typing import Any
 
 import numpy as np
 
-from gcs.report.metrics import METRIC_KEYS, PHASES
+from gcs.report.metrics import LIST_KEYS, METRIC_KEYS, PHASES
 from gcs.report.shared import FORMED_TOL_M, LABELS, md_legend
 from swarm_common.scenario.model import Scenario
 
 ID_COLUMNS = ("scenario", "method", "seed", "status", "error", "duration_s")
 METRIC_COLUMNS = tuple(
-    c for k in METRIC_KEYS
+    c for k in METRIC_KEYS if k not in LIST_KEYS
     for c in ([f"min_distance_{p}_m" for p in PHASES] if k == "min_distance_by_phase_m" else [k])
 )
 CSV_COLUMNS = ID_COLUMNS + METRIC_COLUMNS
@@ -36,7 +36,8 @@ CONFIDENCE = 0.95
 
 def flat_row(metrics: Mapping[str, Any]) -> dict[str, Any]:
     """A run's metrics as flat CSV cells (per-phase distances spread over columns)."""
-    row = {k: v for k, v in metrics.items() if k != "min_distance_by_phase_m"}
+    row = {k: v for k, v in metrics.items()
+           if k != "min_distance_by_phase_m" and k not in LIST_KEYS}
     phases = metrics.get("min_distance_by_phase_m") or {}
     row.update({f"min_distance_{p}_m": phases.get(p) for p in PHASES})
     return row
@@ -210,6 +211,54 @@ def mission_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str 
     return out if any_mission else None
 
 
+RATES_HEAD = (
+    "| Scenario | Method | Runs | Safe (95 % LB) | Success (95 % LB) | Alarmed (95 % UB) |\n"
+    "|---|---|---|---|---|---|\n"
+)
+
+
+def run_rates(ok: Sequence[Mapping[str, Any]]) -> tuple[int, int, int]:
+    """(safe, successful, alarmed) runs among finished ones: **safe** when the safety
+    verdict is not "unsafe" (the true barrier ≥ 0 at every step, no contact, no ground
+    strike); **successful** when the formation formed (``formation_time_s`` set) or, for a
+    mission, the mission completed; **alarmed** when the run had any safety event
+    (``safety_alarm_count`` > 0: docs/metrics.md)."""
+    safe = sum(1 for r in ok if r.get("safety_verdict") not in ("unsafe", None, ""))
+    success = sum(
+        1 for r in ok
+        if (r.get("mission_completed") is True if r.get("mission_completed") not in (None, "")
+            else r.get("formation_time_s") not in (None, ""))
+    )
+    alarmed = sum(1 for r in ok if int(r.get("safety_alarm_count") or 0) > 0)
+    return safe, success, alarmed
+
+
+def clopper_pearson_lower(x: int, n: int, conf: float = CONFIDENCE) -> float:
+    """One-sided lower confidence bound on a probability from ``x`` of ``n``: one minus
+    :func:`clopper_pearson_upper` of the complement."""
+    return 1.0 - clopper_pearson_upper(n - x, n, conf) if n > 0 else 0.0
+
+
+def rates_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
+    """Per scenario × method: the safety, success and alarm rates (:func:`run_rates`) with
+    one-sided 95 % Clopper–Pearson bounds."""
+    out = RATES_HEAD
+    for scen in sorted({r["scenario"] for r in rows}):
+        for m in methods:
+            ok = [r for r in rows if r["scenario"] == scen and r["method"] == m
+                  and r["status"] == "ok"]
+            if not ok:
+                continue
+            n = len(ok)
+            safe, success, alarmed = run_rates(ok)
+            out += (
+                f"| {scen} | {m} | {n} | {safe}/{n} ({clopper_pearson_lower(safe, n):.3f}) "
+                f"| {success}/{n} ({clopper_pearson_lower(success, n):.3f}) "
+                f"| {alarmed}/{n} ({clopper_pearson_upper(alarmed, n):.3f}) |\n"
+            )
+    return out
+
+
 def _stat(values: list[float], q: float) -> str:
     return f"{np.percentile(values, q):.3f}" if values else "–"
 
@@ -241,6 +290,17 @@ def summary_markdown(
         f"* **P(violation) 95 % UB**: one-sided {CONFIDENCE:.0%} Clopper–Pearson upper bound on "
         "the probability that a run has a barrier violation (with 0 of n: 1 − 0.05^(1/n) ≈ 3/n); "
         "**P(collision)** the same for runs with a contact.",
+        "",
+    ]
+    lines += [
+        "## Safety, success and alarm rates",
+        "",
+        rates_table(rows, methods),
+        "* **Safe**: runs whose safety verdict is not \"unsafe\" (true barrier ≥ 0 at every "
+        "step, no contact, no ground strike); **Success**: the formation formed, or the "
+        "mission completed; **Alarmed**: runs with any safety event (an agent's own barrier "
+        "below 0 or an alarm it raised, as well as the truth's). In brackets the one-sided "
+        f"{CONFIDENCE:.0%} Clopper–Pearson bound: lower for the first two, upper for the last.",
         "",
     ]
     missions = mission_table(rows, methods)

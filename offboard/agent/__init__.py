@@ -9,4 +9,6 @@ both derive from :class:`offboard.agent.base.AgentBase`.
 * :mod:`.governor` - slows an infeasible leader trajectory until it fits the input set.
 * :mod:`.peers` - whose estimates an agent needs and waits for.
 * :mod:`.unsensed` - neighbours in range by prediction but not sensed now.
+* :mod:`.guard`, :mod:`.fallback` - a follower's safety monitor, and the brake-hold-land it
+  falls back to when its estimates diverge.
 """

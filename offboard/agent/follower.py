@@ -16,6 +16,7 @@ import numpy as np
 from offboard.agent.attitude import Setpoint
 from offboard.agent.base import CLIP_TOL, AgentBase
 from offboard.agent.governor import governor_for, log_governor
+from offboard.agent.guard import InFlightGuard
 from offboard.agent.peers import peer_ids
 from offboard.agent.takeoff import follower_xi
 from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours
@@ -126,6 +127,8 @@ class FollowerAgent(AgentBase):
         self._predict_idx = np.array(sorted(nb | set(self.form.leader_idx)), dtype=np.int64)
         self._lead_peers = list(self.form.leader_idx)  # their a* for the rcbf filter
         # neighbours predicted into sensing range but not sensed (dcbf, docs/safety.md §5c)
+        # the in-flight alarms and the fallback (offboard.agent.guard, docs/safety.md)
+        self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)
         self.unsensed = UnsensedNeighbours(self.pred, self.index, sc.n,
                                            sc.formation.sensing_range_m, ctl.tau_safe_s)
         # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
@@ -185,14 +188,19 @@ class FollowerAgent(AgentBase):
         rows, have = self.pred.predict_rows(self._predict_idx, t)
         # --- controller at t_k --------------------------------------------------------
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
+        alarms = self.guard.check(t, self.deso.z1, self.deso.z2, rows, have, rel_p, meas.valid,
+                                  sel, rp, rv)
         extra = (self.unsensed.pairs(t, sel, self.deso.z1, self.deso.z2)
                  if self.method == Method.DCBF else None)
         w_raw, w, v_clf, res = self._filter_step(t, sel, rp, rv, rows, have, extra)
-        status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf)
+        status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf,
+                             alarms=int(alarms))
         u = self._use_filter_output(res, w, status)
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
+        own_p, own_v = truth_p[self.index], truth_v[self.index]  # its odometry
+        u = self.guard.command(t, own_p, own_v, u)
         # setpoint, the inner-loop model's realised control over the period (sub-steps)
         # and their mean, whether the setpoint clips u: one compiled call
         sp, u_sub, status.input_clipped, a_mean = self.inner.command(
@@ -204,7 +212,8 @@ class FollowerAgent(AgentBase):
         self.deso.update(rel_p, rel_v, meas.valid, rows, have, u_sub)
         self.ref.update(rows, have)
         status.n_used = self.deso.n_used
-        return self._output(sp, u, self._estimate(t + self.dt), status, w_raw)
+        est = self.guard.estimate(self._estimate(t + self.dt), own_p, own_v)
+        return self._output(sp, u, est, status, w_raw)
 
     # -- the named parts of the step --------------------------------------------------
     def _coast_missed(self, k: int, t: float) -> None:

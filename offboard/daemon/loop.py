@@ -31,6 +31,7 @@ from offboard.daemon.ports import SwarmPort, VehiclePort
 from offboard.daemon.sensing_source import SwarmSensing
 from offboard.daemon.stream import EstimateOutbox, SetpointStream
 from offboard.daemon.wire_convert import estimate_to_wire, status_to_wire
+from offboard.safety.monitor import ALARM_TEXT, alarm_onsets
 from swarm_common import px4, wire
 from swarm_common.enums import SensingSource
 
@@ -60,6 +61,7 @@ class AgentLoop:
         self.driver = driver
         self.last_step = -1
         self.odo_pub_step = -1  # the last step whose own odometry went out
+        self.alarms = 0  # the last step's AgentAlarm bits (a WARNING at each onset)
         self.cooperative = True
         # CPU of this thread inside agent.step (s): the control law runs on the main thread
         # alone (numba kernels, single-threaded BLAS). Not the process's CPU clock: it
@@ -134,6 +136,10 @@ class AgentLoop:
         self.outbox.publish(self._mark_cooperation(est, t))
         mode = px4.short_name(self.vehicle.custom_mode)
         self.swarm.publish_status(status_to_wire(self.id, k, t, out, mode, comm_ok))
+        for bit in alarm_onsets(self.alarms, out.status.alarms):
+            log.warning("agent %d: safety alarm %s at t=%.2f s: %s", self.id, bit.name,
+                        t, ALARM_TEXT[bit])
+        self.alarms = out.status.alarms
         return True
 
     def _mark_cooperation(self, est: wire.Estimate, t: float) -> wire.Estimate:

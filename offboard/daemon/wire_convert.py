@@ -100,4 +100,5 @@ def status_to_wire(
         comm_ok=comm_ok,
         lumped=np.asarray(out.lumped, dtype=float),
         input_clipped=bool(st.input_clipped),
+        alarms=int(st.alarms),
     )

@@ -10,6 +10,8 @@ Entry point: :func:`offboard.safety.filter.make_filters` (one class per
 * :mod:`offboard.safety.rcbf` - the paper's CLF-RCBF QP (kept for comparison).
 * :mod:`offboard.safety.apf` - the improved APF baseline and no avoidance.
 * :mod:`offboard.safety.solvers` - one adapter per QP solver (DAQP, OSQP).
+* :mod:`offboard.safety.monitor` - the in-flight safety alarms (estimate residual, a neighbour
+  heard too late) a follower raises beside its filter.
 * :mod:`offboard.safety.pair_kernel`, :mod:`offboard.safety.clf_kernel`,
   :mod:`offboard.safety.qp_rows_kernel` - compiled terms every filter shares.
 """

@@ -16,7 +16,13 @@ import numpy as np
 from swarm_common.enums import GraphKind
 from swarm_common.scenario import graphs
 from swarm_common.scenario.feasibility import feasibility_problem
-from swarm_common.scenario.files import ALLOW_INFEASIBLE_FLAG, InfeasibleScenarioError
+from swarm_common.scenario.files import (
+    ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
+    InfeasibleScenarioError,
+    UnsafeScenarioError,
+)
+from swarm_common.scenario.safety_check import safety_problems
 
 if TYPE_CHECKING:
     from swarm_common.scenario.spec import AgentSpec, Scenario
@@ -38,6 +44,24 @@ def check_feasible(sc: Scenario) -> None:
         return
     raise InfeasibleScenarioError(
         f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway"
+    )
+
+
+def check_safe(sc: Scenario) -> None:
+    """Raise :class:`UnsafeScenarioError` (one line: file, key, value, bound) with the first
+    broken load-time safety assumption (:func:`swarm_common.scenario.safety_check.
+    safety_problems`, docs/safety.md "Load-time checks"); with ``sc.allow_unsafe`` log one
+    warning per broken assumption instead."""
+    problems = safety_problems(sc)
+    if not problems:
+        return
+    if sc.allow_unsafe:
+        for problem in problems:
+            log.warning("%s: unsafe: %s (%s: running it anyway)", sc.path, problem,
+                        ALLOW_UNSAFE_FLAG)
+        return
+    raise UnsafeScenarioError(
+        f"{sc.path}: unsafe: {problems[0]}; pass {ALLOW_UNSAFE_FLAG} to run it anyway"
     )
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 ALLOW_INFEASIBLE_FLAG = "--allow-infeasible"
+ALLOW_UNSAFE_FLAG = "--allow-unsafe"
 
 
 class ScenarioError(ValueError):
@@ -28,6 +29,11 @@ class ScenarioError(ValueError):
 class InfeasibleScenarioError(ScenarioError):
     """A valid scenario that the vehicles cannot fly (:mod:`swarm_common.scenario.feasibility`);
     ``--allow-infeasible`` turns it into a warning."""
+
+
+class UnsafeScenarioError(ScenarioError):
+    """A scenario that breaks a load-time safety assumption
+    (:mod:`swarm_common.scenario.safety_check`); ``--allow-unsafe`` turns it into warnings."""
 
 
 # The scenario name is the swarm name in every Zenoh key (``swarm/<name>/...``) and part of

@@ -27,17 +27,20 @@ from swarm_common.mission.config import MissionConfig, MissionError, parse_missi
 from swarm_common.scenario.checks import (
     check_feasible,
     check_pads,
+    check_safe,
     check_separation,
     graph_problem,
 )
 from swarm_common.scenario.files import (
     ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
     MAX_SCENARIO_BYTES,
     MAX_TOML_NESTING,
     SWARM_NAME_RE,
     SWARM_NAME_RULE,
     InfeasibleScenarioError,
     ScenarioError,
+    UnsafeScenarioError,
     dump_toml,
     read_scenario_text,
     swarm_name_problem,
@@ -68,6 +71,8 @@ from swarm_common.scenario.spec import AgentSpec, Scenario
 
 __all__ = [
     "ALLOW_INFEASIBLE_FLAG",
+    "ALLOW_UNSAFE_FLAG",
+    "UnsafeScenarioError",
     "MAX_SCENARIO_BYTES",
     "MAX_TOML_NESTING",
     "SCHEMA",
@@ -107,12 +112,15 @@ EXTRA_SECTIONS = ("agent", "faults", "mission")
 
 
 def parse_scenario(
-    data: dict[str, Any], path: str = "<scenario>", allow_infeasible: bool = False
+    data: dict[str, Any], path: str = "<scenario>", allow_infeasible: bool = False,
+    allow_unsafe: bool = False,
 ) -> Scenario:
     """Validate a decoded TOML document and return a :class:`Scenario`.
 
     A valid scenario the vehicles cannot fly (:func:`check_feasible`) raises
-    :class:`InfeasibleScenarioError`, or only logs a warning with ``allow_infeasible``."""
+    :class:`InfeasibleScenarioError`, or only logs a warning with ``allow_infeasible``; one
+    that breaks a load-time safety assumption (:func:`check_safe`) raises
+    :class:`UnsafeScenarioError`, or only logs warnings with ``allow_unsafe``."""
 
     def fail(msg: str) -> ScenarioError:
         return ScenarioError(f"{path}: {msg}")
@@ -230,7 +238,7 @@ def parse_scenario(
         raise fail("[mission] and [leader_trajectory] both move the leaders: keep one "
                    "(a mission replaces the sinusoid; remove [leader_trajectory])")
     scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible,
-                    faults=plan, mission=mission, **typed)
+                    allow_unsafe=allow_unsafe, faults=plan, mission=mission, **typed)
     problem = graph_problem(scen)
     if problem is not None:
         raise fail(problem)
@@ -238,6 +246,7 @@ def parse_scenario(
     if problem is not None:
         raise fail(problem)
     check_feasible(scen)
+    check_safe(scen)
     return scen
 
 
@@ -264,8 +273,11 @@ def _parse_faults(table: object, ids: set[int], fail: Any) -> FaultPlan:
     return plan
 
 
-def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
-    """Read and validate a scenario TOML file (``allow_infeasible``: :func:`parse_scenario`).
+def load_scenario(
+    path: str | Path, allow_infeasible: bool = False, allow_unsafe: bool = False
+) -> Scenario:
+    """Read and validate a scenario TOML file (``allow_infeasible``, ``allow_unsafe``:
+    :func:`parse_scenario`).
 
     Its ``[faults]`` plan becomes this process's (:func:`swarm_common.faults.install`): the
     MAVLink and Zenoh links the process opens afterwards inject those faults."""
@@ -277,7 +289,7 @@ def load_scenario(path: str | Path, allow_infeasible: bool = False) -> Scenario:
         raise ScenarioError(f"{p}: not valid TOML ({exc})") from None
     except RecursionError:
         raise ScenarioError(f"{p}: not a valid scenario (nested too deep)") from None
-    sc = parse_scenario(data, str(p), allow_infeasible)
+    sc = parse_scenario(data, str(p), allow_infeasible, allow_unsafe)
     faults.install(sc.faults, sc.seed)  # the transports this process opens apply it
     return sc
 
@@ -287,4 +299,4 @@ def with_overrides(sc: Scenario, **sections: dict[str, Any]) -> Scenario:
     data = sc.to_toml_dict()
     for sec, kv in sections.items():
         data.setdefault(sec, {}).update(kv)
-    return parse_scenario(data, sc.path, sc.allow_infeasible)
+    return parse_scenario(data, sc.path, sc.allow_infeasible, sc.allow_unsafe)

@@ -71,6 +71,8 @@ class Scenario:
     faults: FaultPlan = field(default_factory=FaultPlan)
     # loaded with the feasibility check waived (--allow-infeasible); children inherit it
     allow_infeasible: bool = False
+    # loaded with the safety assumptions waived (--allow-unsafe); children inherit it
+    allow_unsafe: bool = False
     # [mission] (optional, docs/missions.md): formation waypoints the leaders fly instead of
     # the [leader_trajectory] sinusoid
     mission: MissionConfig | None = None

@@ -17,7 +17,7 @@ from swarm_common.scenario.model import load_scenario, with_overrides
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 SERIES_KEYS = ("t", "p", "v", "p_des", "v_des", "z1", "z2", "xi_p", "lumped_est", "lumped_true",
                "u", "thrust", "tilt_deg", "min_dist", "h_min", "solve_us", "fallback",
-               "input_clipped")
+               "input_clipped", "alarms")
 
 
 @pytest.fixture(scope="module")

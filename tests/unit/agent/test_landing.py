@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_shipped
 
 from offboard.agent.landing import (
     V_D,
@@ -20,7 +21,7 @@ SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
 def test_pads_separated_and_off_descent_paths(path: Path) -> None:
-    sc = load_scenario(path)
+    sc = load_shipped(path)
     plan = landing_plan(sc, 15.0)
     two_d = 2.0 * sc.controller.d_safe_m
     n = sc.n

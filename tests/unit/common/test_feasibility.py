@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, load_shipped
 
 from gcs.mission.launch_spec import LaunchSpec
 from offboard.agent.takeoff import leader_origin
@@ -47,7 +47,7 @@ def _variant(base: Path = CUBE8, allow: bool = True, **sections: dict) -> Scenar
     data = sc.to_toml_dict()
     for sec, kv in sections.items():
         data[sec].update(kv)
-    return parse_scenario(data, "variant.toml", allow_infeasible=allow)
+    return parse_scenario(data, "variant.toml", allow_infeasible=allow, allow_unsafe=True)
 
 
 def _write(tmp_path: Path, old: str, new: str) -> Path:
@@ -60,14 +60,14 @@ def _write(tmp_path: Path, old: str, new: str) -> Path:
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
 def test_shipped_scenarios_are_feasible(path):
-    sc = load_scenario(path)
+    sc = load_shipped(path)
     assert feasibility_problem(sc) is None
     assert not sc.allow_infeasible
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
 def test_desired_origins_are_offboards_formation(path):
-    sc = load_scenario(path)
+    sc = load_shipped(path)
     form = formation_from_scenario(sc)
     lead = [sc.index_of(i) for i in sc.leader_ids]
     lo = np.array([leader_origin(sc, k) for k in lead])
@@ -117,7 +117,7 @@ def test_peak_acceleration_and_jerk_match_finite_differences_of_the_formation():
 def test_the_load_time_input_set_is_the_dcbf_filters_and_is_realisable(path):
     """One input set: the feasibility check's is the dcbf filter's; and every point of it is
     realisable, checked numerically against the vehicle's tilt and thrust limits."""
-    sc = load_scenario(path)
+    sc = load_shipped(path)
     veh, ctl = sc.vehicle, sc.controller
     lim = InputSet.of(veh, ctl)
     dcbf = input_set_of(ctl, veh)

@@ -10,11 +10,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import Counter
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from conftest import ROOT, load_shipped
 
 import offboard.safety.dcbf.front as front_mod
 from gcs.mission.inproc import MissionResult, run_inproc
@@ -22,9 +22,7 @@ from offboard.agent.follower import FollowerAgent
 from offboard.safety.base import saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.dcbf.front import saturate_into
-from swarm_common.scenario.model import load_scenario
 
-ROOT = Path(__file__).resolve().parents[3]
 # Both paths call the same kernels with the same arguments in the same order, so here
 # they give the same bits; the comparison allows a relative 1e-9 (about 4.5e6 ulp at
 # 1.0) so that a platform whose Python-side additions or copies round differently in the
@@ -38,7 +36,7 @@ def _run(name: str, duration: float, composed: bool, monkeypatch: pytest.MonkeyP
     """``name`` run in process with dcbf; ``composed``: every dcbf step part by part
     (the reference) instead of the compiled call. ``calls`` counts each path's steps and
     the compiled calls with predicted rows."""
-    sc = load_scenario(ROOT / "scenarios" / f"{name}.toml")
+    sc = load_shipped(ROOT / "scenarios" / f"{name}.toml")
     run, composed_step = front_mod.DcbfFront.run, FollowerAgent._composed_step
 
     def counted_run(self: front_mod.DcbfFront, *a: Any, **kw: Any) -> Any:

@@ -1,0 +1,173 @@
+"""A run's safety verdict: every broken safety assumption as a timed event, and one word
+for the run (docs/metrics.md, "Safety verdict"; docs/safety.md, "Alarms").
+
+The events come from two sources, both recorded per control step:
+
+* the **truth** (the simulator's positions and velocities): a pair's true barrier below 0,
+  two vehicles closer than the collision radius, a touchdown faster than a landing;
+* each **agent's own view**: the barrier it computed from its estimates below 0 (its margin
+  is used up), and the :class:`~swarm_common.enums.AgentAlarm` bits it raised in flight.
+
+An event is the onset of a condition: the step at which it becomes true for that agent or
+pair, not every step it holds. The list is capped at :data:`ALARM_LIST_MAX` entries, the
+earliest kept; ``safety_alarm_count`` counts them all. Pure: arrays in, plain data out.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
+from swarm_common.enums import AgentAlarm, Method, SafetyAlarmKind
+
+ALARM_LIST_MAX = 200  # entries kept in metrics.json (the earliest); the count is complete
+# the methods that claim safety: a run of one of them that breaks it exits non-zero
+SAFETY_FILTERS = frozenset({Method.DCBF, Method.RCBF})
+GROUND_Z_M = 0.02  # m, an agent this low is on the ground
+STRIKE_SPEED_MPS = 0.5  # m/s, descent speed above which a touchdown is a ground strike
+_BIT_KIND = {
+    AgentAlarm.RESIDUAL: SafetyAlarmKind.RESIDUAL,
+    AgentAlarm.NEAR_ENTRY: SafetyAlarmKind.NEAR_ENTRY,
+    AgentAlarm.FALLBACK: SafetyAlarmKind.FALLBACK,
+}
+
+
+class Verdict(StrEnum):
+    """``metrics.json`` ``safety_verdict``."""
+
+    SAFE = "safe"  # no event: the truth and every agent's own view held
+    ALARM = "alarm"  # the truth held, but an agent's margin or an assumption broke
+    UNSAFE = "unsafe"  # the truth broke: a barrier below 0, a collision or a ground strike
+
+
+TRUTH_KINDS = frozenset({SafetyAlarmKind.BARRIER, SafetyAlarmKind.COLLISION,
+                         SafetyAlarmKind.GROUND_STRIKE})
+
+
+def onsets(cond: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, columns) where the boolean (K, M) ``cond`` becomes true: true at step k and
+    false at k − 1 (or k = 0), in order of step, then column."""
+    if cond.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    prev = np.vstack([np.zeros((1, cond.shape[1]), bool), cond[:-1]])
+    k, m = np.nonzero(cond & ~prev)
+    return k, m
+
+
+def ground_strike_steps(p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, agents) of every touchdown faster than :data:`STRIKE_SPEED_MPS`: an agent
+    above :data:`GROUND_Z_M` at step k − 1 is at or below it at step k, having descended
+    faster than that at k − 1 (a landing at the landing reference's 0.6 m/s ends slower).
+    ``p``, ``v``: (K,N,3) true positions (m) and velocities (m/s)."""
+    if len(p) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    z, vz = p[:, :, 2], v[:, :, 2]
+    k, a = np.nonzero((z[1:] <= GROUND_Z_M) & (z[:-1] > GROUND_Z_M)
+                      & (vz[:-1] < -STRIKE_SPEED_MPS))
+    return k + 1, a
+
+
+def _event(t: float, kind: SafetyAlarmKind, agent: int | None, other: int | None,
+           value: float | None) -> dict[str, Any]:
+    return {"t_s": round(float(t), 6), "assumption": str(kind), "agent": agent,
+            "other": other, "value": None if value is None else float(value)}
+
+
+def safety_events(
+    t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
+    alarms: np.ndarray, ids: list[int], tau_s: float, d_safe_m: float,
+    collision_radius_m: float,
+) -> list[dict[str, Any]]:
+    """Every onset, sorted by time: ``t`` (K,) s; ``p``, ``v`` (K,N,3) true positions (m)
+    and velocities (m/s); ``min_dist`` (K,) the smallest pair distance over the physics
+    steps of the period after t_k (m; a contact between two control steps is seen there);
+    ``own_h`` (K,N) each agent's own smallest barrier (m², inf or NaN where it computed
+    none); ``alarms`` (K,N) :class:`AgentAlarm` bits; ``ids`` the agents' ids in column
+    order. τ (s) and D (m): the barrier's horizon and distance. A contact names the pair
+    closest at its control step."""
+    out: list[dict[str, Any]] = []
+    n = p.shape[1]
+    if n >= 2 and len(t):
+        i, j = np.triu_indices(n, k=1)
+        dp = p[:, i] - p[:, j]
+        dv = v[:, i] - v[:, j]
+        dist2 = np.sum(dp * dp, axis=2)
+        h = dist2 + 2.0 * tau_s * np.sum(dv * dp, axis=2) - d_safe_m**2
+        for k, m in zip(*onsets(h < 0.0), strict=True):
+            out.append(_event(t[k], SafetyAlarmKind.BARRIER, ids[i[m]], ids[j[m]], h[k, m]))
+        with np.errstate(invalid="ignore"):
+            contact = (min_dist < collision_radius_m)[:, None]
+        for k, _ in zip(*onsets(contact), strict=True):
+            m = int(np.argmin(dist2[k]))
+            out.append(_event(t[k], SafetyAlarmKind.COLLISION, ids[i[m]], ids[j[m]],
+                              min_dist[k]))
+    for k, a in zip(*ground_strike_steps(p, v), strict=True):
+        out.append(_event(t[k], SafetyAlarmKind.GROUND_STRIKE, ids[a], None, v[k - 1, a, 2]))
+    with np.errstate(invalid="ignore"):
+        neg = np.nan_to_num(own_h, nan=np.inf) < 0.0
+    for k, a in zip(*onsets(neg), strict=True):
+        out.append(_event(t[k], SafetyAlarmKind.OWN_BARRIER, ids[a], None, own_h[k, a]))
+    bits = alarms.astype(np.int64)
+    for bit, kind in _BIT_KIND.items():
+        for k, a in zip(*onsets((bits & int(bit)) != 0), strict=True):
+            out.append(_event(t[k], kind, ids[a], None, None))
+    out.sort(key=lambda e: (e["t_s"], e["assumption"], e["agent"] or 0, e["other"] or 0))
+    return out
+
+
+def verdict(events: list[dict[str, Any]]) -> Verdict:
+    """UNSAFE when an event is one of :data:`TRUTH_KINDS`, ALARM when there are others,
+    SAFE when there are none."""
+    if any(e["assumption"] in TRUTH_KINDS for e in events):
+        return Verdict.UNSAFE
+    return Verdict.ALARM if events else Verdict.SAFE
+
+
+def verdict_metrics(
+    t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
+    alarms: np.ndarray, ids: list[int], follower_idx: list[int], tau_s: float,
+    d_safe_m: float, collision_radius_m: float,
+) -> dict[str, Any]:
+    """``own_h_min``, ``safety_verdict``, ``safety_alarm_count`` and ``safety_alarms``
+    (the first :data:`ALARM_LIST_MAX` events of :func:`safety_events`). ``own_h_min``: the
+    smallest barrier a follower computed from its own estimates (m²; None when none did)."""
+    events = safety_events(t, p, v, min_dist, own_h, alarms, ids, tau_s, d_safe_m,
+                           collision_radius_m)
+    own = own_h[:, follower_idx] if len(follower_idx) else own_h[:, :0]
+    finite = own[np.isfinite(own)]
+    return {
+        "own_h_min": float(finite.min()) if finite.size else None,
+        "safety_verdict": str(verdict(events)),
+        "safety_alarm_count": len(events),
+        "safety_alarms": events[:ALARM_LIST_MAX],
+    }
+
+
+def summary_line(metrics: dict[str, Any]) -> str | None:
+    """One log line naming the verdict and the first events, None when the run was safe."""
+    if metrics.get("safety_verdict", Verdict.SAFE) == Verdict.SAFE:
+        return None
+    ev = metrics.get("safety_alarms") or []
+    kinds: dict[str, int] = {}
+    for e in ev:
+        kinds[e["assumption"]] = kinds.get(e["assumption"], 0) + 1
+    first = ev[0] if ev else None
+    where = ""
+    if first is not None:
+        pair = f"{first['agent']}" + (f"-{first['other']}" if first["other"] is not None else "")
+        where = f"; first: {first['assumption']} of {pair} at t={first['t_s']:.2f} s"
+    counts = ", ".join(f"{k} {n}" for k, n in kinds.items())
+    return (f"safety verdict {metrics['safety_verdict'].upper()}: "
+            f"{metrics.get('safety_alarm_count', len(ev))} event(s) ({counts}){where}")
+
+
+def safety_exit_status(metrics: dict[str, Any], method: str) -> int:
+    """``gcs mission run``'s exit status for a finished run: :data:`EXIT_SAFETY` when
+    ``method`` is one of :data:`SAFETY_FILTERS` and the verdict is not "safe", else
+    :data:`EXIT_OK` (a baseline without a filter, apf or none, is expected to break: its
+    verdict is in the log and the metrics only)."""
+    safe = metrics.get("safety_verdict", Verdict.SAFE) == Verdict.SAFE
+    return EXIT_OK if safe or method not in SAFETY_FILTERS else EXIT_SAFETY

@@ -1,0 +1,79 @@
+"""A follower's in-flight guard: its :class:`~offboard.safety.monitor.SafetyMonitor` and,
+once that latches, the :class:`~offboard.agent.fallback.Fallback` that replaces formation
+control (docs/safety.md, "In-flight alarms and the fallback").
+
+The guard only reads the follower's state: while no fallback is latched the follower's
+commands and estimates are exactly those without it. In the fallback the command comes
+from the agent's own odometry (its own row of the positions and velocities it is stepped
+with: the daemon's own ODOMETRY, the in-process runner's truth), and the estimate it
+publishes is that odometry, marked non-cooperative so that the others take the whole
+avoidance budget against it (docs/safety.md A5). The fallback is never left in flight.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from offboard.agent.fallback import Fallback
+from offboard.estimation.peer_table import Z1
+from offboard.records import NeighbourEstimate
+from offboard.safety.monitor import SafetyMonitor, monitor_config
+from swarm_common.enums import AgentAlarm
+from swarm_common.scenario.model import Scenario
+
+
+class InFlightGuard:
+    """The guard of follower ``index`` of ``sc``; ``peers`` the scenario indices whose
+    estimates it predicts to t_k (graph neighbours and leaders); ``lo``, ``hi`` (3,) the
+    control box (m/s²)."""
+
+    def __init__(self, sc: Scenario, index: int, peers: np.ndarray, lo: np.ndarray,
+                 hi: np.ndarray) -> None:
+        self.monitor = SafetyMonitor(monitor_config(sc), sc.n)
+        self.fallback = Fallback(sc.controller.leader_kp, sc.controller.leader_kd, lo, hi)
+        self.index = index
+        self.dt = sc.control_dt
+        self._peers = np.zeros(sc.n, dtype=bool)
+        self._peers[peers] = True
+        self._sensed = np.zeros(sc.n, dtype=bool)
+        self.bits = AgentAlarm(0)
+
+    def check(
+        self, t: float, z1: np.ndarray, z2: np.ndarray, rows: np.ndarray, have: np.ndarray,
+        rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray, rp: np.ndarray,
+        rv: np.ndarray,
+    ) -> AgentAlarm:
+        """The step's alarm bits at ``t`` (s), from the estimates ``z1``, ``z2`` (3,) at t_k,
+        the neighbours' predicted ``rows`` (N, ROW) with ``have`` (N,), this step's sensed
+        ``rel_p`` (N,3) where ``fresh`` (N,), and the filter's pairs ``sel`` (indices) with
+        their p_j − p_i, v_j − v_i ``rp``, ``rv`` (N,3). Latches the fallback at ``t``."""
+        self._sensed[:] = False
+        self._sensed[sel] = True
+        bits = self.monitor.step(z1, z2, rows[:, Z1], have & self._peers, rel_p, fresh,
+                                 self._sensed, rp, rv)
+        if self.monitor.fallback:
+            self.fallback.start(t)
+            bits |= AgentAlarm.FALLBACK
+        self.bits = bits
+        return bits
+
+    def command(self, t: float, p: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``u``, or in the fallback its command from the odometry ``p`` (m), ``v`` (m/s)."""
+        if not self.fallback.active:
+            return u
+        return self.fallback.command(t, p, v)
+
+    def estimate(self, est: NeighbourEstimate, p: np.ndarray, v: np.ndarray) -> NeighbourEstimate:
+        """``est``, or in the fallback the odometry ``p``, ``v`` predicted to ``est.t``
+        (one control period ahead), non-cooperative, with the fallback's reference."""
+        fb = self.fallback
+        if not fb.active:
+            return est
+        p, v = np.asarray(p, float), np.asarray(v, float)
+        xi = np.zeros(12)
+        if fb.hold_p is not None:
+            xi[0:3], xi[3:6] = fb.reference(est.t)
+        else:
+            xi[0:3] = p
+        return NeighbourEstimate(est.id, est.t, p + v * self.dt, v.copy(), np.zeros(3), xi,
+                                 False, cooperative=False)

@@ -1,0 +1,182 @@
+"""In-flight safety alarms of a follower and its fallback (docs/safety.md, "In-flight alarms
+and the fallback"). Pure maths: no I/O; the daemon logs the onsets.
+
+:class:`SafetyMonitor` reads, once per control step, what the follower already has at t_k
+and returns its :class:`~swarm_common.enums.AgentAlarm` bits:
+
+* ``RESIDUAL``: the observer's position estimate ẑ_i1 disagrees with what its sensing
+  implies. For every neighbour j with a fresh relative measurement r_ij ≈ p_j − p_i and a
+  usable estimate ẑ_j1 predicted to t_k, ẑ_j1 − r_ij is where j's estimate and the sensor
+  put agent i; the residual is the median over those j of ‖ẑ_i1 − (ẑ_j1 − r_ij)‖ (m). It
+  equals e_i − e_j plus the sensing error (e the estimate errors), so it needs no ground
+  truth. A neighbour j that is *not* sensed (not even held through a dropout) although
+  the estimates put it at ‖ẑ_j1 − ẑ_i1‖ < R (the sensing range, m) is just as
+  inconsistent: its true distance is ≥ R, so ‖e_i − e_j‖ ≥ R − ‖ẑ_j1 − ẑ_i1‖, the lower
+  bound it contributes (0 when the estimates put it out of range). The residual is the
+  largest over both kinds of j: it flags i's own estimate running away, and also a
+  neighbour's that i reads (its own estimate is then driven by it). The median was tried
+  and detects 1.6 s later on cube8 with 0.5 m/s range-rate noise: neighbours that drift
+  together agree with each other. The estimated speed ‖ẑ_i2‖ above :data:`V_IMPOSSIBLE_MPS`
+  counts as over the bound as well (it also covers an agent that senses nobody). Over the bound
+  (:func:`monitor_config`) for ``persist`` consecutive steps raises the bit; it is
+  cleared after as many steps under it.
+* ``NEAR_ENTRY``: an agent sensed at t_k but not at t_{k−1} whose barrier
+  h = ‖Δp‖² + 2τ ΔvᵀΔp − D² (from the sensed Δp = p_i − p_j, Δv) is already < 0 at
+  first sight: it was heard too late to brake. Raised on that step.
+* ``FALLBACK``: ``RESIDUAL`` held for ``fallback_after`` consecutive steps latches the
+  fallback (:class:`Fallback`); the bit stays set from then on (no recovery in flight).
+
+All vectors ENU, z up (m, m/s, m/s²).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from swarm_common.enums import AgentAlarm
+from swarm_common.scenario.model import Scenario
+
+RESIDUAL_FLOOR_M = 1.0  # m, the bound's floor: transients of the estimates (docs/safety.md)
+CHI2_3_999 = 16.266  # the 0.999 quantile of χ² with 3 degrees of freedom
+SENSE_SIGMAS = 4.0  # standard deviations of the relative-position noise in the bound
+V_IMPOSSIBLE_MPS = 30.0  # m/s, an estimated speed no vehicle of this class flies
+PERSIST_S = 0.2  # s over (under) the bound that raises (clears) RESIDUAL
+FALLBACK_AFTER_S = 0.5  # s of RESIDUAL held that latches the fallback
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """The monitor's bounds: ``bound_m`` (m) on the residual, ``v_max_mps`` on the
+    estimated speed, the persistence ``persist`` and ``fallback_after`` (control steps),
+    the barrier's τ (s) and D (m)."""
+
+    bound_m: float
+    v_max_mps: float
+    persist: int
+    fallback_after: int
+    tau_s: float
+    d_safe_m: float
+    range_m: float  # m, the sensing range R
+
+
+def residual_bound(init_pos_error_m: float, distance_noise_m: float,
+                   bearing_noise_rad: float, range_m: float) -> float:
+    """The residual's bound (m): :data:`RESIDUAL_FLOOR_M`, plus the 0.999 quantile of
+    ‖e_i − e_j‖ for two independent initial estimate errors of ``init_pos_error_m`` (m,
+    std per axis): √(2 χ²₃) σ₀, plus :data:`SENSE_SIGMAS` standard deviations of a relative
+    position measured at ``range_m`` (m): σ_d + R σ_β."""
+    start = math.sqrt(2.0 * CHI2_3_999) * init_pos_error_m
+    sense = SENSE_SIGMAS * (distance_noise_m + range_m * bearing_noise_rad)
+    return RESIDUAL_FLOOR_M + start + sense
+
+
+def monitor_config(sc: Scenario) -> MonitorConfig:
+    """The monitor of scenario ``sc`` (cube8: bound 2.77 m, 10 and 25 steps at 50 Hz)."""
+    s = sc.sensing
+    bound = residual_bound(sc.observer.init_pos_error_m, s.distance_noise_m,
+                           s.bearing_noise_rad, sc.formation.sensing_range_m)
+    dt = sc.control_dt
+    return MonitorConfig(bound, V_IMPOSSIBLE_MPS, max(1, round(PERSIST_S / dt)),
+                         max(1, round(FALLBACK_AFTER_S / dt)), sc.controller.tau_safe_s,
+                         sc.controller.d_safe_m, sc.formation.sensing_range_m)
+
+
+def consistency_residual(z1: np.ndarray, est_p: np.ndarray, rel_p: np.ndarray,
+                         use: np.ndarray, unseen: np.ndarray, range_m: float) -> float:
+    """The residual (m; module docstring): the largest over the rows ``use`` (N,) bool of
+    ‖z1 − (est_p[j] − rel_p[j])‖ and over the rows ``unseen`` (N,) bool of
+    max(0, ``range_m`` − ‖est_p[j] − z1‖). ``z1`` (3,): this agent's position estimate,
+    ``est_p`` (N,3): the others' estimates at the same time, ``rel_p`` (N,3): the sensed
+    p_j − p_i. NaN when no row is usable."""
+    if not (np.any(use) or np.any(unseen)):
+        return math.nan
+    r = np.linalg.norm(z1[None, :] - (est_p[use] - rel_p[use]), axis=1)
+    lo = np.maximum(range_m - np.linalg.norm(est_p[unseen] - z1[None, :], axis=1), 0.0)
+    return float(np.max(np.concatenate([r, lo])))
+
+
+def entry_barriers(rel_p: np.ndarray, rel_v: np.ndarray, tau: float, d: float) -> np.ndarray:
+    """h = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) per row of the sensed ``rel_p`` = p_j − p_i and
+    ``rel_v`` = v_j − v_i (Δp = −rel_p, Δv = −rel_v: the signs cancel in the product)."""
+    return (np.einsum("ij,ij->i", rel_p, rel_p) + 2.0 * tau * np.einsum("ij,ij->i", rel_v, rel_p)
+            - d * d)
+
+
+class SafetyMonitor:
+    """One follower's alarms (module docstring); ``n`` agents in the scenario."""
+
+    def __init__(self, cfg: MonitorConfig, n: int) -> None:
+        self.cfg = cfg
+        self.residual = math.nan  # m, the last step's residual (NaN: no usable neighbour)
+        self._over = 0  # consecutive steps over the bound
+        self._under = 0  # consecutive steps under it while raised
+        self._raised = False
+        self._held = 0  # consecutive steps with RESIDUAL raised
+        self.fallback = False  # latched
+        self._prev: np.ndarray | None = None  # (N,) bool: sensed at the step before
+
+    def step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, usable: np.ndarray,
+             rel_p: np.ndarray, fresh: np.ndarray, sensed: np.ndarray, pair_p: np.ndarray,
+             pair_v: np.ndarray) -> AgentAlarm:
+        """The bits of one step. ``z1``, ``z2`` (3,): this agent's estimates at t_k;
+        ``est_p`` (N,3): the others' position estimates predicted to t_k, ``usable`` (N,)
+        where they are; ``rel_p`` (N,3) with ``fresh`` (N,) bool: this step's relative
+        positions p_j − p_i; ``sensed`` (N,) bool with ``pair_p``, ``pair_v`` (N,3): the
+        pairs the filter uses this step (held through a dropout) and their p_j − p_i,
+        v_j − v_i."""
+        bits = AgentAlarm(0)
+        if self._residual_step(z1, z2, est_p, usable & fresh, usable & ~sensed & ~fresh,
+                               rel_p):
+            bits |= AgentAlarm.RESIDUAL
+        if self._near_entry(sensed, pair_p, pair_v):
+            bits |= AgentAlarm.NEAR_ENTRY
+        if self.fallback:
+            bits |= AgentAlarm.FALLBACK
+        return bits
+
+    def _residual_step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray,
+                       use: np.ndarray, unseen: np.ndarray, rel_p: np.ndarray) -> bool:
+        """Update the persistence counters; True while RESIDUAL is raised. A step without a
+        usable neighbour and a plausible speed leaves the counters as they are."""
+        cfg = self.cfg
+        self.residual = consistency_residual(z1, est_p, rel_p, use, unseen, cfg.range_m)
+        speed = float(np.linalg.norm(z2))
+        over = (self.residual > cfg.bound_m or not math.isfinite(speed)
+                or speed > cfg.v_max_mps or not bool(np.all(np.isfinite(z1))))
+        if over:
+            self._over, self._under = self._over + 1, 0
+        elif math.isfinite(self.residual):
+            self._over, self._under = 0, self._under + 1
+        if not self._raised and self._over >= cfg.persist:
+            self._raised = True
+        elif self._raised and self._under >= cfg.persist:
+            self._raised = False
+        self._held = self._held + 1 if self._raised else 0
+        if self._held >= cfg.fallback_after:
+            self.fallback = True
+        return self._raised
+
+    def _near_entry(self, sensed: np.ndarray, pair_p: np.ndarray, pair_v: np.ndarray) -> bool:
+        prev, self._prev = self._prev, np.array(sensed, dtype=bool)
+        if prev is None:  # the first step: the start positions were checked at load
+            return False
+        new = self._prev & ~prev
+        if not np.any(new):
+            return False
+        h = entry_barriers(pair_p[new], pair_v[new], self.cfg.tau_s, self.cfg.d_safe_m)
+        return bool(np.any(h < 0.0))
+
+
+def alarm_onsets(prev: int, now: int) -> AgentAlarm:
+    """The bits set in ``now`` but not in ``prev`` (what a log names once per onset)."""
+    return AgentAlarm(int(now) & ~int(prev) & int(~AgentAlarm(0)))
+
+
+ALARM_TEXT = {
+    AgentAlarm.RESIDUAL: "estimate residual over its bound (the observer may be diverging)",
+    AgentAlarm.NEAR_ENTRY: "a neighbour first heard inside its barrier (heard too late to brake)",
+    AgentAlarm.FALLBACK: "formation control left for the fallback: hold on odometry, then land",
+}

@@ -1,0 +1,236 @@
+"""Load-time safety assumptions of a scenario (docs/safety.md, "Load-time checks"). Pure.
+
+Each check returns one line naming the scenario key(s), the value and the derived bound, or
+None. :func:`safety_problems` lists every broken one; the loader
+(:func:`swarm_common.scenario.checks.check_safe`) refuses the scenario with the first, or
+with ``--allow-unsafe`` logs each as a warning. Notation: D = ``controller.d_safe_m``,
+τ_s = ``controller.tau_safe_s``, τ = ``vehicle.tau_rollpitch_s``, dt = 1/``control_hz``,
+the barrier h = ‖Δp‖² + 2τ_s ΔvᵀΔp − D² (docs/safety.md §1).
+
+(a) **Start inside the safe set.** The filter's claim (§5) is invariance of {h ≥ 0}: it
+    holds from t = 0 only if every pair starts with h(0) ≥ 0 and ‖Δp(0)‖ ≥ D.
+
+(b) **Sensing range vs braking distance.** A pair gets a barrier row only once sensed. Let
+    v̄ bound the closing speed (:func:`closing_speed`). Heard at distance R while closing
+    at v̄, the pair must (i) be in the safe set, h ≥ 0 head-on: R² − 2τ_s v̄ R − D² ≥ 0,
+    i.e. R ≥ τ_s v̄ + √(τ_s² v̄² + D²); and (ii) be able to stop before D. One agent
+    brakes (against a leader, or a neighbour that does not, §5b) with the horizontal
+    authority a_b = min(u_max, g tanθ cos(π/K)) − F_d/m (input set §3 at hover, less the
+    disturbance). It reacts one period late (dt), and the first-order lag makes the
+    acceleration −a_b(1 − e^{−t/τ}); integrating, the distance to stop is
+    v̄²/(2a_b) + v̄τ − a_bτ²/2 ≤ v̄²/(2a_b) + v̄τ. So R ≥ D + v̄(dt + τ) + v̄²/(2a_b).
+
+(c) **Attitude lag vs the control loop.** Per axis the follower's nominal control
+    (offboard.safety.clf_kernel) closes e1 = p − p* with ë1 = u − a* and
+    u = a* − c1 ė1 − c0 e1, c1 = λ + k_s, c0 = k_s λ + k_p/k_d; the lag ȧ = (u − a)/τ
+    and the zero-order hold (half a period of delay, to first order one more lag dt/2)
+    give τ_e s³ + s² + c1 s + c0, τ_e = τ + dt/2. Routh–Hurwitz: stable iff c1 > τ_e c0.
+    A lag margin of :data:`LAG_MARGIN` is required (the loop stays stable with the lag
+    doubled): τ_e ≤ c1/(2 c0). The leaders' PD (c1 = leader_kd, c0 = leader_kp) likewise.
+
+(d) **Noise vs the margin ē.** The filter estimates the relative acceleration by
+    differencing the sensed Δv and low-passing it with weight ½ (§4): the impulse response
+    of ½(1 − z⁻¹)/(1 − ½z⁻¹) has Σh² = 1/3, so white Δv noise of norm-RMS σ_v gives an
+    acceleration error of RMS σ_v/(√3 dt). The sensed Δv = ġ d + g ḋ carries
+    ``range_rate_noise_mps`` along g and d·``bearing_rate_noise_radps`` on each of the three
+    axes: σ_v² = σ_ḋ² + 3 d² σ_ġ², taken at the distance R_h of (b)(i), where h first can
+    be 0 (closer pairs have less). ē = ``dcbf_accel_error_mps2`` must cover
+    :data:`NOISE_SIGMAS` standard deviations of it (A3).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from swarm_common.enums import StartMode
+from swarm_common.scenario.input_set import InputSet
+
+if TYPE_CHECKING:
+    from swarm_common.scenario.spec import Scenario
+
+LAG_MARGIN = 2.0  # the loop must stay Hurwitz with the lag this many times slower
+NOISE_SIGMAS = 1.0  # ē must cover at least this many RMS of the noise-induced acceleration error
+EMA_NOISE_GAIN = math.sqrt(1.0 / 3.0)  # √Σh² of the differenced, low-passed Δv (see (d))
+
+
+# ---------------------------------------------------------------------------
+# (a) start inside the safe set
+# ---------------------------------------------------------------------------
+def pair_barriers(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
+    """(N, N) h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) of positions p, velocities v (N, 3)."""
+    dp = p[:, None, :] - p[None, :, :]
+    dv = v[:, None, :] - v[None, :, :]
+    return np.sum(dp * dp, axis=-1) + 2.0 * tau * np.sum(dv * dp, axis=-1) - d_safe**2
+
+
+def start_problem(sc: Scenario) -> str | None:
+    """(a): the pair with the lowest h(0) < 0 (or distance < D), named by its keys."""
+    c = sc.controller
+    p, v = sc.initial_positions(), sc.initial_velocities()
+    h = pair_barriers(p, v, c.tau_safe_s, c.d_safe_m)
+    iu = np.triu_indices(sc.n, 1)
+    k = int(np.argmin(h[iu]))
+    i, j = int(iu[0][k]), int(iu[1][k])
+    if h[i, j] >= 0.0:
+        return None
+    d = float(np.linalg.norm(p[i] - p[j]))
+    closing = -float(np.dot(v[i] - v[j], p[i] - p[j])) / max(d, 1e-12)
+    return (
+        f"agent[{j}].velocity = {v[j].tolist()}: starts outside the safe set, barrier "
+        f"h = {h[i, j]:.2f} m² < 0 with agent id {sc.agents[i].id} ({d:.2f} m apart, closing "
+        f"at {closing:.2f} m/s; controller.tau_safe_s = {c.tau_safe_s:g}, "
+        f"controller.d_safe_m = {c.d_safe_m:g}): no filter can keep h ≥ 0 from there"
+    )
+
+
+# ---------------------------------------------------------------------------
+# speeds the scenario allows
+# ---------------------------------------------------------------------------
+def loop_coefficients(sc: Scenario) -> tuple[float, float, float, float]:
+    """(c1, c0) of the followers' and (c1, c0) of the leaders' closed loops (1/s, 1/s²)."""
+    c = sc.controller
+    return (c.clf_lambda + c.ks, c.ks * c.clf_lambda + c.kp / c.kd, c.leader_kd, c.leader_kp)
+
+
+def trajectory_speed(sc: Scenario) -> float:
+    """Peak speed (m/s) the leaders' reference asks of every agent: ‖A‖ω of the sinusoid,
+    ``mission.max_speed_mps`` with a [mission], ``lifecycle.climb_rate_mps`` on take-off."""
+    lt = sc.leader_trajectory
+    v = float(np.linalg.norm(lt.amplitude_m)) * 2.0 * math.pi * lt.frequency_hz
+    if sc.mission is not None:
+        v = max(v, sc.mission.max_speed_mps)
+    if sc.lifecycle.start is StartMode.GROUND:
+        v = max(v, sc.lifecycle.climb_rate_mps)
+    return v
+
+
+def closing_speed(sc: Scenario) -> float:
+    """v̄ (m/s): the largest initial relative speed of a pair plus the reference's peak
+    speed. The reference motion is common to every agent (the bearing Laplacian annihilates
+    translations, :mod:`swarm_common.scenario.feasibility`), so it closes a pair only while
+    one of them lags it: by at most the whole reference speed. The controller has no speed
+    limit, so the transient of a follower far from its vertex is not bounded here (left to
+    the in-flight checks, docs/safety.md "Load-time checks")."""
+    v = sc.initial_velocities()
+    dv = np.linalg.norm(v[:, None, :] - v[None, :, :], axis=-1)
+    return float(dv.max()) + trajectory_speed(sc)
+
+
+# ---------------------------------------------------------------------------
+# (b) sensing range vs braking distance
+# ---------------------------------------------------------------------------
+def braking_accel(sc: Scenario) -> float:
+    """a_b (m/s²): the horizontal authority at hover, less the disturbance (see (b))."""
+    lim = InputSet.of(sc.vehicle, sc.controller)
+    return float(lim.horizontal(np.zeros(1))[0]) - sc.disturbance.amplitude_n / sc.vehicle.mass_kg
+
+
+def entry_range(sc: Scenario, v_bar: float) -> float:
+    """R_h (m): the distance at which a pair closing head-on at v̄ has h = 0."""
+    t, d = sc.controller.tau_safe_s, sc.controller.d_safe_m
+    return t * v_bar + math.sqrt((t * v_bar) ** 2 + d * d)
+
+
+def stop_range(sc: Scenario, v_bar: float, a_b: float) -> float:
+    """R_b (m): D + v̄(dt + τ) + v̄²/(2a_b), inf when a_b ≤ 0."""
+    if a_b <= 0.0:
+        return math.inf
+    return (sc.controller.d_safe_m + v_bar * (sc.control_dt + sc.vehicle.tau_rollpitch_s)
+            + v_bar * v_bar / (2.0 * a_b))
+
+
+def range_problem(sc: Scenario) -> str | None:
+    """(b): ``formation.sensing_range_m`` below max(R_h, R_b)."""
+    v_bar = closing_speed(sc)
+    a_b = braking_accel(sc)
+    r_h, r_b = entry_range(sc, v_bar), stop_range(sc, v_bar, a_b)
+    need = max(r_h, r_b)
+    r = sc.formation.sensing_range_m
+    if r >= need:
+        return None
+    if a_b <= 0.0:
+        return (
+            f"disturbance.amplitude_n = {sc.disturbance.amplitude_n:g}: "
+            f"{sc.disturbance.amplitude_n / sc.vehicle.mass_kg:.2f} m/s² leaves no horizontal "
+            f"authority to brake ({a_b:.2f} m/s² after vehicle.tilt_max_deg = "
+            f"{sc.vehicle.tilt_max_deg:g}, controller.u_max_mps2 = {sc.controller.u_max_mps2:g})"
+        )
+    ref = trajectory_speed(sc)
+    source = ("mission.max_speed_mps" if sc.mission is not None
+              and ref == sc.mission.max_speed_mps else "the reference")
+    return (
+        f"formation.sensing_range_m = {r:g}: a pair closing at up to {v_bar:.2f} m/s "
+        f"({source} {ref:.2f} m/s + the largest initial relative speed "
+        f"{v_bar - ref:.2f} m/s) must be "
+        f"sensed from {need:.2f} m (h ≥ 0 there: {r_h:.2f} m; braking at {a_b:.2f} m/s² "
+        f"after dt + vehicle.tau_rollpitch_s = {sc.control_dt + sc.vehicle.tau_rollpitch_s:g} s"
+        f": {r_b:.2f} m)"
+    )
+
+
+# ---------------------------------------------------------------------------
+# (c) attitude lag vs the control loop
+# ---------------------------------------------------------------------------
+def _tau_eff(sc: Scenario) -> float:
+    """τ_e = max(τ_rp, τ_F) + dt/2 (s)."""
+    return max(sc.vehicle.tau_rollpitch_s, sc.vehicle.tau_thrust_s) + 0.5 * sc.control_dt
+
+
+def max_lag(c1: float, c0: float, dt: float) -> float:
+    """Largest attitude lag τ (s) with τ + dt/2 ≤ c1/(LAG_MARGIN c0)."""
+    return c1 / (LAG_MARGIN * c0) - 0.5 * dt
+
+
+def lag_problem(sc: Scenario) -> str | None:
+    """(c): the lag above the bound of the followers' loop or the leaders' PD."""
+    c1, c0, l1, l0 = loop_coefficients(sc)
+    tau = max(sc.vehicle.tau_rollpitch_s, sc.vehicle.tau_thrust_s)
+    key = ("vehicle.tau_rollpitch_s" if sc.vehicle.tau_rollpitch_s >= sc.vehicle.tau_thrust_s
+           else "vehicle.tau_thrust_s")
+    for who, a1, a0, gains in (
+        ("followers' loop", c1, c0, "controller.clf_lambda + ks, ks·clf_lambda + kp/kd"),
+        ("leaders' PD", l1, l0, "controller.leader_kd, leader_kp"),
+    ):
+        bound = max_lag(a1, a0, sc.control_dt)
+        if tau > bound:
+            return (
+                f"{key} = {tau:g}: above {bound:.3f} s, the lag at which the {who} "
+                f"(c1 = {a1:g}, c0 = {a0:g} from {gains}) keeps a lag margin of "
+                f"{LAG_MARGIN:g} (Routh–Hurwitz: τ + dt/2 ≤ c1/({LAG_MARGIN:g} c0))"
+            )
+    return None
+
+
+# ---------------------------------------------------------------------------
+# (d) noise vs the margin ē
+# ---------------------------------------------------------------------------
+def noise_accel_rms(sc: Scenario, distance: float) -> float:
+    """RMS (m/s²) of the relative-acceleration estimate's noise at ``distance`` (m)."""
+    s = sc.sensing
+    sig_v = math.sqrt(s.range_rate_noise_mps**2 + 3.0 * (distance * s.bearing_rate_noise_radps)**2)
+    return EMA_NOISE_GAIN * sig_v / sc.control_dt
+
+
+def noise_problem(sc: Scenario) -> str | None:
+    """(d): NOISE_SIGMAS × the noise RMS above ``controller.dcbf_accel_error_mps2``."""
+    d = entry_range(sc, closing_speed(sc))
+    need = NOISE_SIGMAS * noise_accel_rms(sc, d)
+    e_bar = sc.controller.dcbf_accel_error_mps2
+    if need <= e_bar:
+        return None
+    s = sc.sensing
+    return (
+        f"sensing.range_rate_noise_mps = {s.range_rate_noise_mps:g} (bearing_rate_noise_radps"
+        f" = {s.bearing_rate_noise_radps:g}): {NOISE_SIGMAS:g} RMS of the relative-"
+        f"acceleration noise at {d:.2f} m is {need:.2f} m/s², above the margin "
+        f"controller.dcbf_accel_error_mps2 = {e_bar:g}"
+    )
+
+
+def safety_problems(sc: Scenario) -> list[str]:
+    """Every broken load-time assumption of ``sc``, one line each, in the order (a)–(d)."""
+    checks = (start_problem, lag_problem, range_problem, noise_problem)
+    return [p for p in (check(sc) for check in checks) if p is not None]

@@ -1,0 +1,175 @@
+"""In-flight alarms (offboard.safety.monitor) on synthetic data, the fallback law, and the
+alarm bits on the wire (docs/safety.md, "In-flight alarms and the fallback")."""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+
+from offboard.agent.fallback import BRAKED_MPS, HOLD_S, Fallback
+from offboard.safety.monitor import (
+    MonitorConfig,
+    SafetyMonitor,
+    consistency_residual,
+    entry_barriers,
+    residual_bound,
+)
+from swarm_common import wire
+from swarm_common.enums import AgentAlarm
+
+DT = 0.02  # s, 50 Hz
+N = 5  # agent 0 is "us"; 1..4 the neighbours
+CFG = MonitorConfig(bound_m=2.77, v_max_mps=30.0, persist=10, fallback_after=25,
+                    tau_s=0.8, d_safe_m=0.5, range_m=10.0)
+
+
+class World:
+    """Five agents on a line 2 m apart moving at 1 m/s; our estimate has error ``err``."""
+
+    def __init__(self, seed: int = 0) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.p0 = np.array([[2.0 * i, 0.0, 5.0] for i in range(N)])
+        self.v = np.tile([1.0, 0.0, 0.0], (N, 1))
+
+    def inputs(self, t: float, err: np.ndarray, sensed: np.ndarray | None = None) -> dict:
+        p = self.p0 + self.v * t
+        rel_p = p - p[0] + self.rng.normal(0.0, 0.02, (N, 3))  # sensing noise 2 cm
+        rel_v = np.zeros((N, 3))
+        fresh = np.ones(N, dtype=bool) if sensed is None else sensed.copy()
+        fresh[0] = False
+        est_p = p + self.rng.normal(0.0, 0.05, (N, 3))  # the others' estimates, 5 cm off
+        return dict(z1=p[0] + err, z2=self.v[0].copy(), est_p=est_p,
+                    usable=np.arange(N) > 0, rel_p=rel_p, fresh=fresh, sensed=fresh,
+                    pair_p=rel_p, pair_v=rel_v)
+
+
+def run(errs: list[np.ndarray], seed: int = 0) -> list[AgentAlarm]:
+    w, m = World(seed), SafetyMonitor(CFG, N)
+    return [m.step(**w.inputs(k * DT, e)) for k, e in enumerate(errs)]
+
+
+def test_bound_from_noise() -> None:
+    # the 0.999 quantile of ‖e_i − e_j‖ for two N(0, σ² I₃) errors, by sampling (1e6 pairs;
+    # the sampled quantile is within 1 % of the formula's)
+    rng = np.random.default_rng(1)
+    s0 = 0.3
+    d = np.linalg.norm(rng.normal(0, s0, (1_000_000, 3)) - rng.normal(0, s0, (1_000_000, 3)),
+                       axis=1)
+    start = residual_bound(s0, 0.0, 0.0, 10.0) - 1.0
+    assert abs(np.quantile(d, 0.999) - start) < 0.01 * start
+    # the sensing term: 4 σ of a relative position measured at 10 m
+    assert residual_bound(0.0, 0.005, 0.001, 10.0) == pytest.approx(1.0 + 4 * 0.015)
+
+
+def test_consistent_estimate_raises_nothing() -> None:
+    rng = np.random.default_rng(2)
+    for seed in range(5):  # 30 s each: an estimate 0.3 m off (std per axis), sensing noise
+        errs = [rng.normal(0.0, 0.3, 3) for _ in range(1500)]
+        assert not any(run(errs, seed)), seed
+
+
+def test_diverging_estimate_raises_residual_within_a_second() -> None:
+    # consistent for 2 s, then an error growing at 10 m/s² ... 1 m/s: crossing the bound
+    for rate in (10.0, 1.0):
+        errs = [np.zeros(3)] * 100 + [np.array([rate * (k * DT), 0.0, 0.0])
+                                      for k in range(1, 2000)]
+        bits = run(errs)
+        cross = next(k for k, e in enumerate(errs) if np.linalg.norm(e) > CFG.bound_m)
+        first = next(k for k, b in enumerate(bits) if b & AgentAlarm.RESIDUAL)
+        fb = next(k for k, b in enumerate(bits) if b & AgentAlarm.FALLBACK)
+        assert 0 < (first - cross) * DT <= 1.0, rate
+        assert 0 < (fb - cross) * DT <= 1.0, rate
+        assert all(b & AgentAlarm.FALLBACK for b in bits[fb:])  # latched
+
+
+def test_short_spike_is_not_an_alarm() -> None:
+    # over the bound for fewer steps than the persistence window: nothing
+    errs = [np.zeros(3)] * 50 + [np.array([5.0, 0, 0])] * (CFG.persist - 1) + [np.zeros(3)] * 50
+    assert not any(run(errs))
+
+
+def test_unsensed_neighbour_inside_range_is_inconsistent() -> None:
+    # nobody is sensed; the estimates put neighbours 2..8 m away (< R = 10 m): their true
+    # distance is ≥ R, so the residual is at least R − 2 m for the nearest
+    z1 = np.zeros(3)
+    est = np.array([[0.0, 0, 0], [2.0, 0, 0], [4.0, 0, 0], [6.0, 0, 0], [8.0, 0, 0]])
+    use, unseen = np.zeros(N, bool), np.arange(N) > 0
+    assert consistency_residual(z1, est, np.zeros((N, 3)), use, unseen, 10.0) == 8.0
+    # out of range in the estimates: no evidence either way
+    assert consistency_residual(z1, est * 6, np.zeros((N, 3)), use, unseen, 10.0) == 0.0
+    assert math.isnan(consistency_residual(z1, est, est, use, use, 10.0))
+
+
+def test_impossible_speed_is_a_residual() -> None:
+    w, m = World(), SafetyMonitor(CFG, N)
+    bits = []
+    for k in range(CFG.persist + 1):
+        x = w.inputs(k * DT, np.zeros(3))
+        x["z2"] = np.array([0.0, 0.0, -40.0])
+        bits.append(m.step(**x))
+    assert not bits[CFG.persist - 2] and bits[-1] & AgentAlarm.RESIDUAL
+
+
+def test_near_entry_only_for_a_late_close_newcomer() -> None:
+    w, m = World(), SafetyMonitor(CFG, N)
+    far = np.array([True, True, True, True, False])
+    assert not m.step(**w.inputs(0.0, np.zeros(3), far))
+    # agent 4 appears 0.4 m away closing at 2 m/s: h = 0.16 − 2·0.8·2·0.4 − 0.25 < 0
+    x = w.inputs(DT, np.zeros(3), np.ones(N, bool))
+    x["pair_p"][4] = [0.4, 0.0, 0.0]
+    x["pair_v"][4] = [-2.0, 0.0, 0.0]
+    assert entry_barriers(x["pair_p"][4:], x["pair_v"][4:], 0.8, 0.5)[0] < 0
+    assert m.step(**x) == AgentAlarm.NEAR_ENTRY
+    # the next step it is no newcomer: no alarm although still close
+    x2 = w.inputs(2 * DT, np.zeros(3), np.ones(N, bool))
+    x2["pair_p"][4], x2["pair_v"][4] = x["pair_p"][4], x["pair_v"][4]
+    assert not m.step(**x2)
+    # a newcomer far away (h > 0): nothing
+    m2 = SafetyMonitor(CFG, N)
+    m2.step(**w.inputs(0.0, np.zeros(3), far))
+    assert not m2.step(**w.inputs(DT, np.zeros(3), np.ones(N, bool)))
+
+
+def test_fallback_brakes_holds_then_lands() -> None:
+    # a point mass at 8 m/s, 10 m up, flown by the fallback's command (box ±3, ±8 m/s²)
+    lo, hi = np.array([-3.0, -3.0, -8.0]), np.array([3.0, 3.0, 8.0])
+    fb = Fallback(4.0, 3.0, lo, hi)
+    fb.start(0.0)
+    p, v = np.array([0.0, 0.0, 10.0]), np.array([8.0, 0.0, 0.0])
+    dt, ps, vz = 0.002, [], []
+    for k in range(int(40.0 / dt)):
+        u = fb.command(k * dt, p, v)
+        assert np.all(u >= lo - 1e-12) and np.all(u <= hi + 1e-12)
+        v = v + u * dt
+        p = p + v * dt
+        if p[2] < 0.0:  # ground contact
+            p[2], v[2] = 0.0, max(v[2], 0.0)
+        ps.append(p.copy())
+        vz.append(v[2])
+    ps_a = np.array(ps)
+    assert fb.hold_p is not None and fb.t_hold < 8.0 / 3.0 + 0.5  # braked at 3 m/s²
+    # braking distance v²/(2a) = 10.7 m; it stays within 1 m of where it stopped
+    assert np.max(ps_a[:, 0]) < 8.0**2 / 6.0 + 1.0
+    k_hold = int(fb.t_hold / dt)
+    k_desc = int((fb.t_hold + HOLD_S) / dt)
+    assert np.max(np.abs(ps_a[k_hold:k_desc, 2] - 10.0)) < 0.2  # hovers while holding
+    assert ps_a[-1, 2] < 0.1 and min(vz) > -1.0  # landed, descending at about 0.6 m/s
+    assert fb.landed(40.0, float(p[2]))
+    assert np.linalg.norm(v) < BRAKED_MPS
+
+
+def test_alarm_bits_on_the_wire() -> None:
+    s = wire.Status(3, 1, 0.02, "OFFBOARD", "dcbf", "solved", 55.0, 1.2, 0.3, "ok", 0)
+    assert wire.roundtrip(s).alarms == 0  # type: ignore[union-attr]
+    s.alarms = int(AgentAlarm.RESIDUAL | AgentAlarm.FALLBACK)
+    back = wire.roundtrip(s)
+    assert isinstance(back, wire.Status) and AgentAlarm(back.alarms) == (
+        AgentAlarm.RESIDUAL | AgentAlarm.FALLBACK)
+    # an older sender's record has no "alarm" key: decoded as no alarm
+    d = msgpack.unpackb(wire.encode(s), raw=False)
+    del d["alarm"]
+    old = wire.decode(msgpack.packb(d, use_bin_type=True))
+    assert isinstance(old, wire.Status) and old.alarms == 0
