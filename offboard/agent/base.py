@@ -37,7 +37,12 @@ class AgentBase(ABC):
         self.index = sc.index_of(agent_id)
         self.dt = sc.control_dt
         self.veh = sc.vehicle
+        # a non-cooperative follower ([[agent]] cooperative = false) flies its nominal
+        # command with no filter, whatever the run's method, and says so in its estimates
+        self.cooperative = bool(sc.agents[self.index].cooperative)
         self.method = parse_method(method or sc.controller.method)
+        if not self.cooperative:
+            self.method = Method.NONE
         self.substeps = sc.observer.substeps
         self.inner = InnerLoopModel(self.veh, self.dt / self.substeps)
         self.u_lo, self.u_hi = control_box(sc.vehicle, sc.controller)
@@ -49,8 +54,11 @@ class AgentBase(ABC):
         self.takeoff_held = False
 
     def set_method(self, method: Method | str) -> None:
-        """Switch the collision-avoidance method (at run time); ValueError if unknown."""
-        self.method = parse_method(method)
+        """Switch the collision-avoidance method (at run time); ValueError if unknown. A
+        non-cooperative agent keeps flying without a filter."""
+        chosen = parse_method(method)
+        if self.cooperative:
+            self.method = chosen
 
     def start_landing(self, plan: LandingPlan) -> None:
         """Switch to the coordinated land-all of ``plan`` (offboard.agent.landing) from the current

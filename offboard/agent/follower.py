@@ -434,6 +434,7 @@ class FollowerAgent(AgentBase):
         """What this agent publishes, valid at ``t``."""
         d = self.deso
         return NeighbourEstimate(
-            self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False
+            self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False,
+            cooperative=self.cooperative,
         )
 

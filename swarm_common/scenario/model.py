@@ -47,6 +47,7 @@ from swarm_common.scenario.files import (
 )
 from swarm_common.scenario.mission_check import mission_problem
 from swarm_common.scenario.schema import (
+    AGENT_OPTIONAL,
     AGENT_SCHEMA,
     OPTIONAL_SECTIONS,
     SCHEMA,
@@ -182,13 +183,21 @@ def parse_scenario(
         if not isinstance(a, dict):
             raise fail(f"{where} must be a table")
         for key in a:
-            if key not in AGENT_SCHEMA:
-                raise fail(f"unknown key {where}.{key}; allowed: {', '.join(AGENT_SCHEMA)}")
+            if key not in AGENT_SCHEMA and key not in AGENT_OPTIONAL:
+                allowed = ", ".join([*AGENT_SCHEMA, *AGENT_OPTIONAL])
+                raise fail(f"unknown key {where}.{key}; allowed: {allowed}")
         for key, spec in AGENT_SCHEMA.items():
             if key not in a:
                 raise fail(f"missing key {where}.{key} ({describe_spec(spec)})")
             if not check_value(a[key], spec):
                 raise fail(f"{where}.{key} = {a[key]!r}: must be {describe_spec(spec)}")
+        for key, (spec, _) in AGENT_OPTIONAL.items():
+            if key in a and not check_value(a[key], spec):
+                raise fail(f"{where}.{key} = {a[key]!r}: must be {describe_spec(spec)}")
+        cooperative = bool(a.get("cooperative", AGENT_OPTIONAL["cooperative"][1]))
+        if not cooperative and a["role"] == Role.LEADER:
+            raise fail(f"{where}.cooperative = false: only a follower can be non-cooperative "
+                       "(a leader never avoids anyone)")
         if a["id"] in seen:
             raise fail(f"{where}.id = {a['id']}: duplicate agent id")
         seen.add(a["id"])
@@ -199,6 +208,7 @@ def parse_scenario(
                 position=np.array(a["position"], dtype=float),
                 velocity=np.array(a["velocity"], dtype=float),
                 vertex=np.array(a["vertex"], dtype=float),
+                cooperative=cooperative,
             )
         )
     leaders = raw["formation"]["leaders"]

@@ -226,6 +226,13 @@ AGENT_SCHEMA: dict[str, Spec] = {
     "velocity": ("vec", 3, -100.0, 100.0),
     "vertex": ("vec", 3, -1e3, 1e3),
 }
+# optional keys of an [[agent]] and their defaults
+AGENT_OPTIONAL: dict[str, tuple[Spec, Any]] = {
+    # false: a follower that flies its nominal command with no safety filter and says so
+    # (its estimates carry cooperative = false): the others take the whole avoidance budget
+    # against it (docs/safety.md, "A vehicle that stops cooperating")
+    "cooperative": (("bool",), True),
+}
 
 
 def typed_value(f: Any, value: Any) -> Any:
@@ -272,6 +279,8 @@ def describe_spec(spec: Spec) -> str:
         return "a non-empty list of agent ids (integers 1..255)"
     if kind == "pairs":
         return "a list of [id, id] pairs of agent ids (integers 1..255)"
+    if kind == "bool":
+        return "true or false"
     raise AssertionError(kind)
 
 
@@ -317,4 +326,6 @@ def check_value(value: Any, spec: Spec) -> bool:
         return isinstance(value, list) and all(
             isinstance(w, list) and len(w) == 2 and check_value(w, ("ids",)) for w in value
         )
+    if kind == "bool":
+        return isinstance(value, bool)
     raise AssertionError(kind)

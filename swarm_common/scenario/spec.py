@@ -44,6 +44,7 @@ class AgentSpec:
     position: np.ndarray  # (3,) ENU m
     velocity: np.ndarray  # (3,) ENU m/s
     vertex: np.ndarray  # (3,) formation vertex (unit-free; bearings come from it)
+    cooperative: bool = True  # False: a follower flying its nominal command, no filter
 
     @property
     def is_leader(self) -> bool:
@@ -94,6 +95,7 @@ class Scenario:
                 "position": a.position.tolist(),
                 "velocity": a.velocity.tolist(),
                 "vertex": a.vertex.tolist(),
+                **({} if a.cooperative else {"cooperative": False}),
             }
             for a in self.agents
         ]
