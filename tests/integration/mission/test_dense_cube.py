@@ -1,0 +1,42 @@
+"""A dense cube (edge 2 m, D_safe 0.5 m) forms in process with dcbf, the true barrier of
+every pair staying ≥ 0 (docs/safety.md, "Dense formations: liveness"); with cube8's
+filter margins the same cube never forms, because its spacing is inside the filter's rest
+spacing (offboard.safety.dcbf.liveness)."""
+
+import numpy as np
+import pytest
+from conftest import ROOT  # noqa: E402
+
+from gcs.mission.inproc import run_inproc
+from gcs.report.metrics import pair_barrier
+from offboard.safety.dcbf.liveness import rest_spacing_m
+from swarm_common.scenario.model import load_scenario
+
+DENSE2 = ROOT / "scenarios" / "dense_cube2.toml"
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario(DENSE2)
+
+
+def _rest_spacing(sc, **ctl) -> float:
+    c, v = sc.controller, sc.vehicle
+    kw = dict(tau_s=c.tau_safe_s, d_safe=c.d_safe_m, gamma1=c.dcbf_gamma_lin,
+              gamma3=c.dcbf_gamma_cubic, accel_err=c.dcbf_accel_error_mps2) | ctl
+    return rest_spacing_m(v.tau_rollpitch_s, v.tau_thrust_s, sc.control_dt, **kw)
+
+
+def test_the_shipped_margins_let_neighbours_hover_at_the_edge(scenario):
+    """Edge 2 m: inside cube8's rest spacing (2.75 m), outside the scenario's."""
+    assert _rest_spacing(scenario) < 2.0 - 0.1
+    assert _rest_spacing(scenario, gamma1=0.3, accel_err=2.0) > 2.0
+
+
+def test_dense_cube_forms_with_every_true_barrier_nonnegative(scenario):
+    r = run_inproc(scenario, "dcbf", seed=1, duration=16.0)
+    m, s = r.metrics, r.series
+    assert m["formation_time_s"] is not None and m["formation_time_s"] < 14.0
+    h = pair_barrier(s.p, s.v, scenario.controller.tau_safe_s, scenario.controller.d_safe_m)
+    assert np.min(h) >= 0.0
+    assert m["collisions"] == 0 and m["min_distance_m"] >= scenario.controller.d_safe_m
