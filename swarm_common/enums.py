@@ -156,6 +156,7 @@ class AgentAlarm(IntFlag):
     RESIDUAL = 1  # the observer's residual over its bound: its estimates may be diverging
     NEAR_ENTRY = 2  # a neighbour first heard closer than the distance it must be heard at
     FALLBACK = 4  # the agent left formation control for its safe fallback (hold, then land)
+    DEADLOCK = 8  # its formation error stalls while its filter holds it (a liveness event)
 
 
 class SafetyAlarmKind(StrEnum):
@@ -170,3 +171,4 @@ class SafetyAlarmKind(StrEnum):
     RESIDUAL = "residual"  # AgentAlarm.RESIDUAL
     NEAR_ENTRY = "near_entry"  # AgentAlarm.NEAR_ENTRY
     FALLBACK = "fallback"  # AgentAlarm.FALLBACK
+    DEADLOCK = "deadlock"  # AgentAlarm.DEADLOCK: liveness, not safety (the verdict ignores it)

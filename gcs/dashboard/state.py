@@ -158,8 +158,10 @@ def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_t
         return "NO-OFB"
     if alarms & AgentAlarm.FALLBACK:
         return "FALLBACK"
-    if alarms:
+    if alarms & ~AgentAlarm.DEADLOCK:
         return "ALARM"
+    if alarms:
+        return "STALLED"
     if est_health not in (None, "ok"):
         return f"EST:{est_health}"[:8]
     if qp_degraded(row.qp_status):

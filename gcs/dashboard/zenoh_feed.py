@@ -238,6 +238,7 @@ class ZenohFeed:
         new = alarm_onsets(prev.alarms, s.alarms)  # docs/safety.md, in-flight alarms
         if new:
             sev = (mavlink.MAV_SEVERITY_CRITICAL if new & AgentAlarm.FALLBACK
+                   else mavlink.MAV_SEVERITY_WARNING if new == AgentAlarm.DEADLOCK
                    else mavlink.MAV_SEVERITY_ERROR)
             text = "safety alarm " + "+".join(str(b.name) for b in new)
             ev.append(FeedEvent(now, s.id, "safety", text, sev))

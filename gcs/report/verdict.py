@@ -32,6 +32,7 @@ _BIT_KIND = {
     AgentAlarm.RESIDUAL: SafetyAlarmKind.RESIDUAL,
     AgentAlarm.NEAR_ENTRY: SafetyAlarmKind.NEAR_ENTRY,
     AgentAlarm.FALLBACK: SafetyAlarmKind.FALLBACK,
+    AgentAlarm.DEADLOCK: SafetyAlarmKind.DEADLOCK,
 }
 
 
@@ -45,6 +46,8 @@ class Verdict(StrEnum):
 
 TRUTH_KINDS = frozenset({SafetyAlarmKind.BARRIER, SafetyAlarmKind.COLLISION,
                          SafetyAlarmKind.GROUND_STRIKE})
+# events about liveness, not safety: listed and counted, but they leave the verdict "safe"
+LIVENESS_KINDS = frozenset({SafetyAlarmKind.DEADLOCK})
 
 
 def onsets(cond: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -119,11 +122,12 @@ def safety_events(
 
 
 def verdict(events: list[dict[str, Any]]) -> Verdict:
-    """UNSAFE when an event is one of :data:`TRUTH_KINDS`, ALARM when there are others,
-    SAFE when there are none."""
+    """UNSAFE when an event is one of :data:`TRUTH_KINDS`, ALARM when there are others
+    (:data:`LIVENESS_KINDS` aside), SAFE when there are none."""
     if any(e["assumption"] in TRUTH_KINDS for e in events):
         return Verdict.UNSAFE
-    return Verdict.ALARM if events else Verdict.SAFE
+    safety = [e for e in events if e["assumption"] not in LIVENESS_KINDS]
+    return Verdict.ALARM if safety else Verdict.SAFE
 
 
 def verdict_metrics(

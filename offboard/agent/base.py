@@ -85,6 +85,14 @@ class AgentBase(ABC):
         self.takeoff_held = False
         return True
 
+    def in_formation_phase(self, t: float) -> bool:
+        """Flying the formation at ``t`` (s): after a ground start's take-off plan hands
+        over to the trajectory (``t_traj``), before any land-all."""
+        if self.landing is not None:
+            return False
+        return self.takeoff is None or (
+            not self.takeoff_held and self.takeoff_clock(t) >= self.takeoff.t_traj)
+
     def takeoff_clock(self, t: float) -> float:
         """The time at which to read the take-off plan: ``t``, or the plan's start (pad at
         rest) while held."""

@@ -196,6 +196,10 @@ class FollowerAgent(AgentBase):
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf,
                              alarms=int(alarms))
         u = self._use_filter_output(res, w, status)
+        status.alarms |= int(self.guard.liveness(
+            t, float(np.linalg.norm(self.deso.z1 - self.ref.xi[0:3])),
+            res.qp_status is not QPStatus.INACTIVE,
+            self.in_formation_phase(t)))
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)

@@ -17,10 +17,15 @@ import numpy as np
 from offboard.agent.fallback import Fallback
 from offboard.estimation.peer_table import Z1
 from offboard.records import NeighbourEstimate
+from offboard.safety.deadlock import DeadlockConfig, DeadlockDetector
 from offboard.safety.monitor import SafetyMonitor, monitor_config
 from swarm_common.enums import AgentAlarm
 from swarm_common.scenario.model import Scenario
 
+# s: the window over which a stalled formation error with the filter active is a deadlock.
+# Shorter windows flagged the crossings of cube8 and swap_centre, where followers first move
+# apart under the filter before they close on their vertices (docs/safety.md 5f).
+DEADLOCK_WINDOW_S = 6.0
 
 class InFlightGuard:
     """The guard of follower ``index`` of ``sc``; ``peers`` the scenario indices whose
@@ -37,6 +42,20 @@ class InFlightGuard:
         self._peers[peers] = True
         self._sensed = np.zeros(sc.n, dtype=bool)
         self.bits = AgentAlarm(0)
+        self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
+
+    def liveness(self, t: float, err_m: float, held: bool, flying: bool) -> AgentAlarm:
+        """DEADLOCK while the formation error ``err_m`` (m, ‖ẑ1 − ξ̂_p‖ at ``t``, s) stalls
+        with the filter holding the agent (``held``: a barrier row was active) over the
+        detector's window (:class:`~offboard.safety.deadlock.DeadlockDetector`). Only while
+        ``flying`` formation (not on the pad, landing or in the fallback): otherwise the
+        window starts again."""
+        if not flying or self.fallback.active:
+            self.deadlock.reset()
+            return AgentAlarm(0)
+        if self.deadlock.update_held(t, err_m, held):
+            return AgentAlarm.DEADLOCK
+        return AgentAlarm(0)
 
     def check(
         self, t: float, z1: np.ndarray, z2: np.ndarray, rows: np.ndarray, have: np.ndarray,

@@ -57,8 +57,12 @@ class DeadlockDetector:
     def update(self, t: float, err_m: float, corr_mps2: float) -> bool:
         """One step at mission time ``t`` (s, increasing) with formation error ``err_m`` (m)
         and filter correction ``corr_mps2`` = ‖u − u_nom‖ (m/s²); returns :attr:`active`."""
+        return self.update_held(t, err_m, corr_mps2 > self.cfg.corr_tol_mps2)
+
+    def update_held(self, t: float, err_m: float, held: bool) -> bool:
+        """:meth:`update` where the caller knows whether the filter held the agent this step
+        (e.g. its QP had an active row) rather than the size of its correction."""
         cfg = self.cfg
-        held = corr_mps2 > cfg.corr_tol_mps2
         self._hist.append((t, err_m, held))
         self._held += held
         # keep the newest sample at or before t − window as the window's start

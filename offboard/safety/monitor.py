@@ -179,4 +179,5 @@ ALARM_TEXT = {
     AgentAlarm.RESIDUAL: "estimate residual over its bound (the observer may be diverging)",
     AgentAlarm.NEAR_ENTRY: "a neighbour first heard inside its barrier (heard too late to brake)",
     AgentAlarm.FALLBACK: "formation control left for the fallback: hold on odometry, then land",
+    AgentAlarm.DEADLOCK: "formation error stalled while the filter holds it (liveness)",
 }

@@ -40,3 +40,18 @@ def test_dense_cube_forms_with_every_true_barrier_nonnegative(scenario):
     h = pair_barrier(s.p, s.v, scenario.controller.tau_safe_s, scenario.controller.d_safe_m)
     assert np.min(h) >= 0.0
     assert m["collisions"] == 0 and m["min_distance_m"] >= scenario.controller.d_safe_m
+
+
+def test_a_cube_that_cannot_form_reports_a_deadlock_and_stays_safe():
+    """dense_cube1p5 (cube8's margins, spacing inside d*): every follower's formation error
+    stalls with the filter holding it, so each raises the DEADLOCK liveness event one
+    detector window (6 s) in; the verdict stays "safe" (a liveness event is not a safety
+    break), while cube8 forms and raises none."""
+    sc = load_scenario(ROOT / "scenarios" / "dense_cube1p5.toml")
+    m = run_inproc(sc, "dcbf", seed=1, duration=8.0).metrics
+    stalled = {e["agent"] for e in m["safety_alarms"] if e["assumption"] == "deadlock"}
+    assert stalled == set(sc.follower_ids)
+    assert m["safety_verdict"] == "safe" and m["formation_time_s"] is None
+    cube8 = run_inproc(load_scenario(ROOT / "scenarios" / "cube8.toml"), "dcbf", seed=1,
+                       duration=10.0).metrics
+    assert cube8["safety_alarm_count"] == 0

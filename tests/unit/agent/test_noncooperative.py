@@ -24,7 +24,8 @@ def test_the_key_parses_round_trips_and_is_refused_for_a_leader() -> None:
     assert parse_scenario(data).agents[sc.index_of(ROGUE_ID)].cooperative is False
     bad = sc.to_toml_dict()
     bad["agent"][3]["cooperative"] = "no"
-    with pytest.raises(ScenarioError, match=r"agent\[3\]\.cooperative = 'no': must be true or false"):
+    msg = r"agent\[3\]\.cooperative = 'no': must be true or false"
+    with pytest.raises(ScenarioError, match=msg):
         parse_scenario(bad)
     lead = sc.to_toml_dict()
     lead["agent"][0]["cooperative"] = False

@@ -137,3 +137,12 @@ def test_the_list_is_capped_the_count_is_not() -> None:
     assert m["safety_alarm_count"] == ALARM_LIST_MAX + 5
     assert len(m["safety_alarms"]) == ALARM_LIST_MAX
     assert m["safety_alarms"][0]["t_s"] == pytest.approx(DT)  # the earliest kept
+
+
+def test_a_deadlock_is_listed_but_leaves_the_run_safe() -> None:
+    t, p, v = still(4, [2.0] * 4)
+    own, al = quiet(4)
+    al[2:, 2] = AgentAlarm.DEADLOCK
+    m = verdict_metrics(t, p, v, np.full(4, 2.0), own, al, IDS, [1, 2], TAU, D, R_COLL)
+    assert [(e["assumption"], e["agent"]) for e in m["safety_alarms"]] == [("deadlock", 9)]
+    assert m["safety_verdict"] == "safe" and safety_exit_status(m, "dcbf") == EXIT_OK
