@@ -78,9 +78,12 @@ def start_problem(sc: Scenario) -> str | None:
         return None
     d = float(np.linalg.norm(p[i] - p[j]))
     closing = -float(np.dot(v[i] - v[j], p[i] - p[j])) / max(d, 1e-12)
+    # name the faster of the two: its velocity is the likelier key to fix
+    i, j = (i, j) if np.linalg.norm(v[i]) > np.linalg.norm(v[j]) else (j, i)
     return (
-        f"agent[{j}].velocity = {v[j].tolist()}: starts outside the safe set, barrier "
-        f"h = {h[i, j]:.2f} m² < 0 with agent id {sc.agents[i].id} ({d:.2f} m apart, closing "
+        f"agent[{i}].velocity = {v[i].tolist()}: starts outside the safe set, barrier "
+        f"h = {h[i, j]:.2f} m² < 0 with agent id {sc.agents[j].id} (agent[{j}].velocity = "
+        f"{v[j].tolist()}; {d:.2f} m apart, closing "
         f"at {closing:.2f} m/s; controller.tau_safe_s = {c.tau_safe_s:g}, "
         f"controller.d_safe_m = {c.d_safe_m:g}): no filter can keep h ≥ 0 from there"
     )
