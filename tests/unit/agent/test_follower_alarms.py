@@ -26,10 +26,11 @@ def test_plain_cube8_raises_nothing_and_flies_as_without_the_guard(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     sc = load_scenario(CUBE8)
-    with_guard = run_inproc(sc, "dcbf", seed=3)
+    # 25 s: the crossing, the 5 s outage and the formation (the rest is steady tracking)
+    with_guard = run_inproc(sc, "dcbf", seed=3, duration=25.0)
     assert not np.any(with_guard.series.alarms)
     _no_guard(monkeypatch)
-    without = run_inproc(sc, "dcbf", seed=3)
+    without = run_inproc(sc, "dcbf", seed=3, duration=25.0)
     # the guard only reads: every recorded series and metric bit for bit the same (but the
     # wall-clock QP times)
     for k, v in without.series.as_dict().items():
