@@ -25,6 +25,7 @@ from typing import Any
 import zenoh
 
 from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
+from gcs.mission.preflight import warn_liveness
 from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
 from gcs.mission.recorder import Recorder
@@ -114,6 +115,7 @@ def run_distributed(
     death is recorded in ``facts["failed_agents"]`` and the run goes on. Every child is
     stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
+    warn_liveness(sc, method)
     signing = SigningChoice() if signing is None else signing
     sec_dir = secure_dir() if secure or signing.enabled else None
     try:

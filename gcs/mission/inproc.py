@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs.mission.preflight import warn_liveness
 from gcs.mission.progress import Progress
 from gcs.mission.run_output import (
     empty_series,
@@ -163,6 +164,7 @@ def run_inproc(
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
     dur = float(sc.run.duration_s if duration is None else duration)
+    warn_liveness(sc, method)
     if sc.faults.active:
         log.warning("%s: the in-process runner has no links, so the scenario's [faults] table "
                     "is NOT applied (a distributed run applies it; docs/faults.md)", sc.name)
