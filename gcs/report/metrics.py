@@ -34,6 +34,7 @@ METRIC_KEYS = (
     "own_h_min",
     "safety_verdict",
     "safety_alarm_count",
+    "deadlock_events",
     "safety_alarms",
     "input_clipped_steps",
     "energy_u",

@@ -212,25 +212,28 @@ def mission_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str 
 
 
 RATES_HEAD = (
-    "| Scenario | Method | Runs | Safe (95 % LB) | Success (95 % LB) | Alarmed (95 % UB) |\n"
-    "|---|---|---|---|---|---|\n"
+    "| Scenario | Method | Runs | Safe (95 % LB) | Success (95 % LB) | Alarmed (95 % UB) | "
+    "Stalled |\n"
+    "|---|---|---|---|---|---|---|\n"
 )
 
 
-def run_rates(ok: Sequence[Mapping[str, Any]]) -> tuple[int, int, int]:
-    """(safe, successful, alarmed) runs among finished ones: **safe** when the safety
-    verdict is not "unsafe" (the true barrier ≥ 0 at every step, no contact, no ground
-    strike); **successful** when the formation formed (``formation_time_s`` set) or, for a
-    mission, the mission completed; **alarmed** when the run had any safety event
-    (``safety_alarm_count`` > 0: docs/metrics.md)."""
+def run_rates(ok: Sequence[Mapping[str, Any]]) -> tuple[int, int, int, int]:
+    """(safe, successful, alarmed, stalled) runs among finished ones: **safe** when the
+    safety verdict is not "unsafe" (the true barrier ≥ 0 at every step, no contact, no
+    ground strike); **successful** when the formation formed (``formation_time_s`` set) or,
+    for a mission, the mission completed; **alarmed** when the verdict is not "safe" (a
+    safety event of the truth or of an agent: docs/metrics.md); **stalled** when an agent
+    raised the DEADLOCK liveness event (``deadlock_events`` > 0)."""
     safe = sum(1 for r in ok if r.get("safety_verdict") not in ("unsafe", None, ""))
     success = sum(
         1 for r in ok
         if (r.get("mission_completed") is True if r.get("mission_completed") not in (None, "")
             else r.get("formation_time_s") not in (None, ""))
     )
-    alarmed = sum(1 for r in ok if int(r.get("safety_alarm_count") or 0) > 0)
-    return safe, success, alarmed
+    alarmed = sum(1 for r in ok if r.get("safety_verdict") not in ("safe", None, ""))
+    stalled = sum(1 for r in ok if int(r.get("deadlock_events") or 0) > 0)
+    return safe, success, alarmed, stalled
 
 
 def clopper_pearson_lower(x: int, n: int, conf: float = CONFIDENCE) -> float:
@@ -250,11 +253,12 @@ def rates_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
             if not ok:
                 continue
             n = len(ok)
-            safe, success, alarmed = run_rates(ok)
+            safe, success, alarmed, stalled = run_rates(ok)
             out += (
                 f"| {scen} | {m} | {n} | {safe}/{n} ({clopper_pearson_lower(safe, n):.3f}) "
                 f"| {success}/{n} ({clopper_pearson_lower(success, n):.3f}) "
-                f"| {alarmed}/{n} ({clopper_pearson_upper(alarmed, n):.3f}) |\n"
+                f"| {alarmed}/{n} ({clopper_pearson_upper(alarmed, n):.3f}) "
+                f"| {stalled}/{n} |\n"
             )
     return out
 
@@ -298,8 +302,10 @@ def summary_markdown(
         rates_table(rows, methods),
         "* **Safe**: runs whose safety verdict is not \"unsafe\" (true barrier ≥ 0 at every "
         "step, no contact, no ground strike); **Success**: the formation formed, or the "
-        "mission completed; **Alarmed**: runs with any safety event (an agent's own barrier "
-        "below 0 or an alarm it raised, as well as the truth's). In brackets the one-sided "
+        "mission completed; **Alarmed**: runs whose verdict is not \"safe\" (a safety event of "
+        "the truth, or an agent's own barrier below 0 or a safety alarm it raised); "
+        "**Stalled**: runs in which an agent raised the DEADLOCK liveness event (its "
+        "formation error stalled under the filter for 6 s). In brackets the one-sided "
         f"{CONFIDENCE:.0%} Clopper–Pearson bound: lower for the first two, upper for the last.",
         "",
     ]

@@ -135,8 +135,9 @@ def verdict_metrics(
     alarms: np.ndarray, ids: list[int], follower_idx: list[int], tau_s: float,
     d_safe_m: float, collision_radius_m: float,
 ) -> dict[str, Any]:
-    """``own_h_min``, ``safety_verdict``, ``safety_alarm_count`` and ``safety_alarms``
-    (the first :data:`ALARM_LIST_MAX` events of :func:`safety_events`). ``own_h_min``: the
+    """``own_h_min``, ``safety_verdict``, ``safety_alarm_count``, ``deadlock_events`` (those
+    of :data:`LIVENESS_KINDS`) and ``safety_alarms`` (the first :data:`ALARM_LIST_MAX`
+    events of :func:`safety_events`). ``own_h_min``: the
     smallest barrier a follower computed from its own estimates (m²; None when none did)."""
     events = safety_events(t, p, v, min_dist, own_h, alarms, ids, tau_s, d_safe_m,
                            collision_radius_m)
@@ -146,6 +147,7 @@ def verdict_metrics(
         "own_h_min": float(finite.min()) if finite.size else None,
         "safety_verdict": str(verdict(events)),
         "safety_alarm_count": len(events),
+        "deadlock_events": sum(1 for e in events if e["assumption"] in LIVENESS_KINDS),
         "safety_alarms": events[:ALARM_LIST_MAX],
     }
 

@@ -15,9 +15,12 @@ from gcs.mission.sweep import (
 from gcs.report.metrics import METRIC_KEYS
 from gcs.report.sweep import (
     CSV_COLUMNS,
+    clopper_pearson_lower,
     clopper_pearson_upper,
     flat_row,
     group_stats,
+    rates_table,
+    run_rates,
     summary_table,
 )
 
@@ -84,3 +87,22 @@ def test_flat_row_covers_every_metric_column() -> None:
     assert set(row) == set(CSV_COLUMNS) - {"scenario", "method", "seed", "status", "error",
                                            "duration_s"}
     assert row["min_distance_formation_m"] == 0.7 and row["min_distance_takeoff_m"] is None
+
+
+def test_rates_count_verdicts_success_and_stalls() -> None:
+    """Safe: verdict not unsafe; success: formed, or the mission completed when there is
+    one; alarmed: verdict not safe; stalled: a deadlock event. The list of events is a
+    metrics.json field, never a CSV column."""
+    rows = [
+        {"status": "ok", "safety_verdict": "safe", "formation_time_s": 6.0,
+         "mission_completed": None, "deadlock_events": 0},
+        {"status": "ok", "safety_verdict": "alarm", "formation_time_s": None,
+         "mission_completed": True, "deadlock_events": 2},
+        {"status": "ok", "safety_verdict": "unsafe", "formation_time_s": 9.0,
+         "mission_completed": False, "deadlock_events": 0},
+    ]
+    assert run_rates(rows) == (2, 2, 2, 1)
+    table = rates_table([{**r, "scenario": "s", "method": "dcbf"} for r in rows], ["dcbf"])
+    assert "| s | dcbf | 3 | 2/3 (" in table and "| 1/3 |" in table
+    assert "safety_alarms" not in CSV_COLUMNS and "safety_verdict" in CSV_COLUMNS
+    assert 0.0 < clopper_pearson_lower(99, 100) < 0.99 < clopper_pearson_upper(99, 100)

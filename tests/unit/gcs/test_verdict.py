@@ -113,7 +113,7 @@ def test_a_quiet_run_is_safe_and_exits_0() -> None:
     own, al = quiet(5)
     m = verdict_metrics(t, p, v, np.full(5, 2.0), own, al, IDS, [1, 2], TAU, D, R_COLL)
     assert m == {"own_h_min": 3.0, "safety_verdict": "safe", "safety_alarm_count": 0,
-                 "safety_alarms": []}
+                 "deadlock_events": 0, "safety_alarms": []}
     assert summary_line(m) is None
     assert safety_exit_status(m, "dcbf") == EXIT_OK
 
@@ -145,4 +145,5 @@ def test_a_deadlock_is_listed_but_leaves_the_run_safe() -> None:
     al[2:, 2] = AgentAlarm.DEADLOCK
     m = verdict_metrics(t, p, v, np.full(4, 2.0), own, al, IDS, [1, 2], TAU, D, R_COLL)
     assert [(e["assumption"], e["agent"]) for e in m["safety_alarms"]] == [("deadlock", 9)]
+    assert m["deadlock_events"] == 1
     assert m["safety_verdict"] == "safe" and safety_exit_status(m, "dcbf") == EXIT_OK
