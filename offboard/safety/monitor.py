@@ -1,5 +1,6 @@
-"""In-flight safety alarms of a follower and its fallback (docs/safety.md, "In-flight alarms
-and the fallback"). Pure maths: no I/O; the daemon logs the onsets.
+"""In-flight safety alarms of a follower (docs/safety.md, "In-flight alarms and the
+fallback"; the fallback itself: :mod:`offboard.agent.fallback`). Pure maths: no I/O; the
+daemon logs the onsets.
 
 :class:`SafetyMonitor` reads, once per control step, what the follower already has at t_k
 and returns its :class:`~swarm_common.enums.AgentAlarm` bits:
@@ -7,7 +8,7 @@ and returns its :class:`~swarm_common.enums.AgentAlarm` bits:
 * ``RESIDUAL``: the observer's position estimate ẑ_i1 disagrees with what its sensing
   implies. For every neighbour j with a fresh relative measurement r_ij ≈ p_j − p_i and a
   usable estimate ẑ_j1 predicted to t_k, ẑ_j1 − r_ij is where j's estimate and the sensor
-  put agent i; the residual is the median over those j of ‖ẑ_i1 − (ẑ_j1 − r_ij)‖ (m). It
+  put agent i; the residual takes ‖ẑ_i1 − (ẑ_j1 − r_ij)‖ (m) over those j. It
   equals e_i − e_j plus the sensing error (e the estimate errors), so it needs no ground
   truth. A neighbour j that is *not* sensed (not even held through a dropout) although
   the estimates put it at ‖ẑ_j1 − ẑ_i1‖ < R (the sensing range, m) is just as
@@ -24,7 +25,8 @@ and returns its :class:`~swarm_common.enums.AgentAlarm` bits:
   h = ‖Δp‖² + 2τ ΔvᵀΔp − D² (from the sensed Δp = p_i − p_j, Δv) is already < 0 at
   first sight: it was heard too late to brake. Raised on that step.
 * ``FALLBACK``: ``RESIDUAL`` held for ``fallback_after`` consecutive steps latches the
-  fallback (:class:`Fallback`); the bit stays set from then on (no recovery in flight).
+  fallback (:class:`offboard.agent.fallback.Fallback`); the bit stays set from then on (no
+  recovery in flight).
 
 All vectors ENU, z up (m, m/s, m/s²).
 """
