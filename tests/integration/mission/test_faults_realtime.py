@@ -26,6 +26,7 @@ from typing import Any
 import pytest
 from conftest import CUBE8, ROOT, free_port_offset
 
+from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
 from gcs.mission.sim_log import longest_out_of_offboard, vehicles_in_offboard
 
 pytestmark = pytest.mark.timeout(400)
@@ -45,8 +46,13 @@ def lossy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str,
          "--port-offset", str(free_port_offset()), "--out", str(out), "--json"],
         cwd=ROOT, capture_output=True, text=True, timeout=360,
     )  # fmt: skip
-    assert r.returncode == 0, r.stderr[-3000:]
-    return out, json.loads((out / "metrics.json").read_text())
+    doc = json.loads((out / "metrics.json").read_text())
+    # finished and scored: the exit status is the safety verdict's (gcs.exit_codes). Under
+    # 20 % loss on a loaded machine a pair's true barrier can dip below 0 while the distance
+    # holds (test_safe); the verdict says so and the run exits 3
+    safe = doc["metrics"]["safety_verdict"] == "safe"
+    assert r.returncode == (EXIT_OK if safe else EXIT_SAFETY), r.stderr[-3000:]
+    return out, doc
 
 
 def test_the_faults_were_applied(lossy_run: tuple[Path, dict[str, Any]]) -> None:

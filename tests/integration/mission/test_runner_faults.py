@@ -14,6 +14,8 @@ from pathlib import Path
 import pytest
 from conftest import CUBE8, ROOT, free_port_offset
 
+from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
+
 pytestmark = pytest.mark.timeout(300)
 
 GCS = [sys.executable, "-m", "gcs.cli"]
@@ -101,8 +103,10 @@ def test_dead_daemon_does_not_abort_the_run(tmp_path: Path) -> None:
          "--out", str(out), "--kill-agent", "5", "--kill-at", "0.5", "--json"],
         cwd=ROOT, capture_output=True, text=True, timeout=240,
     )
-    assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
+    # scored and finished: the exit status is the safety verdict's (gcs.exit_codes)
+    safe = doc["metrics"]["safety_verdict"] == "safe"
+    assert r.returncode == (EXIT_OK if safe else EXIT_SAFETY), r.stderr[-2000:]
     assert doc["run"]["failed_agents"] == [5]
     assert doc["aborted"] is False
     on_disk = json.loads((out / "metrics.json").read_text())
