@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.report.verdict import ground_strike_steps, verdict_metrics
+from gcs.report.verdict import ground_strike_steps, pair_barrier, verdict_metrics
 
 METRIC_KEYS = (
     "min_distance_m",
@@ -107,25 +107,15 @@ def formation_time(t: np.ndarray, err: np.ndarray, tol: float = TRACK_TOL_M) -> 
     return float(t[0]) if len(idx) == 0 else float(t[idx[-1] + 1])
 
 
-def pair_barrier(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
-    """True barrier of every unordered pair i < j at every step (m²), shape (K, N(N−1)/2):
-    ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` with Δp = p_i − p_j, Δv = v_i − v_j (paper eq. 9;
-    τ in s, D in m, p in m, v in m/s)."""
-    i, j = np.triu_indices(p.shape[1], k=1)
-    dp = p[:, i] - p[:, j]
-    dv = v[:, i] - v[:, j]
-    return np.sum(dp * dp, axis=2) + 2.0 * tau * np.sum(dv * dp, axis=2) - d_safe**2
-
-
 def barrier_metrics(
-    p: np.ndarray, v: np.ndarray, tau: float, d_safe: float
+    p: np.ndarray, v: np.ndarray, tau: float, d_safe: float, h: np.ndarray | None = None,
 ) -> dict[str, float | int | None]:
     """``h_min`` (m², min of :func:`pair_barrier` over pairs and steps), the steps where some
     pair has h < 0 (``barrier_violation_steps``) and the (pair, step) samples with h < 0
-    (``barrier_violation_pair_steps``)."""
+    (``barrier_violation_pair_steps``). ``h``: that barrier when the caller has it already."""
     if p.shape[0] == 0 or p.shape[1] < 2:
         return {"h_min": None, "barrier_violation_steps": 0, "barrier_violation_pair_steps": 0}
-    h = pair_barrier(p, v, tau, d_safe)
+    h = pair_barrier(p, v, tau, d_safe) if h is None else h
     neg = h < 0.0
     return {
         "h_min": float(h.min()),
@@ -236,18 +226,20 @@ def compute_metrics(
     zrel = float(np.mean(np.linalg.norm(ze - zt, axis=1) / np.linalg.norm(zt, axis=1)))
     thr = s.thrust[:, f]
     deadline = spec.formation_deadline_s
+    # the true barrier of every pair and step, once: the barrier metrics and the verdict
+    h = pair_barrier(s.p, s.v, spec.tau_safe_s, spec.d_safe_m) if s.p.shape[1] >= 2 else None
     return {
         "min_distance_m": float(s.min_dist.min()),
         "min_distance_by_phase_m": min_distance_by_phase(
             s.t, s.min_dist, deadline, takeoff_end_s, land_at_s
         ),
-        **barrier_metrics(s.p, s.v, spec.tau_safe_s, spec.d_safe_m),
+        **barrier_metrics(s.p, s.v, spec.tau_safe_s, spec.d_safe_m, h),
         "collisions": int(collisions),
         "ground_strikes": ground_strikes(s.p, s.v),
         **verdict_metrics(
             s.t, s.p, s.v, s.min_dist, s.h_min, s.alarms,
             list(spec.ids) or list(range(s.p.shape[1])), f, spec.tau_safe_s, spec.d_safe_m,
-            spec.collision_radius_m,
+            spec.collision_radius_m, h,
         ),
         "input_clipped_steps": int(np.sum(s.input_clipped)) if spec.clipped_known else None,
         "energy_u": float(np.sum(s.u[:, f] ** 2) * dt),

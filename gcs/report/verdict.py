@@ -60,6 +60,16 @@ def onsets(cond: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return k, m
 
 
+def pair_barrier(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
+    """True barrier of every unordered pair i < j at every step (m²), shape (K, N(N−1)/2):
+    ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` with Δp = p_i − p_j, Δv = v_i − v_j (paper eq. 9;
+    τ in s, D in m, p in m, v in m/s)."""
+    i, j = np.triu_indices(p.shape[1], k=1)
+    dp = p[:, i] - p[:, j]
+    dv = v[:, i] - v[:, j]
+    return np.sum(dp * dp, axis=2) + 2.0 * tau * np.sum(dv * dp, axis=2) - d_safe**2
+
+
 def ground_strike_steps(p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(steps, agents) of every touchdown faster than :data:`STRIKE_SPEED_MPS`: an agent
     above :data:`GROUND_Z_M` at step k − 1 is at or below it at step k, having descended
@@ -82,29 +92,27 @@ def _event(t: float, kind: SafetyAlarmKind, agent: int | None, other: int | None
 def safety_events(
     t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
     alarms: np.ndarray, ids: list[int], tau_s: float, d_safe_m: float,
-    collision_radius_m: float,
+    collision_radius_m: float, h: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """Every onset, sorted by time: ``t`` (K,) s; ``p``, ``v`` (K,N,3) true positions (m)
     and velocities (m/s); ``min_dist`` (K,) the smallest pair distance over the physics
     steps of the period after t_k (m; a contact between two control steps is seen there);
     ``own_h`` (K,N) each agent's own smallest barrier (m², inf or NaN where it computed
     none); ``alarms`` (K,N) :class:`AgentAlarm` bits; ``ids`` the agents' ids in column
-    order. τ (s) and D (m): the barrier's horizon and distance. A contact names the pair
-    closest at its control step."""
+    order. τ (s) and D (m): the barrier's horizon and distance; ``h`` (K, pairs) their
+    :func:`pair_barrier` when the caller has it already. A contact names the pair closest
+    at its control step."""
     out: list[dict[str, Any]] = []
     n = p.shape[1]
     if n >= 2 and len(t):
         i, j = np.triu_indices(n, k=1)
-        dp = p[:, i] - p[:, j]
-        dv = v[:, i] - v[:, j]
-        dist2 = np.sum(dp * dp, axis=2)
-        h = dist2 + 2.0 * tau_s * np.sum(dv * dp, axis=2) - d_safe_m**2
+        h = pair_barrier(p, v, tau_s, d_safe_m) if h is None else h
         for k, m in zip(*onsets(h < 0.0), strict=True):
             out.append(_event(t[k], SafetyAlarmKind.BARRIER, ids[i[m]], ids[j[m]], h[k, m]))
         with np.errstate(invalid="ignore"):
             contact = (min_dist < collision_radius_m)[:, None]
         for k, _ in zip(*onsets(contact), strict=True):
-            m = int(np.argmin(dist2[k]))
+            m = int(np.argmin(np.sum((p[k, i] - p[k, j]) ** 2, axis=1)))
             out.append(_event(t[k], SafetyAlarmKind.COLLISION, ids[i[m]], ids[j[m]],
                               min_dist[k]))
     for k, a in zip(*ground_strike_steps(p, v), strict=True):
@@ -133,14 +141,14 @@ def verdict(events: list[dict[str, Any]]) -> Verdict:
 def verdict_metrics(
     t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
     alarms: np.ndarray, ids: list[int], follower_idx: list[int], tau_s: float,
-    d_safe_m: float, collision_radius_m: float,
+    d_safe_m: float, collision_radius_m: float, h: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """``own_h_min``, ``safety_verdict``, ``safety_alarm_count``, ``deadlock_events`` (those
     of :data:`LIVENESS_KINDS`) and ``safety_alarms`` (the first :data:`ALARM_LIST_MAX`
     events of :func:`safety_events`). ``own_h_min``: the
     smallest barrier a follower computed from its own estimates (m²; None when none did)."""
     events = safety_events(t, p, v, min_dist, own_h, alarms, ids, tau_s, d_safe_m,
-                           collision_radius_m)
+                           collision_radius_m, h)
     own = own_h[:, follower_idx] if len(follower_idx) else own_h[:, :0]
     finite = own[np.isfinite(own)]
     return {
