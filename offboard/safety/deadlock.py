@@ -46,12 +46,14 @@ class DeadlockDetector:
         self.cfg = cfg or DeadlockConfig()
         self._hist: deque[tuple[float, float, bool]] = deque()
         self._held = 0  # steps in the window with the filter correcting
+        self._low = 0  # steps in the window with the error at or below err_tol_m
         self.active = False
 
     def reset(self) -> None:
         """Forget the history (a new mission phase, e.g. the land-all)."""
         self._hist.clear()
         self._held = 0
+        self._low = 0
         self.active = False
 
     def update(self, t: float, err_m: float, corr_mps2: float) -> bool:
@@ -65,15 +67,19 @@ class DeadlockDetector:
         cfg = self.cfg
         self._hist.append((t, err_m, held))
         self._held += held
-        # keep the newest sample at or before t − window as the window's start
+        self._low += err_m <= cfg.err_tol_m
+        # keep the newest sample at or before t − window as the window's start (running
+        # counts instead of a scan of the window: this runs every control step)
         while len(self._hist) > 1 and self._hist[1][0] <= t - cfg.window_s:
-            self._held -= self._hist.popleft()[2]
+            _, e_old, held_old = self._hist.popleft()
+            self._held -= held_old
+            self._low -= e_old <= cfg.err_tol_m
         t0, e0, _ = self._hist[0]
         full = t - t0 >= cfg.window_s
         n = len(self._hist)
         self.active = bool(
             full
-            and min(e for _, e, _ in self._hist) > cfg.err_tol_m
+            and self._low == 0
             and e0 - err_m < cfg.min_progress * e0
             and self._held >= cfg.held_fraction * n
         )
