@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
+from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm, Method, SafetyAlarmKind
 
 ALARM_LIST_MAX = 200  # entries kept in metrics.json (the earliest); the count is complete
@@ -65,9 +66,7 @@ def pair_barrier(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.
     ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` with Δp = p_i − p_j, Δv = v_i − v_j (paper eq. 9;
     τ in s, D in m, p in m, v in m/s)."""
     i, j = np.triu_indices(p.shape[1], k=1)
-    dp = p[:, i] - p[:, j]
-    dv = v[:, i] - v[:, j]
-    return np.sum(dp * dp, axis=2) + 2.0 * tau * np.sum(dv * dp, axis=2) - d_safe**2
+    return barrier(p[:, i] - p[:, j], v[:, i] - v[:, j], tau, d_safe)
 
 
 def ground_strike_steps(p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_common.barrier import barrier
 from swarm_common.enums import StartMode
 from swarm_common.scenario.input_set import InputSet
 
@@ -61,9 +62,7 @@ EMA_NOISE_GAIN = math.sqrt(1.0 / 3.0)  # √Σh² of the differenced, low-passed
 # ---------------------------------------------------------------------------
 def pair_barriers(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
     """(N, N) h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) of positions p, velocities v (N, 3)."""
-    dp = p[:, None, :] - p[None, :, :]
-    dv = v[:, None, :] - v[None, :, :]
-    return np.sum(dp * dp, axis=-1) + 2.0 * tau * np.sum(dv * dp, axis=-1) - d_safe**2
+    return barrier(p[:, None, :] - p[None, :, :], v[:, None, :] - v[None, :, :], tau, d_safe)
 
 
 def start_problem(sc: Scenario) -> str | None:
