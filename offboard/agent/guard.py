@@ -40,7 +40,6 @@ class InFlightGuard:
         self.dt = sc.control_dt
         self._peers = np.zeros(sc.n, dtype=bool)
         self._peers[peers] = True
-        self._sensed = np.zeros(sc.n, dtype=bool)
         self.bits = AgentAlarm(0)
         self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
 
@@ -66,10 +65,8 @@ class InFlightGuard:
         the neighbours' predicted ``rows`` (N, ROW) with ``have`` (N,), this step's sensed
         ``rel_p`` (N,3) where ``fresh`` (N,), and the filter's pairs ``sel`` (indices) with
         their p_j − p_i, v_j − v_i ``rp``, ``rv`` (N,3). Latches the fallback at ``t``."""
-        self._sensed[:] = False
-        self._sensed[sel] = True
-        bits = self.monitor.step(z1, z2, rows[:, Z1], have & self._peers, rel_p, fresh,
-                                 self._sensed, rp, rv)
+        bits = self.monitor.step(z1, z2, rows[:, Z1], have & self._peers, rel_p, fresh, sel,
+                                 rp, rv)
         if self.monitor.fallback:
             self.fallback.start(t)
             bits |= AgentAlarm.FALLBACK

@@ -38,6 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offboard.safety.monitor_kernel import monitor_terms
+from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm
 from swarm_common.scenario.model import Scenario
 
@@ -86,27 +88,6 @@ def monitor_config(sc: Scenario) -> MonitorConfig:
                          sc.controller.d_safe_m, sc.formation.sensing_range_m)
 
 
-def consistency_residual(z1: np.ndarray, est_p: np.ndarray, rel_p: np.ndarray,
-                         use: np.ndarray, unseen: np.ndarray, range_m: float) -> float:
-    """The residual (m; module docstring): the largest over the rows ``use`` (N,) bool of
-    ‖z1 − (est_p[j] − rel_p[j])‖ and over the rows ``unseen`` (N,) bool of
-    max(0, ``range_m`` − ‖est_p[j] − z1‖). ``z1`` (3,): this agent's position estimate,
-    ``est_p`` (N,3): the others' estimates at the same time, ``rel_p`` (N,3): the sensed
-    p_j − p_i. NaN when no row is usable."""
-    if not (np.any(use) or np.any(unseen)):
-        return math.nan
-    r = np.linalg.norm(z1[None, :] - (est_p[use] - rel_p[use]), axis=1)
-    lo = np.maximum(range_m - np.linalg.norm(est_p[unseen] - z1[None, :], axis=1), 0.0)
-    return float(np.max(np.concatenate([r, lo])))
-
-
-def entry_barriers(rel_p: np.ndarray, rel_v: np.ndarray, tau: float, d: float) -> np.ndarray:
-    """h = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) per row of the sensed ``rel_p`` = p_j − p_i and
-    ``rel_v`` = v_j − v_i (Δp = −rel_p, Δv = −rel_v: the signs cancel in the product)."""
-    return (np.einsum("ij,ij->i", rel_p, rel_p) + 2.0 * tau * np.einsum("ij,ij->i", rel_v, rel_p)
-            - d * d)
-
-
 class SafetyMonitor:
     """One follower's alarms (module docstring); ``n`` agents in the scenario."""
 
@@ -118,36 +99,41 @@ class SafetyMonitor:
         self._raised = False
         self._held = 0  # consecutive steps with RESIDUAL raised
         self.fallback = False  # latched
-        self._prev: np.ndarray | None = None  # (N,) bool: sensed at the step before
+        self._sensed = np.zeros(n, dtype=bool)  # the pairs the filter uses this step
+        self._prev = np.zeros(n, dtype=bool)  # ... and at the step before
+        self._new = np.zeros(n, dtype=bool)  # sensed now but not before
+        self._first = True
 
     def step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, usable: np.ndarray,
-             rel_p: np.ndarray, fresh: np.ndarray, sensed: np.ndarray, pair_p: np.ndarray,
+             rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray, pair_p: np.ndarray,
              pair_v: np.ndarray) -> AgentAlarm:
         """The bits of one step. ``z1``, ``z2`` (3,): this agent's estimates at t_k;
         ``est_p`` (N,3): the others' position estimates predicted to t_k, ``usable`` (N,)
         where they are; ``rel_p`` (N,3) with ``fresh`` (N,) bool: this step's relative
-        positions p_j − p_i; ``sensed`` (N,) bool with ``pair_p``, ``pair_v`` (N,3): the
+        positions p_j − p_i; ``sel`` (indices) with ``pair_p``, ``pair_v`` (N,3): the
         pairs the filter uses this step (held through a dropout) and their p_j − p_i,
         v_j − v_i."""
+        cfg = self.cfg
+        self.residual, speed, any_new = monitor_terms(
+            z1, z2, est_p, usable, rel_p, fresh, sel, self._sensed, self._prev, self._new,
+            cfg.range_m)
         bits = AgentAlarm(0)
-        if self._residual_step(z1, z2, est_p, usable & fresh, usable & ~sensed & ~fresh,
-                               rel_p):
+        if self._residual_step(z1, speed):
             bits |= AgentAlarm.RESIDUAL
-        if self._near_entry(sensed, pair_p, pair_v):
+        if any_new and self._near_entry(pair_p, pair_v):
             bits |= AgentAlarm.NEAR_ENTRY
+        self._first = False
         if self.fallback:
             bits |= AgentAlarm.FALLBACK
         return bits
 
-    def _residual_step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray,
-                       use: np.ndarray, unseen: np.ndarray, rel_p: np.ndarray) -> bool:
-        """Update the persistence counters; True while RESIDUAL is raised. A step without a
-        usable neighbour and a plausible speed leaves the counters as they are."""
+    def _residual_step(self, z1: np.ndarray, speed: float) -> bool:
+        """Update the persistence counters from this step's residual and estimated
+        ``speed`` (m/s); True while RESIDUAL is raised. A step without a usable neighbour
+        and a plausible speed leaves the counters as they are."""
         cfg = self.cfg
-        self.residual = consistency_residual(z1, est_p, rel_p, use, unseen, cfg.range_m)
-        speed = float(np.linalg.norm(z2))
         over = (self.residual > cfg.bound_m or not math.isfinite(speed)
-                or speed > cfg.v_max_mps or not bool(np.all(np.isfinite(z1))))
+                or speed > cfg.v_max_mps or not all(map(math.isfinite, z1)))
         if over:
             self._over, self._under = self._over + 1, 0
         elif math.isfinite(self.residual):
@@ -161,14 +147,13 @@ class SafetyMonitor:
             self.fallback = True
         return self._raised
 
-    def _near_entry(self, sensed: np.ndarray, pair_p: np.ndarray, pair_v: np.ndarray) -> bool:
-        prev, self._prev = self._prev, np.array(sensed, dtype=bool)
-        if prev is None:  # the first step: the start positions were checked at load
+    def _near_entry(self, pair_p: np.ndarray, pair_v: np.ndarray) -> bool:
+        """Any pair first sensed this step already inside its barrier (h < 0). Not on the
+        first step: the start positions were checked at load."""
+        if self._first:
             return False
-        new = self._prev & ~prev
-        if not np.any(new):
-            return False
-        h = entry_barriers(pair_p[new], pair_v[new], self.cfg.tau_s, self.cfg.d_safe_m)
+        new = self._new
+        h = barrier(pair_p[new], pair_v[new], self.cfg.tau_s, self.cfg.d_safe_m)
         return bool(np.any(h < 0.0))
 
 

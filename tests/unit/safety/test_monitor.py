@@ -10,14 +10,10 @@ import numpy as np
 import pytest
 
 from offboard.agent.fallback import BRAKED_MPS, HOLD_S, Fallback
-from offboard.safety.monitor import (
-    MonitorConfig,
-    SafetyMonitor,
-    consistency_residual,
-    entry_barriers,
-    residual_bound,
-)
+from offboard.safety.monitor import MonitorConfig, SafetyMonitor, residual_bound
+from offboard.safety.monitor_kernel import monitor_terms
 from swarm_common import wire
+from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm
 
 DT = 0.02  # s, 50 Hz
@@ -42,8 +38,8 @@ class World:
         fresh[0] = False
         est_p = p + self.rng.normal(0.0, 0.05, (N, 3))  # the others' estimates, 5 cm off
         return dict(z1=p[0] + err, z2=self.v[0].copy(), est_p=est_p,
-                    usable=np.arange(N) > 0, rel_p=rel_p, fresh=fresh, sensed=fresh,
-                    pair_p=rel_p, pair_v=rel_v)
+                    usable=np.arange(N) > 0, rel_p=rel_p, fresh=fresh,
+                    sel=np.flatnonzero(fresh), pair_p=rel_p, pair_v=rel_v)
 
 
 def run(errs: list[np.ndarray], seed: int = 0) -> list[AgentAlarm]:
@@ -91,16 +87,65 @@ def test_short_spike_is_not_an_alarm() -> None:
     assert not any(run(errs))
 
 
+def residual_oracle(z1: np.ndarray, est_p: np.ndarray, rel_p: np.ndarray, use: np.ndarray,
+                    unseen: np.ndarray, range_m: float) -> float:
+    """The residual in numpy (offboard.safety.monitor's docstring), NaN without a row."""
+    r = np.linalg.norm(z1[None, :] - (est_p[use] - rel_p[use]), axis=1)
+    lo = np.maximum(range_m - np.linalg.norm(est_p[unseen] - z1[None, :], axis=1), 0.0)
+    both = np.concatenate([r, lo])
+    return float(np.max(both)) if len(both) else math.nan
+
+
+def terms(z1: np.ndarray, est: np.ndarray, rel: np.ndarray, usable: np.ndarray,
+          fresh: np.ndarray, sel: np.ndarray, range_m: float,
+          prev: np.ndarray | None = None) -> tuple[float, float, bool, np.ndarray]:
+    n = len(est)
+    sensed, new = np.zeros(n, bool), np.zeros(n, bool)
+    prev = np.zeros(n, bool) if prev is None else prev
+    res, speed, any_new = monitor_terms(z1, np.array([3.0, 4.0, 0.0]), est, usable, rel,
+                                        fresh, np.asarray(sel, np.int64), sensed, prev, new,
+                                        range_m)
+    assert list(np.flatnonzero(sensed)) == sorted(sel) and np.array_equal(prev, sensed)
+    return res, speed, any_new, new
+
+
 def test_unsensed_neighbour_inside_range_is_inconsistent() -> None:
     # nobody is sensed; the estimates put neighbours 2..8 m away (< R = 10 m): their true
     # distance is ≥ R, so the residual is at least R − 2 m for the nearest
     z1 = np.zeros(3)
     est = np.array([[0.0, 0, 0], [2.0, 0, 0], [4.0, 0, 0], [6.0, 0, 0], [8.0, 0, 0]])
-    use, unseen = np.zeros(N, bool), np.arange(N) > 0
-    assert consistency_residual(z1, est, np.zeros((N, 3)), use, unseen, 10.0) == 8.0
+    none, others = np.zeros(N, bool), np.arange(N) > 0
+    res, speed, any_new, _ = terms(z1, est, np.zeros((N, 3)), others, none, [], 10.0)
+    assert res == 8.0 and speed == 5.0 and not any_new
     # out of range in the estimates: no evidence either way
-    assert consistency_residual(z1, est * 6, np.zeros((N, 3)), use, unseen, 10.0) == 0.0
-    assert math.isnan(consistency_residual(z1, est, est, use, use, 10.0))
+    assert terms(z1, est * 6, np.zeros((N, 3)), others, none, [], 10.0)[0] == 0.0
+    # every usable neighbour is sensed (held, not fresh): no row counts
+    assert math.isnan(terms(z1, est, est, others, none, [1, 2, 3, 4], 10.0)[0])
+
+
+def test_residual_kernel_matches_numpy() -> None:
+    # random rows, masks and sensed sets: the compiled residual against numpy (1e-12 m),
+    # and the newly sensed pairs against the set difference
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(2, 12))
+        z1 = rng.normal(0, 5, 3)
+        est, rel = rng.normal(0, 5, (n, 3)), rng.normal(0, 5, (n, 3))
+        usable, fresh = rng.random(n) < 0.7, rng.random(n) < 0.5
+        sel = np.flatnonzero(rng.random(n) < 0.5)
+        prev = rng.random(n) < 0.5
+        was = prev.copy()
+        sensed = np.zeros(n, bool)
+        sensed[sel] = True
+        want = residual_oracle(z1, est, rel, usable & fresh, usable & ~fresh & ~sensed, 6.0)
+        res, _, any_new, new = terms(z1, est, rel, usable, fresh, sel, 6.0, prev)
+        assert (math.isnan(res) and math.isnan(want)) or abs(res - want) <= 1e-12
+        assert np.array_equal(new, sensed & ~was) and any_new == bool(np.any(new))
+    # a NaN estimate in a counted row makes the residual NaN, as numpy's max does
+    est = np.ones((3, 3))
+    est[1, 0] = math.nan
+    assert math.isnan(terms(np.zeros(3), est, np.zeros((3, 3)), np.ones(3, bool),
+                            np.ones(3, bool), [], 6.0)[0])
 
 
 def test_impossible_speed_is_a_residual() -> None:
@@ -121,7 +166,7 @@ def test_near_entry_only_for_a_late_close_newcomer() -> None:
     x = w.inputs(DT, np.zeros(3), np.ones(N, bool))
     x["pair_p"][4] = [0.4, 0.0, 0.0]
     x["pair_v"][4] = [-2.0, 0.0, 0.0]
-    assert entry_barriers(x["pair_p"][4:], x["pair_v"][4:], 0.8, 0.5)[0] < 0
+    assert barrier(x["pair_p"][4:], x["pair_v"][4:], 0.8, 0.5)[0] < 0
     assert m.step(**x) == AgentAlarm.NEAR_ENTRY
     # the next step it is no newcomer: no alarm although still close
     x2 = w.inputs(2 * DT, np.zeros(3), np.ones(N, bool))
