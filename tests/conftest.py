@@ -366,11 +366,16 @@ def stop_processes(procs: list[subprocess.Popen], grace_s: float = 15.0) -> None
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Mark each test by its layer folder: ``unit`` (pure, seconds) or ``integration``
-    (subprocesses, UDP and Zenoh)."""
+    (subprocesses, UDP and Zenoh); then run the ``slow`` ones (half a minute or more) first.
+    pytest-xdist hands out tests in this order, so the longest start while the other
+    worker takes the short ones, and none is left to run alone at the end. The sort is
+    stable: the tests of one module that share a module-scoped fixture are all marked
+    alike and stay together."""
     for item in items:
         layer = Path(str(item.fspath)).relative_to(ROOT / "tests").parts[0]
         if layer in ("unit", "integration"):
             item.add_marker(getattr(pytest.mark, layer))
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 async def settle(app, pilot, pred, tries: int = 100) -> bool:

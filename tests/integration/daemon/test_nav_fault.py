@@ -28,6 +28,7 @@ FAULT_LINE = re.compile(r"agent (\d+): estimate off its odometry by more than ([
                         r"t=([\d.]+) s: holding on odometry; landing at t=([\d.]+) s")
 
 
+@pytest.mark.slow
 def test_a_navigation_fault_lands_its_vehicle_and_the_swarm_flies_on(tmp_path: Path) -> None:
     extra = {FAULTY: ["--nav-gate", str(GATE_M)]}
     with flying_swarm(tmp_path, FLY_S, extra_args=extra, all_armed=False) as sw:

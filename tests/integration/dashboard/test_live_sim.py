@@ -62,6 +62,7 @@ async def until(app, pilot, pred, timeout=15.0):
 
 
 @pytest.mark.asyncio
+@pytest.mark.slow
 async def test_dashboard_commands_real_sim(sim):
     sc = load_scenario(SCENARIO)
     link = MavlinkGcs(port_offset=sim).start()

@@ -145,6 +145,7 @@ def _stall_on_commands(app: DashboardApp, launch, agent: int) -> Callable[[], No
 
 
 @pytest.mark.asyncio
+@pytest.mark.slow
 async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
     """Daemon 1's process is stopped for STALL_S from the take-off command on, and again
     from the land-all (offboard.daemon.commands: it then climbs, and lands on its pad,

@@ -55,6 +55,7 @@ def lossy_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str,
     return out, doc
 
 
+@pytest.mark.slow
 def test_the_faults_were_applied(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     out, _ = lossy_run
     plan = tomllib.loads((out / "scenario.toml").read_text())["faults"]
@@ -69,6 +70,7 @@ def test_the_faults_were_applied(lossy_run: tuple[Path, dict[str, Any]]) -> None
     assert dropped > 0 and sent > 0
 
 
+@pytest.mark.slow
 def test_safe(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     _, doc = lossy_run
     m = doc["metrics"]
@@ -77,6 +79,7 @@ def test_safe(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     assert m["min_distance_m"] >= 0.5
 
 
+@pytest.mark.slow
 def test_never_stuck_in_failsafe(lossy_run: tuple[Path, dict[str, Any]]) -> None:
     out, _ = lossy_run
     sim_log = (out / "vehicle-sim.log").read_text()

@@ -114,6 +114,7 @@ def test_ctrl_c_inproc_exits_130() -> None:
     assert "interrupted" in err.strip().splitlines()[-1] and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_ctrl_c_distributed_exits_130_and_stops_every_child(tmp_path: Path) -> None:
     off = free_port_offset()
     proc = start_gcs("mission", "run", CUBE8, "--duration", "60", "--port-offset", str(off),
@@ -131,6 +132,7 @@ def test_ctrl_c_distributed_exits_130_and_stops_every_child(tmp_path: Path) -> N
     assert leftovers(off) == b""
 
 
+@pytest.mark.slow
 def test_daemon_death_mid_run_is_named_and_the_run_is_scored(tmp_path: Path) -> None:
     """A daemon killed mid-run: the runner names it, the others fly on, the run ends with
     exit status of its safety verdict (0 when safe, 3 otherwise) and its metrics list the

@@ -53,6 +53,7 @@ def test_land_all_cube8_safe_and_on_pads(tmp_path: Path, method: str, pad_tol: f
     assert ser["min_dist"][t >= LAND_AT].min() >= 1.0
 
 
+@pytest.mark.slow
 def test_distributed_land_all_matches_inproc(tmp_path: Path) -> None:
     """The Zenoh land command (gcs.mission.distributed, offboard.daemon.core) reproduces the
     in-process

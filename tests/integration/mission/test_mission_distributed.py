@@ -104,6 +104,7 @@ def test_a_daemon_dead_before_the_start_ends_the_run(tmp_path: Path) -> None:
                         kill_agent=3, kill_at=0.0, show_progress=False)
 
 
+@pytest.mark.slow
 def test_child_death_is_reported_and_the_run_goes_on(tmp_path: Path) -> None:
     """A daemon killed from outside: the run continues without it, names it in
     ``failed_agents``, and nothing of the run is left running afterwards."""
@@ -152,6 +153,7 @@ def test_cli_mission_run_json(tmp_path: Path) -> None:
 # four distributed runs in a row: minutes when other workers load the machine (a limit on
 # the wait, not a timing assertion)
 @pytest.mark.timeout(600)
+@pytest.mark.slow
 def test_cli_compare_distributed_writes_report(tmp_path: Path) -> None:
     """The README's main command, shortened: three distributed runs and the report."""
     off = free_port_offset()

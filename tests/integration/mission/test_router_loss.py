@@ -23,6 +23,7 @@ PLAN_LINE = re.compile(r"runner/router lost since t=([\d.]+) s: landing on odome
                        r"t_L=([\d.]+) s")
 
 
+@pytest.mark.slow
 def test_router_kill_lands_every_vehicle_safely(tmp_path: Path) -> None:
     with flying_swarm(tmp_path, FLY_BEFORE_KILL_S) as sw:
         obs = sw.obs

@@ -123,7 +123,7 @@ def test_saturate_into_is_saturate_norm() -> None:
     square root and scaling, each correctly rounded in IEEE arithmetic; the tolerance only
     allows for a platform that contracts or reorders one of them)."""
     rng = np.random.default_rng(11)
-    xs = [rng.standard_normal(3) * 10.0 ** rng.uniform(-6, 6) for _ in range(20000)]
+    xs = [rng.standard_normal(3) * 10.0 ** rng.uniform(-6, 6) for _ in range(4000)]
     xs += [np.array([2.0, 0.0, 0.0]), np.array([0.0, 0.0, -2.0]),
            np.array([math.nan, 1.0, 0.0]), np.array([math.inf, 0.0, 0.0]), np.zeros(3)]
     out = np.empty(3)
