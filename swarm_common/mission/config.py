@@ -7,16 +7,16 @@ naming the key and what is allowed, e.g.::
 
     mission.waypoint[3].scale = nan: must be a number in (0, 10]
 
-The numeric checks are written here rather than borrowed from
-:mod:`swarm_common.scenario.schema` so that the scenario loader may import this module
-without a cycle between the two rooms.
+The numeric checks are :mod:`swarm_common.table_check`'s, shared with the world's tables.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
+
+from swarm_common.table_check import Range as _Range
+from swarm_common.table_check import check_keys, describe, number, show, vector
 
 __all__ = [
     "MAX_WAYPOINTS",
@@ -30,7 +30,6 @@ __all__ = [
 MAX_WAYPOINTS = 1000
 
 # key -> (lo, hi, lo_open, hi_open, default or None when required)
-_Range = tuple[float, float, bool, bool]
 _MISSION_KEYS: dict[str, tuple[_Range, float | None]] = {
     "speed_mps": ((0.0, 15.0, True, False), None),
     "start_s": ((0.0, 3600.0, False, False), 0.0),
@@ -84,69 +83,23 @@ class MissionConfig:
     arrive_radius_m: float = 0.5
 
 
-def _show(value: object, limit: int = 40) -> str:
-    """``repr`` of a value, cut to ``limit`` characters (always one line)."""
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _key(key: object) -> str:
-    """A table key as it may appear in a message: plain names as they are, others quoted."""
-    if isinstance(key, str) and key.replace("_", "a").isalnum() and key.isascii():
-        return key
-    return _show(str(key) if not isinstance(key, str) else key, 30)
-
-
-def _describe(rng: _Range) -> str:
-    lo, hi, lo_open, hi_open = rng
-    return f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
-
-
-def _as_float(value: object) -> float | None:
-    """``value`` as a finite float, or None (bools, non-numbers, NaN, inf, huge ints)."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    try:
-        out = float(value)
-    except OverflowError:
-        return None
-    return out if math.isfinite(out) else None
-
-
-def _in_range(x: float, rng: _Range) -> bool:
-    lo, hi, lo_open, hi_open = rng
-    return (x > lo if lo_open else x >= lo) and (x < hi if hi_open else x <= hi)
-
-
 def _number(value: object, where: str, rng: _Range) -> float:
-    x = _as_float(value)
-    if x is None or not _in_range(x, rng):
-        raise MissionError(f"{where} = {_show(value)}: must be {_describe(rng)}")
-    return x
+    return number(value, where, rng, MissionError)
 
 
 def _vector3(value: object, where: str, rng: _Range) -> tuple[float, float, float]:
-    lo, hi, _, _ = rng
-    rule = f"a list of 3 numbers in [{lo:g}, {hi:g}]"
-    if not isinstance(value, list | tuple) or len(value) != 3:
-        raise MissionError(f"{where} = {_show(value)}: must be {rule}")
-    xs = [_as_float(v) for v in value]
-    if any(x is None or not _in_range(x, rng) for x in xs):
-        raise MissionError(f"{where} = {_show(value)}: must be {rule}")
-    a, b, c = (float(x) for x in xs if x is not None)
+    a, b, c = vector(value, where, 3, rng, MissionError)
     return (a, b, c)
 
 
 def _check_keys(table: dict[Any, Any], where: str, allowed: tuple[str, ...]) -> None:
-    for key in table:
-        if key not in allowed:
-            raise MissionError(f"unknown key {where}.{_key(key)}; allowed: {', '.join(allowed)}")
+    check_keys(table, where, allowed, MissionError)
 
 
 def _waypoint(raw: object, k: int, max_speed: float) -> Waypoint:
     where = f"mission.waypoint[{k}]"
     if not isinstance(raw, dict):
-        raise MissionError(f"{where} = {_show(raw)}: must be a table")
+        raise MissionError(f"{where} = {show(raw)}: must be a table")
     _check_keys(raw, where, _WAYPOINT_ALLOWED)
     if "centroid" not in raw:
         raise MissionError(
@@ -179,14 +132,14 @@ def parse_mission(table: object) -> MissionConfig:
     for a float, a wrong vector length, out-of-range values, and a cruise speed (mission's or
     a waypoint's) above ``max_speed_mps``."""
     if not isinstance(table, dict):
-        raise MissionError(f"[mission] = {_show(table)}: must be a table")
+        raise MissionError(f"[mission] = {show(table)}: must be a table")
     _check_keys(table, "mission", _MISSION_ALLOWED)
     vals: dict[str, float] = {}
     for key, (rng, default) in _MISSION_KEYS.items():
         if key in table:
             vals[key] = _number(table[key], f"mission.{key}", rng)
         elif default is None:
-            raise MissionError(f"missing key mission.{key} ({_describe(rng)})")
+            raise MissionError(f"missing key mission.{key} ({describe(rng)})")
         else:
             vals[key] = default
     if vals["speed_mps"] > vals["max_speed_mps"]:
@@ -201,7 +154,7 @@ def parse_mission(table: object) -> MissionConfig:
     raw = table["waypoint"]
     if not isinstance(raw, list):
         raise MissionError(
-            f"mission.waypoint = {_show(raw)}: must be a list of [[mission.waypoint]] tables"
+            f"mission.waypoint = {show(raw)}: must be a list of [[mission.waypoint]] tables"
         )
     if not raw:
         raise MissionError("mission.waypoint = []: must list at least 1 waypoint")
