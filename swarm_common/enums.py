@@ -161,13 +161,16 @@ class AgentAlarm(IntFlag):
 
 class SafetyAlarmKind(StrEnum):
     """The ``assumption`` of one ``metrics.json`` ``safety_alarms`` entry (docs/metrics.md):
-    what the run found broken, from the truth (the first four) or from an agent's own
+    what the run found broken, from the truth (barrier, collision, ground strike, obstacle,
+    geofence) or from an agent's own
     alarm bits (:class:`AgentAlarm`)."""
 
     BARRIER = "barrier"  # a pair's true barrier h < 0
     OWN_BARRIER = "own_barrier"  # an agent's barrier from its own estimates < 0: margin used up
     COLLISION = "collision"  # two vehicles closer than the collision radius
     GROUND_STRIKE = "ground_strike"  # a vehicle hit the ground faster than a landing
+    OBSTACLE = "obstacle"  # a vehicle's true obstacle barrier < 0 (docs/world.md)
+    GEOFENCE = "geofence"  # a vehicle's true geofence barrier < 0
     RESIDUAL = "residual"  # AgentAlarm.RESIDUAL
     NEAR_ENTRY = "near_entry"  # AgentAlarm.NEAR_ENTRY
     FALLBACK = "fallback"  # AgentAlarm.FALLBACK

@@ -156,15 +156,17 @@ def _toml_table(prefix: str, table: Mapping[str, Any], out: list[str]) -> None:
 
 def dump_toml(doc: Mapping[str, Any]) -> str:
     """A scenario document (tables of scalars and lists, nested tables, arrays of tables of
-    scalars such as ``mission.waypoint``, and the ``agent`` array of tables) as TOML text
-    that :mod:`tomllib` reads back to ``doc``."""
+    scalars such as ``mission.waypoint``, and the top-level arrays of tables ``agent`` and
+    ``obstacle``) as TOML text that :mod:`tomllib` reads back to ``doc``."""
     out: list[str] = []
+    arrays = ("obstacle", "agent")
     for name, value in doc.items():
-        if name == "agent":
+        if name in arrays:
             continue
         _toml_table(name, value, out)
-    for agent in doc.get("agent", []):
-        out.append("[[agent]]")
-        out.extend(f"{k} = {_toml_scalar(v)}" for k, v in agent.items())
-        out.append("")
+    for name in arrays:
+        for row in doc.get(name, []):
+            out.append(f"[[{name}]]")
+            out.extend(f"{k} = {_toml_scalar(v)}" for k, v in row.items())
+            out.append("")
     return "\n".join(out)

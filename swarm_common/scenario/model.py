@@ -69,6 +69,7 @@ from swarm_common.scenario.schema import (
     typed_value,
 )
 from swarm_common.scenario.spec import AgentSpec, Scenario
+from swarm_common.world.config import WorldError, parse_world
 
 __all__ = [
     "ALLOW_INFEASIBLE_FLAG",
@@ -107,8 +108,8 @@ __all__ = [
 
 
 log = logging.getLogger(__name__)
-# top-level tables besides the schema's sections: agents, [faults], [mission]
-EXTRA_SECTIONS = ("agent", "faults", "mission")
+# top-level tables besides the schema's sections: agents, [faults], [mission], the world
+EXTRA_SECTIONS = ("agent", "faults", "mission", "obstacle", "geofence")
 
 
 
@@ -247,8 +248,13 @@ def parse_scenario(
     if mission is not None and lt.frequency_hz > 0.0 and any(lt.amplitude_m):
         raise fail("[mission] and [leader_trajectory] both move the leaders: keep one "
                    "(a mission replaces the sinusoid; remove [leader_trajectory])")
+    try:
+        world = parse_world(data, float(raw["controller"]["d_safe_m"]))
+    except WorldError as exc:
+        raise fail(str(exc)) from None
     scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible,
-                    allow_unsafe=allow_unsafe, faults=plan, mission=mission, **typed)
+                    allow_unsafe=allow_unsafe, faults=plan, mission=mission, world=world,
+                    **typed)
     problem = graph_problem(scen)
     if problem is not None:
         raise fail(problem)

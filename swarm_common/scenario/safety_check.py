@@ -48,6 +48,7 @@ import numpy as np
 from swarm_common.barrier import barrier
 from swarm_common.enums import StartMode
 from swarm_common.scenario.input_set import InputSet
+from swarm_common.scenario.world_check import world_problem
 
 if TYPE_CHECKING:
     from swarm_common.scenario.spec import Scenario
@@ -233,6 +234,7 @@ def noise_problem(sc: Scenario) -> str | None:
 
 
 def safety_problems(sc: Scenario) -> list[str]:
-    """Every broken load-time assumption of ``sc``, one line each, in the order (a)–(d)."""
-    checks = (start_problem, lag_problem, range_problem, noise_problem)
+    """Every broken load-time assumption of ``sc``, one line each, in the order (a)–(d),
+    then the world's (:func:`swarm_common.scenario.world_check.world_problem`)."""
+    checks = (start_problem, lag_problem, range_problem, noise_problem, world_problem)
     return [p for p in (check(sc) for check in checks) if p is not None]

@@ -30,6 +30,7 @@ from swarm_common.scenario.schema import (
     VehicleConfig,
     toml_value,
 )
+from swarm_common.world.config import World, world_toml
 
 
 # ---------------------------------------------------------------------------
@@ -77,6 +78,8 @@ class Scenario:
     # [mission] (optional, docs/missions.md): formation waypoints the leaders fly instead of
     # the [leader_trajectory] sinusoid
     mission: MissionConfig | None = None
+    # [[obstacle]] and [geofence] (optional, docs/world.md): none by default
+    world: World = field(default_factory=World)
 
     def section(self, name: str) -> Any:
         """The typed section of TOML table ``name`` (``[scenario]`` is :attr:`run`)."""
@@ -103,6 +106,7 @@ class Scenario:
             data["faults"] = self.faults.as_toml()
         if self.mission is not None:
             data["mission"] = mission_toml(self.mission)
+        data |= world_toml(self.world)
         return data
 
     # Convenience accessors used everywhere --------------------------------
