@@ -34,6 +34,7 @@ from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.safety.base import SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.dcbf.front import DcbfFront, InnerMotion, Measured, Silence, unsensed_rows
+from offboard.safety.dcbf.world_rows import WorldPlanes
 from offboard.safety.filter import make_filters
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
@@ -101,8 +102,13 @@ class FollowerAgent(AgentBase):
         self.leader_mask[self.form.leader_idx] = True
         self.filters = make_filters(ctl, self.u_lo, self.u_hi, self.leader_mask)
         dcbf = self.filters.get(Method.DCBF)
+        # the world's half-spaces (obstacles, geofence) as dcbf rows (docs/world.md)
+        self._world = (None if sc.world.empty or not isinstance(dcbf, DcbfFilter)
+                       else WorldPlanes(sc.world, sc.formation.sensing_range_m))
         if isinstance(dcbf, DcbfFilter):
-            dcbf.configure(self.veh, self.dt)
+            dcbf.configure(self.veh, self.dt,
+                           0 if self._world is None else self._world.capacity)
+        self._odo = (np.zeros(3), np.zeros(3))  # this step's own odometry p (m), v (m/s)
         # the acceleration estimate reads the predictor's table (one ingest fills both)
         self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX, table=self.pred.table)
         # anti-windup box of the nominal law per method (docs/saturation.md §2): the box of
@@ -186,6 +192,8 @@ class FollowerAgent(AgentBase):
         elif comm_ok:
             self.pred.ingest_batch(neighbours, self._peer_idx, True)
         rows, have = self.pred.predict_rows(self._predict_idx, t)
+        own_p, own_v = truth_p[self.index], truth_v[self.index]  # its odometry
+        self._odo = (own_p, own_v)
         # --- controller at t_k --------------------------------------------------------
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         alarms = self.guard.check(t, self.deso.z1, self.deso.z2, rows, have, rel_p, meas.valid,
@@ -203,7 +211,6 @@ class FollowerAgent(AgentBase):
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
-        own_p, own_v = truth_p[self.index], truth_v[self.index]  # its odometry
         u = self.guard.command(t, own_p, own_v, u)
         # setpoint, the inner-loop model's realised control over the period (sub-steps)
         # and their mean, whether the setpoint clips u: one compiled call
@@ -294,12 +301,20 @@ class FollowerAgent(AgentBase):
         sensed. A step the shortcut settles reports the call's time as ``solve_us``."""
         since, others_heard = self._silence(t)
         t0 = time.perf_counter()
+        floor = self._ground_floor()
         lumped, w, clf, k, h_min, held, u_try = front.run(
             f64(self._reference_xi(t)), Measured(sel, rows3(rp), rows3(rv)),
             Silence(self._full_mask(), self.pred.table.t, since, others_heard),
             InnerMotion(vec3(self.a_real), vec3(self.u_prev), vec3(self.a_mean)),
-            self._ground_floor(), unsensed_rows(extra),
+            floor, unsensed_rows(extra),
         )
+        if self._world is not None and floor is not None:  # airborne, not landing
+            k_pairs = k
+            k = front.filt.add_world_rows(self._world, k, self._odo[0], self._odo[1],
+                                          self.a_real, w)
+            if held and k > k_pairs:  # the QP checks u_try against every row, world's too
+                return lumped[1], w, float(clf[0]), front.filt.solve_rows(
+                    u_try, clf_terms_from(clf), k, h_min, w, self.deso.z2)
         if held:
             res = SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
                                (time.perf_counter() - t0) * 1e6)

@@ -18,6 +18,8 @@ from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.dcbf.step_kernel import (
     P_DT,
+    P_GROUND_ERR,
+    P_TAU,
     GroundInput,
     OwnMotion,
     PairRows,
@@ -26,6 +28,7 @@ from offboard.safety.dcbf.step_kernel import (
     dcbf_filter_rows_into,
     dcbf_params,
 )
+from offboard.safety.dcbf.world_rows import WorldPlanes, plane_rows_into
 from offboard.safety.rcbf.clf_rcbf import ClfTerms
 from swarm_common.enums import Method
 from swarm_common.fastnp import f64, rows3, vec3
@@ -43,6 +46,11 @@ REL_ACC_SMOOTH = 0.5  # low-pass weight of the previous relative-acceleration es
 # kept by h_g ≥ ē(T+τ)/γ
 GROUND_GAMMA = 2.0
 GROUND_ACCEL_ERR = 1.0
+# the world's rows (offboard.safety.dcbf.world_rows): their class-K gain (1/s); the error
+# bound on the predicted own acceleration is the ground's, along every axis (the pair rows'
+# ē also covers the other agent's unknown acceleration, which a static surface has not).
+# At rest a plane is kept at h ≥ ē(T+τ)/γ + ē(T²/2+τT): 0.39 m in cube8
+WORLD_GAMMA = 4.0
 
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> ProjectedInputSet:
@@ -83,11 +91,16 @@ class DcbfFilter(SafetyFilter):
         self._rhs = np.zeros(2 * n + 2)
         self._side = np.zeros(3)
 
-    def configure(self, veh: VehicleConfig, dt: float) -> None:
+    def configure(self, veh: VehicleConfig, dt: float, world_planes: int = 0) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
-        the prediction horizon is T = τ_rp + dt."""
+        the prediction horizon is T = τ_rp + dt. ``world_planes``: room for this many
+        half-spaces of the world (:meth:`add_world_rows`), two rows each."""
         uset = input_set_of(self.ctl, veh)
-        rows = 2 * (len(self.leader_mask) - 1) + 2  # two per other agent, two for the ground
+        # two per other agent, two for the ground, two per half-space of the world
+        rows = 2 * (len(self.leader_mask) - 1) + 2 + 2 * world_planes
+        if world_planes:
+            self._g = np.zeros((len(self._g) + 2 * world_planes, 3))
+            self._rhs = np.zeros(len(self._g))
         self.qp = DcbfQP(min(rows, QP_INITIAL_ROWS), uset, self.ctl.rho, self.ctl.clf_c,
                          limit=rows, solver=self.ctl.qp_solver)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
@@ -155,6 +168,26 @@ class DcbfFilter(SafetyFilter):
         )
         k, h_min = dcbf_filter_rows_into(rows, own, floor, self.rows_state(), self.rows_out())
         return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
+
+    def add_world_rows(self, planes: WorldPlanes, k: int, p: np.ndarray, v: np.ndarray,
+                       a0: np.ndarray, w: np.ndarray) -> int:
+        """Append the rows of the world's half-spaces for an agent at ``p`` (m) with
+        velocity ``v`` (m/s), realised acceleration ``a0`` and disturbance estimate ``w``
+        (m/s², saturated at W_SAFE here) after the first ``k`` rows
+        (:mod:`offboard.safety.dcbf.world_rows`); returns the new row count."""
+        if self.qp is None or self.lag is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        m = planes.at(p)
+        if m == 0:
+            return k
+        self.qp.fit_rows(k + 2 * m)
+        prm = self._params
+        plane_rows_into(
+            planes.normals, planes.offsets, m, vec3(p), vec3(v), vec3(a0),
+            vec3(saturate_norm(w, W_SAFE)), self.lag.table, self.lag.T, prm[P_TAU],
+            WORLD_GAMMA, prm[P_GROUND_ERR], prm[P_GROUND_ERR], self._g, self._rhs, k,
+        )
+        return k + 2 * m
 
     def solve_rows(
         self, u_try: np.ndarray, clf: ClfTerms, k: int, h_min: float, w: np.ndarray,
