@@ -45,7 +45,7 @@ def safety_spec(sc: Scenario, clipped_known: bool = True) -> SafetySpec:
     ``input_clipped``."""
     return SafetySpec(sc.controller.tau_safe_s, sc.controller.d_safe_m,
                       sc.run.formation_deadline_s, clipped_known, tuple(sc.ids),
-                      sc.vehicle.collision_radius_m)
+                      sc.vehicle.collision_radius_m, sc.world)
 
 
 def tilt_deg(att: np.ndarray) -> np.ndarray:

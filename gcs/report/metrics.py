@@ -15,12 +15,14 @@ Every metric is defined, with its unit and window, in docs/metrics.md. In short:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gcs.report.verdict import ground_strike_steps, pair_barrier, verdict_metrics
+from gcs.report.world_metrics import WORLD_KEYS, world_metric_values, world_truth
+from swarm_common.world.config import World
 
 METRIC_KEYS = (
     "min_distance_m",
@@ -55,6 +57,8 @@ METRIC_KEYS = (
     "qp_fallbacks",
     "wall_s",
     "realtime_factor",
+    # the world's (gcs.report.world_metrics; None without obstacles or a geofence)
+    *WORLD_KEYS,
     # a formation mission's (gcs.report.mission_metrics; None without a [mission])
     "mission_completed",
     "mission_time_s",
@@ -181,6 +185,7 @@ class SafetySpec:
     clipped_known: bool = True  # False: the statuses did not carry input_clipped
     ids: tuple[int, ...] = ()  # the agents' ids in column order (the verdict's events name them)
     collision_radius_m: float = 0.0  # m, a pair closer than this is in contact
+    world: World = field(default_factory=World)  # obstacles and geofence (docs/world.md)
 
 
 def ground_strikes(p: np.ndarray, v: np.ndarray) -> int:
@@ -228,6 +233,7 @@ def compute_metrics(
     deadline = spec.formation_deadline_s
     # the true barrier of every pair and step, once: the barrier metrics and the verdict
     h = pair_barrier(s.p, s.v, spec.tau_safe_s, spec.d_safe_m) if s.p.shape[1] >= 2 else None
+    world = world_truth(spec.world, s.p, s.v, spec.tau_safe_s)
     return {
         "min_distance_m": float(s.min_dist.min()),
         "min_distance_by_phase_m": min_distance_by_phase(
@@ -239,7 +245,7 @@ def compute_metrics(
         **verdict_metrics(
             s.t, s.p, s.v, s.min_dist, s.h_min, s.alarms,
             list(spec.ids) or list(range(s.p.shape[1])), f, spec.tau_safe_s, spec.d_safe_m,
-            spec.collision_radius_m, h,
+            spec.collision_radius_m, h, world,
         ),
         "input_clipped_steps": int(np.sum(s.input_clipped)) if spec.clipped_known else None,
         "energy_u": float(np.sum(s.u[:, f] ** 2) * dt),
@@ -258,5 +264,6 @@ def compute_metrics(
         "qp_fallbacks": int(fallbacks),
         "wall_s": float(wall_s),
         "realtime_factor": float(duration_s / wall_s) if wall_s > 0 else None,
+        **world_metric_values(world),
         **dict.fromkeys(MISSION_KEYS),
     } | (extra or {})  # a union keeps the keys' order

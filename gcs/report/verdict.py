@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
+from gcs.report.world_metrics import WorldTruth
 from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm, Method, SafetyAlarmKind
 
@@ -46,7 +47,8 @@ class Verdict(StrEnum):
 
 
 TRUTH_KINDS = frozenset({SafetyAlarmKind.BARRIER, SafetyAlarmKind.COLLISION,
-                         SafetyAlarmKind.GROUND_STRIKE})
+                         SafetyAlarmKind.GROUND_STRIKE, SafetyAlarmKind.OBSTACLE,
+                         SafetyAlarmKind.GEOFENCE})
 # events about liveness, not safety: listed and counted, but they leave the verdict "safe"
 LIVENESS_KINDS = frozenset({SafetyAlarmKind.DEADLOCK})
 
@@ -91,7 +93,7 @@ def _event(t: float, kind: SafetyAlarmKind, agent: int | None, other: int | None
 def safety_events(
     t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
     alarms: np.ndarray, ids: list[int], tau_s: float, d_safe_m: float,
-    collision_radius_m: float, h: np.ndarray | None = None,
+    collision_radius_m: float, h: np.ndarray | None = None, world: WorldTruth | None = None,
 ) -> list[dict[str, Any]]:
     """Every onset, sorted by time: ``t`` (K,) s; ``p``, ``v`` (K,N,3) true positions (m)
     and velocities (m/s); ``min_dist`` (K,) the smallest pair distance over the physics
@@ -99,8 +101,9 @@ def safety_events(
     ``own_h`` (K,N) each agent's own smallest barrier (m², inf or NaN where it computed
     none); ``alarms`` (K,N) :class:`AgentAlarm` bits; ``ids`` the agents' ids in column
     order. τ (s) and D (m): the barrier's horizon and distance; ``h`` (K, pairs) their
-    :func:`pair_barrier` when the caller has it already. A contact names the pair closest
-    at its control step."""
+    :func:`pair_barrier` when the caller has it already; ``world`` the run's truth against
+    its obstacles and geofence (an obstacle event names the obstacle's index as ``other``).
+    A contact names the pair closest at its control step."""
     out: list[dict[str, Any]] = []
     n = p.shape[1]
     if n >= 2 and len(t):
@@ -114,6 +117,15 @@ def safety_events(
             m = int(np.argmin(np.sum((p[k, i] - p[k, j]) ** 2, axis=1)))
             out.append(_event(t[k], SafetyAlarmKind.COLLISION, ids[i[m]], ids[j[m]],
                               min_dist[k]))
+    if world is not None and world.h_obs is not None:
+        n_ob = world.h_obs.shape[2]
+        flat = world.h_obs.reshape(len(world.h_obs), -1)  # column a·O + o
+        for k, c in zip(*onsets(flat < 0.0), strict=True):
+            out.append(_event(t[k], SafetyAlarmKind.OBSTACLE, ids[c // n_ob], int(c % n_ob),
+                              flat[k, c]))
+    if world is not None and world.h_fence is not None:
+        for k, a in zip(*onsets(world.h_fence < 0.0), strict=True):
+            out.append(_event(t[k], SafetyAlarmKind.GEOFENCE, ids[a], None, world.h_fence[k, a]))
     for k, a in zip(*ground_strike_steps(p, v), strict=True):
         out.append(_event(t[k], SafetyAlarmKind.GROUND_STRIKE, ids[a], None, v[k - 1, a, 2]))
     with np.errstate(invalid="ignore"):
@@ -141,13 +153,14 @@ def verdict_metrics(
     t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
     alarms: np.ndarray, ids: list[int], follower_idx: list[int], tau_s: float,
     d_safe_m: float, collision_radius_m: float, h: np.ndarray | None = None,
+    world: WorldTruth | None = None,
 ) -> dict[str, Any]:
     """``own_h_min``, ``safety_verdict``, ``safety_alarm_count``, ``deadlock_events`` (those
     of :data:`LIVENESS_KINDS`) and ``safety_alarms`` (the first :data:`ALARM_LIST_MAX`
     events of :func:`safety_events`). ``own_h_min``: the
     smallest barrier a follower computed from its own estimates (m²; None when none did)."""
     events = safety_events(t, p, v, min_dist, own_h, alarms, ids, tau_s, d_safe_m,
-                           collision_radius_m, h)
+                           collision_radius_m, h, world)
     own = own_h[:, follower_idx] if len(follower_idx) else own_h[:, :0]
     finite = own[np.isfinite(own)]
     return {
