@@ -5,7 +5,9 @@ load-time safety checks (:func:`swarm_common.scenario.safety_check.safety_proble
   geofence by its ``margin_m``;
 * the leaders, which fly their reference with no filter, keep that clearance along it:
   the ``[leader_trajectory]`` sinusoid p_L(t) = p_L(0) + A (1 − cos ωt) is sampled over
-  one period (:data:`SAMPLES` points). A mission's path is not checked here.
+  one period (:data:`SAMPLES` points), a ``[mission]``'s timed plan every
+  :data:`MISSION_STEP_S` (at most :data:`MISSION_SAMPLES` points) to its end. Between
+  samples a leader moves at most its speed limit times the step (a few centimetres).
 
 Each problem is one line naming the agent and the obstacle or face.
 """
@@ -17,12 +19,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_common.scenario.mission_check import plan_for
 from swarm_common.world.geometry import fence_margins, obstacle_distances
 
 if TYPE_CHECKING:
     from swarm_common.scenario.spec import Scenario
 
 SAMPLES = 64  # points per period of the leaders' sinusoid
+MISSION_STEP_S = 0.05  # s between samples of a mission's plan
+MISSION_SAMPLES = 20_000  # ... and at most this many
 
 
 def _worst(sc: Scenario, p: np.ndarray, ids: list[int], what: str) -> str | None:
@@ -55,14 +60,21 @@ def world_problem(sc: Scenario) -> str | None:
         return None
     start = sc.initial_positions()[None]
     problem = _worst(sc, start, list(sc.ids), "starts")
-    if problem is not None or sc.mission is not None:
+    if problem is not None:
         return problem
+    lead = [k for k, a in enumerate(sc.agents) if a.is_leader]
+    lead_ids = [sc.agents[k].id for k in lead]
+    if sc.mission is not None:
+        plan = plan_for(sc)
+        n = int(min(MISSION_SAMPLES, math.ceil(plan.end_s / MISSION_STEP_S) + 1))
+        times = np.linspace(0.0, plan.end_s, max(n, 2))
+        path = np.array([[plan.agent_xi(t, k)[0:3] for k in lead] for t in times])
+        return _worst(sc, path, lead_ids, "flies its mission")
     lt = sc.leader_trajectory
     if lt.frequency_hz <= 0.0 or not any(lt.amplitude_m):
         return None
-    lead = [k for k, a in enumerate(sc.agents) if a.is_leader]
     t = np.linspace(0.0, 1.0 / lt.frequency_hz, SAMPLES)
     wave = 1.0 - np.cos(2.0 * math.pi * lt.frequency_hz * t)
     path = sc.initial_positions()[lead][None] + wave[:, None, None] * np.asarray(
         lt.amplitude_m, float)
-    return _worst(sc, path, [sc.agents[k].id for k in lead], "flies its sinusoid")
+    return _worst(sc, path, lead_ids, "flies its sinusoid")

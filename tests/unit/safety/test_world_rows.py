@@ -16,6 +16,7 @@ from gcs.mission.inproc import run_inproc
 from offboard.safety.dcbf.model import LagCoefficients
 from offboard.safety.dcbf.world_rows import plane_rows_into
 from swarm_common.scenario.files import UnsafeScenarioError, dump_toml
+from swarm_common.scenario.mission_check import plan_for
 from swarm_common.scenario.model import load_scenario, parse_scenario
 
 OBSTACLES = ROOT / "scenarios" / "cube8_obstacles.toml"
@@ -112,3 +113,19 @@ def test_world_round_trips_through_the_scenario_file() -> None:
     back = parse_scenario(tomllib.loads(dump_toml(sc.to_toml_dict())), "back.toml")
     assert back.world == sc.world and len(back.world.obstacles) == 10
     assert math.isclose(back.world.obstacles[0].clearance_m, sc.controller.d_safe_m)
+
+
+def test_an_obstacle_on_a_leaders_mission_path_is_refused() -> None:
+    # course8: a ball 0.6 m above where leader 1 passes mid-way along its second leg
+    sc = load_scenario(ROOT / "scenarios" / "course8.toml")
+    plan = plan_for(sc)
+    k = next(i for i, a in enumerate(sc.agents) if a.is_leader)
+    t = 0.5 * (plan.departure_s[0] + plan.arrival_s[1])
+    q = plan.agent_xi(t, k)[0:3] + np.array([0.0, 0.0, 0.6])
+    doc = sc.to_toml_dict()
+    doc["obstacle"] = [{"kind": "sphere", "centre_m": [float(x) for x in q], "radius_m": 0.2}]
+    with pytest.raises(UnsafeScenarioError, match=f"agent {sc.agents[k].id} flies its mission"):
+        parse_scenario(doc, "course.toml")
+    # 3 m above it: clear
+    doc["obstacle"][0]["centre_m"][2] += 3.0
+    assert parse_scenario(doc, "course.toml").world.obstacles
