@@ -121,7 +121,8 @@ def compare(sc: Scenario, args: argparse.Namespace) -> int:
                         mode="in-process" if args.inproc else _layout(args),
                         tau_safe_s=sc.controller.tau_safe_s,
                         deadline_s=sc.run.formation_deadline_s,
-                        mission=plan_for(sc) if sc.mission is not None else None)
+                        mission=plan_for(sc) if sc.mission is not None else None,
+                        world=sc.world)
     print(compare_table(metrics, d_safe))
     print(safety_table(metrics))
     if seeds:

@@ -21,6 +21,7 @@ from gcs.report.safety_table import safety_legend, safety_table
 from gcs.report.shared import FORMED_TOL_M, LABELS, PAPER_TABLE3, md_legend
 from gcs.report.shared import fmt as _f
 from swarm_common.mission.plan import MissionPlan
+from swarm_common.world.config import World
 
 DEPARTURES = "docs/paper-departures.md"
 
@@ -238,6 +239,20 @@ def mission_table(metrics: dict[str, dict], plan: MissionPlan) -> str:
     return "\n".join(rows)
 
 
+def world_table(metrics: dict[str, dict], world: World) -> str:
+    """Per method: the truth against the obstacles and the geofence (docs/world.md)."""
+    head = (f"{len(world.obstacles)} obstacles"
+            + (", a geofence box" if world.geofence is not None else "")
+            + "; distances from each vehicle's centre, barriers h = d − D + τ ḋ (m).\n\n")
+    rows = ["| method | obstacle min distance | obstacle h_min | fence min margin | fence h_min |",
+            "|---|---|---|---|---|"]
+    for m, met in metrics.items():
+        rows.append(f"| {LABELS.get(m, m)} | {_f(met.get('obstacle_min_distance_m'))} | "
+                    f"{_f(met.get('obstacle_h_min_m'))} | {_f(met.get('fence_min_margin_m'))} | "
+                    f"{_f(met.get('fence_h_min_m'))} |")
+    return head + "\n".join(rows)
+
+
 def write_report(
     out_dir: str | Path,
     scenario_name: str,
@@ -253,10 +268,12 @@ def write_report(
     tau_safe_s: float,
     deadline_s: float,
     mission: MissionPlan | None = None,
+    world: World | None = None,
 ) -> Path:
     """Write report.md and the PNG plots into ``out_dir``; returns the report path
     (``tau_safe_s``, ``deadline_s``: the scenario's barrier τ and tracking-window start, s;
-    ``mission``: the scenario's mission plan, for its section and path plot)."""
+    ``mission``: the scenario's mission plan, for its section and path plot; ``world``:
+    its obstacles and geofence, drawn in the snapshots and summed up in a table)."""
     from gcs.report.plots import (
         plot_energy,
         plot_errors,
@@ -274,7 +291,7 @@ def write_report(
     for m, s in series.items():
         times = snapshot_times(s, metrics.get(m, {}).get("formation_time_s"))
         snap = d / f"snapshots_{m}.png"
-        plot_snapshots(s, edges, times, snap, LABELS.get(m, m), follower_idx)
+        plot_snapshots(s, edges, times, snap, LABELS.get(m, m), follower_idx, world)
     plot_energy(metrics, d / "energy.png")
     lines = [
         f"# Mission comparison: {scenario_name}",
@@ -299,6 +316,8 @@ def write_report(
             "![mission path](mission_path.png)",
             "",
         ]
+    if world is not None and not world.empty:
+        lines += ["## World", "", world_table(metrics, world), ""]
     if seeds:
         lines += [
             "## Distribution over seeds",

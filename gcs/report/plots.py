@@ -15,6 +15,7 @@ import numpy as np
 
 from gcs.report.shared import LABELS, PAPER_TABLE3, closest_approach
 from swarm_common.mission.plan import MissionPlan
+from swarm_common.world.config import ObstacleKind, World
 
 ZOOM_S = 0.6  # half-width of the closest-approach zoom (s)
 TRAIL_S = 1.0  # length of the path drawn behind each vehicle in a snapshot (s)
@@ -102,6 +103,32 @@ def snapshot_times(s: dict, formed_s: float | None) -> list[tuple[float, str]]:
     return out
 
 
+def _draw_world(ax: Any, world: World) -> None:
+    """The obstacles as grey wireframes (ENU, m)."""
+    u, w = np.meshgrid(np.linspace(0, 2 * np.pi, 16), np.linspace(0, np.pi, 9))
+    for ob in world.obstacles:
+        c = np.asarray(ob.centre_m)
+        if ob.kind is ObstacleKind.SPHERE:
+            r = ob.radius_m
+            ax.plot_wireframe(c[0] + r * np.cos(u) * np.sin(w), c[1] + r * np.sin(u) * np.sin(w),
+                              c[2] + r * np.cos(w), color="0.5", lw=0.4)
+        elif ob.kind is ObstacleKind.CYLINDER:
+            a, z = np.meshgrid(np.linspace(0, 2 * np.pi, 16), np.array(ob.z_range_m))
+            ax.plot_wireframe(c[0] + ob.radius_m * np.cos(a), c[1] + ob.radius_m * np.sin(a), z,
+                              color="0.5", lw=0.4)
+        else:
+            h = 0.5 * np.asarray(ob.size_m)
+            corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * h
+            yaw = np.deg2rad(ob.yaw_deg)
+            rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0],
+                            [0, 0, 1]])
+            pts = corners @ rot.T + c
+            for i in range(8):
+                for j in range(i + 1, 8):
+                    if int(np.sum(corners[i] != corners[j])) == 1:  # an edge
+                        ax.plot(*zip(pts[i], pts[j], strict=True), color="0.5", lw=0.6)
+
+
 def plot_snapshots(
     s: dict,
     edges: list[tuple[int, int]],
@@ -109,9 +136,11 @@ def plot_snapshots(
     path: Path,
     title: str,
     follower_idx: list[int],
+    world: World | None = None,
 ) -> None:
     """3-D formation at each of ``times`` (ENU, m): graph edges, the last second of each
-    path and the nearest pair; the same axis limits in every panel."""
+    path, the nearest pair and the ``world``'s obstacles; the same axis limits in every
+    panel."""
     plt = _plt()
     fig = plt.figure(figsize=(4.2 * len(times), 4.8))
     leaders = [i for i in range(s["p"].shape[1]) if i not in follower_idx]
@@ -132,6 +161,8 @@ def plot_snapshots(
         na, nb = (int(x) for x in np.unravel_index(int(np.argmin(d)), d.shape))
         near = f"nearest pair {d[na, nb]:.2f} m"
         ax.plot(*zip(p[na], p[nb], strict=True), "m-", lw=2.0, label=near)
+        if world is not None:
+            _draw_world(ax, world)
         ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
         ax.set_box_aspect(None, zoom=0.82)
         ax.set_title(f"t = {s['t'][i]:.2f} s ({why})", fontsize=8)
