@@ -207,7 +207,7 @@ class FollowerAgent(AgentBase):
         status.alarms |= int(self.guard.liveness(
             t, float(np.linalg.norm(self.deso.z1 - self.ref.xi[0:3])),
             res.qp_status is not QPStatus.INACTIVE,
-            self.in_formation_phase(t)))
+            self.in_formation_phase(t), self.deso.z1))
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)

@@ -43,16 +43,18 @@ class InFlightGuard:
         self.bits = AgentAlarm(0)
         self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
 
-    def liveness(self, t: float, err_m: float, held: bool, flying: bool) -> AgentAlarm:
+    def liveness(self, t: float, err_m: float, held: bool, flying: bool,
+                 pos: np.ndarray | None = None) -> AgentAlarm:
         """DEADLOCK while the formation error ``err_m`` (m, ‖ẑ1 − ξ̂_p‖ at ``t``, s) stalls
         with the filter holding the agent (``held``: a barrier row was active) over the
         detector's window (:class:`~offboard.safety.deadlock.DeadlockDetector`). Only while
         ``flying`` formation (not on the pad, landing or in the fallback): otherwise the
-        window starts again."""
+        window starts again. ``pos`` (3,): the agent's position estimate (m), for the
+        detector's travel test."""
         if not flying or self.fallback.active:
             self.deadlock.reset()
             return AgentAlarm(0)
-        if self.deadlock.update_held(t, err_m, held):
+        if self.deadlock.update_held(t, err_m, held, pos):
             return AgentAlarm.DEADLOCK
         return AgentAlarm(0)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from offboard.safety.deadlock import DeadlockConfig, DeadlockDetector
@@ -59,3 +60,14 @@ def test_bad_configuration_is_refused() -> None:
         DeadlockConfig(window_s=0.0)
     with pytest.raises(ValueError):
         DeadlockConfig(min_progress=1.0)
+
+
+def test_a_stalled_error_while_the_agent_travels_is_not_a_deadlock() -> None:
+    """Winding around an obstacle: the error stays at 0.5 m for 5 s under the filter while
+    the agent moves 0.25 m/s (0.75 m per 3 s window, over max_travel_m = 0.5 m);
+    the same stall standing still (or creeping at 0.05 m/s) is flagged."""
+    for speed, flagged in ((0.25, False), (0.05, True), (0.0, True)):
+        det = DeadlockDetector(DeadlockConfig(window_s=3.0))
+        out = [det.update_held(k * DT, 0.5, True, np.array([speed * k * DT, 0.0, 5.0]))
+               for k in range(250)]
+        assert any(out) is flagged, speed
