@@ -15,6 +15,7 @@ import numpy as np
 
 from offboard.agent.attitude import Setpoint
 from offboard.agent.base import CLIP_TOL, AgentBase
+from offboard.agent.detour import Detour
 from offboard.agent.governor import governor_for, log_governor
 from offboard.agent.guard import InFlightGuard
 from offboard.agent.peers import peer_ids
@@ -109,6 +110,8 @@ class FollowerAgent(AgentBase):
             dcbf.configure(self.veh, self.dt,
                            0 if self._world is None else self._world.capacity)
         self._odo = (np.zeros(3), np.zeros(3))  # this step's own odometry p (m), v (m/s)
+        # out of a pocket of obstacles when the deadlock detector finds it stuck
+        self.detour = None if self._world is None else Detour(self._world, self.index)
         # the acceleration estimate reads the predictor's table (one ingest fills both)
         self.acc_est = NeighbourAccel(sc.ids, ctl.u_max_mps2 + W_MAX, table=self.pred.table)
         # anti-windup box of the nominal law per method (docs/saturation.md §2): the box of
@@ -204,10 +207,13 @@ class FollowerAgent(AgentBase):
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf,
                              alarms=int(alarms))
         u = self._use_filter_output(res, w, status)
-        status.alarms |= int(self.guard.liveness(
+        stuck = self.guard.liveness(
             t, float(np.linalg.norm(self.deso.z1 - self.ref.xi[0:3])),
             res.qp_status is not QPStatus.INACTIVE,
-            self.in_formation_phase(t), self.deso.z1))
+            self.in_formation_phase(t), self.deso.z1)
+        status.alarms |= int(stuck)
+        if stuck and self.detour is not None and not self.detour.active(t):
+            self.detour.start(t, own_p, self.ref.xi[0:3])
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
@@ -424,6 +430,8 @@ class FollowerAgent(AgentBase):
         if self.takeoff is not None and self.takeoff_clock(t) < self.takeoff.t_blend:
             # offboard.agent.takeoff (at rest on the pad while held for the take-off command)
             return follower_xi(self.takeoff, self.index, self.takeoff_clock(t), self.ref.xi)
+        if self.detour is not None:  # offboard.agent.detour: out of a pocket of obstacles
+            return self.detour.reference(t, self.ref.xi)
         return self.ref.xi
 
     def _use_filter_output(
