@@ -109,7 +109,6 @@ class FollowerAgent(AgentBase):
         if isinstance(dcbf, DcbfFilter):
             dcbf.configure(self.veh, self.dt,
                            0 if self._world is None else self._world.capacity)
-        self._odo = (np.zeros(3), np.zeros(3))  # this step's own odometry p (m), v (m/s)
         # out of a pocket of obstacles when the deadlock detector finds it stuck
         self.detour = None if self._world is None else Detour(self._world, self.index)
         # the acceleration estimate reads the predictor's table (one ingest fills both)
@@ -196,14 +195,14 @@ class FollowerAgent(AgentBase):
             self.pred.ingest_batch(neighbours, self._peer_idx, True)
         rows, have = self.pred.predict_rows(self._predict_idx, t)
         own_p, own_v = truth_p[self.index], truth_v[self.index]  # its odometry
-        self._odo = (own_p, own_v)
         # --- controller at t_k --------------------------------------------------------
         sel, rp, rv = self.hold.pairs(t, meas.valid, rel_p, rel_v)
         alarms = self.guard.check(t, self.deso.z1, self.deso.z2, rows, have, rel_p, meas.valid,
                                   sel, rp, rv)
         extra = (self.unsensed.pairs(t, sel, self.deso.z1, self.deso.z2)
                  if self.method == Method.DCBF else None)
-        w_raw, w, v_clf, res = self._filter_step(t, sel, rp, rv, rows, have, extra)
+        w_raw, w, v_clf, res = self._filter_step(t, sel, rp, rv, rows, have, extra,
+                                                 (own_p, own_v))
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf,
                              alarms=int(alarms))
         u = self._use_filter_output(res, w, status)
@@ -273,13 +272,14 @@ class FollowerAgent(AgentBase):
 
     def _filter_step(
         self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
-        have: np.ndarray, extra: PredictedPairs | None,
+        have: np.ndarray, extra: PredictedPairs | None, odo: tuple[np.ndarray, np.ndarray],
     ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
         """The step from the state to the filter's output: (w_raw, w, V, output). The dcbf
-        filter's in one compiled call (:meth:`_front_step`), the others' part by part
+        filter's in one compiled call (:meth:`_front_step`, with the own odometry ``odo``
+        (p (m), v (m/s)) for the world's rows), the others' part by part
         (:meth:`_composed_step`)."""
         if self.method == Method.DCBF and self._front is not None:
-            return self._front_step(self._front, t, sel, rp, rv, extra)
+            return self._front_step(self._front, t, sel, rp, rv, extra, odo)
         return self._composed_step(t, sel, rp, rv, rows, have, extra)
 
     def _composed_step(
@@ -300,7 +300,7 @@ class FollowerAgent(AgentBase):
 
     def _front_step(
         self, front: DcbfFront, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray,
-        extra: PredictedPairs | None,
+        extra: PredictedPairs | None, odo: tuple[np.ndarray, np.ndarray],
     ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
         """The dcbf filter's step in one compiled call (:mod:`offboard.safety.dcbf.front`):
         the sensed pairs, then ``extra``, the neighbours predicted into range but not
@@ -316,17 +316,16 @@ class FollowerAgent(AgentBase):
         )
         if self._world is not None and floor is not None:  # airborne, not landing
             k_pairs = k
-            k = front.filt.add_world_rows(self._world, k, self._odo[0], self._odo[1],
-                                          self.a_real, w)
-            if held and k > k_pairs:  # the QP checks u_try against every row, world's too
-                return lumped[1], w, float(clf[0]), front.filt.solve_rows(
-                    u_try, clf_terms_from(clf), k, h_min, w, self.deso.z2)
-        if held:
+            k = front.filt.add_world_rows(self._world, k, odo[0], odo[1], self.a_real, w)
+            world_rows = k > k_pairs
+        else:
+            world_rows = False
+        if held and not world_rows:
             res = SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
                                (time.perf_counter() - t0) * 1e6)
-        else:
+        else:  # held with world rows: the QP checks u_try against every row itself
             res = front.filt.solve_rows(u_try, clf_terms_from(clf), k, h_min, w,
-                                        self.deso.z2, unheld=True)
+                                        self.deso.z2, unheld=not held)
         return lumped[1], w, float(clf[0]), res
 
     def _leader_accels(self, rows: np.ndarray, have: np.ndarray) -> dict[int, np.ndarray]:
