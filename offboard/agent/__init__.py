@@ -9,6 +9,9 @@ both derive from :class:`offboard.agent.base.AgentBase`.
 * :mod:`.governor` - slows an infeasible leader trajectory until it fits the input set.
 * :mod:`.peers` - whose estimates an agent needs and waits for.
 * :mod:`.unsensed` - neighbours in range by prediction but not sensed now.
+* :mod:`.shares` - who takes a pair's whole avoidance budget (leaders, silent or
+  non-cooperative neighbours).
+* :mod:`.detour` - the way out of a pocket of obstacles when a follower is stuck.
 * :mod:`.guard`, :mod:`.fallback` - a follower's safety monitor, and the brake-hold-land it
   falls back to when its estimates diverge.
 """

@@ -19,14 +19,15 @@ from offboard.agent.detour import Detour
 from offboard.agent.governor import governor_for, log_governor
 from offboard.agent.guard import InFlightGuard
 from offboard.agent.peers import peer_ids
+from offboard.agent.shares import ShareRule
 from offboard.agent.takeoff import follower_xi
 from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours
 from offboard.estimation.bearing import Formation, formation_from_scenario
 from offboard.estimation.deso import DESO
-from offboard.estimation.deso_gains import GainReport, gain_report
+from offboard.estimation.deso_gains import GainReport, formation_gain_report
 from offboard.estimation.formation_frame import FormationFrameObserver, formation_frame_observer
 from offboard.estimation.neighbour_accel import NeighbourAccel
-from offboard.estimation.peer_table import XI, EstimateBatch, full_share_rows
+from offboard.estimation.peer_table import XI, EstimateBatch
 from offboard.estimation.predictor import NeighbourPredictor
 from offboard.estimation.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.estimation.sensing import DropoutHold, Sensor
@@ -40,21 +41,12 @@ from offboard.safety.filter import make_filters
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
-from swarm_common.memo import ContentMemo
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
 MAX_COAST_PERIODS = 50  # periods a missed-step catch-up advances at most (1 s at 50 Hz)
-# a neighbour not heard from for longer than this is no longer trusted to do its half of
-# an avoidance (docs/safety.md §5b): s, and at least this many control periods
-SILENT_AFTER_S = 0.1
-SILENT_AFTER_PERIODS = 3
-
-
-# the DESO gain report of a formation's content and observer gains, once per process
-_gain_reports: ContentMemo[GainReport] = ContentMemo()
 
 
 class FollowerAgent(AgentBase):
@@ -139,10 +131,9 @@ class FollowerAgent(AgentBase):
         self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)
         self.unsensed = UnsensedNeighbours(self.pred, self.index, sc.n,
                                            sc.formation.sensing_range_m, ctl.tau_safe_s)
-        # (predictor revision, (N,) full-share mask) of :meth:`_full_share`
-        self._full: tuple[int, np.ndarray] = (-1, self.leader_mask)
+        # who takes a pair's whole avoidance budget in the dcbf filter
+        self.shares = ShareRule(self.pred, self.leader_mask, self.dt)
         self._zero_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _no_margin
-        self.silent_after = max(SILENT_AFTER_S, SILENT_AFTER_PERIODS * self.dt)  # s
         self.fallbacks = 0
         self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
@@ -156,17 +147,10 @@ class FollowerAgent(AgentBase):
 
     @property
     def gains(self) -> GainReport:
-        """DESO gain check (Departure 7), computed on first use, once per formation
-        content and observer gains in a process: every follower of a formation has the
-        same report, and so does every run of a sweep over one scenario (its dense
-        eigenvalue problems take 0.66 s at 64 agents; :meth:`Formation.content_digest`)."""
+        """DESO gain check (Departure 7), computed on first use
+        (:func:`~offboard.estimation.deso_gains.formation_gain_report`)."""
         if self._gains is None:
-            obs = self.sc.observer
-            params = (tuple(obs.beta), self.dt, obs.substeps, obs.leader_anchor,
-                      tuple(obs.velocity_gain))
-            self._gains = _gain_reports.get(
-                (self.form.content_digest(), params), lambda: gain_report(self.form, *params)
-            )
+            self._gains = formation_gain_report(self.form, self.sc.observer, self.dt)
         return self._gains
 
     def initial_estimate(self) -> NeighbourEstimate:
@@ -305,12 +289,12 @@ class FollowerAgent(AgentBase):
         """The dcbf filter's step in one compiled call (:mod:`offboard.safety.dcbf.front`):
         the sensed pairs, then ``extra``, the neighbours predicted into range but not
         sensed. A step the shortcut settles reports the call's time as ``solve_us``."""
-        since, others_heard = self._silence(t)
+        since, others_heard = self.shares.silence(t)
         t0 = time.perf_counter()
         floor = self._ground_floor()
         lumped, w, clf, k, h_min, held, u_try = front.run(
             f64(self._reference_xi(t)), Measured(sel, rows3(rp), rows3(rv)),
-            Silence(self._full_mask(), self.pred.table.t, since, others_heard),
+            Silence(self.shares.mask(), self.pred.table.t, since, others_heard),
             InnerMotion(vec3(self.a_real), vec3(self.u_prev), vec3(self.a_mean)),
             floor, unsensed_rows(extra),
         )
@@ -349,7 +333,7 @@ class FollowerAgent(AgentBase):
             margin = np.concatenate([margin, pm])
             predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
         # only the dcbf filter reads the share mask (rcbf keeps the paper's shares)
-        full = self._full_share(sel, t) if self.method == Method.DCBF else None
+        full = self.shares.full(sel, t) if self.method == Method.DCBF else None
         return SafetyInput(
             clf, w, self.deso.z2, dp, dv, sel, self._leader_accels(rows, have), self.a_real,
             self.u_prev, self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
@@ -374,42 +358,6 @@ class FollowerAgent(AgentBase):
         if not self._airborne and float(self.deso.z1[2]) >= floor:
             self._airborne = True
         return floor if self._airborne else None
-
-    def _full_share(self, sel: np.ndarray, t: float) -> np.ndarray:
-        """(M,) True where this agent takes the whole avoidance budget in the dcbf filter
-        (docs/safety.md A5, §5b; rcbf keeps the paper's shares):
-        * the other is a leader;
-        * its last estimate says it no longer cooperates;
-        * it is sensed but has never been heard from (a real-time start: its daemon may
-          not be flying it yet);
-        * or it alone fell silent: no estimate from it for more than ``silent_after`` (s)
-          at ``t`` while others are heard within that time. Its daemon is then stopped,
-          dead or cut off, so its vehicle flies an old setpoint or its failsafe, not its
-          half. When everyone is silent at once (this agent's own link is out) nobody is
-          singled out: the others still run their filters on their onboard sensing.
-        Silence is judged by the estimates' own stamps, so in-process and lockstep runs
-        judge it alike."""
-        since, others_heard = self._silence(t)
-        out = np.empty(len(sel), dtype=np.bool_)  # new from Python: cheaper than boxed
-        full_share_rows(sel, self._full_mask(), self.pred.table.t, since, others_heard, out)
-        return out
-
-    def _silence(self, t: float) -> tuple[float, bool]:
-        """(since, others_heard): an agent whose newest estimate is older than ``since``
-        (s) is silent at ``t``, and it stands out only when others were heard since then
-        (newest ≥ since; one never heard has −inf and a full share already)."""
-        since = t - self.silent_after
-        return since, self.pred.newest >= since
-
-    def _full_mask(self) -> np.ndarray:
-        """(N,) True for a leader, an agent never heard from or one that no longer
-        cooperates (:meth:`_full_share`'s fixed part, kept while the predictor's revision
-        is unchanged)."""
-        rev, tab = self.pred.revision, self.pred.table
-        if self._full[0] != rev:  # someone first heard from, or a cooperative flag changed
-            never = tab.t == -math.inf
-            self._full = (rev, self.leader_mask | never | ~tab.cooperative)
-        return self._full[1]
 
     def _nominal(self, w: np.ndarray, t: float) -> ClfTerms:
         """CLF terms and nominal control on (z(t_k), ξ̂(t_k)) (§4.2, Departure 10), with the

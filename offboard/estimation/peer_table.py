@@ -218,7 +218,7 @@ def full_share_rows(
     (M,) (scenario indices, int64): ``full[j]`` (N,)
     bool, or, when ``others_heard``, the agent's last stamp ``t_tab[j]`` (s, −inf never
     heard) is before ``since`` (s). The dcbf filter's full-share mask
-    (:meth:`offboard.agent.follower.FollowerAgent._full_share`) in one call."""
+    (:meth:`offboard.agent.shares.ShareRule.full`) in one call."""
     if out.shape[0] != sel.shape[0]:
         raise ValueError("full_share_rows: out not of the pairs' length")
     for r in range(sel.shape[0]):

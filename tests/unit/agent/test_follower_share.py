@@ -1,4 +1,4 @@
-"""Who takes the whole avoidance budget (FollowerAgent._full_share, docs/safety.md A5)."""
+"""Who takes the whole avoidance budget (offboard.agent.shares.ShareRule, docs/safety.md A5)."""
 
 from __future__ import annotations
 
@@ -18,14 +18,14 @@ def test_a_neighbour_never_heard_from_gets_the_full_share() -> None:
     assert isinstance(me, FollowerAgent)
     followers = [i for i, a in enumerate(agents) if isinstance(a, FollowerAgent) and a is not me]
     sel = np.array(followers)
-    assert me._full_share(sel, 0.0).all()  # nothing heard yet: no one is assumed to cooperate
+    assert me.shares.full(sel, 0.0).all()  # nothing heard yet: no one is assumed to cooperate
     heard = {agents[i].id: agents[i].initial_estimate() for i in followers[:2]}
     me.pred.ingest(heard, True)
-    share = me._full_share(sel, 0.0)
+    share = me.shares.full(sel, 0.0)
     assert not share[:2].any() and share[2:].all()
     leaders = np.array([i for i, a in enumerate(agents) if not isinstance(a, FollowerAgent)])
     me.pred.ingest({agents[i].id: agents[i].initial_estimate() for i in leaders}, True)
-    assert me._full_share(leaders, 0.0).all()  # leaders never share
+    assert me.shares.full(leaders, 0.0).all()  # leaders never share
 
 
 def test_the_share_follows_a_neighbour_that_stops_and_resumes_cooperating() -> None:
@@ -39,14 +39,14 @@ def test_the_share_follows_a_neighbour_that_stops_and_resumes_cooperating() -> N
     sel = np.array([other])
     e = agents[other].initial_estimate()
     me.pred.ingest({e.id: e}, True)
-    assert not me._full_share(sel, 0.0)[0]
+    assert not me.shares.full(sel, 0.0)[0]
     for t, coop in ((0.02, False), (0.04, False), (0.06, True)):
         e = replace(e, t=t, cooperative=coop)
         me.pred.ingest({e.id: e}, True)
-        assert me._full_share(sel, t)[0] == (not coop)
+        assert me.shares.full(sel, t)[0] == (not coop)
     stale = replace(e, t=0.0, cooperative=False)  # older than the last: ignored
     me.pred.ingest({e.id: stale}, True)
-    assert not me._full_share(sel, 0.06)[0]
+    assert not me.shares.full(sel, 0.06)[0]
 
 
 def test_a_neighbour_that_alone_fell_silent_gets_the_full_share_until_heard_again() -> None:
@@ -59,19 +59,19 @@ def test_a_neighbour_that_alone_fell_silent_gets_the_full_share_until_heard_agai
     agents = [make_agent(sc, a.id, seed=1) for a in sc.agents]
     me = agents[3]
     assert isinstance(me, FollowerAgent)
-    assert me.silent_after == max(0.1, 3 * sc.control_dt)
+    assert me.shares.silent_after == max(0.1, 3 * sc.control_dt)
     others = [i for i, a in enumerate(agents) if isinstance(a, FollowerAgent) and a is not me]
     sel = np.array(others[:2])
-    limit = 1.0 + me.silent_after
+    limit = 1.0 + me.shares.silent_after
     for i in others:
         e = replace(agents[i].initial_estimate(), t=1.0)
         me.pred.ingest({e.id: e}, True)
-    assert not me._full_share(sel, limit).any()  # at the limit: still heard
-    assert not me._full_share(sel, limit + 1e-6).any()  # everyone silent: our link is out
+    assert not me.shares.full(sel, limit).any()  # at the limit: still heard
+    assert not me.shares.full(sel, limit + 1e-6).any()  # everyone silent: our link is out
     e = replace(agents[others[-1]].initial_estimate(), t=1.2)
     me.pred.ingest({e.id: e}, True)  # a third follower is heard: the two stand out
-    assert me._full_share(sel, 1.2).all()
+    assert me.shares.full(sel, 1.2).all()
     e = replace(agents[others[0]].initial_estimate(), t=1.5)
     me.pred.ingest({e.id: e}, True)  # the first one speaks again
-    assert me._full_share(sel, 1.52).tolist() == [False, True]
-    assert not me._full[1][sel].any()  # the cached mask only holds who cooperates
+    assert me.shares.full(sel, 1.52).tolist() == [False, True]
+    assert not me.shares.mask()[sel].any()  # the cached mask only holds who cooperates
