@@ -8,5 +8,6 @@ Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
 * :mod:`.zenoh_feed` - truth / status / estimate subscriber, command publisher.
 * :mod:`.state` - the plain snapshot the UI draws (:class:`SwarmView`), built from the
   two feeds or from a recorded fixture.
-* :mod:`.app`, :mod:`.widgets` - the Textual UI; :mod:`.cli` - argument parsing, launch.
+* :mod:`.app`, :mod:`.widgets`, :mod:`.palette` - the Textual UI and its command palette;
+  :mod:`.cli` - argument parsing, launch.
 """

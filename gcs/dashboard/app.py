@@ -50,6 +50,7 @@ from swarm_common.wire import Command
 
 from .mavlink_gcs import CommandResult
 from .navigate import CHOICES, command_for
+from .palette import OUTAGES_S, palette_commands
 from .px4modes import COMMANDS
 from .state import DashEvent, SwarmView
 from .widgets import (
@@ -68,8 +69,6 @@ log = logging.getLogger(__name__)
 NOTICE = mavlink.MAV_SEVERITY_NOTICE
 WARNING = mavlink.MAV_SEVERITY_WARNING
 ERROR = mavlink.MAV_SEVERITY_ERROR
-OUTAGES_S = (0.5, 1.0, 2.0, 5.0)
-MAV_ACTIONS = ("arm", "disarm", "offboard", "hold", "land")
 LAND_LEAD_S = 1.0  # s of mission time between the land-all key and the common t_L
 # a take-off or land-all is published again this many times, this far apart (s): a Zenoh
 # put is not acknowledged, and it is lost to a daemon whose link is congested (its process
@@ -387,48 +386,11 @@ class DashboardApp(App[int]):
                 log.debug("re-publishing %s failed", cmd.kind, exc_info=True)
                 return
 
-    def _palette_takeoff(self) -> None:
+    def palette_takeoff(self) -> None:
         self.target_all = True
         self.action_takeoff()
 
     # -- command palette ---------------------------------------------------------------
     def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
         yield from super().get_system_commands(screen)
-        for key in MAV_ACTIONS:
-            label = COMMANDS[key].label
-            yield SystemCommand(
-                f"{label.capitalize()}: selected vehicle",
-                "COMMAND_LONG to the selected vehicle, waits for the ACK",
-                lambda k=key: self.send_mav(k, [i for i in [self.selected_id()] if i]),
-            )
-            yield SystemCommand(
-                f"{label.capitalize()}: all vehicles",
-                "COMMAND_LONG to every vehicle, waits for each ACK",
-                lambda k=key: self.send_mav(k, self.all_ids()),
-            )
-        yield SystemCommand(
-            "Emergency stop (asks first)", "Flight termination of the target", self.action_estop
-        )
-        for m in METHODS:
-            yield SystemCommand(
-                f"Method {m}: all vehicles",
-                "Switch collision avoidance at run time (Zenoh)",
-                lambda m=m: self.send_zenoh(Command(kind="method", agent=0, method=m)),
-            )
-        for d in OUTAGES_S:
-            yield SystemCommand(
-                f"Outage {d:g} s: all vehicles",
-                "Inject a communication outage (Zenoh)",
-                lambda d=d: self.send_zenoh(Command(kind="outage", agent=0, duration_s=d)),
-            )
-        yield SystemCommand(
-            "Coordinated land-all (Zenoh)",
-            "Every agent lands on its own pad, lowest first, safety filter active",
-            lambda: self.send_zenoh(Command(kind="land", agent=0, at_s=-1.0)),
-        )
-        yield SystemCommand(
-            "Coordinated take-off: all vehicles",
-            "OFFBOARD + arm every vehicle, then the ground start's layered climb (Zenoh)",
-            self._palette_takeoff,
-        )
-        yield SystemCommand("Toggle command target (selected / all)", "", self.action_toggle_target)
+        yield from palette_commands(self)
