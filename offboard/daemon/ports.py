@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from typing import Protocol, SupportsFloat
 
-from offboard.daemon.mavlink.link import Odometry
+from offboard.daemon.mavlink.odometry import Odometry
 from swarm_common import wire
 
 

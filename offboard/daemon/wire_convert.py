@@ -9,7 +9,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from offboard.agent.factory import AgentOutput, NeighbourEstimate
-from offboard.daemon.mavlink.link import Odometry
+from offboard.daemon.mavlink.odometry import Odometry
 from offboard.estimation.peer_table import ROW, EstimateBatch
 from offboard.estimation.reference import xi_p
 from swarm_common import frames, wire

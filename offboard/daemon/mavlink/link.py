@@ -43,15 +43,15 @@ import socket
 import struct
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from typing import Any, BinaryIO, SupportsFloat
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from offboard.daemon.link_guard import DropLog, StampGuard, odometry_fields_ok  # noqa: E402
+from offboard.daemon.link_guard import DropLog, StampGuard  # noqa: E402
 from offboard.daemon.mavlink.commands import VehicleCommands  # noqa: E402
 from offboard.daemon.mavlink.frame_peek import unread_frames  # noqa: E402
+from offboard.daemon.mavlink.odometry import Odometry, read_odometry  # noqa: E402
 from offboard.daemon.mavlink.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
 from offboard.daemon.mavlink.url import parse_udpin  # noqa: E402
 from offboard.daemon.output_burst import OutputBurst  # noqa: E402
@@ -75,20 +75,6 @@ MAX_DATAGRAM = 65535
 PARSE_ERRORS: tuple[type[Exception], ...] = (
     mavlink.MAVError, struct.error, ValueError, IndexError, TypeError,
 )
-
-
-@dataclass
-class Odometry:
-    """The latest ODOMETRY of the vehicle (NED, as on the wire): position (m), attitude
-    quaternion (w, x, y, z, FRD -> NED) and body FRD velocity (m/s)."""
-
-    time_usec: int
-    x: float
-    y: float
-    z: float
-    received: float
-    q: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
-    v_body: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 HEARTBEAT_PERIOD_S = 1.0  # the daemon's own HEARTBEAT (MAVLink microservice: 1 Hz)
@@ -303,19 +289,11 @@ class VehicleLink:
                 self.offboard_lost_texts += "offboard" in low
 
     def _odometry(self, msg: Any, now: float) -> None:
-        q = tuple(map(float, msg.q))
-        pos = (float(msg.x), float(msg.y), float(msg.z))
-        vel = (float(msg.vx), float(msg.vy), float(msg.vz))
-        why = odometry_fields_ok(pos, q, vel)
-        if why is None:
-            why = self.stamps.check(int(msg.time_usec), now)
-        if why is not None:
-            if why != "duplicate stamp":
-                self.drops.drop(why, f"ODOMETRY time_usec={int(msg.time_usec)}", now)
-            return
-        self.odometry = Odometry(
-            int(msg.time_usec), pos[0], pos[1], pos[2], now, (q[0], q[1], q[2], q[3]), vel,
-        )
+        got = read_odometry(msg, self.stamps, now)
+        if isinstance(got, Odometry):
+            self.odometry = got
+        elif got != "duplicate stamp":
+            self.drops.drop(got, f"ODOMETRY time_usec={int(msg.time_usec)}", now)
 
     def wait_lock(self, timeout: float, stopped: Callable[[], bool], say_every: float) -> bool:
         """Wait for the vehicle's first heartbeat (the link lock), saying what it waits for

@@ -14,7 +14,7 @@ from conftest import CUBE8
 from offboard.agent.factory import make_agent
 from offboard.daemon.commands import GroundCommands
 from offboard.daemon.drivers import LockstepDriver, RealtimeDriver
-from offboard.daemon.mavlink.link import Odometry
+from offboard.daemon.mavlink.odometry import Odometry
 from offboard.daemon.mavlink.offboard_keeper import OffboardKeeper
 from offboard.daemon.runner_loss import RunnerLoss
 from offboard.daemon.stream import SetpointStream

@@ -15,8 +15,8 @@ from offboard.agent.factory import make_agent
 from offboard.daemon.commands import GroundCommands
 from offboard.daemon.drivers import LockstepDriver
 from offboard.daemon.loop import AgentLoop
-from offboard.daemon.mavlink.link import Odometry
 from offboard.daemon.mavlink.mode_requests import SwarmReady
+from offboard.daemon.mavlink.odometry import Odometry
 from offboard.daemon.mavlink.offboard_keeper import OffboardKeeper
 from offboard.daemon.runner_loss import RunnerLoss
 from offboard.daemon.sensing_source import SwarmSensing

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from offboard.daemon.mavlink.link import Odometry
+from offboard.daemon.mavlink.odometry import Odometry
 from offboard.daemon.wire_convert import (
     estimate_to_wire,
     estimates_from_wire,
