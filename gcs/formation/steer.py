@@ -80,10 +80,13 @@ class FormationSteer:
         return self.fly(mission_toml(replace(self._flying, waypoints=rest)), t)
 
     def goto(self, centroid: np.ndarray, t: float, yaw_deg: float | None = None) -> wire.Command:
-        """Go to ``centroid`` (m, ENU) at the present scale and yaw (or ``yaw_deg``)."""
-        if yaw_deg is not None:
-            self.yaw_deg = float(yaw_deg)
-        return self.fly(self.one(centroid, self.scale, self.yaw_deg), t)
+        """Go to ``centroid`` (m, ENU) at the scale and yaw of the formation's next rest
+        (or at ``yaw_deg``); a refused go-to changes nothing."""
+        pose = self.rest_pose(t)
+        yaw = float(np.degrees(pose.yaw_rad)) if yaw_deg is None else float(yaw_deg)
+        cmd = self.fly(self.one(centroid, pose.scale, yaw), t)
+        self.scale, self.yaw_deg = pose.scale, yaw
+        return cmd
 
     def nudge(
         self, t: float, d_centroid: tuple[float, float, float] = (0.0, 0.0, 0.0),

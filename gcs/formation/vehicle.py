@@ -238,7 +238,8 @@ class FormationVehicle:
         up = alt if frame in mi.RELATIVE_FRAMES else -geo.down_from_amsl(self.geo, alt)
         if float(m.param1) > 0.0:
             self.steer.speed = min(float(m.param1), self.base.max_speed_mps)
-        yaw = yaw_of_heading(float(m.param4), self.steer.yaw_deg)
+        # NaN heading: keep the formation's yaw (FormationSteer.goto)
+        yaw = None if math.isnan(float(m.param4)) else yaw_of_heading(float(m.param4), 0.0)
         return self._publish_cmd(self.steer.goto(np.array([east, north, up]), self.t, yaw))
 
     def _set_mode(self, m: Any) -> int:

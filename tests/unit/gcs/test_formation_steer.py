@@ -85,3 +85,22 @@ def test_steps_add_up_from_each_rest_and_the_floor_stops_them():
     command_for(s, "down", 240.0)  # back to 3 m: the lowest layer at 1 m
     with pytest.raises(MissionError, match="floor"):
         command_for(s, "down", 300.0)  # it would be at 0 m
+
+
+def test_a_goto_without_a_yaw_keeps_the_formations_own_yaw_and_scale():
+    """course8 turns to 90° on its way: a go-to at t = 50 s, where it rests turned, keeps
+    that yaw and scale instead of turning back to what the ground station last set."""
+    s = steer()
+    pose = s.rest_pose(50.0)
+    assert abs(np.degrees(pose.yaw_rad)) > 45.0  # the course has turned by then
+    wp = waypoint(s.goto(np.array([0.0, 0.0, 5.0]), 50.0))
+    assert wp["yaw_deg"] == pytest.approx(np.degrees(pose.yaw_rad), abs=1e-9)
+    assert wp["scale"] == pytest.approx(pose.scale, abs=1e-12)
+
+
+def test_a_refused_goto_changes_nothing():
+    s = steer()
+    before = (s.yaw_deg, s.scale, len(s.timeline.plans))
+    with pytest.raises(MissionError):
+        s.goto(np.array([0.0, 0.0, -5.0]), 2.0, yaw_deg=45.0)  # under the floor
+    assert (s.yaw_deg, s.scale, len(s.timeline.plans)) == before
