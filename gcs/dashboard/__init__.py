@@ -8,6 +8,9 @@ Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
 * :mod:`.zenoh_feed` - truth / status / estimate subscriber, command publisher.
 * :mod:`.state` - the plain snapshot the UI draws (:class:`SwarmView`), built from the
   two feeds or from a recorded fixture.
+* :mod:`.mission_progress` - where a formation mission stands (next waypoint, time to
+  arrive, fraction done, planned centroid path) and the typed go-to's parser;
+  :mod:`.navigate` - the navigation menu (``n``) and go-to (``g``) commands.
 * :mod:`.app`, :mod:`.widgets`, :mod:`.palette` - the Textual UI and its command palette;
   :mod:`.cli` - argument parsing, launch.
 """

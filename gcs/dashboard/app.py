@@ -20,6 +20,8 @@ l      land; all vehicles with Zenoh up: coordinated land-all Zenoh Command "lan
 x      emergency stop (asks first)                            DO_FLIGHTTERMINATION 185
 m      collision-avoidance method rcbf / apf / none           Zenoh Command "method"
 o      inject a communication outage                          Zenoh Command "outage"
+n      navigate: step, scale, turn, hold, resume the mission  Zenoh "mission" / "hold"
+g      go to a typed centroid "x y z [yaw]" (ENU m, deg)      Zenoh Command "mission"
 t      target: the selected vehicle <-> all vehicles
 q      quit
 =====  =====================================================  =========================
@@ -45,11 +47,10 @@ from textual.screen import Screen
 from textual.widgets import Footer, Header
 
 from gcs.formation.steer import FormationSteer
-from swarm_common.mission.config import MissionError
 from swarm_common.wire import Command
 
+from . import navigate as nav
 from .mavlink_gcs import CommandResult
-from .navigate import CHOICES, command_for
 from .palette import OUTAGES_S, palette_commands
 from .px4modes import COMMANDS
 from .state import DashEvent, SwarmView
@@ -58,7 +59,9 @@ from .widgets import (
     ConfirmScreen,
     EventLog,
     FormationView,
+    InputScreen,
     MinDistancePlot,
+    MissionPanel,
     StatusBar,
     VehicleTable,
 )
@@ -95,6 +98,7 @@ class DashboardApp(App[int]):
         Binding("m", "method", "Method"),
         Binding("o", "outage", "Outage"),
         Binding("n", "navigate", "Navigate"),
+        Binding("g", "goto", "Go to"),
         Binding("t", "toggle_target", "One/All"),
         Binding("q", "quit", "Quit"),
     ]
@@ -125,6 +129,7 @@ class DashboardApp(App[int]):
     def compose(self) -> ComposeResult:
         yield Header()
         yield StatusBar(id="status")
+        yield MissionPanel(id="mission", shown=self.steer is not None)
         yield VehicleTable(id="vehicles")
         with Horizontal(id="bottom"):
             with Horizontal(id="views"):
@@ -168,6 +173,12 @@ class DashboardApp(App[int]):
             fv.show(view)
         self.query_one(MinDistancePlot).show(view)
         self.query_one(StatusBar).show(view, self.target_label())
+        if (p := nav.progress(self.steer, self.commander)) is not None:  # the mission, its path
+            self.query_one(MissionPanel).show(p)
+            self.query_one("#top", FormationView).show_path(p.path, p.next_centroid)
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        return action != "goto" or self.steer is not None  # g: for a mission scenario only
 
     def watch_target_all(self) -> None:
         if self.view is not None:
@@ -312,25 +323,19 @@ class DashboardApp(App[int]):
     def action_navigate(self) -> None:
         """The navigation menu (gcs.dashboard.navigate): a step, scale or turn of the whole
         formation, hold or resume; needs a launched scenario with a [mission] and Zenoh."""
-        up = getattr(self.commander, "zenoh_up", None)
-        t_now = getattr(self.commander, "mission_time", lambda: None)()
-        steer = self.steer
-        if steer is None or not (callable(up) and up()) or t_now is None:
-            self.log_event(0, "cmd", "navigation needs a launched scenario with a [mission] "
-                           "and a live Zenoh feed", WARNING)
+        self._steer("navigation", ChoiceScreen(nav.MENU_TITLE, nav.CHOICES), nav.command_for)
+
+    def action_goto(self) -> None:
+        """g: fly the formation to a typed centroid (navigate.goto_command)."""
+        self._steer("go-to", InputScreen(nav.GOTO_PROMPT, nav.GOTO_HINT), nav.goto_command)
+
+    def _steer(self, what: str, ask: Screen[str | None], make: nav.MakeCommand) -> None:
+        """Ask (``ask``), then send ``make(steer, answer, t)`` (navigate.sender)."""
+        t_now = nav.steer_time(self.steer, self.commander)
+        if self.steer is None or t_now is None:
+            self.log_event(0, "cmd", f"{what} {nav.NEEDS}", WARNING)
             return
-
-        def done(choice: str | None) -> None:
-            if not choice:
-                return
-            try:
-                cmd = command_for(steer, choice, float(t_now))
-            except MissionError as exc:
-                self.log_event(0, "cmd", f"navigation {choice} refused: {exc}", ERROR)
-                return
-            self.send_zenoh(cmd)
-
-        self.push_screen(ChoiceScreen("Fly the formation:", CHOICES), done)
+        self.push_screen(ask, nav.sender(self, what, self.steer, t_now, make))
 
     def action_outage(self) -> None:
         ids = self.targets()

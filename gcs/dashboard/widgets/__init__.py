@@ -1,14 +1,17 @@
 """Small composable Textual widgets of the dashboard, one per module.
 
 :class:`VehicleTable` (per-vehicle rows), :class:`FormationView` (the swarm seen from
-above), :class:`MinDistancePlot`, :class:`EventLog`, :class:`StatusBar`, and the modal
-screens :class:`ConfirmScreen` and :class:`ChoiceScreen`; :mod:`.fmt` formats numbers.
+above), :class:`MinDistancePlot`, :class:`EventLog`, :class:`StatusBar`,
+:class:`MissionPanel` (:mod:`.mission_panel`: the mission's next waypoint and progress), and
+the modal screens :class:`ConfirmScreen`, :class:`ChoiceScreen` and :class:`InputScreen`;
+:mod:`.fmt` formats numbers.
 """
 
 from .distance_plot import MinDistancePlot
 from .event_log import EventLog
 from .formation import FormationView
-from .modals import ChoiceScreen, ConfirmScreen
+from .mission_panel import MissionPanel
+from .modals import ChoiceScreen, ConfirmScreen, InputScreen
 from .status_bar import StatusBar
 from .vehicle_table import VehicleTable
 
@@ -17,7 +20,9 @@ __all__ = [
     "ConfirmScreen",
     "EventLog",
     "FormationView",
+    "InputScreen",
     "MinDistancePlot",
+    "MissionPanel",
     "StatusBar",
     "VehicleTable",
 ]

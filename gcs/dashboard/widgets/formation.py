@@ -1,14 +1,18 @@
 """The formation seen from above (x-y) or from the side (x-z), drawn with characters.
 
 The desired cube (edges ``·``, vertices ``+``) is drawn under the vehicles (their id,
-yellow for leaders, cyan for followers, red on white when their link is silent).
+yellow for leaders, cyan for followers, red on white when their link is silent); under it,
+when given (:meth:`FormationView.show_path`), the mission's planned centroid path (dim ``·``)
+and its next waypoint (``◎``).
 One character cell is taken as twice as tall as wide, so the picture keeps its aspect.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
+import numpy as np
 from rich.text import Text
 from textual.widget import Widget
 
@@ -34,6 +38,8 @@ class FormationView(Widget):
         super().__init__(**kw)
         self.plane = plane
         self.view: SwarmView | None = None
+        self.path: np.ndarray | None = None  # (K, 3) m ENU, the planned centroid path
+        self.next_wp: np.ndarray | None = None  # (3,) m ENU, the next waypoint's centroid
         ia, ib, la, lb = AXES[plane]
         self.border_title = ("Top " if plane == "xy" else "Side ") + f"{la}-{lb}"
 
@@ -41,6 +47,14 @@ class FormationView(Widget):
         self.view = view
         fit = self._fit()
         self.border_subtitle = f"{fit[0]:.2g} m/col" if fit else ""
+        self.refresh()
+
+    def show_path(self, path: np.ndarray | None, next_wp: np.ndarray | None) -> None:
+        """Draw the planned centroid path (K, 3) m and the next waypoint (3,) m (ENU) under
+        the formation, or neither (None); the fit takes them in."""
+        self.path = None if path is None else np.asarray(path, dtype=float).reshape(-1, 3)
+        self.next_wp = None if next_wp is None else np.asarray(next_wp, dtype=float).reshape(3)
+        self.on_resize()
         self.refresh()
 
     def on_resize(self) -> None:
@@ -55,12 +69,12 @@ class FormationView(Widget):
         ia, ib, _, _ = AXES[self.plane]
         v = self.view
         pts = [p for p in v.desired.values()] + [r.pos for r in v.rows if r.pos is not None]
-        if not pts:
+        extra = [a for a in (self.path, self.next_wp) if a is not None]
+        arr = np.vstack([np.array(pts, dtype=float).reshape(-1, 3), *extra])
+        if not len(arr):
             return None
-        amin = min(p[ia] for p in pts)
-        amax = max(p[ia] for p in pts)
-        bmin = min(p[ib] for p in pts)
-        bmax = max(p[ib] for p in pts)
+        amin, amax = float(arr[:, ia].min()), float(arr[:, ia].max())
+        bmin, bmax = float(arr[:, ib].min()), float(arr[:, ib].max())
         ra = max(amax - amin, 1.0) * 1.15
         rb = max(bmax - bmin, 1.0) * 1.15
         cx = max(ra / max(w - 1, 1), rb / (2 * max(h - 1, 1)))
@@ -80,7 +94,7 @@ class FormationView(Widget):
         cx, am, bm = fit
         cy = 2 * cx
 
-        def cell(p: tuple[float, float, float]) -> tuple[int, int]:
+        def cell(p: Sequence[float] | np.ndarray) -> tuple[int, int]:
             col = round((p[ia] - am) / cx + (w - 1) / 2)
             row = round((h - 1) / 2 - (p[ib] - bm) / cy)
             return col, row
@@ -93,6 +107,8 @@ class FormationView(Widget):
                 grid[r][c] = ch
                 style[r][c] = st
 
+        for p in self.path if self.path is not None else ():
+            put(*cell(p), "·", "dim")
         for i, j in v.cube_edges:
             if i in v.desired and j in v.desired:
                 (c0, r0), (c1, r1) = cell(v.desired[i]), cell(v.desired[j])
@@ -101,6 +117,8 @@ class FormationView(Widget):
                     put(round(c0 + (c1 - c0) * k / n), round(r0 + (r1 - r0) * k / n), "·", "green")
         for p in v.desired.values():
             put(*cell(p), "+", "bold green")
+        if self.next_wp is not None:
+            put(*cell(self.next_wp), "◎", "bold magenta")
         # vehicles, far ones first (so the nearer one is on top)
         depth = 3 - ia - ib
         placed = [(r, r.pos) for r in v.rows if r.pos is not None]
