@@ -22,7 +22,7 @@ from swarm_common import wire
 from swarm_common.enums import CommandKind
 from swarm_common.mission.config import MissionConfig, MissionError, mission_toml
 from swarm_common.mission.plan import Pose
-from swarm_common.scenario.mission_check import timeline_for
+from swarm_common.scenario.flight_check import checked_timeline
 from swarm_common.scenario.spec import Scenario
 
 COMMAND_LEAD_S = 1.0  # s of mission time between a command and when the leaders apply it
@@ -38,7 +38,7 @@ class FormationSteer:
         if sc.mission is None:
             raise MissionError("steering the formation needs a scenario with a [mission]")
         self.base: MissionConfig = sc.mission
-        self.timeline = timeline_for(sc)
+        self.timeline = checked_timeline(sc)
         self.scale = 1.0
         self.yaw_deg = 0.0
         self.speed = self.base.speed_mps
@@ -78,6 +78,22 @@ class FormationSteer:
         if not rest:
             raise MissionError("nothing to resume: every waypoint was reached")
         return self.fly(mission_toml(replace(self._flying, waypoints=rest)), t)
+
+    def live(self, velocity: np.ndarray, t: float) -> wire.Command:
+        """Fly the centroid at ``velocity`` (m/s, ENU) from ``t`` + the lead, on the
+        replica first (:meth:`MissionTimeline.live`: it brakes to rest by itself unless a
+        newer velocity follows); a live stream ends any mission a hold could resume."""
+        at = self.at(t)
+        v = np.asarray(velocity, dtype=float)
+        self.timeline.live(v, at)
+        self._flying, self.holding = None, False
+        return wire.Command(kind=CommandKind.LIVE, at_s=at,
+                            velocity=(float(v[0]), float(v[1]), float(v[2])))
+
+    def centroid_at_command(self, t: float) -> np.ndarray:
+        """The centroid (m, ENU) of the leaders' plan when a command sent at ``t`` applies."""
+        at = self.at(t)
+        return np.asarray(self.timeline.plan_at(at).centroid_at(at), dtype=float)
 
     def goto(self, centroid: np.ndarray, t: float, yaw_deg: float | None = None) -> wire.Command:
         """Go to ``centroid`` (m, ENU) at the scale and yaw of the formation's next rest

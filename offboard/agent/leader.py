@@ -20,7 +20,8 @@ from swarm_common.fastnp import f64
 from swarm_common.jit import kernel
 from swarm_common.mission.config import MissionConfig, MissionError
 from swarm_common.mission.timeline import MissionTimeline
-from swarm_common.scenario.mission_check import timeline_for, turn_problem
+from swarm_common.scenario.flight_check import checked_timeline
+from swarm_common.scenario.mission_check import turn_problem
 from swarm_common.scenario.model import Scenario
 
 
@@ -46,7 +47,7 @@ class LeaderAgent(AgentBase):
         )
         # a [mission] replaces the sinusoid: its timeline (the plan, then what ground-station
         # commands change) gives this leader's ξ at mission time
-        self.timeline = timeline_for(sc) if sc.mission is not None else None
+        self.timeline = checked_timeline(sc) if sc.mission is not None else None
         self._last_xi: tuple[float, object, np.ndarray] | None = None
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
@@ -100,6 +101,13 @@ class LeaderAgent(AgentBase):
     def hold_formation(self, at_s: float) -> float:
         """Stop at the first rest at or after mission time ``at_s``; returns when (s)."""
         return self._mission_time(self._timeline().hold(at_s - self._t0()))
+
+    def fly_live(self, velocity: np.ndarray, at_s: float) -> float:
+        """Fly the formation's centroid at ``velocity`` (m/s, ENU) from mission time
+        ``at_s`` (:meth:`MissionTimeline.live`: then it brakes to rest by itself unless a
+        newer velocity follows); returns when (s). Raises :class:`MissionError` (nothing
+        changed) when the leaders could not fly it, or the scenario has no mission."""
+        return self._mission_time(self._timeline().live(velocity, at_s - self._t0()))
 
     def _timeline(self) -> MissionTimeline:
         if self.timeline is None:

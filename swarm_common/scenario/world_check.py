@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_common.mission.plan import MissionPlan
+from swarm_common.mission.timeline import Plan
 from swarm_common.scenario.mission_check import plan_for
 from swarm_common.world.geometry import fence_margins, obstacle_distances
 
@@ -54,6 +56,22 @@ def _worst(sc: Scenario, p: np.ndarray, ids: list[int], what: str) -> str | None
     return None
 
 
+def plan_world_problem(sc: Scenario, plan: Plan, t0: float) -> str | None:
+    """The first clearance that the leaders break flying ``plan`` from ``t0`` (s) to its
+    end, sampled every :data:`MISSION_STEP_S` (at most :data:`MISSION_SAMPLES` points):
+    the load-time check of a ``[mission]``, and of every plan a ground station sends in
+    flight (:func:`swarm_common.scenario.flight_check.checked_timeline`)."""
+    if sc.world.empty:
+        return None
+    lead = [k for k, a in enumerate(sc.agents) if a.is_leader]
+    # a hold is a plan without legs (no end_s): its one pose
+    end = t0 if isinstance(plan, MissionPlan) and not plan.legs else max(float(plan.end_s), t0)
+    n = int(min(MISSION_SAMPLES, math.ceil((end - t0) / MISSION_STEP_S) + 1))
+    times = np.linspace(t0, end, max(n, 2))
+    path = np.array([[plan.agent_xi(t, k)[0:3] for k in lead] for t in times])
+    return _worst(sc, path, [sc.agents[k].id for k in lead], "flies its mission")
+
+
 def world_problem(sc: Scenario) -> str | None:
     """The first broken world assumption of ``sc`` (module docstring), else None."""
     if sc.world.empty:
@@ -65,11 +83,7 @@ def world_problem(sc: Scenario) -> str | None:
     lead = [k for k, a in enumerate(sc.agents) if a.is_leader]
     lead_ids = [sc.agents[k].id for k in lead]
     if sc.mission is not None:
-        plan = plan_for(sc)
-        n = int(min(MISSION_SAMPLES, math.ceil(plan.end_s / MISSION_STEP_S) + 1))
-        times = np.linspace(0.0, plan.end_s, max(n, 2))
-        path = np.array([[plan.agent_xi(t, k)[0:3] for k in lead] for t in times])
-        return _worst(sc, path, lead_ids, "flies its mission")
+        return plan_world_problem(sc, plan_for(sc), 0.0)
     lt = sc.leader_trajectory
     if lt.frequency_hz <= 0.0 or not any(lt.amplitude_m):
         return None
