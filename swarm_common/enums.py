@@ -146,6 +146,7 @@ class CommandKind(StrEnum):
     TAKEOFF = "takeoff"  # coordinated take-off of a ground start at at_s
     MISSION = "mission"  # the leaders fly these formation waypoints from at_s (docs/missions.md)
     HOLD = "hold"  # the formation stops at its next rest from at_s and stays there
+    LIVE = "live"  # the formation's centroid flies at a velocity from at_s, briefly
 
 
 class AgentAlarm(IntFlag):

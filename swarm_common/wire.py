@@ -15,6 +15,7 @@ key                                    payload                                  
 ``<root>/<swarm>/cmd/takeoff``         :class:`Command` kind="takeoff"             gcs
 ``<root>/<swarm>/cmd/mission``         :class:`Command` kind="mission"             gcs
 ``<root>/<swarm>/cmd/hold``            :class:`Command` kind="hold"                gcs
+``<root>/<swarm>/cmd/live``            :class:`Command` kind="live"                gcs
 =====================================  ==========================================  ==========
 
 Payloads are msgpack maps with a version field ``"v": 1``; every float vector is
@@ -68,6 +69,15 @@ def _mission_text(x: Any) -> str:
     if not isinstance(x, str) or len(x.encode()) > MAX_MISSION_TEXT:
         raise WireError(f"command mission: not a string of at most {MAX_MISSION_TEXT} bytes")
     return x
+
+
+def _velocity(b: Any) -> tuple[float, float, float]:
+    """A live command's velocity (3 float32, m/s); absent: zero. Its numbers are checked
+    where they are used (finite, within the speed limit)."""
+    if b is None:
+        return (0.0, 0.0, 0.0)
+    v = _unpack_vec(b, (3,))
+    return (float(v[0]), float(v[1]), float(v[2]))
 
 
 def key_cmd(swarm: str, kind: str, root: str = DEFAULT_ROOT) -> str:
@@ -203,7 +213,10 @@ class Command:
     pads: the climbs start at mission time ``at_s``), "mission" (the leaders fly the
     formation waypoints of ``mission``, a ``[mission]`` table as JSON text, from the first
     rest at or after ``at_s``; docs/missions.md) or "hold" (the formation stops at its next
-    rest after ``at_s``); a negative ``at_s`` means at the step the command arrives."""
+    rest after ``at_s``), or "live" (the formation's centroid flies at ``velocity`` (m/s,
+    ENU) from ``at_s`` for a short while, then brakes to rest unless a newer one follows;
+    docs/missions.md, "Flying the formation live"); a negative ``at_s`` means at the step
+    the command arrives."""
 
     kind: str
     agent: int = 0  # 0 = all
@@ -211,6 +224,7 @@ class Command:
     duration_s: float = 0.0
     at_s: float = -1.0
     mission: str = ""  # kind "mission": the [mission] table as JSON (MAX_MISSION_TEXT bytes)
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)  # kind "live": m/s, ENU
 
 
 Payload = Truth | Estimate | Status | Command | Odometry
@@ -296,6 +310,8 @@ def encode(obj: Payload) -> bytes:
         }
         if obj.mission:
             d["mis"] = obj.mission
+        if obj.kind == "live":
+            d["vel"] = _pack_vec(np.asarray(obj.velocity, dtype=float).reshape(3))
     else:
         raise TypeError(f"cannot encode {type(obj).__name__}")
     return msgpack.packb(d, use_bin_type=True)
@@ -381,6 +397,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 duration_s=float(d["dur"]),
                 at_s=float(d.get("at", -1.0)),
                 mission=_mission_text(d.get("mis", "")),
+                velocity=_velocity(d.get("vel")),
             )
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, WireError):

@@ -13,6 +13,8 @@ import logging
 import math
 from collections.abc import Callable, Iterable
 
+import numpy as np
+
 from offboard.agent.factory import FollowerAgent, LeaderAgent
 from offboard.agent.landing import landing_plan
 from offboard.safety.filter import parse_method
@@ -55,6 +57,7 @@ class GroundCommands:
             CommandKind.TAKEOFF: self._takeoff_command,
             CommandKind.MISSION: self._mission_command,
             CommandKind.HOLD: self._hold_command,
+            CommandKind.LIVE: self._live_command,
         }
 
     def comm_ok(self, t: float) -> bool:
@@ -165,6 +168,20 @@ class GroundCommands:
             self._bad_command(cmd, str(exc).splitlines()[0][:300])
             return
         log.info("agent %d: formation holds from t=%.2f s", self.id, start)
+
+    def _live_command(self, cmd: wire.Command, t: float) -> None:
+        """The formation's centroid flies at ``velocity`` (m/s, ENU) from ``at_s``, then
+        brakes to rest unless a newer live command follows (docs/missions.md, "Flying the
+        formation live"). A velocity the leaders could not fly is counted and dropped."""
+        at = self._formation_at(cmd, t)
+        if at is None or not isinstance(self.agent, LeaderAgent):
+            return
+        try:
+            start = self.agent.fly_live(np.asarray(cmd.velocity, dtype=float), at)
+        except ValueError as exc:  # MissionError
+            self._bad_command(cmd, str(exc).splitlines()[0][:300])
+            return
+        log.debug("agent %d: live velocity %s from t=%.2f s", self.id, cmd.velocity, start)
 
     def maybe_start_landing(self, t: float) -> None:
         """From the first step at or after ``land_at``: the common plan of offboard.agent.landing,

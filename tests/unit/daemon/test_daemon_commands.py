@@ -29,7 +29,8 @@ def _commands(agent_id: int = 2) -> GroundCommands:
 
 
 def test_every_kind_on_the_wire_has_a_handler() -> None:
-    assert wire.COMMAND_KINDS == ("method", "outage", "land", "takeoff", "mission", "hold")
+    assert wire.COMMAND_KINDS == ("method", "outage", "land", "takeoff", "mission", "hold",
+                                  "live")
     assert [k.value for k in CommandKind] == list(wire.COMMAND_KINDS)
     assert set(_commands().handlers) == set(CommandKind)
     for kind in CommandKind:  # a StrEnum member is its word on the wire
@@ -189,3 +190,39 @@ def test_hold_stops_at_the_next_rest() -> None:
     held = c.agent.reference(plan_arrival + 30.0)
     np.testing.assert_allclose(held[:3], c.agent.reference(plan_arrival)[:3], atol=1e-9)
     assert np.all(held[3:] == 0.0)
+
+
+def test_a_live_command_moves_every_leader_alike_and_then_stops() -> None:
+    """A live velocity (gcs.formation.live) read off the wire: both leaders fly it from its
+    at_s, alike (their offset stays the shape's), and come to rest by themselves."""
+    a, b, f = _mission_leader(1), _mission_leader(2), _mission_leader(3)
+    cmd = wire.roundtrip(wire.Command(kind="live", at_s=5.0, velocity=(1.0, -0.5, 0.0)))
+    assert isinstance(cmd, wire.Command) and cmd.velocity == (1.0, -0.5, 0.0)
+    for c in (a, b, f):
+        c.apply([cmd], 4.0)
+        assert c.bad_commands == 0
+    x0 = a.agent.reference(5.0)
+    moving = a.agent.reference(6.0)  # the end of its 1 s: still flying
+    assert moving[3] > 0.3 and moving[4] < -0.15  # east and south
+    late = 30.0
+    xa, xb = a.agent.reference(late), b.agent.reference(late)
+    assert np.all(xa[3:] == 0.0)  # it braked to rest by itself
+    assert xa[0] - x0[0] > 0.5 and xa[1] - x0[1] < -0.2
+    np.testing.assert_allclose(xb[:3] - xa[:3], b.agent.reference(5.0)[:3] - x0[:3],
+                               atol=1e-9)  # the shape is kept
+
+
+def test_bad_live_commands_are_counted_and_change_nothing() -> None:
+    c = _mission_leader(1)
+    before = c.agent.reference(30.0).copy()
+    bad = [
+        wire.Command(kind="live", at_s=5.0, velocity=(float("nan"), 0.0, 0.0)),
+        wire.Command(kind="live", at_s=5.0, velocity=(50.0, 0.0, 0.0)),  # too fast
+        wire.Command(kind="live", at_s=5.0, velocity=(0.0, 0.0, -3.0)),  # into the floor
+    ]
+    c.apply(bad, 4.0)
+    assert c.bad_commands == len(bad)
+    np.testing.assert_array_equal(c.agent.reference(30.0), before)
+    with pytest.raises(wire.WireError):  # a velocity of the wrong length never decodes
+        raw = wire.encode(wire.Command(kind="live", at_s=5.0, velocity=(1.0, 0.0, 0.0)))
+        wire.decode(raw.replace(np.asarray([1.0, 0.0, 0.0], "<f4").tobytes(), b"\0" * 8))
