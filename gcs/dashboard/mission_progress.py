@@ -18,6 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from swarm_common.mission.config import MissionError
+from swarm_common.mission.live import LivePlan
 from swarm_common.mission.plan import MissionPlan
 from swarm_common.mission.timeline import MissionTimeline
 
@@ -49,12 +50,17 @@ class MissionProgress:
     holding: bool
     finished: bool
     path: np.ndarray
+    live: bool = False  # flown live by setpoints (gcs.formation.live): next = where it stops
 
     def line(self) -> str:
         """One line for the mission panel, e.g.
         ``waypoint 3/5 → (20.0, 0.0, 5.0) in 4.2 s · 47 % · t 31.0 s``."""
         c = "({:.1f}, {:.1f}, {:.1f})".format(*(float(x) for x in self.next_centroid))
         t = f"t {self.t:.1f} s"
+        if self.live:
+            if self.finished:
+                return f"flown live · at rest at {c} · {t}"
+            return f"flown live · stops at {c} in {self.eta_s:.1f} s unless steered on · {t}"
         if self.holding:
             return f"holding at {c} · mission paused (n: resume) · {t}"
         head, pct = f"waypoint {self.next_index + 1}/{self.count}", f"{self.fraction:.0%}"
@@ -62,6 +68,17 @@ class MissionProgress:
             state = "finished" if self.finished else "at the last waypoint"
             return f"{head} {c} reached · {pct[:-1]} % · {state} · {t}"
         return f"{head} → {c} in {self.eta_s:.1f} s · {pct[:-1]} % · {t}"
+
+
+@lru_cache(maxsize=8)
+def live_path(plan: LivePlan) -> np.ndarray:
+    """(K, 3) m: a live plan's centroid from its start to its rest, every
+    :data:`PATH_STEP_S` s and at both ends. Cached per plan."""
+    k = max(2, math.ceil((plan.rest_s - plan.start_s) / PATH_STEP_S) + 1)
+    path = np.array([plan.centroid_at(float(t))
+                     for t in np.linspace(plan.start_s, plan.rest_s, k)])
+    path.setflags(write=False)
+    return path
 
 
 @lru_cache(maxsize=8)
@@ -85,6 +102,10 @@ def progress_at(timeline: MissionTimeline, t: float) -> MissionProgress:
     """The progress of the plan in force at mission time ``t`` (s) (class docstring)."""
     t = float(t)
     plan = timeline.plan_at(t)
+    if isinstance(plan, LivePlan):
+        path = live_path(plan)
+        return MissionProgress(t, 0, 0, 0, path[-1], max(plan.rest_s - t, 0.0), 1.0, False,
+                               t >= plan.rest_s, path, live=True)
     path = planned_path(plan)
     if not plan.legs:  # held: stays where it stopped
         return MissionProgress(t, 0, 0, 0, path[0], 0.0, 1.0, True, False, path)

@@ -5,8 +5,9 @@ as to one PX4 vehicle, system id :data:`FORMATION_SYSID`, on UDP :data:`FORMATIO
 offset on the ground-station host. It sees the formation's centroid as the vehicle's position.
 It uploads, downloads and starts a mission, sends it somewhere (``DO_REPOSITION``), holds it
 (``DO_SET_MODE`` AUTO.LOITER), changes its speed (``DO_CHANGE_SPEED``) and its scale (the
-``FORM_SCALE`` parameter). Each of these becomes a Zenoh ``mission`` or ``hold`` command to
-the leaders, timed :data:`gcs.formation.steer.COMMAND_LEAD_S` of mission time ahead so
+``FORM_SCALE`` parameter), or flies it live in OFFBOARD with velocity or position setpoints
+(:mod:`gcs.formation.live`). Each of these becomes a Zenoh ``mission``, ``hold`` or ``live``
+command to the leaders, timed :data:`gcs.formation.steer.COMMAND_LEAD_S` of mission time ahead so
 that every leader applies it at the same step (:mod:`swarm_common.mission.timeline`).
 
 The vehicle keeps a replica of the leaders' timeline. It refuses a mission or command that the
@@ -32,6 +33,7 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as M
 
+from gcs.formation.live import LiveSetpoints, parse_setpoint
 from gcs.formation.steer import FormationSteer
 from gcs.formation.translate import items_to_table, yaw_of_heading
 from swarm_common import frames, px4, wire
@@ -80,6 +82,8 @@ class FormationVehicle:
         self.bad_frames = 0
         self.live = False  # the swarm is stepping (a truth came): commands reach the leaders
         self.sent_commands: list[wire.Command] = []
+        self.setpoints = LiveSetpoints(self.base.max_speed_mps)
+        self.offboard = False  # flown live by a client's setpoints (gcs.formation.live)
         self._pending: list[tuple[float, wire.Command, int]] = []  # (due, command, copies left)
         self._next_hb = self._next_pos = 0.0
         self._t_boot = time.monotonic()
@@ -111,6 +115,7 @@ class FormationVehicle:
                 self._take(data, addr)
         if not self.live:
             return
+        self._fly_live(now)
         for m, dest in self.transfer.tick(now):
             self._send(m, dest)
         self._transfer_errors()
@@ -177,6 +182,8 @@ class FormationVehicle:
             out = [(self._param_value(), addr)]
         elif kind == "PARAM_SET":
             out = [(self._param_set(m), addr)]
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+            self.setpoints.take(parse_setpoint(m, now))  # MissionError: counted, dropped
         self.transfer.changed.clear()
         for msg, dest in out:
             self._send(msg, dest)
@@ -244,6 +251,13 @@ class FormationVehicle:
 
     def _set_mode(self, m: Any) -> int:
         main, sub = int(m.param2), int(m.param3)
+        if main == px4.MAIN_OFFBOARD:  # as PX4: only once setpoints stream
+            if not self.setpoints.fresh(time.monotonic()):
+                raise MissionError("OFFBOARD refused: no setpoint stream")
+            self.offboard = True
+            self.setpoints.sent_at = -math.inf  # the first live command goes at once
+            return M.MAV_RESULT_ACCEPTED
+        self.offboard = False
         if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_LOITER:
             return self._publish_cmd(self.steer.hold(self.t))
         if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_MISSION:
@@ -251,7 +265,34 @@ class FormationVehicle:
         return M.MAV_RESULT_UNSUPPORTED
 
     def _fly(self, table: dict[str, Any]) -> int:
+        self.offboard = False
         return self._publish_cmd(self.steer.fly(table, self.t))
+
+    def _fly_live(self, now: float) -> None:
+        """In OFFBOARD: the velocity of the latest setpoint to the leaders when due; a
+        stream gone quiet ends OFFBOARD (the leaders' plan brakes to rest by itself)."""
+        if not self.offboard:
+            return
+        if not self.setpoints.fresh(now):
+            self.offboard, self.steer.holding = False, True
+            log.warning("formation vehicle: setpoints lost: the formation brakes and holds")
+            return
+        v = self.setpoints.velocity(self.steer.centroid_at_command(self.t))
+        if not self.setpoints.due(self.t, v):
+            return
+        try:
+            cmd = self.steer.live(v, self.t)
+        except MissionError as exc:  # e.g. it would take an agent under the floor: stop
+            log.warning("formation vehicle: setpoint refused: %s", exc)
+            v = np.zeros(3)
+            try:
+                cmd = self.steer.live(v, self.t)
+            except MissionError:
+                return
+        self.setpoints.sent(self.t, v)
+        self._pending.clear()  # older commands' copies would arrive out of order
+        self.publish(cmd)
+        self.sent_commands.append(cmd)
 
     def _publish_cmd(self, cmd: wire.Command) -> int:
         """Publish a command the steering accepted (a refused one raised MissionError: the
@@ -301,7 +342,8 @@ class FormationVehicle:
 
     def _heartbeat(self) -> Any:
         sub = px4.SUB_AUTO_LOITER if self.steer.holding else px4.SUB_AUTO_MISSION
-        custom = (px4.MAIN_AUTO << 16) | (sub << 24)
+        custom = (px4.MAIN_OFFBOARD << 16 if self.offboard
+                  else (px4.MAIN_AUTO << 16) | (sub << 24))
         base = (mavutil.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
                 | mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
                 | mavutil.mavlink.MAV_MODE_FLAG_AUTO_ENABLED)

@@ -16,7 +16,7 @@ from gcs.dashboard.mission_progress import (
     planned_path,
     progress_at,
 )
-from gcs.formation.steer import FormationSteer
+from gcs.formation.steer import COMMAND_LEAD_S, FormationSteer
 from swarm_common.mission.config import MissionError
 from swarm_common.scenario.model import load_scenario
 
@@ -147,3 +147,22 @@ def test_parse_goto_refuses_with_one_line(text, why):
         parse_goto(text)
     msg = str(err.value)
     assert why in msg and "\n" not in msg
+
+
+def test_a_live_plan_shows_where_the_formation_will_stop() -> None:
+    """Flown live (gcs.formation.live): the panel says where the formation stops unless
+    steered on, and the path ends there; once at rest, it says so."""
+    steer = FormationSteer(load_scenario(ROOT / "scenarios" / "course8.toml"))
+    steer.live(np.array([1.0, 0.0, 0.0]), 2.0)
+    at = 2.0 + COMMAND_LEAD_S
+    plan = steer.timeline.plan_at(at)
+    p = progress_at(steer.timeline, at + 0.5)
+    assert p.live and not p.finished and "flown live" in p.line()
+    stop = plan.centroid_at(plan.rest_s)
+    np.testing.assert_allclose(p.next_centroid, stop, atol=1e-12)
+    np.testing.assert_allclose(p.path[0], plan.centroid_at(at), atol=1e-12)
+    np.testing.assert_allclose(p.path[-1], stop, atol=1e-12)
+    assert stop[0] > plan.centroid_at(at)[0] + 1.0  # it flew east before stopping
+    assert p.eta_s == pytest.approx(plan.rest_s - (at + 0.5), abs=1e-12)
+    done = progress_at(steer.timeline, plan.rest_s + 1.0)
+    assert done.finished and "at rest" in done.line()
