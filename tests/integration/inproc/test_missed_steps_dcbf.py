@@ -15,9 +15,6 @@ from conftest import CUBE8, ROOT
 from gcs.mission.inproc import f32, round_estimate, wire_to_command
 from offboard.agent.factory import FollowerAgent, make_agent
 from offboard.estimation.bearing import formation_from_scenario
-from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.dcbf.step_kernel import P_DT
-from swarm_common.enums import Method
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.physics.dynamics import SwarmDynamics
 
@@ -72,23 +69,3 @@ def test_starved_swarm_keeps_its_altitude(path: str, seed: int) -> None:
     # span (14.6-17.7 m with a one-period difference)
     assert z < z_ref + 1.0, (z, z_ref)
     assert d > 0.8 * d_ref, (d, d_ref)
-
-
-def test_span_scales_the_relative_acceleration_difference() -> None:
-    """The filter's finite difference of Δv: the same change of relative velocity over
-    one period, or over three with set_span(3), gives a relative acceleration 3× apart;
-    set_span(1) restores the period exactly (the in-process bits)."""
-    sc = load_scenario(CUBE8)
-    ag = make_agent(sc, 3, seed=1, method="dcbf")
-    assert isinstance(ag, FollowerAgent)
-    filt = ag.filters[Method.DCBF]
-    assert isinstance(filt, DcbfFilter)
-    dt = sc.control_dt
-    params = filt.rows_state()[0]
-    assert params[P_DT] == dt
-    filt.set_span(3)
-    assert params[P_DT] == 3 * dt
-    filt.set_span(1)
-    assert params[P_DT] == dt  # exactly: in-process and lockstep runs keep their bits
-    filt.forget_history()
-    assert not filt.rows_state()[4].any()

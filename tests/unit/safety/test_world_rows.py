@@ -1,8 +1,7 @@
 """The dcbf filter's world rows (offboard.safety.dcbf.world_rows, docs/world.md): the
-rows against a numerical prediction of the lagged point mass, and cube8 with ten
-obstacles and a geofence flown in process: the filter keeps every obstacle and fence
-barrier ≥ 0 where no filter breaks them; a scenario whose start or leader path breaks a
-clearance is refused at load."""
+rows against a numerical prediction of the lagged point mass; a scenario whose start or
+leader path breaks a clearance is refused at load. The flight of cube8 with ten obstacles
+is tests/integration/inproc/test_world_flight.py."""
 
 from __future__ import annotations
 
@@ -12,7 +11,6 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from gcs.mission.inproc import run_inproc
 from offboard.safety.dcbf.model import LagCoefficients
 from offboard.safety.dcbf.world_rows import plane_rows_into
 from swarm_common.scenario.files import UnsafeScenarioError, dump_toml
@@ -66,19 +64,6 @@ def test_rows_are_the_barrier_conditions_of_the_predicted_state() -> None:
         assert abs(s1 * (g[0] @ u - r[0]) - c1) < 1e-3
         assert abs(s2 * (g[1] @ u - r[1]) - c2) < 1e-3
         assert np.allclose(np.linalg.norm(g, axis=1), 1.0)
-
-
-def test_obstacles_kept_by_dcbf_and_broken_without_a_filter() -> None:
-    sc = load_scenario(OBSTACLES)
-    m = run_inproc(sc, "dcbf", seed=2, duration=20.0).metrics
-    assert m["obstacle_h_min_m"] >= 0.0 and m["fence_h_min_m"] >= 0.0
-    assert m["obstacle_min_distance_m"] >= 0.5 and m["collisions"] == 0
-    assert m["safety_verdict"] in ("safe", "alarm") and m["h_min"] >= 0.0
-    assert not [e for e in m["safety_alarms"] if e["assumption"] in ("obstacle", "geofence")]
-    none = run_inproc(sc, "none", seed=2, duration=20.0).metrics
-    assert none["obstacle_h_min_m"] < 0.0 and none["safety_verdict"] == "unsafe"
-    hits = [e for e in none["safety_alarms"] if e["assumption"] == "obstacle"]
-    assert hits and all(0 <= e["other"] < len(sc.world.obstacles) for e in hits)
 
 
 def _doc_with(extra: dict) -> dict:
