@@ -11,6 +11,7 @@ Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
 * :mod:`.mission_progress` - where a formation mission stands (next waypoint, time to
   arrive, fraction done, planned centroid path) and the typed go-to's parser;
   :mod:`.navigate` - the navigation menu (``n``) and go-to (``g``) commands.
+* :mod:`.world_cells` - the scenario's obstacles and geofence as a view's character cells.
 * :mod:`.app`, :mod:`.widgets`, :mod:`.palette` - the Textual UI and its command palette;
   :mod:`.cli` - argument parsing, launch.
 """

@@ -48,6 +48,7 @@ from textual.widgets import Footer, Header
 
 from gcs.formation.steer import FormationSteer
 from swarm_common.wire import Command
+from swarm_common.world.config import World
 
 from . import navigate as nav
 from .mavlink_gcs import CommandResult
@@ -112,8 +113,10 @@ class DashboardApp(App[int]):
         poll_s: float = 0.25,
         title: str | None = None,
         steer: FormationSteer | None = None,
+        world: World | None = None,
     ) -> None:
         super().__init__()
+        self.world = world  # the scenario's obstacles and geofence, drawn in both views
         self.steer = steer  # a mission scenario's formation steering (n), else None
         self.source = source
         self.commander = commander
@@ -133,8 +136,8 @@ class DashboardApp(App[int]):
         yield VehicleTable(id="vehicles")
         with Horizontal(id="bottom"):
             with Horizontal(id="views"):
-                yield FormationView("xy", id="top")
-                yield FormationView("xz", id="side-view")
+                yield FormationView("xy", self.world, id="top")
+                yield FormationView("xz", self.world, id="side-view")
             with Vertical(id="side"):
                 yield MinDistancePlot(id="dmin")
                 yield EventLog(id="events")

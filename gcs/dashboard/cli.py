@@ -161,7 +161,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     title = f"{sc.name} · offset {offset}" + (" · launched" if launch else "")
     title += " · signed" if link.signed else ""
     steer = FormationSteer(sc) if sc.mission is not None else None
-    return DashboardApp(source, commander, title=title, steer=steer), source, launch, title
+    app = DashboardApp(source, commander, title=title, steer=steer, world=sc.world)
+    return app, source, launch, title
 
 
 def run_dashboard(args: argparse.Namespace) -> int:
