@@ -12,6 +12,7 @@ Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
   arrive, fraction done, planned centroid path) and the typed go-to's parser;
   :mod:`.navigate` - the navigation menu (``n``) and go-to (``g``) commands.
 * :mod:`.world_cells` - the scenario's obstacles and geofence as a view's character cells.
+* :mod:`.formation_link` - the formation as one MAVLink vehicle, served by the dashboard.
 * :mod:`.app`, :mod:`.widgets`, :mod:`.palette` - the Textual UI and its command palette;
   :mod:`.cli` - argument parsing, launch.
 """

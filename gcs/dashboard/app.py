@@ -81,6 +81,7 @@ COMMAND_REPEATS = 20
 COMMAND_REPEAT_S = 0.5
 TAKEOFF_LEAD_S = 1.0  # s of mission time between the last ACK and the common take-off t0
 WIDE_TABLE_COLUMNS = 150
+FORMATION_TICK_S = 0.05  # s between two ticks of the formation vehicle (formation_link)
 
 
 class DashboardApp(App[int]):
@@ -114,9 +115,11 @@ class DashboardApp(App[int]):
         title: str | None = None,
         steer: FormationSteer | None = None,
         world: World | None = None,
+        formation: Any = None,
     ) -> None:
         super().__init__()
         self.world = world  # the scenario's obstacles and geofence, drawn in both views
+        self.formation = formation  # gcs.dashboard.formation_link, ticked on this loop
         self.steer = steer  # a mission scenario's formation steering (n), else None
         self.source = source
         self.commander = commander
@@ -148,6 +151,8 @@ class DashboardApp(App[int]):
         self.query_one(VehicleTable).focus()
         if getattr(self.source, "live", True):
             self.set_interval(self.poll_s, self.refresh_data)
+        if self.formation is not None:
+            self.set_interval(FORMATION_TICK_S, self.formation.tick)
 
     def on_resize(self) -> None:
         if self.view is not None:

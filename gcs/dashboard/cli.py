@@ -68,6 +68,9 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         help="start vehicle-sim (real time) and the offboard daemons; stop on exit",
     )
     p.add_argument("--no-daemons", action="store_true", help="with --launch: simulator only")
+    p.add_argument("--formation-vehicle", action="store_true",
+                   help="serve the formation as one MAVLink vehicle (system 200, UDP "
+                   "14560+offset; a scenario with a [mission], Zenoh on)")
     p.add_argument(
         ALLOW_INFEASIBLE_FLAG,
         action="store_true",
@@ -127,6 +130,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     sc = load_scenario(path, allow_infeasible=args.allow_infeasible,
                        allow_unsafe=args.allow_unsafe)
     offset = args.port_offset
+    if args.formation_vehicle and (sc.mission is None or args.no_zenoh):
+        raise ValueError("--formation-vehicle needs a scenario with a [mission] and Zenoh")
     launch = None
     link = feed = None
     signing = SigningChoice.from_args(args)  # LaunchError (a RuntimeError): exit 2
@@ -161,8 +166,37 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     title = f"{sc.name} · offset {offset}" + (" · launched" if launch else "")
     title += " · signed" if link.signed else ""
     steer = FormationSteer(sc) if sc.mission is not None else None
-    app = DashboardApp(source, commander, title=title, steer=steer, world=sc.world)
+    formation = None
+    if args.formation_vehicle:
+        try:
+            formation = _formation_link(sc, feed, steer, offset, key)
+        except BaseException:
+            source.close()
+            if launch is not None:
+                launch.stop()
+            raise
+        title += f" · formation vehicle {formation.port}"
+    app = DashboardApp(source, commander, title=title, steer=steer, world=sc.world,
+                       formation=formation)
     return app, source, launch, title
+
+
+def _formation_link(sc: Any, feed: Any, steer: FormationSteer | None, offset: int,
+                    key: bytes | None) -> Any:
+    """The formation vehicle (gcs.dashboard.formation_link); ValueError (exit 2) without a
+    mission or Zenoh, OSError when its port is busy."""
+    from gcs.formation.vehicle import FORMATION_PORT
+
+    from .formation_link import FormationLink
+
+    if steer is None:
+        raise ValueError("--formation-vehicle needs a scenario with a [mission]")
+    if feed is None:
+        raise ValueError("--formation-vehicle needs Zenoh (not --no-zenoh)")
+    try:
+        return FormationLink(sc, feed, steer, FORMATION_PORT + offset, key)
+    except OSError as exc:
+        raise OSError(f"formation vehicle on UDP {FORMATION_PORT + offset}: {exc}") from None
 
 
 def run_dashboard(args: argparse.Namespace) -> int:
@@ -176,6 +210,8 @@ def run_dashboard(args: argparse.Namespace) -> int:
     try:
         app.run()
     finally:
+        if getattr(app, "formation", None) is not None:
+            app.formation.close()
         if source is not None:
             source.close()
         if launch is not None:

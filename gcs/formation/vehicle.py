@@ -62,10 +62,11 @@ class FormationVehicle:
 
     def __init__(
         self, sc: Scenario, publish: Publish, port: int, host: str = "127.0.0.1",
-        key: bytes | None = None,
+        key: bytes | None = None, steer: FormationSteer | None = None,
     ) -> None:
         self.sc, self.publish = sc, publish
-        self.steer = FormationSteer(sc)  # raises MissionError without a [mission]
+        # a shared steering (the dashboard's); raises MissionError without a [mission]
+        self.steer = steer if steer is not None else FormationSteer(sc)
         self.base = self.steer.base
         self.geo = AutopilotConfig()
         self.transfer = MissionTransfer(self.geo)
