@@ -5,7 +5,9 @@ Same order as the distributed run (docs/architecture.md, lockstep), step k:
 1. truth(k) = float32(p, v) of the simulator (what the truth message carries);
 2. every agent, in scenario order: ``agent.step(k, t_k, truth, neighbours(k−1), comm_ok)``
    where neighbours are the float32-rounded estimates published at step k−1 (valid for
-   t_k); during an outage window (``communication.outages_s``) comm_ok is False;
+   t_k), or at step k−1−d with a latency (``communication.delay_s``, d =
+   :attr:`Scenario.delay_periods`, in process only); during an outage window
+   (``communication.outages_s``) comm_ok is False;
 3. each setpoint goes through the wire form (float32 quaternion + thrust_norm) and is
    decoded exactly as the simulator does (:func:`wire_to_command`, for all agents at once
    :func:`wire_to_commands`) → ``set_command`` (``set_commands``);
@@ -21,6 +23,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -192,6 +195,9 @@ def run_inproc(
         # every agent's estimate of the step before, as the receivers see it; each follower
         # takes its peers' rows only, as its daemon subscribes to them only
         published = published_batch([ag.initial_estimate() for ag in agents])
+        # what the agents receive: the batch published delay_periods steps before the last
+        # (communication.delay_s; the initial estimates until then)
+        in_flight: deque[EstimateBatch] = deque([published], maxlen=sc.delay_periods + 1)
         n = sc.n
         ser = empty_series(np.arange(n_steps) * dt, n)
         # the truth of every step, its derived rows (desired states, tilt) filled after
@@ -214,7 +220,8 @@ def run_inproc(
             thrust[k], att[k] = dyn.thrust, dyn.att
             ser.z1[k], ser.z2[k] = published.rows[:, 0:3], published.rows[:, 3:6]
             ser.xi_p[k] = published.rows[:, XI_COL:XI_COL + 3]
-            outs = [ag.step(k, t, tp, tv, published, comm) for ag in agents]
+            heard = in_flight[0]
+            outs = [ag.step(k, t, tp, tv, heard, comm) for ag in agents]
             # the commands, estimates and records of all agents at once (each agent's
             # step reads the estimates of the step before and never the dynamics)
             dyn.set_commands(*wire_to_commands(
@@ -222,6 +229,7 @@ def run_inproc(
                 np.array([o.thrust_norm for o in outs], dtype=np.float32), f_max,
             ))
             published = published_batch([o.estimate for o in outs])
+            in_flight.append(published)
             set_agent_rows(ser, k, outs)
             md = dyn.advance_period(nsub)  # nsub physics steps, their min pair distance
             ser.min_dist[k] = md

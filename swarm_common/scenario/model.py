@@ -167,6 +167,11 @@ def parse_scenario(
             f"scenario.physics_hz = {sc['physics_hz']}: must be a multiple of "
             f"scenario.control_hz = {sc['control_hz']}"
         )
+    com = raw["communication"]
+    if com["delay_s"] >= com["max_age_s"]:
+        raise fail(f"communication.delay_s = {com['delay_s']!r}: must be below "
+                   f"communication.max_age_s = {com['max_age_s']!r} (every estimate would "
+                   f"arrive too old to use)")
     veh = raw["vehicle"]
     if veh["thrust_max_n"] <= veh["mass_kg"] * veh["gravity_mps2"]:
         raise fail(

@@ -121,10 +121,13 @@ class SensingConfig:
 
 @dataclass(frozen=True)
 class CommunicationConfig:
-    """``[communication]``: outage windows (s) and neighbour-data ageing (s)."""
+    """``[communication]``: outage windows (s), neighbour-data ageing (s) and the latency of
+    the neighbours' estimates (s; optional, 0: the next step; modelled in process,
+    docs/faults.md "Link latency in process")."""
 
     outages_s: tuple[tuple[float, float], ...] = _special("windows")
     max_age_s: float = _num(0.0, 10.0, lo_open=True)
+    delay_s: float = field(default=0.0, metadata={"spec": ("float", 0.0, 5.0, False, False)})
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ file first); the checks in :mod:`swarm_common.scenario.checks` and
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -141,6 +142,14 @@ class Scenario:
     @property
     def control_dt(self) -> float:
         return 1.0 / float(self.run.control_hz)
+
+    @property
+    def delay_periods(self) -> int:
+        """Control periods an estimate arrives later than the next step: a latency L
+        (``communication.delay_s``) makes the estimate published at step j usable from the
+        first step at or after t_j + L, and never before step j + 1."""
+        periods = self.communication.delay_s / self.control_dt
+        return max(0, math.ceil(periods - 1e-9) - 1)
 
     @property
     def physics_dt(self) -> float:
