@@ -30,8 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 CUBE8 = str(ROOT / "scenarios" / "cube8.toml")
 # shipped stress families outside a load-time safety assumption on purpose, run with
 # --allow-unsafe (docs/safety.md, "Load-time checks"): cube8_noise5's sensing noise exceeds
-# the margin the noise bound asks for (measured, it kept h >= 0 over 100 seeds)
-OUTSIDE_ASSUMPTIONS = frozenset({"cube8_noise5"})
+# the margin the noise bound asks for (measured, it kept h >= 0 over 100 seeds);
+# cube8_noise20's is twenty times the paper's (the evidence grid, docs/safety.md 5h)
+OUTSIDE_ASSUMPTIONS = frozenset({"cube8_noise5", "cube8_noise20"})
 
 
 def load_shipped(path: str | Path) -> Scenario:
