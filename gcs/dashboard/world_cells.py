@@ -3,7 +3,9 @@
 A view (:class:`Fit`) maps metres on two ENU axes (:data:`AXES`: ``xy`` from above, ``xz``
 and ``yz`` from the side) to character cells; a row is :data:`ROW_ASPECT` columns tall.
 :func:`world_cells` gives the cells each obstacle's footprint covers in that plane and the
-cells of the geofence's outline. Footprints: a sphere is a disc; a vertical cylinder a
+cells of the geofence's outline: a box's rectangle in every view; a polygon fence's
+polygon from above (each edge sampled at every half cell) and from the side the rectangle
+of its extent on that axis by its z range. Footprints: a sphere is a disc; a vertical cylinder a
 disc from above and a rectangle from the side; a box a rectangle turned by its yaw from
 above, and from the side the axis-aligned extent of the turned box by its z extent.
 
@@ -153,9 +155,12 @@ def world_cells(world: World, plane: str, fit: Fit) -> WorldCells:
     obstacles = tuple(footprint_cells(footprint(o, plane), fit) for o in world.obstacles)
     fence_h: set[Cell] = set()
     fence_v: set[Cell] = set()
-    if world.geofence is not None:
+    f = world.geofence
+    if f is not None and f.polygon_m and plane == "xy":
+        fence_h, fence_v = _polygon_outline(f.polygon_m, fit)
+    elif f is not None:  # a box, or a polygon's bounding extent from the side
         ia, ib, _, _ = AXES[plane]
-        lo, hi = world.geofence.min_m, world.geofence.max_m
+        lo, hi = f.min_m, f.max_m
         c0, r1 = fit.cell(lo[ia], lo[ib])  # r1: the bottom row (rows grow downwards)
         c1, r0 = fit.cell(hi[ia], hi[ib])
         for c in range(max(c0, -1), min(c1, fit.width) + 1):
@@ -165,9 +170,33 @@ def world_cells(world: World, plane: str, fit: Fit) -> WorldCells:
     return WorldCells(obstacles, _inside(fence_h, fit), _inside(fence_v, fit))
 
 
+_MAX_EDGE_SAMPLES = 20_000  # per polygon edge
+
+
+def _polygon_outline(vertices: tuple[tuple[float, float], ...],
+                     fit: Fit) -> tuple[set[Cell], set[Cell]]:
+    """The cells (from above) of a fence polygon's edges: an edge that crosses more columns
+    than rows goes with the horizontal edges, else with the vertical ones; each vertex is
+    in both (a corner)."""
+    fence_h: set[Cell] = set()
+    fence_v: set[Cell] = set()
+    v = np.array(vertices, dtype=float)
+    for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
+        span_c = abs(b[0] - a[0]) / fit.m_per_col
+        span_r = abs(b[1] - a[1]) / fit.m_per_row
+        n = int(min(_MAX_EDGE_SAMPLES, np.ceil(2.0 * max(span_c, span_r)) + 1))
+        s = np.linspace(0.0, 1.0, max(n, 2))
+        col, row = fit.cells(a[0] + s * (b[0] - a[0]), a[1] + s * (b[1] - a[1]))
+        cells = set(zip(col.tolist(), row.tolist(), strict=True))
+        (fence_h if span_c >= span_r else fence_v).update(cells)
+    corners = set(zip(*(x.tolist() for x in fit.cells(v[:, 0], v[:, 1])), strict=True))
+    return fence_h | corners, fence_v | corners
+
+
 def world_extent(world: World) -> np.ndarray:
     """(N, 3) m ENU points whose per-axis min and max bound every obstacle and the fence
-    (two corners of each one's axis-aligned box); (0, 3) for an empty world."""
+    (two corners of each one's axis-aligned box; a polygon fence's is its bounding box);
+    (0, 3) for an empty world."""
     pts: list[tuple[float, float, float]] = []
     for o in world.obstacles:
         c = np.asarray(o.centre_m, float)

@@ -242,7 +242,8 @@ def mission_table(metrics: dict[str, dict], plan: MissionPlan) -> str:
 def world_table(metrics: dict[str, dict], world: World) -> str:
     """Per method: the truth against the obstacles and the geofence (docs/world.md)."""
     head = (f"{len(world.obstacles)} obstacles"
-            + (", a geofence box" if world.geofence is not None else "")
+            + ("" if world.geofence is None else ", a geofence box" if not world.geofence.polygon_m
+               else f", a {len(world.geofence.polygon_m)}-sided geofence polygon")
             + "; distances from each vehicle's centre, barriers h = d − D + τ ḋ (m).\n\n")
     rows = ["| method | obstacle min distance | obstacle h_min | fence min margin | fence h_min |",
             "|---|---|---|---|---|"]

@@ -7,7 +7,7 @@ obstacles and the geofence, scored from the simulator's positions and velocities
   D the obstacle's ``clearance_m``, τ the pair barrier's ``tau_safe_s``), what the dcbf
   filter's world rows keep ≥ 0;
 * ``fence_min_margin_m`` and ``fence_h_min_m``: the same for the geofence, with d the
-  distance inside the box and D its ``margin_m``.
+  distance inside the fence (box or polygon prism) and D its ``margin_m``.
 
 Each is None without obstacles (or without a fence). A barrier below 0 is a truth event
 of the verdict (:data:`~swarm_common.enums.SafetyAlarmKind.OBSTACLE`,
@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from swarm_common.world.config import World
-from swarm_common.world.geometry import fence_margins, obstacle_distances
+from swarm_common.world.geometry import fence_distances, obstacle_distances
 
 WORLD_KEYS = ("obstacle_min_distance_m", "obstacle_h_min_m", "fence_min_margin_m",
               "fence_h_min_m")
@@ -50,14 +50,12 @@ def world_truth(world: World, p: np.ndarray, v: np.ndarray, tau_s: float) -> Wor
         h_obs = dist - world.clearances + tau_s * rate
     if world.geofence is not None and p.size:
         f = world.geofence
-        fence = np.array([f.min_m, f.max_m])
-        margin = fence_margins(fence, p)
+        planes = f.planes()
+        dist_f = fence_distances(planes, p)
+        margin = np.min(dist_f, axis=-1)
         # the rate of the nearest face's margin: the velocity along its inward normal
-        lo, hi = p - fence[0], fence[1] - p
-        both = np.concatenate([lo, hi], axis=-1)
-        face = np.argmin(both, axis=-1)
-        vel = np.concatenate([v, -v], axis=-1)
-        rate_f = np.take_along_axis(vel, face[..., None], axis=-1)[..., 0]
+        face = np.argmin(dist_f, axis=-1)
+        rate_f = np.sum(planes[face, :3] * v, axis=-1)
         h_fence = margin - f.margin_m + tau_s * rate_f
     return WorldTruth(dist, h_obs, margin, h_fence)
 

@@ -9,7 +9,8 @@ load-time safety checks (:func:`swarm_common.scenario.safety_check.safety_proble
   :data:`MISSION_STEP_S` (at most :data:`MISSION_SAMPLES` points) to its end. Between
   samples a leader moves at most its speed limit times the step (a few centimetres).
 
-Each problem is one line naming the agent and the obstacle or face.
+Each problem is one line naming the agent and the obstacle or the fence's nearest face
+(a box's ``max_m.x``, a polygon's ``side polygon_m[2]–[3]``, ``floor`` or ``ceiling``).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import numpy as np
 from swarm_common.mission.plan import MissionPlan
 from swarm_common.mission.timeline import Plan
 from swarm_common.scenario.mission_check import plan_for
-from swarm_common.world.geometry import fence_margins, obstacle_distances
+from swarm_common.world.geometry import fence_distances, fence_margins, obstacle_distances
 
 if TYPE_CHECKING:
     from swarm_common.scenario.spec import Scenario
@@ -47,12 +48,15 @@ def _worst(sc: Scenario, p: np.ndarray, ids: list[int], what: str) -> str | None
                     f"its surface, inside its clearance_m = {ob.clearance_m:g}")
     if w.geofence is not None:
         f = w.geofence
-        fence = np.array([f.min_m, f.max_m])
-        m = fence_margins(fence, p)
+        planes = f.planes()
+        m = fence_margins(planes, p)
         k, i = np.unravel_index(int(np.argmin(m)), m.shape)
         if m[k, i] < f.margin_m:
-            return (f"geofence: agent {ids[i]} {what} {m[k, i]:.2f} m inside it, less than "
-                    f"geofence.margin_m = {f.margin_m:g}")
+            face = f.face_names()[int(np.argmin(fence_distances(planes, p[k, i])))]
+            where = (f"{m[k, i]:.2f} m inside it" if m[k, i] >= 0.0
+                     else f"{-m[k, i]:.2f} m outside it")
+            return (f"geofence: agent {ids[i]} {what} {where} (nearest face: {face}), less "
+                    f"than geofence.margin_m = {f.margin_m:g}")
     return None
 
 

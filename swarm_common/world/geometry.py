@@ -8,7 +8,8 @@ An obstacle is one row of :attr:`swarm_common.world.config.World.table`: kind (0
 agent at p and n the outward normal there, the obstacle lies in {x : nᵀ(x − q) ≤ 0}, so
 an agent with nᵀp ≥ nᵀq + D keeps a distance ≥ D from it. The filter keeps that
 half-space (re-taken from p each step) with the same rows as its ground barrier
-(:mod:`offboard.safety.dcbf.world_rows`). A geofence face is a half-space already.
+(:mod:`offboard.safety.dcbf.world_rows`). A geofence, box or convex polygon prism, is an
+intersection of half-spaces already (:meth:`swarm_common.world.config.Geofence.planes`).
 """
 
 from __future__ import annotations
@@ -101,15 +102,16 @@ def closest_point(ob: np.ndarray, px: float, py: float, pz: float, out: np.ndarr
 
 
 @kernel
-def world_planes(table: np.ndarray, clearance: np.ndarray, fence_on: bool,
-                 fence: np.ndarray, fence_margin: float, p: np.ndarray, range_m: float,
+def world_planes(table: np.ndarray, clearance: np.ndarray, fence: np.ndarray,
+                 fence_margin: float, p: np.ndarray, range_m: float,
                  normals: np.ndarray, offsets: np.ndarray) -> int:
     """The half-spaces nᵀx ≥ c that an agent at ``p`` (3,) keeps this step, written into
-    ``normals`` (P,3) and ``offsets`` (P,) (room for K + 6); returns their count. One per
+    ``normals`` (P,3) and ``offsets`` (P,) (room for K + F); returns their count. One per
     obstacle of ``table`` (K rows) whose surface is within ``range_m`` (m): n its outward
-    normal at the closest point q, c = nᵀq + ``clearance[k]``; one per face of the
-    ``fence`` box ([min; max], m) within ``range_m`` of p: n the inward normal,
-    c = face + ``fence_margin``."""
+    normal at the closest point q, c = nᵀq + ``clearance[k]``; then one per plane
+    [n, c] of ``fence`` (F,4) (the fence's inward half-spaces, F = 0 without one,
+    :meth:`swarm_common.world.config.Geofence.planes`) with nᵀp − c < ``range_m``:
+    that n, c + ``fence_margin``."""
     out = np.empty(7)
     m = 0
     for k in range(table.shape[0]):
@@ -118,18 +120,12 @@ def world_planes(table: np.ndarray, clearance: np.ndarray, fence_on: bool,
             normals[m, 0], normals[m, 1], normals[m, 2] = out[3], out[4], out[5]
             offsets[m] = out[3] * out[0] + out[4] * out[1] + out[5] * out[2] + clearance[k]
             m += 1
-    if fence_on:
-        for a in range(3):
-            if p[a] - fence[0, a] < range_m:
-                normals[m, 0], normals[m, 1], normals[m, 2] = 0.0, 0.0, 0.0
-                normals[m, a] = 1.0
-                offsets[m] = fence[0, a] + fence_margin
-                m += 1
-            if fence[1, a] - p[a] < range_m:
-                normals[m, 0], normals[m, 1], normals[m, 2] = 0.0, 0.0, 0.0
-                normals[m, a] = -1.0
-                offsets[m] = -(fence[1, a] - fence_margin)
-                m += 1
+    for j in range(fence.shape[0]):
+        nx, ny, nz, c = fence[j, 0], fence[j, 1], fence[j, 2], fence[j, 3]
+        if nx * p[0] + ny * p[1] + nz * p[2] - c < range_m:
+            normals[m, 0], normals[m, 1], normals[m, 2] = nx, ny, nz
+            offsets[m] = c + fence_margin
+            m += 1
     return m
 
 
@@ -148,6 +144,14 @@ def obstacle_distances(table: np.ndarray, p: np.ndarray, v: np.ndarray,
 
 
 def fence_margins(fence: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """(…) how far (m) each point of ``p`` (…,3) is inside the ``fence`` box ([min; max]):
-    the smallest distance to a face, < 0 outside."""
-    return np.minimum(np.min(p - fence[0], axis=-1), np.min(fence[1] - p, axis=-1))
+    """(…) how far (m) each point of ``p`` (…,3) is inside the fence of half-spaces
+    ``fence`` (F,4) [n, c] (F ≥ 1): the smallest nᵀp − c, the distance to the nearest
+    face from inside, < 0 outside."""
+    return np.min(fence_distances(fence, p), axis=-1)
+
+
+def fence_distances(fence: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(…, F) nᵀp − c (m) of each point of ``p`` (…,3) to each plane of ``fence`` (F,4)."""
+    p = np.asarray(p, dtype=float)[..., None, :]
+    return (p[..., 0] * fence[:, 0] + p[..., 1] * fence[:, 1] + p[..., 2] * fence[:, 2]
+            - fence[:, 3])

@@ -1,5 +1,5 @@
 """The dcbf filter's world rows: one pair of barrier rows per half-space nᵀx ≥ c that the
-agent keeps this step (an obstacle's tangent plane or a geofence face,
+agent keeps this step (an obstacle's tangent plane or a geofence face, box or polygon,
 :func:`swarm_common.world.geometry.world_planes`; docs/world.md).
 
 They are the ground barrier's rows (:func:`offboard.safety.dcbf.kernel.ground_rows_kernel`)
@@ -93,15 +93,15 @@ class WorldPlanes:
     def __init__(self, world: World, range_m: float) -> None:
         self.table = np.ascontiguousarray(world.table, dtype=float)
         self.clearance = np.ascontiguousarray(world.clearances, dtype=float)
-        self.fence_on, self.fence, self.fence_margin = world.fence_arrays()
+        fence, self.fence_margin = world.fence_arrays()
+        self.fence = np.ascontiguousarray(fence, dtype=float)
         self.range_m = float(range_m)
-        self.capacity = len(self.table) + 6
+        self.capacity = len(self.table) + len(self.fence)
         self.normals = np.zeros((self.capacity, 3))
         self.offsets = np.zeros(self.capacity)
 
     def at(self, p: np.ndarray) -> int:
         """The number of half-spaces for an agent at ``p`` (3,) (m), written into
         :attr:`normals` and :attr:`offsets`."""
-        return int(world_planes(self.table, self.clearance, self.fence_on, self.fence,
-                                self.fence_margin, p, self.range_m, self.normals,
-                                self.offsets))
+        return int(world_planes(self.table, self.clearance, self.fence, self.fence_margin, p,
+                                self.range_m, self.normals, self.offsets))

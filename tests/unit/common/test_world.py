@@ -237,6 +237,7 @@ def test_closest_point_on_the_axis() -> None:
 # --- world_planes --------------------------------------------------------------------------
 
 FENCE = np.array([[-6.0, -7.0, -4.0], [7.0, 6.0, 6.0]])
+FENCE_PLANES = Geofence((-6.0, -7.0, -4.0), (7.0, 6.0, 6.0), 0.6).planes()  # (6, 4) [n, c]
 FENCE_MARGIN = 0.6
 FAR = Obstacle(ObstacleKind.SPHERE, (50.0, 50.0, 50.0), 0.4, radius_m=1.0)
 
@@ -244,7 +245,7 @@ FAR = Obstacle(ObstacleKind.SPHERE, (50.0, 50.0, 50.0), 0.4, radius_m=1.0)
 def _planes(table: np.ndarray, clear: np.ndarray, p: np.ndarray,
             range_m: float) -> tuple[np.ndarray, np.ndarray]:
     normals, offsets = np.full((len(table) + 6, 3), np.nan), np.full(len(table) + 6, np.nan)
-    m = world_planes(table, clear, True, FENCE, FENCE_MARGIN, p, range_m, normals, offsets)
+    m = world_planes(table, clear, FENCE_PLANES, FENCE_MARGIN, p, range_m, normals, offsets)
     return normals[:m], offsets[:m]
 
 
@@ -287,8 +288,8 @@ def test_world_planes_fence_interior(rng: np.random.Generator) -> None:
     empty, none = np.zeros((0, 11)), np.zeros(0)
     p = rng.uniform(FENCE[0] - 0.5, FENCE[1] + 0.5, (2000, 3))
     y = rng.uniform(FENCE[0] - 0.5, FENCE[1] + 0.5, (2000, 3))
-    deep = y[fence_margins(FENCE, y) > FENCE_MARGIN]
-    shallow = y[fence_margins(FENCE, y) < FENCE_MARGIN]
+    deep = y[fence_margins(FENCE_PLANES, y) > FENCE_MARGIN]
+    shallow = y[fence_margins(FENCE_PLANES, y) < FENCE_MARGIN]
     assert len(deep) > 500 and len(shallow) > 500
     for agent in p[:200]:
         normals, offsets = _planes(empty, none, agent, 1e6)  # every face in range
@@ -329,7 +330,7 @@ def test_obstacle_distances(rng: np.random.Generator) -> None:
 
 def test_fence_margins(rng: np.random.Generator) -> None:
     p = rng.uniform(FENCE[0] - 2.0, FENCE[1] + 2.0, (3000, 3))
-    got = fence_margins(FENCE, p)
+    got = fence_margins(FENCE_PLANES, p)
     ref = np.empty(len(p))
     for i, x in enumerate(p):
         m = math.inf
@@ -337,7 +338,7 @@ def test_fence_margins(rng: np.random.Generator) -> None:
             m = min(m, x[a] - FENCE[0, a], FENCE[1, a] - x[a])
         ref[i] = m
     np.testing.assert_allclose(got, ref, rtol=0, atol=EXACT)
-    assert fence_margins(FENCE, p.reshape(30, 100, 3)).shape == (30, 100)
+    assert fence_margins(FENCE_PLANES, p.reshape(30, 100, 3)).shape == (30, 100)
     inside_fence = np.all((p > FENCE[0]) & (p < FENCE[1]), axis=1)
     assert inside_fence.sum() > 500 and (~inside_fence).sum() > 500
     assert np.all((got > 0) == inside_fence)
@@ -390,11 +391,11 @@ def test_parse_world_values() -> None:
     assert w.table.shape == (4, 11) and not w.table.flags.writeable
     np.testing.assert_array_equal(w.table[2], BOX.row())
     np.testing.assert_allclose(w.clearances, [0.4, D_SAFE, 0.5, D_SAFE])
-    on, fence, margin = w.fence_arrays()
-    assert on and margin == D_SAFE
-    np.testing.assert_array_equal(fence, FENCE)
+    fence, margin = w.fence_arrays()
+    assert margin == D_SAFE
+    np.testing.assert_array_equal(fence, FENCE_PLANES)
     empty = parse_world({}, D_SAFE)
-    assert empty.empty and empty.table.shape == (0, 11) and not empty.fence_arrays()[0]
+    assert empty.empty and empty.table.shape == (0, 11) and empty.fence_arrays()[0].shape == (0, 4)
 
 
 def test_world_round_trip() -> None:
