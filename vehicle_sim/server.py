@@ -38,6 +38,7 @@ from vehicle_sim.link.server_io import ServerIO
 from vehicle_sim.link.truth import TruthPublisher
 from vehicle_sim.options import SimOptions, restrict
 from vehicle_sim.physics.dynamics import SwarmDynamics
+from vehicle_sim.services.geofence import scenario_fence_items
 from vehicle_sim.vehicle import MSG_ODOMETRY, Vehicle
 
 log = logging.getLogger(__name__)
@@ -123,6 +124,8 @@ class SimServer(ServerIO):
                 port_offset=o.port_offset,
             )
             v = Vehicle(aid, idx, self.dyn, cfg)
+            if self.sc.world.geofence is not None:  # listed and checked as the filter keeps it
+                v.mission.preload_fence(scenario_fence_items(cfg, self.sc.world.geofence))
             if o.signing_key is not None:
                 v.sign_links(o.signing_key, LINK_NAMES, signing.setup_signing)
             self.vehicles.append(v)

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as M
 
+from swarm_common import frames
+from vehicle_sim.physics.geo import latlon_e7
 from vehicle_sim.services.mission_items import FENCE_CIRCLE, FENCE_POLYGON, Item, item_position_enu
 
 
@@ -84,6 +86,25 @@ class Geofence:
             if not zn.inclusion and zn.contains(x, y):
                 return "inside an exclusion zone"
         return None
+
+
+def scenario_fence_items(cfg: Any, fence: Any) -> list[Item]:
+    """The FENCE items of a scenario's ``[geofence]`` (:class:`swarm_common.world.config.
+    Geofence`): one inclusion polygon, the box's x-y rectangle or the polygon's vertices,
+    global frame (lat/lon degE7 about ``cfg``'s origin). Its altitude limits have no zone
+    item (PX4's zones are 2-D): the offboard filter keeps them."""
+    if fence.polygon_m:
+        xy = [(float(x), float(y)) for x, y in fence.polygon_m]
+    else:
+        (x0, y0, _), (x1, y1, _) = fence.min_m, fence.max_m
+        xy = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    items = []
+    for k, (x, y) in enumerate(xy):
+        lat, lon = latlon_e7(cfg, frames.enu_to_ned(np.array([x, y, 0.0])))
+        items.append(Item(k, M.MAV_FRAME_GLOBAL_INT, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                          0, 1, float(len(xy)), 0.0, 0.0, 0.0, lat, lon, 0.0,
+                          M.MAV_MISSION_TYPE_FENCE))
+    return items
 
 
 def fence_from_items(cfg: Any, items: Sequence[Item]) -> Geofence:

@@ -28,6 +28,7 @@ from vehicle_sim.autopilot.nav import NavTarget
 from vehicle_sim.services import mission_items as mi
 from vehicle_sim.services.geofence import Geofence, fence_from_items
 from vehicle_sim.services.mission_executor import MissionExecutor
+from vehicle_sim.services.mission_items import Item
 from vehicle_sim.services.mission_transfer import MissionTransfer, ack
 
 CURRENT_HZ = 1.0  # MISSION_CURRENT, as PX4 streams it (wall clock)
@@ -45,6 +46,7 @@ class MissionService:
         self.transfer = MissionTransfer(vehicle.cfg)
         self.executor: MissionExecutor | None = None
         self.geofence = Geofence()
+        self._preloaded: list[Item] | None = None  # the scenario's fence, when it has one
         self.fence_breached = False
         self._breach_handled = False
         self.started = False  # AUTO.MISSION entered since the mission was stored
@@ -161,6 +163,14 @@ class MissionService:
             self._next_current = now + 1.0 / CURRENT_HZ
         self._check_fence(sim_t)
 
+    def preload_fence(self, items: list[Item]) -> None:
+        """Start with ``items`` as the stored fence (the scenario's ``[geofence]``,
+        :func:`~vehicle_sim.services.geofence.scenario_fence_items`): a ground station lists
+        it, and the breach check uses it, as the offboard filter does."""
+        self.transfer.stores[mi.FENCE] = list(items)
+        self.geofence = fence_from_items(self.vehicle.cfg, items)
+        self._preloaded = list(items)
+
     def _apply_changes(self) -> None:
         v = self.vehicle
         for line in self.transfer.errors:
@@ -177,6 +187,9 @@ class MissionService:
                 self.started = False
             elif mt == mi.FENCE:
                 self.geofence = fence_from_items(v.cfg, items)
+                if self._preloaded is not None and items != self._preloaded:
+                    v.event("geofence changed: the offboard filter keeps the scenario's "
+                            "[geofence]", M.MAV_SEVERITY_WARNING)
         self.transfer.changed.clear()
 
     def _mission_state(self) -> tuple[int, int, int]:
