@@ -15,23 +15,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, free_port_offset
+from formation_flight import WAIT_AT, fly_with, formation_port, swarm_key, waiting_course8
 from pymavlink import mavutil
 
-from gcs.formation.vehicle import FORMATION_PORT, FORMATION_SYSID
-from gcs.mission.distributed import recorded_metrics, run_distributed
-from gcs.mission.launch_spec import SigningChoice
+from gcs.formation.vehicle import FORMATION_SYSID
+from gcs.mission.distributed import recorded_metrics
 from swarm_common import px4
 from swarm_common.scenario.mission_check import mission_shape
-from swarm_common.scenario.model import dump_toml, load_scenario, with_overrides
-from swarm_common.signing import generate_key, load_key, setup_signing
+from swarm_common.signing import load_key, setup_signing
 
 pytestmark = pytest.mark.timeout(300)
 MAV = mavutil.mavlink
 SPEED = 1.0  # m/s east
 MOVE_M = 4.0  # the client stops streaming once the centroid is this far east of its start
 DURATION_S = 40.0
-START = (2.0, 2.0, 4.0)  # ENU (m): the waypoint where the formation forms and waits
+START = WAIT_AT  # ENU (m): the waypoint where the formation forms and waits
 FORMED_M, FORMED_MPS = 0.1, 0.05  # the client starts once the centroid is there, at rest
 VELOCITY_ONLY = (MAV.POSITION_TARGET_TYPEMASK_X_IGNORE | MAV.POSITION_TARGET_TYPEMASK_Y_IGNORE
                  | MAV.POSITION_TARGET_TYPEMASK_Z_IGNORE | MAV.POSITION_TARGET_TYPEMASK_AX_IGNORE
@@ -125,26 +123,11 @@ class LivePilot(threading.Thread):
 
 @pytest.mark.slow
 def test_a_client_flies_the_formation_live_with_velocity_setpoints(tmp_path: Path) -> None:
-    base = load_scenario(ROOT / "scenarios" / "course8.toml")
-    sc = with_overrides(base, mission={"speed_mps": 1.5, "waypoint": [
-        {"centroid": list(START), "hold_s": 1.0}]})  # form where it starts, then wait
-    path = tmp_path / "wait8.toml"
-    path.write_text(dump_toml(sc.to_toml_dict()))
-    sc = load_scenario(path)
-    off = free_port_offset()
-    key_path = tmp_path / "keys" / "swarm.key"
-    generate_key(key_path)
-    pilot = LivePilot(FORMATION_PORT + off, load_key(key_path))
-    pilot.start()
-    try:
-        rec, facts = run_distributed(
-            sc, tmp_path / "run", "dcbf", None, DURATION_S, port_offset=off,
-            show_progress=False, signing=SigningChoice(key=key_path), processes=2,
-            formation_port=FORMATION_PORT + off,
-        )
-    finally:
-        pilot.join(5)
-        pilot.conn.close()
+    sc = waiting_course8(tmp_path)
+    off, port = formation_port()
+    key_path = swarm_key(tmp_path)
+    pilot = LivePilot(port, load_key(key_path))
+    rec, facts = fly_with(pilot, sc, tmp_path, off, DURATION_S, key_path)
     assert pilot.error is None, pilot.error
     assert pilot.denied_before_stream == MAV.MAV_RESULT_DENIED
     assert pilot.offboard_result == MAV.MAV_RESULT_ACCEPTED

@@ -15,15 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import ROOT, free_port_offset
+from formation_flight import assert_passes, fly_with, formation_port, swarm_key, waiting_course8
 from pymavlink import mavutil
 
-from gcs.formation.vehicle import FORMATION_PORT, FORMATION_SYSID
-from gcs.mission.distributed import recorded_metrics, run_distributed
-from gcs.mission.launch_spec import SigningChoice
+from gcs.formation.vehicle import FORMATION_SYSID
+from gcs.mission.distributed import recorded_metrics
 from swarm_common import frames
-from swarm_common.scenario.model import dump_toml, load_scenario, with_overrides
-from swarm_common.signing import generate_key, load_key, setup_signing
+from swarm_common.signing import load_key, setup_signing
 from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.physics import geo
 
@@ -93,38 +91,17 @@ class GroundStation(threading.Thread):
 
 @pytest.mark.slow
 def test_a_pymavlink_ground_station_flies_the_formation(tmp_path: Path) -> None:
-    base = load_scenario(ROOT / "scenarios" / "course8.toml")
-    sc = with_overrides(base, mission={"speed_mps": 1.5, "waypoint": [
-        {"centroid": [2.0, 2.0, 4.0], "hold_s": 1.0}]})  # form where it starts, then wait
-    path = tmp_path / "wait8.toml"
-    path.write_text(dump_toml(sc.to_toml_dict()))
-    sc = load_scenario(path)
-    off = free_port_offset()
-    key_path = tmp_path / "keys" / "swarm.key"
-    generate_key(key_path)
-    gs = GroundStation(FORMATION_PORT + off, load_key(key_path))
-    gs.start()
-    try:
-        rec, facts = run_distributed(
-            sc, tmp_path / "run", "dcbf", None, DURATION_S, port_offset=off,
-            show_progress=False, signing=SigningChoice(key=key_path), processes=2,
-            formation_port=FORMATION_PORT + off,
-        )
-    finally:
-        gs.join(5)
-        gs.conn.close()
+    sc = waiting_course8(tmp_path)
+    off, port = formation_port()
+    key_path = swarm_key(tmp_path)
+    gs = GroundStation(port, load_key(key_path))
+    rec, facts = fly_with(gs, sc, tmp_path, off, DURATION_S, key_path)
     assert gs.error is None, gs.error
     assert gs.results == {"bad": MAV.MAV_MISSION_INVALID, "good": MAV.MAV_MISSION_ACCEPTED,
                           "start": MAV.MAV_RESULT_ACCEPTED}
     assert facts["formation_commands"] == ["mission"]  # the refused upload sent nothing
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], DURATION_S)
-    centroid = ser.p.mean(axis=1)
-    k = 0
-    for wp in WAYPOINTS:  # in order
-        d = np.linalg.norm(centroid[k:] - np.array(wp), axis=1)
-        hit = np.flatnonzero(d <= 0.5)
-        assert hit.size, f"the centroid never came within 0.5 m of {wp} (closest {d.min():.2f})"
-        k += int(hit[0])
+    assert_passes(ser.p.mean(axis=1), WAYPOINTS)  # in order
     assert m["collisions"] == 0 and m["h_min"] >= 0.0
 
 
@@ -201,34 +178,16 @@ GOTO = (2.0, 6.0, 4.5)
 @pytest.mark.slow
 def test_mavsdk_uploads_starts_and_sends_the_formation_somewhere(tmp_path: Path) -> None:
     pytest.importorskip("mavsdk")
-    base = load_scenario(ROOT / "scenarios" / "course8.toml")
-    sc = with_overrides(base, mission={"speed_mps": 1.5, "waypoint": [
-        {"centroid": [2.0, 2.0, 4.0], "hold_s": 1.0}]})
-    path = tmp_path / "wait8.toml"
-    path.write_text(dump_toml(sc.to_toml_dict()))
-    sc = load_scenario(path)
-    off = free_port_offset()
-    gs = MavsdkGroundStation(FORMATION_PORT + off)
-    gs.start()
-    try:  # MAVSDK does not sign: a swarm whose links are unsigned (--no-signing)
-        rec, facts = run_distributed(
-            sc, tmp_path / "run", "dcbf", None, MAVSDK_S, port_offset=off, show_progress=False,
-            signing=SigningChoice(enabled=False), processes=2,
-            formation_port=FORMATION_PORT + off,
-        )
-    finally:
-        gs.join(10)
+    sc = waiting_course8(tmp_path)
+    off, port = formation_port()
+    # MAVSDK does not sign: a swarm whose links are unsigned (--no-signing)
+    gs = MavsdkGroundStation(port)
+    rec, facts = fly_with(gs, sc, tmp_path, off, MAVSDK_S, None, join_s=10.0)
     assert gs.error is None, gs.error
     assert gs.done == ["upload", "start", "goto"]
     # MAVSDK's goto on a PX4 autopilot switches to HOLD (AUTO.LOITER) before DO_REPOSITION
     kinds = facts["formation_commands"]
     assert kinds[0] == kinds[-1] == "mission" and set(kinds) <= {"mission", "hold"}, kinds
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], MAVSDK_S)
-    centroid = ser.p.mean(axis=1)
-    k = 0
-    for wp in [*MAVSDK_LEGS, GOTO]:
-        d = np.linalg.norm(centroid[k:] - np.array(wp), axis=1)
-        hit = np.flatnonzero(d <= 0.5)
-        assert hit.size, f"the centroid never came within 0.5 m of {wp} (closest {d.min():.2f})"
-        k += int(hit[0])
+    assert_passes(ser.p.mean(axis=1), [*MAVSDK_LEGS, GOTO])
     assert m["collisions"] == 0 and m["h_min"] >= 0.0
