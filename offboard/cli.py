@@ -207,10 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     except ScenarioError as exc:
         print(f"offboard: {exc}", file=sys.stderr)
         return 2
-    if sc.communication.delay_s > 0.0:  # the network's own latency is the daemons'
-        print(f"offboard: {sc.path}: communication.delay_s = {sc.communication.delay_s:g} is "
-              f"modelled in process only; a daemon's latency is its network's (or the "
-              f"[faults] delay_s of docs/faults.md)", file=sys.stderr)
+    if (why := sc.process_problem()) is not None:
+        print(f"offboard: {sc.path}: {why}", file=sys.stderr)
         return 2
     ids = agent_ids(args, sc.ids)
     if isinstance(ids, str):

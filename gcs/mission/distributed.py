@@ -115,9 +115,8 @@ def run_distributed(
     death is recorded in ``facts["failed_agents"]`` and the run goes on. Every child is
     stopped on the way out, whatever ends the run (Ctrl-C and SIGTERM included).
     """
-    if sc.communication.delay_s > 0.0:
-        raise LaunchError(f"communication.delay_s = {sc.communication.delay_s:g} is modelled in "
-                          f"process only (--inproc); distributed runs take a [faults] delay_s")
+    if (why := sc.process_problem()) is not None:
+        raise LaunchError(why)
     warn_liveness(sc, method)
     signing = SigningChoice() if signing is None else signing
     sec_dir = secure_dir() if secure or signing.enabled else None

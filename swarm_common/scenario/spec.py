@@ -151,6 +151,16 @@ class Scenario:
         periods = self.communication.delay_s / self.control_dt
         return max(0, math.ceil(periods - 1e-9) - 1)
 
+    def process_problem(self) -> str | None:
+        """Why this scenario cannot fly as processes (daemons, a distributed run), or None:
+        a latency (``communication.delay_s``) is modelled in process only; a process's is
+        its network's, or a ``[faults]`` delay (docs/faults.md)."""
+        if self.communication.delay_s > 0.0:
+            return (f"communication.delay_s = {self.communication.delay_s:g} is modelled in "
+                    f"process only (--inproc); processes take their network's latency or a "
+                    f"[faults] delay_s")
+        return None
+
     @property
     def physics_dt(self) -> float:
         return 1.0 / float(self.run.physics_hz)
