@@ -183,16 +183,13 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
 
 def _formation_link(sc: Any, feed: Any, steer: FormationSteer | None, offset: int,
                     key: bytes | None) -> Any:
-    """The formation vehicle (gcs.dashboard.formation_link); ValueError (exit 2) without a
-    mission or Zenoh, OSError when its port is busy."""
+    """The formation vehicle (gcs.dashboard.formation_link); OSError when its port is busy.
+    :func:`build` refused a scenario without a mission, or no Zenoh, before starting."""
     from gcs.formation.vehicle import FORMATION_PORT
 
     from .formation_link import FormationLink
 
-    if steer is None:
-        raise ValueError("--formation-vehicle needs a scenario with a [mission]")
-    if feed is None:
-        raise ValueError("--formation-vehicle needs Zenoh (not --no-zenoh)")
+    assert steer is not None and feed is not None  # checked in build, before any work
     try:
         return FormationLink(sc, feed, steer, FORMATION_PORT + offset, key)
     except OSError as exc:

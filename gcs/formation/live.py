@@ -112,5 +112,9 @@ class LiveSetpoints:
         return (t - self.sent_at >= SEND_EVERY_S
                 or float(np.linalg.norm(v - self.sent_velocity)) > CHANGE_MPS)
 
+    def restart(self) -> None:
+        """The next live command goes at once (OFFBOARD was just entered)."""
+        self.sent_at = -math.inf
+
     def sent(self, t: float, v: np.ndarray) -> None:
         self.sent_at, self.sent_velocity = float(t), np.array(v, dtype=float)

@@ -256,7 +256,7 @@ class FormationVehicle:
             if not self.setpoints.fresh(time.monotonic()):
                 raise MissionError("OFFBOARD refused: no setpoint stream")
             self.offboard = True
-            self.setpoints.sent_at = -math.inf  # the first live command goes at once
+            self.setpoints.restart()  # the first live command goes at once
             return M.MAV_RESULT_ACCEPTED
         self.offboard = False
         if main == px4.MAIN_AUTO and sub == px4.SUB_AUTO_LOITER:
