@@ -79,14 +79,14 @@ def _compare_distributed(sc: Scenario, args: argparse.Namespace, out: Path) -> O
 
 
 def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
-    from concurrent.futures import ProcessPoolExecutor
+    from gcs.mission.sweep import worker_pool
 
     base = sc.seed if args.seed is None else args.seed
     jobs = [(args.scenario, sc.allow_infeasible, sc.allow_unsafe, m, base + s, args.duration)
             for m in METHODS
             for s in range(args.seeds)]
     log.info("seed sweep: %d runs ...", len(jobs))
-    with ProcessPoolExecutor(max_workers=args.jobs) as ex:
+    with worker_pool(args.jobs) as ex:
         res_all = list(ex.map(_run_one, jobs))
     return {m: [r for (_, _, _, mm, _, _), r in zip(jobs, res_all, strict=True) if mm == m]
             for m in METHODS}

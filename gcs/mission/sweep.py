@@ -4,7 +4,7 @@
                       [--duration S]
 
 Every (scenario, method, seed) is one :func:`gcs.mission.inproc.run_inproc` in a worker process
-(:class:`~concurrent.futures.ProcessPoolExecutor`, ``--jobs`` workers, default
+(:func:`worker_pool`: fresh ``spawn`` processes, ``--jobs`` of them, default
 ``os.cpu_count()``); progress on stderr (:mod:`gcs.mission.progress`, over the simulated seconds of
 all runs). Writes ``DIR/runs.csv`` (:data:`gcs.report.sweep.CSV_COLUMNS`), ``DIR/summary.md``
 and ``DIR/summary.png`` (:mod:`gcs.report.sweep`). A run that raises is kept as a row with
@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import multiprocessing
 import os
 import sys
 import time
@@ -31,6 +32,7 @@ from gcs.exit_codes import EXIT_USAGE
 from gcs.mission.progress import Progress
 from gcs.report.sweep import flat_row, write_outputs
 from swarm_common.enums import Method
+from swarm_common.logsetup import configure_logging
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
@@ -145,6 +147,18 @@ def make_jobs(
     ]
 
 
+def worker_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` fresh interpreters (``spawn``), each logging as this process does.
+
+    Never ``fork``: a caller with threads (a test runner's, a dashboard's, Zenoh's) may hold
+    a lock at the moment of the fork, and the child then waits on it for ever."""
+    level = logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower()
+    if level not in ("debug", "info", "warning", "error"):
+        level = "warning"
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=configure_logging, initargs=(level,))
+
+
 def run_job(job: Job) -> dict[str, Any]:
     """Worker: one in-process run → its CSV row; an exception becomes a ``crashed`` row
     (logged with its traceback in the worker)."""
@@ -180,7 +194,7 @@ def run_sweep(
     bar = Progress(total, label=f"sweep {len(jobs)} runs") if show_progress else None
     rows = [] if rows is None else rows
     done_s, crashed = 0.0, 0
-    ex = ProcessPoolExecutor(max_workers=workers)
+    ex = worker_pool(workers)
     try:
         futs: dict[Future[dict[str, Any]], Job] = {ex.submit(run_job, j): j for j in jobs}
         for fut in as_completed(futs):
