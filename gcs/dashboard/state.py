@@ -22,7 +22,9 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from swarm_common.enums import AgentAlarm, QPStatus, Role
+from swarm_common.enums import AgentAlarm, QPStatus, Role, VehicleMode
+
+from .timeline import EventMerger, SimClock
 
 Vec3 = tuple[float, float, float]
 
@@ -63,7 +65,7 @@ class VehicleRow:
 class SwarmView:
     """Everything on screen at one instant."""
 
-    t: float  # seconds since the dashboard started (or recorded time)
+    t: float  # sim time (s) now (NaN before the dashboard heard one; recorded: its time)
     rows: list[VehicleRow]
     desired: dict[int, Vec3]  # desired (cube) position per id
     cube_edges: list[tuple[int, int]]
@@ -90,7 +92,7 @@ class SwarmView:
 
 @dataclass(frozen=True)
 class DashEvent:
-    t: float  # seconds since the dashboard started
+    t: float  # sim time (s) when it arrived (NaN before any sim time was heard)
     agent: int  # 0 = swarm / ground station
     kind: str
     text: str
@@ -147,7 +149,9 @@ def as_vec3(a: Any) -> Vec3:
 
 def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_text: bool,
                    alarms: int = 0) -> str:
-    """The row's failsafe cell; ``alarms``: the agent's AgentAlarm bits (docs/safety.md)."""
+    """The row's failsafe cell; ``alarms``: the agent's AgentAlarm bits (docs/safety.md).
+    The agent's own alarms, estimator and QP count only while its setpoints fly the
+    vehicle (OFFBOARD); before, they are no failsafe of anything."""
     if row.link_lost:
         return "LINK"
     if row.mode in ("TERMINATION",):
@@ -156,6 +160,8 @@ def failsafe_label(row: VehicleRow, zenoh_on: bool, est_health: str | None, fs_t
         return "FS"
     if zenoh_on and row.status_missing:
         return "NO-OFB"
+    if row.mode != VehicleMode.OFFBOARD:
+        return "ok"
     if alarms & AgentAlarm.FALLBACK:
         return "FALLBACK"
     if alarms & ~AgentAlarm.DEADLOCK:
@@ -227,14 +233,21 @@ class LiveSource:
         self.history: deque[float] = deque(maxlen=history)
         self._fs_text: dict[int, bool] = {}
         self._init_pos = {a.id: np.asarray(a.position, float) for a in scenario.agents}
+        self.sim_clock = SimClock()  # every time on screen is sim time (timeline)
+        self.merger: EventMerger[DashEvent] = EventMerger()
 
     def close(self) -> None:
         for part in (self.link, self.feed):
             if part is not None:
                 part.close()
 
-    def _rel(self, t: float) -> float:
-        return max(0.0, t - self.t0)
+    def _observe_sim_time(self, snap: Any) -> None:
+        """Sim-time references: the truth's stamp, else the agents' status stamps."""
+        if snap.truth is not None and snap.truth_time is not None:
+            self.sim_clock.observe(float(snap.truth.t), snap.truth_time)
+        elif snap.status:
+            st, ts = max(snap.status.values(), key=lambda rec: rec[1])
+            self.sim_clock.observe(float(st.t), ts)
 
     def poll(self) -> tuple[SwarmView, list[DashEvent]]:
         now = self.clock()
@@ -244,11 +257,14 @@ class LiveSource:
         if self.feed is not None:
             self.feed.check(now)
             snap = self.feed.snapshot()
+            self._observe_sim_time(snap)
+        sim_at = self.sim_clock.at
+        if snap is not None:
             for e in self.feed.drain_events():
-                events.append(DashEvent(self._rel(e.t), e.agent, e.kind, e.text, e.severity))
+                events.append(DashEvent(sim_at(e.t), e.agent, e.kind, e.text, e.severity))
         if self.link is not None:
             for e in self.link.drain_events():
-                events.append(DashEvent(self._rel(e.t), e.sysid, e.kind, e.text, e.severity))
+                events.append(DashEvent(sim_at(e.t), e.sysid, e.kind, e.text, e.severity))
                 if e.kind == "statustext" and any(w in e.text.lower() for w in FAILSAFE_WORDS):
                     self._fs_text[e.sysid] = e.severity <= mavlink.MAV_SEVERITY_WARNING
         if self.procs is not None:
@@ -256,10 +272,10 @@ class LiveSource:
                 if d not in self._dead_seen:
                     self._dead_seen.add(d)
                     ev = DashEvent(
-                        self._rel(now), 0, "process", f"exited: {d}", mavlink.MAV_SEVERITY_CRITICAL
+                        sim_at(now), 0, "process", f"exited: {d}", mavlink.MAV_SEVERITY_CRITICAL
                     )
                     events.append(ev)
-        events.sort(key=lambda e: e.t)
+        events = self.merger.push(events, now)
 
         truth = snap.truth if snap is not None else None
         truth_fresh = snap is not None and truth is not None and now - (snap.truth_time or 0) < 2.0
@@ -350,8 +366,9 @@ class LiveSource:
             method = methods.pop() if len(methods) == 1 else "mixed"
         else:
             method = self.method + "?"
+        t_sim = sim_at(now)
         view = SwarmView(
-            t=self._rel(now),
+            t=t_sim,
             rows=rows,
             desired=desired,
             cube_edges=self.edges,
@@ -364,7 +381,7 @@ class LiveSource:
             zenoh=zstate,
             swarm=self.swarm,
             method=method,
-            sim_time=truth.t if truth is not None else None,
+            sim_time=t_sim if math.isfinite(t_sim) else None,
             collisions=truth.collisions if truth is not None else 0,
             signed=bool(getattr(self.link, "signed", False)),
             rejected=int(getattr(self.link, "rejected", 0)) + sum(v.rejected for v in veh.values()),

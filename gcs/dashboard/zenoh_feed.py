@@ -36,7 +36,7 @@ import zenoh
 from pymavlink.dialects.v20 import common as mavlink
 
 from offboard.safety.monitor import alarm_onsets
-from swarm_common.enums import AgentAlarm, CommandKind, Method
+from swarm_common.enums import AgentAlarm, CommandKind, Method, VehicleMode
 from swarm_common.wire import (
     COMMAND_KINDS,
     Command,
@@ -60,6 +60,11 @@ METHODS = tuple(Method)
 NOTICE = mavlink.MAV_SEVERITY_NOTICE
 INFO = mavlink.MAV_SEVERITY_INFO
 RING_DEPTH = 256  # samples per subscriber kept for the feed's reader (the oldest dropped)
+
+
+def in_charge(s: Status) -> bool:
+    """Whether the agent's setpoints fly its vehicle (its QP, estimator and links matter)."""
+    return s.mode == VehicleMode.OFFBOARD
 
 
 @dataclass(frozen=True)
@@ -213,30 +218,39 @@ class ZenohFeed:
                 self.bad_payloads += 1  # a Command on a data key
 
     def _status_events(self, prev: Status | None, s: Status, now: float) -> None:
+        """Operator events from one agent's status change. Before its setpoints fly its
+        vehicle (mode not OFFBOARD: on the pads, holding, landed) the agent's QP, estimator
+        and links cannot hurt anyone: their changes are states (INFO), QP fallbacks are
+        not reported, and what is still wrong when it enters OFFBOARD is reported then."""
         ev = self._events
         if prev is None:
             ev.append(FeedEvent(now, s.id, "status", f"status up ({s.mode}, {s.method})", INFO))
             return
+        flying = in_charge(s)
         if s.method != prev.method:
             text = f"method {prev.method} -> {s.method}"
             ev.append(FeedEvent(now, s.id, "method", text, NOTICE))
         if s.mode != prev.mode:
             ev.append(FeedEvent(now, s.id, "mode", f"offboard {prev.mode} -> {s.mode}", NOTICE))
-        if s.fallbacks > prev.fallbacks:
+        entered = flying and not in_charge(prev)
+        if flying and s.fallbacks > prev.fallbacks:
             text = f"QP fallback ({s.qp_status}), total {s.fallbacks}"
             ev.append(FeedEvent(now, s.id, "fallback", text, mavlink.MAV_SEVERITY_WARNING))
-        if s.comm_ok != prev.comm_ok:
+        if s.comm_ok != prev.comm_ok or (entered and not s.comm_ok):
             text, sev = (
                 ("comm restored", NOTICE)
                 if s.comm_ok
-                else ("comm outage", mavlink.MAV_SEVERITY_ERROR)
+                else ("comm outage", mavlink.MAV_SEVERITY_ERROR if flying else INFO)
             )
             ev.append(FeedEvent(now, s.id, "comm", text, sev))
-        if s.est_health != prev.est_health:
-            sev = INFO if s.est_health == "ok" else mavlink.MAV_SEVERITY_ERROR
+        if s.est_health != prev.est_health or (entered and s.est_health != "ok"):
+            bad = mavlink.MAV_SEVERITY_ERROR if flying else INFO
+            sev = INFO if s.est_health == "ok" else bad
             ev.append(FeedEvent(now, s.id, "estimator", f"estimator {s.est_health}", sev))
-        new = alarm_onsets(prev.alarms, s.alarms)  # docs/safety.md, in-flight alarms
-        if new:
+        new = alarm_onsets(prev.alarms, s.alarms) if flying else AgentAlarm(0)
+        if entered:
+            new |= alarm_onsets(0, s.alarms)
+        if new:  # docs/safety.md, in-flight alarms
             sev = (mavlink.MAV_SEVERITY_CRITICAL if new & AgentAlarm.FALLBACK
                    else mavlink.MAV_SEVERITY_WARNING if new == AgentAlarm.DEADLOCK
                    else mavlink.MAV_SEVERITY_ERROR)

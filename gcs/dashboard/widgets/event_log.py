@@ -1,6 +1,11 @@
-"""The event log: STATUSTEXT, mode changes, failsafes, QP fallbacks, outages, ACKs."""
+"""The event log: STATUSTEXT, mode changes, failsafes, QP fallbacks, outages, ACKs.
+
+Times are sim seconds, the header's clock (``-`` before the dashboard heard one); a repeated
+event arrives here once with its count (:mod:`gcs.dashboard.timeline`)."""
 
 from __future__ import annotations
+
+import math
 
 from rich.text import Text
 from textual.widgets import RichLog
@@ -22,7 +27,7 @@ class EventLog(RichLog):
 
     def add(self, ev: DashEvent) -> None:
         line = Text(no_wrap=True)
-        line.append(f"{ev.t:6.1f} ", "dim")
+        line.append(f"{ev.t:6.1f} " if math.isfinite(ev.t) else "     - ", "dim")  # sim s
         who = "GCS" if ev.agent == 0 else f"#{ev.agent}"
         line.append(f"{who:>3} ")
         sev = max(0, min(7, ev.severity))

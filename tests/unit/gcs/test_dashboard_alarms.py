@@ -13,15 +13,20 @@ from swarm_common.enums import AgentAlarm
 from swarm_common.wire import Status
 
 
-def _status(alarms: int) -> Status:
-    return Status(3, 1, 0.02, "OFFBOARD", "dcbf", "solved", 5.0, 1.0, 0.1, "ok", 0,
-                  alarms=alarms)
+def _status(alarms: int, mode: str = "OFFBOARD", est_health: str = "ok", fallbacks: int = 0,
+            qp_status: str = "solved", comm_ok: bool = True) -> Status:
+    return Status(3, 1, 0.02, mode, "dcbf", qp_status, 5.0, 1.0, 0.1, est_health, fallbacks,
+                  comm_ok=comm_ok, alarms=alarms)
+
+
+def _all_events(prev: Status, now: Status) -> list[FeedEvent]:
+    feed = SimpleNamespace(_events=[])
+    ZenohFeed._status_events(feed, prev, now, 1.0)  # type: ignore[arg-type]
+    return list(feed._events)
 
 
 def _events(prev: int, now: int) -> list[FeedEvent]:
-    feed = SimpleNamespace(_events=[])
-    ZenohFeed._status_events(feed, _status(prev), _status(now), 1.0)  # type: ignore[arg-type]
-    return [e for e in feed._events if e.kind == "safety"]
+    return [e for e in _all_events(_status(prev), _status(now)) if e.kind == "safety"]
 
 
 def test_alarm_onsets_make_named_events() -> None:
@@ -33,9 +38,32 @@ def test_alarm_onsets_make_named_events() -> None:
     assert f.severity == mavlink.MAV_SEVERITY_CRITICAL
 
 
+def test_nothing_is_an_error_before_the_agent_flies_its_vehicle() -> None:
+    """On the pads (POSCTL): QP fallbacks are not reported, a comm outage and a degraded
+    estimator are states (INFO); entering OFFBOARD reports what is still wrong, as errors."""
+    calm = _status(0, "POSCTL")
+    bad = _status(int(AgentAlarm.RESIDUAL), "POSCTL", comm_ok=False, est_health="predicting",
+                  fallbacks=7, qp_status="relaxed")
+    pre = _all_events(calm, bad)
+    assert {e.kind for e in pre} == {"comm", "estimator"}
+    assert all(e.severity == mavlink.MAV_SEVERITY_INFO for e in pre)
+    flying = _status(int(AgentAlarm.RESIDUAL), comm_ok=False, est_health="predicting",
+                     fallbacks=8, qp_status="relaxed")
+    entry = {e.kind: e for e in _all_events(bad, flying)}
+    assert {"comm", "estimator", "safety", "fallback", "mode"} <= set(entry)
+    for kind in ("comm", "estimator", "safety"):
+        assert entry[kind].severity <= mavlink.MAV_SEVERITY_ERROR, kind
+    assert "RESIDUAL" in entry["safety"].text
+
+
 def test_row_shows_the_alarm() -> None:
-    row = VehicleRow(3, "follower", link_lost=False)
+    row = VehicleRow(3, "follower", link_lost=False, mode="OFFBOARD")
     row.status_missing = False
     assert failsafe_label(row, True, "ok", False) == "ok"
     assert failsafe_label(row, True, "ok", False, int(AgentAlarm.NEAR_ENTRY)) == "ALARM"
     assert failsafe_label(row, True, "ok", False, 5) == "FALLBACK"
+    assert failsafe_label(row, True, "predicting", False) == "EST:predi"[:8]
+    row.mode = "POSCTL"  # on the pads: the agent's alarms and estimator are no failsafe yet
+    assert failsafe_label(row, True, "predicting", False, 5) == "ok"
+    row.link_lost = True
+    assert failsafe_label(row, True, "ok", False) == "LINK"
