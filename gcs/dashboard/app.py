@@ -33,7 +33,8 @@ from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Iterable
+import math
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +51,9 @@ from gcs.formation.steer import FormationSteer
 from swarm_common.wire import Command
 from swarm_common.world.config import World
 
+from . import group_commands as gc
 from . import navigate as nav
+from .group_commands import COMMAND_REPEAT_S, LAND_LEAD_S
 from .mavlink_gcs import CommandResult
 from .palette import OUTAGES_S, palette_commands
 from .px4modes import COMMANDS
@@ -73,13 +76,6 @@ log = logging.getLogger(__name__)
 NOTICE = mavlink.MAV_SEVERITY_NOTICE
 WARNING = mavlink.MAV_SEVERITY_WARNING
 ERROR = mavlink.MAV_SEVERITY_ERROR
-LAND_LEAD_S = 1.0  # s of mission time between the land-all key and the common t_L
-# a take-off or land-all is published again this many times, this far apart (s): a Zenoh
-# put is not acknowledged, and it is lost to a daemon whose link is congested (its process
-# stalled) or reconnecting; every daemon acts on the first copy and ignores the others
-COMMAND_REPEATS = 20
-COMMAND_REPEAT_S = 0.5
-TAKEOFF_LEAD_S = 1.0  # s of mission time between the last ACK and the common take-off t0
 WIDE_TABLE_COLUMNS = 150
 FORMATION_TICK_S = 0.05  # s between two ticks of the formation vehicle (formation_link)
 
@@ -195,7 +191,7 @@ class DashboardApp(App[int]):
     def log_event(
         self, agent: int, kind: str, text: str, severity: int = mavlink.MAV_SEVERITY_INFO
     ) -> None:
-        t = self.view.t if self.view is not None else 0.0
+        t = self.view.t if self.view is not None else math.nan  # sim s, as every line
         self.query_one(EventLog).add(DashEvent(t, agent, kind, text, severity))
 
     # -- targets -------------------------------------------------------------------
@@ -226,8 +222,24 @@ class DashboardApp(App[int]):
         self.target_all = not self.target_all
         self.notify(f"command target: {self.target_label()}", timeout=2)
 
+    def confirm_group(self, what: str, ids: list[int], go: Callable[[], None]) -> None:
+        """A command for more than one vehicle runs once the operator confirmed the list of
+        its targets (``y``); one vehicle: at once."""
+        if len(ids) <= 1:
+            go()
+            return
+
+        def done(yes: bool | None) -> None:
+            if yes:
+                go()
+            else:
+                self.log_event(0, "cmd", f"{what} -> {self.target_label(ids)} cancelled")
+
+        self.push_screen(ConfirmScreen(gc.group_question(what, ids)), done)
+
     def action_mav(self, key: str) -> None:
-        self.send_mav(key, self.targets())
+        ids = self.targets()
+        self.confirm_group(COMMANDS[key].label, ids, lambda: self.send_mav(key, ids))
 
     def send_mav(self, key: str, ids: list[int]) -> None:
         spec = COMMANDS[key]
@@ -241,9 +253,9 @@ class DashboardApp(App[int]):
         self.run_worker(self._mav_worker(key, ids), group="mav", exit_on_error=False)
 
     async def _mav_worker(self, key: str, ids: list[int]) -> None:
-        self._log_results(await asyncio.gather(*(self.commander.mav(i, key) for i in ids)))
+        self.log_results(await asyncio.gather(*(self.commander.mav(i, key) for i in ids)))
 
-    def _log_results(self, results: Iterable[CommandResult]) -> None:
+    def log_results(self, results: Iterable[CommandResult]) -> None:
         for r in results:
             self.results.append(r)
             self.log_event(
@@ -257,11 +269,14 @@ class DashboardApp(App[int]):
         ids = self.targets()
         up = getattr(self.commander, "zenoh_up", None)
         if self.target_all and len(ids) > 1 and callable(up) and up():
-            t_now = getattr(self.commander, "mission_time", lambda: None)()
-            at_s = -1.0 if t_now is None else float(t_now) + LAND_LEAD_S
-            self.send_zenoh(Command(kind="land", agent=0, at_s=at_s))
+
+            def land_all() -> None:  # the common t_L from the mission time once confirmed
+                at_s = gc.mission_time_plus(self.commander, LAND_LEAD_S)
+                self.send_zenoh(Command(kind="land", agent=0, at_s=at_s))
+
+            self.confirm_group("coordinated land-all", ids, land_all)
             return
-        self.send_mav("land", ids)
+        self.confirm_group(COMMANDS["land"].label, ids, lambda: self.send_mav("land", ids))
 
     def action_takeoff(self) -> None:
         """Target ALL with a Zenoh link up: OFFBOARD then arm every vehicle, and once every
@@ -280,21 +295,12 @@ class DashboardApp(App[int]):
         if why:
             self.log_event(0, "cmd", f"take-off is for all vehicles at once: {why}", WARNING)
             return
-        self.log_event(0, "cmd", "take-off -> ALL: OFFBOARD, arm, then take-off", NOTICE)
-        self.run_worker(self._takeoff_worker(ids), group="mav", exit_on_error=False)
 
-    async def _takeoff_worker(self, ids: list[int]) -> None:
-        for key in ("offboard", "arm"):
-            results = await asyncio.gather(*(self.commander.mav(i, key) for i in ids))
-            self._log_results(results)
-            failed = [r.sysid for r in results if not r.ok]
-            if failed:
-                who = ",".join(f"#{i}" for i in failed)
-                self.log_event(0, "cmd", f"take-off not sent: {key} refused by {who}", ERROR)
-                return
-        t_now = getattr(self.commander, "mission_time", lambda: None)()
-        at_s = -1.0 if t_now is None else float(t_now) + TAKEOFF_LEAD_S
-        self.send_zenoh(Command(kind="takeoff", agent=0, at_s=at_s))
+        def go() -> None:
+            self.log_event(0, "cmd", "take-off -> ALL: OFFBOARD, arm, then take-off", NOTICE)
+            self.run_worker(gc.takeoff_sequence(self, ids), group="mav", exit_on_error=False)
+
+        self.confirm_group("take-off (OFFBOARD, arm, climb)", ids, go)
 
     def action_estop(self) -> None:
         ids = self.targets()
@@ -310,7 +316,8 @@ class DashboardApp(App[int]):
                 self.log_event(0, "cmd", f"emergency stop {label} cancelled")
 
         self.push_screen(
-            ConfirmScreen(f"EMERGENCY STOP {label}?\nFlight termination: motors stop at once."),
+            ConfirmScreen(f"EMERGENCY STOP {label} ({gc.id_list(ids)})?\n"
+                          "Flight termination: motors stop at once."),
             done,
         )
 
@@ -386,18 +393,7 @@ class DashboardApp(App[int]):
             NOTICE,
         )
         if cmd.kind in ("land", "takeoff"):
-            self.run_worker(self._repeat(cmd), group="repeat", exit_on_error=False)
-
-    async def _repeat(self, cmd: Command) -> None:
-        """Publish ``cmd`` again COMMAND_REPEATS times, ``command_repeat_s`` apart (the
-        same command: the same at_s), quietly (see COMMAND_REPEATS)."""
-        for _ in range(COMMAND_REPEATS):
-            await asyncio.sleep(self.command_repeat_s)
-            try:
-                self.commander.zenoh(cmd)
-            except Exception:  # the link went down: the first copy's outcome stands
-                log.debug("re-publishing %s failed", cmd.kind, exc_info=True)
-                return
+            self.run_worker(gc.repeat_command(self, cmd), group="repeat", exit_on_error=False)
 
     def palette_takeoff(self) -> None:
         self.target_all = True

@@ -7,7 +7,7 @@ yields after Textual's own commands.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
 from textual.app import SystemCommand
@@ -25,6 +25,7 @@ class PaletteTarget(Protocol):
     """What the palette's entries call (the app, :class:`~gcs.dashboard.app.DashboardApp`)."""
 
     def send_mav(self, key: str, ids: list[int]) -> None: ...
+    def confirm_group(self, what: str, ids: list[int], go: Callable[[], None]) -> None: ...
     def send_zenoh(self, cmd: Command) -> None: ...
     def selected_id(self) -> int | None: ...
     def all_ids(self) -> list[int]: ...
@@ -46,7 +47,8 @@ def palette_commands(app: PaletteTarget) -> Iterator[SystemCommand]:
         yield SystemCommand(
             f"{label.capitalize()}: all vehicles",
             "COMMAND_LONG to every vehicle, waits for each ACK",
-            lambda k=key: app.send_mav(k, app.all_ids()),
+            lambda k=key, what=label: app.confirm_group(
+                what, app.all_ids(), lambda: app.send_mav(k, app.all_ids())),
         )
     yield SystemCommand(
         "Emergency stop (asks first)", "Flight termination of the target", app.action_estop
@@ -66,7 +68,8 @@ def palette_commands(app: PaletteTarget) -> Iterator[SystemCommand]:
     yield SystemCommand(
         "Coordinated land-all (Zenoh)",
         "Every agent lands on its own pad, lowest first, safety filter active",
-        lambda: app.send_zenoh(Command(kind="land", agent=0, at_s=-1.0)),
+        lambda: app.confirm_group("coordinated land-all", app.all_ids(), lambda: app.send_zenoh(
+            Command(kind="land", agent=0, at_s=-1.0))),
     )
     yield SystemCommand(
         "Coordinated take-off: all vehicles",

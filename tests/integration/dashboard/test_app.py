@@ -67,6 +67,9 @@ async def test_toggle_target_all_and_failed_ack_is_logged():
         await pilot.press("t")
         assert app.target_all
         await pilot.press("a")
+        assert isinstance(app.screen, ConfirmScreen)  # a group command: its targets first
+        assert "#1 #2 #3 #4 #5 #6 #7 #8" in app.screen.question and cmd.mav_calls == []
+        await pilot.press("y")
         assert await settle(app, pilot, lambda: len(cmd.mav_calls) == 8)
         assert sorted(i for i, _ in cmd.mav_calls) == list(range(1, 9))
         assert await settle(app, pilot, lambda: log_text(app).count("TIMEOUT") == 8)
@@ -165,8 +168,24 @@ async def test_command_palette_arm_all():
         await pilot.press(*"arm: all vehicles")
         await settle(app, pilot, tries=5)
         await pilot.press("enter")
+        assert await settle(app, pilot, lambda: isinstance(app.screen, ConfirmScreen))
+        await pilot.press("y")
         assert await settle(app, pilot, lambda: len(cmd.mav_calls) == 8)
         assert {k for _, k in cmd.mav_calls} == {"arm"}
+
+
+async def test_group_command_cancelled_sends_nothing():
+    cmd = FakeCommander()
+    app = DashboardApp(recorded_source(), cmd)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await pilot.press("t", "f")
+        assert isinstance(app.screen, ConfirmScreen)
+        assert "8 vehicles" in app.screen.question
+        await pilot.press("n")
+        assert await settle(app, pilot, lambda: "cancelled" in log_text(app))
+        assert cmd.mav_calls == []
+        await pilot.press("t", "f")  # one vehicle again: no question, at once
+        assert await settle(app, pilot, lambda: cmd.mav_calls == [(1, "offboard")])
 
 
 async def test_command_palette_method():

@@ -7,8 +7,9 @@ import pytest
 from conftest import free_tcp_port, settle, wait_for  # noqa: E402
 from dashboard_fakes import FakeCommander
 
-from gcs.dashboard.app import COMMAND_REPEATS, LAND_LEAD_S, DashboardApp
+from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.commands import LiveCommander
+from gcs.dashboard.group_commands import COMMAND_REPEATS, LAND_LEAD_S
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.zenoh_feed import ZenohFeed
 from offboard.daemon.zenoh.link import SwarmBus
@@ -22,7 +23,7 @@ async def test_land_all_goes_out_as_one_zenoh_command() -> None:
     app = DashboardApp(recorded_source(), cmd)
     app.command_repeat_s = 0.01  # the copies' spacing, short for the test
     async with app.run_test(size=(80, 24)) as pilot:
-        await pilot.press("t", "l")
+        await pilot.press("t", "l", "y")
         assert await settle(app, pilot, lambda: len(cmd.zenoh_calls) >= 2)
         assert cmd.mav_calls == []
         c = cmd.zenoh_calls[0]
@@ -44,7 +45,7 @@ async def test_single_vehicle_or_no_zenoh_uses_auto_land() -> None:
     down = FakeCommander(up=False, t=12.5)
     app = DashboardApp(recorded_source(), down)
     async with app.run_test(size=(80, 24)) as pilot:
-        await pilot.press("t", "l")
+        await pilot.press("t", "l", "y")
         assert await settle(app, pilot, lambda: len(down.mav_calls) > 1)
         assert {k for _, k in down.mav_calls} == {"land"} and down.zenoh_calls == []
 

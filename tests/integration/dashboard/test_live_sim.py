@@ -97,7 +97,7 @@ async def test_dashboard_commands_real_sim(sim):
             assert await until(app, pilot, lambda: app.view.row(4).mode == "AUTO.LOITER")
             await pilot.press("l")
             assert await until(app, pilot, lambda: "#4 land: ACCEPTED" in log_text(app))
-            await pilot.press("t", "d")  # disarm all
+            await pilot.press("t", "d", "y")  # disarm all (y: the group confirmation)
             assert await until(app, pilot, lambda: log_text(app).count("disarm:") == 8)
             await pilot.press("t", "x", "y")  # emergency stop of #4 only
             assert await until(app, pilot, lambda: "#4 emergency stop:" in log_text(app))

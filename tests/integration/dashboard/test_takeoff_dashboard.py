@@ -19,8 +19,9 @@ import pytest
 from conftest import ROOT, free_port_offset, settle
 from dashboard_fakes import FakeCommander
 
-from gcs.dashboard.app import COMMAND_REPEATS, TAKEOFF_LEAD_S, DashboardApp
+from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.cli import build, configure_parser
+from gcs.dashboard.group_commands import COMMAND_REPEATS, TAKEOFF_LEAD_S
 from gcs.dashboard.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
 from offboard.agent.takeoff import takeoff_plan
@@ -45,7 +46,7 @@ async def test_takeoff_key_offboard_arm_then_one_zenoh_command() -> None:
     app = DashboardApp(recorded_source(), cmd)
     app.command_repeat_s = 0.01  # the copies' spacing, short for the test
     async with app.run_test(size=(80, 24)) as pilot:
-        await pilot.press("t", "u")
+        await pilot.press("t", "u", "y")
         assert await settle(app, pilot, lambda: len(cmd.zenoh_calls) >= 2)
         ids = app.all_ids()
         assert len(ids) > 1
@@ -64,7 +65,7 @@ async def test_takeoff_key_refused_or_not_all() -> None:
     cmd = FakeCommander(refuse=3)  # vehicle 3 refuses to arm: no take-off command
     app = DashboardApp(recorded_source(), cmd)
     async with app.run_test(size=(80, 24)) as pilot:
-        await pilot.press("t", "u")
+        await pilot.press("t", "u", "y")
         assert await settle(app, pilot, lambda: "take-off not sent" in log_text(app))
         assert "arm refused by #3" in log_text(app) and cmd.zenoh_calls == []
     for commander, keys in ((FakeCommander(), ("u",)), (FakeCommander(up=False), ("t", "u"))):
@@ -203,7 +204,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
                 and all(r.pos is not None and not r.status_missing for r in app.view.rows)
             )
             assert await watch(ready, timeout=60.0), launch.dead()
-            await pilot.press("t", "u")
+            await pilot.press("t", "u", "y")  # y: the group command's confirmation
             # OFFBOARD, then arm, ACKed by every vehicle first: that took more than 20 s
             # (with retries) with three CPU burners and a callgrind run beside the test
             assert await watch(lambda: "take-off at t=" in log_text(app), 60.0), (
@@ -222,7 +223,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
             # formed: leaders on their trajectory (after t_traj of the shifted plan)
             t_traj = takeoff_plan(sc, t0).t_traj
             assert await watch(lambda: app.view.sim_time >= t_traj, timeout=30.0)
-            await pilot.press("l")
+            await pilot.press("l", "y")
             assert await watch(lambda: "land-all at t=" in log_text(app), 10.0)
             await pilot.pause(STALL_S)
             resume()
