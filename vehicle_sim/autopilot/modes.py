@@ -37,12 +37,30 @@ NAV_MODES = (VehicleMode.TAKEOFF, VehicleMode.RTL, VehicleMode.MISSION)
 
 
 # -- entering modes -------------------------------------------------------------------------
-def takeoff_target(v: VehicleState, alt_m: float | None) -> NavTarget:
-    """Climb over the current point to ``alt_m`` above home (None: MIS_TAKEOFF_ALT), never
-    lower than the vehicle is now."""
-    alt = float(v.params.get("MIS_TAKEOFF_ALT")) if alt_m is None else float(alt_m)
+def takeoff_altitude(z_now: float, alt_m: float | None, mis_takeoff_alt: float) -> float:
+    """PX4's take-off altitude (ENU z, m; Navigator ``Takeoff::set_takeoff_position``,
+    PX4 v1.15 and later): the requested altitude as given, or, when none is given (NaN),
+    ``MIS_TAKEOFF_ALT`` above the *current* altitude; then never lower than now (PX4:
+    "Already higher than takeoff altitude"). There is no minimum: a requested altitude
+    only 1 m up is flown, however large ``MIS_TAKEOFF_ALT`` is (PX4 dropped the old
+    "raise to home + MIS_TAKEOFF_ALT" rule)."""
+    alt = z_now + float(mis_takeoff_alt) if alt_m is None else float(alt_m)
+    return max(alt, z_now)
+
+
+def takeoff_target(v: VehicleState, alt_m: float | None, quiet: bool = False) -> NavTarget:
+    """Climb over the current point to :func:`takeoff_altitude`; tells the client, as PX4
+    does, when it uses ``MIS_TAKEOFF_ALT`` or keeps the current altitude (``quiet``: no)."""
     p = v.p()
-    return NavTarget(NavKind.TAKEOFF, np.array([p[0], p[1], max(alt, float(p[2]))]))
+    z_now = float(p[2])
+    mis = float(v.params.get("MIS_TAKEOFF_ALT"))
+    alt = takeoff_altitude(z_now, alt_m, mis)
+    if not quiet:
+        if alt_m is None:
+            v.event(f"Using default takeoff altitude: {mis:.1f} m", M.MAV_SEVERITY_INFO)
+        elif alt_m < z_now:
+            v.event("Already higher than takeoff altitude", M.MAV_SEVERITY_CRITICAL)
+    return NavTarget(NavKind.TAKEOFF, np.array([p[0], p[1], alt]))
 
 
 def rtl_plan(v: VehicleState) -> nav_flight.RtlPlan:
@@ -56,7 +74,8 @@ def engage_onboard(v: VehicleState) -> None:
     if v.mode in HOLD_MODES:
         v.fs.engage(FailsafeAction.HOLD, v.p(), v.yaw())
     elif v.mode == VehicleMode.LAND:
-        v.fs.gains.land_speed = float(v.params.get("MPC_LAND_SPEED"))
+        land = min(float(v.params.get("MPC_LAND_SPEED")), float(v.params.get("MPC_Z_VEL_MAX_DN")))
+        v.fs.gains.land_speed = land
         v.fs.engage(FailsafeAction.LAND, v.p(), v.yaw())
     v.pc.reset(v.yaw())
 
@@ -108,7 +127,8 @@ def request_mode(v: VehicleState, main: int, sub: int, sim_t: float) -> int:
 
 
 def takeoff(v: VehicleState, alt_m: float | None) -> int:
-    """NAV_TAKEOFF: AUTO.TAKEOFF to ``alt_m`` above home (None: MIS_TAKEOFF_ALT)."""
+    """NAV_TAKEOFF: AUTO.TAKEOFF to ENU z ``alt_m`` (None: MIS_TAKEOFF_ALT above the
+    current altitude; :func:`takeoff_altitude`)."""
     if v.terminated:
         return M.MAV_RESULT_DENIED
     v.failsafe = False
@@ -153,7 +173,8 @@ def arm(v: VehicleState, sim_t: float) -> int:
         v.release_requested = True
     engage_onboard(v)
     if v.mode == VehicleMode.TAKEOFF:
-        v.nav = takeoff_target(v, None if v.nav is None else float(v.nav.position_enu[2]))
+        z = None if v.nav is None else float(v.nav.position_enu[2])
+        v.nav = takeoff_target(v, z, quiet=z is not None)
     v.landed_since = None
     v.event("armed")
     return M.MAV_RESULT_ACCEPTED

@@ -4,8 +4,12 @@ limits.
 The parameters read here (PX4 names, ``vehicle.params``): ``MPC_XY_CRUISE`` (horizontal
 speed, m/s, unless the target or DO_CHANGE_SPEED gives one), ``MPC_TKO_SPEED`` (climb in
 a take-off, m/s), ``MPC_LAND_SPEED`` (descent in a landing, m/s), ``RTL_RETURN_ALT``
-(m above home). PX4's velocity ceilings that the simulator does not expose as
-parameters are the constants below, at PX4's defaults.
+(m above home), and the ceilings ``MPC_XY_VEL_MAX``, ``MPC_Z_VEL_MAX_UP``,
+``MPC_Z_VEL_MAX_DN`` (m/s): as on PX4, no AUTO speed exceeds them (a cruise, take-off or
+land speed above its ceiling flies at the ceiling), and :func:`velocity_ceiling` is what
+the position controller applies in every mode, OFFBOARD included
+(:meth:`~vehicle_sim.physics.position_control.PositionController.set_ceiling`). The
+constants below are PX4's defaults of those ceilings.
 
 RTL (:class:`RtlPlan`), as PX4 flies it without a mission: climb over the current point
 to ``max(current altitude, RTL_RETURN_ALT)``, fly there to the destination (home, or the
@@ -39,26 +43,37 @@ def _p(params: Any, name: str) -> float:
     return float(params.get(name))
 
 
+def velocity_ceiling(params: Any) -> SpeedLimits:
+    """PX4's speed ceilings (m/s): ``MPC_XY_VEL_MAX``, ``MPC_Z_VEL_MAX_UP``,
+    ``MPC_Z_VEL_MAX_DN``."""
+    return SpeedLimits(
+        _p(params, "MPC_XY_VEL_MAX"), _p(params, "MPC_Z_VEL_MAX_UP"),
+        _p(params, "MPC_Z_VEL_MAX_DN"),
+    )  # fmt: skip
+
+
 def nav_setpoint(
     target: NavTarget, params: Any, speed_override: float | None = None
 ) -> tuple[PositionSetpoint, SpeedLimits]:
     """What the position controller flies for ``target`` (TAKEOFF, GOTO, LOITER, LAND;
-    an RTL target is resolved by :class:`RtlPlan` first)."""
+    an RTL target is resolved by :class:`RtlPlan` first); every speed within
+    :func:`velocity_ceiling`."""
+    top = velocity_ceiling(params)
     xy_speed = target.speed_m_s or speed_override or _p(params, "MPC_XY_CRUISE")
-    xy_speed = max(0.1, float(xy_speed))
+    xy_speed = min(max(0.1, float(xy_speed)), top.xy)
     pos = np.array(target.position_enu, dtype=float)
     yaw = target.yaw_rad
     if target.kind == NavKind.TAKEOFF:
-        lim = SpeedLimits(xy_speed, _p(params, "MPC_TKO_SPEED"), Z_VEL_MAX_DN)
+        lim = SpeedLimits(xy_speed, min(_p(params, "MPC_TKO_SPEED"), top.up), top.down)
         return PositionSetpoint(pos=pos, yaw=yaw), lim
     if target.kind == NavKind.LAND:
-        land = _p(params, "MPC_LAND_SPEED")
+        land = min(_p(params, "MPC_LAND_SPEED"), top.down)
         sp = PositionSetpoint(
             pos=np.array([pos[0], pos[1], math.nan]), vel=np.array([math.nan, math.nan, -land]),
             yaw=yaw,
         )  # fmt: skip
-        return sp, SpeedLimits(xy_speed, Z_VEL_MAX_UP, land)
-    return PositionSetpoint(pos=pos, yaw=yaw), SpeedLimits(xy_speed, Z_VEL_MAX_UP, Z_VEL_MAX_DN)
+        return sp, SpeedLimits(xy_speed, top.up, land)
+    return PositionSetpoint(pos=pos, yaw=yaw), SpeedLimits(xy_speed, top.up, top.down)
 
 
 def takeoff_reached(target: NavTarget, p: np.ndarray) -> bool:

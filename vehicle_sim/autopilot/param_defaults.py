@@ -2,8 +2,11 @@
 
 Every entry is one of two kinds, named at the start of its ``doc``: ``behaviour`` (read by
 the vehicle: offboard-loss time and action, take-off altitude, hover thrust and tilt limit
-of the onboard position controller, speeds, RTL altitude, geofence) or ``identity`` (what
-clients read on connect; read-only, PARAM_SET answers MAV_PARAM_ERROR_READ_ONLY).
+of the onboard position controller, speeds and speed ceilings, RTL altitude, geofence) or
+``identity`` (what clients read on connect; read-only, PARAM_SET answers
+MAV_PARAM_ERROR_READ_ONLY). Ranges: a PARAM_SET outside ``[lo, hi]`` is refused
+(MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, the value unchanged), where PX4 stores it and only
+QGroundControl warns.
 PX4 names and units; ``COM_OBL_RC_ACT`` values follow PX4 (docs/px4/params.md lists
 them).
 """
@@ -58,6 +61,12 @@ def default_param_specs(agent_id: int, cfg: Any, dyn: Any) -> list[ParamSpec]:
         ParamSpec("MPC_XY_CRUISE", REAL32, 5.0, 1.0, 20.0,
                   "behaviour: horizontal cruise speed, m/s"),
         ParamSpec("MPC_LAND_SPEED", REAL32, 0.7, 0.3, 3.0, "behaviour: land descent speed, m/s"),
+        ParamSpec("MPC_XY_VEL_MAX", REAL32, 12.0, 0.5, 20.0,
+                  "behaviour: horizontal speed ceiling (every mode, offboard too), m/s"),
+        ParamSpec("MPC_Z_VEL_MAX_UP", REAL32, 3.0, 0.5, 8.0,
+                  "behaviour: climb speed ceiling (every mode), m/s"),
+        ParamSpec("MPC_Z_VEL_MAX_DN", REAL32, 1.5, 0.5, 4.0,
+                  "behaviour: descent speed ceiling (every mode), m/s"),
         ParamSpec("RTL_RETURN_ALT", REAL32, 30.0, 0.0, 150.0,
                   "behaviour: RTL altitude above home, m"),
         ParamSpec("NAV_ACC_RAD", REAL32, 2.0, 0.05, 200.0,

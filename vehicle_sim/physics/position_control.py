@@ -12,7 +12,9 @@ Per axis, as PX4 cascades it (``PositionControl``):
   velocity setpoint when also given, else 0);
 * velocity given alone: ``v_ref = v_sp``;
 * the horizontal ``v_ref`` is limited to :attr:`SpeedLimits.xy` (norm), the vertical one
-  to ``[−down, up]``;
+  to ``[−down, up]``, each limit no higher than the controller's ceiling
+  (:meth:`PositionController.set_ceiling`: PX4's ``MPC_XY_VEL_MAX``,
+  ``MPC_Z_VEL_MAX_UP``, ``MPC_Z_VEL_MAX_DN``, whatever the mode asks);
 * an axis with a velocity reference gets ``u = kd (v_ref − v) + ∫ ki (v_ref − v) dt``
   (integral clamped) plus the acceleration setpoint as feed-forward; an axis with an
   acceleration setpoint only gets that acceleration.
@@ -90,6 +92,7 @@ class PositionController:
         self.gains = gains or PositionGains()
         self.integ = np.zeros(3)
         self.yaw_ref = 0.0
+        self.ceiling: SpeedLimits | None = None
 
     def reset(self, yaw: float) -> None:
         """Forget the integral and hold ``yaw`` until a setpoint says otherwise."""
@@ -101,10 +104,17 @@ class PositionController:
         self.tilt_max_rad = float(tilt_max_rad)
         self.hover_norm = float(hover_norm)
 
+    def set_ceiling(self, ceiling: SpeedLimits | None) -> None:
+        """Speed ceilings (m/s) applied on top of every step's limits (None: none)."""
+        self.ceiling = ceiling
+
     def velocity_reference(
         self, sp: PositionSetpoint, p: np.ndarray, lim: SpeedLimits
     ) -> np.ndarray:
         """Velocity reference per axis (NaN where neither position nor velocity is given)."""
+        top = self.ceiling
+        if top is not None:
+            lim = SpeedLimits(min(lim.xy, top.xy), min(lim.up, top.up), min(lim.down, top.down))
         kp = np.array([self.gains.kp_xy, self.gains.kp_xy, self.gains.kp_z])
         has_pos = np.isfinite(sp.pos)
         ff = np.where(np.isfinite(sp.vel), sp.vel, 0.0)

@@ -20,7 +20,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4
-from vehicle_sim.autopilot import modes, nav_flight, setpoints, telemetry
+from vehicle_sim.autopilot import modes, setpoints, telemetry
 from vehicle_sim.autopilot.nav import NavKind, NavTarget
 from vehicle_sim.autopilot.state import VehicleState
 from vehicle_sim.physics import geo
@@ -95,7 +95,8 @@ def _altitude_enu(v: VehicleState, c: Command, alt: float | None) -> float | Non
 
 
 def _takeoff(v: VehicleState, c: Command) -> Outcome:
-    """NAV_TAKEOFF: p7 altitude (AMSL; NaN: MIS_TAKEOFF_ALT above home)."""
+    """NAV_TAKEOFF: p7 altitude (AMSL; NaN: MIS_TAKEOFF_ALT above the current altitude;
+    :func:`vehicle_sim.autopilot.modes.takeoff_target` has PX4's rule)."""
     try:
         alt = _altitude_enu(v, c, finite(c.p[6]))
     except ValueError:
@@ -142,7 +143,7 @@ SPEED_RESET = -2.0  # DO_CHANGE_SPEED p2: back to the default (-1: no change)
 
 def _change_speed(v: VehicleState, c: Command) -> Outcome:
     """DO_CHANGE_SPEED: p1 speed type (air or ground speed; climb/descent unsupported),
-    p2 speed m/s (-1 no change, -2 default)."""
+    p2 speed m/s (-1 no change, -2 default; above ``MPC_XY_VEL_MAX``: DENIED)."""
     kind, speed = finite(c.p[0], float(M.SPEED_TYPE_GROUNDSPEED)), finite(c.p[1])
     if kind not in (M.SPEED_TYPE_AIRSPEED, M.SPEED_TYPE_GROUNDSPEED):
         return M.MAV_RESULT_UNSUPPORTED, None
@@ -151,7 +152,7 @@ def _change_speed(v: VehicleState, c: Command) -> Outcome:
     if speed == SPEED_RESET:
         v.speed_override = None
         return M.MAV_RESULT_ACCEPTED, None
-    if not 0.0 < speed <= nav_flight.XY_VEL_MAX:
+    if not 0.0 < speed <= float(v.params.get("MPC_XY_VEL_MAX")):
         return M.MAV_RESULT_DENIED, None
     v.speed_override = speed
     return M.MAV_RESULT_ACCEPTED, None

@@ -10,6 +10,8 @@ Contract: :class:`vehicle_sim.autopilot.nav.VehicleService`. The pieces, each pu
 This module wires them to one vehicle: MAVLink handlers, MISSION_CURRENT at
 :data:`CURRENT_HZ` and on every change, MISSION_ITEM_REACHED, and once per step the
 geofence (``fence_breached``, and ``GF_ACTION`` once per breach while flying).
+A store is applied in the handler that commits it, before its MISSION_ACK is queued, so
+the ACK always acknowledges the store that a following MISSION_START sees.
 A client whose frames are unsigned on a signed link (``_restricted``) may download, not
 upload, clear or set the current item: MAV_MISSION_DENIED.
 """
@@ -88,15 +90,22 @@ class MissionService:
 
     def _on_count(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if self._accepts(m, src, write=True):
-            self._send(self.transfer.on_count(m, src, wall))
+            self._send_applied(self.transfer.on_count(m, src, wall))
 
     def _on_item_int(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if self._accepts(m, src, write=True):
-            self._send(self.transfer.on_item(m, src, wall, is_int=True))
+            self._send_applied(self.transfer.on_item(m, src, wall, is_int=True))
 
     def _on_item_float(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if self._accepts(m, src, write=True):
-            self._send(self.transfer.on_item(m, src, wall, is_int=False))
+            self._send_applied(self.transfer.on_item(m, src, wall, is_int=False))
+
+    def _send_applied(self, outs: list[tuple[Any, Any]]) -> None:
+        """Apply a committed store *before* its MISSION_ACK is queued: a client that sends
+        MISSION_START (or AUTO.MISSION) right after the ACK must find the new mission,
+        whenever the next simulation step comes."""
+        self._apply_changes()
+        self._send(outs)
 
     def _on_request_list(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if self._accepts(m, src, write=False):
@@ -116,8 +125,7 @@ class MissionService:
 
     def _on_clear_all(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if self._accepts(m, src, write=True):
-            self._send(self.transfer.on_clear_all(m, src))
-            self._apply_changes()
+            self._send_applied(self.transfer.on_clear_all(m, src))
 
     def _on_set_current(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if not self._accepts(m, src, write=True):
@@ -188,8 +196,10 @@ class MissionService:
             elif mt == mi.FENCE:
                 self.geofence = fence_from_items(v.cfg, items)
                 if self._preloaded is not None and items != self._preloaded:
-                    v.event("geofence changed: the offboard filter keeps the scenario's "
-                            "[geofence]", M.MAV_SEVERITY_WARNING)
+                    v.event(
+                        "geofence changed: the offboard filter keeps the scenario's [geofence]",
+                        M.MAV_SEVERITY_WARNING,
+                    )
         self.transfer.changed.clear()
 
     def _mission_state(self) -> tuple[int, int, int]:

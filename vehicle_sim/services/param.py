@@ -29,6 +29,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as M
 
+from vehicle_sim.autopilot import nav_flight
 from vehicle_sim.autopilot.params import INT32, ParamError, ParamSpec, ParamStore
 
 log = logging.getLogger(__name__)
@@ -101,7 +102,12 @@ class ParamService:
         return {}
 
     def update(self, sim_t: float) -> None:
-        """Once per simulation step: the next ``LIST_PER_STEP`` values of open lists."""
+        """Once per simulation step (before the vehicle's controllers run): the speed
+        ceilings (``MPC_*_VEL_MAX*``) to the position controller, then the next
+        ``LIST_PER_STEP`` values of open lists."""
+        pc = getattr(self.vehicle, "pc", None)
+        if pc is not None:
+            pc.set_ceiling(nav_flight.velocity_ceiling(self.store))
         for _ in range(min(LIST_PER_STEP, len(self.pending))):
             i, src = self.pending.popleft()
             self.vehicle.outbox.append((self.value_msg(i), src))
