@@ -20,8 +20,12 @@ $(STAMP): pyproject.toml
 .PHONY: venv mission test check static smoke test-unit test-integration lint typecheck warm bench
 venv: $(STAMP)
 
+# PORT_OFFSET=N forces the port offset (a busy port: exit 2 before anything starts);
+# without it the first offset 0, 1000, ... whose ports are all free is chosen
+PORT_OFFSET ?=
 mission: $(STAMP)
-	$(VENV)/bin/gcs mission compare scenarios/cube8.toml --out runs/compare
+	$(VENV)/bin/gcs mission compare scenarios/cube8.toml --out runs/compare \
+	  $(if $(PORT_OFFSET),--port-offset $(PORT_OFFSET))
 
 test: static test-unit test-integration
 

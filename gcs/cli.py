@@ -225,8 +225,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="coordinated land-all at mission time T s (docs/lifecycle.md)")
     d = r.add_argument_group("distributed runs (without --inproc)")
     d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
-    d.add_argument("--port-offset", type=_port_offset, default=0,
-                   help="added to every UDP/TCP port")
+    d.add_argument("--port-offset", type=_port_offset, default=None,
+                   help="added to every UDP/TCP port (default: the first of 0, 1000, ... "
+                   "whose ports are all free; with N, a busy port is exit 2)")
     d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
@@ -256,8 +257,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--jobs", type=_int_in(1, 256), default=2,
                    help="parallel processes for the sweep")
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
-    c.add_argument("--port-offset", type=_port_offset, default=0,
-                   help="distributed: shift every port")
+    c.add_argument("--port-offset", type=_port_offset, default=None,
+                   help="distributed: shift every port by N (default: the first of 0, 1000, "
+                   "... whose ports are all free, per method; with N, a busy port is exit 2)")
     c.add_argument("--processes", type=_int_in(1, 10_000), default=None, metavar="N",
                    help="distributed: pack the daemons into N processes (default: one per "
                    "agent)")

@@ -8,7 +8,8 @@ Entry points:
   and :mod:`.score` scores the record as the in-process runner would.
 * :func:`gcs.mission.sweep.run_sweep` - many in-process runs in parallel.
 
-Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.procs` (child
+Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.ports` (every
+port a run binds, the probe, the free offset), :mod:`.procs` (child
 processes), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
 :mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
 :mod:`.compare_cli` (``gcs mission compare``);

@@ -50,31 +50,47 @@ def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcom
     return metrics, series, gains
 
 
-def _compare_distributed(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome | int:
-    """The three distributed runs, or an exit code (2 busy port, 1 a run failed)."""
+def _compare_distributed(
+    sc: Scenario, args: argparse.Namespace, out: Path, failed: dict[str, tuple[str, int]],
+) -> Outcome | int:
+    """Every method's distributed run. A method that fails is left out of the outcome and
+    put in ``failed`` (method -> its one-line reason and exit code: 2 a busy port, 1 a run
+    that failed), and the others still run. An exit code when no method finished, or (2)
+    when a forced ``--port-offset`` has a busy port: nothing has started then."""
     import numpy as np
 
     from gcs.mission.distributed import MissionError, run_and_score
-    from gcs.mission.launch_spec import LaunchError
+    from gcs.mission.launch_spec import LaunchError, resolve_port_offset
 
+    forced = getattr(args, "port_offset", None)
+    if forced is not None:  # every port bound and released before anything starts
+        try:
+            resolve_port_offset(sc, forced)
+        except LaunchError as exc:
+            print(f"gcs mission compare: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     metrics: dict[str, Any] = {}
     series: dict[str, Any] = {}
     duration = float(sc.run.duration_s if args.duration is None else args.duration)
     for m in METHODS:
         log.info("running %s: vehicle-sim + %d offboard daemons, lockstep ...", m, sc.n)
         try:
+            # per method: the ports the previous run freed are probed again
+            offset = resolve_port_offset(sc, forced)
+            log.info("%s: port offset %d", m, offset)
             doc = run_and_score(sc, out / m, m, args.seed, duration,
-                                port_offset=args.port_offset, show_progress=True,
+                                port_offset=offset, show_progress=True,
                                 processes=getattr(args, "processes", None))
-        except LaunchError as exc:
-            print(f"gcs mission compare: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        except MissionError as exc:
-            print(f"gcs mission compare: {exc}", file=sys.stderr)
-            return EXIT_RUN_FAILED
+        except (LaunchError, MissionError) as exc:
+            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            print(f"gcs mission compare: {m}: {line}", file=sys.stderr)
+            failed[m] = (line, EXIT_USAGE if isinstance(exc, LaunchError) else EXIT_RUN_FAILED)
+            continue
         metrics[m] = doc["metrics"]
         with np.load(out / m / "series.npz") as z:
             series[m] = {k: z[k] for k in z.files}
+    if not metrics:
+        return next(iter(failed.values()))[1] if failed else EXIT_RUN_FAILED
     return metrics, series, _gain_lines(sc)
 
 
@@ -101,7 +117,9 @@ def _layout(args: argparse.Namespace) -> str:
 
 def compare(sc: Scenario, args: argparse.Namespace) -> int:
     """``gcs mission compare`` of a loaded, checked scenario: every method's run, the
-    report, the tables on stdout; the exit code (0, 1 a run failed, 2 a busy port)."""
+    report (of the methods that finished, the failed ones marked with their reason), the
+    tables on stdout; the exit code (0; else the first failure's: 1 a run failed, 2 a busy
+    port)."""
     from gcs.report.comparison import compare_table, write_report
     from gcs.report.safety_table import safety_table
     from gcs.report.sweep import seeds_table
@@ -109,9 +127,12 @@ def compare(sc: Scenario, args: argparse.Namespace) -> int:
     from swarm_common.scenario.mission_check import plan_for
 
     out = Path(args.out or "runs/compare")
-    outcome = (_compare_inproc if args.inproc else _compare_distributed)(sc, args, out)
+    failed: dict[str, tuple[str, int]] = {}
+    outcome = (_compare_inproc(sc, args, out) if args.inproc
+               else _compare_distributed(sc, args, out, failed))
     if isinstance(outcome, int):
         return outcome
+    why = {m: line for m, (line, _) in failed.items()}
     metrics, series, gains = outcome
     seeds = _seed_sweep(sc, args) if args.seeds and args.seeds > 1 else None
     form = formation_from_scenario(sc)
@@ -122,12 +143,15 @@ def compare(sc: Scenario, args: argparse.Namespace) -> int:
                         tau_safe_s=sc.controller.tau_safe_s,
                         deadline_s=sc.run.formation_deadline_s,
                         mission=plan_for(sc) if sc.mission is not None else None,
-                        world=sc.world)
-    print(compare_table(metrics, d_safe))
-    print(safety_table(metrics))
+                        world=sc.world, failed=why)
+    print(compare_table(metrics, d_safe, why))
+    print(safety_table(metrics, why))
     if seeds:
         print(seeds_table(seeds, d_safe))
     log.info("wrote %s", path)
+    if failed:  # the report has the others; the exit code is the first failure's
+        log.error("failed: %s (see %s)", ", ".join(failed), path)
+        return next(iter(failed.values()))[1]
     return EXIT_OK
 
 

@@ -25,6 +25,7 @@ from typing import Any
 import zenoh
 
 from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
+from gcs.mission.ports import PortUse, bind_failure_line
 from gcs.mission.preflight import warn_liveness
 from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
@@ -172,7 +173,8 @@ def run_distributed(
             spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
         facts.update(
             _supervise(rec, group, sc.control_dt, victim, kill_agent, kill_at, bar,
-                       stall_timeout, out_dir, each(hooks), facts, checkpoint)
+                       stall_timeout, out_dir, each(hooks), facts, checkpoint,
+                       spec.child_ports)
         )
         at_first = facts.get("processes_at_first_step", {}).get(RUNNER_NAME)
         if at_first is not None:
@@ -242,6 +244,7 @@ def _supervise(
     on_step: Callable[[int], None] | None,
     facts: dict[str, Any],
     checkpoint: Callable[[], None] | None = None,
+    ports_of: Callable[[str], list[PortUse]] | None = None,
 ) -> dict[str, Any]:
     """Watch a started run until step ``rec.steps``: drain the recorder, show progress,
     kill the process ``victim`` (the one of ``kill_agent``) at ``kill_at`` (s), add a dead
@@ -284,13 +287,9 @@ def _supervise(
             if victim is not None and not facts["killed_agents"] and k * dt >= (kill_at or 0.0):
                 group.kill(victim)
                 facts["killed_agents"].append(kill_agent)
-            _check_children(group, failed, max(k, 0) * dt)
+            _check_children(group, failed, max(k, 0) * dt, ports_of)
             if failed and k < 1:  # the start barrier waits for every vehicle: it never passes
-                raise MissionError(
-                    f"the daemon of agent(s) {', '.join(map(str, failed))} exited before the "
-                    "start; the simulator starts when every vehicle is armed in OFFBOARD, so "
-                    f"the run cannot start; see logs in {out_dir}"
-                )
+                raise _early_death(group, failed, ports_of)
             # the start-up, to step 1: the simulator offers t_0 (truth of step 0) until
             # every daemon is up and answers in OFFBOARD (its barrier)
             limit = stall_timeout if k >= 1 else max(stall_timeout, startup_limit)
@@ -314,21 +313,61 @@ def _supervise(
     return out
 
 
-def _check_children(group: ProcessGroup, failed: list[int], t: float) -> None:
-    """A dead daemon: its agent joins ``failed`` (once, with a warning naming its log); a
-    dead simulator ends the run (:class:`MissionError`)."""
+def _check_children(
+    group: ProcessGroup, failed: list[int], t: float,
+    ports_of: Callable[[str], list[PortUse]] | None = None,
+) -> None:
+    """A dead daemon: its agent joins ``failed`` (once, with a warning naming its log and
+    the cause); a dead simulator ends the run: :class:`MissionError` with the cause (the
+    last error line of its log), or :class:`LaunchError` when that cause is a busy port."""
     for child in group.dead():
         if not child.name.startswith("offboard-"):
+            cause = group.cause(child)
+            busy = _busy_port_error(child.name, cause, child.log_path, ports_of)
+            if busy is not None:
+                raise busy
             raise MissionError(
-                f"{child.name} exited with code {child.proc.returncode}; "
-                f"last lines of {child.log_path}:\n{group.tail(child)}"
+                f"{child.name} exited with code {child.proc.returncode}: {cause} "
+                f"(log: {child.log_path})"
             )
         for aid in parse_agents(child.name.removeprefix("offboard-")):
             if aid not in failed:
                 failed.append(aid)
                 then = "the run goes on without it" if t > 0 else "before the start"
-                log.warning("agent %d's daemon exited (code %s) at t = %.2f s, %s (see %s)",
-                            aid, child.proc.returncode, t, then, child.log_path)
+                log.warning("agent %d's daemon exited (code %s) at t = %.2f s, %s: %s (see %s)",
+                            aid, child.proc.returncode, t, then, group.cause(child),
+                            child.log_path)
+
+
+def _early_death(
+    group: ProcessGroup, failed: list[int], ports_of: Callable[[str], list[PortUse]] | None,
+) -> Exception:
+    """The one-line error of daemons dead before the start: the first one's cause (the last
+    error line of its log) and log; a :class:`LaunchError` when the cause is a busy port."""
+    dead = [c for c in group.dead() if c.name.startswith("offboard-")]
+    first = dead[0] if dead else None
+    cause = "" if first is None else group.cause(first)
+    if first is not None:
+        busy = _busy_port_error(first.name, cause, first.log_path, ports_of)
+        if busy is not None:
+            return busy
+    where = "" if first is None else f": {cause} (log: {first.log_path})"
+    return MissionError(
+        f"the daemon of agent(s) {', '.join(map(str, failed))} exited before the start"
+        f"{where}; the simulator starts when every vehicle is armed in OFFBOARD, so the run "
+        "cannot start"
+    )
+
+
+def _busy_port_error(
+    name: str, cause: str, log_path: Path, ports_of: Callable[[str], list[PortUse]] | None,
+) -> LaunchError | None:
+    """A :class:`LaunchError` (exit 2) when ``cause`` says a port of child ``name`` was in
+    use (:func:`~gcs.mission.ports.bind_failure_line`); None for any other cause."""
+    if ports_of is None:
+        return None
+    line = bind_failure_line(name, cause, log_path, ports_of(name))
+    return None if line is None else LaunchError(line)
 
 
 def run_and_score(

@@ -15,16 +15,22 @@ arms and starts). Topology, for port offset ``o``:
 
 from __future__ import annotations
 
-import socket
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gcs.mission.ports import (
+    PortUse,
+    busy_uses,
+    choose_port_offset,
+    port_in_use_line,
+    swarm_port_uses,
+)
 from gcs.mission.procs import python_entry
 from offboard.daemon.packing import format_agents
 from swarm_common.enums import DefaultStreams
-from swarm_common.ports import GCS_PORT, MAX_ID, port_free, vehicle_ports
+from swarm_common.ports import GCS_PORT, MAX_ID, vehicle_ports
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
@@ -204,28 +210,32 @@ class LaunchSpec:
     def sim_stats_path(self) -> Path | None:
         return None if self.run_dir is None else self.run_dir / "vehicle-sim-stats.json"
 
+    def port_uses(self, gcs_port: bool = False) -> list[PortUse]:
+        """Every port this swarm binds (:func:`gcs.mission.ports.swarm_port_uses`).
+        ``gcs_port``: also the GCS port (14550+offset), which only a ground station (the
+        dashboard) binds; a mission run leaves it to whoever listens there."""
+        return swarm_port_uses(self.sc.ids, self.port_offset, self.zenoh, gcs_port)
+
     def busy_ports(self, gcs_port: bool = False) -> list[str]:
-        """Every port the swarm will bind that is already taken, as ``"udp 14580 (vehicle
-        1)"``. ``gcs_port``: also the GCS port (14550+offset), which only a ground station
-        (the dashboard) binds; a mission run leaves it to whoever listens there."""
-        udp: list[tuple[int, str]] = [(GCS_PORT + self.port_offset, "GCS")] if gcs_port else []
-        for a in self.sc.agents:
-            vp = vehicle_ports(a.id, self.port_offset)
-            udp += [(p, f"vehicle {a.id}") for p in (vp.api_local, vp.api_remote, vp.gcs_local)]
-        busy = [f"udp {p} ({who})" for p, who in udp if not port_free(p)]
-        if self.zenoh:
-            for p, who in ((self.router_port, "Zenoh router"), (self.sim_port, "Zenoh sim")):
-                if not port_free(p, socket.SOCK_STREAM, allow_time_wait=True):
-                    busy.append(f"tcp {p} ({who})")
-        return busy
+        """Every port the swarm will bind that is already taken, as ``"udp 14580
+        (127.0.0.1, vehicle 1 simulator API port)"`` (each bound and released)."""
+        return [u.line() for u in busy_uses(self.port_uses(gcs_port))]
 
     def check_ports(self, gcs_port: bool = False) -> None:
-        """Raise :class:`LaunchError` naming every busy port of this swarm."""
-        busy = self.busy_ports(gcs_port)
+        """Raise :class:`LaunchError`, one line naming the first busy port of this swarm
+        (and how many more are busy)."""
+        busy = busy_uses(self.port_uses(gcs_port))
         if busy:
-            raise LaunchError(
-                f"ports in use: {', '.join(busy)} (another swarm? try --port-offset)"
-            )
+            raise LaunchError(port_in_use_line(busy))
+
+    def child_ports(self, name: str) -> list[PortUse]:
+        """The ports child ``name`` binds (:meth:`processes`): the simulator its Zenoh
+        listener and every vehicle's two links; a daemon its agents' API ports."""
+        uses = self.port_uses()
+        if name == "vehicle-sim":
+            return [u for u in uses if u.role == "Zenoh simulator" or "simulator" in u.role]
+        ids = next((p for p in self.packs() if self.daemon_name(p) == name), [])
+        return [u for u in uses if u.role in {f"agent {i} API port" for i in ids}]
 
     def sim_argv(self) -> list[str]:
         """``vehicle-sim`` for this swarm."""
@@ -326,6 +336,29 @@ class LaunchSpec:
 
 
 MAX_PORT_OFFSET = _max_port_offset()
+
+
+def resolve_port_offset(
+    sc: Scenario, forced: int | None, formation_base: int | None = None,
+    gcs_port: bool = False,
+) -> int:
+    """The port offset of a launch of ``sc``: ``forced`` (``--port-offset N``) when every
+    port it gives is free, else :class:`LaunchError` naming the first busy one; with
+    ``forced`` None the first offset 0, 1000, ... whose ports are all free
+    (:func:`gcs.mission.ports.choose_port_offset`, logged). Every port is bound and released
+    here, before anything starts. ``formation_base``: the formation vehicle's UDP port at
+    offset 0, when it is served; ``gcs_port``: also the GCS port (a ground station's)."""
+    if forced is not None:
+        fport = None if formation_base is None else formation_base + forced
+        busy = busy_uses(swarm_port_uses(sc.ids, forced, True, gcs_port, fport))
+        if busy:
+            raise LaunchError(port_in_use_line(busy, can_choose=True))
+        return forced
+    off = choose_port_offset(sc.ids, MAX_PORT_OFFSET, True, gcs_port, formation_base)
+    if off is None:
+        raise LaunchError(f"no port offset 0..{MAX_PORT_OFFSET} has every port of "
+                          f"{len(sc.ids)} agents free; pass one with --port-offset")
+    return off
 
 
 def add_signing_flags(g: Any, launch_note: str = "") -> None:

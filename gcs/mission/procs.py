@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -133,12 +134,48 @@ class ProcessGroup:
             shutil.rmtree(self._gate, ignore_errors=True)
             self._gate = None
 
+    def cause(self, child: Child) -> str:
+        """One line on why ``child`` exited: :func:`cause_line` of its log."""
+        child.log_file.flush()
+        return cause_line(child.log_path, child.proc.returncode)
+
     def tail(self, child: Child, lines: int = 15) -> str:
         try:
             text = child.log_path.read_text(errors="replace").splitlines()
         except OSError:
             return ""
         return "\n".join(text[-lines:])
+
+
+# a log line that says what went wrong (the last such line is the cause of an exit)
+ERROR_MARKERS = ("Error", "error", "Errno", "Exception", "in use", "cannot", "refused",
+                 "denied", "failed", "FATAL")
+CAUSE_MAX_CHARS = 240  # a cause is one line of the top-level message
+# a program's one-line refusal on stderr (``offboard: --signing-key: ...``, exit 2)
+REFUSAL = re.compile(r"^(offboard|vehicle-sim|gcs[\w ]*): ")
+
+
+def cause_line(log_path: Path, returncode: int | None) -> str:
+    """Why a child exited, as one line: the last line of its log that reads as an error
+    (an exception, an ``OSError``'s ``[Errno 98] Address already in use``, a program's
+    one-line refusal), else its signal or exit code and its log's last line."""
+    try:
+        lines = [ln.strip() for ln in log_path.read_text(errors="replace").splitlines()]
+    except OSError:
+        lines = []
+    lines = [ln for ln in lines if ln and not ln.startswith(("Traceback", "File ", "^"))]
+    for ln in reversed(lines):
+        if any(m in ln for m in ERROR_MARKERS) or REFUSAL.match(ln):
+            return ln[:CAUSE_MAX_CHARS]
+    if returncode is not None and returncode < 0:
+        try:
+            how = f"killed by {signal.Signals(-returncode).name}"
+        except ValueError:
+            how = f"killed by signal {-returncode}"
+    else:
+        how = f"exit code {returncode}"
+    return how + (f"; last log line: {lines[-1][:CAUSE_MAX_CHARS]}" if lines else
+                  "; its log is empty")
 
 
 # daemons that may start at once whatever the number of CPUs: a cube8 run starts its 8

@@ -11,7 +11,7 @@ from typing import Any
 from gcs.exit_codes import EXIT_RUN_FAILED, EXIT_USAGE
 from gcs.formation.vehicle import FORMATION_PORT
 from gcs.mission.distributed import MissionError, run_and_score
-from gcs.mission.launch_spec import LaunchError, SigningChoice
+from gcs.mission.launch_spec import LaunchError, SigningChoice, resolve_port_offset
 from gcs.mission.run_output import print_result
 from gcs.mission.score import default_out_dir, late_steps
 from gcs.report.verdict import safety_exit_status
@@ -22,7 +22,9 @@ log = logging.getLogger(__name__)
 
 
 def cli_run(args: Any, sc: Scenario) -> int:
-    """``gcs mission run SCENARIO`` (distributed). Exit 2: bad input or a busy port;
+    """``gcs mission run SCENARIO`` (distributed), at ``--port-offset`` or, without it, the
+    first offset whose ports are all free (:func:`~gcs.mission.launch_spec.resolve_port_offset`).
+    Exit 2: bad input or a busy port;
     1: a child died or the run stalled; 3: the safety verdict (:mod:`gcs.exit_codes`)."""
     method = str(args.method or sc.controller.method)
     duration = float(sc.run.duration_s if args.duration is None else args.duration)
@@ -33,21 +35,25 @@ def cli_run(args: Any, sc: Scenario) -> int:
     if args.kill_at is not None and args.kill_agent is None:
         print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
         return EXIT_USAGE
+    formation = getattr(args, "formation_vehicle", False)
     try:
         out = Path(args.out) if args.out else default_out_dir(sc, method)
         signing = SigningChoice.from_args(args)
+        # every port bound and released before anything starts: a forced offset with a busy
+        # port stops here (exit 2, one line); without one, the first offset all free
+        offset = resolve_port_offset(sc, args.port_offset,
+                                     FORMATION_PORT if formation else None)
     except (ValueError, LaunchError) as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_USAGE
     try:
         doc = run_and_score(
             sc, out, method, args.seed, duration, realtime=args.realtime,
-            port_offset=args.port_offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
+            port_offset=offset, kill_agent=args.kill_agent, kill_at=args.kill_at,
             show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
             processes=getattr(args, "processes", None),
             default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
-            formation_port=(FORMATION_PORT + args.port_offset
-                            if getattr(args, "formation_vehicle", False) else None),
+            formation_port=FORMATION_PORT + offset if formation else None,
         )
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)

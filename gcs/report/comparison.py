@@ -1,4 +1,4 @@
-"""Comparison report of the three methods: the paper's Table 3 beside ours, and plots.
+"""Comparison report of every method run: the paper's Table 3 beside ours, and plots.
 
 ``write_report`` writes ``report.md`` (tables, each with a legend of its columns, and a
 paragraph on every difference from the paper's Table 3) and the PNG plots of
@@ -18,15 +18,18 @@ from typing import Any
 import numpy as np
 
 from gcs.report.safety_table import safety_legend, safety_table
-from gcs.report.shared import FORMED_TOL_M, LABELS, PAPER_TABLE3, md_legend
+from gcs.report.shared import FORMED_TOL_M, LABELS, PAPER_TABLE3, failed_rows, md_legend
 from gcs.report.shared import fmt as _f
 from swarm_common.mission.plan import MissionPlan
 from swarm_common.world.config import World
 
 DEPARTURES = "docs/paper-departures.md"
 
-def compare_table(metrics: dict[str, dict], d_safe: float = 0.5) -> str:
-    """Markdown table: paper Table 3 beside our metrics per method."""
+def compare_table(
+    metrics: dict[str, dict], d_safe: float = 0.5, failed: dict[str, str] | None = None
+) -> str:
+    """Markdown table: paper Table 3 beside our metrics per method; the methods of
+    ``failed`` (method -> why its run failed) as rows marked FAILED."""
     head = (
         "| Method | Paper min dist (m) | Ours min dist (m) | < D_safe | Collisions | "
         "Paper energy | ∫Σ‖u‖²dt (m²/s³) | ∫Σ(F−mg)²dt (N²s) | ∫ΣF²dt (N²s) | "
@@ -43,7 +46,7 @@ def compare_table(metrics: dict[str, dict], d_safe: float = 0.5) -> str:
             f"{_f(met['energy_thrust'], 0)} | {_f(met.get('formation_time_s'), 1)} | "
             f"{met['qp_fallbacks']} |"
         )
-    return head + "\n".join(rows) + "\n"
+    return head + "".join(r + "\n" for r in rows) + failed_rows(failed, 11)
 
 
 def compare_legend(d_safe: float = 0.5) -> str:
@@ -167,7 +170,7 @@ def _distance_text(
 def _energy_text(metrics: dict[str, dict], series: dict[str, dict]) -> str:
     ms = [m for m in metrics if m in PAPER_TABLE3]
     dur = _duration(next(iter(series.values()))["t"]) if series else PAPER_DURATION_S
-    ft = [metrics[m]["energy_thrust"] for m in ms]
+    ft = [metrics[m]["energy_thrust"] for m in metrics]  # every method of the table
     paper = [PAPER_TABLE3[m][1] for m in ms]
     out = (
         "**Energy.** The paper calls its energy the integral of squared thrust, but that "
@@ -176,11 +179,13 @@ def _energy_text(metrics: dict[str, dict], series: dict[str, dict]) -> str:
     if ft:
         mant, exp = f"{np.mean(ft) / dur * PAPER_DURATION_S:.1e}".split("e")
         out += (
-            f"Here ∫ΣF²dt is {min(ft):.0f} to {max(ft):.0f} N²s for the {len(ft)} methods over "
+            f"Here ∫ΣF²dt is {min(ft):.0f} to {max(ft):.0f} N²s for the {len(ft)} "
+            f"method{'s' if len(ft) != 1 else ''} of the table over "
             f"{dur:g} s, about {mant}·10^{int(exp)} N²s over the paper's {PAPER_DURATION_S:g} s "
-            f"whatever the method, so the paper's {min(paper):g} to {max(paper):g} cannot be "
-            "that quantity. "
+            "whatever the method"
         )
+        out += (f", so the paper's {min(paper):g} to {max(paper):g} cannot be that quantity. "
+                if paper else ". ")
     out += (
         "We therefore compare the paper's column with the integral of the squared virtual "
         "control ∫Σ‖u‖²dt, and also give the squared thrust above hover ∫Σ(F−mg)²dt. "
@@ -254,6 +259,23 @@ def world_table(metrics: dict[str, dict], world: World) -> str:
     return head + "\n".join(rows)
 
 
+def failed_text(metrics: dict[str, dict], failed: dict[str, str] | None) -> list[str]:
+    """Report lines on the methods whose run failed (none: no lines): how many of all,
+    each with its reason; the numbers and plots below are of the others only."""
+    if not failed:
+        return []
+    n = len(metrics) + len(failed)
+    return [
+        f"**Failed runs.** {len(failed)} of the {n} methods did not finish; their rows below "
+        "are marked FAILED, and the numbers, text and plots are of the "
+        f"{len(metrics)} that did:",
+        "",
+        *[f"* **{LABELS.get(m, m)}** (`{m}`): {why.splitlines()[0] if why else '?'}"
+          for m, why in failed.items()],
+        "",
+    ]
+
+
 def write_report(
     out_dir: str | Path,
     scenario_name: str,
@@ -270,11 +292,14 @@ def write_report(
     deadline_s: float,
     mission: MissionPlan | None = None,
     world: World | None = None,
+    failed: dict[str, str] | None = None,
 ) -> Path:
     """Write report.md and the PNG plots into ``out_dir``; returns the report path
     (``tau_safe_s``, ``deadline_s``: the scenario's barrier τ and tracking-window start, s;
     ``mission``: the scenario's mission plan, for its section and path plot; ``world``:
-    its obstacles and geofence, drawn in the snapshots and summed up in a table)."""
+    its obstacles and geofence, drawn in the snapshots and summed up in a table;
+    ``failed``: method -> why its run failed (one line), said in the text and marked as a
+    FAILED row in the tables; ``metrics`` and ``series`` hold the methods that finished)."""
     from gcs.report.plots import (
         plot_energy,
         plot_errors,
@@ -299,11 +324,12 @@ def write_report(
         "",
         f"The paper's Table 3 beside our {mode} runs (same scenario, seed, sensing noise, ζ).",
         "",
-        compare_table(metrics, d_safe),
+        *failed_text(metrics, failed),
+        compare_table(metrics, d_safe, failed),
         compare_legend(d_safe),
         "## Safety and tracking (true states)",
         "",
-        safety_table(metrics),
+        safety_table(metrics, failed),
         safety_legend(d_safe, tau_safe_s, deadline_s),
         paper_differences(metrics, series, d_safe, follower_idx),
     ]

@@ -8,6 +8,7 @@ formed, end) and energies. Positions are ENU (m); vehicles are indexed in scenar
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,7 @@ def plot_min_distance(series: dict[str, dict], d_safe: float, path: Path) -> Non
     top.set(xlabel="time t (s)", ylabel="min distance, any pair (m)", ylim=(0, None))
     top.set_title("Smallest distance between any two vehicles", fontsize=10)
     top.grid(True, alpha=0.3)
-    top.legend(fontsize=8, loc="center right")
+    top.legend(fontsize=8, loc="best")
     for k, (m, s) in enumerate(series.items()):
         ax = fig.add_subplot(grid[1, k])
         i, dmin, (a, b) = closest_approach(s)
@@ -55,7 +56,8 @@ def plot_min_distance(series: dict[str, dict], d_safe: float, path: Path) -> Non
         ax.set(xlabel="time t (s)", ylabel="min distance (m)", ylim=(0, None))
         ax.set_title(f"{LABELS.get(m, m)}: pair {a + 1}–{b + 1}", fontsize=9)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
+        # "best": the corner with the fewest points of the curve and the marker under it
+        ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -159,7 +161,9 @@ def plot_snapshots(
         d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
         d[np.diag_indices(len(p))] = np.inf
         na, nb = (int(x) for x in np.unravel_index(int(np.argmin(d)), d.shape))
-        near = f"nearest pair {d[na, nb]:.2f} m"
+        # the recorded smallest distance of this step: the number the closest-approach
+        # title shows (snapshot_times), so title and legend agree to the last digit
+        near = f"nearest pair {float(s['min_dist'][i]):.2f} m"
         ax.plot(*zip(p[na], p[nb], strict=True), "m-", lw=2.0, label=near)
         if world is not None:
             _draw_world(ax, world)
@@ -191,7 +195,9 @@ def plot_energy(metrics: dict[str, dict], path: Path) -> None:
     axes[1].bar(x, excess, color="C1", label="ours ∫Σ(F − mg)²dt")
     axes[1].set(ylabel="∫Σ(F − mg)²dt (N²s)", title="Squared thrust above hover (followers)")
     for ax in axes:
-        ax.set_xticks(x, [LABELS.get(m, m) for m in ms], fontsize=7)
+        # the methods' labels are long: wrapped onto lines of at most 12 characters so that
+        # neighbours never overlap (four methods on a 4-inch axis)
+        ax.set_xticks(x, [textwrap.fill(LABELS.get(m, m), 12) for m in ms], fontsize=7)
         ax.set_xlabel("method")
         ax.title.set_fontsize(9)
         ax.legend(fontsize=8)

@@ -3,12 +3,13 @@ safety verdict) and its legend (docs/metrics.md)."""
 
 from __future__ import annotations
 
-from gcs.report.shared import LABELS, md_legend
+from gcs.report.shared import LABELS, failed_rows, md_legend
 from gcs.report.shared import fmt as _f
 
 
-def safety_table(metrics: dict[str, dict]) -> str:
-    """Markdown table of the honest safety and tracking metrics (docs/metrics.md)."""
+def safety_table(metrics: dict[str, dict], failed: dict[str, str] | None = None) -> str:
+    """Markdown table of the honest safety and tracking metrics (docs/metrics.md); the
+    methods of ``failed`` (method -> why its run failed) as rows marked FAILED."""
     out = (
         "| Method | Verdict (events) | True h_min (m²) | Own h_min (m²) | Steps h<0 | "
         "Pair-steps h<0 | Min dist formation / mission (m) | Clipped agent-steps | "
@@ -28,7 +29,7 @@ def safety_table(metrics: dict[str, dict]) -> str:
             f"{_f(met.get('tracking_max_m'), 3)} | "
             f"{_f(met.get('tracking_time_above_0p1_s'), 2)} |\n"
         )
-    return out
+    return out + failed_rows(failed, 10)
 
 
 def safety_legend(d_safe: float, tau: float, deadline_s: float) -> str:

@@ -45,3 +45,20 @@ def fmt(x: Any, nd: int = 2) -> str:
     if isinstance(x, float):
         return f"{x:.{nd}f}"
     return str(x)
+
+
+FAILED_CELL_CHARS = 160  # a failed method's reason in a table cell is cut to this length
+
+
+def failed_rows(failed: dict[str, str] | None, columns: int) -> str:
+    """Table rows (markdown, ``columns`` cells) of methods whose run failed: the method,
+    ``FAILED: <reason>`` (cut to :data:`FAILED_CELL_CHARS`, pipes escaped), "–" elsewhere."""
+    rows = ""
+    for m, why in (failed or {}).items():
+        reason = why.splitlines()[0] if why else "no reason given"
+        if len(reason) > FAILED_CELL_CHARS:
+            reason = reason[:FAILED_CELL_CHARS - 1] + "…"
+        reason = reason.replace("|", "\\|")
+        rows += (f"| {LABELS.get(m, m)} | FAILED: {reason} |"
+                 + " – |" * (columns - 2) + "\n")
+    return rows
