@@ -41,9 +41,23 @@ from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 
 
+def _port_offset(text: str) -> int:
+    from gcs.mission.launch_spec import MAX_PORT_OFFSET
+
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: not an integer") from None
+    if not 0 <= v <= MAX_PORT_OFFSET:
+        raise argparse.ArgumentTypeError(f"{v}: must be in 0..{MAX_PORT_OFFSET}")
+    return v
+
+
 def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--scenario", default=None, help="scenario TOML (default scenarios/cube8.toml)")
-    p.add_argument("--port-offset", type=int, default=0, help="shift every port by N")
+    p.add_argument("--port-offset", type=_port_offset, default=None,
+                   help="shift every port by N (default: with --launch the first offset whose "
+                   "ports are all free, else 0)")
     p.add_argument(
         "--swarm",
         default=None,
@@ -129,7 +143,13 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
     sc = load_scenario(path, allow_infeasible=args.allow_infeasible,
                        allow_unsafe=args.allow_unsafe)
-    offset = args.port_offset
+    offset = 0 if args.port_offset is None else args.port_offset
+    if args.launch:  # free ports (or the forced offset's, checked): LaunchError, exit 2
+        from gcs.formation.vehicle import FORMATION_PORT
+        from gcs.mission.launch_spec import resolve_port_offset
+
+        base = FORMATION_PORT if args.formation_vehicle else None
+        offset = resolve_port_offset(sc, args.port_offset, base, gcs_port=True)
     if args.formation_vehicle and (sc.mission is None or args.no_zenoh):
         raise ValueError("--formation-vehicle needs a scenario with a [mission] and Zenoh")
     launch = None
