@@ -10,11 +10,16 @@ PYTEST := $(VENV)/bin/python -m pytest -q
 UNIT_JOBS ?= 2
 INTEGRATION_JOBS ?= 2
 SMOKE_DIR := $(VENV)/smoke
+# a standard client the tests drive unmodified; --no-deps: its map and camera modules'
+# vtk and opencv (200 MB) are never loaded by mavproxy.py on a UDP link (its other
+# dependencies are in the dev extra)
+CLIENT_TOOLS := 'mavproxy>=1.8.70'
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --upgrade pip
 	$(VENV)/bin/pip install --quiet -e '.[dev]'
+	$(VENV)/bin/pip install --quiet --no-deps $(CLIENT_TOOLS)
 	touch $(STAMP)
 
 .PHONY: venv mission test check static smoke test-unit test-integration lint typecheck warm bench

@@ -36,6 +36,7 @@ from vehicle_sim.autopilot import modes, nav_flight, setpoint_input, telemetry
 from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.setpoints import SetpointKind
 from vehicle_sim.autopilot.state import Dest, VehicleState
+from vehicle_sim.autopilot.streams import PeerStreams
 from vehicle_sim.physics.position_control import PositionSetpoint, SpeedLimits
 from vehicle_sim.services import command as commands
 from vehicle_sim.services.command import Command
@@ -57,6 +58,8 @@ class Vehicle(VehicleState):
         self, agent_id: int, idx: int, dyn: Any, cfg: AutopilotConfig | None = None
     ) -> None:
         super().__init__(agent_id, idx, dyn, cfg)
+        # per-link default sets: onboard on the API link, PX4's normal set on the GCS link
+        self.streams = PeerStreams(self.cfg.rates, self.cfg.odometry_hz, self.cfg.gcs_rates)
         self._handlers: dict[int, Callable[[Any, Dest, float, float], None]] = {
             M.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: self._on_setpoint,
             M.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_position_target,
@@ -207,15 +210,20 @@ class Vehicle(VehicleState):
         heartbeat_only: bool = False,
     ) -> None:
         """Queue every stream whose interval has elapsed on the wall clock (to
-        :attr:`stream_out`); ``live``: the peers still there (others lose their rates);
-        ``heartbeat_only``: nobody takes the default schedule but its HEARTBEAT
-        (``--default-streams on-contact``), so nothing else of it is built."""
+        :attr:`stream_out`, as ``(message, (link, addr or None))``: None = every
+        destination on the link's default schedule); ``live``: the peers still there
+        (others lose their rates); ``heartbeat_only``: nobody takes a default schedule but
+        its HEARTBEAT (``--default-streams on-contact``), so nothing else of it is built.
+        A message due for several destinations in one call is built once."""
         if live is not None:
             self.streams.forget(live)
+        built: dict[int, M.MAVLink_message | None] = {}
         for key, mid in self.streams.due(wall, skip):
-            if heartbeat_only and key is None and mid != M.MAVLINK_MSG_ID_HEARTBEAT:
+            if heartbeat_only and key[1] is None and mid != M.MAVLINK_MSG_ID_HEARTBEAT:
                 continue
-            msg = telemetry.build(self, mid, sim_t)
+            if mid not in built:
+                built[mid] = telemetry.build(self, mid, sim_t)
+            msg = built[mid]
             if msg is not None:
                 self.stream_out.append((msg, key))
 

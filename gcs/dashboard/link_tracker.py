@@ -3,7 +3,9 @@
 Vehicles are told apart by the MAVLink system id (= agent id). One pymavlink
 ``MAVLink`` parser object reads every datagram (MAVLink 2, common dialect). Per system
 id :class:`LinkTracker` keeps heartbeat age, message rate, PX4 mode, armed state,
-position and velocity (converted NED -> ENU), STATUSTEXT and mode/arming changes as
+position and velocity (converted NED -> ENU; from LOCAL_POSITION_NED or ODOMETRY, with
+the time of the last one), attitude (ATTITUDE_QUATERNION, ODOMETRY, or ATTITUDE: PX4's
+normal GCS set streams ATTITUDE at 15 Hz and no quaternion), STATUSTEXT and mode/arming changes as
 :class:`LinkEvent`, and hands a COMMAND_ACK to the :class:`PendingAck` awaiting it.
 Malformed packets are counted, never raised. No socket here: the caller feeds datagrams.
 """
@@ -24,7 +26,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_common import signing
-from swarm_common.frames import ned_to_enu, rotm_from_quat
+from swarm_common.frames import ned_to_enu, quat_from_rotm, rotm_from_euler, rotm_from_quat
 
 from .command_retry import PendingAck
 from .px4modes import decode_px4_mode
@@ -62,6 +64,7 @@ class LinkVehicle:
     pos_enu: tuple[float, float, float] | None = None
     vel_enu: tuple[float, float, float] | None = None
     q_ned: tuple[float, float, float, float] | None = None
+    pos_t: float | None = None  # clock() time of the last position (None: none yet)
     time_boot_ms: int = 0
     sensors_ok: bool | None = None
     battery_pct: int = -1
@@ -114,6 +117,7 @@ class LinkTracker:
             "LOCAL_POSITION_NED": self._on_local_position,
             "ODOMETRY": self._on_odometry,
             "ATTITUDE_QUATERNION": self._on_attitude,
+            "ATTITUDE": self._on_attitude_euler,
             "SYS_STATUS": self._on_sys_status,
             "STATUSTEXT": self._on_statustext,
             "COMMAND_ACK": self._on_command_ack,
@@ -217,11 +221,13 @@ class LinkTracker:
         v.pos_enu = _enu(msg.x, msg.y, msg.z)
         v.vel_enu = _enu(msg.vx, msg.vy, msg.vz)
         v.time_boot_ms = msg.time_boot_ms
+        v.pos_t = now
 
     def _on_odometry(self, v: LinkVehicle, msg: Any, now: float) -> None:
         """Position in a local frame; velocity in a local or body frame (body: rotate by q)."""
         if msg.frame_id in LOCAL_FRAMES:
             v.pos_enu = _enu(msg.x, msg.y, msg.z)
+            v.pos_t = now
         vel = (msg.vx, msg.vy, msg.vz)
         q = tuple(float(c) for c in msg.q)
         if msg.child_frame_id in LOCAL_FRAMES:
@@ -233,6 +239,13 @@ class LinkTracker:
 
     def _on_attitude(self, v: LinkVehicle, msg: Any, now: float) -> None:
         v.q_ned = (msg.q1, msg.q2, msg.q3, msg.q4)
+
+    def _on_attitude_euler(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        """ATTITUDE: roll, pitch, yaw (rad, FRD relative to NED, ZYX) -> NED quaternion."""
+        e = (float(msg.roll), float(msg.pitch), float(msg.yaw))
+        if all(math.isfinite(c) for c in e):
+            q = quat_from_rotm(rotm_from_euler(*e))
+            v.q_ned = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
     def _on_sys_status(self, v: LinkVehicle, msg: Any, now: float) -> None:
         need = msg.onboard_control_sensors_present & msg.onboard_control_sensors_enabled

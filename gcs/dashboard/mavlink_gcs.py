@@ -11,6 +11,14 @@ waits for the matching COMMAND_ACK with a per-attempt timeout and retries (the
 :func:`~.command_retry.command_exchange`. :meth:`MavlinkGcs.send_command` blocks;
 :meth:`MavlinkGcs.command` is the ``async`` twin for an asyncio (Textual) loop.
 
+Streams: a vehicle's GCS link starts from PX4's normal set (docs/px4/streams.md), in
+which LOCAL_POSITION_NED runs at 1 Hz. When a live vehicle's position is older than
+:data:`POSITION_STALE_S`, this link asks it, on its own link, for LOCAL_POSITION_NED at
+:data:`POSITION_STREAM_HZ` (MAV_CMD_SET_MESSAGE_INTERVAL, per peer on the vehicle),
+again at most every :data:`STREAM_REQUEST_RETRY_S` (a lost request, a restarted vehicle,
+a vehicle that forgot our rate when we fell silent). A vehicle that already streams it
+fast enough is never asked.
+
 The socket runs in a daemon thread; no Textual here, so all of it is unit-testable
 (:meth:`MavlinkGcs.feed` takes a datagram directly).
 """
@@ -51,6 +59,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+POSITION_STREAM_HZ = 10.0  # LOCAL_POSITION_NED rate asked of every vehicle
+POSITION_STALE_S = 0.5  # s: a position older than this means the rate is too low
+STREAM_REQUEST_RETRY_S = 5.0  # s between two stream requests to one vehicle
+
 
 class MavlinkGcs:
     """The GCS UDP link. ``start()`` binds and starts the reader thread.
@@ -72,6 +84,7 @@ class MavlinkGcs:
         clock: Callable[[], float] = time.monotonic,
         max_events: int = 2000,
         signing_key: bytes | None = None,
+        request_streams: bool = True,
     ) -> None:
         self.host = host
         self.port = GCS_PORT + port_offset if port is None else port
@@ -89,6 +102,8 @@ class MavlinkGcs:
         self._stop = threading.Event()
         self._last_tick = 0.0
         self._last_gcs_hb = 0.0
+        self._request_streams = request_streams
+        self._stream_requested: dict[int, float] = {}  # sysid -> clock() of the last request
 
     def _keep_signing_time(self) -> None:
         """Signed: the outgoing signing timestamp never lags the wall clock, so a vehicle
@@ -197,6 +212,28 @@ class MavlinkGcs:
                     self.sock.sendto(buf, addr)
                 except OSError as exc:  # the vehicle's port went away: its link times out
                     log.debug("GCS heartbeat to %s: %s", addr, exc)
+        if self._request_streams:
+            self._request_position_streams(now)
+
+    def _request_position_streams(self, now: float) -> None:
+        """SET_MESSAGE_INTERVAL(LOCAL_POSITION_NED) to each live vehicle whose position is
+        stale (older than POSITION_STALE_S), at most every STREAM_REQUEST_RETRY_S."""
+        for v in self.tracker.vehicles().values():
+            if v.lost or v.last_heartbeat is None:
+                continue
+            since = v.first_seen if v.pos_t is None else v.pos_t
+            if now - since < POSITION_STALE_S:
+                continue
+            if now - self._stream_requested.get(v.sysid, -STREAM_REQUEST_RETRY_S) < (
+                STREAM_REQUEST_RETRY_S
+            ):
+                continue
+            self._stream_requested[v.sysid] = now
+            interval_us = 1e6 / POSITION_STREAM_HZ
+            self._send_long(
+                v.sysid, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, interval_us), 0,
+            )  # fmt: skip
 
     # -- commands ------------------------------------------------------------------
     def _send_long(self, sysid: int, command: int, params: tuple[float, ...], conf: int) -> bool:

@@ -5,9 +5,12 @@
 rates). It is not the scenario's physical vehicle (mass, thrust, tilt: that is
 :class:`swarm_common.scenario.schema.VehicleConfig`, which the dynamics read).
 
-:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with on both of its links
-(Hz, 0 = off; close to PX4's "normal" link mode; ODOMETRY uses
-``AutopilotConfig.odometry_hz``). docs/px4/streams.md lists them.
+:data:`DEFAULT_RATES` holds the stream rates a vehicle starts with on its API link (the
+"onboard" set: PX4's MAVLINK_MODE_ONBOARD streams that this simulator builds, at the
+rates the offboard daemon needs; ODOMETRY uses ``AutopilotConfig.odometry_hz``) and
+:data:`GCS_RATES` those of its GCS link (PX4's MAVLINK_MODE_NORMAL set, restricted to the
+messages this simulator builds: no ODOMETRY, no ATTITUDE_QUATERNION). Hz, 0 = off.
+docs/px4/streams.md lists both.
 """
 
 from __future__ import annotations
@@ -34,6 +37,24 @@ DEFAULT_RATES: dict[int, float] = {
     M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.0,
 }
 
+# PX4 Mavlink::configure_streams_to_default, MAVLINK_MODE_NORMAL (rates in Hz)
+GCS_RATES: dict[int, float] = {
+    M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 15.0,
+    M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 2.0,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
+    M.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 1.0,
+    M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 0.0,  # not in the normal set
+    M.MAVLINK_MSG_ID_ODOMETRY: 0.0,  # onboard only: a client may request it
+}
+
 
 @dataclass
 class AutopilotConfig:
@@ -53,5 +74,7 @@ class AutopilotConfig:
     home_alt: float = 488.0
     uid_base: int = 0x4253574152000000  # "BSWAR" + offset << 8 + id
     port_offset: int = 0
-    # default stream rates (Hz); 0 = off. ODOMETRY uses odometry_hz.
+    # default stream rates (Hz) of the API link; 0 = off. ODOMETRY uses odometry_hz.
     rates: dict[int, float] = field(default_factory=lambda: dict(DEFAULT_RATES))
+    # default stream rates (Hz) of the GCS link (PX4's normal set)
+    gcs_rates: dict[int, float] = field(default_factory=lambda: dict(GCS_RATES))

@@ -26,7 +26,7 @@ from vehicle_sim.autopilot.nav_flight import RtlPlan
 from vehicle_sim.autopilot.param_defaults import default_param_specs
 from vehicle_sim.autopilot.params import ParamStore
 from vehicle_sim.autopilot.setpoints import SetpointKind
-from vehicle_sim.autopilot.streams import PeerKey, PeerStreams
+from vehicle_sim.autopilot.streams import PeerStreams, StreamKey
 from vehicle_sim.physics.failsafe_controller import FailsafeController
 from vehicle_sim.physics.position_control import PositionController, PositionSetpoint
 
@@ -69,7 +69,7 @@ class VehicleState:
         self.ctr = VehicleCounters()
         self.outbox: list[tuple[M.MAVLink_message, Dest]] = []
         # telemetry streams: None = every destination on the default schedule
-        self.stream_out: list[tuple[M.MAVLink_message, PeerKey | None]] = []
+        self.stream_out: list[tuple[M.MAVLink_message, StreamKey]] = []
         self.events: list[tuple[int, str]] = []  # (MAV_SEVERITY, line) for the server's log
         self.encs: dict[str, M.MAVLink] = {}  # per link (Vehicle.encoder())
         # MAV_CMD -> handler(vehicle, command) of the services the vehicle attaches

@@ -4,9 +4,9 @@
 ``(vehicle, sim_t) -> message`` that reads the vehicle's state (dynamics row, mode,
 setpoint); :func:`build` looks it up (``None`` for a message the vehicle does not send).
 :data:`vehicle_sim.autopilot.config.DEFAULT_RATES` holds the stream rates a vehicle starts
-with on both of its links (Hz, 0 = off; close to PX4's "normal" link mode). The ODOMETRY
-rate comes from ``AutopilotConfig.odometry_hz``. Rates, health bits and the battery:
-docs/px4/streams.md.
+with on its API link (the onboard set), ``config.GCS_RATES`` those of its GCS link (PX4's
+"normal" set); Hz, 0 = off. The ODOMETRY rate comes from ``AutopilotConfig.odometry_hz``.
+Rates, health bits and the battery: docs/px4/streams.md.
 
 Frames: the dynamics are ENU / FLU (z up); every message is NED / FRD. Time stamps are
 simulation time (``time_boot_ms`` = round(sim_t · 1000), ``time_usec`` = round(sim_t · 1e6)).

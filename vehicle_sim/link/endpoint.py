@@ -16,9 +16,15 @@
   seconds. At most ``max_peers`` such peers: a newcomer is refused (``peers_refused``,
   its frames dropped) while the table is full of peers that still speak, it never evicts
   one. The default remote is always admitted and never counted.
-* Amplification bound: a peer that is neither the default remote nor authenticated by a
-  valid signature earns ``AMPLIFICATION_LIMIT`` bytes of stream credit per byte it sends;
-  streams to it stop when the credit is spent (:meth:`MavlinkLink.stream_allowed`).
+* Amplification bound (docs/security.md): a peer that is neither the default remote nor
+  authenticated by a valid signature gets streams only while it speaks (within
+  ``peer_timeout``) and within a byte budget of its own, a token bucket of
+  ``budget_bytes_per_s`` (default :data:`BUDGET_BYTES_PER_S`, 64 kB/s) holding at most
+  ``budget_burst_bytes`` (:data:`BUDGET_BURST_BYTES`); a stream datagram the bucket
+  cannot pay for is withheld and counted (:meth:`MavlinkLink.stream_allowed`). PX4's
+  normal set is about 1.5 kB/s, so a ground station, even one that asks for a few
+  streams at 50-100 Hz, never reaches it; a spoofed source earns at most
+  ``peer_timeout`` seconds of it per datagram.
 * Counters (:attr:`stats`): datagrams, messages, ``bad`` (CRC / length / flags errors),
   ``garbage`` (bytes that are not MAVLink at all, parser exceptions), ``truncated``,
   ``foreign`` (a ``target_system`` that is neither 0 nor ours: dropped here),
@@ -55,8 +61,9 @@ RCVBUF_BYTES = 1 << 20
 PARSE_ERRORS = (mavlink2.MAVError, struct.error, IndexError, ValueError)
 PEER_TIMEOUT_S = 5.0  # a peer silent this long gets no more streams and is forgotten
 MAX_PEERS = 4  # peers per link besides the default remote
-AMPLIFICATION_LIMIT = 10.0  # stream bytes out per byte in, unauthenticated peers
-CREDIT_MAX_BYTES = 20_000.0  # stream credit an unauthenticated peer can bank
+# per-peer stream byte budget of unauthenticated peers (token bucket)
+BUDGET_BYTES_PER_S = 64_000.0  # refill rate, bytes/s
+BUDGET_BURST_BYTES = 32_000.0  # bucket size (and a newcomer's start), bytes
 LIVENESS_FREE_S = 1.0  # one HEARTBEAT per second reaches a peer out of credit
 SIGNING_LINK_ID = 0  # link id of the simulator's outgoing signed streams
 # what an unsigned client may send on an ``unsigned_ok`` link (commands checked later)
@@ -120,7 +127,8 @@ class Peer:
     sysid: int = 0
     compid: int = 0
     authenticated: bool = False  # has sent a frame with a valid signature
-    credit: float = 0.0  # stream bytes it may still be sent (unauthenticated peers)
+    tokens: float = BUDGET_BURST_BYTES  # stream bytes it may still be sent now
+    refilled_at: float = 0.0  # when ``tokens`` was last brought up to date (monotonic s)
     free_liveness_at: float = -1e9  # when it last got a HEARTBEAT without credit
 
 
@@ -137,6 +145,8 @@ class MavlinkLink:
     max_peers: int = MAX_PEERS
     key: bytes | None = None
     unsigned_ok: bool = False
+    budget_bytes_per_s: float = BUDGET_BYTES_PER_S
+    budget_burst_bytes: float = BUDGET_BURST_BYTES
     stats: LinkStats = field(default_factory=LinkStats)
     # injected faults (docs/faults.md); None: the plan of the scenario this process loaded
     faults: FaultInjector | None = None
@@ -226,7 +236,7 @@ class MavlinkLink:
                 m._restricted = self.key is not None and not m.get_signed()
                 signed = signed or (self.key is not None and m.get_signed())
                 accepted.append(m)
-            if good and self._admit(addr, now, msgs, signed, len(data)):
+            if good and self._admit(addr, now, msgs, signed):
                 st.messages += len(accepted)
                 out.extend(accepted)
         return out
@@ -247,9 +257,7 @@ class MavlinkLink:
         else:
             st.bad += 1
 
-    def _admit(
-        self, addr: tuple[str, int], now: float, msgs: Iterable, signed: bool, nbytes: int
-    ) -> bool:
+    def _admit(self, addr: tuple[str, int], now: float, msgs: Iterable, signed: bool) -> bool:
         """Track the sender of an accepted datagram; False (frames dropped) for a newcomer
         while ``max_peers`` peers that still speak fill the table."""
         p = self.peers.get(addr)
@@ -259,10 +267,10 @@ class MavlinkLink:
             if addr != self.default_remote and len(counted) >= self.max_peers:
                 self.stats.peers_refused += 1
                 return False
-            p = self.peers[addr] = Peer(addr, now)
+            p = self.peers[addr] = Peer(addr, now, tokens=self.budget_burst_bytes,
+                                        refilled_at=now)  # fmt: skip
         p.last_seen = now
         p.authenticated = p.authenticated or signed
-        p.credit = min(CREDIT_MAX_BYTES, p.credit + AMPLIFICATION_LIMIT * nbytes)
         for m in msgs:
             if m.get_msgId() >= 0:
                 p.sysid, p.compid = m.get_srcSystem(), m.get_srcComponent()
@@ -301,25 +309,33 @@ class MavlinkLink:
     def stream_allowed(
         self, addr: tuple[str, int], nbytes: int, now: float, liveness: bool = False
     ) -> bool:
-        """Whether a stream datagram of ``nbytes`` may go to ``addr`` (and spend its
-        credit): always for the default remote and authenticated peers; a ``liveness``
-        datagram (HEARTBEAT) once per ``LIVENESS_FREE_S`` without credit. An address the
-        link no longer knows (a peer just forgotten) gets nothing."""
+        """Whether a stream datagram of ``nbytes`` may go to ``addr`` at ``now``
+        (monotonic s), and pay for it: always for the default remote and authenticated
+        peers; for any other peer only while it speaks (within ``peer_timeout``) and
+        when its token bucket (refilled at ``budget_bytes_per_s`` up to
+        ``budget_burst_bytes``) holds ``nbytes``, else it is counted in ``throttled``. A
+        ``liveness`` datagram (HEARTBEAT) goes once per ``LIVENESS_FREE_S`` even from an
+        empty bucket. An address the link no longer knows gets nothing."""
         if addr == self.default_remote:
             return True
         p = self.peers.get(addr)
-        if p is None:
+        if p is None or now - p.last_seen > self.peer_timeout:
             return False
         if p.authenticated:
+            return True
+        if now > p.refilled_at:
+            p.tokens = min(
+                self.budget_burst_bytes, p.tokens + (now - p.refilled_at) * self.budget_bytes_per_s
+            )
+            p.refilled_at = now
+        if p.tokens >= nbytes:
+            p.tokens -= nbytes
             return True
         if liveness and now - p.free_liveness_at >= LIVENESS_FREE_S:
             p.free_liveness_at = now
             return True
-        if p.credit < nbytes:
-            self.stats.throttled += 1
-            return False
-        p.credit -= nbytes
-        return True
+        self.stats.throttled += 1
+        return False
 
     def close(self) -> None:
         if self.faults is not None:

@@ -2,9 +2,10 @@
 
 Outbound: every vehicle's outbox and telemetry streams, packed per link (each link has its
 own sequence numbers and signing stream, as PX4's MAVLink instances do) and sent to the
-link's live destinations; streams to unauthenticated peers within their amplification
-credit. Inbound: decoded messages to the vehicles, a hostile one counted, never fatal; an
-onboard component's HEARTBEAT on the API link forwarded to the GCS link's peers.
+link's live destinations (each link its own default stream set, docs/px4/streams.md);
+streams to unauthenticated peers within their per-peer byte budget. Inbound: decoded
+messages to the vehicles, a hostile one counted, never fatal; an onboard component's
+HEARTBEAT on the API link forwarded to the GCS link's peers.
 Rejected-frame reports (STATUSTEXT) and the vehicles' event lines go to the log.
 """
 
@@ -86,8 +87,9 @@ class ServerIO:
         self.log_events()
 
     def _flush_streams(self, v: Vehicle, now: float, dests: dict[str, list]) -> None:
-        """Telemetry: the default schedule to every destination without its own, each
-        peer's own schedule to it; unauthenticated peers within their credit."""
+        """Telemetry: each link's default schedule to every destination of that link
+        without its own, each peer's own schedule to it; unauthenticated peers within
+        their byte budget (:meth:`MavlinkLink.stream_allowed`)."""
         links = self.vlinks[v.id]
         out, v.stream_out = v.stream_out, []
         custom = {name: v.streams.custom(name) for name in links}
@@ -98,21 +100,24 @@ class ServerIO:
             if self.opts.default_streams is DefaultStreams.ON_CONTACT
             else {}
         )
-        for msg, key in out:
+        for msg, (name, addr) in out:
+            link = links.get(name)
+            if link is None:
+                continue
             hb = msg.get_msgId() == M.MAVLINK_MSG_ID_HEARTBEAT
-            targets = (
-                [(n, d) for n in links for d in dests[n]
-                 if d not in custom[n] and (hb or d != silent.get(n))]
-                if key is None
-                else [key]
-            )
-            bufs: dict[str, bytes | None] = {}  # one frame per link: its own sequence
-            for name, addr in targets:
-                if name not in bufs:
-                    bufs[name] = self._pack(v, msg, name)
-                buf = bufs[name]
-                if buf is not None and links[name].stream_allowed(addr, len(buf), now, hb):
-                    links[name].send_bytes(buf, [], addr)
+            if addr is None:
+                skip = silent.get(name) if not hb else None
+                targets = [d for d in dests[name] if d not in custom[name] and d != skip]
+            else:
+                targets = [addr]
+            if not targets:
+                continue
+            buf = self._pack(v, msg, name)  # one frame per link: its own sequence
+            if buf is None:
+                continue
+            for d in targets:
+                if link.stream_allowed(d, len(buf), now, hb):
+                    link.send_bytes(buf, [], d)
 
     def _pack(self, v: Vehicle, msg: M.MAVLink_message, link: str) -> bytes | None:
         try:
@@ -191,4 +196,3 @@ class ServerIO:
         self.forwarded[(v.id, comp)] = now
         gcs = self.vlinks[v.id]["gcs"]
         gcs.send_bytes(bytes(m.get_msgbuf()), gcs.destinations(now))
-

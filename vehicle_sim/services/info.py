@@ -7,9 +7,13 @@ MAV_CMD_REQUEST_PROTOCOL_VERSION, MAV_CMD_GET_HOME_POSITION; and the simulated b
 * REQUEST_DATA_STREAM (the legacy stream groups, still sent by QGroundControl and
   MAVProxy): the group's messages (:data:`DATA_STREAM_GROUPS`, the grouping ArduPilot
   uses, restricted to what this vehicle sends) are set to ``req_message_rate`` Hz for the
-  requesting peer only, or switched off with ``start_stop`` = 0; ``req_message_rate`` 0
-  with start puts the group back on its default rates. The answer is a DATA_STREAM per
-  request (stream id, the rate now in force, on/off): a request is never met by silence.
+  requesting peer only (starting from its link's set, docs/px4/streams.md), or switched
+  off with ``start_stop`` = 0; ``req_message_rate`` 0 with start puts the group back on
+  its link's default rates. A rate is delivered, within the caps of
+  :mod:`vehicle_sim.autopilot.streams` and the peer's byte budget
+  (:mod:`vehicle_sim.link.endpoint`), which an ordinary client never reaches. The answer is
+  a DATA_STREAM per request (stream id, the rate now in force, on/off): a request is
+  never met by silence.
   PX4 itself ignores these groups; they are honoured here because MAVProxy relies on them.
 * MAV_CMD_REQUEST_PROTOCOL_VERSION: ACCEPTED, then PROTOCOL_VERSION (200, 100..200).
 * MAV_CMD_GET_HOME_POSITION (deprecated, QGroundControl still sends it): HOME_POSITION.

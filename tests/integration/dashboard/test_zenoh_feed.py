@@ -29,7 +29,7 @@ def status(i: int, **kw) -> Status:
         id=i,
         step=1,
         t=0.02,
-        mode="formation",
+        mode="OFFBOARD",  # the vehicle flies the agent: its events count
         method="rcbf",
         qp_status="solved",
         qp_solve_us=80.0,

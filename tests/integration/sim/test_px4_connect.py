@@ -166,11 +166,12 @@ class _Client:
 
 
 def test_a_rate_ends_with_the_client_that_set_it(sim_factory):
-    """Client A asks for ATTITUDE_TARGET (off by default) and falls silent; client B,
-    bound to the very same address after A's peer timeout, gets the defaults."""
+    """Client A asks for ATTITUDE_QUATERNION (off in the GCS link's set, PX4's normal
+    one) and falls silent; client B, bound to the very same address after A's peer
+    timeout, gets the defaults."""
     sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
     port = vehicle_ports(1, sim.offset).gcs_local
-    tgt = M.MAVLINK_MSG_ID_ATTITUDE_TARGET
+    tgt = M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION
     a = _Client()
     try:
         a.command(port, M.MAV_CMD_SET_MESSAGE_INTERVAL, tgt, 100_000)
@@ -178,7 +179,7 @@ def test_a_rate_ends_with_the_client_that_set_it(sim_factory):
             port, "COMMAND_ACK", 3.0, lambda m: m.command == M.MAV_CMD_SET_MESSAGE_INTERVAL
         )
         assert ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
-        assert a.wait(port, "ATTITUDE_TARGET", 3.0) is not None
+        assert a.wait(port, "ATTITUDE_QUATERNION", 3.0) is not None
     finally:
         a.close()
     time.sleep(PEER_TIMEOUT_S + 1.5)  # A is silent: the link forgets it, and its rates
@@ -187,7 +188,7 @@ def test_a_rate_ends_with_the_client_that_set_it(sim_factory):
         b.command(port, M.MAV_CMD_GET_MESSAGE_INTERVAL, tgt)
         iv = b.wait(port, "MESSAGE_INTERVAL", 3.0, lambda m: m.message_id == tgt)
         assert iv is not None and iv.interval_us == -1
-        assert b.wait(port, "ATTITUDE_TARGET", 1.5) is None
+        assert b.wait(port, "ATTITUDE_QUATERNION", 1.5) is None
         assert b.wait(port, "ATTITUDE", 3.0) is not None  # the defaults still stream
     finally:
         b.close()

@@ -19,7 +19,7 @@ from swarm_common import px4
 from swarm_common.enums import VehicleMode
 from swarm_common.ports import vehicle_ports
 from swarm_common.signing import generate_key, setup_signing
-from vehicle_sim.link.endpoint import AMPLIFICATION_LIMIT, LIVENESS_FREE_S
+from vehicle_sim.link.endpoint import BUDGET_BURST_BYTES, BUDGET_BYTES_PER_S, PEER_TIMEOUT_S
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -231,24 +231,28 @@ def _unsigned_params(peer, port: int) -> None:
     assert again is not None and again.param_value == got.param_value
 
 
-def _bytes_after_one_heartbeat(sim, seconds: float) -> tuple[int, int]:
+def _bytes_after_one_heartbeat(sim, seconds: float) -> tuple[int, int, int]:
+    """(bytes sent, bytes received in ``seconds``, bytes received in the 2 s after)."""
     stranger = Peer(77)
     try:
         sent = stranger.heartbeat(vehicle_ports(1, sim.offset).api_local)
         stranger.poll(seconds)
-        return len(sent), stranger.bytes_in
+        first = stranger.bytes_in
+        stranger.poll(2.0)
+        return len(sent), first, stranger.bytes_in - first
     finally:
         stranger.close()
 
 
 def test_amplification_bounded(sim_factory, key_files):
-    """Old simulator: one 21-byte HEARTBEAT -> 142 kB over 10 s (about 6800x)."""
-    seconds = 7.0
+    """Old simulator: one 21-byte HEARTBEAT -> 142 kB over 10 s (about 6800x). Now one
+    datagram buys streams for PEER_TIMEOUT_S at most, within the peer's byte budget."""
+    seconds = PEER_TIMEOUT_S + 1.5  # the peer is forgotten 5 s after its HEARTBEAT
     sim = sim_factory(["--no-zenoh", "--vehicles", "1"])
-    n_in, n_out = _bytes_after_one_heartbeat(sim, seconds)
-    hb_size = 21 + 13  # a HEARTBEAT, signature block included
-    bound = AMPLIFICATION_LIMIT * n_in + (seconds / LIVENESS_FREE_S + 1) * hb_size
+    _, n_out, after = _bytes_after_one_heartbeat(sim, seconds)
+    bound = BUDGET_BURST_BYTES + BUDGET_BYTES_PER_S * PEER_TIMEOUT_S
     assert 0 < n_out <= bound
+    assert after == 0  # silent: nothing more, whatever its budget
     signed = sim_factory(["--no-zenoh", "--vehicles", "1", "--signing-key", key_files[0]])
     assert _bytes_after_one_heartbeat(signed, 2.0)[1] == 0
 

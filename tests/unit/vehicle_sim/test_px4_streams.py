@@ -164,7 +164,8 @@ def test_rate_set_by_a_peer_ends_when_it_goes_silent() -> None:
     s.forget([GCS_PEER])
     assert s.for_peer(GCS_PEER).interval_us(tgt) == 100_000
     s.forget([])  # the link no longer counts it as present
-    assert s.for_peer(GCS_PEER).interval_us(tgt) == -1  # the same address starts afresh
+    # the same address starts afresh, from its link's set (PX4 normal: 2 Hz)
+    assert s.for_peer(GCS_PEER).interval_us(tgt) == 500_000
     assert GCS_PEER[1] not in s.custom("gcs")
 
 
