@@ -9,6 +9,7 @@ pymavlink's ``mavutil.PX4_CUSTOM_MAIN_MODE_*`` / ``PX4_CUSTOM_SUB_MODE_*`` (PX4'
 from __future__ import annotations
 
 import os
+import struct
 
 from swarm_common.enums import VehicleMode
 
@@ -105,3 +106,14 @@ def short_name(custom: int) -> str:
         return str(name)
     main, _ = split_mode(custom)
     return MAIN_MODES.get(main, f"MODE{main}")
+
+
+def int32_to_wire(value: int) -> float:
+    """The float whose four bytes are ``value``'s (PX4's bytewise INT32 encoding of
+    PARAM_VALUE / PARAM_SET.param_value)."""
+    return float(struct.unpack("<f", struct.pack("<i", int(value)))[0])
+
+
+def wire_to_int32(value: float) -> int:
+    """Inverse of :func:`int32_to_wire`."""
+    return int(struct.unpack("<i", struct.pack("<f", value))[0])

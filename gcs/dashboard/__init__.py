@@ -15,6 +15,8 @@ Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
   :mod:`.group_commands` - commands for several vehicles (confirmation listing the
   targets, the coordinated take-off and land-all).
 * :mod:`.world_cells` - the scenario's obstacles and geofence as a view's character cells.
+* :mod:`.preflight` - the plan's envelope (altitude, closest pair, speed) and whether the
+  vehicles' parameters agree, shown before take-off.
 * :mod:`.formation_link` - the formation as one MAVLink vehicle, served by the dashboard.
 * :mod:`.app`, :mod:`.widgets`, :mod:`.palette` - the Textual UI and its command palette;
   :mod:`.cli` - argument parsing, launch.

@@ -56,6 +56,7 @@ from . import navigate as nav
 from .group_commands import COMMAND_REPEAT_S, LAND_LEAD_S
 from .mavlink_gcs import CommandResult
 from .palette import OUTAGES_S, palette_commands
+from .preflight import PlanEnvelope
 from .px4modes import COMMANDS
 from .state import DashEvent, SwarmView
 from .widgets import (
@@ -66,6 +67,7 @@ from .widgets import (
     InputScreen,
     MinDistancePlot,
     MissionPanel,
+    PreflightPanel,
     StatusBar,
     VehicleTable,
 )
@@ -112,8 +114,10 @@ class DashboardApp(App[int]):
         steer: FormationSteer | None = None,
         world: World | None = None,
         formation: Any = None,
+        preflight: PlanEnvelope | None = None,
     ) -> None:
         super().__init__()
+        self.preflight = preflight  # the plan's envelope, shown until take-off
         self.world = world  # the scenario's obstacles and geofence, drawn in both views
         self.formation = formation  # gcs.dashboard.formation_link, ticked on this loop
         self.steer = steer  # a mission scenario's formation steering (n), else None
@@ -131,6 +135,7 @@ class DashboardApp(App[int]):
     def compose(self) -> ComposeResult:
         yield Header()
         yield StatusBar(id="status")
+        yield PreflightPanel(self.preflight, id="preflight")
         yield MissionPanel(id="mission", shown=self.steer is not None)
         yield VehicleTable(id="vehicles")
         with Horizontal(id="bottom"):
@@ -177,6 +182,7 @@ class DashboardApp(App[int]):
             fv.show(view)
         self.query_one(MinDistancePlot).show(view)
         self.query_one(StatusBar).show(view, self.target_label())
+        self.query_one(PreflightPanel).show(view.params, view.flying)
         if (p := nav.progress(self.steer, self.commander)) is not None:  # the mission, its path
             self.query_one(MissionPanel).show(p)
             self.query_one("#top", FormationView).show_path(p.path, p.next_centroid)

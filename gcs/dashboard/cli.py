@@ -28,6 +28,14 @@ from typing import Any
 from gcs.formation.steer import FormationSteer
 from gcs.mission.launch_spec import add_signing_flags
 from swarm_common.enums import Method
+from swarm_common.inputs import (
+    OneLineParser,
+    float_in,
+    int_in,
+    out_dir_arg,
+    port_offset,
+    zenoh_endpoint,
+)
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
@@ -41,21 +49,13 @@ from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 
 
-def _port_offset(text: str) -> int:
-    from gcs.mission.launch_spec import MAX_PORT_OFFSET
-
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: not an integer") from None
-    if not 0 <= v <= MAX_PORT_OFFSET:
-        raise argparse.ArgumentTypeError(f"{v}: must be in 0..{MAX_PORT_OFFSET}")
-    return v
+MAX_ACK_TIMEOUT_S = 60.0
+MAX_RETRIES = 100
 
 
 def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--scenario", default=None, help="scenario TOML (default scenarios/cube8.toml)")
-    p.add_argument("--port-offset", type=_port_offset, default=None,
+    p.add_argument("--port-offset", type=port_offset, default=None,
                    help="shift every port by N (default: with --launch the first offset whose "
                    "ports are all free, else 0)")
     p.add_argument(
@@ -66,6 +66,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument(
         "--zenoh-connect",
         nargs="+",
+        type=zenoh_endpoint,
         default=None,
         metavar="EP",
         help=f"Zenoh endpoints to dial (default {default_endpoint()}+offset)",
@@ -102,9 +103,12 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         default=None,
         help="with --launch: the daemons' initial method",
     )
-    p.add_argument("--log-dir", default=None, help="with --launch: child logs (default: temp)")
-    p.add_argument("--ack-timeout", type=float, default=1.0, help="COMMAND_ACK wait per try (s)")
-    p.add_argument("--retries", type=int, default=2, help="COMMAND_LONG retries")
+    p.add_argument("--log-dir", type=out_dir_arg, default=None,
+                   help="with --launch: child logs (default: temp)")
+    p.add_argument("--ack-timeout", type=float_in(0.0, MAX_ACK_TIMEOUT_S, lo_open=True, unit="s"),
+                   default=1.0, help="COMMAND_ACK wait per try (s)")
+    p.add_argument("--retries", type=int_in(0, MAX_RETRIES), default=2,
+                   help="COMMAND_LONG retries")
     p.add_argument("--demo", action="store_true", help="show the recorded state, no network")
     return p
 
@@ -134,6 +138,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     from .commands import LiveCommander
     from .launch import Launch, dashboard_spec
     from .mavlink_gcs import MavlinkGcs
+    from .preflight import CHECKED_PARAMS, plan_envelope
     from .recorded import recorded_source
     from .state import LiveSource
     from .zenoh_feed import ZenohFeed
@@ -167,7 +172,9 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
             if why:
                 raise RuntimeError(why)
         key = None if key_path is None else load_key(key_path)  # SigningKeyError: ValueError
-        link = MavlinkGcs(port_offset=offset, signing_key=key).start()
+        link = MavlinkGcs(port_offset=offset, signing_key=key)
+        link.param_names = CHECKED_PARAMS  # the pre-flight panel's comparison
+        link.start()
         if not args.no_zenoh:
             if launch is not None:
                 feed = ZenohFeed(swarm, sc.ids, session=launch.router).start()
@@ -197,7 +204,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
             raise
         title += f" · formation vehicle {formation.port}"
     app = DashboardApp(source, commander, title=title, steer=steer, world=sc.world,
-                       formation=formation)
+                       formation=formation, preflight=plan_envelope(sc))
     return app, source, launch, title
 
 
@@ -244,7 +251,7 @@ def run_dashboard(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m gcs.dashboard`` (the same as ``gcs dashboard``)."""
-    p = configure_parser(argparse.ArgumentParser(prog="gcs dashboard"))
+    p = configure_parser(OneLineParser(prog="gcs dashboard"))
     add_log_level_argument(p)
     args = p.parse_args(argv)
     configure_logging(args.log_level)

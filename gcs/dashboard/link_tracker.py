@@ -19,7 +19,7 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -27,6 +27,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_common import signing
 from swarm_common.frames import ned_to_enu, quat_from_rotm, rotm_from_euler, rotm_from_quat
+from swarm_common.px4 import wire_to_int32
 
 from .command_retry import PendingAck
 from .px4modes import decode_px4_mode
@@ -66,7 +67,10 @@ class LinkVehicle:
     q_ned: tuple[float, float, float, float] | None = None
     pos_t: float | None = None  # clock() time of the last position (None: none yet)
     time_boot_ms: int = 0
+    sim_s: float | None = None  # the vehicle's latest clock stamp (time_boot_ms, s)
+    hb_sim_s: float | None = None  # the link's sim clock when its last heartbeat came
     sensors_ok: bool | None = None
+    params: dict[str, float] = field(default_factory=dict)  # PARAM_VALUEs heard, decoded
     battery_pct: int = -1
     lost: bool = False
     statustexts: int = 0
@@ -107,6 +111,8 @@ class LinkTracker:
         self._lock = threading.Lock()
         self._vehicles: dict[int, LinkVehicle] = {}
         self._events: deque[LinkEvent] = deque(maxlen=max_events)
+        self.sim_s: float | None = None  # the link's sim clock: the latest vehicle stamp
+        self.last_rx: float | None = None  # clock() of the last message from any vehicle
         self._pending: dict[tuple[int, int], PendingAck] = {}
         self.bad_packets = 0
         self.packets = 0
@@ -120,6 +126,7 @@ class LinkTracker:
             "ATTITUDE": self._on_attitude_euler,
             "SYS_STATUS": self._on_sys_status,
             "STATUSTEXT": self._on_statustext,
+            "PARAM_VALUE": self._on_param_value,
             "COMMAND_ACK": self._on_command_ack,
         }
 
@@ -188,7 +195,13 @@ class LinkTracker:
             return
         v = self._vehicle(msg.get_srcSystem(), addr, now)
         v.last_msg = now
+        self.last_rx = now
         v.msg_count += 1
+        stamp = getattr(msg, "time_boot_ms", None)
+        if isinstance(stamp, int) and stamp > 0:  # the vehicle's (sim) clock
+            t = stamp / 1000.0
+            v.sim_s = t if v.sim_s is None else max(v.sim_s, t)
+            self.sim_s = t if self.sim_s is None else max(self.sim_s, t)
         handler = self._handlers.get(mtype)
         if handler is not None:
             handler(v, msg, now)
@@ -198,6 +211,7 @@ class LinkTracker:
         if msg.type == mavlink.MAV_TYPE_GCS:
             return
         v.last_heartbeat = now
+        v.hb_sim_s = self.sim_s
         if v.lost:
             v.lost = False
             self._event(now, v.sysid, "link", "link regained", mavlink.MAV_SEVERITY_NOTICE)
@@ -252,6 +266,18 @@ class LinkTracker:
         v.sensors_ok = (need & ~msg.onboard_control_sensors_health) == 0
         v.battery_pct = int(msg.battery_remaining)
 
+    def _on_param_value(self, v: LinkVehicle, msg: Any, now: float) -> None:
+        """A parameter's value (INT32 decoded from PX4's bytewise encoding)."""
+        name = msg.param_id
+        if isinstance(name, bytes | bytearray):
+            name = name.decode("ascii", "replace")
+        name = str(name).rstrip("\x00")
+        value = float(msg.param_value)
+        if msg.param_type == mavlink.MAV_PARAM_TYPE_INT32:
+            value = float(wire_to_int32(value))
+        if name and math.isfinite(value):
+            v.params[name] = value
+
     def _on_statustext(self, v: LinkVehicle, msg: Any, now: float) -> None:
         text = msg.text
         if isinstance(text, bytes | bytearray):
@@ -275,30 +301,50 @@ class LinkTracker:
             pend.event.set()
 
     # -- periodic --------------------------------------------------------------------
-    def update(self, now: float, heartbeat_timeout_s: float) -> list[Addr]:
-        """Update rates, flag links silent for ``heartbeat_timeout_s``; return every address."""
+    def update(
+        self, now: float, heartbeat_timeout_s: float, caught_up: float | None = None,
+    ) -> list[Addr]:
+        """Update rates, flag lost links (:meth:`silent`); return every address.
+        ``caught_up``: the last clock() time the caller had read every datagram that had
+        arrived (default ``now``)."""
         targets: list[Addr] = []
+        seen_to = now if caught_up is None else min(now, caught_up)
         with self._lock:
             for v in self._vehicles.values():
                 dt = now - v._rate_t
                 if dt >= 0.9:
                     v.rate_hz = (v.msg_count - v._rate_n) / dt
                     v._rate_t, v._rate_n = now, v.msg_count
-                age = v.heartbeat_age(now)
-                silent = (now - v.first_seen) if age is None else age
-                if not v.lost and silent > heartbeat_timeout_s:
+                if not v.lost and self._silent(v, seen_to, heartbeat_timeout_s):
                     v.lost = True
+                    age = v.heartbeat_age(now)
                     text = f"link lost (heartbeat {_age(age)})"
                     self._event(now, v.sysid, "link", text, mavlink.MAV_SEVERITY_CRITICAL)
                 if v.addr is not None:
                     targets.append(v.addr)
         return targets
 
+    def _silent(self, v: LinkVehicle, seen_to: float, timeout_s: float) -> bool:
+        """A vehicle's link is lost when no heartbeat of it was read for ``timeout_s``
+        (wall clock, up to ``seen_to``: when every datagram that had arrived was read, so a
+        reader starved by load sees no silence that is not there) AND, while the others'
+        stamps move on, its own sim clock fell ``timeout_s`` behind theirs (a lockstep run
+        slower than the wall is no silence); when nothing at all arrives for ``timeout_s``
+        (the simulator gone), the wall clock alone decides."""
+        last = v.first_seen if v.last_heartbeat is None else v.last_heartbeat
+        if seen_to - last <= timeout_s:
+            return False
+        link_quiet = self.last_rx is None or seen_to - self.last_rx > timeout_s
+        if link_quiet or self.sim_s is None:
+            return True
+        since = v.hb_sim_s if v.hb_sim_s is not None else v.sim_s
+        return since is None or self.sim_s - since > timeout_s
+
     # -- snapshots and command bookkeeping -------------------------------------------
     def vehicles(self) -> dict[int, LinkVehicle]:
         """A consistent copy of every tracked vehicle."""
         with self._lock:
-            return {k: replace(v) for k, v in self._vehicles.items()}
+            return {k: replace(v, params=dict(v.params)) for k, v in self._vehicles.items()}
 
     def drain_events(self) -> list[LinkEvent]:
         with self._lock:

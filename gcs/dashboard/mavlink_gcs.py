@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import select
 import socket
 import threading
 import time
@@ -62,6 +63,7 @@ log = logging.getLogger(__name__)
 POSITION_STREAM_HZ = 10.0  # LOCAL_POSITION_NED rate asked of every vehicle
 POSITION_STALE_S = 0.5  # s: a position older than this means the rate is too low
 STREAM_REQUEST_RETRY_S = 5.0  # s between two stream requests to one vehicle
+PARAM_RETRY_S = 2.0  # s between two parameter requests to one vehicle that lacks some
 
 
 class MavlinkGcs:
@@ -102,7 +104,11 @@ class MavlinkGcs:
         self._stop = threading.Event()
         self._last_tick = 0.0
         self._last_gcs_hb = 0.0
+        self._caught_up: float | None = None  # None: tick() callers judge up to ``now``
         self._request_streams = request_streams
+        # parameters every vehicle is asked for (gcs.dashboard.preflight.CHECKED_PARAMS)
+        self.param_names: tuple[str, ...] = ()
+        self._params_requested: dict[int, float] = {}  # sysid -> clock() of the last ask
         self._stream_requested: dict[int, float] = {}  # sysid -> clock() of the last request
 
     def _keep_signing_time(self) -> None:
@@ -145,12 +151,17 @@ class MavlinkGcs:
         self.close()
 
     def _run(self) -> None:
+        """Read datagrams until closed; ``caught_up`` is the last time the socket was found
+        empty (every datagram that had arrived was read): a link is judged silent only up
+        to then (:meth:`LinkTracker.update`), so a reader that load delays sees no loss."""
         assert self.sock is not None
+        sock = self.sock
         while not self._stop.is_set():
             try:
-                data, addr = self.sock.recvfrom(65535)
+                data, addr = sock.recvfrom(65535)
             except TimeoutError:
                 data = b""
+                self._caught_up = self.clock()
             except OSError:
                 if self._stop.is_set():
                     break
@@ -158,6 +169,8 @@ class MavlinkGcs:
                 continue
             if data:
                 self.feed(data, addr)
+                if not select.select([sock], [], [], 0)[0]:
+                    self._caught_up = self.clock()
             now = self.clock()
             if now - self._last_tick >= 0.5:
                 self.tick(now)
@@ -195,7 +208,7 @@ class MavlinkGcs:
         """Update rates, detect lost links, send the GCS heartbeat (reader thread)."""
         now = self.clock() if now is None else now
         self._last_tick = now
-        targets = self.tracker.update(now, self.heartbeat_timeout_s)
+        targets = self.tracker.update(now, self.heartbeat_timeout_s, self._caught_up)
         if self._send_heartbeat and now - self._last_gcs_hb >= 1.0 and self.sock is not None:
             self._last_gcs_hb = now
             with self._tx_lock:
@@ -214,6 +227,29 @@ class MavlinkGcs:
                     log.debug("GCS heartbeat to %s: %s", addr, exc)
         if self._request_streams:
             self._request_position_streams(now)
+        if self.param_names:
+            self._request_params(now)
+
+    def _request_params(self, now: float) -> None:
+        """PARAM_REQUEST_READ of every name in :attr:`param_names` a live vehicle has not
+        reported yet, again at most every PARAM_RETRY_S (the pre-flight check's values)."""
+        for v in self.tracker.vehicles().values():
+            missing = [n for n in self.param_names if n not in v.params]
+            if v.lost or not missing or v.addr is None or self.sock is None:
+                continue
+            if now - self._params_requested.get(v.sysid, -PARAM_RETRY_S) < PARAM_RETRY_S:
+                continue
+            self._params_requested[v.sysid] = now
+            for name in missing:
+                with self._tx_lock:
+                    self._keep_signing_time()
+                    buf = self._tx.param_request_read_encode(
+                        v.sysid, mavlink.MAV_COMP_ID_AUTOPILOT1, name.encode("ascii"), -1,
+                    ).pack(self._tx)  # fmt: skip
+                try:
+                    self.sock.sendto(buf, v.addr)
+                except OSError as exc:
+                    log.debug("PARAM_REQUEST_READ to %s: %s", v.addr, exc)
 
     def _request_position_streams(self, now: float) -> None:
         """SET_MESSAGE_INTERVAL(LOCAL_POSITION_NED) to each live vehicle whose position is

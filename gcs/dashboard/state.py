@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from swarm_common.enums import AgentAlarm, QPStatus, Role, VehicleMode
 
+from .preflight import ParamAgreement, param_agreement
 from .timeline import EventMerger, SimClock
 
 Vec3 = tuple[float, float, float]
@@ -80,8 +81,14 @@ class SwarmView:
     method: str = "?"
     sim_time: float | None = None
     collisions: int = 0
+    params: ParamAgreement | None = None  # the vehicles' pre-flight parameters (None: not asked)
     signed: bool = False  # the GCS link signs and verifies (MAVLink 2 signing)
     rejected: int = 0  # frames rejected for their signature: here + reported by vehicles
+
+    @property
+    def flying(self) -> bool:
+        """Some vehicle is armed and flies its agent's setpoints (OFFBOARD)."""
+        return any(r.armed and r.mode == VehicleMode.OFFBOARD for r in self.rows)
 
     def row(self, agent_id: int) -> VehicleRow | None:
         for r in self.rows:
@@ -313,9 +320,9 @@ class LiveSource:
                 r.armed = lv.armed
                 r.hb_age = lv.heartbeat_age(now)
                 r.rate_hz = lv.rate_hz
-                r.link_lost = (
-                    lv.lost or r.hb_age is None or r.hb_age > self.link.heartbeat_timeout_s
-                )
+                # the link tracker's judgement only (its timeout, on the sim clock and up to
+                # what its reader has read): the UI's own clock would trip under load
+                r.link_lost = lv.lost or r.hb_age is None
             elif truth is not None and truth_fresh and i in truth.ids:
                 k = truth.ids.index(i)
                 r.mode = truth.mode[k] if k < len(truth.mode) else "?"
@@ -385,5 +392,8 @@ class LiveSource:
             collisions=truth.collisions if truth is not None else 0,
             signed=bool(getattr(self.link, "signed", False)),
             rejected=int(getattr(self.link, "rejected", 0)) + sum(v.rejected for v in veh.values()),
+            params=(None if self.link is None or not getattr(self.link, "param_names", ())
+                    else param_agreement({i: v.params for i, v in veh.items()}, self.ids,
+                                         self.link.param_names)),
         )
         return view, events

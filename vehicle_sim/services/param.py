@@ -23,12 +23,12 @@ behaviour a client sees; in short:
 from __future__ import annotations
 
 import logging
-import struct
 from collections import deque
 from typing import Any
 
 from pymavlink.dialects.v20 import common as M
 
+from swarm_common.px4 import int32_to_wire, wire_to_int32
 from vehicle_sim.autopilot import nav_flight
 from vehicle_sim.autopilot.params import INT32, ParamError, ParamSpec, ParamStore
 
@@ -42,16 +42,6 @@ INDEX_BY_NAME = -1  # PARAM_REQUEST_READ.param_index meaning "use param_id"
 PARAM_ID_LEN = 16
 TEXT_LEN = 50  # STATUSTEXT.text
 ANSWERED_COMPONENTS = (M.MAV_COMP_ID_ALL, M.MAV_COMP_ID_AUTOPILOT1)
-
-
-def int32_to_wire(value: int) -> float:
-    """The float whose four bytes are ``value``'s (PX4's bytewise INT32 encoding)."""
-    return float(struct.unpack("<f", struct.pack("<i", int(value)))[0])
-
-
-def wire_to_int32(value: float) -> int:
-    """Inverse of :func:`int32_to_wire`."""
-    return int(struct.unpack("<i", struct.pack("<f", value))[0])
 
 
 def wire_value(spec: ParamSpec, value: float) -> float:

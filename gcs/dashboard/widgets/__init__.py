@@ -2,7 +2,9 @@
 
 :class:`VehicleTable` (per-vehicle rows), :class:`FormationView` (the swarm seen from
 above), :class:`MinDistancePlot`, :class:`EventLog`, :class:`StatusBar`,
-:class:`MissionPanel` (:mod:`.mission_panel`: the mission's next waypoint and progress), and
+:class:`MissionPanel` (:mod:`.mission_panel`: the mission's next waypoint and progress),
+:class:`PreflightPanel` (:mod:`.preflight_panel`: the plan's envelope and the vehicles'
+parameters, before take-off), and
 the modal screens :class:`ConfirmScreen`, :class:`ChoiceScreen` and :class:`InputScreen`;
 :mod:`.fmt` formats numbers.
 """
@@ -12,6 +14,7 @@ from .event_log import EventLog
 from .formation import FormationView
 from .mission_panel import MissionPanel
 from .modals import ChoiceScreen, ConfirmScreen, InputScreen
+from .preflight_panel import PreflightPanel
 from .status_bar import StatusBar
 from .vehicle_table import VehicleTable
 
@@ -23,6 +26,7 @@ __all__ = [
     "InputScreen",
     "MinDistancePlot",
     "MissionPanel",
+    "PreflightPanel",
     "StatusBar",
     "VehicleTable",
 ]

@@ -24,6 +24,7 @@ class FakeVehicle:
         self.ack_result = ack_result
         self.commands: list[tuple[int, int, list[float]]] = []  # (command, confirmation, params)
         self.heartbeats_from_gcs = 0
+        self.t0 = time.monotonic()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -38,7 +39,9 @@ class FakeVehicle:
         self.send(self.mav.heartbeat_encode(2, 12, base, self.custom_mode, 4))
 
     def position(self, ned=(1.0, 2.0, -3.0), vel=(0.5, 0.0, -0.1)) -> None:
-        self.send(self.mav.local_position_ned_encode(1000, *ned, *vel))
+        # time_boot_ms runs with the wall clock, as a real-time vehicle's does
+        ms = 1000 + int((time.monotonic() - self.t0) * 1000)
+        self.send(self.mav.local_position_ned_encode(ms, *ned, *vel))
 
     def statustext(self, text: str, severity: int = 4) -> None:
         self.send(self.mav.statustext_encode(severity, text.encode()))
