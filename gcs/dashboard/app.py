@@ -56,9 +56,9 @@ from . import navigate as nav
 from .group_commands import COMMAND_REPEAT_S, LAND_LEAD_S
 from .mavlink_gcs import CommandResult
 from .palette import OUTAGES_S, palette_commands
-from .preflight import PlanEnvelope
 from .px4modes import COMMANDS
-from .state import DashEvent, SwarmView
+from .view.preflight import PlanEnvelope
+from .view.state import DashEvent, SwarmView
 from .widgets import (
     ChoiceScreen,
     ConfirmScreen,

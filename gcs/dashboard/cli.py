@@ -138,9 +138,9 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     from .commands import LiveCommander
     from .launch import Launch, dashboard_spec
     from .mavlink_gcs import MavlinkGcs
-    from .preflight import CHECKED_PARAMS, plan_envelope
-    from .recorded import recorded_source
-    from .state import LiveSource
+    from .view.preflight import CHECKED_PARAMS, plan_envelope
+    from .view.recorded import recorded_source
+    from .view.state import LiveSource
     from .zenoh_feed import ZenohFeed
 
     if args.demo:

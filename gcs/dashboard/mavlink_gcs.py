@@ -106,7 +106,7 @@ class MavlinkGcs:
         self._last_gcs_hb = 0.0
         self._caught_up: float | None = None  # None: tick() callers judge up to ``now``
         self._request_streams = request_streams
-        # parameters every vehicle is asked for (gcs.dashboard.preflight.CHECKED_PARAMS)
+        # parameters every vehicle is asked for (gcs.dashboard.view.preflight.CHECKED_PARAMS)
         self.param_names: tuple[str, ...] = ()
         self._params_requested: dict[int, float] = {}  # sysid -> clock() of the last ask
         self._stream_requested: dict[int, float] = {}  # sysid -> clock() of the last request

@@ -14,7 +14,7 @@ from gcs.formation.steer import FormationSteer
 from swarm_common import wire
 from swarm_common.mission.config import MissionError
 
-from .mission_progress import MissionProgress, parse_goto, progress_at
+from .view.mission_progress import MissionProgress, parse_goto, progress_at
 
 STEP_M = 2.0  # m, a horizontal step of the centroid
 CLIMB_M = 1.0  # m, a vertical step

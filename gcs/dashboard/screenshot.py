@@ -10,7 +10,7 @@ import asyncio
 from pathlib import Path
 
 from .app import DashboardApp
-from .recorded import recorded_source
+from .view.recorded import recorded_source
 
 
 async def export(out: Path, width: int, height: int) -> Path:

@@ -1,7 +1,7 @@
 """The event log: STATUSTEXT, mode changes, failsafes, QP fallbacks, outages, ACKs.
 
 Times are sim seconds, the header's clock (``-`` before the dashboard heard one); a repeated
-event arrives here once with its count (:mod:`gcs.dashboard.timeline`)."""
+event arrives here once with its count (:mod:`gcs.dashboard.view.timeline`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import math
 from rich.text import Text
 from textual.widgets import RichLog
 
-from ..state import DashEvent
+from ..view.state import DashEvent
 from .fmt import SEVERITY_STYLE, SEVERITY_TAG
 
 

@@ -5,7 +5,7 @@ yellow for leaders, cyan for followers, red on white when their link is silent);
 when given (:meth:`FormationView.show_path`), the mission's planned centroid path (dim ``·``)
 and its next waypoint (``◎``). Under everything, when the app has the scenario's world
 (:meth:`FormationView.show_world`), each obstacle's footprint (grey ``░``) and the
-geofence's outline (dim red ``┄``/``┆``, ``·`` at its corners); see gcs.dashboard.world_cells.
+geofence's outline (dim red ``┄``/``┆``, ``·`` at its corners); see gcs.dashboard.view.world_cells.
 One character cell is taken as twice as tall as wide, so the picture keeps its aspect.
 """
 
@@ -20,8 +20,8 @@ from textual.widget import Widget
 
 from swarm_common.world.config import World
 
-from ..state import SwarmView
-from ..world_cells import AXES, ROW_ASPECT, Fit, WorldCells, world_cells, world_extent
+from ..view.state import SwarmView
+from ..view.world_cells import AXES, ROW_ASPECT, Fit, WorldCells, world_cells, world_extent
 
 OBSTACLE = ("░", "grey50")
 FENCE_STYLE = "dim red"

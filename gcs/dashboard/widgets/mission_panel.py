@@ -7,7 +7,7 @@ from __future__ import annotations
 from rich.text import Text
 from textual.widgets import Static
 
-from ..mission_progress import MissionProgress
+from ..view.mission_progress import MissionProgress
 
 NO_MISSION = "no mission"
 WAITING = "mission: waiting for the swarm's mission time (Zenoh)"

@@ -6,7 +6,7 @@ from __future__ import annotations
 from rich.text import Text
 from textual.widgets import Static
 
-from ..preflight import ParamAgreement, PlanEnvelope
+from ..view.preflight import ParamAgreement, PlanEnvelope
 
 
 class PreflightPanel(Static):

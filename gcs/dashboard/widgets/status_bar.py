@@ -5,7 +5,7 @@ from __future__ import annotations
 from rich.text import Text
 from textual.widgets import Static
 
-from ..state import SwarmView
+from ..view.state import SwarmView
 from .fmt import num
 
 

@@ -10,7 +10,7 @@ from textual.widgets import DataTable
 from swarm_common.enums import QPStatus
 
 from ..px4modes import short_mode
-from ..state import SwarmView, VehicleRow
+from ..view.state import SwarmView, VehicleRow
 from .fmt import age, num, vec
 
 QP_SHORT: dict[str, str] = {

@@ -7,7 +7,7 @@ import pytest
 from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.mavlink_gcs import CommandResult
 from gcs.dashboard.px4modes import COMMANDS
-from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.view.recorded import recorded_source
 from gcs.dashboard.widgets import ChoiceScreen, ConfirmScreen, EventLog, VehicleTable
 from swarm_common.enums import Method
 

@@ -10,7 +10,7 @@ from dashboard_fakes import FakeCommander
 from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.commands import LiveCommander
 from gcs.dashboard.group_commands import COMMAND_REPEATS, LAND_LEAD_S
-from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.view.recorded import recorded_source
 from gcs.dashboard.zenoh_feed import ZenohFeed
 from offboard.daemon.zenoh.link import SwarmBus
 from swarm_common.wire import Command

@@ -18,7 +18,7 @@ from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.cli import build, configure_parser
 from gcs.dashboard.commands import LiveCommander
 from gcs.dashboard.mavlink_gcs import MavlinkGcs
-from gcs.dashboard.state import LiveSource
+from gcs.dashboard.view.state import LiveSource
 from gcs.dashboard.widgets import EventLog
 from swarm_common.scenario.model import load_scenario
 

@@ -1,4 +1,4 @@
-"""Dashboard ``g`` and the mission panel (gcs.dashboard.mission_progress): a typed centroid
+"""Dashboard ``g`` and the mission panel (gcs.dashboard.view.mission_progress): a typed centroid
 goes out as one checked Zenoh "mission" command; a bad entry is one ERROR line and sends
 nothing; the panel and the top view show the mission's next waypoint and its path."""
 
@@ -12,7 +12,7 @@ from conftest import settle
 from dashboard_fakes import FakeCommander
 
 from gcs.dashboard.app import DashboardApp
-from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.view.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog, FormationView, InputScreen, MissionPanel
 from gcs.formation.steer import FormationSteer
 from swarm_common.scenario.model import load_scenario

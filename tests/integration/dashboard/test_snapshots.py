@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 from gcs.dashboard.app import DashboardApp
-from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.view.recorded import recorded_source
 
 
 @pytest.mark.parametrize("size", [(80, 24), (160, 48)], ids=["80x24", "160x48"])

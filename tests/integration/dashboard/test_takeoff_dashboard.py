@@ -22,7 +22,7 @@ from dashboard_fakes import FakeCommander
 from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.cli import build, configure_parser
 from gcs.dashboard.group_commands import COMMAND_REPEATS, TAKEOFF_LEAD_S
-from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.view.recorded import recorded_source
 from gcs.dashboard.widgets import EventLog
 from offboard.agent.takeoff import takeoff_plan
 from swarm_common.scenario.model import load_scenario

@@ -12,9 +12,9 @@ from conftest import ROOT
 
 from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.cli import build, configure_parser
-from gcs.dashboard.recorded import recorded_source
+from gcs.dashboard.view.recorded import recorded_source
+from gcs.dashboard.view.world_cells import world_cells
 from gcs.dashboard.widgets import FormationView
-from gcs.dashboard.world_cells import world_cells
 from swarm_common.scenario.model import load_scenario
 from swarm_common.world.config import Geofence, Obstacle, ObstacleKind, make_world
 

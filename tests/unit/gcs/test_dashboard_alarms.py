@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.dashboard.state import VehicleRow, failsafe_label
+from gcs.dashboard.view.state import VehicleRow, failsafe_label
 from gcs.dashboard.zenoh_feed import FeedEvent, ZenohFeed
 from swarm_common.enums import AgentAlarm
 from swarm_common.wire import Status

@@ -1,4 +1,4 @@
-"""The dashboard's pre-flight checks (gcs.dashboard.preflight), checked numerically."""
+"""The dashboard's pre-flight checks (gcs.dashboard.view.preflight), checked numerically."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from gcs.dashboard.preflight import (
+from gcs.dashboard.view.preflight import (
     CHECKED_PARAMS,
     desired_states,
     param_agreement,

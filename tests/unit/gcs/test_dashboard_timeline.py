@@ -1,4 +1,4 @@
-"""The event log's timeline (gcs.dashboard.timeline): one sim clock, repeats merged."""
+"""The event log's timeline (gcs.dashboard.view.timeline): one sim clock, repeats merged."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.dashboard.state import DashEvent
-from gcs.dashboard.timeline import (
+from gcs.dashboard.view.state import DashEvent
+from gcs.dashboard.view.timeline import (
     MAX_EXTRAPOLATION_S,
     REPEAT_WINDOW_S,
     EventMerger,

@@ -1,4 +1,4 @@
-"""The dashboard's mission progress (gcs.dashboard.mission_progress): the next waypoint, the
+"""The dashboard's mission progress (gcs.dashboard.view.mission_progress): the next waypoint, the
 time to arrive, the fraction done and the planned centroid path, read from the replica of
 the leaders' timeline; and the typed go-to's parser."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.dashboard.mission_progress import (
+from gcs.dashboard.view.mission_progress import (
     MAX_PATH_POINTS,
     PATH_STEP_S,
     parse_goto,

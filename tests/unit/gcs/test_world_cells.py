@@ -1,4 +1,4 @@
-"""The world in a formation view's cells (gcs.dashboard.world_cells), checked by sampling:
+"""The world in a formation view's cells (gcs.dashboard.view.world_cells), checked by sampling:
 dense points of each solid obstacle and of the fence's edges, projected on the plane, must
 fall in the returned cells; every returned cell must have a sample close by; and cells far
 from every sample must not be returned."""
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gcs.dashboard.world_cells import (
+from gcs.dashboard.view.world_cells import (
     AXES,
     Fit,
     footprint,

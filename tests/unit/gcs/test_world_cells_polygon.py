@@ -1,4 +1,4 @@
-"""A polygon geofence in the dashboard's views (gcs.dashboard.world_cells): its outline from
+"""A polygon geofence in the dashboard's views (gcs.dashboard.view.world_cells): its outline from
 above, and from the side the rectangle of its extent by its z range."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gcs.dashboard.world_cells import Fit, world_cells
+from gcs.dashboard.view.world_cells import Fit, world_cells
 from swarm_common.world.config import Geofence, World, polygon_fence
 
 # a view with an odd offset: no cell boundary falls on a round number

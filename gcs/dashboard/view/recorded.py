@@ -28,7 +28,7 @@ from .state import (
     nearest_neighbours,
 )
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[3] / "scenarios" / "cube8.toml"
 
 # fixed offsets from the desired vertex (ENU m), per id
 OFFSETS = {

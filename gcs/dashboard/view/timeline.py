@@ -29,7 +29,7 @@ _NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 
 
 class Event(Protocol):
-    """What the merger reads of an event (:class:`gcs.dashboard.state.DashEvent`)."""
+    """What the merger reads of an event (:class:`gcs.dashboard.view.state.DashEvent`)."""
 
     @property
     def agent(self) -> int: ...
