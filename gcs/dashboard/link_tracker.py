@@ -117,6 +117,7 @@ class LinkTracker:
         self.bad_packets = 0
         self.packets = 0
         self.rejected = 0  # frames that failed signature checks here (signing on)
+        self.rejected_replay = 0  # ... of them replayed or reflected (claiming our own id)
         self.signed = False
         self._handlers: dict[str, Callable[[LinkVehicle, Any, float], None]] = {
             "HEARTBEAT": self._on_heartbeat,
@@ -132,7 +133,9 @@ class LinkTracker:
 
     def enable_signing(self, key: bytes) -> None:
         """Accept only frames signed with ``key`` (MAVLink 2 signing); the others are
-        counted in :attr:`rejected`."""
+        counted in :attr:`rejected`, replayed or reflected ones (a stream's timestamp not
+        above its last, a new stream older than 60 s, a frame claiming this ground
+        station's own system and component) also in :attr:`rejected_replay`."""
         signing.setup_signing(self._rx, key, GCS_SIGNING_LINK_ID)
         self.signed = True
 
@@ -160,6 +163,7 @@ class LinkTracker:
                     reason = str(getattr(msg, "reason", ""))
                     if reason.startswith(signing.INVALID_SIGNATURE_REASON):
                         self.rejected += 1
+                        self.rejected_replay += reason.endswith(signing.REPLAY_REASONS)
                     else:
                         self.bad_packets += 1
                     continue

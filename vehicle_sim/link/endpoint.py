@@ -5,8 +5,13 @@
   (a frame never continues into the next datagram: a leftover partial frame is counted
   as ``truncated`` and dropped, like PX4's UDP receiver).
 * Signing (``key`` set, :mod:`swarm_common.signing`): a frame that is unsigned, wrongly
-  signed or replayed is rejected and counted per reason (``rejected_unsigned``,
-  ``rejected_bad_signature``, ``rejected_replay``). On an ``unsigned_ok`` link an unsigned
+  signed, replayed or reflected is rejected and counted per reason (``rejected_unsigned``,
+  ``rejected_bad_signature``, ``rejected_replay``; a reflection counts as a replay). A
+  reflection is a frame of a stream this process emits: it claims the system id and
+  component of one of the simulator's vehicles (every link registers its vehicle in the
+  process's :data:`PROCESS_LEDGER`), or it is a frame the simulator forwarded
+  (:meth:`MavlinkLink.forward_bytes`). A rejected frame never admits or refreshes a peer.
+  On an ``unsigned_ok`` link an unsigned
   HEARTBEAT, TIMESYNC, COMMAND_LONG/INT, PING, REQUEST_DATA_STREAM or parameter / mission
   protocol message is let through marked ``_restricted``: the vehicle answers only
   telemetry requests and reads (parameters, mission download) from it, and refuses its
@@ -89,6 +94,8 @@ UNSIGNED_MSG_IDS = frozenset({
     mavlink2.MAVLINK_MSG_ID_MISSION_SET_CURRENT,
 })  # fmt: skip
 _REJECT_PREFIX = signing.INVALID_SIGNATURE_REASON + ": "
+# the signed streams this process emits: every signing link's vehicle, forwarded frames
+PROCESS_LEDGER = signing.StreamLedger()
 
 
 class LinkError(OSError):
@@ -150,6 +157,8 @@ class MavlinkLink:
     stats: LinkStats = field(default_factory=LinkStats)
     # injected faults (docs/faults.md); None: the plan of the scenario this process loaded
     faults: FaultInjector | None = None
+    # streams this process emits, refused coming back; None: :data:`PROCESS_LEDGER`
+    ledger: signing.StreamLedger | None = None
 
     def __post_init__(self) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -170,9 +179,14 @@ class MavlinkLink:
             None, srcSystem=self.sysid, srcComponent=mavlink2.MAV_COMP_ID_AUTOPILOT1
         )
         self.mav.robust_parsing = True
+        self._identity: tuple[int, int] | None = None
         if self.key is not None:
             allow = self._allow_unsigned if self.unsigned_ok else None
-            signing.setup_signing(self.mav, self.key, SIGNING_LINK_ID, allow)
+            if self.ledger is None:
+                self.ledger = PROCESS_LEDGER
+            self._identity = (self.sysid, mavlink2.MAV_COMP_ID_AUTOPILOT1)
+            self.ledger.add_identity(*self._identity)
+            signing.setup_signing(self.mav, self.key, SIGNING_LINK_ID, allow, self.ledger)
         self.peers: dict[tuple[str, int], Peer] = {}
         if self.faults is None:
             self.faults = fault_plan.injector_for(
@@ -250,7 +264,7 @@ class MavlinkLink:
             why = reason[len(_REJECT_PREFIX) :]
             if why == signing.REJECT_UNSIGNED:
                 st.rejected_unsigned += 1
-            elif why == signing.REJECT_REPLAY:
+            elif why in signing.REPLAY_REASONS:
                 st.rejected_replay += 1
             else:
                 st.rejected_bad_signature += 1
@@ -299,6 +313,14 @@ class MavlinkLink:
             else:
                 self.faults.send((buf, d), self._sendto)
 
+    def forward_bytes(self, buf: bytes, dests: list[tuple[str, int]]) -> None:
+        """Send a frame another system signed (a forwarded HEARTBEAT) to ``dests``; its
+        stream is recorded in the ledger so that the frame never comes back in on any link
+        of this process (a reflection)."""
+        if self.ledger is not None:
+            self.ledger.note_forwarded(buf)
+        self.send_bytes(buf, dests)
+
     def _sendto(self, frame: tuple[bytes, tuple[str, int]]) -> None:
         try:
             self.sock.sendto(frame[0], frame[1])
@@ -338,6 +360,9 @@ class MavlinkLink:
         return False
 
     def close(self) -> None:
+        if self._identity is not None and self.ledger is not None:
+            self.ledger.remove_identity(*self._identity)
+            self._identity = None
         if self.faults is not None:
             self.faults.close()
         try:

@@ -195,4 +195,4 @@ class ServerIO:
             return
         self.forwarded[(v.id, comp)] = now
         gcs = self.vlinks[v.id]["gcs"]
-        gcs.send_bytes(bytes(m.get_msgbuf()), gcs.destinations(now))
+        gcs.forward_bytes(bytes(m.get_msgbuf()), gcs.destinations(now))

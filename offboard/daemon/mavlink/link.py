@@ -16,7 +16,12 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
 * **commands** never block: :attr:`VehicleLink.commands` queues a COMMAND_LONG, (re)sends
   it on ``tick`` and the ACK completes it (:mod:`offboard.daemon.mavlink.commands`);
 * **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
-  dropped and counted.
+  dropped and counted (``bad signature``); replayed frames (a stream's timestamp not
+  above its last, a new stream older than 60 s) and reflected ones (claiming the daemon's
+  own system id and component, as its own frames forwarded by the vehicle do) dropped
+  and counted as ``replayed`` (:mod:`swarm_common.signing`). Before the lock they are
+  verified like any frame; after it a stranger's datagram is dropped unparsed
+  (``foreign address``) and nothing is ever sent to it.
 * **unread telemetry**: a datagram made only of messages the daemon does not read is
   dropped from the frames' headers, undecoded and unverified
   (:mod:`offboard.daemon.mavlink.frame_peek`),
@@ -58,7 +63,11 @@ from offboard.daemon.output_burst import OutputBurst  # noqa: E402
 from swarm_common import faults as fault_plan  # noqa: E402
 from swarm_common import px4  # noqa: E402
 from swarm_common.faults import FaultInjector  # noqa: E402
-from swarm_common.signing import setup_signing  # noqa: E402
+from swarm_common.signing import (  # noqa: E402
+    INVALID_SIGNATURE_REASON,
+    REPLAY_REASONS,
+    setup_signing,
+)
 
 mavlink = mavutil.mavlink
 log = logging.getLogger(__name__)
@@ -216,7 +225,9 @@ class VehicleLink:
         kind = msg.get_type()
         if kind == "BAD_DATA":
             reason = str(getattr(msg, "reason", "bad data"))
-            why = "bad signature" if reason.startswith("Invalid signature") else "bad data"
+            why = "bad data"
+            if reason.startswith(INVALID_SIGNATURE_REASON):
+                why = "replayed" if reason.endswith(REPLAY_REASONS) else "bad signature"
             self.drops.drop(why, reason, now)
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
