@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import signal
 import sys
 from collections.abc import Callable
@@ -36,6 +35,14 @@ from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams, Method
+from swarm_common.inputs import (
+    OneLineParser,
+    float_in,
+    int_in,
+    port_offset,
+    seed,
+    zenoh_listen_endpoint,
+)
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.process_life import exit_now
 from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, ALLOW_UNSAFE_FLAG, Scenario
@@ -72,13 +79,13 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
 
         return cli_run(args, sc)
     from gcs.mission.inproc import run_inproc
-    from gcs.mission.run_output import print_result
+    from gcs.mission.run_output import print_result, write_run
 
     res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True,
                      land_at=args.land_at)
-    if args.out:
-        res.save(args.out)
-        log.info("wrote %s/metrics.json, series.npz", args.out)
+    if args.out:  # checked writable before the run; a fallback folder if it fails now
+        where = write_run(Path(args.out), res.document(), res.series)
+        log.info("wrote %s/metrics.json, series.npz", where)
     print_result(res.document(), args.json)
     return safety_exit_status(res.metrics, res.method)
 
@@ -102,7 +109,8 @@ def add_keys(sub: argparse._SubParsersAction) -> None:
 
 def add_router_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="run a Zenoh router (multi-machine setups)")
-    p.add_argument("--listen", nargs="+", default=[default_endpoint()], metavar="EP",
+    p.add_argument("--listen", nargs="+", type=zenoh_listen_endpoint,
+                   default=[default_endpoint()], metavar="EP",
                    help=f"endpoints to listen on (default {default_endpoint()})")
     p.add_argument("--scenario", default=None,
                    help="authenticate and apply this swarm's ACL (docs/security.md)")
@@ -133,52 +141,15 @@ def cmd_mission_compare(args: argparse.Namespace) -> int:
     return compare(sc, args)
 
 
-def _seconds(text: str, allow_zero: bool) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: must be a finite number of seconds {'>= 0' if allow_zero else '> 0'}"
-        )
-    return v
-
-
 MAX_DURATION_S = 3600.0  # as scenario.duration_s: the recorder preallocates the run
+MAX_MISSION_TIME_S = 1e6  # --land-at, --kill-at: any time after the run is simply never reached
 
-
-def _positive_seconds(text: str) -> float:
-    return _seconds(text, allow_zero=False)
-
-
-def _duration(text: str) -> float:
-    v = _seconds(text, allow_zero=False)
-    if v > MAX_DURATION_S:
-        raise argparse.ArgumentTypeError(f"{text!r}: at most {MAX_DURATION_S:g} s")
-    return v
-
-
-def _int_in(lo: int, hi: int) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{text!r}: must be in {lo}..{hi}")
-        return v
-
-    return parse
-
-
-def _port_offset(text: str) -> int:
-    from gcs.mission.launch_spec import MAX_PORT_OFFSET
-
-    return _int_in(0, MAX_PORT_OFFSET)(text)
-
-
-_seed = _int_in(0, 2**32 - 1)
+_duration = float_in(0.0, MAX_DURATION_S, lo_open=True, unit="s")
+_non_negative_seconds = float_in(0.0, MAX_MISSION_TIME_S, unit="s")
+# the shared flag types (swarm_common.inputs): the same bounds as vehicle-sim and offboard
+_int_in = int_in
+_port_offset = port_offset
+_seed = seed
 
 
 def _check_run_args(args: argparse.Namespace, sc: Scenario, cmd: str) -> None:
@@ -194,10 +165,6 @@ def _check_run_args(args: argparse.Namespace, sc: Scenario, cmd: str) -> None:
     if problem:
         print(f"gcs {cmd}: {problem}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE)
-
-
-def _non_negative_seconds(text: str) -> float:
-    return _seconds(text, allow_zero=True)
 
 
 def _add_allow_infeasible(p: argparse.ArgumentParser) -> None:
@@ -228,7 +195,8 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--port-offset", type=_port_offset, default=None,
                    help="added to every UDP/TCP port (default: the first of 0, 1000, ... "
                    "whose ports are all free; with N, a busy port is exit 2)")
-    d.add_argument("--kill-agent", type=int, default=None, help="kill this agent's process ...")
+    d.add_argument("--kill-agent", type=int_in(1, 255, "an agent id"), default=None,
+                   help="kill this agent's process ...")
     d.add_argument("--kill-at", type=_non_negative_seconds, default=None,
                    help="... at this mission time (s)")
     d.add_argument("--processes", type=_int_in(1, 10_000), default=None, metavar="N",
@@ -280,7 +248,7 @@ COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="gcs", description="bearing-swarm ground station")
+    ap = OneLineParser(prog="gcs", description="bearing-swarm ground station")
     add_log_level_argument(ap)
     sub = ap.add_subparsers(dest="command", required=True)
     for add in COMMANDS.values():

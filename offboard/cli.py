@@ -36,6 +36,18 @@ from offboard.daemon.zenoh.shared_subs import SharedSubscriptions
 from offboard.estimation.bearing import formation_from_scenario
 from swarm_common.blas import single_thread_blas
 from swarm_common.enums import Method, SensingSource
+from swarm_common.inputs import (
+    MAX_ZENOH_CONFIG_BYTES,
+    BoundedReadError,
+    OneLineParser,
+    agent_id,
+    out_file_problem,
+    port_offset,
+    read_bounded,
+    seed,
+    zenoh_endpoint,
+    zenoh_listen_endpoint,
+)
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.process_life import exit_now, freeze_startup
@@ -59,6 +71,9 @@ from swarm_common.zenoh_session import (
 OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 log = logging.getLogger("offboard.cli")
+UNSIGNED_WARNING = ("no --signing-key: the daemon accepts unsigned MAVLink frames from its "
+                    "vehicle link, from anyone who reaches its port (gcs keys generate; "
+                    "docs/security.md)")
 
 
 def die_with_parent() -> str | None:
@@ -125,22 +140,26 @@ def nav_gate(text: object) -> float | None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="offboard", description=__doc__.splitlines()[0])
+    ap = OneLineParser(prog="offboard", description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", required=True, help="scenario TOML file")
     who = ap.add_mutually_exclusive_group(required=True)
-    who.add_argument("--agent", type=int, help="agent id (= MAVLink system id)")
+    who.add_argument("--agent", type=agent_id, help="agent id (= MAVLink system id)")
     who.add_argument("--agents", default=None, metavar="IDS",
                      help="several agents in this process: a range 3-8 or a list 1,2,5 "
                      "(one Zenoh session, one event loop, one MAVLink link per agent)")
     ap.add_argument("--mavlink", default=None,
                     help="MAVLink URL (default udpin on the API port; --agent only)")
-    ap.add_argument("--port-offset", type=int, default=0, help="shift every port by N")
+    ap.add_argument("--port-offset", type=port_offset, default=0,
+                    help="shift every port by N")
     ap.add_argument("--swarm", default=None, help="swarm name in Zenoh keys (default: scenario)")
     ap.add_argument("--method", choices=[m.value for m in Method], default=None)
-    ap.add_argument("--seed", type=int, default=None, help="override scenario.seed")
+    ap.add_argument("--seed", type=seed, default=None,
+                    help="override scenario.seed (0..2^32-1)")
     ap.add_argument("--realtime", action="store_true", help="wall-clock mode (default lockstep)")
-    ap.add_argument("--zenoh-connect", nargs="*", default=None, metavar="EP")
-    ap.add_argument("--zenoh-listen", nargs="*", default=None, metavar="EP")
+    ap.add_argument("--zenoh-connect", nargs="*", type=zenoh_endpoint, default=None,
+                    metavar="EP")
+    ap.add_argument("--zenoh-listen", nargs="*", type=zenoh_listen_endpoint, default=None,
+                    metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
     ap.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
                     help="Zenoh JSON5 config with this agent's credentials (as written by "
@@ -202,6 +221,9 @@ def main(argv: list[str] | None = None) -> int:
         except SigningKeyError as exc:
             print(f"offboard: --signing-key: {exc}", file=sys.stderr)
             return 2
+    if (why := file_problem(args)) is not None:
+        print(f"offboard: {why}", file=sys.stderr)
+        return 2
     try:
         sc = load_scenario(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except ScenarioError as exc:
@@ -217,10 +239,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.swarm is not None and (problem := swarm_name_problem(args.swarm)) is not None:
         print(f"offboard: --swarm {args.swarm!r}: {problem}", file=sys.stderr)
         return 2
-    if args.zenoh_config is not None and not os.path.isfile(args.zenoh_config):
-        print(f"offboard: {ZENOH_CONFIG_FLAG} {args.zenoh_config}: not a readable file",
-              file=sys.stderr)
-        return 2
+    if args.tlog is not None:
+        for i in ids:
+            tlog = args.tlog.replace("{id}", str(i))
+            if (why := out_file_problem(tlog, "--tlog")) is not None:
+                print(f"offboard: {why}", file=sys.stderr)
+                return 2
     land_after = loss_land_after(args.loss_land_after)
     if land_after is None:
         print(f"offboard: --loss-land-after {args.loss_land_after!r}: must be 0 or a number "
@@ -231,6 +255,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"offboard: --nav-gate {args.nav_gate!r}: must be 0 or a number of metres in "
               f"{MIN_NAV_GATE_M:g}..{MAX_NAV_GATE_M:g}", file=sys.stderr)
         return 2
+    if key is None:  # every check passed: the one line before the daemon starts
+        log.warning("%s", UNSIGNED_WARNING)
     connect = args.zenoh_connect
     if connect is None:
         connect = [default_endpoint(args.port_offset)]
@@ -245,6 +271,20 @@ def main(argv: list[str] | None = None) -> int:
         return run_daemons(cfgs, session, "-".join(str(i) for i in ids))
     finally:
         session.close()
+
+
+def file_problem(args: argparse.Namespace) -> str | None:
+    """``--zenoh-config`` (or ``$SWARM_ZENOH_CONFIG``): a regular file within its cap, read
+    before anything starts (:mod:`swarm_common.inputs`); None, or the one-line error."""
+    path = args.zenoh_config or os.environ.get(ZENOH_CONFIG_ENV) or None
+    if path is None:
+        return None
+    flag = ZENOH_CONFIG_FLAG if args.zenoh_config else f"${ZENOH_CONFIG_ENV}"
+    try:
+        read_bounded(path, MAX_ZENOH_CONFIG_BYTES, "zenoh config")
+    except BoundedReadError as exc:
+        return f"{flag}: {exc}"
+    return None
 
 
 def agent_ids(args: argparse.Namespace, ids: list[int]) -> list[int] | str:

@@ -103,11 +103,16 @@ def open_session(
 
 
 def _config_from_file(path: Path) -> zenoh.Config:
-    """Load a JSON5 Zenoh config; ``ValueError`` (one line, never the file's content)."""
+    """Load a JSON5 Zenoh config: a regular file of at most
+    :data:`~swarm_common.inputs.MAX_ZENOH_CONFIG_BYTES` (never a FIFO or a device);
+    ``ValueError`` (one line, never the file's content)."""
     import zenoh
 
+    from swarm_common.inputs import MAX_ZENOH_CONFIG_BYTES, read_bounded_text
+
+    text = read_bounded_text(path, MAX_ZENOH_CONFIG_BYTES, "zenoh config")  # ValueError
     try:
-        return zenoh.Config.from_file(str(path))
+        return zenoh.Config.from_json5(text)
     except (zenoh.ZError, OSError) as exc:
         why = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else "unreadable"
         raise ValueError(f"zenoh config {path}: cannot load ({why})") from None

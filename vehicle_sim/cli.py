@@ -10,19 +10,32 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import os
 import signal
 import sys
 import time
-from collections.abc import Callable
 from types import FrameType
 from typing import TYPE_CHECKING
 
 from swarm_common.blas import single_thread_blas
 from swarm_common.enums import DefaultStreams, FailsafeAction
+from swarm_common.inputs import (
+    MAX_PARAMS_BYTES,
+    MAX_ZENOH_CONFIG_BYTES,
+    BoundedReadError,
+    OneLineParser,
+    float_in,
+    host,
+    int_in,
+    out_file_problem,
+    port_offset,
+    read_bounded,
+    seed,
+    zenoh_endpoint,
+    zenoh_listen_endpoint,
+)
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
-from swarm_common.ports import GCS_LOCAL_BASE, MAX_ID
+from swarm_common.ports import MAX_ID
 from swarm_common.process_life import exit_now, freeze_startup
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
@@ -40,44 +53,39 @@ if TYPE_CHECKING:
     from vehicle_sim.server import SimServer
 
 log = logging.getLogger("vehicle_sim")
-MAX_PORT = 65535
-HIGHEST_BASE_PORT = GCS_LOCAL_BASE + MAX_ID  # the highest vehicle port before the offset
-
-
-def _pos_float(name: str) -> Callable[[str], float]:
-    def conv(s: str) -> float:
-        try:
-            x = float(s)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} {s!r}: must be a number") from None
-        if not (math.isfinite(x) and x > 0):
-            raise argparse.ArgumentTypeError(f"{name} {s!r}: must be a positive number")
-        return x
-
-    return conv
+MAX_TIMEOUT_S = 3600.0  # --offboard-timeout, --step-timeout
+MAX_RATE_HZ = 5000.0  # --odometry-hz: the highest physics rate a scenario may have
+MAX_SIM_DURATION_S = 1e7  # --duration: about 116 days of simulated time
+UNSIGNED_WARNING = ("no --signing-key: the vehicles accept unsigned MAVLink commands from "
+                    "anyone who reaches their ports (gcs keys generate; docs/security.md)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = OneLineParser(
         prog="vehicle-sim",
         description="SITL-style multi-vehicle MAVLink 2 simulator (PX4 conventions).",
     )
     ap.add_argument("--scenario", required=True, help="scenario TOML file (scenarios/cube8.toml)")
     ap.add_argument("--lockstep", action="store_true", help="advance only when controllers answer")
-    ap.add_argument("--seed", type=int, default=None, help="dynamics seed (default: scenario)")
+    ap.add_argument("--seed", type=seed, default=None,
+                    help="dynamics seed, 0..2^32-1 (default: scenario)")
     ap.add_argument(ALLOW_INFEASIBLE_FLAG, action="store_true",
                     help="run a scenario that fails the feasibility check, with a warning")
     ap.add_argument(ALLOW_UNSAFE_FLAG, action="store_true",
                     help="run a scenario that breaks a load-time safety assumption, with a "
                     "warning")
-    ap.add_argument("--port-offset", type=int, default=0, help="shift every UDP/TCP port")
-    ap.add_argument("--bind", default="127.0.0.1", help="address the vehicle sockets bind")
-    ap.add_argument("--remote-host", default="127.0.0.1", help="where default streams go")
+    ap.add_argument("--port-offset", type=port_offset, default=0,
+                    help="shift every UDP/TCP port")
+    ap.add_argument("--bind", type=host, default="127.0.0.1",
+                    help="address the vehicle sockets bind")
+    ap.add_argument("--remote-host", type=host, default="127.0.0.1",
+                    help="where default streams go (an IPv4 address or a host name)")
     ap.add_argument(
         "--swarm", default=None, help="swarm name in the Zenoh keys (default: the scenario name)"
     )
-    ap.add_argument("--zenoh-listen", nargs="+", default=[], metavar="EP")
-    ap.add_argument("--zenoh-connect", nargs="+", default=[], metavar="EP")
+    ap.add_argument("--zenoh-listen", nargs="+", type=zenoh_listen_endpoint, default=[],
+                    metavar="EP")
+    ap.add_argument("--zenoh-connect", nargs="+", type=zenoh_endpoint, default=[], metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
     ap.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
@@ -97,12 +105,15 @@ def build_parser() -> argparse.ArgumentParser:
         default=str(FailsafeAction.HOLD),
         help="what a vehicle does on offboard loss",
     )
-    ap.add_argument("--offboard-timeout", type=_pos_float("--offboard-timeout"), default=0.5)
-    ap.add_argument("--odometry-hz", type=_pos_float("--odometry-hz"), default=50.0)
-    ap.add_argument("--step-timeout", type=_pos_float("--step-timeout"), default=0.5)
-    ap.add_argument("--duration", type=_pos_float("--duration"), default=None,
-                    help="exit 0 after this much simulated time (s)")  # fmt: skip
-    ap.add_argument("--vehicles", type=int, default=None, metavar="K",
+    ap.add_argument("--offboard-timeout", type=float_in(0, MAX_TIMEOUT_S, lo_open=True, unit="s"),
+                    default=0.5)
+    ap.add_argument("--odometry-hz", type=float_in(0, MAX_RATE_HZ, lo_open=True, unit="Hz"),
+                    default=50.0)
+    ap.add_argument("--step-timeout", type=float_in(0, MAX_TIMEOUT_S, lo_open=True, unit="s"),
+                    default=0.5)
+    ap.add_argument("--duration", type=float_in(0, MAX_SIM_DURATION_S, lo_open=True, unit="s"),
+                    default=None, help="exit 0 after this much simulated time (s)")
+    ap.add_argument("--vehicles", type=int_in(1, MAX_ID), default=None, metavar="K",
                     help="simulate only the first K agents of the scenario")  # fmt: skip
     ap.add_argument(
         "--default-streams", choices=[d.value for d in DefaultStreams],
@@ -142,8 +153,6 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
     """Check the options that depend on the scenario and type them."""
     if args.vehicles is not None and not 1 <= args.vehicles <= sc.n:
         raise _Fatal(f"--vehicles {args.vehicles}: must be in [1, {sc.n}]")
-    if not 0 <= args.port_offset <= MAX_PORT - HIGHEST_BASE_PORT:
-        raise _Fatal(f"--port-offset {args.port_offset}: out of range")
     if args.swarm is not None and (problem := swarm_name_problem(args.swarm)) is not None:
         raise _Fatal(f"--swarm {args.swarm!r}: {problem}")
     key = None
@@ -179,19 +188,43 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
     )
 
 
+def check_files(args: argparse.Namespace) -> None:
+    """The file options, before anything starts (:mod:`swarm_common.inputs`): the Zenoh
+    config and an existing ``--params-file`` are regular files within their caps;
+    ``--stats-out`` and a ``--params-file`` still to be created can be written.
+    :class:`_Fatal` with one line if not."""
+    zenoh_config = args.zenoh_config
+    flag = ZENOH_CONFIG_FLAG
+    if zenoh_config is None and not args.no_zenoh:
+        zenoh_config, flag = os.environ.get(ZENOH_CONFIG_ENV) or None, f"${ZENOH_CONFIG_ENV}"
+    try:
+        if zenoh_config is not None:
+            read_bounded(zenoh_config, MAX_ZENOH_CONFIG_BYTES, "zenoh config")
+        if args.params_file is not None and os.path.lexists(args.params_file):
+            flag = "--params-file"
+            read_bounded(args.params_file, MAX_PARAMS_BYTES, "parameter file")
+    except BoundedReadError as exc:
+        raise _Fatal(f"{flag}: {exc}") from None
+    if args.params_file is not None and not os.path.lexists(args.params_file):
+        if (why := out_file_problem(args.params_file, "--params-file")) is not None:
+            raise _Fatal(why)
+    if args.stats_out is not None and (why := out_file_problem(args.stats_out,
+                                                               "--stats-out")) is not None:
+        raise _Fatal(why)
+
+
 def _server(args: argparse.Namespace) -> SimServer:
     """Load the scenario and open every socket; :class:`_Fatal` with one line if not."""
     from vehicle_sim.link.endpoint import LinkError
     from vehicle_sim.server import SimServer
 
+    check_files(args)
     try:
         sc = load_scenario(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except ScenarioError as exc:
         raise _Fatal(str(exc)) from None
     opts = _options(args, sc)
     if args.zenoh_config is not None:
-        if not os.path.isfile(args.zenoh_config):
-            raise _Fatal(f"{ZENOH_CONFIG_FLAG} {args.zenoh_config}: not a readable file")
         # read by swarm_common.zenoh_session.make_config when the truth session opens
         os.environ[ZENOH_CONFIG_ENV] = args.zenoh_config
     try:
@@ -205,6 +238,8 @@ def _server(args: argparse.Namespace) -> SimServer:
     except _Fatal:
         server.close()
         raise
+    if opts.signing_key is None:  # every check passed: one line as the simulator starts
+        log.warning("%s", UNSIGNED_WARNING)
     for line in port_map_lines(opts, [v.id for v in server.vehicles]):
         log.info("%s", line)
     return server

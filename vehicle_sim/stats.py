@@ -18,6 +18,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from swarm_common.inputs import fallback_dir
 from vehicle_sim.clock import LockstepClock, RealTimeClock
 from vehicle_sim.link.endpoint import MavlinkLink
 from vehicle_sim.link.truth import TruthPublisher
@@ -116,8 +117,22 @@ def write_stats(sim: RunState, path: str) -> None:
         "links": _link_totals(sim),
         "summary": summary(sim),
     }
+    write_json_or_fallback(doc, path)
+
+
+def write_json_or_fallback(doc: dict[str, Any], path: str) -> str:
+    """Write ``doc`` as JSON to ``path`` (checked writable at start, ``vehicle_sim.cli``);
+    if that still fails, to ``stats.json`` in a fresh private temporary folder, logged
+    with its path as an ERROR, so the statistics are never lost. Returns where it went."""
+    text = json.dumps(doc, indent=2)
     try:
         with open(path, "w") as f:
-            json.dump(doc, f, indent=2)
+            f.write(text)
+        return path
     except OSError as exc:
-        log.error("cannot write stats to %s: %s", path, exc)
+        fallback = str(fallback_dir("vehicle-sim-stats-") / "stats.json")
+        with open(fallback, "w") as f:
+            f.write(text)
+        log.error("cannot write stats to %s (%s): written to %s instead", path,
+                  exc.strerror or exc, fallback)
+        return fallback

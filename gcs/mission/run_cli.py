@@ -12,7 +12,7 @@ from gcs.exit_codes import EXIT_RUN_FAILED, EXIT_USAGE
 from gcs.formation.vehicle import FORMATION_PORT
 from gcs.mission.distributed import MissionError, run_and_score
 from gcs.mission.launch_spec import LaunchError, SigningChoice, resolve_port_offset
-from gcs.mission.run_output import print_result
+from gcs.mission.run_output import out_dir_problem, print_result
 from gcs.mission.score import default_out_dir, late_steps
 from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams
@@ -45,6 +45,9 @@ def cli_run(args: Any, sc: Scenario) -> int:
                                      FORMATION_PORT if formation else None)
     except (ValueError, LaunchError) as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    if (why := out_dir_problem(out)) is not None:  # the default run directory too
+        print(f"gcs mission run: {why}", file=sys.stderr)
         return EXIT_USAGE
     try:
         doc = run_and_score(

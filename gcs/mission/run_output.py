@@ -32,6 +32,7 @@ from gcs.report.mission_metrics import (
 from gcs.report.verdict import summary_line
 from offboard.estimation.bearing import Formation
 from offboard.records import AgentOutput
+from swarm_common import inputs
 from swarm_common.enums import QPStatus
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
@@ -146,16 +147,13 @@ def run_dir_inside(parent: Path, leaf: str) -> Path:
 
 
 def out_dir_problem(out: Path) -> str | None:
-    """Why ``out`` cannot be a run directory (it exists and is not a directory), or None."""
-    if out.exists() and not out.is_dir():
-        return f"--out {out}: exists and is not a directory"
-    return None
+    """Why ``out`` cannot be a run directory, or None: checked before a run starts
+    (:func:`swarm_common.inputs.out_dir_problem`: created if missing, a probe file written
+    and removed), so a run never ends with nowhere to write its results."""
+    return inputs.out_dir_problem(out, "--out")
 
 
-def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
-    """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``,
-    each through a temporary file renamed over the old one, so a reader (or a run killed
-    while writing) never sees half a file."""
+def _write_files(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, Any] = series.as_dict()
     tmp = out_dir / ".series.tmp.npz"
@@ -164,6 +162,24 @@ def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
     tmp = out_dir / ".metrics.json.tmp"
     tmp.write_text(json.dumps(doc, indent=2, default=json_default) + "\n")
     os.replace(tmp, out_dir / "metrics.json")
+
+
+def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> Path:
+    """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``,
+    each through a temporary file renamed over the old one, so a reader (or a run killed
+    while writing) never sees half a file. When ``out_dir`` cannot be written (it was
+    checked before the run, but a disk can fill or a folder vanish), the results go to a
+    fresh private folder in the temporary directory instead, logged as an ERROR with its
+    path: a finished run's results are never lost. Returns the folder written."""
+    try:
+        _write_files(out_dir, doc, series)
+        return out_dir
+    except OSError as exc:
+        fallback = inputs.fallback_dir("swarm-run-")
+        _write_files(fallback, doc, series)
+        log.error("cannot write the results to %s (%s): written to %s instead", out_dir,
+                  exc.strerror or exc, fallback)
+        return fallback
 
 
 def print_result(doc: Mapping[str, Any], as_json: bool) -> None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import multiprocessing
 import os
 import sys
@@ -32,6 +31,7 @@ from gcs.exit_codes import EXIT_USAGE
 from gcs.mission.progress import Progress
 from gcs.report.sweep import flat_row, write_outputs
 from swarm_common.enums import Method
+from swarm_common.inputs import SEED_MAX, finite_float, out_dir_problem
 from swarm_common.logsetup import configure_logging
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
@@ -46,6 +46,11 @@ log = logging.getLogger(__name__)
 
 class SweepInputError(ValueError):
     """Bad command-line input of the sweep (exit 2); ``str()`` is the one-line reason."""
+
+
+MAX_SWEEP_SEEDS = 100_000  # as gcs mission compare --seeds
+MAX_SWEEP_JOBS = 256  # as gcs mission compare --jobs
+MAX_SWEEP_DURATION_S = 3600.0  # as scenario.duration_s
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,8 @@ def parse_seeds(text: str) -> list[int]:
             lo, hi = int(lo_s), int(hi_s)
             if lo > hi:
                 raise SweepInputError(f"--seeds {text!r}: empty range ({lo} > {hi})")
+            if hi - lo >= MAX_SWEEP_SEEDS:  # checked before the list is built
+                raise SweepInputError(f"--seeds {text!r}: more than {MAX_SWEEP_SEEDS} seeds")
             seeds = list(range(lo, hi + 1))
         else:
             seeds = [int(s) for s in text.split(",")]
@@ -79,8 +86,10 @@ def parse_seeds(text: str) -> list[int]:
         raise SweepInputError(
             f"--seeds {text!r}: expected a range like 1-100 or a list like 1,4,9"
         ) from None
-    if any(s < 0 for s in seeds):
-        raise SweepInputError(f"--seeds {text!r}: seeds must be >= 0")
+    if any(not 0 <= s <= SEED_MAX for s in seeds):
+        raise SweepInputError(f"--seeds {text!r}: seeds must be in 0..{SEED_MAX}")
+    if len(seeds) > MAX_SWEEP_SEEDS:
+        raise SweepInputError(f"--seeds {text!r}: more than {MAX_SWEEP_SEEDS} seeds")
     return list(dict.fromkeys(seeds))
 
 
@@ -105,8 +114,8 @@ def parse_jobs(text: str | None) -> int:
         jobs = int(text)
     except ValueError:
         raise SweepInputError(f"--jobs {text!r}: not an integer") from None
-    if jobs < 1:
-        raise SweepInputError(f"--jobs {text!r}: must be >= 1")
+    if not 1 <= jobs <= MAX_SWEEP_JOBS:
+        raise SweepInputError(f"--jobs {text!r}: must be in 1..{MAX_SWEEP_JOBS}")
     return jobs
 
 
@@ -114,12 +123,10 @@ def parse_duration(text: str | None) -> float | None:
     """``--duration``: seconds > 0 and finite; None → each scenario's ``run.duration_s``."""
     if text is None:
         return None
-    try:
-        v = float(text)
-    except ValueError:
-        raise SweepInputError(f"--duration {text!r}: not a number of seconds") from None
-    if not math.isfinite(v) or v <= 0:
-        raise SweepInputError(f"--duration {text!r}: must be a finite number of seconds > 0")
+    v = finite_float(text)
+    if v is None or not 0 < v <= MAX_SWEEP_DURATION_S:
+        raise SweepInputError(f"--duration {text!r}: must be a finite number of seconds in "
+                              f"(0, {MAX_SWEEP_DURATION_S:g}]")
     return v
 
 
@@ -237,6 +244,9 @@ def cmd_mission_sweep(args: argparse.Namespace) -> int:
         print(f"gcs mission sweep: {exc}", file=sys.stderr)
         return EXIT_USAGE
     out = Path(args.out or f"runs/sweep-{time.strftime('%Y%m%d-%H%M%S')}")
+    if (why := out_dir_problem(out, "--out")) is not None:  # before any run starts
+        print(f"gcs mission sweep: {why}", file=sys.stderr)
+        return EXIT_USAGE
     jobs = make_jobs(scenarios, methods, seeds, duration)
     log.info("sweep: %d runs on %d workers -> %s", len(jobs), workers, out)
     t0 = time.monotonic()

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
-import stat
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+from swarm_common.inputs import MAX_SCENARIO_BYTES, BoundedReadError, read_bounded_text
 
 ALLOW_INFEASIBLE_FLAG = "--allow-infeasible"
 ALLOW_UNSAFE_FLAG = "--allow-unsafe"
@@ -41,7 +41,6 @@ class UnsafeScenarioError(ScenarioError):
 # or ``#`` may reach a key expression or a path.
 SWARM_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
 SWARM_NAME_RULE = "1-64 characters of A-Z a-z 0-9 _ -, starting with a letter or digit"
-MAX_SCENARIO_BYTES = 1 << 20  # 1 MiB: the shipped scenarios are a few kB
 MAX_TOML_NESTING = 32  # arrays/tables deeper than this are refused before tomllib sees them
 
 
@@ -88,32 +87,16 @@ def _nesting_problem(text: str) -> str | None:
 
 def read_scenario_text(p: Path) -> str:
     """The file's text: a regular file (not a FIFO, device or directory) of at most
-    :data:`MAX_SCENARIO_BYTES`, UTF-8, nested at most :data:`MAX_TOML_NESTING` deep."""
+    :data:`MAX_SCENARIO_BYTES`, UTF-8 (:func:`swarm_common.inputs.read_bounded_text`),
+    nested at most :data:`MAX_TOML_NESTING` deep."""
     try:
-        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise ScenarioError(f"{p}: cannot read scenario file (not a regular file)")
-        with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(MAX_SCENARIO_BYTES + 1)
-    except OSError as exc:
-        raise ScenarioError(f"{p}: cannot read scenario file ({exc.strerror})") from None
-    finally:
-        os.close(fd)
-    if len(data) > MAX_SCENARIO_BYTES:
-        raise ScenarioError(f"{p}: scenario file larger than {MAX_SCENARIO_BYTES} bytes")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(f"{p}: not UTF-8 (byte {exc.start})") from None
+        text = read_bounded_text(p, MAX_SCENARIO_BYTES, "scenario file")
+    except BoundedReadError as exc:
+        raise ScenarioError(str(exc)) from None
     problem = _nesting_problem(text)
     if problem is not None:
         raise ScenarioError(f"{p}: not a valid scenario ({problem})")
     return text
-
-
 
 
 def _toml_scalar(v: Any) -> str:

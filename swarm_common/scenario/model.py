@@ -113,6 +113,12 @@ EXTRA_SECTIONS = ("agent", "faults", "mission", "obstacle", "geofence")
 
 
 
+def _shown(value: Any, width: int = 40) -> str:
+    """``repr(value)`` cut to ``width`` characters (a 400-digit integer stays one short line)."""
+    text = repr(value)
+    return text if len(text) <= width else f"{text[:width - 3]}..."
+
+
 def parse_scenario(
     data: dict[str, Any], path: str = "<scenario>", allow_infeasible: bool = False,
     allow_unsafe: bool = False,
@@ -154,7 +160,7 @@ def parse_scenario(
                 raise fail(f"missing key {section}.{key} ({describe_spec(spec)})")
             v = given[key] if key in given else toml_value(defaults[key])
             if not check_value(v, spec):
-                raise fail(f"{section}.{key} = {v!r}: must be {describe_spec(spec)}")
+                raise fail(f"{section}.{key} = {_shown(v)}: must be {describe_spec(spec)}")
             out[key] = v
         raw[section] = out
 
@@ -196,10 +202,10 @@ def parse_scenario(
             if key not in a:
                 raise fail(f"missing key {where}.{key} ({describe_spec(spec)})")
             if not check_value(a[key], spec):
-                raise fail(f"{where}.{key} = {a[key]!r}: must be {describe_spec(spec)}")
+                raise fail(f"{where}.{key} = {_shown(a[key])}: must be {describe_spec(spec)}")
         for key, (spec, _) in AGENT_OPTIONAL.items():
             if key in a and not check_value(a[key], spec):
-                raise fail(f"{where}.{key} = {a[key]!r}: must be {describe_spec(spec)}")
+                raise fail(f"{where}.{key} = {_shown(a[key])}: must be {describe_spec(spec)}")
         cooperative = bool(a.get("cooperative", AGENT_OPTIONAL["cooperative"][1]))
         if not cooperative and a["role"] == Role.LEADER:
             raise fail(f"{where}.cooperative = false: only a follower can be non-cooperative "
@@ -310,6 +316,9 @@ def load_scenario(
         raise ScenarioError(f"{p}: not valid TOML ({exc})") from None
     except RecursionError:
         raise ScenarioError(f"{p}: not a valid scenario (nested too deep)") from None
+    except ValueError as exc:  # an integer of more than 4300 digits (int's str limit)
+        why = str(exc).split(":", 1)[0]
+        raise ScenarioError(f"{p}: not a valid scenario ({why})") from None
     sc = parse_scenario(data, str(p), allow_infeasible, allow_unsafe)
     faults.install(sc.faults, sc.seed)  # the transports this process opens apply it
     return sc

@@ -7,12 +7,12 @@ Units are in the field names (``_s``, ``_m``, ``_mps2``, ``_hz``, ``_deg``, ``_n
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
 from swarm_common.enums import GraphKind, Method, QPSolver, Role, StartMode
+from swarm_common.inputs import is_finite_number
 
 # ---------------------------------------------------------------------------
 # Schema. Each section is a frozen dataclass; each field carries its spec in its
@@ -287,15 +287,11 @@ def describe_spec(spec: Spec) -> str:
     raise AssertionError(kind)
 
 
-def _is_num(x: Any) -> bool:
-    return isinstance(x, int | float) and not isinstance(x, bool)
-
-
 def check_value(value: Any, spec: Spec) -> bool:
     kind = spec[0]
     if kind == "float":
         _, lo, hi, lo_open, hi_open = spec
-        if not _is_num(value) or not math.isfinite(value):
+        if not is_finite_number(value):  # an int too large for a float too (no OverflowError)
             return False
         ok_lo = value > lo if lo_open else value >= lo
         ok_hi = value < hi if hi_open else value <= hi
@@ -309,13 +305,13 @@ def check_value(value: Any, spec: Spec) -> bool:
         return (
             isinstance(value, list)
             and len(value) == spec[1]
-            and all(_is_num(v) and math.isfinite(v) and spec[2] <= v <= spec[3] for v in value)
+            and all(is_finite_number(v) and spec[2] <= v <= spec[3] for v in value)
         )
     if kind == "windows":
         return isinstance(value, list) and all(
             isinstance(w, list)
             and len(w) == 2
-            and all(_is_num(x) and math.isfinite(x) for x in w)
+            and all(is_finite_number(x) for x in w)
             and 0 <= w[0] < w[1]
             for w in value
         )

@@ -30,6 +30,13 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as M
 
+from swarm_common.inputs import (
+    MAX_PARAMS_BYTES,
+    BoundedReadError,
+    finite_float,
+    read_bounded_text,
+)
+
 log = logging.getLogger(__name__)
 
 INT32 = M.MAV_PARAM_TYPE_INT32
@@ -148,8 +155,11 @@ def _entry(store: ParamStore, vid: int, name: Any, value: Any) -> float:
         raise ParamFileError(f"vehicle {vid}: parameter name {name!r} is not a string")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParamFileError(f"vehicle {vid}: {name} = {value!r} is not a number")
+    number = finite_float(value)
+    if number is None:  # NaN, ±inf or an int too large for a float (no OverflowError)
+        raise ParamFileError(f"vehicle {vid}: {name} = {str(value)[:40]} is not a finite number")
     try:
-        return store.check(name, float(value))
+        return store.check(name, number)
     except ParamError as exc:
         raise ParamFileError(f"vehicle {vid}: {exc}") from None
 
@@ -177,16 +187,18 @@ def read_param_file(path: str | Path, table: ParamStore) -> dict[int, dict[str, 
     """Read and validate ``path``; a missing file is an empty one (it is created on the
     first PARAM_SET). :class:`ParamFileError` with one line otherwise."""
     p = Path(path)
-    if not p.exists():
+    if not os.path.lexists(p):
         return {}
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ParamFileError(f"cannot read: {exc}") from None
+    try:  # a regular file of at most MAX_PARAMS_BYTES: never a FIFO or /dev/zero
+        text = read_bounded_text(p, MAX_PARAMS_BYTES, "parameter file")
+    except BoundedReadError as exc:
+        raise ParamFileError(str(exc).removeprefix(f"{p}: ")) from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ParamFileError(f"not JSON: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # an int of > 4300 digits; nesting too deep
+        raise ParamFileError(f"not valid JSON ({type(exc).__name__})") from None
     return parse_param_file(data, table)
 
 

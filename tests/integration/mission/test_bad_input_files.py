@@ -1,0 +1,172 @@
+"""Every file option of every command given what must never be read (issue 42): a device
+streaming zeros, a FIFO with no writer, a 1 GiB sparse file and a directory. Each is one
+line on stderr and exit status 2, at once and without reading. One fresh process per file
+option runs the command's ``main`` on the four (the start-up imports are paid once, not
+four times), each call timed; the process's own peak RSS is read from ``wait4``. Also the
+output paths that cannot be written: exit 2 before the run starts."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import CUBE8, ROOT
+
+pytestmark = pytest.mark.integration
+
+KINDS = ("dev_zero", "fifo", "sparse", "directory")
+TIMEOUT_S = 20.0  # robust under load; the assertions are far below it
+MAX_ELAPSED_S = 10.0  # per refusal (measured: well under 0.1 s once imported)
+# peak RSS of the whole process (imports included: 120-180 MB measured); reading the
+# 1 GiB file or /dev/zero for even a second would be far above it
+MAX_RSS_MB = 400.0
+PY = sys.executable
+SIM, OFFBOARD, GCS = "vehicle_sim.cli", "offboard.cli", "gcs.cli"
+
+# (name, module, argv with {} for the file) for each file option of each command
+OPTIONS = [
+    ("sim-scenario", SIM, ["--scenario", "{}", "--no-zenoh"]),
+    ("sim-params-file", SIM, ["--scenario", CUBE8, "--no-zenoh", "--params-file", "{}"]),
+    ("sim-signing-key", SIM, ["--scenario", CUBE8, "--no-zenoh", "--signing-key", "{}"]),
+    ("sim-zenoh-config", SIM, ["--scenario", CUBE8, "--zenoh-config", "{}"]),
+    ("offboard-scenario", OFFBOARD, ["--scenario", "{}", "--agent", "1"]),
+    ("offboard-signing-key", OFFBOARD, ["--scenario", CUBE8, "--agent", "1",
+                                        "--signing-key", "{}"]),
+    ("offboard-zenoh-config", OFFBOARD, ["--scenario", CUBE8, "--agent", "1",
+                                         "--zenoh-config", "{}"]),
+    ("gcs-run-scenario", GCS, ["mission", "run", "{}", "--inproc"]),
+    ("gcs-run-signing-key", GCS, ["mission", "run", CUBE8, "--signing-key", "{}"]),
+    ("gcs-compare-scenario", GCS, ["mission", "compare", "{}"]),
+    ("gcs-sweep-scenario", GCS, ["mission", "sweep", "{}"]),
+    ("gcs-router-scenario", GCS, ["router", "--scenario", "{}", "--secure-dir", "SECURE"]),
+    ("gcs-dashboard-scenario", GCS, ["dashboard", "--scenario", "{}"]),
+    ("gcs-dashboard-signing-key", GCS, ["dashboard", "--signing-key", "{}"]),
+    ("gcs-dashboard-zenoh-config", GCS, ["dashboard", "--zenoh-config", "{}"]),
+]
+
+# runs MODULE.main(argv) for each argv of argv[2] (JSON), stderr of each call captured
+# alone; prints [{"rc", "s", "err"}, ...] as JSON
+DRIVER = """
+import contextlib, importlib, io, json, sys, tempfile, time
+main = importlib.import_module(sys.argv[1]).main
+out = []
+for argv in json.loads(sys.argv[2]):
+    with tempfile.TemporaryFile("w+") as buf:  # a real file: faulthandler needs its fd
+        t0 = time.monotonic()
+        with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(io.StringIO()):
+            try:
+                rc = main(argv)
+            except SystemExit as exc:
+                rc = exc.code
+        elapsed = time.monotonic() - t0
+        buf.seek(0)
+        out.append({"rc": rc, "s": elapsed, "err": buf.read()})
+print(json.dumps(out))
+"""
+
+
+def _special(tmp_path: Path, kind: str) -> Path:
+    if kind == "dev_zero":
+        return Path("/dev/zero")
+    p = tmp_path / kind
+    if kind == "fifo":
+        os.mkfifo(p, 0o600)
+    elif kind == "sparse":
+        with open(p, "wb") as f:
+            f.truncate(1 << 30)
+        os.chmod(p, 0o600)  # as a key file must be: refused for its size, not its mode
+    else:
+        p.mkdir(mode=0o700)
+    return p
+
+
+def _wait(proc: subprocess.Popen[bytes], t0: float) -> tuple[int, float]:
+    """(exit code, peak RSS in MB) of ``proc``, reaped with ``wait4`` so the rusage is this
+    child's alone; killed after :data:`TIMEOUT_S` (a FIFO that blocked)."""
+    while True:
+        pid, status, ru = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            return proc.returncode, ru.ru_maxrss / 1024.0
+        if time.monotonic() - t0 > TIMEOUT_S:
+            proc.kill()
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize(("name", "module", "argv"), OPTIONS, ids=[o[0] for o in OPTIONS])
+def test_file_option_refuses_what_it_must_not_read(tmp_path, name, module, argv):
+    paths = [_special(tmp_path, kind) for kind in KINDS]
+    argvs = [[str(p) if a == "{}" else str(tmp_path / "secure") if a == "SECURE" else a
+              for a in argv] for p in paths]
+    with open(tmp_path / "out", "w+") as out:
+        t0 = time.monotonic()
+        proc = subprocess.Popen([PY, "-c", DRIVER, module, json.dumps(argvs)], cwd=tmp_path,
+                                stdin=subprocess.DEVNULL, stdout=out,
+                                stderr=subprocess.STDOUT)
+        rc, rss_mb = _wait(proc, t0)
+        out.seek(0)
+        text = out.read()
+    assert rc == 0, text  # killed (a blocking read) or crashed
+    assert rss_mb < MAX_RSS_MB
+    results = json.loads(text.strip().splitlines()[-1])
+    for kind, path, res in zip(KINDS, paths, results, strict=True):
+        lines = [ln for ln in res["err"].splitlines() if ln.strip()]
+        assert res["rc"] == 2, (kind, res)
+        assert len(lines) == 1 and "Traceback" not in res["err"], (kind, res["err"])
+        assert str(path) in lines[0], (kind, lines[0])
+        assert res["s"] < MAX_ELAPSED_S, (kind, res["s"])
+
+
+def test_one_refusal_as_a_real_process(tmp_path):
+    """The same refusal through the command's entry point: exit status 2, one line."""
+    fifo = _special(tmp_path, "fifo")
+    r, elapsed = _run([PY, "-m", SIM, "--scenario", CUBE8, "--no-zenoh", "--params-file",
+                       str(fifo)], tmp_path)
+    _one_line_exit_2(r, str(fifo), "not a regular file")
+    assert elapsed < MAX_ELAPSED_S
+
+
+def _run(argv: list[str], cwd: Path) -> tuple[subprocess.CompletedProcess[str], float]:
+    t0 = time.monotonic()
+    r = subprocess.run(argv, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT_S * 3)
+    return r, time.monotonic() - t0
+
+
+def _one_line_exit_2(r: subprocess.CompletedProcess[str], *expect: str) -> None:
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2, r.stderr
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    for e in expect:
+        assert e in lines[0], (e, lines[0])
+
+
+def test_unwritable_out_is_refused_before_the_run(tmp_path):
+    """``--out /proc/nope/run``: exit 2 before anything runs (a 60 s in-process run would
+    take far longer than the bound; nothing is written)."""
+    r, elapsed = _run([PY, "-m", GCS, "mission", "run", CUBE8, "--inproc", "--out",
+                       "/proc/nope/run"], tmp_path)
+    _one_line_exit_2(r, "--out /proc/nope/run")
+    assert elapsed < MAX_ELAPSED_S and r.stdout == ""
+
+
+def test_vehicle_sim_unwritable_stats_out_exits_2(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    r, elapsed = _run([PY, "-m", SIM, "--scenario", CUBE8, "--no-zenoh", "--duration", "0.05",
+                       "--stats-out", str(blocker / "stats.json")], tmp_path)
+    _one_line_exit_2(r, "--stats-out")
+    assert elapsed < MAX_ELAPSED_S
+
+
+def test_offboard_port_offset_out_of_range_exits_2(tmp_path):
+    """Once it waited forever for a router on port 107446."""
+    for bad in ("99999", "-1"):
+        r, elapsed = _run([PY, "-m", OFFBOARD, "--scenario", CUBE8, "--agent", "1", "--port-offset",
+                           bad], ROOT)
+        _one_line_exit_2(r, "--port-offset")
+        assert elapsed < MAX_ELAPSED_S
