@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from gcs.exit_codes import EXIT_USAGE
+from offboard.estimation.deso_gains import scenario_gain_problem
 from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
 
@@ -193,12 +194,19 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     problem = ""
     for k in ks:
         doc["formation"] = _formation(v, n_lead, args.graph, k or DEFAULT_K, args.range)
+        where = f"{args.shape} --agents {n}"
         try:
-            parse_scenario(doc, f"{args.shape} --agents {n}")
+            sc = parse_scenario(doc, where)
         except ScenarioError as exc:
             problem = str(exc)
             if "formation." not in problem:  # not the graph's fault: no larger k helps
                 break
+            continue
+        # the project's own scenarios pass the DESO gain check too (issue 42: a generated
+        # 250-agent sphere was UNSTABLE on its graph); a denser graph may pass it
+        unstable = scenario_gain_problem(sc)
+        if unstable is not None:
+            problem = f"{where}: {unstable}"
             continue
         return doc, k or 0
     raise GenError(problem)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -26,7 +25,7 @@ from typing import Any
 import zenoh
 
 from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
-from gcs.mission.procs import ProcessGroup
+from gcs.mission.procs import ProcessGroup, release_dir
 from gcs.mission.router import open_router
 from swarm_common.scenario.model import Scenario
 from swarm_common.zenoh_session import write_swarm_security
@@ -135,5 +134,5 @@ class Launch:
                 log.warning("closing the Zenoh router: %s", exc)
             self.router = None
         if self.secure_dir is not None:
-            shutil.rmtree(self.secure_dir, ignore_errors=True)
+            release_dir(self.secure_dir)
             self.secure_dir = None

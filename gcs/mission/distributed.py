@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import logging
 import resource
-import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -24,10 +23,17 @@ from typing import Any
 
 import zenoh
 
-from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir, split_packs
+from gcs.mission.launch_spec import (
+    LaunchError,
+    LaunchSpec,
+    SigningChoice,
+    check_physics,
+    secure_dir,
+    split_packs,
+)
 from gcs.mission.ports import PortUse, bind_failure_line
 from gcs.mission.preflight import warn_liveness
-from gcs.mission.procs import ProcessGroup
+from gcs.mission.procs import ProcessGroup, release_dir, role_of, stall_cause
 from gcs.mission.progress import Progress
 from gcs.mission.recorder import Recorder
 from gcs.mission.router import open_router
@@ -134,6 +140,7 @@ def run_distributed(
             default_streams=default_streams,
         )
         spec.check_ports()
+        check_physics(sc, duration)  # after the flags' checks: their error stays one line
         out_dir.mkdir(parents=True, exist_ok=True)
         router = open_router([spec.router_endpoint],
                              config_file=None if sec is None else sec.router)
@@ -220,6 +227,9 @@ def run_distributed(
     return rec, facts
 
 
+STATE_EVERY_S = 1.0  # wall seconds between looks for stopped children (/proc)
+
+
 def _swarm(sc: Scenario) -> str:
     return sc.name
 
@@ -227,8 +237,7 @@ def _swarm(sc: Scenario) -> str:
 def _remove(path: Path | None) -> None:
     """Delete the run's secure directory (the passwords and the per-run key die with the
     run)."""
-    if path is not None:
-        shutil.rmtree(path, ignore_errors=True)
+    release_dir(path)
 
 
 def _supervise(
@@ -258,7 +267,7 @@ def _supervise(
     startup_limit = startup_timeout_s(len(group.children))
     failed: list[int] = facts["failed_agents"]
     last_k = -1
-    last_change = t_run0 = next_ckpt = time.monotonic()
+    last_change = t_run0 = next_ckpt = next_state = time.monotonic()
     next_ckpt += CHECKPOINT_EVERY_S
     t_first: float | None = None
     k_first = 0
@@ -288,6 +297,9 @@ def _supervise(
                 group.kill(victim)
                 facts["killed_agents"].append(kill_agent)
             _check_children(group, failed, max(k, 0) * dt, ports_of)
+            if time.monotonic() >= next_state:  # stopped children: named, once each
+                next_state = time.monotonic() + STATE_EVERY_S
+                group.warn_stopped(facts, max(k, 0) * dt)
             if failed and k < 1:  # the start barrier waits for every vehicle: it never passes
                 raise _early_death(group, failed, ports_of)
             # the start-up, to step 1: the simulator offers t_0 (truth of step 0) until
@@ -295,7 +307,8 @@ def _supervise(
             limit = stall_timeout if k >= 1 else max(stall_timeout, startup_limit)
             if time.monotonic() - last_change > limit:
                 raise MissionError(
-                    f"run stalled at step {k} for {limit:.0f} s; see logs in {out_dir}"
+                    f"run stalled at step {k} for {limit:.0f} s: {stall_cause(group)}; "
+                    f"see logs in {out_dir}"
                 )
             if checkpoint is not None and time.monotonic() >= next_ckpt:
                 t0 = time.monotonic()
@@ -327,16 +340,15 @@ def _check_children(
             if busy is not None:
                 raise busy
             raise MissionError(
-                f"{child.name} exited with code {child.proc.returncode}: {cause} "
+                f"{role_of(child.name)} died at t = {t:.2f} s: {group.fault(child)} "
                 f"(log: {child.log_path})"
             )
         for aid in parse_agents(child.name.removeprefix("offboard-")):
             if aid not in failed:
                 failed.append(aid)
                 then = "the run goes on without it" if t > 0 else "before the start"
-                log.warning("agent %d's daemon exited (code %s) at t = %.2f s, %s: %s (see %s)",
-                            aid, child.proc.returncode, t, then, group.cause(child),
-                            child.log_path)
+                log.warning("agent %d's daemon exited at t = %.2f s, %s: %s (see %s)",
+                            aid, t, then, group.fault(child), child.log_path)
 
 
 def _early_death(

@@ -15,6 +15,8 @@ arms and starts). Topology, for port offset ``o``:
 
 from __future__ import annotations
 
+import logging
+import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,10 +29,12 @@ from gcs.mission.ports import (
     port_in_use_line,
     swarm_port_uses,
 )
-from gcs.mission.procs import python_entry
+from gcs.mission.procs import python_entry, remove_on_death
 from offboard.daemon.packing import format_agents
+from offboard.estimation.deso_gains import scenario_gain_problem
 from swarm_common.enums import DefaultStreams
 from swarm_common.ports import GCS_PORT, MAX_ID, vehicle_ports
+from swarm_common.scenario.feasibility import deadline_problem
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
@@ -57,6 +61,8 @@ def _max_port_offset() -> int:
     highest = max(highest, DEFAULT_ZENOH_PORT + 1, GCS_PORT)
     return 65535 - highest
 
+log = logging.getLogger(__name__)
+
 
 class LaunchError(RuntimeError):
     """The swarm cannot start here: a port is busy or an endpoint is refused (exit 2)."""
@@ -67,8 +73,16 @@ RUN_KEY_NAME = "mavlink.key"  # the per-run signing key, inside the run's secure
 
 def secure_dir() -> Path:
     """A fresh private directory (mode 0700) for one run's Zenoh credentials and signing
-    key; the caller deletes it when the run ends."""
-    return Path(tempfile.mkdtemp(prefix="swarm-secure-"))
+    key; the caller deletes it with :func:`gcs.mission.procs.release_dir` when the run ends.
+    A watchdog process deletes it if this process dies first, kill -9 included
+    (:func:`gcs.mission.procs.remove_on_death`): no secret outlives its run."""
+    path = Path(tempfile.mkdtemp(prefix="swarm-secure-"))
+    try:
+        remove_on_death(path)
+    except OSError:
+        shutil.rmtree(path, ignore_errors=True)
+        raise
+    return path
 
 
 def split_packs(ids: list[int], processes: int | None) -> list[list[int]]:
@@ -373,3 +387,21 @@ def add_signing_flags(g: Any, launch_note: str = "") -> None:
     g.add_argument("--unsigned-gcs-link", action="store_true",
                    help=f"{launch_note}let unsigned clients (MAVSDK, QGC) request telemetry on "
                    "the GCS port; they can never arm, fly or switch modes")
+
+
+def check_physics(sc: Scenario, duration: float) -> None:
+    """What the loader cannot check (issue 42): the followers' DESO gains on this graph
+    (:func:`~offboard.estimation.deso_gains.scenario_gain_problem`): a
+    :class:`LaunchError` (exit 2), or a warning when the scenario
+    was loaded with --allow-infeasible; and a ``--duration`` that ends the run before
+    ``scenario.formation_deadline_s`` (a warning: a short smoke run is legitimate, but
+    its tracking metrics are empty)."""
+    late = deadline_problem(sc.run.formation_deadline_s, duration, "--duration")
+    if late is not None:
+        log.warning("%s: %s", sc.path, late)
+    problem = scenario_gain_problem(sc)
+    if problem is None:
+        return
+    if not sc.allow_infeasible:
+        raise LaunchError(f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway")
+    log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)

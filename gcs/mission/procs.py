@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO
+from typing import IO, Any
 
 from offboard.daemon.start_gate import GATE_ENV, gate_value
 
@@ -73,9 +73,12 @@ class ProcessGroup:
         full_env.setdefault("OMP_NUM_THREADS", "1")
         if env:
             full_env.update(env)
+        # the runner's code, not the caller's directory's (python_entry runs with -P)
+        full_env["PYTHONPATH"] = child_pythonpath(full_env.get("PYTHONPATH"))
         if gated:
             if self._gate is None:
                 self._gate = Path(tempfile.mkdtemp(prefix="swarm-start-"))
+                remove_on_death(self._gate)
             full_env[GATE_ENV] = gate_value(start_slots(), self._gate)
         # own process group: a terminal's Ctrl-C reaches the runner only, which stops the
         # children in order; PDEATHSIG: no child outlives the runner, even after kill -9
@@ -118,6 +121,7 @@ class ProcessGroup:
             if c.proc.poll() is None:
                 try:
                     c.proc.send_signal(signal.SIGTERM)
+                    c.proc.send_signal(signal.SIGCONT)  # a stopped child acts on it
                 except OSError as exc:  # exited between poll() and the signal
                     log.debug("SIGTERM %s: %s", c.name, exc)
         deadline = time.monotonic() + timeout
@@ -130,14 +134,53 @@ class ProcessGroup:
                 c.proc.wait(2.0)
         for c in self.children:
             c.log_file.close()
-        if self._gate is not None:
-            shutil.rmtree(self._gate, ignore_errors=True)
-            self._gate = None
+        release_dir(self._gate)
+        self._gate = None
 
     def cause(self, child: Child) -> str:
         """One line on why ``child`` exited: :func:`cause_line` of its log."""
         child.log_file.flush()
         return cause_line(child.log_path, child.proc.returncode)
+
+    def stopped(self) -> list[Child]:
+        """Live children the kernel has stopped (state T or t in /proc/PID/stat: SIGSTOP,
+        Ctrl-Z, a debugger): they answer nothing, however fast the machine."""
+        return [c for c in self.children
+                if c.proc.poll() is None and proc_state(c.proc.pid) in STOPPED_STATES]
+
+    def warn_stopped(self, facts: dict[str, Any], t: float) -> None:
+        """Name every child newly stopped by the kernel (SIGSTOP, Ctrl-Z, a debugger) once:
+        a warning with its last log lines, and ``facts["stopped_processes"]`` (name, pid,
+        t_s: mission time, s). A stopped daemon is not slow: the simulator steps on
+        without its answers."""
+        seen: list[dict[str, Any]] = facts.setdefault("stopped_processes", [])
+        for child in self.stopped():
+            if any(s["name"] == child.name for s in seen):
+                continue
+            seen.append({"name": child.name, "pid": child.proc.pid, "t_s": round(t, 3)})
+            log.warning("%s at t = %.2f s: %s", role_of(child.name), t, self.fault(child))
+
+    def fault(self, child: Child) -> str:
+        """One line naming what happened to ``child``: stopped (alive, state T), or dead
+        with its signal or exit code and the cause line of its log (:func:`cause_line`),
+        then its last log lines (:func:`last_lines`)."""
+        child.log_file.flush()
+        pid = child.proc.pid
+        rc = child.proc.poll()
+        if rc is None:
+            state = proc_state(pid)
+            if state in STOPPED_STATES:
+                what = (f"{child.name} (pid {pid}) is stopped (state {state} in /proc: "
+                        "SIGSTOP, Ctrl-Z or a debugger), not slow")
+            else:
+                what = f"{child.name} (pid {pid}) is alive (state {state}) but silent"
+        else:
+            what = f"{child.name} (pid {pid}) {exit_how(rc)}"
+            cause = cause_line(child.log_path, rc)
+            # an error line of its log; not cause_line's fallback (said above already)
+            if not cause.startswith(("killed by", "exit code")):
+                what += f": {cause}"
+        return f"{what}; {last_lines(child.log_path)}"
 
     def tail(self, child: Child, lines: int = 15) -> str:
         try:
@@ -147,12 +190,68 @@ class ProcessGroup:
         return "\n".join(text[-lines:])
 
 
+def role_of(name: str) -> str:
+    """What child ``name`` is, in words: ``the simulator (vehicle-sim)``, ``the daemon
+    offboard-3``."""
+    if name.startswith("offboard-"):
+        return f"the daemon {name}"
+    return f"the simulator ({name})" if "sim" in name else name
+
+
+def stall_cause(group: ProcessGroup) -> str:
+    """Why a run stalls, in one line: the stopped or dead children with their last log
+    lines, or that none is stopped or dead (every process alive and running)."""
+    bad = group.stopped() + group.dead()
+    if not bad:
+        return ("every process is alive and none is stopped (the simulator waits for an "
+                "answer that does not come)")
+    return "; ".join(f"{role_of(c.name)}: {group.fault(c)}" for c in bad)
+
+
 # a log line that says what went wrong (the last such line is the cause of an exit)
 ERROR_MARKERS = ("Error", "error", "Errno", "Exception", "in use", "cannot", "refused",
                  "denied", "failed", "FATAL")
 CAUSE_MAX_CHARS = 240  # a cause is one line of the top-level message
 # a program's one-line refusal on stderr (``offboard: --signing-key: ...``, exit 2)
 REFUSAL = re.compile(r"^(offboard|vehicle-sim|gcs[\w ]*): ")
+
+
+STOPPED_STATES = ("T", "t")  # /proc/PID/stat: stopped by a signal, stopped by a tracer
+LAST_LINES = 3  # log lines quoted in a fault's one line
+
+
+def proc_state(pid: int) -> str | None:
+    """The state letter of process ``pid`` (field 3 of /proc/PID/stat: R running, S
+    sleeping, D disk wait, T stopped, t traced, Z zombie), or None when it is gone."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return None
+
+
+def exit_how(returncode: int) -> str:
+    """``killed by SIGKILL (signal 9)`` for a negative Popen return code, else
+    ``exited with code N``."""
+    if returncode < 0:
+        try:
+            return f"killed by {signal.Signals(-returncode).name} (signal {-returncode})"
+        except ValueError:
+            return f"killed by signal {-returncode}"
+    return f"exited with code {returncode}"
+
+
+def last_lines(log_path: Path, n: int = LAST_LINES) -> str:
+    """``last log lines: a | b | c`` (the last ``n`` non-empty lines of ``log_path``, each
+    cut to :data:`CAUSE_MAX_CHARS`), or ``its log is empty`` / ``no log``: never a bare
+    heading."""
+    try:
+        text = log_path.read_text(errors="replace").splitlines()
+    except OSError:
+        return f"no log at {log_path}"
+    lines = [ln.strip()[:CAUSE_MAX_CHARS] for ln in text if ln.strip()][-n:]
+    if not lines:
+        return f"its log {log_path} is empty"
+    return f"last log lines of {log_path.name}: " + " | ".join(lines)
 
 
 def cause_line(log_path: Path, returncode: int | None) -> str:
@@ -196,5 +295,68 @@ def start_slots() -> int:
 
 
 def python_entry(module: str) -> list[str]:
-    """argv prefix running ``module`` with this interpreter (no reliance on PATH)."""
-    return [sys.executable, "-m", module]
+    """argv prefix running ``module`` with this interpreter (no reliance on PATH), in
+    safe-path mode (``-P``): the caller's working directory is not put on ``sys.path``, so
+    a run started inside a clone does not run the clone's packages in its children while
+    the runner runs the installed ones (:func:`code_root` goes on ``PYTHONPATH`` instead)."""
+    return [sys.executable, "-P", "-m", module]
+
+
+def code_root() -> Path:
+    """The directory the runner imported its packages from (the one holding ``gcs/``):
+    first on every child's ``PYTHONPATH``, so the children import the runner's code."""
+    return Path(__file__).resolve().parents[2]
+
+
+def child_pythonpath(current: str | None) -> str:
+    """``PYTHONPATH`` for a child: :func:`code_root` first, then ``current`` (the caller's,
+    if any) without a repeat of the root."""
+    root = str(code_root())
+    rest = [p for p in (current or "").split(os.pathsep) if p and p != root]
+    return os.pathsep.join([root, *rest])
+
+
+# the watchdog of :func:`remove_on_death`: stdlib only, isolated mode (-I: no PYTHON*
+# variables, no user site, no working directory on sys.path). It ignores the terminal's
+# signals, waits for EOF on stdin (the runner's end of the pipe closes however the runner
+# ends, kill -9 included) and removes the paths given
+_WATCHDOG = (
+    "import os,shutil,signal,sys\n"
+    "for s in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):\n"
+    "    signal.signal(s, signal.SIG_IGN)\n"
+    "try:\n"
+    "    while os.read(0, 64):\n"
+    "        pass\n"
+    "finally:\n"
+    "    for p in sys.argv[1:]:\n"
+    "        shutil.rmtree(p, ignore_errors=True)\n"
+)
+_watchdogs: dict[Path, subprocess.Popen[bytes]] = {}
+
+
+def remove_on_death(path: Path) -> None:
+    """Start a watchdog process that deletes ``path`` (a per-run secrets directory) when
+    this process ends, however it ends: it holds the read end of a pipe whose only write
+    end this process keeps, and EOF on it (the kernel closes the write end at our exit,
+    SIGKILL included) makes it remove the directory and exit. In its own session, so a
+    terminal's Ctrl-C does not end it first. :func:`release_dir` removes the directory
+    now and lets the watchdog go."""
+    proc = subprocess.Popen(
+        [sys.executable, "-I", "-c", _WATCHDOG, str(path)], stdin=subprocess.PIPE,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )
+    _watchdogs[path] = proc
+
+
+def release_dir(path: Path | None) -> None:
+    """Delete ``path`` now and end its :func:`remove_on_death` watchdog (if any)."""
+    if path is None:
+        return
+    shutil.rmtree(path, ignore_errors=True)
+    proc = _watchdogs.pop(path, None)
+    if proc is not None and proc.stdin is not None:
+        proc.stdin.close()  # EOF: the watchdog removes (nothing left) and exits
+        try:
+            proc.wait(5.0)
+        except subprocess.TimeoutExpired:
+            log.warning("the watchdog of %s did not exit", path)

@@ -171,8 +171,11 @@ class OffboardDaemon:
         )
         agent = self.loop.agent
         if isinstance(agent, FollowerAgent):
+            # an UNSTABLE report is never INFO: an error, a warning with --allow-infeasible
+            level = (logging.INFO if agent.gains.ok else
+                     logging.WARNING if self.cfg.scenario.allow_infeasible else logging.ERROR)
             for line in agent.gains.lines():
-                log.info("agent %d: %s", self.id, line)
+                log.log(level, "agent %d: %s", self.id, line)
         self.loop.publish_initial_estimate()
         return None
 

@@ -20,10 +20,11 @@ from scipy import sparse
 from scipy.linalg import expm
 from scipy.sparse.linalg import ArpackNoConvergence, eigs
 
-from offboard.estimation.bearing import Formation
+from offboard.estimation.bearing import Formation, formation_from_scenario
 from offboard.estimation.deso import _cont_matrix, observer_weights
 from swarm_common.memo import ContentMemo
 from swarm_common.scenario.schema import ObserverConfig
+from swarm_common.scenario.spec import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +56,25 @@ class GainReport:
     @property
     def ok(self) -> bool:
         return bool(self.max_real_pole < 0.0 and self.rho_post_update < 1.0)
+
+    def problem(self) -> str | None:
+        """One line naming the observer keys when the check fails (``ok`` is False): a
+        channel not Hurwitz, or a sampled loop of spectral radius >= 1; else None. The
+        loader-level rule (issue 42): an error, or a warning with --allow-infeasible,
+        never an INFO line."""
+        if self.ok:
+            return None
+        b, k = self.beta, self.kappa
+        keys = (f"observer.beta = [{b[0]:g}, {b[1]:g}, {b[2]:g}] (velocity_gain = "
+                f"[{k[0]:g}, {k[1]:g}], substeps = {self.substeps}, dt = {self.dt:g} s)")
+        if self.max_real_pole >= 0.0:
+            return (f"{keys}: the DESO is unstable on this graph: its slowest channel pole "
+                    f"is {self.max_real_pole:.3f} 1/s >= 0 (lambda(observer Laplacian) in "
+                    f"[{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}])")
+        return (f"{keys}: the DESO is unstable on this graph: its sampled loop has spectral "
+                f"radius {self.rho_post_update:.4f} >= 1 (lambda(observer Laplacian) in "
+                f"[{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; change the gains, "
+                f"formation.graph or observer.leader_anchor)")
 
     def lines(self) -> list[str]:
         b = self.beta
@@ -216,3 +236,10 @@ def formation_gain_report(form: Formation, obs: ObserverConfig, dt: float) -> Ga
     64 agents; :meth:`Formation.content_digest`)."""
     params = (tuple(obs.beta), dt, obs.substeps, obs.leader_anchor, tuple(obs.velocity_gain))
     return _reports.get((form.content_digest(), params), lambda: gain_report(form, *params))
+
+
+def scenario_gain_problem(sc: Scenario) -> str | None:
+    """:meth:`GainReport.problem` of ``sc``'s followers' observers (memoised: a daemon of
+    the same process pays nothing more), or None when it passes."""
+    report = formation_gain_report(formation_from_scenario(sc), sc.observer, sc.control_dt)
+    return report.problem()

@@ -24,6 +24,17 @@ one period, per agent.
 
 Reachability. A desired position below the ground clearance ``controller.d_safe_m`` at any
 time of the trajectory (``min_t z = z(0) + min(0, 2A_z)``) is unreachable.
+
+Control rate (:func:`rate_problem`). Per axis the nominal loop closes e1 = p − p* with
+``u = −c1 ė1 − c0 e1`` (followers: c1 = λ + k_s, c0 = k_s λ + k_p/k_d; leaders' PD: c1 =
+leader_kd, c0 = leader_kp), sampled every dt = 1/``control_hz`` and held (zero-order hold)
+through the lag ``ȧ = (u − a)/τ``. Exactly discretised, the state x = (e1, ė1, a) moves
+by ``x⁺ = (Φ − Γ K) x`` with ``[Φ Γ; 0 1] = exp([A B; 0 0] dt)``; a spectral radius ≥ 1
+means the loop diverges whatever the gains of the filter on top (measured in
+docs/safety.md, "Load-time checks": cube8 at 1, 2 and 4 Hz).
+
+Deadline (:func:`deadline_problem`). The tracking metrics are taken over
+[``formation_deadline_s``, end]: a deadline at or after the end leaves them empty.
 """
 
 from __future__ import annotations
@@ -32,6 +43,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.linalg import expm
 
 from swarm_common.enums import StartMode
 from swarm_common.scenario import graphs
@@ -207,10 +219,91 @@ def acceleration_problem(sc: Scenario, origins: np.ndarray, idx: list[int]) -> s
     return None
 
 
+RATE_BISECTIONS = 40  # halvings of the control period in :func:`min_control_hz` (1e-12 relative)
+MAX_RATE_HZ = 1e4  # search ceiling of :func:`min_control_hz` (Hz)
+
+
+def sampled_loop_radius(c1: float, c0: float, tau: float, dt: float) -> float:
+    """Spectral radius of one period of the sampled loop (module docstring, "Control
+    rate"): gains c1 (1/s), c0 (1/s²), lag τ (s), period dt (s); < 1 ⇔ it converges."""
+    m = np.zeros((4, 4))
+    m[0, 1] = m[1, 2] = 1.0
+    m[2, 2], m[2, 3] = -1.0 / tau, 1.0 / tau
+    e = expm(m * dt)
+    closed = e[:3, :3] - np.outer(e[:3, 3], [c0, c1, 0.0])
+    return float(np.max(np.abs(np.linalg.eigvals(closed))))
+
+
+def min_control_hz(c1: float, c0: float, tau: float, hz: float) -> float:
+    """The lowest control rate (Hz) above which the sampled loop converges, found by
+    bisection between ``hz`` (where it diverges) and a rate where it converges (None of
+    them up to :data:`MAX_RATE_HZ`: that ceiling)."""
+    lo, hi = hz, 2.0 * hz
+    while sampled_loop_radius(c1, c0, tau, 1.0 / hi) >= 1.0:
+        lo, hi = hi, 2.0 * hi
+        if hi > MAX_RATE_HZ:
+            return MAX_RATE_HZ
+    for _ in range(RATE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        if sampled_loop_radius(c1, c0, tau, 1.0 / mid) >= 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def rate_problem(sc: Scenario) -> str | None:
+    """One line naming ``scenario.control_hz`` if a sampled loop (followers' or leaders',
+    horizontal with τ_rp or vertical with τ_F) diverges at that rate while a faster one
+    would converge (τ c0 < c1, Routh–Hurwitz of the continuous loop); else None. A lag
+    that no rate can carry is :func:`swarm_common.scenario.safety_check.lag_problem`'s."""
+    c = sc.controller
+    hz = float(sc.run.control_hz)
+    veh = sc.vehicle
+    for who, c1, c0, gains in (
+        ("followers'", c.clf_lambda + c.ks, c.ks * c.clf_lambda + c.kp / c.kd,
+         "controller.clf_lambda + ks, ks·clf_lambda + kp/kd"),
+        ("leaders'", c.leader_kd, c.leader_kp, "controller.leader_kd, leader_kp"),
+    ):
+        for axis, key, tau in (("horizontal", "vehicle.tau_rollpitch_s", veh.tau_rollpitch_s),
+                               ("vertical", "vehicle.tau_thrust_s", veh.tau_thrust_s)):
+            if tau * c0 >= c1:  # not Hurwitz however fast it samples: the lag's fault,
+                continue  # refused by safety_check.lag_problem (it names the lag)
+            rho = sampled_loop_radius(c1, c0, tau, 1.0 / hz)
+            if rho < 1.0:
+                continue
+            need = min_control_hz(c1, c0, tau, hz)
+            return (
+                f"scenario.control_hz = {sc.run.control_hz}: the {who} {axis} loop (c1 = "
+                f"{c1:g}, c0 = {c0:g} from {gains}; {key} = {tau:g}) sampled every "
+                f"{1.0 / hz:g} s has spectral radius {rho:.3f} >= 1 and diverges; it "
+                f"needs control_hz above {need:.2f}"
+            )
+    return None
+
+
+def deadline_problem(deadline_s: float, duration_s: float, source: str) -> str | None:
+    """One line naming both times if the tracking window [``deadline_s``, ``duration_s``]
+    is empty (``source``: where the duration comes from, e.g. ``scenario.duration_s`` or
+    ``--duration``); else None."""
+    if deadline_s < duration_s:
+        return None
+    return (
+        f"scenario.formation_deadline_s = {deadline_s:g}: not before the end of the run "
+        f"({source} = {duration_s:g} s), so the tracking metrics would be empty"
+    )
+
+
 def feasibility_problem(sc: Scenario) -> str | None:
     """The first feasibility problem of ``sc`` as one line naming the key and the numbers
-    (no file name), or None when it is feasible. Followers are skipped when the formation
-    does not fix them (:func:`formation_map`); only the leaders are checked then."""
+    (no file name), or None when it is feasible: the control rate (:func:`rate_problem`),
+    the deadline (:func:`deadline_problem`), then the trajectory. Followers are skipped when
+    the formation does not fix them (:func:`formation_map`); only the leaders are checked
+    then."""
+    problem = rate_problem(sc) or deadline_problem(
+        sc.run.formation_deadline_s, sc.run.duration_s, "scenario.duration_s")
+    if problem is not None:
+        return problem
     origins = desired_origins(sc)
     idx = list(range(sc.n))
     if origins is None:

@@ -198,12 +198,21 @@ def lag_problem(sc: Scenario) -> str | None:
         ("leaders' PD", l1, l0, "controller.leader_kd, leader_kp"),
     ):
         bound = max_lag(a1, a0, sc.control_dt)
-        if tau > bound:
-            return (
-                f"{key} = {tau:g}: above {bound:.3f} s, the lag at which the {who} "
-                f"(c1 = {a1:g}, c0 = {a0:g} from {gains}) keeps a lag margin of "
-                f"{LAG_MARGIN:g} (Routh–Hurwitz: τ + dt/2 ≤ c1/({LAG_MARGIN:g} c0))"
-            )
+        if tau <= bound:
+            continue
+        why = (f"the {who} (c1 = {a1:g}, c0 = {a0:g} from {gains}) keeps a lag margin of "
+               f"{LAG_MARGIN:g} (Routh–Hurwitz: τ + dt/2 ≤ c1/({LAG_MARGIN:g} c0))")
+        budget = a1 / (LAG_MARGIN * a0)  # τ + dt/2 allowed (s)
+        if tau >= budget:  # the lag alone breaks it: no rate helps
+            return (f"{key} = {tau:g}: above {budget:.3f} s at any control rate, the lag at "
+                    f"which {why}")
+        need = f"control_hz >= {1.0 / (2.0 * (budget - tau)):.2f}"
+        if bound <= 0.0:  # half a period alone breaks it: the rate's fault
+            return (f"scenario.control_hz = {sc.run.control_hz}: half a period "
+                    f"({0.5 * sc.control_dt:g} s) plus {key} = {tau:g} exceeds {budget:.3f} s, "
+                    f"the lag at which {why}; it needs {need}")
+        return (f"{key} = {tau:g}: above {bound:.3f} s, the lag at which {why} at "
+                f"scenario.control_hz = {sc.run.control_hz} (or {need})")
     return None
 
 

@@ -1,0 +1,128 @@
+"""Secrets never outlive a run, and the children run the runner's code (issue 42).
+
+* ``kill -9`` of ``gcs mission run`` mid-run: its secure directory (signing key, Zenoh
+  passwords) is deleted by the watchdog (:func:`gcs.mission.procs.remove_on_death`) and no
+  child is left.
+* A child started from inside another checkout imports the runner's packages, not that
+  checkout's (``python -P`` and the runner's root on ``PYTHONPATH``).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import CUBE8, ROOT, free_port_offset
+
+import gcs
+from gcs.mission.procs import ProcessGroup, python_entry, release_dir, remove_on_death
+
+pytestmark = pytest.mark.timeout(180)
+
+GONE_WITHIN_S = 5.0  # the watchdog and PDEATHSIG act at once; 5 s for a loaded machine
+
+
+def _alive(pid: int) -> bool:
+    """True while ``pid`` exists and is not a zombie."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def _children_of(pid: int) -> list[int]:
+    """Pids of the live processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(stat[1]) == pid and stat[0] != "Z":
+            out.append(int(d.name))
+    return out
+
+
+def _wait(cond: object, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():  # type: ignore[operator]
+            return True
+        time.sleep(0.1)
+    return bool(cond())  # type: ignore[operator]
+
+
+def test_kill_9_of_the_runner_leaves_no_secret_and_no_child(tmp_path: Path) -> None:
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    off = free_port_offset()
+    env = {**os.environ, "TMPDIR": str(tmp)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gcs.cli", "mission", "run", CUBE8, "--duration", "30",
+         "--port-offset", str(off), "--out", str(tmp_path / "run")],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    try:
+        # the secure dir holds the key and the passwords once the daemons are started
+        def ready() -> bool:
+            dirs = list(tmp.glob("swarm-secure-*"))
+            return bool(dirs) and any(dirs[0].iterdir()) and len(_children_of(proc.pid)) >= 3
+
+        assert _wait(ready, 60.0), "the runner never wrote its secure dir and started"
+        secure = list(tmp.glob("swarm-secure-*"))
+        assert len(secure) == 1
+        assert (secure[0] / "mavlink.key").exists()
+        kids = _children_of(proc.pid)
+        assert len(kids) >= 3  # the watchdog(s), the simulator, daemons
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        assert _wait(lambda: not secure[0].exists(), GONE_WITHIN_S), f"{secure[0]} left"
+        assert _wait(lambda: not any(_alive(k) for k in kids), GONE_WITHIN_S), (
+            f"children left: {[k for k in kids if _alive(k)]}")
+        assert list(tmp.iterdir()) == []  # the start gate's folder too
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_release_dir_removes_now_and_ends_the_watchdog(tmp_path: Path) -> None:
+    d = tmp_path / "secret"
+    d.mkdir()
+    (d / "k").write_text("x")
+    remove_on_death(d)
+    from gcs.mission import procs
+
+    dog = procs._watchdogs[d]
+    assert dog.poll() is None  # waiting while we live
+    release_dir(d)
+    assert not d.exists()
+    assert dog.wait(5.0) == 0
+
+
+def test_a_child_runs_the_runners_code_not_the_callers_checkout(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clone = tmp_path / "clone"
+    (clone / "gcs").mkdir(parents=True)
+    (clone / "gcs" / "__init__.py").write_text("")
+    probe = "import gcs; print(gcs.__file__)"
+    monkeypatch.chdir(clone)
+    monkeypatch.delenv("PYTHONPATH", raising=False)
+    # the set-up shadows: a plain ``python`` started here imports the clone's gcs
+    plain = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                           check=True).stdout.strip()
+    assert Path(plain).resolve() == (clone / "gcs" / "__init__.py").resolve()
+    group = ProcessGroup(tmp_path)
+    child = group.start("probe", [*python_entry("x")[:2], "-c", probe])
+    assert child.proc.wait(30) == 0
+    group.stop()
+    seen = Path((tmp_path / "probe.log").read_text().strip())
+    assert seen.resolve() == Path(gcs.__file__).resolve()
