@@ -79,8 +79,14 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
 
         return cli_run(args, sc)
     from gcs.mission.inproc import run_inproc
+    from gcs.mission.launch_spec import LaunchError, check_physics
     from gcs.mission.run_output import print_result, write_run
 
+    try:  # the observer's gains on this graph, the deadline against --duration
+        check_physics(sc, float(sc.run.duration_s if args.duration is None else args.duration))
+    except LaunchError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True,
                      land_at=args.land_at)
     if args.out:  # checked writable before the run; a fallback folder if it fails now

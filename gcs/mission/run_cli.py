@@ -68,9 +68,18 @@ def cli_run(args: Any, sc: Scenario) -> int:
     if doc["run"]["failed_agents"]:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])
     if (late := late_steps(doc)) and not args.realtime:
-        log.warning("the simulator stepped %d time(s) without every answer (lockstep "
-                    "timeouts: a daemon too slow for this machine), so this run may differ "
-                    "from the in-process run; fewer daemon processes (--processes N) avoid "
-                    "it", late)
+        stopped = [p.get("name", "?") for p in doc["run"].get("stopped_processes", [])]
+        failed = [f"agent {a}'s daemon" for a in doc["run"]["failed_agents"]]
+        if stopped or failed:  # the fault is known: name it, not the machine
+            why = "; ".join(filter(None, [
+                f"stopped: {', '.join(stopped)}" if stopped else "",
+                f"dead: {', '.join(failed)}" if failed else ""]))
+            log.warning("the simulator stepped %d time(s) without every answer (%s), so "
+                        "this run may differ from the in-process run", late, why)
+        else:
+            log.warning("the simulator stepped %d time(s) without every answer (lockstep "
+                        "timeouts: a daemon too slow for this machine), so this run may "
+                        "differ from the in-process run; fewer daemon processes "
+                        "(--processes N) avoid it", late)
     print_result(doc, args.json)
     return safety_exit_status(doc["metrics"], method)
