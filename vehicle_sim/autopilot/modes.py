@@ -37,28 +37,35 @@ NAV_MODES = (VehicleMode.TAKEOFF, VehicleMode.RTL, VehicleMode.MISSION)
 
 
 # -- entering modes -------------------------------------------------------------------------
-def takeoff_altitude(z_now: float, alt_m: float | None, mis_takeoff_alt: float) -> float:
-    """PX4's take-off altitude (ENU z, m; Navigator ``Takeoff::set_takeoff_position``,
-    PX4 v1.15 and later): the requested altitude as given, or, when none is given (NaN),
-    ``MIS_TAKEOFF_ALT`` above the *current* altitude; then never lower than now (PX4:
-    "Already higher than takeoff altitude"). There is no minimum: a requested altitude
-    only 1 m up is flown, however large ``MIS_TAKEOFF_ALT`` is (PX4 dropped the old
-    "raise to home + MIS_TAKEOFF_ALT" rule)."""
-    alt = z_now + float(mis_takeoff_alt) if alt_m is None else float(alt_m)
+def takeoff_altitude(
+    z_now: float, alt_m: float | None, mis_takeoff_alt: float, home_z: float = 0.0,
+) -> float:
+    """PX4's take-off altitude (ENU z, m; Navigator ``Takeoff::set_takeoff_position`` as
+    PX4 v1.14 has it, with the raise to the minimum): the minimum is home +
+    ``MIS_TAKEOFF_ALT``; a requested altitude below it is raised to it ("Using minimum
+    takeoff altitude"), no altitude (NaN) means the minimum; then never lower than now
+    ("Already higher than takeoff altitude")."""
+    minimum = float(home_z) + float(mis_takeoff_alt)
+    alt = minimum if alt_m is None else max(float(alt_m), minimum)
     return max(alt, z_now)
 
 
 def takeoff_target(v: VehicleState, alt_m: float | None, quiet: bool = False) -> NavTarget:
     """Climb over the current point to :func:`takeoff_altitude`; tells the client, as PX4
-    does, when it uses ``MIS_TAKEOFF_ALT`` or keeps the current altitude (``quiet``: no)."""
+    does, when it uses or raises to the minimum, or keeps the current altitude (``quiet``:
+    no)."""
     p = v.p()
     z_now = float(p[2])
     mis = float(v.params.get("MIS_TAKEOFF_ALT"))
-    alt = takeoff_altitude(z_now, alt_m, mis)
+    home_z = float(v.home_enu[2])
+    alt = takeoff_altitude(z_now, alt_m, mis, home_z)
     if not quiet:
+        minimum = home_z + mis
         if alt_m is None:
-            v.event(f"Using default takeoff altitude: {mis:.1f} m", M.MAV_SEVERITY_INFO)
-        elif alt_m < z_now:
+            v.event(f"Using minimum takeoff altitude: {mis:.2f} m", M.MAV_SEVERITY_INFO)
+        elif alt_m < minimum - 0.1:
+            v.event(f"Using minimum takeoff altitude: {mis:.2f} m", M.MAV_SEVERITY_CRITICAL)
+        if (minimum if alt_m is None else max(alt_m, minimum)) < z_now:
             v.event("Already higher than takeoff altitude", M.MAV_SEVERITY_CRITICAL)
     return NavTarget(NavKind.TAKEOFF, np.array([p[0], p[1], alt]))
 
@@ -127,8 +134,8 @@ def request_mode(v: VehicleState, main: int, sub: int, sim_t: float) -> int:
 
 
 def takeoff(v: VehicleState, alt_m: float | None) -> int:
-    """NAV_TAKEOFF: AUTO.TAKEOFF to ENU z ``alt_m`` (None: MIS_TAKEOFF_ALT above the
-    current altitude; :func:`takeoff_altitude`)."""
+    """NAV_TAKEOFF: AUTO.TAKEOFF to ENU z ``alt_m`` (None: home + MIS_TAKEOFF_ALT; raised to
+    that minimum, never down: :func:`takeoff_altitude`)."""
     if v.terminated:
         return M.MAV_RESULT_DENIED
     v.failsafe = False

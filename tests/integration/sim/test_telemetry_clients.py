@@ -34,6 +34,7 @@ MIN_ATTITUDE_HZ = 10.0  # against PX4's nominal 15 Hz
 WINDOW_S = 4.0  # wall time over which ATTITUDE frames are counted
 HOME = (47.397742, 8.545594)
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
+GROUND8 = Path(__file__).resolve().parents[3] / "scenarios" / "ground8.toml"
 TYPES = (M.MAV_MISSION_TYPE_MISSION, M.MAV_MISSION_TYPE_FENCE, M.MAV_MISSION_TYPE_RALLY)
 
 
@@ -164,7 +165,7 @@ def _mavproxy(port: int, state_dir: Path, commands: list[str], expect: list[str]
     online and return its output once every ``expect`` text appeared (or 60 s)."""
     proc = subprocess.Popen(
         [sys.executable, str(MAVPROXY), f"--master=udpout:{LOCALHOST}:{port}",
-         f"--state-basedir={state_dir}", "--default-modules=wp,fence,rally,mode,param"],
+         f"--state-basedir={state_dir}", "--default-modules=wp,fence,rally,mode,param,arm,cmdlong"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         bufsize=1, cwd=state_dir, env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )  # fmt: skip
@@ -251,4 +252,39 @@ def test_eight_vehicles_on_one_gcs_port(sim_factory) -> None:
     # the normal set is ~1.5 kB/s a vehicle; the old 50 Hz ODOMETRY alone was ~12 kB/s
     assert rate < 8 * 5_000, rate
     assert drops == 0
+    assert sim.stop() == 0
+
+
+def test_mavproxy_takeoff_climbs_to_the_minimum(sim_factory, tmp_path) -> None:
+    """MAVProxy's ``takeoff 5`` is COMMAND_LONG NAV_TAKEOFF with p7 = 5 m AMSL, far under
+    home; PX4 raises it to home + MIS_TAKEOFF_ALT (docs/px4/modes.md, "Take-off altitude").
+    A ground start (ground8): the vehicle stands on its pad."""
+    sim = sim_factory(["--no-zenoh", "--vehicles", "1"], scenario=str(GROUND8))
+    port = vehicle_ports(1, sim.offset).gcs_local
+    text = _mavproxy(port, tmp_path, ["arm throttle", "takeoff 5"],
+                     ["minimum takeoff altitude"])
+    assert "minimum takeoff altitude" in text, text[-3000:]
+    cli = Client()
+    try:
+        mis = None
+        cli.heartbeat(port)
+        cli.send(port, M.MAVLink_param_request_read_message(1, 1, b"MIS_TAKEOFF_ALT", -1))
+        got = cli.wait("PARAM_VALUE", 10.0, lambda m: m.param_id == "MIS_TAKEOFF_ALT",
+                       keepalive=port)  # fmt: skip
+        assert got is not None
+        mis = float(got.param_value)
+
+        def settled(m) -> bool:  # at the take-off altitude, no longer climbing
+            return abs(m.relative_alt / 1000.0 - mis) < 0.3 and abs(m.vz) < 20
+
+        seen: list[tuple[float, float]] = []
+
+        def watch(m) -> bool:
+            seen.append((m.relative_alt / 1000.0, m.vz / 100.0))
+            return settled(m)
+
+        pos = cli.wait("GLOBAL_POSITION_INT", 30.0, watch, keepalive=port)
+        assert pos is not None, f"never settled at {mis} m above home: {seen[::10]}"
+    finally:
+        cli.close()
     assert sim.stop() == 0

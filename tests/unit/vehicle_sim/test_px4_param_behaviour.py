@@ -116,10 +116,10 @@ def statustexts(v: Vehicle) -> list[str]:
 @pytest.mark.parametrize(
     ("z_now", "requested", "mis", "expected"),
     [
-        (0.0, None, 2.5, 2.5),  # NaN: MIS_TAKEOFF_ALT above here
-        (10.0, None, 2.5, 12.5),  # … above the *current* altitude (PX4 issue #26867)
-        (0.0, 1.0, 10.0, 1.0),  # a requested altitude is not raised to MIS_TAKEOFF_ALT
-        (0.0, 30.0, 2.5, 30.0),
+        (0.0, None, 2.5, 2.5),  # NaN: home + MIS_TAKEOFF_ALT
+        (10.0, None, 2.5, 10.0),  # … already higher: stays where it is
+        (0.0, 1.0, 10.0, 10.0),  # a requested altitude under the minimum is raised to it
+        (0.0, 30.0, 2.5, 30.0),  # above it: as requested
         (5.0, 3.0, 2.5, 5.0),  # below the vehicle: stays where it is, never descends
     ],
 )
@@ -127,7 +127,7 @@ def test_takeoff_altitude_rule(z_now, requested, mis, expected) -> None:
     assert takeoff_altitude(z_now, requested, mis) == expected
 
 
-def test_mis_takeoff_alt_is_the_default_climb_and_a_requested_altitude_wins() -> None:
+def test_mis_takeoff_alt_is_the_minimum_and_a_higher_request_wins() -> None:
     s = Sim()
     v = s.v
     assert mav_read(v, "MIS_TAKEOFF_ALT") == pytest.approx(2.5)
@@ -135,20 +135,27 @@ def test_mis_takeoff_alt_is_the_default_climb_and_a_requested_altitude_wins() ->
     v.arm(0.0)
     v.outbox.clear()
     assert s.run(M.MAV_CMD_NAV_TAKEOFF) == M.MAV_RESULT_ACCEPTED  # p7 NaN
-    assert "Using default takeoff altitude: 4.0 m" in statustexts(v)
+    assert "Using minimum takeoff altitude: 4.00 m" in statustexts(v)
     s.step(8.0)
     assert v.mode == VehicleMode.HOLD and s.p[2] == pytest.approx(4.0, abs=0.2)
-    # an explicit altitude (AMSL, COMMAND_LONG) below MIS_TAKEOFF_ALT is flown as given …
-    mav_set(v, "MIS_TAKEOFF_ALT", 10.0)
+    # an explicit altitude (AMSL, COMMAND_LONG) under home + MIS_TAKEOFF_ALT is raised
+    mav_set(v, "MIS_TAKEOFF_ALT", 6.0)
     v.outbox.clear()
     assert s.run(M.MAV_CMD_NAV_TAKEOFF, *(NAN,) * 6, v.cfg.home_alt + 1.0) == 0
-    assert "Already higher than takeoff altitude" in statustexts(v)  # … and not down
-    s.step(3.0)
-    assert s.p[2] == pytest.approx(4.0, abs=0.2)
-    assert s.run(M.MAV_CMD_NAV_TAKEOFF, *(NAN,) * 6, 6.0,
+    assert "Using minimum takeoff altitude: 6.00 m" in statustexts(v)
+    s.step(6.0)
+    assert s.p[2] == pytest.approx(6.0, abs=0.2)
+    # above the minimum: flown as requested (a height above home, RELATIVE_ALT frame)
+    assert s.run(M.MAV_CMD_NAV_TAKEOFF, *(NAN,) * 6, 8.0,
                  frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) == 0  # fmt: skip
     s.step(6.0)
-    assert s.p[2] == pytest.approx(6.0, abs=0.2)  # not raised to 10
+    assert s.p[2] == pytest.approx(8.0, abs=0.2)
+    # under the vehicle: it stays, and says so
+    v.outbox.clear()
+    assert s.run(M.MAV_CMD_NAV_TAKEOFF, *(NAN,) * 6, v.cfg.home_alt + 7.0) == 0
+    assert "Already higher than takeoff altitude" in statustexts(v)
+    s.step(3.0)
+    assert s.p[2] == pytest.approx(8.0, abs=0.2)
 
 
 # -- speeds --------------------------------------------------------------------------------
