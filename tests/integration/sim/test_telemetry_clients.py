@@ -211,6 +211,21 @@ def test_mavproxy_lists_mission_fence_and_rally(sim_factory, tmp_path) -> None:
     for e in expect:
         assert e in text, text[-3000:]
     assert sim.stop() == 0
+    # what MAVProxy itself received, from its own telemetry log (pymavlink's tlog reader)
+    assert _tlog_rate(tmp_path / "mav.tlog", "ATTITUDE") >= MIN_ATTITUDE_HZ
+
+
+def _tlog_rate(path: Path, typ: str) -> float:
+    """Messages of ``typ`` per second in a MAVLink telemetry log, over the span between
+    its first and last one (the tlog's own receive timestamps)."""
+    from pymavlink import mavutil
+
+    log = mavutil.mavlink_connection(str(path))
+    stamps = []
+    while (m := log.recv_match(type=typ)) is not None:
+        stamps.append(m._timestamp)
+    assert len(stamps) > 10, f"{len(stamps)} {typ} in {path}"
+    return (len(stamps) - 1) / (stamps[-1] - stamps[0])
 
 
 def _udp_drops(sock: socket.socket) -> int:
