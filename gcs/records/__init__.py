@@ -1,0 +1,14 @@
+"""A run as a record that robotics tools open (issue 43; docs/records.md): an MCAP file for
+Foxglove and PlotJuggler, CSV files per vehicle, written with the maintained ``mcap`` and
+``foxglove-sdk`` packages.
+
+* :mod:`.topics` - the topic scheme: topic and schema names, the ROS 2 message fields.
+* :mod:`.payloads` - CDR bodies of the ROS 2 messages, every step at once (numpy).
+* :mod:`.scene` - the ``/scene`` SceneUpdates: vehicles, bearings, obstacles, geofence.
+* :mod:`.events` - the ``/events`` Log messages from metrics.json and the series.
+* :mod:`.writer` - :func:`~gcs.records.writer.write_record`: ``record.mcap`` of a run.
+* :mod:`.reader` - read a record back: checks and the ROS 2 topics as arrays.
+* :mod:`.export` - load a run folder or record; write the CSV files.
+* :mod:`.layout` - the Foxglove layout shipped in docs/foxglove/.
+* :mod:`.cli` - ``gcs log export`` (hook :func:`~gcs.records.cli.add_log_parser`).
+"""
