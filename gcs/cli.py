@@ -33,6 +33,7 @@ from gcs.exit_codes import (
 )
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
+from gcs.records.cli import add_log_parser
 from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.inputs import (
@@ -90,8 +91,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True,
                      land_at=args.land_at)
     if args.out:  # checked writable before the run; a fallback folder if it fails now
-        where = write_run(Path(args.out), res.document(), res.series)
-        log.info("wrote %s/metrics.json, series.npz", where)
+        where = write_run(Path(args.out), res.document(), res.series, sc)
+        log.info("wrote %s/metrics.json, series.npz, record.mcap", where)
     print_result(res.document(), args.json)
     return safety_exit_status(res.metrics, res.method)
 
@@ -250,6 +251,7 @@ COMMANDS: dict[str, Callable[[argparse._SubParsersAction], None]] = {
     "dashboard": add_dashboard,
     "keys": add_keys,
     "scenario": add_scenario,
+    "log": add_log_parser,
 }
 
 

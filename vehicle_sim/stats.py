@@ -6,7 +6,8 @@ The summary is the last line the process writes to stderr (docs/conventions.md):
 
 The link counters include the signing rejects per reason (``rejected_unsigned``,
 ``rejected_bad_signature``, ``rejected_replay``), ``peers_refused`` and ``throttled``
-(docs/security.md).
+(docs/security.md). ``audit``: every vehicle's audit trail of the commands it received
+(:func:`vehicle_sim.autopilot.audit.stats_document`; docs/security.md, "Audit trail").
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from swarm_common.inputs import fallback_dir
+from vehicle_sim.autopilot.audit import stats_document
 from vehicle_sim.clock import LockstepClock, RealTimeClock
 from vehicle_sim.link.endpoint import MavlinkLink
 from vehicle_sim.link.truth import TruthPublisher
@@ -105,7 +107,8 @@ def _link_totals(sim: RunState) -> dict[str, int]:
 
 
 def write_stats(sim: RunState, path: str) -> None:
-    """``--stats-out``: mode, steps, timeouts, collisions, latency and the summary line."""
+    """``--stats-out``: mode, steps, timeouts, collisions, latency, the summary line and the
+    audit trail."""
     doc = {
         "mode": "lockstep" if sim.opts.lockstep else "realtime",
         "steps": sim.clock.k,
@@ -116,6 +119,7 @@ def write_stats(sim: RunState, path: str) -> None:
         "signing": sim.opts.signing_key is not None,
         "links": _link_totals(sim),
         "summary": summary(sim),
+        "audit": stats_document([(v.id, v.audit) for v in sim.vehicles]),
     }
     write_json_or_fallback(doc, path)
 

@@ -32,7 +32,7 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4
 from swarm_common.enums import VehicleMode
-from vehicle_sim.autopilot import modes, nav_flight, setpoint_input, telemetry
+from vehicle_sim.autopilot import audit, modes, nav_flight, setpoint_input, telemetry
 from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.setpoints import SetpointKind
 from vehicle_sim.autopilot.state import Dest, VehicleState
@@ -128,6 +128,8 @@ class Vehicle(VehicleState):
             res = self.request_mode(*px4.split_mode(m.custom_mode), sim_t)
         else:
             res = M.MAV_RESULT_UNSUPPORTED
+        audit.record(self, m, src, sim_t, "SET_MODE", [m.base_mode, m.custom_mode],
+                     audit.enum_name("MAV_RESULT", res), res == M.MAV_RESULT_ACCEPTED)
         self._ack(src, M.MAV_CMD_DO_SET_MODE, res, m)
 
     def _on_timesync(self, m: Any, src: Dest, wall: float, sim_t: float) -> None:
@@ -138,9 +140,12 @@ class Vehicle(VehicleState):
         self.ctr.commands += 1
         if getattr(m, "_restricted", False) and c.cmd not in commands.TELEMETRY_COMMANDS:
             self.ctr.commands_unsigned_refused += 1  # unsigned link: telemetry requests only
+            audit.record_command(self, m, src, c.sim_t, c.cmd, c.p, M.MAV_RESULT_DENIED,
+                                 "unsigned link: telemetry requests only")
             self._ack(src, c.cmd, M.MAV_RESULT_DENIED, m)
             return
         res, reply = commands.execute(self, c)
+        audit.record_command(self, m, src, c.sim_t, c.cmd, c.p, res)
         if res == M.MAV_RESULT_UNSUPPORTED:
             self.ctr.commands_unsupported += 1
         self._ack(src, c.cmd, res, m)

@@ -13,5 +13,6 @@ port a run binds, the probe, the free offset), :mod:`.procs` (child
 processes), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
 :mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
 :mod:`.compare_cli` (``gcs mission compare``);
-:mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`).
+:mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);
+:mod:`.audit` (the commands a run received, for ``metrics.json``).
 """

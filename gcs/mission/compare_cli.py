@@ -45,7 +45,7 @@ def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcom
     for m in METHODS:
         log.info("running %s in process ...", m)
         res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
-        res.save(out / m)
+        res.save(out / m, sc)
         metrics[m], series[m], gains = res.metrics, res.series.as_dict(), res.gains
     return metrics, series, gains
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import zenoh
 
+from gcs.mission.audit import audit_document
 from gcs.mission.launch_spec import (
     LaunchError,
     LaunchSpec,
@@ -223,6 +224,9 @@ def run_distributed(
             facts["simulator"] = json.loads(stats_path.read_text())
         except ValueError as exc:
             log.warning("%s: not JSON (%s); run facts without simulator stats", stats_path, exc)
+    sim = facts.get("simulator")
+    sim_audit = sim.pop("audit", None) if isinstance(sim, dict) else None
+    facts["audit"] = audit_document(sim_audit, rec.commands, rec.commands_dropped)
     facts["recorder_dropped"] = rec.dropped
     return rec, facts
 
@@ -409,6 +413,7 @@ def run_and_score(
         part = {**facts, "aborted": True, "abort_reason": reason}
         try:
             doc, ser = score_run(rec, sc, part, method, seed, realtime, land_at, duration)
+            with_audit(doc, rec)
             write_run(out_dir, doc, ser)
         except (OSError, ValueError) as exc:
             log.warning("could not write the %s metrics to %s: %s", reason, out_dir, exc)
@@ -420,6 +425,16 @@ def run_and_score(
         default_streams=default_streams, formation_port=formation_port,
     )
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
-    write_run(out_dir, doc, ser)
+    with_audit(doc, rec)
+    write_run(out_dir, doc, ser, sc)
     warn_verdict(sc.name, method, doc["metrics"])
     return doc
+
+
+def with_audit(doc: dict[str, Any], rec: Recorder) -> None:
+    """Move the run's audit trail (``run.audit``, :func:`run_distributed`) to the
+    document's top level, ``audit`` (docs/security.md, "Audit trail"); a run that ended
+    early has no simulator statistics yet: the Zenoh commands the recorder saw so far."""
+    run = doc.get("run")
+    found = run.pop("audit", None) if isinstance(run, dict) else None
+    doc["audit"] = found or audit_document(None, list(rec.commands), rec.commands_dropped)

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs.mission.audit import audit_document, zenoh_record
 from gcs.mission.preflight import warn_liveness
 from gcs.mission.progress import Progress
 from gcs.mission.run_output import (
@@ -49,7 +50,9 @@ from offboard.agent.landing import landing_plan
 from offboard.agent.takeoff import is_ground_start, takeoff_plan
 from offboard.estimation.bearing import formation_from_scenario
 from offboard.estimation.peer_table import ROW, XI_COL, EstimateBatch
+from swarm_common import wire
 from swarm_common.blas import single_thread_blas
+from swarm_common.enums import CommandKind
 from swarm_common.frames import euler_enu_from_quats_ned
 from swarm_common.scenario.model import Scenario
 from vehicle_sim.physics.dynamics import SwarmDynamics
@@ -136,17 +139,21 @@ class MissionResult:
     series: Series
     gains: list[str] = field(default_factory=list)
     collision_pairs: list[Any] = field(default_factory=list)
+    # the scripted commands, as the distributed runner's audit (gcs.mission.audit)
+    audit: dict[str, Any] = field(default_factory=lambda: audit_document(None, []))
 
     def document(self) -> dict[str, Any]:
         """The run's ``metrics.json`` document (:func:`gcs.mission.run_output.run_document`)."""
         return run_document(
             self.scenario, self.method, self.seed, self.metrics, gains=self.gains,
             collision_pairs=[list(map(float, c)) for c in self.collision_pairs],
+            audit=self.audit,
         )
 
-    def save(self, out_dir: str | Path) -> None:
-        """Write metrics.json and series.npz to ``out_dir``."""
-        write_run(Path(out_dir), self.document(), self.series)
+    def save(self, out_dir: str | Path, sc: Scenario | None = None) -> None:
+        """Write metrics.json and series.npz to ``out_dir`` (and, given the run's scenario
+        ``sc``, its record.mcap)."""
+        write_run(Path(out_dir), self.document(), self.series, sc)
 
 
 def run_inproc(
@@ -205,6 +212,7 @@ def run_inproc(
         lumped_true, thrust, att = (np.zeros((n_steps, n, 3)), np.zeros((n_steps, n)),
                                     np.zeros((n_steps, n, 3)))
         md_run = math.inf
+        scripted: list[dict[str, Any]] = []  # audit records of the scripted commands
         t_wall = time.perf_counter()
         for k in range(n_steps):
             t = k * dt
@@ -212,6 +220,9 @@ def run_inproc(
                 # t_L = land_at, as in offboard.daemon.commands
                 plan = landing_plan(sc, land_at, form)
                 log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
+                scripted.append(zenoh_record(
+                    t, wire.key_cmd(sc.name, CommandKind.LAND),
+                    wire.Command(kind=CommandKind.LAND, at_s=float(land_at))))
                 for ag in agents:
                     ag.start_landing(plan)
             tp, tv = f32(dyn.p), f32(dyn.v)
@@ -256,5 +267,5 @@ def run_inproc(
     warn_verdict(sc.name, str(method), metrics)
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,
-        collision_pairs=list(dyn.collision_pairs),
+        collision_pairs=list(dyn.collision_pairs), audit=audit_document(None, scripted),
     )

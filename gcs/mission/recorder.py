@@ -6,7 +6,10 @@ subscribers queue the payloads in Zenoh's own channels (no Python runs on Zenoh'
 threads, so the router never waits for the interpreter), which the runner's loop drains
 (:meth:`Recorder.drain`) into the preallocated arrays every few tens of milliseconds.
 A payload that does not decode, names an agent outside the scenario, carries a step
-outside the run or non-finite values is dropped and counted (``dropped``).
+outside the run or non-finite values is dropped and counted (``dropped``). The
+ground-station commands on the swarm's ``cmd/*`` keys are kept for the run's audit trail
+(``commands``, :func:`gcs.mission.audit.zenoh_record`; the first
+:data:`gcs.mission.audit.ZENOH_CAP`, then counted in ``commands_dropped``).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import Any
 import numpy as np
 import zenoh
 
+from gcs.mission.audit import ZENOH_CAP, zenoh_record
 from offboard.daemon.link_guard import all_finite
 from offboard.daemon.zenoh.link import ZENOH_ERRORS
 from swarm_common import wire
@@ -89,6 +93,8 @@ class Recorder:
         self.max_step = -1
         self.last_mode: list[str] = []
         self.dropped = 0
+        self.commands: list[dict[str, Any]] = []  # Zenoh commands seen (audit records)
+        self.commands_dropped = 0
         self._subs: list[Any] = []
 
     @property
@@ -96,19 +102,19 @@ class Recorder:
         return TruthView(self)
 
     def subscribe(self, session: Any, swarm: str) -> list[Any]:
-        """Declare the truth, estimate and status subscribers on ``session`` (each with its
-        channel, read by :meth:`drain`)."""
+        """Declare the truth, estimate, status and command subscribers on ``session``
+        (each with its channel, read by :meth:`drain`)."""
         self._subs = [
             session.declare_subscriber(key, zenoh.handlers.FifoChannel(CHANNEL_DEPTH))
             for key in (wire.key_truth(swarm), wire.key_estimate(swarm, "*"),
-                        wire.key_status(swarm, "*"))
+                        wire.key_status(swarm, "*"), wire.key_cmd(swarm, "*"))
         ]
         return self._subs
 
-    def _received(self) -> list[bytes]:
-        """Every payload waiting in the subscribers' channels (the loop of
+    def _received(self) -> list[tuple[str, bytes]]:
+        """Every (key, payload) waiting in the subscribers' channels (the loop of
         :meth:`offboard.daemon.zenoh.link.SwarmBus.pump`, without its per-sample handler)."""
-        out: list[bytes] = []
+        out: list[tuple[str, bytes]] = []
         for sub in self._subs:
             while True:
                 try:
@@ -117,7 +123,7 @@ class Recorder:
                     break
                 if sample is None:
                     break
-                out.append(sample.payload.to_bytes())
+                out.append((str(sample.key_expr), sample.payload.to_bytes()))
         return out
 
     def _put_truth(self, m: wire.Truth) -> bool:
@@ -138,11 +144,14 @@ class Recorder:
     def drain(self) -> None:
         """Decode the payloads received since the last call into the arrays."""
         dropped = 0
-        for data in self._received():
+        for key, data in self._received():
             try:
                 msg = wire.decode(data)
             except wire.WireError:
                 dropped += 1
+                continue
+            if isinstance(msg, wire.Command):
+                self._put_command(key, msg)
                 continue
             if isinstance(msg, wire.Truth):
                 with self.lock:
@@ -162,6 +171,16 @@ class Recorder:
                 dropped += 1
         with self.lock:
             self.dropped += dropped
+
+    def _put_command(self, key: str, cmd: wire.Command) -> None:
+        """An audit record of a command, at the mission time of the newest truth."""
+        if len(self.commands) >= ZENOH_CAP:
+            self.commands_dropped += 1
+            return
+        with self.lock:
+            k = self.max_step
+            t = float(self.t[k]) if k >= 0 else -1.0
+        self.commands.append(zenoh_record(t, key, cmd))
 
     def _put_estimate(self, e: wire.Estimate, k: int, i: int) -> bool:
         if not all_finite((e.z1, e.z2)):

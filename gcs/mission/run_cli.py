@@ -64,7 +64,7 @@ def cli_run(args: Any, sc: Scenario) -> int:
     except MissionError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_RUN_FAILED
-    log.info("wrote %s/metrics.json, series.npz, vehicle_*.tlog, *.log", out)
+    log.info("wrote %s/metrics.json, series.npz, record.mcap, vehicle_*.tlog, *.log", out)
     if doc["run"]["failed_agents"]:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])
     if (late := late_steps(doc)) and not args.realtime:

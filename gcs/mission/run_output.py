@@ -164,22 +164,34 @@ def _write_files(out_dir: Path, doc: Mapping[str, Any], series: Series) -> None:
     os.replace(tmp, out_dir / "metrics.json")
 
 
-def write_run(out_dir: Path, doc: Mapping[str, Any], series: Series) -> Path:
+def write_run(
+    out_dir: Path, doc: Mapping[str, Any], series: Series, scenario: Scenario | None = None,
+) -> Path:
     """Write ``metrics.json`` (``doc``) and ``series.npz`` (``series``) into ``out_dir``,
     each through a temporary file renamed over the old one, so a reader (or a run killed
     while writing) never sees half a file. When ``out_dir`` cannot be written (it was
     checked before the run, but a disk can fill or a folder vanish), the results go to a
     fresh private folder in the temporary directory instead, logged as an ERROR with its
-    path: a finished run's results are never lost. Returns the folder written."""
+    path: a finished run's results are never lost. With ``scenario``, also the run's
+    MCAP record (``record.mcap``, :func:`gcs.records.writer.write_record`) beside them.
+    Returns the folder written."""
     try:
         _write_files(out_dir, doc, series)
-        return out_dir
+        written = out_dir
     except OSError as exc:
-        fallback = inputs.fallback_dir("swarm-run-")
-        _write_files(fallback, doc, series)
+        written = inputs.fallback_dir("swarm-run-")
+        _write_files(written, doc, series)
         log.error("cannot write the results to %s (%s): written to %s instead", out_dir,
-                  exc.strerror or exc, fallback)
-        return fallback
+                  exc.strerror or exc, written)
+    if scenario is not None:
+        from gcs.records.writer import write_record
+
+        try:
+            write_record(written, doc, series, scenario)
+        except (OSError, ValueError) as exc:
+            log.error("cannot write %s/record.mcap (%s); metrics.json and series.npz are "
+                      "written", written, exc)
+    return written
 
 
 def print_result(doc: Mapping[str, Any], as_json: bool) -> None:

@@ -11,4 +11,5 @@ functions below take one), set up by :class:`vehicle_sim.autopilot.config.Autopi
 * :mod:`.params`, :mod:`.param_defaults` - the PX4 parameters.
 * :mod:`.telemetry`, :mod:`.streams` - the messages a vehicle sends and their schedule.
 * :mod:`.mavlink_extra` - messages pymavlink's ``common`` dialect does not generate.
+* :mod:`.audit` - the audit trail: every command the vehicle received, and its result.
 """

@@ -20,6 +20,7 @@ from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, px4
 from swarm_common.enums import FailsafeAction, VehicleMode
+from vehicle_sim.autopilot.audit import AuditLog
 from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.nav import MissionControl, NavKind, NavTarget
 from vehicle_sim.autopilot.nav_flight import RtlPlan
@@ -72,6 +73,8 @@ class VehicleState:
         self.stream_out: list[tuple[M.MAVLink_message, StreamKey]] = []
         self.events: list[tuple[int, str]] = []  # (MAV_SEVERITY, line) for the server's log
         self.encs: dict[str, M.MAVLink] = {}  # per link (Vehicle.encoder())
+        # commands received and their results (vehicle_sim.autopilot.audit; --stats-out)
+        self.audit = AuditLog()
         # MAV_CMD -> handler(vehicle, command) of the services the vehicle attaches
         # (vehicle_sim.services.command.execute looks there first)
         self.command_handlers: dict[int, Any] = {}

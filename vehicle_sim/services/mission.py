@@ -26,6 +26,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, px4
+from vehicle_sim.autopilot import audit
 from vehicle_sim.autopilot.nav import NavTarget
 from vehicle_sim.services import mission_items as mi
 from vehicle_sim.services.geofence import Geofence, fence_from_items
@@ -38,6 +39,14 @@ NO_MISSION_TOTAL = 0xFFFF  # MISSION_CURRENT.total when no mission is stored
 GF_NONE, GF_WARN, GF_HOLD, GF_RTL, GF_TERMINATE, GF_LAND = range(6)  # PX4 GF_ACTION values
 MISSION_MODE = px4.custom_mode(px4.MAIN_AUTO, px4.SUB_AUTO_MISSION)
 Handler = Callable[[Any, Any, float, float], None]
+# the audit trail's name of each write (vehicle_sim.autopilot.audit)
+AUDIT_NAME = {
+    M.MAVLINK_MSG_ID_MISSION_COUNT: "MISSION_UPLOAD",
+    M.MAVLINK_MSG_ID_MISSION_ITEM_INT: "MISSION_UPLOAD",
+    M.MAVLINK_MSG_ID_MISSION_ITEM: "MISSION_UPLOAD",
+    M.MAVLINK_MSG_ID_MISSION_CLEAR_ALL: "MISSION_CLEAR_ALL",
+    M.MAVLINK_MSG_ID_MISSION_SET_CURRENT: "MISSION_SET_CURRENT",
+}
 
 
 class MissionService:
@@ -78,27 +87,42 @@ class MissionService:
     def _send(self, outs: list[tuple[Any, Any]]) -> None:
         self.vehicle.outbox.extend(outs)
 
-    def _accepts(self, m: Any, src: Any, write: bool) -> bool:
-        """For our autopilot component; a write from a restricted peer is DENIED."""
+    def _accepts(self, m: Any, src: Any, write: bool, sim_t: float = 0.0) -> bool:
+        """For our autopilot component; a write from a restricted peer is DENIED (and
+        audited)."""
         if getattr(m, "target_component", 0) not in (0, M.MAV_COMP_ID_AUTOPILOT1):
             return False
         if write and getattr(m, "_restricted", False):
             mt = int(getattr(m, "mission_type", mi.MISSION))
-            self._send([(ack(m, M.MAV_MISSION_DENIED, mt), src)])
+            outs = [(ack(m, M.MAV_MISSION_DENIED, mt), src)]
+            self._audit(m, src, sim_t, outs)
+            self._send(outs)
             return False
         return True
 
+    def _audit(self, m: Any, src: Any, sim_t: float, outs: list[tuple[Any, Any]]) -> None:
+        """The MISSION_ACKs a write answers with, in the vehicle's audit trail (an
+        upload's final ACK, a clear's, a refusal's)."""
+        name = AUDIT_NAME.get(m.get_msgId(), m.get_type())
+        audit.record_mission_acks(self.vehicle, m, src, sim_t, name, outs)
+
     def _on_count(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
-        if self._accepts(m, src, write=True):
-            self._send_applied(self.transfer.on_count(m, src, wall))
+        if self._accepts(m, src, write=True, sim_t=sim_t):
+            outs = self.transfer.on_count(m, src, wall)
+            self._audit(m, src, sim_t, outs)
+            self._send_applied(outs)
 
     def _on_item_int(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
-        if self._accepts(m, src, write=True):
-            self._send_applied(self.transfer.on_item(m, src, wall, is_int=True))
+        if self._accepts(m, src, write=True, sim_t=sim_t):
+            outs = self.transfer.on_item(m, src, wall, is_int=True)
+            self._audit(m, src, sim_t, outs)
+            self._send_applied(outs)
 
     def _on_item_float(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
-        if self._accepts(m, src, write=True):
-            self._send_applied(self.transfer.on_item(m, src, wall, is_int=False))
+        if self._accepts(m, src, write=True, sim_t=sim_t):
+            outs = self.transfer.on_item(m, src, wall, is_int=False)
+            self._audit(m, src, sim_t, outs)
+            self._send_applied(outs)
 
     def _send_applied(self, outs: list[tuple[Any, Any]]) -> None:
         """Apply a committed store *before* its MISSION_ACK is queued: a client that sends
@@ -124,15 +148,22 @@ class MissionService:
             self.transfer.on_client_ack(m)
 
     def _on_clear_all(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
-        if self._accepts(m, src, write=True):
-            self._send_applied(self.transfer.on_clear_all(m, src))
+        if self._accepts(m, src, write=True, sim_t=sim_t):
+            outs = self.transfer.on_clear_all(m, src)
+            self._audit(m, src, sim_t, outs)
+            self._send_applied(outs)
 
     def _on_set_current(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
-        if not self._accepts(m, src, write=True):
+        if not self._accepts(m, src, write=True, sim_t=sim_t):
             return
         if not self._set_current(int(m.seq)):
             self.vehicle.event(f"mission: no item {int(m.seq)}", M.MAV_SEVERITY_WARNING)
-            self._send([(ack(m, M.MAV_MISSION_INVALID_SEQUENCE, mi.MISSION), src)])
+            outs = [(ack(m, M.MAV_MISSION_INVALID_SEQUENCE, mi.MISSION), src)]
+            self._audit(m, src, sim_t, outs)
+            self._send(outs)
+            return
+        audit.record(self.vehicle, m, src, sim_t, "MISSION_SET_CURRENT", [int(m.seq)],
+                     "MAV_MISSION_ACCEPTED", True)
 
     def _cmd_set_current(self, vehicle: Any, c: Any) -> tuple[int, Any]:
         """MAV_CMD_DO_SET_MISSION_CURRENT: param1 = seq (-1 or NaN: keep), param2 = 1: reset."""

@@ -29,7 +29,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.px4 import int32_to_wire, wire_to_int32
-from vehicle_sim.autopilot import nav_flight
+from vehicle_sim.autopilot import audit, nav_flight
 from vehicle_sim.autopilot.params import INT32, ParamError, ParamSpec, ParamStore
 
 log = logging.getLogger(__name__)
@@ -156,6 +156,16 @@ class ParamService:
             return
         self.vehicle.outbox.append((self.value_msg(i), src))
 
+    def _audit(self, m: Any, src: Any, sim_t: float, name: str, exc: ParamError | None) -> None:
+        """PARAM_SET in the vehicle's audit trail: params (name, value, MAV_PARAM_TYPE),
+        result ACCEPTED or the MAV_PARAM_ERROR with its reason."""
+        params = [name, m.param_value, m.param_type]
+        if exc is None:
+            audit.record(self.vehicle, m, src, sim_t, "PARAM_SET", params, "ACCEPTED", True)
+        else:
+            audit.record(self.vehicle, m, src, sim_t, "PARAM_SET", params,
+                         audit.enum_name("MAV_PARAM_ERROR", exc.code), False, str(exc))
+
     def _on_set(self, m: Any, src: Any, wall: float, sim_t: float) -> None:
         if not self._for_us(m):
             return
@@ -163,6 +173,7 @@ class ParamService:
         i = self.store.index.get(name)
         if i is None:
             exc = ParamError(M.MAV_PARAM_ERROR_DOES_NOT_EXIST, f"unknown parameter {name!r}")
+            self._audit(m, src, sim_t, name, exc)
             self._refuse(m, src, name, INDEX_BY_NAME, exc)
             return
         try:
@@ -173,9 +184,11 @@ class ParamService:
             value = decode_set(self.store.specs[i], int(m.param_type), float(m.param_value))
             changed = self.store.set(name, value)
         except ParamError as exc:
+            self._audit(m, src, sim_t, name, exc)
             self._refuse(m, src, name, i, exc)
             self.vehicle.outbox.append((self.value_msg(i), src))  # unchanged value
             return
+        self._audit(m, src, sim_t, name, None)
         log.info("vehicle %d: %s = %g", self.vehicle.id, name, changed)
         for n in self.store.linked(name):
             self.vehicle.outbox.append((self.value_msg(self.store.index[n]), None))
