@@ -4,7 +4,7 @@
 
 ``mission run`` and ``mission compare`` are distributed (real processes, lockstep) unless
 ``--inproc``; the seed sweep of ``compare --seeds N`` and ``mission sweep``
-(:mod:`gcs.mission.sweep`) always run in process.
+(:mod:`gcs.sweep`) always run in process.
 ``gcs --log-level {debug,info,warning,error} ...`` sets the diagnostics level.
 ``mission run --fault-drop P --fault-delay-ms MS ... --fault-link mavlink|zenoh|both``
 injects transport faults in a distributed run (docs/faults.md).
@@ -240,7 +240,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    "agent)")
     _add_allow_infeasible(c)
     c.set_defaults(func=cmd_mission_compare)
-    from gcs.mission.sweep import add_sweep_parser
+    from gcs.sweep.cli import add_sweep_parser
 
     add_sweep_parser(msub)
 

@@ -1,4 +1,4 @@
-"""Running a mission: in process, distributed, or many runs as a sweep.
+"""Running a mission: in process or distributed (many runs: :mod:`gcs.sweep`).
 
 Entry points:
 
@@ -6,11 +6,10 @@ Entry points:
 * :func:`gcs.mission.distributed.run_and_score` - ``vehicle-sim``, a Zenoh router and one
   ``offboard`` daemon per agent (or packed) as real processes; :mod:`.recorder` records them
   and :mod:`.score` scores the record as the in-process runner would.
-* :func:`gcs.mission.sweep.run_sweep` - many in-process runs in parallel.
 
 Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.ports` (every
-port a run binds, the probe, the free offset), :mod:`.procs` (child
-processes), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
+port a run binds, the probe, the free offset), :mod:`.procs` (child processes, the
+spawn worker pool), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
 :mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
 :mod:`.compare_cli` (``gcs mission compare``);
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);

@@ -95,7 +95,7 @@ def _compare_distributed(
 
 
 def _seed_sweep(sc: Scenario, args: argparse.Namespace) -> dict[str, list[dict[str, Any]]]:
-    from gcs.mission.sweep import worker_pool
+    from gcs.mission.procs import worker_pool
 
     base = sc.seed if args.seed is None else args.seed
     jobs = [(args.scenario, sc.allow_infeasible, sc.allow_unsafe, m, base + s, args.duration)

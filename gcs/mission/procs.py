@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ctypes
 import logging
+import multiprocessing
 import os
 import re
 import shutil
@@ -13,11 +14,13 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
 from offboard.daemon.start_gate import GATE_ENV, gate_value
+from swarm_common.logsetup import configure_logging
 
 log = logging.getLogger(__name__)
 
@@ -360,3 +363,15 @@ def release_dir(path: Path | None) -> None:
             proc.wait(5.0)
         except subprocess.TimeoutExpired:
             log.warning("the watchdog of %s did not exit", path)
+
+
+def worker_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` fresh interpreters (``spawn``), each logging as this process does.
+
+    Never ``fork``: a caller with threads (a test runner's, a dashboard's, Zenoh's) may hold
+    a lock at the moment of the fork, and the child then waits on it for ever."""
+    level = logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower()
+    if level not in ("debug", "info", "warning", "error"):
+        level = "warning"
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=configure_logging, initargs=(level,))

@@ -7,7 +7,9 @@ metrics of :mod:`gcs.report.metrics`, the per-phase minimum distances flattened 
 ``summary.md``: per scenario × method, percentiles p0/p5/p50 of the minimum distance and of
 the true barrier minimum h_min, runs with a barrier violation, collisions, and the 95 %
 Clopper–Pearson upper bound on the per-run probability of a violation
-(:func:`clopper_pearson_upper`). Definitions: docs/metrics.md. Also the seed table of
+(:func:`clopper_pearson_upper`); per scenario × method the safety, success and alarm rates
+with one-sided Clopper–Pearson bounds and two-sided 95 % Wilson score intervals
+(:func:`wilson_interval`). Definitions: docs/metrics.md. Also the seed table of
 ``gcs mission compare --seeds N`` (:func:`seeds_table`).
 """
 
@@ -107,14 +109,19 @@ def seeds_legend(d_safe: float = 0.5) -> str:
     )
 
 
+def csv_cells(row: Mapping[str, Any]) -> dict[str, Any]:
+    """A row's :data:`CSV_COLUMNS` cells; None → empty cell."""
+    return {k: "" if row.get(k) is None else row.get(k) for k in CSV_COLUMNS}
+
+
 def write_csv(path: Path, rows: Iterable[Mapping[str, Any]]) -> None:
     """``runs.csv``, sorted by scenario, method, seed; None → empty cell."""
-    ordered = sorted(rows, key=lambda r: (r["scenario"], r["method"], r["seed"]))
+    ordered = sorted(rows, key=lambda r: (r["scenario"], r["method"], int(r["seed"])))
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(CSV_COLUMNS), extrasaction="ignore")
         w.writeheader()
         for r in ordered:
-            w.writerow({k: "" if r.get(k) is None else r.get(k) for k in CSV_COLUMNS})
+            w.writerow(csv_cells(r))
 
 
 def _pcts(values: list[float]) -> str:
@@ -213,9 +220,27 @@ def mission_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str 
 
 RATES_HEAD = (
     "| Scenario | Method | Runs | Safe (95 % LB) | Success (95 % LB) | Alarmed (95 % UB) | "
-    "Stalled |\n"
-    "|---|---|---|---|---|---|---|\n"
+    "Stalled | Safe 95 % CI | Success 95 % CI | Alarmed 95 % CI |\n"
+    "|---|---|---|---|---|---|---|---|---|---|\n"
 )
+Z_95 = 1.959963984540054  # the standard normal's 0.975 quantile
+
+
+def wilson_interval(x: int, n: int, z: float = Z_95) -> tuple[float, float]:
+    """Two-sided Wilson score interval on a probability from ``x`` events in ``n`` trials:
+    the p with |x/n − p| ≤ z √(p(1 − p)/n) (z = 1.96: 95 %); (0, 1) when n = 0."""
+    if n <= 0:
+        return (0.0, 1.0)
+    p_hat = x / n
+    z2n = z * z / n
+    centre = (p_hat + z2n / 2) / (1 + z2n)
+    half = z / (1 + z2n) * float(np.sqrt(p_hat * (1 - p_hat) / n + z2n / (4 * n)))
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _wilson_cell(x: int, n: int) -> str:
+    lo, hi = wilson_interval(x, n)
+    return f"{lo:.3f}–{hi:.3f}"
 
 
 def run_rates(ok: Sequence[Mapping[str, Any]]) -> tuple[int, int, int, int]:
@@ -244,7 +269,7 @@ def clopper_pearson_lower(x: int, n: int, conf: float = CONFIDENCE) -> float:
 
 def rates_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
     """Per scenario × method: the safety, success and alarm rates (:func:`run_rates`) with
-    one-sided 95 % Clopper–Pearson bounds."""
+    one-sided 95 % Clopper–Pearson bounds, and their two-sided 95 % Wilson intervals."""
     out = RATES_HEAD
     for scen in sorted({r["scenario"] for r in rows}):
         for m in methods:
@@ -258,7 +283,8 @@ def rates_table(rows: Sequence[Mapping[str, Any]], methods: list[str]) -> str:
                 f"| {scen} | {m} | {n} | {safe}/{n} ({clopper_pearson_lower(safe, n):.3f}) "
                 f"| {success}/{n} ({clopper_pearson_lower(success, n):.3f}) "
                 f"| {alarmed}/{n} ({clopper_pearson_upper(alarmed, n):.3f}) "
-                f"| {stalled}/{n} |\n"
+                f"| {stalled}/{n} | {_wilson_cell(safe, n)} | {_wilson_cell(success, n)} "
+                f"| {_wilson_cell(alarmed, n)} |\n"
             )
     return out
 
@@ -306,7 +332,9 @@ def summary_markdown(
         "the truth, or an agent's own barrier below 0 or a safety alarm it raised); "
         "**Stalled**: runs in which an agent raised the DEADLOCK liveness event (its "
         "formation error stalled under the filter for 6 s). In brackets the one-sided "
-        f"{CONFIDENCE:.0%} Clopper–Pearson bound: lower for the first two, upper for the last.",
+        f"{CONFIDENCE:.0%} Clopper–Pearson bound: lower for the first two, upper for the last. "
+        "**95 % CI**: the two-sided Wilson score interval of the same rate, the p with "
+        "|x/n − p| ≤ 1.96 √(p(1 − p)/n).",
         "",
     ]
     missions = mission_table(rows, methods)

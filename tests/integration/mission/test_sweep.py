@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 from conftest import CUBE8, ROOT
 
-from gcs.mission.sweep import Job, run_sweep
 from gcs.report.sweep import CSV_COLUMNS
+from gcs.sweep.jobs import Job
+from gcs.sweep.local import run_sweep
 
 pytestmark = pytest.mark.timeout(240)
 GCS = [sys.executable, "-m", "gcs.cli"]
@@ -49,7 +50,7 @@ def test_sweep_writes_rows_and_summary(tmp_path: Path) -> None:
     summary = (tmp_path / "summary.md").read_text()
     assert "| cube8 | none | 2 (0) |" in summary and "| cube8 | rcbf | 2 (0) |" in summary
     assert (tmp_path / "summary.png").read_bytes()[:4] == b"\x89PNG"
-    assert "runs, 0 crashed" in r.stderr  # the progress display
+    assert "4/4 runs, 0 failed, 0 s left" in r.stderr  # the progress display
 
 
 def test_crashed_run_is_a_row_not_lost(tmp_path: Path) -> None:
@@ -69,6 +70,8 @@ def test_crashed_run_is_a_row_not_lost(tmp_path: Path) -> None:
         (["--jobs", "0"], "--jobs"),
         (["--methods", "rcbf,magic"], "magic"),
         (["--duration", "-1"], "--duration"),
+        (["--cluster", "nonsense"], "--cluster"),
+        (["--cluster", "tcp://host"], "--cluster"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(args: list[str], needle: str, tmp_path: Path) -> None:

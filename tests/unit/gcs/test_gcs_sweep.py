@@ -1,17 +1,17 @@
-"""gcs.mission.sweep input parsing and gcs.report.sweep statistics (pure functions)."""
+"""gcs.sweep input parsing, gcs.report.sweep statistics and runs.csv bookkeeping
+(gcs.sweep.rows)."""
 
 from __future__ import annotations
 
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
 import pytest
 from scipy.stats import binom
 
-from gcs.mission.sweep import (
-    SweepInputError,
-    parse_duration,
-    parse_jobs,
-    parse_methods,
-    parse_seeds,
-)
 from gcs.report.metrics import METRIC_KEYS
 from gcs.report.sweep import (
     CSV_COLUMNS,
@@ -22,7 +22,22 @@ from gcs.report.sweep import (
     rates_table,
     run_rates,
     summary_table,
+    wilson_interval,
+    write_csv,
 )
+from gcs.sweep.jobs import (
+    SweepInputError,
+    parse_address,
+    parse_duration,
+    parse_jobs,
+    parse_methods,
+    parse_seeds,
+    scenario_from_text,
+)
+from gcs.sweep.rows import RowSink, SweepProgress, read_csv_rows, resumable_rows
+from swarm_common.scenario.model import load_scenario
+
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_parse_seeds_range_and_list() -> None:
@@ -106,3 +121,100 @@ def test_rates_count_verdicts_success_and_stalls() -> None:
     assert "| s | dcbf | 3 | 2/3 (" in table and "| 1/3 |" in table
     assert "safety_alarms" not in CSV_COLUMNS and "safety_verdict" in CSV_COLUMNS
     assert 0.0 < clopper_pearson_lower(99, 100) < 0.99 < clopper_pearson_upper(99, 100)
+
+
+@pytest.mark.parametrize(("x", "n"), [(0, 10), (3, 20), (20, 20), (57, 100), (1, 1)])
+def test_wilson_interval_inverts_the_score_test(x: int, n: int) -> None:
+    """The interval is the set of p that the score test |x/n − p| ≤ z √(p(1−p)/n) keeps:
+    found here by dense sampling of p (step 1e-6, so agreement to 2e-6)."""
+    lo, hi = wilson_interval(x, n)
+    p = np.linspace(0.0, 1.0, 1_000_001)
+    kept = p[np.abs(x / n - p) <= 1.959963984540054 * np.sqrt(p * (1 - p) / n)]
+    assert lo == pytest.approx(kept.min(), abs=2e-6) and hi == pytest.approx(kept.max(), abs=2e-6)
+    assert wilson_interval(0, 0) == (0.0, 1.0)
+
+
+def test_wilson_interval_known_value() -> None:
+    # 0 of 10: the published 95 % Wilson upper bound 0.2775 (z²/(n + z²))
+    lo, hi = wilson_interval(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(0.27753, abs=1e-5)
+
+
+def test_rates_table_has_wilson_columns() -> None:
+    rows = [{"scenario": "s", "method": "rcbf", "status": "ok", "safety_verdict": "safe",
+             "formation_time_s": 5.0, "mission_completed": None, "deadlock_events": 0}] * 10
+    table = rates_table(rows, ["rcbf"])
+    assert "Safe 95 % CI" in table.splitlines()[0]
+    # 10/10 safe: [1 − 0.2775, 1]; 0/10 alarmed: [0, 0.2775]
+    assert "| 0.722–1.000 | 0.722–1.000 | 0.000–0.278 |" in table
+
+
+def _csv_row(seed: int, **kw: object) -> dict[str, object]:
+    row: dict[str, object] = {c: None for c in CSV_COLUMNS}
+    row.update({"scenario": "cube8", "method": "rcbf", "seed": seed, "status": "ok",
+                "error": "", "duration_s": 2.0, "min_distance_m": 0.8125, "collisions": 0,
+                "safety_verdict": "safe", "mission_completed": False})
+    row.update(kw)
+    return row
+
+
+def test_runs_csv_reads_back_to_the_same_cells(tmp_path: Path) -> None:
+    rows = [_csv_row(2, h_min=-0.25), _csv_row(1, status="crashed", error="ValueError: 3, 4")]
+    write_csv(tmp_path / "a.csv", rows)
+    back = read_csv_rows(tmp_path / "a.csv")
+    assert [r["seed"] for r in back] == [1, 2]  # sorted by (scenario, method, seed)
+    assert back[1]["h_min"] == -0.25 and back[1]["collisions"] == 0
+    assert back[1]["mission_completed"] is False and back[1]["formation_time_s"] is None
+    assert back[0]["error"] == "ValueError: 3, 4" and back[1]["error"] == ""
+    write_csv(tmp_path / "b.csv", back)
+    assert (tmp_path / "b.csv").read_bytes() == (tmp_path / "a.csv").read_bytes()
+    assert [r["seed"] for r in resumable_rows(tmp_path / "a.csv")] == [2]  # crashed: re-run
+    assert resumable_rows(tmp_path / "missing.csv") == []
+
+
+def test_row_sink_appends_flushed_rows_once(tmp_path: Path) -> None:
+    path = tmp_path / "runs.csv"
+    sink = RowSink(path, [_csv_row(1)])
+    assert sink.add(_csv_row(2)) is True
+    assert sink.add(_csv_row(2, min_distance_m=9.0)) is False  # the same run again: dropped
+    assert [r["seed"] for r in read_csv_rows(path)] == [1, 2]  # on disk before close
+    sink.close()
+    assert read_csv_rows(path)[1]["min_distance_m"] == 0.8125 and len(sink.rows) == 2
+
+
+def test_sweep_progress_counts_failed_runs_and_time_left() -> None:
+    now = [100.0]
+    out = io.StringIO()
+    bar = SweepProgress([2.0, 2.0, 4.0], clock=lambda: now[0], stream=out)
+    assert bar.eta_s() is None
+    now[0] = 110.0
+    bar.add(2.0, ok=True)  # 2 of 8 simulated s in 10 s wall: 6 s more take 30 s
+    assert bar.eta_s() == pytest.approx(30.0, abs=1e-9)
+    now[0] = 130.0
+    bar.add(4.0, ok=False)  # 6 of 8 in 30 s: 2 s more take 10 s
+    assert bar.eta_s() == pytest.approx(10.0, abs=1e-9)
+    assert "2/3 runs, 1 failed, 10 s left" in out.getvalue()
+
+
+def test_parse_address() -> None:
+    assert parse_address("tcp://10.0.0.5:8786") == "tcp://10.0.0.5:8786"
+    assert parse_address("tls://sched.example.org:8786") == "tls://sched.example.org:8786"
+    for bad in ("10.0.0.5:8786", "tcp://host", "tcp://host:0", "tcp://host:70000",
+                "http://host:8786", "tcp://a b:1"):
+        with pytest.raises(SweepInputError, match="--cluster"):
+            parse_address(bad)
+
+
+def test_scenario_from_text_is_the_file_scenario() -> None:
+    path = str(ROOT / "scenarios" / "cube8.toml")
+    text = Path(path).read_text()
+    assert scenario_from_text(text, path).to_toml_dict() == load_scenario(path).to_toml_dict()
+    assert scenario_from_text(text, path).path == load_scenario(path).path
+
+
+def test_local_sweep_does_not_import_dask() -> None:
+    code = ("import sys, gcs.cli, gcs.sweep.cli, gcs.sweep.local; "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'dask', 'distributed'}))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       cwd=ROOT, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stderr
