@@ -265,14 +265,14 @@ def zenoh_endpoint_problem(text: str, allow_zero_port: bool = False) -> str | No
 def zenoh_endpoint(text: str) -> str:
     """argparse ``type=`` for an endpoint to connect to (:func:`zenoh_endpoint_problem`)."""
     if (why := zenoh_endpoint_problem(text)) is not None:
-        raise argparse.ArgumentTypeError(f"{text!r}: {why}")
+        raise argparse.ArgumentTypeError(f"zenoh endpoint {text!r}: {why}")
     return text
 
 
 def zenoh_listen_endpoint(text: str) -> str:
     """argparse ``type=`` for an endpoint to listen on (port 0: any free port)."""
     if (why := zenoh_endpoint_problem(text, allow_zero_port=True)) is not None:
-        raise argparse.ArgumentTypeError(f"{text!r}: {why}")
+        raise argparse.ArgumentTypeError(f"zenoh endpoint {text!r}: {why}")
     return text
 
 
@@ -297,17 +297,23 @@ def out_dir_problem(out: str | os.PathLike[str], flag: str = "--out") -> str | N
     """Why ``out`` cannot be an output directory, or None. The directory (and its parents)
     is created if missing and a probe file written and removed in it, so a path that a run
     could not write (``/proc/nope/run``, a read-only mount, a file in the way) is refused
-    before anything starts."""
+    before anything starts; what the check created is removed again (a refused run
+    leaves nothing behind)."""
     p = Path(out)
     if p.exists() and not p.is_dir():
         return f"{flag} {p}: exists and is not a directory"
+    made = [q for q in (p, *p.parents) if not q.exists()]  # created here: removed again
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         return f"{flag} {p}: cannot create the directory ({exc.strerror})"
-    if (why := _probe_dir(p)) is not None:
-        return f"{flag} {p}: {why}"
-    return None
+    why = _probe_dir(p)
+    for q in made:  # deepest first; a check writes nothing (the run creates them)
+        try:
+            q.rmdir()
+        except OSError:
+            break
+    return None if why is None else f"{flag} {p}: {why}"
 
 
 def out_file_problem(out: str | os.PathLike[str], flag: str) -> str | None:

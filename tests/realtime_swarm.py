@@ -28,12 +28,13 @@ from conftest import CUBE8, ROOT, free_port_offset, stop_processes  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from gcs.mission.launch_spec import LaunchSpec  # noqa: E402
-from swarm_common.ports import GCS_PORT  # noqa: E402
+from swarm_common.ports import GCS_PORT, vehicle_ports  # noqa: E402
 from swarm_common.scenario.model import load_scenario  # noqa: E402
 
 ARMED_FLAG = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 AUTOPILOT = mavutil.mavlink.MAV_COMP_ID_AUTOPILOT1
 LANDED_Z_M = 0.1
+POSITION_HZ = 20.0  # LOCAL_POSITION_NED asked of every vehicle
 
 
 class Observer(threading.Thread):
@@ -45,11 +46,14 @@ class Observer(threading.Thread):
         super().__init__(daemon=True)
         self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", dialect="common")
         self.ids = ids
+        self.offset = port - GCS_PORT  # the swarm's port offset
         self.pos: dict[int, tuple[float, np.ndarray, np.ndarray]] = {}  # t, p NED, v NED
         self.armed: dict[int, bool] = {}
         self.min_dist = float("inf")  # since the last reset_min
         self.min_at = 0.0  # mission time (s) of that minimum
         self.samples = 0
+        self.asked: dict[int, float] = {}  # sysid -> when LOCAL_POSITION_NED was last asked
+        self.heard: dict[int, float] = {}  # sysid -> when its last position arrived
         self.halt = threading.Event()
         self.lock = threading.Lock()
 
@@ -62,13 +66,36 @@ class Observer(threading.Thread):
             sysid = m.get_srcSystem()
             if sysid not in self.ids or m.get_srcComponent() != AUTOPILOT:
                 continue  # the daemons' own HEARTBEATs (component 191) are forwarded too
+            if m.get_type() == "HEARTBEAT":
+                self._ask_positions(sysid)
             with self.lock:
                 if m.get_type() == "HEARTBEAT":
                     self.armed[sysid] = bool(m.base_mode & ARMED_FLAG)
                 else:
                     self.pos[sysid] = (m.time_boot_ms * 1e-3, np.array([m.x, m.y, m.z]),
                                        np.array([m.vx, m.vy, m.vz]))
+                    self.heard[sysid] = time.monotonic()
                     self._distance()
+
+    def _ask_positions(self, sysid: int) -> None:
+        """As a ground station does: LOCAL_POSITION_NED at POSITION_HZ from this vehicle
+        (its GCS link starts from PX4's normal set, 1 Hz), asked again while the vehicle's
+        positions do not come that fast (a request lost, a vehicle restarted)."""
+        now = time.monotonic()
+        last = self.pos.get(sysid)
+        fresh = last is not None and now - self.heard.get(sysid, 0.0) < 0.5
+        if fresh or now - self.asked.get(sysid, -10.0) < 2.0:
+            return
+        self.asked[sysid] = now
+        msg = self.conn.mav.command_long_encode(
+            sysid, AUTOPILOT, mavutil.mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+            mavutil.mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 1e6 / POSITION_HZ, 0, 0, 0, 0, 0)
+        try:
+            # to the port the vehicle's GCS link sends from (swarm_common.ports)
+            dest = ("127.0.0.1", vehicle_ports(sysid, self.offset).gcs_local)
+            self.conn.port.sendto(msg.pack(self.conn.mav), dest)
+        except OSError:
+            pass
 
     def _distance(self) -> None:
         if len(self.pos) < len(self.ids):

@@ -116,6 +116,8 @@ class SigningChoice:
     def __post_init__(self) -> None:
         if not self.enabled and self.key is not None:
             raise LaunchError("--no-signing and --signing-key exclude each other")
+        if self.key is not None:  # a bad key file stops here, before ports or processes
+            load_key(self.key)  # SigningKeyError (a ValueError): one line
         if not self.enabled and self.unsigned_gcs_link:
             raise LaunchError("--unsigned-gcs-link needs signing (drop --no-signing)")
 

@@ -179,7 +179,10 @@ def test_listen_endpoint_may_use_port_zero():
 
 def test_out_dir_problem(tmp_path):
     new = tmp_path / "a" / "b"
-    assert out_dir_problem(new) is None and new.is_dir()
+    assert out_dir_problem(new) is None
+    assert not (tmp_path / "a").exists()  # what the check created is gone again
+    new.mkdir(parents=True)
+    assert out_dir_problem(new) is None and new.is_dir()  # an existing one stays
     assert list(new.iterdir()) == []  # the probe file is gone
     f = tmp_path / "file"
     f.write_text("x")
