@@ -200,6 +200,9 @@ class LinkTracker:
         v = self._vehicle(msg.get_srcSystem(), addr, now)
         v.last_msg = now
         self.last_rx = now
+        if v.lost and mtype != "COMMAND_ACK":  # any message of its autopilot: it is back
+            v.lost = False
+            self._event(now, v.sysid, "link", "link regained", mavlink.MAV_SEVERITY_NOTICE)
         v.msg_count += 1
         stamp = getattr(msg, "time_boot_ms", None)
         if isinstance(stamp, int) and stamp > 0:  # the vehicle's (sim) clock
@@ -216,9 +219,6 @@ class LinkTracker:
             return
         v.last_heartbeat = now
         v.hb_sim_s = self.sim_s
-        if v.lost:
-            v.lost = False
-            self._event(now, v.sysid, "link", "link regained", mavlink.MAV_SEVERITY_NOTICE)
         v.base_mode = msg.base_mode
         v.autopilot = msg.autopilot
         v.system_status = msg.system_status
@@ -329,20 +329,20 @@ class LinkTracker:
         return targets
 
     def _silent(self, v: LinkVehicle, seen_to: float, timeout_s: float) -> bool:
-        """A vehicle's link is lost when no heartbeat of it was read for ``timeout_s``
-        (wall clock, up to ``seen_to``: when every datagram that had arrived was read, so a
-        reader starved by load sees no silence that is not there) AND, while the others'
-        stamps move on, its own sim clock fell ``timeout_s`` behind theirs (a lockstep run
-        slower than the wall is no silence); when nothing at all arrives for ``timeout_s``
-        (the simulator gone), the wall clock alone decides."""
-        last = v.first_seen if v.last_heartbeat is None else v.last_heartbeat
-        if seen_to - last <= timeout_s:
+        """A vehicle's link is lost when nothing of its autopilot (a heartbeat or any other
+        message: one late or dropped heartbeat of a link that carries its 15 Hz attitude
+        is no loss) was read for ``timeout_s`` (wall clock, up to ``seen_to``: when every
+        datagram that had arrived was read, so a reader starved by load sees no silence that
+        is not there) AND, while the others' stamps move on, its own sim clock fell
+        ``timeout_s`` behind theirs (a lockstep run slower than the wall is no silence);
+        when nothing at all arrives for ``timeout_s`` (the simulator gone), the wall clock
+        alone decides."""
+        if seen_to - v.last_msg <= timeout_s:
             return False
         link_quiet = self.last_rx is None or seen_to - self.last_rx > timeout_s
         if link_quiet or self.sim_s is None:
             return True
-        since = v.hb_sim_s if v.hb_sim_s is not None else v.sim_s
-        return since is None or self.sim_s - since > timeout_s
+        return v.sim_s is None or self.sim_s - v.sim_s > timeout_s
 
     # -- snapshots and command bookkeeping -------------------------------------------
     def vehicles(self) -> dict[int, LinkVehicle]:

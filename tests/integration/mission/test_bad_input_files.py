@@ -2,7 +2,7 @@
 streaming zeros, a FIFO with no writer, a 1 GiB sparse file and a directory. Each is one
 line on stderr and exit status 2, at once and without reading. One fresh process per file
 option runs the command's ``main`` on the four (the start-up imports are paid once, not
-four times), each call timed; the process's own peak RSS is read from ``wait4``. Also the
+four times), each call timed; the process's own peak RSS is its VmHWM (/proc/self/status). Also the
 output paths that cannot be written: exit 2 before the run starts."""
 
 from __future__ import annotations
@@ -22,6 +22,10 @@ pytestmark = pytest.mark.integration
 KINDS = ("dev_zero", "fifo", "sparse", "directory")
 TIMEOUT_S = 20.0  # robust under load; the assertions are far below it
 MAX_ELAPSED_S = 10.0  # per refusal (measured: well under 0.1 s once imported)
+# a whole process (interpreter start and imports included) that refuses its input: the
+# guarantee is that it ends instead of waiting for ever; its start-up time depends on the
+# machine's load (11 s seen beside a second copy of the suite), so the bound is generous
+PROCESS_MAX_S = 50.0  # below the subprocess timeout (60 s)
 # peak RSS of the whole process (imports included: 120-180 MB measured); reading the
 # 1 GiB file or /dev/zero for even a second would be far above it
 MAX_RSS_MB = 400.0
@@ -67,6 +71,10 @@ for argv in json.loads(sys.argv[2]):
         buf.seek(0)
         out.append({"rc": rc, "s": elapsed, "err": buf.read()})
 print(json.dumps(out))
+# this process's own peak (VmHWM: per address space, so it starts afresh at exec; the
+# rusage of a forked child would also count its parent's pages before the exec)
+hwm = [ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")]
+print(int(hwm[0].split()[1]) / 1024.0 if hwm else 0.0)
 """
 
 
@@ -112,8 +120,9 @@ def test_file_option_refuses_what_it_must_not_read(tmp_path, name, module, argv)
         out.seek(0)
         text = out.read()
     assert rc == 0, text  # killed (a blocking read) or crashed
-    assert rss_mb < MAX_RSS_MB
-    results = json.loads(text.strip().splitlines()[-1])
+    *_, result_line, hwm_line = text.strip().splitlines()
+    assert float(hwm_line) < MAX_RSS_MB, (hwm_line, rss_mb)
+    results = json.loads(result_line)
     for kind, path, res in zip(KINDS, paths, results, strict=True):
         lines = [ln for ln in res["err"].splitlines() if ln.strip()]
         assert res["rc"] == 2, (kind, res)
@@ -128,7 +137,7 @@ def test_one_refusal_as_a_real_process(tmp_path):
     r, elapsed = _run([PY, "-m", SIM, "--scenario", CUBE8, "--no-zenoh", "--params-file",
                        str(fifo)], tmp_path)
     _one_line_exit_2(r, str(fifo), "not a regular file")
-    assert elapsed < MAX_ELAPSED_S
+    assert elapsed < PROCESS_MAX_S
 
 
 def _run(argv: list[str], cwd: Path) -> tuple[subprocess.CompletedProcess[str], float]:
@@ -151,7 +160,7 @@ def test_unwritable_out_is_refused_before_the_run(tmp_path):
     r, elapsed = _run([PY, "-m", GCS, "mission", "run", CUBE8, "--inproc", "--out",
                        "/proc/nope/run"], tmp_path)
     _one_line_exit_2(r, "--out /proc/nope/run")
-    assert elapsed < MAX_ELAPSED_S and r.stdout == ""
+    assert elapsed < PROCESS_MAX_S and r.stdout == ""
 
 
 def test_vehicle_sim_unwritable_stats_out_exits_2(tmp_path):
@@ -160,7 +169,7 @@ def test_vehicle_sim_unwritable_stats_out_exits_2(tmp_path):
     r, elapsed = _run([PY, "-m", SIM, "--scenario", CUBE8, "--no-zenoh", "--duration", "0.05",
                        "--stats-out", str(blocker / "stats.json")], tmp_path)
     _one_line_exit_2(r, "--stats-out")
-    assert elapsed < MAX_ELAPSED_S
+    assert elapsed < PROCESS_MAX_S
 
 
 def test_offboard_port_offset_out_of_range_exits_2(tmp_path):
@@ -169,4 +178,4 @@ def test_offboard_port_offset_out_of_range_exits_2(tmp_path):
         r, elapsed = _run([PY, "-m", OFFBOARD, "--scenario", CUBE8, "--agent", "1", "--port-offset",
                            bad], ROOT)
         _one_line_exit_2(r, "--port-offset")
-        assert elapsed < MAX_ELAPSED_S
+        assert elapsed < PROCESS_MAX_S

@@ -165,7 +165,10 @@ def _mavproxy(port: int, state_dir: Path, commands: list[str], expect: list[str]
     online and return its output once every ``expect`` text appeared (or 60 s)."""
     proc = subprocess.Popen(
         [sys.executable, str(MAVPROXY), f"--master=udpout:{LOCALHOST}:{port}",
-         f"--state-basedir={state_dir}", "--default-modules=wp,fence,rally,mode,param,arm,cmdlong"],
+         f"--state-basedir={state_dir}", "--default-modules=wp,fence,rally,mode,param,arm,cmdlong",
+         # MAVProxy asks for 4 Hz streams by default (REQUEST_DATA_STREAM), which the
+         # vehicle honours; -1 asks for nothing, so the vehicle's own set is what is measured
+         "--streamrate=-1"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         bufsize=1, cwd=state_dir, env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )  # fmt: skip
