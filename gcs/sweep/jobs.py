@@ -3,10 +3,10 @@
 :class:`Job` (scenario path and text, method, seed, duration, allow flags; ``key`` names
 it), the command-line parsers (:func:`parse_seeds`, :func:`parse_methods`,
 :func:`parse_jobs`, :func:`parse_duration`, :func:`parse_address`; bad input is a
-:class:`SweepInputError`, one line), :func:`scenario_from_text` (a scenario built from its
-text with a file's validation, so a worker needs no shared files), :func:`make_jobs`, and
-:func:`run_job`: one :func:`gcs.mission.inproc.run_inproc` to its CSV row (an exception is
-a ``crashed`` row, never lost).
+:class:`SweepInputError`, one line), :func:`make_jobs`, and
+:func:`run_job`: one :func:`gcs.mission.inproc.run_inproc` of the scenario built from its text
+(:func:`swarm_common.scenario.model.scenario_from_text`: a file's validation, no shared files
+on a worker) to its CSV row (an exception is a ``crashed`` row, never lost).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import logging
 import os
 import re
 import time
-import tomllib
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,7 +22,6 @@ from pathlib import Path
 from typing import Any
 
 from gcs.report.sweep import flat_row
-from swarm_common import faults
 from swarm_common.enums import Method
 from swarm_common.inputs import SEED_MAX, finite_float
 from swarm_common.scenario.files import read_scenario_text
@@ -31,7 +29,7 @@ from swarm_common.scenario.model import (
     Scenario,
     ScenarioError,
     load_scenario,
-    parse_scenario,
+    scenario_from_text,
 )
 
 log = logging.getLogger(__name__)
@@ -137,28 +135,6 @@ def parse_address(text: str) -> str:
         raise SweepInputError(f"--cluster {text!r}: expected a scheduler address such as "
                               "tcp://HOST:8786")
     return text.strip()
-
-
-def scenario_from_text(
-    text: str, path: str, allow_infeasible: bool = False, allow_unsafe: bool = False
-) -> Scenario:
-    """:func:`~swarm_common.scenario.model.load_scenario` of a file's text already read
-    (``path`` only names it in errors and in ``Scenario.path``): no file system needed, so a
-    Dask worker on another machine builds the same scenario. Installs its ``[faults]`` plan
-    in this process as ``load_scenario`` does."""
-    path = str(Path(path))  # as load_scenario names it
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:  # the messages of load_scenario
-        raise ScenarioError(f"{path}: not valid TOML ({exc})") from None
-    except RecursionError:
-        raise ScenarioError(f"{path}: not a valid scenario (nested too deep)") from None
-    except ValueError as exc:  # an integer of more than 4300 digits (int's str limit)
-        why = str(exc).split(":", 1)[0]
-        raise ScenarioError(f"{path}: not a valid scenario ({why})") from None
-    sc = parse_scenario(data, path, allow_infeasible, allow_unsafe)
-    faults.install(sc.faults, sc.seed)
-    return sc
 
 
 def load_all(

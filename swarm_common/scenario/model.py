@@ -309,7 +309,16 @@ def load_scenario(
     Its ``[faults]`` plan becomes this process's (:func:`swarm_common.faults.install`): the
     MAVLink and Zenoh links the process opens afterwards inject those faults."""
     p = Path(path)
-    text = read_scenario_text(p)
+    return scenario_from_text(read_scenario_text(p), p, allow_infeasible, allow_unsafe)
+
+
+def scenario_from_text(
+    text: str, path: str | Path, allow_infeasible: bool = False, allow_unsafe: bool = False
+) -> Scenario:
+    """:func:`load_scenario` of a file's text already read (``path`` only names it in errors
+    and in ``Scenario.path``): no file system needed, so a sweep's worker on another machine
+    builds the same scenario. Installs its ``[faults]`` plan as :func:`load_scenario` does."""
+    p = Path(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
