@@ -105,7 +105,10 @@ class AgentLoop:
         ``--sensing odometry``), and handed to our own sensing source."""
         if self.source is SensingSource.TRUTH and not self.swarm.odometry_matched:
             return  # nobody reads it: neither our sensing (truth) nor a subscriber
-        got = None if k == self.odo_pub_step else vehicle_state(self.vehicle, 0.0)
+        if k == self.odo_pub_step:
+            self.sensing.put_own_again()  # a peer that subscribed late still gets it
+            return
+        got = vehicle_state(self.vehicle, 0.0)
         if got is None:
             return
         self.odo_pub_step = k

@@ -75,13 +75,16 @@ class SwarmSensing:
         self.own = odo
         self.own_put_at = time.monotonic()
 
-    def _put_own_again(self) -> None:
-        """While waiting for the others' odometry of step k (lockstep), put our own of k
-        again every ``OWN_REPUT_S``: a put made before a peer's subscription reached us is
-        lost (Zenoh keeps no history), and that peer, waiting for it, would otherwise sit
-        out the whole start-up timeout at step 0 (seen on a loaded host: 30 s, after which
-        it flew its first steps without two neighbours). Receivers store by (step, id), so
-        a repeat changes nothing."""
+    def put_own_again(self) -> None:
+        """Put our own odometry of step k again every ``OWN_REPUT_S`` for as long as k is
+        our latest step: while we wait for the others' odometry of k, and while our vehicle
+        waits (lockstep) for a peer that is still at k. A put made before a peer's
+        subscription reached us is lost (Zenoh keeps no history), and that peer, waiting
+        for it, would otherwise sit out the whole start-up timeout at step 0 (seen on a
+        loaded host: 30 s, after which it flew its first steps without a neighbour; in CI
+        the peer had already sent its step-0 setpoint and stopped re-putting while it was
+        waiting for the vehicle). Receivers store by (step, id), so a repeat changes
+        nothing."""
         now = time.monotonic()
         if self.own is not None and now - self.own_put_at >= OWN_REPUT_S:
             self.own_put_at = now
@@ -122,7 +125,7 @@ class SwarmSensing:
             want = [j for j in others if j not in self.silent]
 
             def have_all() -> bool:
-                self._put_own_again()
+                self.put_own_again()
                 got = bus.odometry.get(k, {})
                 return all(j in got for j in want)
 

@@ -19,7 +19,7 @@ from offboard.daemon.mavlink.mode_requests import SwarmReady
 from offboard.daemon.mavlink.odometry import Odometry
 from offboard.daemon.mavlink.offboard_keeper import OffboardKeeper
 from offboard.daemon.runner_loss import RunnerLoss
-from offboard.daemon.sensing_source import SwarmSensing
+from offboard.daemon.sensing_source import OWN_REPUT_S, SwarmSensing
 from offboard.daemon.stream import EstimateOutbox, SetpointStream
 from offboard.daemon.wire_convert import estimates_from_wire
 from swarm_common import wire
@@ -153,3 +153,28 @@ def test_the_loop_hands_the_agent_what_the_in_process_runner_would() -> None:
     out = alone.step(0, 0.0, t0.p, t0.v, estimates_from_wire({}, 8, {}), True)
     assert vehicle.sent[0][1] == [float(c) for c in out.q_ned]
     assert vehicle.sent[0][2] == float(out.thrust_norm)
+
+
+def test_own_odometry_is_put_again_while_the_vehicle_waits_at_a_step() -> None:
+    """Lockstep: a peer whose subscription came after our put of step k still gets it
+    while our vehicle waits at k (for that very peer's setpoint): the same record goes out
+    again every OWN_REPUT_S, never more often, and a new step puts the new record."""
+    loop, vehicle, swarm = _loop()
+    swarm.odometry_matched = True  # someone reads our odometry
+    vehicle.stamp(0)
+    loop.vehicle_clock()
+    loop.on_odometry()
+
+    def puts() -> list[wire.Odometry]:
+        return [p for p in swarm.published if isinstance(p, wire.Odometry)]
+
+    assert [o.step for o in puts()] == [0]
+    loop.on_odometry()  # at once: not again
+    assert len(puts()) == 1
+    loop.sensing.own_put_at -= OWN_REPUT_S  # as if OWN_REPUT_S had passed at step 0
+    loop.on_odometry()
+    assert [o.step for o in puts()] == [0, 0] and puts()[1] is puts()[0]
+    vehicle.stamp(1)
+    loop.vehicle_clock()
+    loop.on_odometry()
+    assert [o.step for o in puts()] == [0, 0, 1]
