@@ -34,6 +34,7 @@ from gcs.exit_codes import (
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.records.cli import add_log_parser
+from gcs.records.live import add_live_flags, start_live
 from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.inputs import (
@@ -85,11 +86,18 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
 
     try:  # the observer's gains on this graph, the deadline against --duration
         check_physics(sc, float(sc.run.duration_s if args.duration is None else args.duration))
-    except LaunchError as exc:
+        live = start_live(args, sc, str(args.method or sc.controller.method), args.seed)
+    except (LaunchError, ValueError, OSError) as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration, progress=True,
-                     land_at=args.land_at)
+    try:
+        res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration,
+                         progress=True, land_at=args.land_at, live=live)
+        if live is not None:
+            live.finish(res.document())
+    finally:
+        if live is not None:
+            live.close()
     if args.out:  # checked writable before the run; a fallback folder if it fails now
         where = write_run(Path(args.out), res.document(), res.series, sc)
         log.info("wrote %s/metrics.json, series.npz, record.mcap", where)
@@ -220,6 +228,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    "with a [mission]; docs/missions.md)")
     add_signing_flags(d)
     add_fault_flags(d)
+    add_live_flags(r)
     _add_allow_infeasible(r)
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run every method and write a report")

@@ -1,6 +1,6 @@
 """``gcs dashboard``: a terminal ground-control station (Textual) for the swarm.
 
-Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
+Modules, from the wire up (only ``app``, ``replay_app`` and ``widgets`` import Textual):
 
 * :mod:`.px4modes` - PX4 custom-mode decoding and the COMMAND_LONG recipes.
 * :mod:`.mavlink_gcs` - the MAVLink GCS link (UDP 14550+offset), per-system tracking,
@@ -16,4 +16,5 @@ Modules, from the wire up (only ``app`` and ``widgets`` import Textual):
 * :mod:`.formation_link` - the formation as one MAVLink vehicle, served by the dashboard.
 * :mod:`.app`, :mod:`.widgets`, :mod:`.palette` - the Textual UI and its command palette;
   :mod:`.cli` - argument parsing, launch.
+* :mod:`.replay_app` - ``--replay RUN``: the same UI on a recorded run (:mod:`.view.replay`).
 """

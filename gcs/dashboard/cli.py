@@ -3,6 +3,7 @@
     gcs dashboard [--scenario S] [--port-offset N] [--swarm NAME] [--zenoh-connect EP ...]
     gcs dashboard --launch scenarios/cube8.toml [--no-daemons] [--method rcbf]
     gcs dashboard --demo            # the recorded state, no network (docs, trying keys)
+    gcs dashboard --replay RUN      # play a recorded run (run folder or record.mcap)
 
 ``--launch`` secures the swarm as ``gcs mission run`` does (docs/security.md, "Defaults"):
 Zenoh authentication + ACL with fresh credentials, and MAVLink 2 signing with a fresh key
@@ -27,6 +28,7 @@ from typing import Any
 
 from gcs.formation.steer import FormationSteer
 from gcs.mission.launch_spec import add_signing_flags
+from gcs.records.live import add_live_flags, start_live
 from swarm_common.enums import Method
 from swarm_common.inputs import (
     OneLineParser,
@@ -76,6 +78,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
                    help="attached: Zenoh config with the gcs credentials (gcs router --secure-dir)")
     add_signing_flags(p, "with --launch: ")
+    add_live_flags(p)
     p.add_argument(
         "--launch",
         metavar="SCENARIO",
@@ -110,6 +113,9 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--retries", type=int_in(0, MAX_RETRIES), default=2,
                    help="COMMAND_LONG retries")
     p.add_argument("--demo", action="store_true", help="show the recorded state, no network")
+    p.add_argument("--replay", metavar="RUN", default=None,
+                   help="play a recorded run (run folder or record.mcap; --scenario: its "
+                   "scenario, default scenarios/<name>.toml); no network")
     return p
 
 
@@ -143,6 +149,13 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     from .view.state import LiveSource
     from .zenoh_feed import ZenohFeed
 
+    if args.foxglove and (args.replay or args.demo):
+        raise ValueError("--foxglove serves a live swarm; not with --replay or --demo "
+                         "(open the run's record.mcap in Foxglove instead)")
+    if args.replay:  # a recorded run: RecordError (a ValueError), exit 2 before the app
+        from .replay_app import build_replay
+
+        return build_replay(args)
     if args.demo:
         return DashboardApp(recorded_source(), None, title="demo (recorded)"), None, None, None
     path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
@@ -157,6 +170,9 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
         offset = resolve_port_offset(sc, args.port_offset, base, gcs_port=True)
     if args.formation_vehicle and (sc.mission is None or args.no_zenoh):
         raise ValueError("--formation-vehicle needs a scenario with a [mission] and Zenoh")
+    if args.foxglove and args.no_zenoh:
+        raise ValueError("--foxglove needs the Zenoh feed (not --no-zenoh)")
+    live = start_live(args, sc, str(args.method or sc.controller.method), None)
     launch = None
     link = feed = None
     signing = SigningChoice.from_args(args)  # LaunchError (a RuntimeError): exit 2
@@ -182,6 +198,10 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
                 connect = args.zenoh_connect or [default_endpoint(offset)]
                 feed = ZenohFeed(swarm, sc.ids, connect=connect, mode=args.zenoh_mode,
                                  config_file=args.zenoh_config).start()
+            if live is not None:  # --foxglove: the live view shows each truth received
+                from gcs.mission.live_feed import feed_hook
+
+                feed.on_truth = feed_hook(sc, live, feed.snapshot)
     except BaseException:
         if link is not None:
             link.close()

@@ -126,6 +126,8 @@ class ZenohFeed:
         self._events: deque[FeedEvent] = deque(maxlen=2000)
         self._stale_flag: dict[int, bool] = {}
         self.started_at = clock()
+        # called with each truth taken in, on a reader thread (the live view, gcs.records.live)
+        self.on_truth: Callable[[Truth], None] | None = None
 
     # -- lifecycle ---------------------------------------------------------------
     def start(self) -> ZenohFeed:
@@ -216,6 +218,8 @@ class ZenohFeed:
                 self.estimate[obj.id] = (obj, now)
             else:
                 self.bad_payloads += 1  # a Command on a data key
+        if isinstance(obj, Truth) and self.on_truth is not None:
+            self.on_truth(obj)
 
     def _status_events(self, prev: Status | None, s: Status, now: float) -> None:
         """Operator events from one agent's status change. Before its setpoints fly its

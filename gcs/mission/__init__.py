@@ -13,5 +13,7 @@ spawn worker pool), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:
 :mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
 :mod:`.compare_cli` (``gcs mission compare``);
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);
-:mod:`.audit` (the commands a run received, for ``metrics.json``).
+:mod:`.audit` (the commands a run received, for ``metrics.json``);
+:mod:`.live_feed` (each runner's and the dashboard's rows for the live view,
+:mod:`gcs.records.live`).
 """

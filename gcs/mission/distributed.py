@@ -19,7 +19,7 @@ import resource
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import zenoh
 
@@ -32,6 +32,7 @@ from gcs.mission.launch_spec import (
     secure_dir,
     split_packs,
 )
+from gcs.mission.live_feed import recorder_hook
 from gcs.mission.ports import PortUse, bind_failure_line
 from gcs.mission.preflight import warn_liveness
 from gcs.mission.procs import ProcessGroup, release_dir, role_of, stall_cause
@@ -51,6 +52,9 @@ from offboard.daemon.packing import parse_agents
 from swarm_common.enums import DefaultStreams
 from swarm_common.scenario.model import Scenario
 from swarm_common.zenoh_session import write_swarm_security
+
+if TYPE_CHECKING:
+    from gcs.records.live import LiveView
 
 log = logging.getLogger(__name__)
 # scoring lives in gcs.mission.score; these names stay importable from here
@@ -101,6 +105,7 @@ def run_distributed(
     default_streams: DefaultStreams = DefaultStreams.ALWAYS,
     on_step: Callable[[int], None] | None = None,
     formation_port: int | None = None,
+    live: LiveView | None = None,
 ) -> tuple[Recorder, dict[str, Any]]:
     """Run the mission as real processes; return the recorder and run facts.
 
@@ -116,7 +121,8 @@ def run_distributed(
     user that may publish its own agents' keys only. ``default_streams``: the simulator's
     ``--default-streams`` (:class:`~gcs.mission.launch_spec.LaunchSpec`). ``on_step(k)``: called
     by the supervising loop with the newest recorded step, about every 50 ms of wall time
-    while the run goes (a script's events at a mission time).
+    while the run goes (a script's events at a mission time). ``live``: a live view fed
+    the recorded rows (:func:`gcs.mission.live_feed.recorder_hook`).
 
     Raises :class:`~gcs.mission.launch_spec.LaunchError` before starting anything when a port is
     busy, :class:`MissionError` when the simulator dies or the run stalls. A daemon's
@@ -175,7 +181,9 @@ def run_distributed(
         bar = Progress(duration, label=str(method)) if show_progress else None
         land = None if land_at is None else land_sender(router, spec.swarm_name, land_at,
                                                           sc.control_dt)
-        hooks = [h for h in (land, on_step, formation and formation[0]) if h is not None]
+        shown = None if live is None else recorder_hook(sc, rec, live)
+        hooks = [h for h in (land, on_step, formation and formation[0], shown)
+                 if h is not None]
         checkpoint = None if on_abort is None else (lambda: on_abort(rec, facts, "checkpoint"))
         victim = None if kill_agent is None else next(
             spec.daemon_name(p) for p in spec.packs() if kill_agent in p)
@@ -402,6 +410,7 @@ def run_and_score(
     processes: int | None = None,
     default_streams: DefaultStreams = DefaultStreams.ALWAYS,
     formation_port: int | None = None,
+    live: LiveView | None = None,
 ) -> dict[str, Any]:
     """One distributed run -> metrics.json + series.npz in ``out_dir``; returns the document.
 
@@ -422,7 +431,7 @@ def run_and_score(
         sc, out_dir, method, seed, duration, realtime=realtime, port_offset=port_offset,
         kill_agent=kill_agent, kill_at=kill_at, show_progress=show_progress, land_at=land_at,
         on_abort=write_partial, signing=signing, processes=processes,
-        default_streams=default_streams, formation_port=formation_port,
+        default_streams=default_streams, formation_port=formation_port, live=live,
     )
     doc, ser = score_run(rec, sc, facts, method, seed, realtime, land_at, duration)
     with_audit(doc, rec)

@@ -26,7 +26,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -56,6 +56,9 @@ from swarm_common.enums import CommandKind
 from swarm_common.frames import euler_enu_from_quats_ned
 from swarm_common.scenario.model import Scenario
 from vehicle_sim.physics.dynamics import SwarmDynamics
+
+if TYPE_CHECKING:
+    from gcs.records.live import LiveView
 
 log = logging.getLogger(__name__)
 
@@ -163,13 +166,15 @@ def run_inproc(
     duration: float | None = None,
     progress: bool = False,
     land_at: float | None = None,
+    live: LiveView | None = None,
 ) -> MissionResult:
     """Run a mission in process and return its metrics and time series.
 
     ``progress``: log the gains and show a :class:`~gcs.mission.progress.Progress` on stderr.
     ``land_at``: mission time (s) of a coordinated land-all (offboard.agent.landing,
     docs/lifecycle.md): from the first step at or after it every agent tracks its landing
-    reference, the safety filter still active.
+    reference, the safety filter still active. ``live``: a live view fed the rows while a
+    client watches it (:class:`gcs.mission.live_feed.InprocFeed`).
     """
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
@@ -212,6 +217,11 @@ def run_inproc(
         lumped_true, thrust, att = (np.zeros((n_steps, n, 3)), np.zeros((n_steps, n)),
                                     np.zeros((n_steps, n, 3)))
         md_run = math.inf
+        shown = None
+        if live is not None:  # its imports (the recorder's Zenoh) only for a live run
+            from gcs.mission.live_feed import InprocFeed
+
+            shown = InprocFeed(sc, form, live)
         scripted: list[dict[str, Any]] = []  # audit records of the scripted commands
         t_wall = time.perf_counter()
         for k in range(n_steps):
@@ -245,6 +255,8 @@ def run_inproc(
             md = dyn.advance_period(nsub)  # nsub physics steps, their min pair distance
             ser.min_dist[k] = md
             md_run = min(md_run, md)
+            if shown is not None:
+                shown.step(k, ser, lumped_true, thrust, att, last=k == n_steps - 1)
             if bar is not None:
                 bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
         if bar is not None:

@@ -14,6 +14,7 @@ from gcs.mission.distributed import MissionError, run_and_score
 from gcs.mission.launch_spec import LaunchError, SigningChoice, resolve_port_offset
 from gcs.mission.run_output import out_dir_problem, print_result
 from gcs.mission.score import default_out_dir, late_steps
+from gcs.records.live import start_live
 from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams
 from swarm_common.scenario.model import Scenario
@@ -49,6 +50,11 @@ def cli_run(args: Any, sc: Scenario) -> int:
     if (why := out_dir_problem(out)) is not None:  # the default run directory too
         print(f"gcs mission run: {why}", file=sys.stderr)
         return EXIT_USAGE
+    try:  # --foxglove: its port bound before anything starts (busy: exit 2)
+        live = start_live(args, sc, method, args.seed)
+    except (ValueError, OSError) as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     try:
         doc = run_and_score(
             sc, out, method, args.seed, duration, realtime=args.realtime,
@@ -56,14 +62,19 @@ def cli_run(args: Any, sc: Scenario) -> int:
             show_progress=True, land_at=getattr(args, "land_at", None), signing=signing,
             processes=getattr(args, "processes", None),
             default_streams=DefaultStreams(getattr(args, "default_streams", "always")),
-            formation_port=FORMATION_PORT + offset if formation else None,
+            formation_port=FORMATION_PORT + offset if formation else None, live=live,
         )
+        if live is not None:
+            live.finish(doc)
     except LaunchError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except MissionError as exc:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_RUN_FAILED
+    finally:
+        if live is not None:
+            live.close()
     log.info("wrote %s/metrics.json, series.npz, record.mcap, vehicle_*.tlog, *.log", out)
     if doc["run"]["failed_agents"]:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])

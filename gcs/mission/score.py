@@ -23,21 +23,26 @@ from gcs.mission.run_output import (
 )
 from gcs.report.metrics import Series, compute_metrics
 from offboard.agent.takeoff import is_ground_start, takeoff_plan
-from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.bearing import Formation, formation_from_scenario
 from swarm_common.scenario.model import Scenario
 from vehicle_sim.physics.dynamics import SwarmDynamics
 
 
-def recorder_series(rec: Recorder, sc: Scenario) -> Series:
+def recorder_series(rec: Recorder, sc: Scenario, steps: np.ndarray | None = None,
+                    form: Formation | None = None) -> Series:
     """The recorded run as the in-process runner's :class:`~gcs.report.metrics.Series`.
 
     Row k holds truth(k), the estimates valid at t_k (published at step k−1), the
     statuses of step k and the minimum pair distance over (t_k, t_k+1] (carried by
     truth(k+1)). Rows use the float32 values that crossed the wire, as in-process.
+    ``steps``: only those (steps with a truth, increasing; the live view's latest rows),
+    as the recorder holds them now; default: every step with a truth, after a drain.
+    ``form``: the scenario's formation, when the caller has it.
     """
-    rec.drain()
-    form = formation_from_scenario(sc)
-    steps = np.flatnonzero(rec.have_truth[: rec.steps])
+    if steps is None:
+        rec.drain()
+        steps = np.flatnonzero(rec.have_truth[: rec.steps])
+    form = formation_from_scenario(sc) if form is None else form
     ser = empty_series(rec.t[steps].copy(), sc.n, fill=np.nan)
     p, v = rec.p[steps].astype(float), rec.v[steps].astype(float)
     set_truth_rows(ser, form, p, v, rec.lumped_true[steps].astype(float),

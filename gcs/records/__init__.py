@@ -6,7 +6,9 @@ Foxglove and PlotJuggler, CSV files per vehicle, written with the maintained ``m
 * :mod:`.payloads` - CDR bodies of the ROS 2 messages, every step at once (numpy).
 * :mod:`.scene` - the ``/scene`` SceneUpdates: vehicles, bearings, obstacles, geofence.
 * :mod:`.events` - the ``/events`` Log messages from metrics.json and the series.
+* :mod:`.channels` - the record's channels and the messages of a step (file and live).
 * :mod:`.writer` - :func:`~gcs.records.writer.write_record`: ``record.mcap`` of a run.
+* :mod:`.live` - the live view: the same channels on a Foxglove WebSocket server.
 * :mod:`.reader` - read a record back: checks and the ROS 2 topics as arrays.
 * :mod:`.export` - load a run folder or record; write the CSV files.
 * :mod:`.layout` - the Foxglove layout shipped in docs/foxglove/.

@@ -41,7 +41,7 @@ def _fail(msg: str) -> int:
     return EXIT_USAGE
 
 
-def _scenario(arg: str | None, name: object, n: int) -> Any:
+def run_scenario(arg: str | None, name: object, n: int) -> Any:
     """The run's scenario, or None when none is given and none of its name is shipped;
     ``ValueError`` (one line) when the one given cannot be loaded or has another size."""
     from swarm_common.scenario.model import ScenarioError, load_scenario
@@ -62,9 +62,10 @@ def cmd_log_export(args: argparse.Namespace) -> int:
     """``gcs log export``; 0 when written, 2 on bad input."""
     import numpy as np
 
+    from gcs.records.channels import RecordContext
     from gcs.records.export import load_record, load_run_folder, write_csv
     from gcs.records.reader import RecordError
-    from gcs.records.writer import RecordContext, write_mcap
+    from gcs.records.writer import write_mcap
     from gcs.report.verdict import pair_barrier
 
     run, out = Path(args.run), Path(args.out)
@@ -78,7 +79,7 @@ def cmd_log_export(args: argparse.Namespace) -> int:
         else:
             doc, ser = load_run_folder(run)
             n = ser.p.shape[1]
-            sc = _scenario(args.scenario, doc.get("scenario"), n)
+            sc = run_scenario(args.scenario, doc.get("scenario"), n)
             if args.format == "mcap":
                 c = (RecordContext.from_scenario(sc) if sc is not None
                      else RecordContext.bare(n))

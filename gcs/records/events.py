@@ -60,12 +60,17 @@ def series_events(ns: np.ndarray, ids: Sequence[int], fallback: np.ndarray,
     return out
 
 
+def start_event(doc: Mapping[str, Any], ns0: int) -> Event:
+    """The start of the run at ``ns0``: its scenario, method and seed (``doc``'s keys)."""
+    return Event(ns0, INFO, "run", f"start: scenario {doc.get('scenario')}, method "
+                 f"{doc.get('method')}, seed {doc.get('seed')}")
+
+
 def document_events(doc: Mapping[str, Any], ns0: int, ns1: int) -> list[Event]:
     """The start and end of the run (at ``ns0`` and ``ns1``) and the events listed in its
     ``metrics.json`` document."""
     m = doc.get("metrics") or {}
-    out = [Event(ns0, INFO, "run", f"start: scenario {doc.get('scenario')}, method "
-                 f"{doc.get('method')}, seed {doc.get('seed')}")]
+    out = [start_event(doc, ns0)]
     for e in m.get("safety_alarms") or []:
         if not isinstance(e, Mapping):
             continue

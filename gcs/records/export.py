@@ -11,6 +11,7 @@ Every failure to load is a :class:`~gcs.records.reader.RecordError` (one line).
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
@@ -73,7 +74,7 @@ def load_run_folder(run: Path) -> tuple[dict[str, Any], Series]:
     try:
         with np.load(sz, allow_pickle=False) as z:
             arrays = {k: np.asarray(z[k]) for k in z.files}
-    except (ValueError, OSError, EOFError, KeyError) as exc:
+    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile) as exc:
         msg = " ".join(str(exc).split())[:120] or type(exc).__name__
         raise RecordError(f"{sz}: not a readable series ({msg})") from None
     return doc, series_from_arrays(sz, arrays)

@@ -11,6 +11,7 @@ float64 comes before any 1-byte field, so no field needs padding (checked:
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Mapping, Sequence
 
@@ -21,6 +22,7 @@ _TYPES = {"float64": "<f8", "bool": "u1", "uint8": "u1"}
 _ARRAY = re.compile(r"^(\w+)(?:\[(\d+)\])?$")
 
 
+@functools.lru_cache(maxsize=64)  # a few field lists, each asked for at every step live
 def layout(fields: Sequence[tuple[str, str, str]]) -> np.dtype:
     """The packed numpy dtype of a message of ``fields`` (name, ROS type, comment), header
     first; ``ValueError`` when a float64 would follow a 1-byte field (it would need

@@ -1,16 +1,19 @@
 """Read a bearing-swarm MCAP record back (the ``mcap`` package's reader): check that a
 file is a whole MCAP record of this project, and decode its ROS 2 topics (the estimates,
 the safety filter, the pairs: :mod:`gcs.records.topics`) into arrays with the same packed
-layout the writer used (:func:`gcs.records.payloads.layout`).
+layout the writer used (:func:`gcs.records.payloads.layout`); and the run's document from
+its metadata (:func:`read_document`).
 
 Every failure is a :class:`RecordError` whose ``str()`` is one line naming the file.
 """
 
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -96,6 +99,32 @@ def read_arrays(path: Path) -> RecordArrays:
     pairs = _decode(path, tp.PAIRS, schemas[tp.PAIRS], tp.pairs_fields(n * (n - 1) // 2),
                     rows[tp.PAIRS])
     return RecordArrays(ids, est, qp, pairs)
+
+
+def read_document(path: Path) -> dict[str, Any]:
+    """The run's ``metrics.json`` document as the record's metadata keeps it (``run``:
+    scenario, method, seed; ``metrics``: the metrics, :func:`gcs.records.writer.write_mcap`);
+    ``RecordError`` when the file is not a readable MCAP record or has no such metadata."""
+    check_file(path)
+    meta: dict[str, dict[str, str]] = {}
+    try:
+        with path.open("rb") as f:
+            for m in make_reader(f).iter_metadata():
+                meta[m.name] = dict(m.metadata)
+    except (McapError, EOFError, OSError, ValueError, KeyError, AssertionError) as exc:
+        why = " ".join(str(exc).split())[:160] or type(exc).__name__
+        raise RecordError(f"{path}: not a readable MCAP record ({why})") from None
+    run = meta.get("run")
+    if run is None or "scenario" not in run:
+        raise RecordError(f"{path}: not a bearing-swarm record (no run metadata)")
+    try:
+        metrics = json.loads(meta.get("metrics", {}).get("json", "{}"))
+    except ValueError:
+        raise RecordError(f"{path}: its metrics metadata is not JSON") from None
+    seed = run.get("seed", "")
+    return {"scenario": run["scenario"], "method": run.get("method"),
+            "seed": int(seed) if seed.lstrip("-").isdigit() else seed,
+            "metrics": metrics if isinstance(metrics, dict) else {}}
 
 
 def _decode(path: Path, topic: str, schema: tuple[str, bytes],

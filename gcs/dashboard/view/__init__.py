@@ -8,4 +8,6 @@
 * :mod:`.preflight` - the plan's envelope and whether the vehicles' parameters agree.
 * :mod:`.mission_progress` - where a formation mission stands, and the typed go-to's parser.
 * :mod:`.world_cells` - the scenario's obstacles and geofence as a view's character cells.
+* :mod:`.replay` - a replay's clock over a recorded series (frame, speed, closest approach,
+  events); :mod:`.replay_source` - a recorded run (run folder or record.mcap) as the source.
 """

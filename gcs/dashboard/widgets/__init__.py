@@ -4,7 +4,8 @@
 above), :class:`MinDistancePlot`, :class:`EventLog`, :class:`StatusBar`,
 :class:`MissionPanel` (:mod:`.mission_panel`: the mission's next waypoint and progress),
 :class:`PreflightPanel` (:mod:`.preflight_panel`: the plan's envelope and the vehicles'
-parameters, before take-off), and
+parameters, before take-off), :class:`ReplayBar` (:mod:`.replay_bar`: a replay's min
+distance now and over the run), and
 the modal screens :class:`ConfirmScreen`, :class:`ChoiceScreen` and :class:`InputScreen`;
 :mod:`.fmt` formats numbers.
 """
@@ -15,6 +16,7 @@ from .formation import FormationView
 from .mission_panel import MissionPanel
 from .modals import ChoiceScreen, ConfirmScreen, InputScreen
 from .preflight_panel import PreflightPanel
+from .replay_bar import ReplayBar
 from .status_bar import StatusBar
 from .vehicle_table import VehicleTable
 
@@ -27,6 +29,7 @@ __all__ = [
     "MinDistancePlot",
     "MissionPanel",
     "PreflightPanel",
+    "ReplayBar",
     "StatusBar",
     "VehicleTable",
 ]
