@@ -143,7 +143,7 @@ def compare(sc: Scenario, args: argparse.Namespace) -> int:
                         tau_safe_s=sc.controller.tau_safe_s,
                         deadline_s=sc.run.formation_deadline_s,
                         mission=plan_for(sc) if sc.mission is not None else None,
-                        world=sc.world, failed=why)
+                        world=sc.world, failed=why, ids=sc.ids)
     print(compare_table(metrics, d_safe, why))
     print(safety_table(metrics, why))
     if seeds:

@@ -8,5 +8,11 @@
 * :mod:`gcs.report.safety_table` - the comparison report's safety and tracking table.
 * :func:`gcs.report.comparison.write_report` - the methods side by side, with the paper's
   Table 3 (plots in :mod:`.plots`).
+* :mod:`gcs.report.figures` - the report's figures, each captioned with its time window and
+  where to see it in the run's record.
+* :mod:`gcs.report.paths` - every vehicle's flown path from above and from the side, with
+  the obstacles, the geofence and the closest approach.
+* :mod:`gcs.report.animation` - a GIF of the swarm around the closest approach (matplotlib's
+  Pillow writer, where it is installed).
 * :mod:`gcs.report.sweep` - a sweep's ``runs.csv``, ``summary.md`` and ``summary.png``.
 """

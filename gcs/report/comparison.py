@@ -1,8 +1,8 @@
 """Comparison report of every method run: the paper's Table 3 beside ours, and plots.
 
 ``write_report`` writes ``report.md`` (tables, each with a legend of its columns, and a
-paragraph on every difference from the paper's Table 3) and the PNG plots of
-:mod:`gcs.report.plots`.
+paragraph on every difference from the paper's Table 3) and its figures, each captioned
+with its time window and where it is in the run's record (:mod:`gcs.report.figures`).
 
 Energy (docs/paper-departures.md, Departure 15): the paper's "integral of squared
 thrust" cannot be ∫ΣF²dt (hover alone gives about 1.1·10⁵ N²s per minute for six
@@ -12,6 +12,7 @@ numbers), ``∫Σ(F−mg)²dt`` and ``∫ΣF²dt``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -293,32 +294,22 @@ def write_report(
     mission: MissionPlan | None = None,
     world: World | None = None,
     failed: dict[str, str] | None = None,
+    ids: Sequence[int] | None = None,
 ) -> Path:
-    """Write report.md and the PNG plots into ``out_dir``; returns the report path
+    """Write report.md and its figures into ``out_dir``; returns the report path
     (``tau_safe_s``, ``deadline_s``: the scenario's barrier τ and tracking-window start, s;
     ``mission``: the scenario's mission plan, for its section and path plot; ``world``:
-    its obstacles and geofence, drawn in the snapshots and summed up in a table;
+    its obstacles and geofence, drawn in the snapshots and paths and summed up in a table;
     ``failed``: method -> why its run failed (one line), said in the text and marked as a
-    FAILED row in the tables; ``metrics`` and ``series`` hold the methods that finished)."""
-    from gcs.report.plots import (
-        plot_energy,
-        plot_errors,
-        plot_min_distance,
-        plot_mission_path,
-        plot_snapshots,
-        snapshot_times,
-    )
+    FAILED row in the tables; ``metrics`` and ``series`` hold the methods that finished;
+    ``ids``: the agents' scenario ids in column order, naming the vehicles of the figures
+    (:mod:`gcs.report.figures`), default 1, 2, ...)."""
+    from gcs.report.figures import figure_lines, mission_caption
+    from gcs.report.plots import plot_mission_path
     from gcs.report.sweep import seeds_legend, seeds_table
 
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
-    plot_min_distance(series, d_safe, d / "min_distance.png")
-    plot_errors(series, follower_idx, d / "errors.png")
-    for m, s in series.items():
-        times = snapshot_times(s, metrics.get(m, {}).get("formation_time_s"))
-        snap = d / f"snapshots_{m}.png"
-        plot_snapshots(s, edges, times, snap, LABELS.get(m, m), follower_idx, world)
-    plot_energy(metrics, d / "energy.png")
     lines = [
         f"# Mission comparison: {scenario_name}",
         "",
@@ -342,6 +333,8 @@ def write_report(
             "",
             "![mission path](mission_path.png)",
             "",
+            mission_caption(series),
+            "",
         ]
     if world is not None and not world.empty:
         lines += ["## World", "", world_table(metrics, world), ""]
@@ -359,22 +352,7 @@ def write_report(
         *gains,
         "```",
         "",
-        "## Plots",
-        "",
-        "Smallest distance between any two vehicles; below, each method's closest approach.",
-        "",
-        "![min distance](min_distance.png)",
-        "",
-        "Tracking and estimation errors of the worst follower at each instant.",
-        "",
-        "![errors](errors.png)",
-        "",
-        "The formation at the start, at each method's closest approach, when it formed and",
-        "at the end (times taken from the run).",
-        "",
-        *[f"![snapshots {m}](snapshots_{m}.png)\n" for m in series],
-        "![energy](energy.png)",
-        "",
+        *figure_lines(d, metrics, series, follower_idx, edges, d_safe, ids, world),
     ]
     path = d / "report.md"
     path.write_text("\n".join(lines))

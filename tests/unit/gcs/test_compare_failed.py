@@ -15,7 +15,7 @@ import pytest
 from gcs.mission import compare_cli, distributed
 from gcs.mission.distributed import MissionError
 from gcs.mission.launch_spec import LaunchError
-from gcs.report import plots
+from gcs.report import animation, paths, plots
 from swarm_common.scenario.model import load_scenario
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -44,6 +44,8 @@ def _stub_run(fail: Mapping[str, Exception], offsets: list[int]) -> Any:
 def no_plots(monkeypatch: pytest.MonkeyPatch) -> None:
     for name in ("plot_min_distance", "plot_errors", "plot_snapshots", "plot_energy"):
         monkeypatch.setattr(plots, name, lambda *a, **k: None)
+    monkeypatch.setattr(paths, "plot_paths", lambda s, *a, **k: paths.closest_of(s, a[3]))
+    monkeypatch.setattr(animation, "animate_closest", lambda *a, **k: None)
 
 
 def _args(out: Path) -> argparse.Namespace:

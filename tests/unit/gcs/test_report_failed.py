@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gcs.report import plots
+from gcs.report import animation, paths, plots
 from gcs.report.comparison import compare_table, paper_differences, write_report
 from gcs.report.safety_table import safety_table
 
@@ -78,6 +78,9 @@ def plot_calls(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, Any]]:
     for name in ("plot_min_distance", "plot_errors", "plot_snapshots", "plot_energy"):
         monkeypatch.setattr(plots, name,
                             lambda first, *a, _n=name, **k: calls.append((_n, first)))
+    # the flown paths (what they mark, without drawing) and no animation
+    monkeypatch.setattr(paths, "plot_paths", lambda s, *a, **k: paths.closest_of(s, a[3]))
+    monkeypatch.setattr(animation, "animate_closest", lambda *a, **k: None)
     return calls
 
 
