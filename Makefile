@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet --no-deps $(CLIENT_TOOLS)
 	touch $(STAMP)
 
-.PHONY: venv mission test check static smoke test-unit test-integration lint typecheck warm bench
+.PHONY: venv mission test check static smoke test-unit test-unit-quick test-integration lint typecheck warm bench
 venv: $(STAMP)
 
 # PORT_OFFSET=N forces the port offset (a busy port: exit 2 before anything starts);
@@ -34,7 +34,8 @@ mission: $(STAMP)
 
 test: static test-unit test-integration
 
-check: static test-unit smoke
+# the quick tier: unit tests marked `full` (a few seconds each) run in `make test` only
+check: static test-unit-quick smoke
 
 # lint, then the type check beside the kernels' first compilation (gcs.mission.warmup):
 # each uses one core, so side by side they take the longer one's time, not the sum
@@ -46,6 +47,9 @@ static: $(STAMP)
 
 test-unit: $(STAMP)
 	$(PYTEST) -n $(UNIT_JOBS) tests/unit
+
+test-unit-quick: $(STAMP)
+	$(PYTEST) -n $(UNIT_JOBS) -m 'not full' tests/unit
 
 test-integration: $(STAMP)
 	$(PYTEST) -n $(INTEGRATION_JOBS) tests/integration

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from reference.close import assert_close
 
 from offboard.agent.attitude import (
@@ -204,6 +205,7 @@ def test_inner_loop_model_equals_previous() -> None:
         assert all(type(x) is float for x in [*new.att, new.f]), k
 
 
+@pytest.mark.full
 def test_frames_quaternion_conversions_equal_previous() -> None:
     rng = np.random.default_rng(5)
     for trial in range(3000):
@@ -228,6 +230,7 @@ def test_frames_euler_of_the_wire_quaternions() -> None:
         assert np.allclose(got, ref, **TOL), trial
 
 
+@pytest.mark.full
 def test_one_period_command_is_the_separate_calls() -> None:
     """InnerLoopModel.command (one compiled call) against the calls it replaced: the
     setpoint, the clipping check against the realised acceleration (numpy's max, nan

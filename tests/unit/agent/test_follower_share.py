@@ -5,12 +5,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from conftest import CUBE8
 
 from offboard.agent.factory import FollowerAgent, make_agent
 from swarm_common.scenario.model import load_scenario
 
 
+@pytest.mark.full
 def test_a_neighbour_never_heard_from_gets_the_full_share() -> None:
     sc = load_scenario(CUBE8)
     agents = [make_agent(sc, a.id, seed=1) for a in sc.agents]

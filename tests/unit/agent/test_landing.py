@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[3]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.toml"))
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
 def test_pads_separated_and_off_descent_paths(path: Path) -> None:
     sc = load_shipped(path)

@@ -7,6 +7,7 @@ integrator onto a moving reference (so a wrong gain or sign fails)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from reference.close import assert_close
 
 from offboard.agent.leader import leader_control_kernel, leader_prediction_kernel
@@ -65,6 +66,7 @@ def test_control_equals_the_numpy_formulation() -> None:
         assert _same(got, control_numpy(ref, p, v, d, TAU, KP, KD, lo, hi)), i
 
 
+@pytest.mark.full
 def test_prediction_equals_the_numpy_formulation() -> None:
     rng = np.random.default_rng(12)
     for i in range(3000):

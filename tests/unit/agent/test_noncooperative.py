@@ -49,6 +49,7 @@ def test_it_flies_no_filter_and_says_so() -> None:
     assert out.estimate.cooperative is False and out.status.method is Method.NONE
 
 
+@pytest.mark.full
 def test_the_others_keep_their_distance_from_it() -> None:
     sc = load_scenario(ROGUE)
     res = run_inproc(sc, "dcbf", seed=1, duration=12.0)

@@ -144,6 +144,7 @@ def test_edges_graph_builds_the_listed_pairs(sc27):
     assert formation_from_scenario(sc).edges == f0.edges
 
 
+@pytest.mark.full
 def test_anchor_uses_only_sensed_leaders(sc27):
     f = formation_from_scenario(sc27)
     a = sc27.observer.leader_anchor

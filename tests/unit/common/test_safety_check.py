@@ -184,6 +184,7 @@ def _gcs(*args: str) -> subprocess.CompletedProcess[str]:
                           capture_output=True, text=True, timeout=180)
 
 
+@pytest.mark.full
 def test_cli_exit_2_unless_allow_unsafe(tmp_path):
     text = SWAP.read_text()
     assert "tau_rollpitch_s = 0.15" in text

@@ -173,6 +173,7 @@ def rng() -> np.random.Generator:
 
 # --- closest_point -------------------------------------------------------------------------
 
+@pytest.mark.full
 @pytest.mark.parametrize("o", OBSTACLES, ids=IDS)
 def test_closest_point_outside(o: Obstacle, rng: np.random.Generator) -> None:
     p = around(o, 600, rng)

@@ -45,6 +45,7 @@ def test_a_failing_warm_up_is_a_warning(
     assert logging.root.manager.disable == logging.NOTSET
 
 
+@pytest.mark.full
 @needs_jit
 def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
     """vehicle_sim.server.load_kernels loads the kernel each lockstep step runs
@@ -68,6 +69,7 @@ def test_simulator_warm_up_loads_the_period_physics_kernel() -> None:
     assert int(out.stdout.split()[-1]) >= 1
 
 
+@pytest.mark.full
 @needs_jit
 def test_daemon_warm_up_loads_the_dcbf_step_and_qp_kernels() -> None:
     """warm_kernels steps the throwaway follower through its dcbf step in one compiled

@@ -132,6 +132,7 @@ def test_gate_freezes_adaptation_until_converged(sc):
     assert obs.converged_s >= GATE_HOLD_S  # innovations small for long enough: adapting
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("init_err,mu,seeds", [(1.0, 0.005, (1, 2, 3)), (2.0, 0.05, (1,))])
 def test_closed_loop_observer_converges_from_large_initial_error(sc, init_err, mu, seeds):
     """cube8: before the adaptive-law bounds, init_pos_error 1 m with μ = 0.005 made seed 1

@@ -53,6 +53,7 @@ def test_transition_is_one_period_of_the_real_observers(path):
     assert np.max(np.abs(e1 - e0.ravel())) > 1e-3  # the period moved the errors
 
 
+@pytest.mark.full
 def test_spectral_radius_sparse_equals_dense_on_grid64():
     """Above DENSE_MAX the radius comes from ARPACK: on grid64's four loops (orders 540 and
     1080) it equals every eigenvalue's maximum modulus to 1e-10."""
@@ -71,6 +72,7 @@ def test_spectral_radius_sparse_equals_dense_on_grid64():
             assert gains.spectral_radius(loop) == pytest.approx(dense, rel=1e-10)
 
 
+@pytest.mark.full
 def test_spectral_radius_clustered_complex_top():
     """A top made of close complex pairs (a rotation block per pair, radii 0.99 apart by
     1e-4) and a random sparse rest: the largest modulus, as the dense answer."""

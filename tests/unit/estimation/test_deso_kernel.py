@@ -173,6 +173,7 @@ def cube8():  # type: ignore[no-untyped-def]
     return sc, form, form.desired_positions(sc.initial_positions()[form.leader_idx])
 
 
+@pytest.mark.full
 def test_adaptive_model_equals_numpy() -> None:
     rng = np.random.default_rng(5)
     for trial in range(3000):
@@ -199,6 +200,7 @@ def test_adaptive_model_equals_numpy() -> None:
     assert np.array_equal(adapt_step(zeta, bad, 1.0, 1.0, 0.1, 0.02), zeta)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("anchor,kappa,mu", [
     (0.0, (0.0, 0.0), 0.0), (1.0, (1.0, 4.0), 0.0), (1.0, (1.0, 4.0), 0.5),
     (0.0, (0.0, 0.0), 2.0),
@@ -247,6 +249,7 @@ def test_one_period_equals_numpy(cube8, anchor, kappa, mu) -> None:  # type: ign
     assert (counts["adapted"] > 0) == (mu > 0.0)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_trajectories_equal_numpy(cube8, mu) -> None:  # type: ignore[no-untyped-def]
     """All followers over 600 periods of a moving formation with noisy, dropped

@@ -31,6 +31,7 @@ def times(pl, n=60):
     return np.linspace(0.2, pl.end_s - 0.2, n)
 
 
+@pytest.mark.full
 def test_the_yaw_read_from_two_leaders_is_the_plans():
     pl = plan()
     r0 = complex(*(SHAPE[1, :2] - SHAPE[0, :2]))

@@ -4,6 +4,7 @@ docs/estimation.md §4): leaders exact through any outage, followers with an err
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.linalg import expm
 
 from offboard.estimation.peer_table import XI, Z1, Z2
@@ -35,6 +36,7 @@ def _est(aid: int, t: float, z1: np.ndarray, z2: np.ndarray, xi: np.ndarray,
     return NeighbourEstimate(aid, t, z1, z2, np.zeros(3), xi, leader)
 
 
+@pytest.mark.full
 def test_leader_exact_through_a_long_outage() -> None:
     """A leader on the exosystem with a PD offset: the prediction 5 s later equals the
     exosystem's state plus the PD loop's decayed offset, and is never dropped (max_age 1 s)."""
@@ -97,6 +99,7 @@ def test_max_age_caps_followers() -> None:
     assert pred.get_at(5, 0.1) is not None and pred.get_at(5, 0.12) is None
 
 
+@pytest.mark.full
 def test_error_accel_gain_bounds_the_loop() -> None:
     """c_r bounds |[−k_p, −k_v] e^{As} x| / |x| over s, for random x and s."""
     kp, kv = FOL

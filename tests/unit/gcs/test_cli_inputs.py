@@ -140,6 +140,7 @@ def test_stats_fall_back_to_a_temp_folder(tmp_path, caplog):
     assert any(where in r.getMessage() for r in caplog.records)
 
 
+@pytest.mark.full
 def test_vehicle_sim_without_a_key_warns_once(capfd):
     """One WARNING line as a simulator without a key starts (a subprocess: the run installs
     signal handlers), none when it is refused."""

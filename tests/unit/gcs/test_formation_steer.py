@@ -27,6 +27,7 @@ def waypoint(cmd) -> dict:
     return wp
 
 
+@pytest.mark.full
 def test_every_menu_choice_moves_the_formation_from_its_next_rest():
     t = 2.0  # course8 holds at its first waypoint (2, 2, 4) until 10 s
     for choice, _ in CHOICES[:10]:

@@ -212,6 +212,7 @@ def test_scenario_from_text_is_the_file_scenario() -> None:
     assert scenario_from_text(text, path).path == load_scenario(path).path
 
 
+@pytest.mark.full
 def test_local_sweep_does_not_import_dask() -> None:
     code = ("import sys, gcs.cli, gcs.sweep.cli, gcs.sweep.local; "
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'dask', 'distributed'}))")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from gcs.mission.inproc import round_estimate, round_estimates, wire_to_command, wire_to_commands
@@ -125,6 +126,7 @@ def test_status_rows_written_at_once() -> None:
     assert not ser.fallback[0].any() and not ser.fallback[2].any()  # other rows untouched
 
 
+@pytest.mark.full
 def test_followers_given_the_batch_equal_followers_given_dicts() -> None:
     """A follower handed the runner's batch of every agent's estimates (published_batch)
     flies the same bits as one handed its peers' estimates one by one (round_estimates,

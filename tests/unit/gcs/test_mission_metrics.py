@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from gcs.report.mission_metrics import leader_yaw, mission_metrics, yawed_desired
 from offboard.estimation.bearing import formation_from_scenario
@@ -78,6 +79,7 @@ def test_transit_error_is_over_the_window_only_and_a_short_run_is_not_complete()
     assert cut["mission_completed"] is False and cut["mission_time_s"] is None
 
 
+@pytest.mark.full
 def test_the_mission_table_and_path_plot(tmp_path):
     from gcs.report.comparison import mission_table
     from gcs.report.plots import plot_mission_path

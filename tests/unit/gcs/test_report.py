@@ -123,6 +123,7 @@ def test_paper_paragraph_uses_the_run(inputs: tuple[dict, dict]) -> None:
     )
 
 
+@pytest.mark.full
 def test_write_report_writes_markdown_and_plots(inputs: tuple[dict, dict], tmp_path: Path) -> None:
     metrics, series = inputs
     seeds = {m: [metrics[m]] * 3 for m in metrics}

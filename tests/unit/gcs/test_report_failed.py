@@ -132,6 +132,7 @@ def figures(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
     return saved
 
 
+@pytest.mark.full
 def test_zoom_legend_leaves_the_closest_point_visible(
     finished: tuple[dict, dict], figures: list[Any], tmp_path: Path
 ) -> None:
@@ -163,6 +164,7 @@ def test_energy_labels_do_not_overlap(finished: tuple[dict, dict], figures: list
                 assert not boxes[i].overlaps(boxes[j]), (ax.get_title(), i, j)
 
 
+@pytest.mark.full
 def test_snapshot_title_and_legend_give_one_number(figures: list[Any], tmp_path: Path) -> None:
     s = _series(2.0, 0.3)
     # the recorded distance differs from the centre-to-centre distance of the positions

@@ -133,6 +133,7 @@ def _check_axes(fig: Any) -> int:
     return n
 
 
+@pytest.mark.full
 def test_every_axis_of_every_figure_has_a_label_and_unit(
     figures: list[Any], tmp_path: Path
 ) -> None:
@@ -167,6 +168,7 @@ def old_plots(monkeypatch: pytest.MonkeyPatch) -> None:
         monkeypatch.setattr(plots, name, lambda *a, **k: None)
 
 
+@pytest.mark.full
 def test_each_figure_names_its_window_and_place_in_the_record(
     old_plots: None, tmp_path: Path
 ) -> None:
@@ -209,6 +211,7 @@ def test_without_the_writer_the_report_says_so_and_writes_no_gif(
     assert ".gif" not in text and "(paths_rcbf.png)" in text
 
 
+@pytest.mark.full
 def test_the_gif_shows_the_window_around_the_closest_approach(tmp_path: Path) -> None:
     s = _series(dip_t=3.0, n=80)  # 0..7.9 s: the whole ±3 s window fits
     clip = animation.animate_closest(s, tmp_path / "a.gif", "x", FOLLOWERS, IDS, _world())

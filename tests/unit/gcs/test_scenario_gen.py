@@ -32,6 +32,7 @@ def _load(text: str):
     return parse_scenario(tomllib.loads(text), "generated")
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("shape", list(Shape))
 @pytest.mark.parametrize(("n", "n_lead"), [(3, 2), (8, 2), (20, 3), (30, 4)])
 def test_every_shape_loads(shape: Shape, n: int, n_lead: int) -> None:
@@ -57,6 +58,7 @@ def test_grid_sizes_and_leaders_spread() -> None:
     assert np.linalg.norm(v[lead[0]] - v[lead[1]]) == pytest.approx(9.0 * np.sqrt(3))
 
 
+@pytest.mark.full
 def test_scramble_is_seeded() -> None:
     a = _args("grid", "--agents", "27", "--leaders", "4", "--scramble", "7")
     b = _args("grid", "--agents", "27", "--leaders", "4", "--scramble", "8")
@@ -82,6 +84,7 @@ def test_mix_and_shrink() -> None:
     assert np.abs(full.initial_positions() - full.vertices()).max() > 1.0
 
 
+@pytest.mark.full
 def test_explicit_k_and_range_graph() -> None:
     doc, k = build(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1",
                          "--k", "8"))

@@ -34,6 +34,7 @@ def _touching(cells: frozenset[tuple[int, int]], pts: np.ndarray) -> set[tuple[i
     return {c for c, h in zip(drawn, hit, strict=True) if h}
 
 
+@pytest.mark.full
 def test_polygon_outline_from_above_follows_its_edges() -> None:
     wc = world_cells(World(geofence=FENCE), "xy", FIT)
     outline = wc.fence_h | wc.fence_v

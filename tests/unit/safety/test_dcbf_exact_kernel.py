@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from reference.close import assert_close
 
 from offboard.safety.dcbf.exact_kernel import NO_EXACT, pre_solve_kernel
@@ -65,6 +66,7 @@ def _reference(u_nom, g, rhs, k, lgv, lfv, v, uset, a_u, lo_u, hi_u):  # type: i
     return clf_rhs, (u, delta)
 
 
+@pytest.mark.full
 def test_pre_solve_kernel_equals_the_numpy_formulation() -> None:
     uset = input_set_of(SC.controller, SC.vehicle)
     a_u, lo_u, hi_u = uset.rows()

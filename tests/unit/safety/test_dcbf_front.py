@@ -81,6 +81,7 @@ def _assert_same_run(a: MissionResult, b: MissionResult) -> None:
             assert repr(v) == repr(mb[k]), k
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(
     ("name", "duration", "land_at"),
     [("cube8", 4.0, None), ("cube8_noise5", 4.0, None), ("grid12", 3.0, None),
@@ -99,6 +100,7 @@ def test_missions_in_one_call_equal_part_by_part(
     assert parts_calls["composed"] == fused_calls["front"]
 
 
+@pytest.mark.full
 def test_predicted_pairs_and_solver_steps_are_covered(monkeypatch: pytest.MonkeyPatch) -> None:
     """The families above reach the branches the equality is meant for: with dropouts
     some compiled calls carry predicted rows, and in the crossing grid the QP solver

@@ -33,6 +33,7 @@ def _predict(p: np.ndarray, v: np.ndarray, a0: np.ndarray, w: np.ndarray, u: np.
     return p, v, a + w
 
 
+@pytest.mark.full
 def test_rows_are_the_barrier_conditions_of_the_predicted_state() -> None:
     # random planes, states and commands: g·u − r of each row equals its condition on the
     # state predicted by integrating the lagged point mass (scaled by 1/‖g‖; 1e-3 for the

@@ -141,6 +141,7 @@ def random_state(dyn: SwarmDynamics, rng: np.random.Generator) -> None:
     dyn.step_count = int(round(dyn.t / dyn.dt))
 
 
+@pytest.mark.full
 def test_single_steps_equal_numpy_step(cube8) -> None:
     rng = np.random.default_rng(7)
     for trial in range(2000):
