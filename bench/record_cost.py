@@ -33,10 +33,10 @@ rc = main(["--log-level", "error", "mission", "run", sys.argv[2], "--inproc", "-
            str(out), "--duration", sys.argv[3]])
 if sys.argv[4] == "record":
     import numpy as np
-    from gcs.report.metrics import Series
+    from gcs.records.series import RunSeries
     from swarm_common.scenario.model import load_scenario
     with np.load(out / "series.npz") as z:  # in write_run the series is in memory
-        ser = Series(**{k: z[k] for k in z.files})
+        ser = RunSeries(**{k: z[k] for k in z.files})
     doc, sc = json.loads((out / "metrics.json").read_text()), load_scenario(sys.argv[2])
     t0 = time.perf_counter()
     from gcs.records.writer import write_record

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm_common.enums import Method, QPStatus
+from swarm_common.enums import Method, QPRow, QPStatus
 
 
 @dataclass
@@ -30,6 +30,24 @@ class NeighbourEstimate:
     cooperative: bool = True
 
 
+@dataclass(frozen=True)
+class ActiveRows:
+    """The safety QP's rows active at its solution (docs/records.md): each row whose
+    constraint is tight within :data:`offboard.safety.rcbf.clf_rcbf.ACTIVE_TOL_MPS2`
+    (m/s²; barrier rows, relaxed ones included, and input bounds), and the CLF row when
+    its slack δ exceeds it. ``count`` rows, the kinds among them (:class:`QPRow` bits) and
+    the scenario indices of the other agents whose pair rows are among them (in row
+    order, each once). Only a solved QP reports rows: a step the shortcut settled, a
+    fallback and the filters without a QP report none (:data:`NO_ACTIVE`)."""
+
+    count: int = 0
+    kinds: QPRow = QPRow(0)
+    pairs: tuple[int, ...] = ()
+
+
+NO_ACTIVE = ActiveRows()
+
+
 @dataclass
 class AgentStatus:
     """Per-step status record (for the ground station / metrics)."""
@@ -41,14 +59,20 @@ class AgentStatus:
     solve_us: float = 0.0
     h_min: float = float("inf")
     V: float = 0.0
-    slack: float = 0.0
-    violation: float = 0.0
+    slack: float = 0.0  # the CLF row's slack δ (m/s²)
+    violation: float = 0.0  # the barrier rows' relaxation σ (m/s²)
     fallbacks: int = 0  # cumulative
     n_sensed: int = 0
     n_used: int = 0
     comm_ok: bool = True
     input_clipped: bool = False  # setpoint conversion changed u (tilt/thrust clip)
     alarms: int = 0  # AgentAlarm bits raised this step (offboard.safety.monitor)
+    active: ActiveRows = NO_ACTIVE  # the QP's rows active at its solution
+    # the nominal (CLF) control before the safety filter (m/s², ENU; leaders: their u) and
+    # the filter's correction ‖u_f − u_nom‖ (m/s²) of its output u_f (the command but for
+    # the landing idle, the pad floor and the guard's fallback)
+    u_nom: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    correction: float = 0.0
 
 
 @dataclass

@@ -50,6 +50,18 @@ class QPStatus(StrEnum):
         return self in (QPStatus.RELAXED, QPStatus.FALLBACK)
 
 
+class QPRow(IntFlag):
+    """The kinds of a safety QP's rows, as bits: which kinds had a row active (tight) at
+    the solution of a step (``offboard.records.ActiveRows``, docs/records.md)."""
+
+    CLF = 1  # the soft CLF row (active: its slack δ > 0)
+    PAIR = 2  # a barrier row of a pair (another agent, sensed or predicted)
+    GROUND = 4  # a ground-barrier row (dcbf)
+    OBSTACLE = 8  # a row of an obstacle's tangent plane (dcbf, docs/world.md)
+    FENCE = 16  # a row of a geofence face (dcbf)
+    INPUT = 32  # a bound of the input set (dcbf: the polytope; rcbf: the box)
+
+
 class QPSolver(StrEnum):
     """Solver of the followers' safety QPs (``[controller] qp_solver``; docs/safety.md §4b)."""
 

@@ -114,6 +114,17 @@ def _unpack_vec(b: Any, shape: tuple[int, ...]) -> np.ndarray:
     return np.frombuffer(b, dtype="<f4").astype(np.float64).reshape(shape)
 
 
+def _qp_fields(d: dict[str, Any]) -> dict[str, Any]:
+    """A status map's QP report (keys ``act``, ``qpx``) as :class:`Status` fields; none
+    when the sender had none."""
+    if "act" not in d:
+        return {}
+    n, kinds = (int(x) for x in d["act"])
+    x = _unpack_vec(d["qpx"], (6,))
+    return {"qp_active": n, "qp_kinds": kinds, "u_nom": x[0:3], "qp_slack": float(x[3]),
+            "qp_relax": float(x[4]), "correction": float(x[5])}
+
+
 def _opt_bool(d: dict[str, Any], key: str, default: bool) -> bool:
     """An optional boolean field: absent -> ``default``; anything but a bool is malformed."""
     value = d.get(key, default)
@@ -186,6 +197,15 @@ class Status:
     lumped: np.ndarray = field(default_factory=lambda: np.zeros(3))  # z3 + Φζ̂ used, m/s²
     input_clipped: bool = False  # the setpoint conversion changed the commanded u this step
     alarms: int = 0  # enums.AgentAlarm bits the agent raised this step (docs/safety.md)
+    # the safety QP's rows active at its solution (count, enums.QPRow bits), the CLF slack
+    # δ and the relaxation σ (m/s²), the nominal control and the correction ‖u_f − u_nom‖
+    # (m/s²; offboard.records.AgentStatus); absent on the wire from older senders: 0
+    qp_active: int = 0
+    qp_kinds: int = 0
+    qp_slack: float = 0.0
+    qp_relax: float = 0.0
+    u_nom: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    correction: float = 0.0
 
 
 @dataclass
@@ -288,6 +308,10 @@ def encode(obj: Payload) -> bytes:
             "lump": _pack_vec(obj.lumped),
             "clip": bool(obj.input_clipped),
             "alarm": int(obj.alarms),
+            "act": [int(obj.qp_active), int(obj.qp_kinds)],
+            # u_nom | δ, σ, correction: one float32 block
+            "qpx": _pack_vec(np.concatenate([np.ravel(obj.u_nom), [
+                obj.qp_slack, obj.qp_relax, obj.correction]])),
         }
     elif isinstance(obj, Odometry):
         d = {
@@ -382,6 +406,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 lumped=_unpack_vec(d["lump"], (3,)) if "lump" in d else np.zeros(3),
                 input_clipped=bool(d.get("clip", False)),
                 alarms=int(d.get("alarm", 0)),
+                **_qp_fields(d),
             )
         if kind == "odo":
             x = _unpack_vec(d["x"], (6,))

@@ -25,6 +25,7 @@ import numpy as np
 from gcs.mission.recorder import Recorder
 from gcs.mission.run_output import empty_series, formation_yaw, set_truth_rows
 from gcs.mission.score import recorder_series
+from gcs.records.series import MAX_COUNT, STATUS_CODE, UNKNOWN_STATUS, rows_of
 from gcs.report.metrics import Series
 from offboard.estimation.bearing import Formation, formation_from_scenario
 from swarm_common import wire
@@ -64,7 +65,7 @@ class InprocFeed:
         self.shown, self.next_t = b, now + INPROC_PERIOD_S
         if not self.live.watched():
             return
-        rows = Series(**{f: np.array(v[a:b]) for f, v in ser.as_dict().items()})
+        rows = rows_of(ser, slice(a, b))
         set_truth_rows(rows, self.form, rows.p, rows.v, lumped[a:b], thrust[a:b], att[a:b],
                        formation_yaw(self.sc, rows.p, rows.v))
         self.live.publish(rows, att[a:b])
@@ -129,6 +130,11 @@ def feed_hook(sc: Scenario, live: LiveView, latest: Callable[[], FeedState]
             row.h_min[0, a], row.solve_us[0, a] = st.h_min, st.qp_solve_us
             row.fallback[0, a] = st.qp_status in DEGRADED
             row.input_clipped[0, a], row.alarms[0, a] = bool(st.input_clipped), st.alarms & 0xFF
+            row.qp_status[0, a] = STATUS_CODE.get(st.qp_status, UNKNOWN_STATUS)
+            row.qp_active[0, a] = min(max(st.qp_active, 0), MAX_COUNT)
+            row.qp_kinds[0, a], row.u_nom[0, a] = st.qp_kinds & 0xFF, st.u_nom
+            row.clf_slack[0, a], row.qp_relax[0, a] = st.qp_slack, st.qp_relax
+            row.u_corr[0, a] = st.correction
         for i, (e, _) in state.estimate.items():
             if (a := col.get(i)) is not None:
                 row.z1[0, a], row.z2[0, a], row.xi_p[0, a] = e.z1, e.z2, e.xi[:3]

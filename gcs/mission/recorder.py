@@ -22,6 +22,7 @@ import numpy as np
 import zenoh
 
 from gcs.mission.audit import ZENOH_CAP, zenoh_record
+from gcs.records.series import MAX_COUNT, STATUS_CODE, UNKNOWN_STATUS
 from offboard.daemon.link_guard import all_finite
 from offboard.daemon.zenoh.link import ZENOH_ERRORS
 from swarm_common import wire
@@ -86,6 +87,11 @@ class Recorder:
         self.degraded = np.zeros((rows, n), bool)
         self.clipped = np.zeros((rows, n), bool)
         self.alarms = np.zeros((rows, n), np.uint8)  # AgentAlarm bits of step k
+        # the safety filter's report of step k (gcs.records.series.RunSeries)
+        self.qp_status = np.full((rows, n), UNKNOWN_STATUS, np.uint8)
+        self.qp_active, self.qp_kinds = np.zeros((rows, n), np.uint8), np.zeros((rows, n), np.uint8)
+        self.clf_slack, self.qp_relax, self.u_corr = arr(n), arr(n), arr(n)
+        self.u_nom = arr(n, 3)
         self.have_status = np.zeros((rows, n), bool)
         self.zeta_last = np.zeros((n, 6))  # ζ̂ of the estimates of step steps-1
         self.last_status: dict[int, wire.Status] = {}
@@ -200,6 +206,11 @@ class Recorder:
         self.h_min[k, i], self.solve_us[k, i] = st.h_min, st.qp_solve_us
         self.degraded[k, i], self.clipped[k, i] = degraded, bool(st.input_clipped)
         self.alarms[k, i] = int(st.alarms) & 0xFF
+        self.qp_status[k, i] = STATUS_CODE[st.qp_status]
+        self.qp_active[k, i] = min(max(int(st.qp_active), 0), MAX_COUNT)
+        self.qp_kinds[k, i] = int(st.qp_kinds) & 0xFF
+        self.clf_slack[k, i], self.qp_relax[k, i] = st.qp_slack, st.qp_relax
+        self.u_nom[k, i], self.u_corr[k, i] = st.u_nom, st.correction
         self.have_status[k, i] = True
         self.last_status[st.id] = st
         return True

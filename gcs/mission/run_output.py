@@ -5,7 +5,9 @@ directory (``metrics.json`` + ``series.npz``), for in-process and distributed ru
 ``p_des``, ``v_des``, ``z1``, ``z2``, ``lumped_est``, ``lumped_true``, ``u``, ``thrust``,
 ``tilt_deg``, ``min_dist``, ``h_min``, ``solve_us``, ``fallback``, ``input_clipped``,
 ``alarms``: the :class:`~swarm_common.enums.AgentAlarm` bits, uint8; files written before
-it have none, and no reader here needs it).
+it have none, and no reader here needs it), and the safety filter's report of
+:class:`~gcs.records.series.RunSeries` (``qp_status``, ``qp_active``, ``qp_kinds``,
+``clf_slack``, ``qp_relax``, ``u_nom``, ``u_corr``; older files have none).
 ``metrics.json`` is :func:`run_document`: ``scenario``, ``method``, ``seed``, ``metrics`` (keys
 :data:`~gcs.report.metrics.METRIC_KEYS`) and the runner's extras (in process: ``gains``,
 ``collision_pairs``; distributed: ``mode``, ``run``).
@@ -22,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs.records.series import MAX_COUNT, STATUS_CODE, RunSeries, unknown_filter
 from gcs.report.metrics import SafetySpec, Series
 from gcs.report.mission_metrics import (
     leader_yaw,
@@ -55,21 +58,23 @@ def tilt_deg(att: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(np.cos(att[..., 0]) * np.cos(att[..., 1]), -1, 1)))
 
 
-def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> Series:
-    """A :class:`Series` of ``len(t)`` steps for ``n`` agents, every value ``fill``
-    (NaN where rows may stay unknown, as in a recorded run); ``fallback`` and
-    ``input_clipped`` all False, ``alarms`` all 0."""
+def empty_series(t: np.ndarray, n: int, fill: float = 0.0) -> RunSeries:
+    """A :class:`~gcs.records.series.RunSeries` of ``len(t)`` steps for ``n`` agents, every
+    value ``fill`` (NaN where rows may stay unknown, as in a recorded run); ``fallback``
+    and ``input_clipped`` all False, ``alarms`` all 0, the QP's status unknown and no
+    active rows (:func:`~gcs.records.series.unknown_filter`)."""
     kk = len(t)
 
     def z(*shape: int) -> np.ndarray:
         return np.full((kk, *shape), fill)
 
-    return Series(
+    return RunSeries(
         t=t, p=z(n, 3), v=z(n, 3), p_des=z(n, 3), v_des=z(n, 3), z1=z(n, 3), z2=z(n, 3),
         xi_p=z(n, 3),
         lumped_est=z(n, 3), lumped_true=z(n, 3), u=z(n, 3), thrust=z(n), tilt_deg=z(n),
         min_dist=z(), h_min=z(n), solve_us=z(n), fallback=np.zeros((kk, n), bool),
         input_clipped=np.zeros((kk, n), bool), alarms=np.zeros((kk, n), np.uint8),
+        **unknown_filter(kk, n, fill),
     )
 
 
@@ -105,11 +110,12 @@ def set_truth_rows(
 _DEGRADED: dict[str, bool] = {s: s.degraded for s in QPStatus}
 
 
-def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
+def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
     """Row ``r`` of every agent's status, ``outs`` in scenario order: virtual control u
     (m/s²), estimated lumped disturbance, smallest barrier value, QP time (µs), whether the
-    QP degraded, whether the setpoint conversion changed u (tilt/thrust clip) and the
-    agent's safety alarm bits (:class:`~swarm_common.enums.AgentAlarm`)."""
+    QP degraded, whether the setpoint conversion changed u (tilt/thrust clip), the
+    agent's safety alarm bits (:class:`~swarm_common.enums.AgentAlarm`) and the safety
+    filter's report (status, active rows, slacks, u_nom, correction)."""
     ser.u[r] = [o.u for o in outs]
     ser.lumped_est[r] = [o.lumped for o in outs]
     ser.h_min[r] = [o.status.h_min for o in outs]
@@ -117,6 +123,13 @@ def set_agent_rows(ser: Series, r: int, outs: Sequence[AgentOutput]) -> None:
     ser.fallback[r] = [_DEGRADED[o.status.qp_status] for o in outs]
     ser.input_clipped[r] = [bool(o.status.input_clipped) for o in outs]
     ser.alarms[r] = [int(o.status.alarms) for o in outs]
+    ser.qp_status[r] = [STATUS_CODE[o.status.qp_status] for o in outs]
+    ser.qp_active[r] = [min(o.status.active.count, MAX_COUNT) for o in outs]
+    ser.qp_kinds[r] = [int(o.status.active.kinds) for o in outs]
+    ser.clf_slack[r] = [o.status.slack for o in outs]
+    ser.qp_relax[r] = [o.status.violation for o in outs]
+    ser.u_nom[r] = [o.status.u_nom for o in outs]
+    ser.u_corr[r] = [o.status.correction for o in outs]
 
 
 def run_document(

@@ -21,6 +21,7 @@ from gcs.mission.run_output import (
     safety_spec,
     set_truth_rows,
 )
+from gcs.records.series import RunSeries, rows_of
 from gcs.report.metrics import Series, compute_metrics
 from offboard.agent.takeoff import is_ground_start, takeoff_plan
 from offboard.estimation.bearing import Formation, formation_from_scenario
@@ -29,7 +30,7 @@ from vehicle_sim.physics.dynamics import SwarmDynamics
 
 
 def recorder_series(rec: Recorder, sc: Scenario, steps: np.ndarray | None = None,
-                    form: Formation | None = None) -> Series:
+                    form: Formation | None = None) -> RunSeries:
     """The recorded run as the in-process runner's :class:`~gcs.report.metrics.Series`.
 
     Row k holds truth(k), the estimates valid at t_k (published at step k−1), the
@@ -56,6 +57,10 @@ def recorder_series(rec: Recorder, sc: Scenario, steps: np.ndarray | None = None
     ser.h_min[:], ser.solve_us[:] = rec.h_min[steps], rec.solve_us[steps]
     ser.fallback[:], ser.input_clipped[:] = rec.degraded[steps], rec.clipped[steps]
     ser.alarms[:] = rec.alarms[steps]
+    ser.qp_status[:], ser.qp_active[:] = rec.qp_status[steps], rec.qp_active[steps]
+    ser.qp_kinds[:], ser.clf_slack[:] = rec.qp_kinds[steps], rec.clf_slack[steps]
+    ser.qp_relax[:], ser.u_nom[:] = rec.qp_relax[steps], rec.u_nom[steps]
+    ser.u_corr[:] = rec.u_corr[steps]
     # Real time: an agent may skip a stamp (late cycle), leaving a row without its
     # message; hold the last value (lockstep runs have none missing).
     for arr in (ser.z1, ser.z2, ser.xi_p, ser.u, ser.lumped_est, ser.h_min, ser.solve_us):
@@ -82,7 +87,7 @@ def recorded_metrics(
     fallbacks = sum(st.fallbacks for st in rec.last_status.values())
     valid = ~np.isnan(ser.min_dist)
     if not np.all(valid):  # a run cut short: drop the incomplete tail
-        ser = Series(**{k: v[valid] for k, v in ser.as_dict().items()})
+        ser = rows_of(ser, valid)
     metrics = compute_metrics(
         ser, form.follower_idx, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,

@@ -2,6 +2,8 @@
 Foxglove and PlotJuggler, CSV files per vehicle, written with the maintained ``mcap`` and
 ``foxglove-sdk`` packages.
 
+* :mod:`.series` - the run's series with the safety filter's report (status, active rows,
+  slacks, u_nom, ‖u − u_nom‖): what the record's QP topics carry.
 * :mod:`.topics` - the topic scheme: topic and schema names, the ROS 2 message fields.
 * :mod:`.payloads` - CDR bodies of the ROS 2 messages, every step at once (numpy).
 * :mod:`.scene` - the ``/scene`` SceneUpdates: vehicles, bearings, obstacles, geofence.

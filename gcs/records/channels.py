@@ -45,6 +45,7 @@ from gcs.records.scene import (
     vehicle_entities,
     world_entities,
 )
+from gcs.records.series import filter_arrays
 from gcs.report.metrics import Series
 from gcs.report.verdict import pair_barrier
 
@@ -114,11 +115,16 @@ def cdr_messages(s: Series, c: RecordContext) -> CdrMessages:
         "v_err_m_s": _by_agent(_norm(s.z2 - s.v)),
         "d_err_m_s2": _by_agent(_norm(s.lumped_est - s.lumped_true)),
         "track_err_m": _by_agent(_norm(s.p - s.p_des))}, n * k)
+    f = filter_arrays(s)
     qp = pl.cdr_rows(tp.QP_FIELDS, {
         "t_s": t, "u_m_s2": _by_agent(s.u), "h_min_m2": _by_agent(s.h_min),
         "solve_us": _by_agent(s.solve_us), "thrust_n": _by_agent(s.thrust),
-        "tilt_deg": _by_agent(s.tilt_deg), "degraded": _by_agent(s.fallback),
-        "input_clipped": _by_agent(s.input_clipped), "alarms": _by_agent(s.alarms)}, n * k)
+        "tilt_deg": _by_agent(s.tilt_deg), "u_nom_m_s2": _by_agent(f["u_nom"]),
+        "correction_m_s2": _by_agent(f["u_corr"]), "clf_slack_m_s2": _by_agent(f["clf_slack"]),
+        "relax_m_s2": _by_agent(f["qp_relax"]), "degraded": _by_agent(s.fallback),
+        "input_clipped": _by_agent(s.input_clipped), "alarms": _by_agent(s.alarms),
+        "qp_status": _by_agent(f["qp_status"]), "active_rows": _by_agent(f["qp_active"]),
+        "active_kinds": _by_agent(f["qp_kinds"])}, n * k)
     i, j = np.triu_indices(n, k=1)
     h = pair_barrier(s.p, s.v, c.tau_s, c.d_safe_m)
     with np.errstate(invalid="ignore"):

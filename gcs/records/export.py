@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from gcs.records.reader import RecordError, read_arrays
+from gcs.records.series import RunSeries, filter_arrays, unknown_filter
 from gcs.report.metrics import Series
 
 MAX_METRICS_BYTES = 64 << 20  # a metrics.json read back (as swarm_common.inputs)
@@ -42,6 +43,13 @@ VEHICLE_COLUMNS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("fallback", ("qp_degraded",)),
     ("input_clipped", ("input_clipped",)),
     ("alarms", ("alarms",)),
+    ("qp_status", ("qp_status",)),
+    ("qp_active", ("active_rows",)),
+    ("qp_kinds", ("active_kinds",)),
+    ("clf_slack", ("clf_slack_m_s2",)),
+    ("qp_relax", ("relax_m_s2",)),
+    ("u_nom", tuple(f"u{a}_nom_m_s2" for a in XYZ)),
+    ("u_corr", ("correction_m_s2",)),
 )
 PAIRS_HEADER = ("t_s", "i", "j", "distance_m", "h_m2")
 # record field -> Series field (estimate and qp topics)
@@ -50,12 +58,15 @@ _FROM_ESTIMATE = {"p_m": "p", "v_m_s": "v", "p_des_m": "p_des", "v_des_m_s": "v_
                   "d_est_m_s2": "lumped_est", "d_true_m_s2": "lumped_true"}
 _FROM_QP = {"u_m_s2": "u", "thrust_n": "thrust", "tilt_deg": "tilt_deg",
             "h_min_m2": "h_min", "solve_us": "solve_us", "degraded": "fallback",
-            "input_clipped": "input_clipped", "alarms": "alarms"}
-_SERIES = tuple(f.name for f in fields(Series))
+            "input_clipped": "input_clipped", "alarms": "alarms", "u_nom_m_s2": "u_nom",
+            "correction_m_s2": "u_corr", "clf_slack_m_s2": "clf_slack",
+            "relax_m_s2": "qp_relax", "qp_status": "qp_status", "active_rows": "qp_active",
+            "active_kinds": "qp_kinds"}
+_SERIES = tuple(f.name for f in fields(RunSeries))
 _OPTIONAL = {"alarms": np.uint8, "xi_p": float}  # older series.npz files lack them
 
 
-def load_run_folder(run: Path) -> tuple[dict[str, Any], Series]:
+def load_run_folder(run: Path) -> tuple[dict[str, Any], RunSeries]:
     """(``metrics.json`` document, series) of run folder ``run``; ``RecordError``."""
     if not run.is_dir():
         raise RecordError(f"{run}: not a run folder")
@@ -80,15 +91,17 @@ def load_run_folder(run: Path) -> tuple[dict[str, Any], Series]:
     return doc, series_from_arrays(sz, arrays)
 
 
-def series_from_arrays(src: Path, arrays: dict[str, np.ndarray]) -> Series:
-    """A :class:`Series` of ``arrays`` checked for every field and a consistent shape."""
+def series_from_arrays(src: Path, arrays: dict[str, np.ndarray]) -> RunSeries:
+    """A :class:`~gcs.records.series.RunSeries` of ``arrays`` checked for every field and
+    a consistent shape (the filter's report unknown where the file has none)."""
     t, p = arrays.get("t"), arrays.get("p")
     if t is None or p is None or t.ndim != 1 or p.ndim != 3 or p.shape[::2] != (len(t), 3):
         raise RecordError(f"{src}: not a run series (no t (K,) and p (K,N,3))")
     k, n = p.shape[:2]
     out: dict[str, np.ndarray] = {}
+    unknown = unknown_filter(k, n)
     for name in _SERIES:
-        a = arrays.get(name)
+        a = arrays.get(name, unknown.get(name))
         if a is None and name in _OPTIONAL:
             a = np.zeros((k, n, 3)) * np.nan if name == "xi_p" else np.zeros((k, n), np.uint8)
         if a is None:
@@ -96,10 +109,10 @@ def series_from_arrays(src: Path, arrays: dict[str, np.ndarray]) -> Series:
         if a.shape[:1] != (k,) or (a.ndim > 1 and a.shape[1] != n):
             raise RecordError(f"{src}: {name} has shape {a.shape}, not ({k}, {n}, ...)")
         out[name] = a
-    return Series(**out)
+    return RunSeries(**out)
 
 
-def load_record(path: Path) -> tuple[list[int], Series, np.ndarray, np.ndarray]:
+def load_record(path: Path) -> tuple[list[int], RunSeries, np.ndarray, np.ndarray]:
     """(ids, series, pair distances (K,P) m, pair barriers (K,P) m²) of a record file."""
     r = read_arrays(path)
     est, qp = [r.estimate[i] for i in r.ids], [r.qp[i] for i in r.ids]
@@ -108,19 +121,23 @@ def load_record(path: Path) -> tuple[list[int], Series, np.ndarray, np.ndarray]:
         raise RecordError(f"{path}: the topics hold different numbers of steps")
     vals: dict[str, np.ndarray] = {"t": np.asarray(r.pairs["t_s"], float),
                                    "min_dist": np.asarray(r.pairs["min_distance_m"], float)}
+    vals.update(unknown_filter(k, len(r.ids)))  # an older record has no filter's report
     for src, table in ((est, _FROM_ESTIMATE), (qp, _FROM_QP)):
         for f, name in table.items():
-            vals[name] = np.stack([a[f] for a in src], axis=1)
+            if f in (src[0].dtype.names or ()):
+                vals[name] = np.stack([a[f] for a in src], axis=1)
     vals["fallback"] = vals["fallback"].astype(bool)
     vals["input_clipped"] = vals["input_clipped"].astype(bool)
-    return r.ids, Series(**vals), np.asarray(r.pairs["distance_m"]), np.asarray(r.pairs["h_m2"])
+    return (r.ids, RunSeries(**vals), np.asarray(r.pairs["distance_m"]),
+            np.asarray(r.pairs["h_m2"]))
 
 
 def vehicle_table(s: Series, a: int) -> tuple[list[str], np.ndarray]:
     """(header, (K, C) values) of vehicle column ``a``."""
     head, cols = ["t_s"], [np.asarray(s.t, float)[:, None]]
+    vals = {**filter_arrays(s), **s.as_dict()}
     for name, names in VEHICLE_COLUMNS:
-        x = np.asarray(getattr(s, name))[:, a]
+        x = np.asarray(vals[name])[:, a]
         cols.append(x.reshape(len(x), -1).astype(float))
         head.extend(names)
     return head, np.hstack(cols)

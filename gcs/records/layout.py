@@ -2,7 +2,8 @@
 foxglove-sdk's layout types (:mod:`foxglove.layouts`): a 3-D panel on ``/scene``,
 ``/world/tf`` and ``/formation/desired``; a plot of the smallest pair distance and the
 smallest barrier h (``/pairs``); a plot of each follower's position-estimate error
-(``/agent/<id>/estimate.p_err_m``); and a Log panel on ``/events``.
+(``/agent/<id>/estimate.p_err_m``); a plot of each follower's safety-filter correction
+(``/agent/<id>/qp.correction_m_s2``, ‖u − u_nom‖); and a Log panel on ``/events``.
 
     python -m gcs.records.layout [SCENARIO] > docs/foxglove/swarm-layout.json
 """
@@ -37,11 +38,15 @@ def swarm_layout(followers: Sequence[int]) -> fl.Layout:
         paths=[fl.PlotSeries(value=f"{tp.estimate_topic(i)}.p_err_m", label=f"agent {i}",
                              color=PALETTE[k % len(PALETTE)], enabled=True)
                for k, i in enumerate(followers)]))
+    corr = fl.PlotPanel(title="filter correction ||u - u_nom|| (m/s^2)", config=fl.PlotConfig(
+        paths=[fl.PlotSeries(value=f"{tp.qp_topic(i)}.correction_m_s2", label=f"agent {i}",
+                             color=PALETTE[k % len(PALETTE)], enabled=True)
+               for k, i in enumerate(followers)]))
     events = fl.LogPanel(title="events", config=fl.LogConfig(topic_to_render=tp.EVENTS,
                                                             min_log_level=1))
     right = fl.SplitContainer(direction="column", items=[
         fl.SplitItem(proportion=1, content=safety), fl.SplitItem(proportion=1, content=est),
-        fl.SplitItem(proportion=1, content=events)])
+        fl.SplitItem(proportion=1, content=corr), fl.SplitItem(proportion=1, content=events)])
     return fl.Layout(content=fl.SplitContainer(direction="row", items=[
         fl.SplitItem(proportion=3, content=scene), fl.SplitItem(proportion=2, content=right)]))
 

@@ -34,8 +34,9 @@ class RecordError(ValueError):
 class RecordArrays:
     """The decoded ROS 2 topics of a record: ``ids`` (agents in id order), per agent the
     structured arrays of ``estimate`` and ``qp`` (one row per step, fields of
-    :data:`~gcs.records.topics.ESTIMATE_FIELDS` / :data:`~gcs.records.topics.QP_FIELDS`)
-    and ``pairs`` (:func:`~gcs.records.topics.pairs_fields`)."""
+    :data:`~gcs.records.topics.ESTIMATE_FIELDS` / :data:`~gcs.records.topics.QP_FIELDS`, or
+    :data:`~gcs.records.topics.QP_FIELDS_V1` in an older record) and ``pairs``
+    (:func:`~gcs.records.topics.pairs_fields`)."""
 
     ids: list[int]
     estimate: dict[int, np.ndarray]
@@ -90,6 +91,8 @@ def read_arrays(path: Path) -> RecordArrays:
         if m is None:
             continue
         fields = tp.ESTIMATE_FIELDS if m.group(2) == "estimate" else tp.QP_FIELDS
+        if fields is tp.QP_FIELDS and schemas[topic][1] == tp.ros2msg(tp.QP_FIELDS_V1).encode():
+            fields = tp.QP_FIELDS_V1  # a record written before the filter's report
         (est if m.group(2) == "estimate" else qp)[int(m.group(1))] = _decode(
             path, topic, schemas[topic], fields, data)
     ids = sorted(est)

@@ -74,7 +74,9 @@ ESTIMATE_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("d_err_m_s2", "float64", "||d_est - d_true|| (m/s^2)"),
     ("track_err_m", "float64", "||p - p_des|| (m)"),
 )
-QP_FIELDS: tuple[tuple[str, str, str], ...] = (
+# the first version of QP_FIELDS (records written before the filter's report; the reader
+# still reads them)
+QP_FIELDS_V1: tuple[tuple[str, str, str], ...] = (
     ("t_s", "float64", "simulation time (s)"),
     ("u_m_s2", "float64[3]", "virtual control commanded, world ENU (m/s^2)"),
     ("h_min_m2", "float64", "smallest barrier the agent computed from its estimates (m^2)"),
@@ -84,6 +86,19 @@ QP_FIELDS: tuple[tuple[str, str, str], ...] = (
     ("degraded", "bool", "the QP fell back (QPStatus.degraded)"),
     ("input_clipped", "bool", "the setpoint conversion changed u (tilt/thrust clip)"),
     ("alarms", "uint8", "AgentAlarm bits raised at the step"),
+)
+QP_FIELDS: tuple[tuple[str, str, str], ...] = (
+    *QP_FIELDS_V1[:6],
+    ("u_nom_m_s2", "float64[3]", "nominal (CLF) control before the safety filter (m/s^2)"),
+    ("correction_m_s2", "float64", "the filter's correction ||u_f - u_nom|| (m/s^2)"),
+    ("clf_slack_m_s2", "float64", "slack delta of the CLF row (m/s^2)"),
+    ("relax_m_s2", "float64", "relaxation sigma of the barrier rows (m/s^2)"),
+    *QP_FIELDS_V1[6:],
+    ("qp_status", "uint8", "QP status: 0 inactive, 1 solved, 2 relaxed, 3 fallback, "
+     "255 unknown"),
+    ("active_rows", "uint8", "rows active (tight) at the QP's solution (255: 255 or more)"),
+    ("active_kinds", "uint8", "their kinds, QPRow bits: 1 CLF, 2 pair, 4 ground, "
+     "8 obstacle, 16 fence, 32 input bound"),
 )
 
 

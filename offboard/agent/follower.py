@@ -185,10 +185,10 @@ class FollowerAgent(AgentBase):
                                   sel, rp, rv)
         extra = (self.unsensed.pairs(t, sel, self.deso.z1, self.deso.z2)
                  if self.method == Method.DCBF else None)
-        w_raw, w, v_clf, res = self._filter_step(t, sel, rp, rv, rows, have, extra,
-                                                 (own_p, own_v))
+        w_raw, w, v_clf, u_nom, res = self._filter_step(t, sel, rp, rv, rows, have, extra,
+                                                        (own_p, own_v))
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf,
-                             alarms=int(alarms))
+                             alarms=int(alarms), u_nom=u_nom)
         u = self._use_filter_output(res, w, status)
         stuck = self.guard.liveness(
             t, float(np.linalg.norm(self.deso.z1 - self.ref.xi[0:3])),
@@ -257,10 +257,10 @@ class FollowerAgent(AgentBase):
     def _filter_step(
         self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
         have: np.ndarray, extra: PredictedPairs | None, odo: tuple[np.ndarray, np.ndarray],
-    ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
-        """The step from the state to the filter's output: (w_raw, w, V, output). The dcbf
-        filter's in one compiled call (:meth:`_front_step`, with the own odometry ``odo``
-        (p (m), v (m/s)) for the world's rows), the others' part by part
+    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, SafetyOutput]:
+        """The step from the state to the filter's output: (w_raw, w, V, u_nom, output).
+        The dcbf filter's in one compiled call (:meth:`_front_step`, with the own odometry
+        ``odo`` (p (m), v (m/s)) for the world's rows), the others' part by part
         (:meth:`_composed_step`)."""
         if self.method == Method.DCBF and self._front is not None:
             return self._front_step(self._front, t, sel, rp, rv, extra, odo)
@@ -269,9 +269,10 @@ class FollowerAgent(AgentBase):
     def _composed_step(
         self, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray, rows: np.ndarray,
         have: np.ndarray, extra: PredictedPairs | None,
-    ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
+    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, SafetyOutput]:
         """The step from the state to the filter's output, part by part: (w_raw, w, V,
-        output). ``w_raw`` is the lumped-disturbance estimate, ``w`` its saturation."""
+        u_nom, output). ``w_raw`` is the lumped-disturbance estimate, ``w`` its
+        saturation."""
         w_raw = self.deso.lumped()
         # peaking of the high-gain observer: saturate the disturbance estimate used in control
         w = saturate_norm(w_raw, W_MAX)
@@ -280,12 +281,12 @@ class FollowerAgent(AgentBase):
         dp, dv = self._dp[:m], self._dv[:m]  # Δp = p_i − p_j, Δv = v_i − v_j, written here
         pair_rows(sel, rows3(rp), rows3(rv), dp, dv)
         x = self._safety_input(t, clf, w, sel, dp, dv, rows, have, extra)
-        return w_raw, w, clf.V, self.filters[self.method].apply(x)
+        return w_raw, w, clf.V, clf.u_nom, self.filters[self.method].apply(x)
 
     def _front_step(
         self, front: DcbfFront, t: float, sel: np.ndarray, rp: np.ndarray, rv: np.ndarray,
         extra: PredictedPairs | None, odo: tuple[np.ndarray, np.ndarray],
-    ) -> tuple[np.ndarray, np.ndarray, float, SafetyOutput]:
+    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, SafetyOutput]:
         """The dcbf filter's step in one compiled call (:mod:`offboard.safety.dcbf.front`):
         the sensed pairs, then ``extra``, the neighbours predicted into range but not
         sensed. A step the shortcut settles reports the call's time as ``solve_us``."""
@@ -310,7 +311,7 @@ class FollowerAgent(AgentBase):
         else:  # held with world rows: the QP checks u_try against every row itself
             res = front.filt.solve_rows(u_try, clf_terms_from(clf), k, h_min, w,
                                         self.deso.z2, unheld=not held)
-        return lumped[1], w, float(clf[0]), res
+        return lumped[1], w, float(clf[0]), clf[5:8], res
 
     def _leader_accels(self, rows: np.ndarray, have: np.ndarray) -> dict[int, np.ndarray]:
         """The leaders' a* (m/s²) predicted to t_k, by scenario index: the rcbf filter's
@@ -384,17 +385,20 @@ class FollowerAgent(AgentBase):
     def _use_filter_output(
         self, res: SafetyOutput, w: np.ndarray, status: AgentStatus
     ) -> np.ndarray:
-        """The filter's u, recorded in ``status``; a non-finite u brakes on −w (the
-        saturated disturbance estimate; a fallback)."""
+        """The filter's u, recorded in ``status`` with the correction ‖u − u_nom‖ from its
+        nominal control ``status.u_nom`` (m/s²); a non-finite u brakes on −w (the saturated
+        disturbance estimate; a fallback)."""
         u = res.u
         if res.fallback:
             self.fallbacks += 1
         status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
-        status.slack, status.violation = res.slack, res.violation
+        status.slack, status.violation, status.active = res.slack, res.violation, res.active
         if not finite(u):
             u = np.clip(np.nan_to_num(-w), self.u_lo, self.u_hi)
             self.fallbacks += 1
         status.fallbacks = self.fallbacks
+        (a, b, c), (x, y, z) = u.tolist(), status.u_nom.tolist()
+        status.correction = math.sqrt((a - x) * (a - x) + (b - y) * (b - y) + (c - z) * (c - z))
         return u
 
     def current_reference(self, t: float) -> np.ndarray:

@@ -162,7 +162,8 @@ class LeaderAgent(AgentBase):
             self.id, t + self.dt, pv[0], pv[1], self.d_hat.copy(),
             self.current_reference(t + self.dt), True,
         )
-        status = AgentStatus(method=self.method, comm_ok=comm_ok, input_clipped=clipped)
+        status = AgentStatus(method=self.method, comm_ok=comm_ok, input_clipped=clipped,
+                             u_nom=u)  # no filter: its command is its nominal control
         return self._output(sp, u, est, status, self.d_hat.copy())
 
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:

@@ -101,4 +101,10 @@ def status_to_wire(
         lumped=np.asarray(out.lumped, dtype=float),
         input_clipped=bool(st.input_clipped),
         alarms=int(st.alarms),
+        qp_active=int(st.active.count),
+        qp_kinds=int(st.active.kinds),
+        qp_slack=float(st.slack),
+        qp_relax=float(st.violation),
+        u_nom=np.asarray(st.u_nom, dtype=float),
+        correction=float(st.correction),
     )

@@ -16,6 +16,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from offboard.records import NO_ACTIVE, ActiveRows
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, barrier, tangential_term
 from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario.model import ControllerConfig
@@ -79,9 +80,10 @@ class SafetyOutput:
     h_min: float = math.inf  # smallest barrier value h_ij (m²), inf without pairs
     qp_status: QPStatus = QPStatus.INACTIVE
     solve_us: float = 0.0
-    slack: float = 0.0  # CLF slack δ
-    violation: float = 0.0  # RCBF relaxation σ
+    slack: float = 0.0  # CLF slack δ (m/s²)
+    violation: float = 0.0  # relaxation σ of the barrier rows (m/s²)
     fallback: bool = False  # counted in the agent's fallbacks
+    active: ActiveRows = NO_ACTIVE  # the QP's rows active at its solution (the record's)
 
 
 class SafetyFilter(ABC):

@@ -72,3 +72,26 @@ def rows_finite_kernel(
             if not math.isfinite(g[r, c]):
                 return False
     return math.isfinite(lfv) and math.isfinite(v)
+
+
+@kernel
+def tight_rows_kernel(
+    g: np.ndarray, rhs: np.ndarray, k: int, sigma: float, a_u: np.ndarray, lo_u: np.ndarray,
+    hi_u: np.ndarray, u: np.ndarray, tol: float, tight: np.ndarray,
+) -> tuple[int, int]:
+    """The rows active at a solution (u (3,), relaxation σ), for the record: ``tight[n]``
+    (n < the first returned count) the indices r < k of the safety rows ``g_rᵀu + σ ≥ r_r``
+    (g (M,3), rhs (M,), m/s²) met within ``tol`` (``g_rᵀu + σ − r_r ≤ tol``, a relaxed
+    row too), in order; the second count the input rows ``lo ≤ A_U u ≤ hi`` (a_u (U,3))
+    at a bound within ``tol``. Reads only: the solution is not touched."""
+    n = 0
+    for r in range(k):
+        if g[r, 0] * u[0] + g[r, 1] * u[1] + g[r, 2] * u[2] + sigma - rhs[r] <= tol:
+            tight[n] = r
+            n += 1
+    n_in = 0
+    for r in range(a_u.shape[0]):
+        y = a_u[r, 0] * u[0] + a_u[r, 1] * u[1] + a_u[r, 2] * u[2]
+        if y >= hi_u[r] - tol or y <= lo_u[r] + tol:
+            n_in += 1
+    return n, n_in

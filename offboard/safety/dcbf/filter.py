@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from offboard.records import NO_ACTIVE, ActiveRows
 from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from offboard.safety.dcbf.qp import DcbfQP
@@ -29,8 +30,8 @@ from offboard.safety.dcbf.step_kernel import (
     dcbf_params,
 )
 from offboard.safety.dcbf.world_rows import WorldPlanes, plane_rows_into
-from offboard.safety.rcbf.clf_rcbf import ClfTerms
-from swarm_common.enums import Method
+from offboard.safety.rcbf.clf_rcbf import ACTIVE_TOL_MPS2, ClfTerms, QPResult
+from swarm_common.enums import Method, QPRow
 from swarm_common.fastnp import f64, rows3, vec3
 from swarm_common.scenario.model import ControllerConfig, VehicleConfig
 
@@ -51,6 +52,7 @@ GROUND_ACCEL_ERR = 1.0
 # ē also covers the other agent's unknown acceleration, which a static surface has not).
 # At rest a plane is kept at h ≥ ē(T+τ)/γ + ē(T²/2+τT): 0.39 m in cube8
 WORLD_GAMMA = 4.0
+NO_ROWS = np.zeros(0, dtype=np.int64)  # no pair rows of that kind (never written)
 
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> ProjectedInputSet:
@@ -90,6 +92,19 @@ class DcbfFilter(SafetyFilter):
         self._g = np.zeros((2 * n + 2, 3))
         self._rhs = np.zeros(2 * n + 2)
         self._side = np.zeros(3)
+        # where the step's rows come from, for the active rows it reports (_active): the
+        # pair rows' scenario indices (sensed, then predicted), the ground's two rows, and
+        # the world's (its planes, their first row, the agent's position)
+        self._rows_of: tuple[np.ndarray, np.ndarray, bool] = (NO_ROWS, NO_ROWS, False)
+        self._world_of: tuple[WorldPlanes, int, int, np.ndarray] | None = None
+
+    def note_rows(self, sensed: np.ndarray, predicted: np.ndarray, ground: bool) -> None:
+        """The step's pair rows are those of the agents of scenario indices ``sensed``, then
+        ``predicted``, followed by the ground's two rows when ``ground`` (the layout of
+        :func:`~offboard.safety.dcbf.step_kernel.dcbf_filter_rows_into`); no world rows
+        until :meth:`add_world_rows`. Only the report of the active rows reads it."""
+        self._rows_of = (sensed, predicted, ground)
+        self._world_of = None
 
     def configure(self, veh: VehicleConfig, dt: float, world_planes: int = 0) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
@@ -166,6 +181,7 @@ class DcbfFilter(SafetyFilter):
             ground, float(x.z1[2]) if ground and x.z1 is not None else 0.0, float(x.z2[2]),
             float(x.floor_m) if ground and x.floor_m is not None else 0.0,
         )
+        self.note_rows(rows.pairs, NO_ROWS, ground)
         k, h_min = dcbf_filter_rows_into(rows, own, floor, self.rows_state(), self.rows_out())
         return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
 
@@ -180,6 +196,7 @@ class DcbfFilter(SafetyFilter):
         m = planes.at(p)
         if m == 0:
             return k
+        self._world_of = (planes, k, m, p)
         self.qp.fit_rows(k + 2 * m)
         prm = self._params
         plane_rows_into(
@@ -202,8 +219,41 @@ class DcbfFilter(SafetyFilter):
         res = self.qp.solve(u_try, clf, self._g[:k], self._rhs[:k], h_min,
                             lambda: -w - gain * z2, unheld)  # the fallback, formed if taken
         return SafetyOutput(
-            res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
+            res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback,
+            self._active(res),
         )
+
+    def _active(self, res: QPResult) -> ActiveRows:
+        """The rows active at ``res``'s solution by kind (:meth:`note_rows`,
+        :meth:`add_world_rows`): none unless the QP was solved."""
+        if res.tight is None:
+            return NO_ACTIVE
+        kinds, count = QPRow(0), len(res.tight) + res.tight_input
+        if res.tight_input:
+            kinds |= QPRow.INPUT
+        if res.slack > ACTIVE_TOL_MPS2:
+            kinds |= QPRow.CLF
+            count += 1
+        sensed, predicted, ground = self._rows_of
+        n_s = len(sensed)
+        m = n_s + len(predicted)
+        pairs: list[int] = []
+        n_obstacle = -1  # obstacle planes of the step's world rows, counted when needed
+        for r in res.tight.tolist():
+            if r < 2 * m:  # the (C1) rows of the pairs, then their (C2) rows
+                i = r % m
+                j = int(sensed[i]) if i < n_s else int(predicted[i - n_s])
+                kinds |= QPRow.PAIR
+                if j not in pairs:
+                    pairs.append(j)
+            elif ground and r < 2 * m + 2:
+                kinds |= QPRow.GROUND
+            elif self._world_of is not None:  # two rows per plane: obstacles, then fence
+                planes, first, n_planes, p = self._world_of
+                if n_obstacle < 0:
+                    n_obstacle = n_planes - planes.fence_planes_at(p)
+                kinds |= QPRow.OBSTACLE if (r - first) // 2 < n_obstacle else QPRow.FENCE
+        return ActiveRows(count, kinds, tuple(pairs))
 
     def rows_state(self) -> RowsState:
         """The parameters, lag tables and per-pair state of :func:`dcbf_filter_rows_into`,

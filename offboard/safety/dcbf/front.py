@@ -282,6 +282,7 @@ class DcbfFront:
         m = len(meas.sel) + len(unsensed.idx)
         ground = floor is not None
         qp.fit_rows(2 * m + 2 if ground else 2 * m)  # room for every row before the call
+        self.filt.note_rows(meas.sel, unsensed.idx, ground)  # the rows' layout, as the call's
         lumped, w, clf, u_try = np.empty((2, 3)), np.empty(3), np.empty(CLF_OUT), np.empty(3)
         tab = self.acc.table
         k, h_min, held = _front_call(  # the groups in their order, as plain tuples

@@ -105,10 +105,13 @@ class DcbfQP(_ClfRowsQP):
         )
         if delta != NO_EXACT:  # one barrier row active, alone or with the CLF row: exact
             us = (time.perf_counter() - t0) * 1e6
-            return QPResult(u, QPStatus.SOLVED, 0, us, h_min, clf.V, delta, 0.0, False)
+            out = QPResult(u, QPStatus.SOLVED, 0, us, h_min, clf.V, delta, 0.0, False)
+            return self._tight(out, g3, rhs1, k, self.a_u, self.lo_u, self.hi_u)
         sv, x = self._solve_rows(u_nom, clf, clf_rhs, g, rhs, k)
         # the solver's answer up to its tolerance; project() is a no-op inside the set
         u = self.uset.project(x[0:3] if x is not None else np.nan_to_num(fallback_of(brake)))
         out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
+        if x is not None:  # after the clock: the record's bookkeeping is not solve time
+            self._tight(out, g3, rhs1, k, self.a_u, self.lo_u, self.hi_u)
         return out

@@ -105,3 +105,11 @@ class WorldPlanes:
         :attr:`normals` and :attr:`offsets`."""
         return int(world_planes(self.table, self.clearance, self.fence, self.fence_margin, p,
                                 self.range_m, self.normals, self.offsets))
+
+    def fence_planes_at(self, p: np.ndarray) -> int:
+        """How many of :meth:`at`'s half-spaces for ``p`` are the fence's (they follow
+        the obstacles'): its planes within range, by the test :func:`world_planes`
+        makes, in the same operations (so the same answer)."""
+        f, x = self.fence, np.asarray(p, dtype=float)
+        near = f[:, 0] * x[0] + f[:, 1] * x[1] + f[:, 2] * x[2] - f[:, 3] < self.range_m
+        return int(np.count_nonzero(near))

@@ -57,13 +57,17 @@ from scipy import sparse
 
 from offboard.safety.clf_kernel import CLF_OUT, nominal_into
 from offboard.safety.pair_kernel import barrier_kernel, tangential_kernel
-from offboard.safety.qp_rows_kernel import write_rows_kernel
+from offboard.safety.qp_rows_kernel import tight_rows_kernel, write_rows_kernel
 from offboard.safety.solvers.daqp_call import DAQP_INF, daqp_solve
 from offboard.safety.solvers.osqp_call import update_solve
 from swarm_common.enums import QPSolver, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
 
 SOLVED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
+# m/s²: a row counts as active at a solution when met within this (the rows are unit
+# normalised); a DAQP or exact solution meets its active rows to rounding (the exact one
+# to 1e-9), OSQP's polished one to well within it
+ACTIVE_TOL_MPS2 = 1e-4
 
 # a safety QP's fallback input (m/s²), or a function giving it: the filters pass the
 # function, so the brake is formed only on the rare step that takes it
@@ -150,6 +154,10 @@ class QPResult:
     slack: float  # CLF slack δ
     violation: float  # RCBF relaxation σ (0 when the hard problem is feasible)
     fallback: bool
+    # a solved QP's rows active at u (_ClfRowsQP._tight): the indices of the safety rows
+    # among the first k (None: not solved) and the number of input rows at a bound
+    tight: np.ndarray | None = None
+    tight_input: int = 0
 
 
 class _ClfRowsQP:
@@ -258,6 +266,18 @@ class _ClfRowsQP:
         return sv, None
 
     @staticmethod
+    def _tight(out: QPResult, g: np.ndarray, rhs: np.ndarray, k: int, a_u: np.ndarray,
+               lo: np.ndarray, hi: np.ndarray) -> QPResult:
+        """``out`` (a solved QP's result) with the rows active at its u: the first k safety
+        rows of g (unit rows), rhs and the input rows ``lo ≤ a_u u ≤ hi``
+        (:func:`~offboard.safety.qp_rows_kernel.tight_rows_kernel`; reads only)."""
+        idx = np.empty(k, dtype=np.int64)
+        n, n_in = tight_rows_kernel(rows3(g), f64(rhs), k, float(out.violation), a_u, lo, hi,
+                                    vec3(out.u), ACTIVE_TOL_MPS2, idx)
+        out.tight, out.tight_input = idx[:n], int(n_in)
+        return out
+
+    @staticmethod
     def _result(
         sv: int, x: np.ndarray | None, u: np.ndarray, h_min: float, clf: ClfTerms
     ) -> QPResult:
@@ -296,6 +316,7 @@ class SafetyQP(_ClfRowsQP):
         self.brake_gain = brake_gain
         # exact penalty: M must exceed every multiplier, incl. the CLF row's 2ρδ (δ ≤ ~16 m/s²)
         self.lin_sigma = float(violation_linear or max(1e3, 50.0 * rho))
+        self._box_rows = np.eye(3)  # the box as input rows (_tight)
         self._start(max_pairs, limit, rho, violation_weight, eps, solver)
 
     def _setup(self, m: int) -> None:
@@ -360,5 +381,7 @@ class SafetyQP(_ClfRowsQP):
                     self.u_hi)
         out = self._result(sv, x, u, h_min, clf)
         out.solve_us = (time.perf_counter() - t0) * 1e6
+        if x is not None:  # after the clock: the record's bookkeeping is not solve time
+            self._tight(out, n_hat, rhs, k, self._box_rows, self.u_lo, self.u_hi)
         return out
 

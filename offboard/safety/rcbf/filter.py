@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from offboard.records import NO_ACTIVE, ActiveRows
 from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput, saturate_norm
-from offboard.safety.rcbf.clf_rcbf import SafetyQP
+from offboard.safety.rcbf.clf_rcbf import ACTIVE_TOL_MPS2, QPResult, SafetyQP
 from offboard.safety.rcbf.kernel import rcbf_filter_rows_kernel, rcbf_params
-from swarm_common.enums import Method
+from swarm_common.enums import Method, QPRow
 from swarm_common.fastnp import rows3, vec3
 from swarm_common.scenario.model import ControllerConfig
 
@@ -62,5 +63,21 @@ class RcbfFilter(SafetyFilter):
         res = self.qp.solve(x.clf.u_nom + side, x.clf, n_hat, rhs, h,
                             lambda: -x.w - gain * x.z2)  # the fallback, formed if taken
         return SafetyOutput(
-            res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback
+            res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback,
+            active_rows(res, x.pairs),
         )
+
+
+def active_rows(res: QPResult, pairs: np.ndarray) -> ActiveRows:
+    """The rows active at ``res``'s solution: row r the pair with the agent of scenario
+    index ``pairs[r]``, the box's bounds the input rows; none unless the QP was solved."""
+    if res.tight is None:
+        return NO_ACTIVE
+    kinds = QPRow.PAIR if len(res.tight) else QPRow(0)
+    if res.tight_input:
+        kinds |= QPRow.INPUT
+    clf = res.slack > ACTIVE_TOL_MPS2
+    if clf:
+        kinds |= QPRow.CLF
+    return ActiveRows(len(res.tight) + res.tight_input + int(clf), kinds,
+                      tuple(int(pairs[r]) for r in res.tight.tolist()))

@@ -17,7 +17,9 @@ from swarm_common.scenario.model import load_scenario, with_overrides
 CUBE8 = ROOT / "scenarios" / "cube8.toml"
 SERIES_KEYS = ("t", "p", "v", "p_des", "v_des", "z1", "z2", "xi_p", "lumped_est", "lumped_true",
                "u", "thrust", "tilt_deg", "min_dist", "h_min", "solve_us", "fallback",
-               "input_clipped", "alarms")
+               "input_clipped", "alarms",
+               # the safety filter's report (gcs.records.series.RunSeries)
+               "qp_status", "qp_active", "qp_kinds", "clf_slack", "qp_relax", "u_nom", "u_corr")
 
 
 @pytest.fixture(scope="module")

@@ -46,6 +46,13 @@ def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
     # clipped inputs travel in the status record: the same steps as in process
     assert m["input_clipped_steps"] == ref.metrics["input_clipped_steps"]
     assert np.array_equal(ser.input_clipped, ref.series.input_clipped)
+    # so does the safety filter's report (docs/records.md): the same statuses and active
+    # rows, its numbers float32-rounded
+    for name in ("qp_status", "qp_active", "qp_kinds"):
+        assert np.array_equal(getattr(ser, name), getattr(ref.series, name)), name
+    for name in ("clf_slack", "qp_relax", "u_nom", "u_corr"):
+        want = getattr(ref.series, name).astype(np.float32).astype(float)
+        assert np.array_equal(getattr(ser, name), want), name
     assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
     # estimates received over Zenoh equal the in-process published ones (both float32)
     np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)

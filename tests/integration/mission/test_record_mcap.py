@@ -1,8 +1,10 @@
 """The MCAP record of a cube8 run (issue 43; docs/records.md), read back with the ``mcap``
 reader and independent decoders (``mcap-protobuf-support`` for Foxglove's protobuf
 schemas, ``mcap-ros2-support`` for the ROS 2 messages): every channel and schema, one
-message (or transform) per vehicle per step, the poses equal to ``series.npz`` to 1e-9;
-``gcs log export`` round trips; bad input is one line and exit 2, nothing written."""
+message (or transform) per vehicle per step, the poses and the safety filter's report
+(status, active rows, slacks, u_nom, ‖u − u_nom‖) equal to ``series.npz`` to 1e-9, the
+audit's MAVLink commands as events; ``gcs log export`` round trips, an older record too;
+bad input is one line and exit 2, nothing written."""
 
 from __future__ import annotations
 
@@ -22,9 +24,9 @@ from mcap_ros2.decoder import DecoderFactory as Ros2Decoder
 
 from gcs.cli import main as gcs_main
 from gcs.records import topics as tp
-from gcs.records.export import VEHICLE_COLUMNS, read_vehicle_csv
+from gcs.records.export import VEHICLE_COLUMNS, load_record, read_vehicle_csv
+from gcs.records.series import UNKNOWN_STATUS, RunSeries
 from gcs.records.writer import write_record
-from gcs.report.metrics import Series
 from offboard.estimation.bearing import formation_from_scenario
 from swarm_common.scenario.model import load_scenario
 
@@ -41,16 +43,16 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
                     "--duration", str(DURATION_S), "--out", str(out)], cwd=ROOT, check=True,
                    capture_output=True, timeout=120)
     d = np.load(out / "series.npz")
-    ser = Series(**{k: d[k] for k in d.files})
+    ser = RunSeries(**{k: d[k] for k in d.files})
     write_record(out, json.loads((out / "metrics.json").read_text()), ser,
                  load_scenario(str(CUBE8)))
     return out
 
 
 @pytest.fixture(scope="module")
-def series(run: Path) -> Series:
+def series(run: Path) -> RunSeries:
     d = np.load(run / "series.npz")
-    return Series(**{k: d[k] for k in d.files})
+    return RunSeries(**{k: d[k] for k in d.files})
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +85,7 @@ def test_every_channel_and_schema(run: Path) -> None:
     assert summary.statistics is not None and summary.statistics.message_count > 0
 
 
-def test_transforms_one_per_vehicle_per_step_equal_series(decoded, series: Series) -> None:
+def test_transforms_one_per_vehicle_per_step_equal_series(decoded, series: RunSeries) -> None:
     sc = load_scenario(str(CUBE8))
     tf = decoded[tp.TF]
     assert [t for t, _ in tf] == _ns(series.t)
@@ -97,7 +99,7 @@ def test_transforms_one_per_vehicle_per_step_equal_series(decoded, series: Serie
         np.testing.assert_allclose(p, series.p[k], rtol=0, atol=TOL)
 
 
-def test_agent_topics_one_per_step_equal_series(decoded, series: Series) -> None:
+def test_agent_topics_one_per_step_equal_series(decoded, series: RunSeries) -> None:
     sc = load_scenario(str(CUBE8))
     ns = _ns(series.t)
     for a, i in enumerate(sc.ids):
@@ -116,7 +118,75 @@ def test_agent_topics_one_per_step_equal_series(decoded, series: Series) -> None
         np.testing.assert_array_equal([m.alarms for _, m in qp], series.alarms[:, a])
 
 
-def test_pairs_distance_and_barrier(decoded, series: Series) -> None:
+def test_filter_report_on_the_qp_topics_equals_series(decoded, series: RunSeries) -> None:
+    """The QP's status, active rows and their kinds, the slacks, u_nom and ‖u − u_nom‖ of
+    every agent and step, read back, equal the series (the followers' QP binds some
+    rows in these 5 s of cube8; the leaders have no filter: no correction)."""
+    sc = load_scenario(str(CUBE8))
+    for a, i in enumerate(sc.ids):
+        qp = [m for _, m in decoded[tp.qp_topic(i)]]
+        for name, field in (("u_nom_m_s2", "u_nom"), ("correction_m_s2", "u_corr"),
+                            ("clf_slack_m_s2", "clf_slack"), ("relax_m_s2", "qp_relax")):
+            got = np.array([getattr(m, name) for m in qp])
+            np.testing.assert_allclose(got, getattr(series, field)[:, a], rtol=0, atol=TOL)
+        for name, field in (("qp_status", "qp_status"), ("active_rows", "qp_active"),
+                            ("active_kinds", "qp_kinds")):
+            np.testing.assert_array_equal([getattr(m, name) for m in qp],
+                                          getattr(series, field)[:, a])
+    assert (series.qp_status != UNKNOWN_STATUS).all()  # in process: every step's status
+    f = [sc.index_of(i) for i in sc.follower_ids]
+    lead = [sc.index_of(i) for i in sc.leader_ids]
+    assert series.qp_active[:, f].max() > 0 and (series.u_corr[:, f] > 1e-3).any()
+    assert (series.qp_active[:, lead] == 0).all() and (series.u_corr[:, lead] == 0).all()
+    np.testing.assert_array_equal(series.u_nom[:, lead], series.u[:, lead])
+    # a step with active rows is a solved QP, and a QP that was not solved has none
+    solved = series.qp_status == 1
+    assert not (series.qp_active[~solved] > 0).any()
+
+
+def test_audit_commands_are_events(run: Path, series: RunSeries, tmp_path: Path) -> None:
+    """MAVLink commands of ``metrics.json``'s audit (a distributed run's; in process there
+    are none) are ``/events`` lines at their times: the mode asked for, refused ones as
+    warnings; a Zenoh command too."""
+    doc = json.loads((run / "metrics.json").read_text())
+    rec = {"vehicle": 3, "link": "api", "signed": True, "params": [129.0, 6.0, 0.0],
+           "command": "MAV_CMD_DO_SET_MODE", "result": "MAV_RESULT_ACCEPTED",
+           "accepted": True, "reason": ""}
+    doc["audit"] = {"mavlink": [
+        {**rec, "t": 0.5},
+        {**rec, "t": 1.0, "vehicle": 4, "params": [129.0, 4.0, 6.0],
+         "result": "MAV_RESULT_DENIED", "accepted": False, "reason": "not armed"}],
+        "zenoh": [{"t": 2.0, "key": "swarm/cube8/cmd/land", "kind": "land", "agent": 0,
+                   "fields": {"at_s": 2.0}}]}
+    shutil.copy(run / "series.npz", tmp_path / "series.npz")
+    write_record(tmp_path, doc, series, load_scenario(str(CUBE8)))
+    with (tmp_path / "record.mcap").open("rb") as f:
+        reader = make_reader(f, decoder_factories=[ProtobufDecoder()])
+        ev = [(m.log_time, o) for _, ch, m, o in reader.iter_decoded_messages(
+            topics=[tp.EVENTS])]
+    lines = {(o.name, o.message, int(o.level)): t for t, o in ev}
+    assert lines[("agent/3", "MAVLink set mode OFFBOARD: MAV_RESULT_ACCEPTED [link api]",
+                  2)] == 500_000_000
+    assert lines[("agent/4", "MAVLink set mode LAND: MAV_RESULT_DENIED (not armed) "
+                  "[link api]", 3)] == 1_000_000_000
+    assert lines[("gcs", "command land to all agents at 2 s", 2)] == 2_000_000_000
+
+
+def test_a_record_written_before_the_filter_report_still_exports(
+        series: RunSeries, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A record of the first QP message version (no filter report) reads back with the
+    report unknown, the rest as before."""
+    doc = {"scenario": "cube8", "method": "dcbf", "seed": 1, "metrics": {}}
+    with monkeypatch.context() as m:
+        m.setattr(tp, "QP_FIELDS", tp.QP_FIELDS_V1)
+        write_record(tmp_path, doc, series, load_scenario(str(CUBE8)))
+    ids, old, _, _ = load_record(tmp_path / "record.mcap")
+    assert ids == list(load_scenario(str(CUBE8)).ids)
+    np.testing.assert_array_equal(old.u, series.u)
+    assert (old.qp_status == UNKNOWN_STATUS).all() and np.isnan(old.u_corr).all()
+
+
+def test_pairs_distance_and_barrier(decoded, series: RunSeries) -> None:
     sc = load_scenario(str(CUBE8))
     tau, d = sc.controller.tau_safe_s, sc.controller.d_safe_m
     pairs = decoded[tp.PAIRS]
@@ -134,7 +204,7 @@ def test_pairs_distance_and_barrier(decoded, series: Series) -> None:
     assert len(pairs[0][1].i) == sc.n * (sc.n - 1) // 2
 
 
-def test_scene_vehicles_and_bearings(decoded, series: Series) -> None:
+def test_scene_vehicles_and_bearings(decoded, series: RunSeries) -> None:
     sc = load_scenario(str(CUBE8))
     form = formation_from_scenario(sc)
     scene = decoded[tp.SCENE]
@@ -153,7 +223,7 @@ def test_scene_vehicles_and_bearings(decoded, series: Series) -> None:
         assert dist.max() < TOL
 
 
-def test_desired_and_events(decoded, series: Series) -> None:
+def test_desired_and_events(decoded, series: RunSeries) -> None:
     des = decoded[tp.DESIRED]
     steps = range(0, len(series.t), 5)  # 10 Hz of a 50 Hz run
     assert [t for t, _ in des] == [_ns(series.t)[k] for k in steps]
@@ -169,7 +239,7 @@ def test_record_size_per_second(run: Path) -> None:
     assert (run / "record.mcap").stat().st_size * 60 / DURATION_S < 20e6
 
 
-def test_csv_export_round_trips(run: Path, series: Series, tmp_path: Path,
+def test_csv_export_round_trips(run: Path, series: RunSeries, tmp_path: Path,
                                 capsys: pytest.CaptureFixture[str]) -> None:
     sc = load_scenario(str(CUBE8))
     assert gcs_main(["log", "export", str(run), "--format", "csv", "--out",

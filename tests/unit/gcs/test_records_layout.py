@@ -40,7 +40,9 @@ def test_shipped_layout_is_generated_and_names_record_topics() -> None:
     for v in values:  # every series is topic.field of a topic and a field the record has
         topic, field = v.rsplit(".", 1)
         assert topic in topics
-        names = {n for n, _, _ in (tp.ESTIMATE_FIELDS if topics[topic] == tp.ESTIMATE_SCHEMA
-                                   else tp.pairs_fields(1))}
+        names = {n for n, _, _ in {tp.ESTIMATE_SCHEMA: tp.ESTIMATE_FIELDS,
+                                   tp.QP_SCHEMA: tp.QP_FIELDS}.get(topics[topic],
+                                                                   tp.pairs_fields(1))}
         assert field in names
     assert sum(v.endswith(".p_err_m") for v in values) == len(followers)
+    assert sum(v.endswith(".correction_m_s2") for v in values) == len(followers)

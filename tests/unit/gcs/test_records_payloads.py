@@ -12,7 +12,7 @@ from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoder
 from mcap_ros2._dynamic import generate_dynamic
 
 from gcs.records import topics as tp
-from gcs.records.events import INFO, WARNING, all_events, series_events
+from gcs.records.events import DEBUG, INFO, WARNING, all_events, document_events, series_events
 from gcs.records.payloads import cdr_rows, layout
 from swarm_common.enums import AgentAlarm
 
@@ -30,7 +30,11 @@ def test_qp_rows_decode_independently() -> None:
             "h_min_m2": np.r_[np.inf, np.nan, rng.normal(size=k - 2)],
             "solve_us": rng.uniform(0, 100, k), "thrust_n": rng.uniform(0, 50, k),
             "tilt_deg": rng.uniform(0, 30, k), "degraded": np.arange(k) % 2 == 1,
-            "input_clipped": np.arange(k) % 3 == 0, "alarms": np.arange(k) % 16}
+            "input_clipped": np.arange(k) % 3 == 0, "alarms": np.arange(k) % 16,
+            "u_nom_m_s2": rng.normal(size=(k, 3)), "correction_m_s2": rng.uniform(0, 5, k),
+            "clf_slack_m_s2": np.r_[np.nan, rng.uniform(0, 1, k - 1)],
+            "relax_m_s2": rng.uniform(0, 1e-3, k), "qp_status": np.r_[255, np.arange(k - 1) % 4],
+            "active_rows": np.arange(k) * 40, "active_kinds": np.arange(k) * 9 % 64}
     rows = cdr_rows(tp.QP_FIELDS, vals, k)
     dec = _decoder(tp.QP_SCHEMA, tp.QP_FIELDS)
     for r, raw in enumerate(rows):
@@ -41,6 +45,11 @@ def test_qp_rows_decode_independently() -> None:
         assert bool(m.degraded) == bool(vals["degraded"][r])
         assert bool(m.input_clipped) == bool(vals["input_clipped"][r])
         assert m.alarms == vals["alarms"][r]
+        assert list(m.u_nom_m_s2) == vals["u_nom_m_s2"][r].tolist()
+        for f in ("correction_m_s2", "clf_slack_m_s2", "relax_m_s2"):
+            np.testing.assert_array_equal(getattr(m, f), vals[f][r])
+        for f in ("qp_status", "active_rows", "active_kinds"):
+            assert getattr(m, f) == vals[f][r]
 
 
 def test_pairs_rows_decode_independently() -> None:
@@ -94,6 +103,50 @@ def test_document_events_sorted_with_safety_alarms() -> None:
     assert any(e.ns == 40_000_000 and "collision" in e.message for e in ev)
     assert any("failed agents: [4]" in e.message for e in ev)
     assert ev[-1].message.startswith("end: safety verdict unsafe")
+
+
+def test_audit_commands_faults_and_failsafes_are_events() -> None:
+    """MAVLink commands (modes by name, arming, telemetry requests DEBUG, refusals WARNING),
+    Zenoh commands, killed agents and the simulator's failsafes; times clamped to the run;
+    malformed records skipped or shown as they are, never an exception."""
+    rec = {"vehicle": 2, "link": "gcs", "signed": False, "accepted": True, "reason": "",
+           "result": "MAV_RESULT_ACCEPTED"}
+    doc = {"metrics": {}, "audit": {"mavlink": [
+        {**rec, "t": 0.02, "command": "SET_MODE", "params": [1, 4 << 16 | 6 << 24]},
+        {**rec, "t": 0.04, "command": "MAV_CMD_COMPONENT_ARM_DISARM", "params": [0.0, None]},
+        {**rec, "t": -1.0, "command": "MAV_CMD_REQUEST_MESSAGE", "params": [33.0]},
+        {**rec, "t": 99.0, "command": "MAV_CMD_NAV_LAND", "params": [], "accepted": False,
+         "result": "MAV_RESULT_DENIED", "reason": "busy"},
+        {**rec, "t": float("nan"), "command": "MAV_CMD_DO_SET_MODE", "params": "junk"},
+        "not a record"],
+        "zenoh": [{"t": 0.06, "kind": "method", "agent": 3, "fields": {"method": "rcbf"}},
+                  {"t": 0.0, "kind": "outage", "agent": 0, "fields": {"duration_s": 0.5}},
+                  {"kind": "hold", "fields": None}],
+        "mavlink_dropped": 2, "zenoh_dropped": "x"},
+        "run": {"killed_agents": [5], "failed_agents": [],
+                "simulator": {"summary": "stats: steps=9 failsafes=3 throttled=0"}}}
+    ns0, ns1 = 0, 80_000_000
+    got = {(e.ns, e.level, e.name, e.message) for e in document_events(doc, ns0, ns1)}
+    want = {
+        (20_000_000, INFO, "agent/2", "MAVLink set mode LAND: MAV_RESULT_ACCEPTED "
+         "[link gcs, unsigned]"),
+        (40_000_000, INFO, "agent/2", "MAVLink disarm: MAV_RESULT_ACCEPTED [link gcs, "
+         "unsigned]"),
+        (ns0, DEBUG, "agent/2", "MAVLink MAV_CMD_REQUEST_MESSAGE: MAV_RESULT_ACCEPTED "
+         "[link gcs, unsigned]"),
+        (ns1, WARNING, "agent/2", "MAVLink MAV_CMD_NAV_LAND: MAV_RESULT_DENIED (busy) "
+         "[link gcs, unsigned]"),
+        (ns0, INFO, "agent/2", "MAVLink MAV_CMD_DO_SET_MODE: MAV_RESULT_ACCEPTED "
+         "[link gcs, unsigned]"),
+        (60_000_000, INFO, "gcs", "command method rcbf to agent 3"),
+        (ns0, INFO, "gcs", "command outage 0.5 s to all agents"),
+        (ns0, INFO, "gcs", "command hold to all agents"),
+        (ns0, WARNING, "run", "audit: 2 commands past the caps not listed"),
+        (ns1, WARNING, "run", "fault: agents killed on purpose: [5]"),
+        (ns1, WARNING, "run", "vehicle-sim: 3 offboard-loss failsafes"),
+    }
+    assert want <= got
+    assert len(got - want) == 2  # the start and the end
 
 
 def test_world_entities_of_obstacles_and_geofence() -> None:
