@@ -21,7 +21,9 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
   own system id and component, as its own frames forwarded by the vehicle do) dropped
   and counted as ``replayed`` (:mod:`swarm_common.signing`). Before the lock they are
   verified like any frame; after it a stranger's datagram is dropped unparsed
-  (``foreign address``) and nothing is ever sent to it.
+  (``foreign address``) and nothing is ever sent to it. With signing the lock also needs
+  a frame signed after the daemon's start and an address that answered a TIMESYNC
+  challenge (:mod:`offboard.daemon.mavlink.lock_gate`).
 * **unread telemetry**: a datagram made only of messages the daemon does not read is
   dropped from the frames' headers, undecoded and unverified
   (:mod:`offboard.daemon.mavlink.frame_peek`),
@@ -56,6 +58,7 @@ from pymavlink import mavutil  # noqa: E402
 from offboard.daemon.link_guard import DropLog, StampGuard  # noqa: E402
 from offboard.daemon.mavlink.commands import VehicleCommands  # noqa: E402
 from offboard.daemon.mavlink.frame_peek import unread_frames  # noqa: E402
+from offboard.daemon.mavlink.lock_gate import LockGate  # noqa: E402
 from offboard.daemon.mavlink.odometry import Odometry, read_odometry  # noqa: E402
 from offboard.daemon.mavlink.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
 from offboard.daemon.mavlink.url import parse_udpin  # noqa: E402
@@ -135,6 +138,7 @@ class VehicleLink:
         self.odometry: Odometry | None = None
         self.stamps = StampGuard(control_hz, lockstep)
         self.drops = DropLog(f"agent {agent_id}: MAVLink")
+        self.gate = LockGate(agent_id, self.drops, self.signed, challenge=self.sock is not None)
         self.commands = VehicleCommands(agent_id, self._send)  # COMMAND_LONG, ACK, retry
         self.statustexts: list[str] = []
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
@@ -231,9 +235,15 @@ class VehicleLink:
             self.drops.drop(why, reason, now)
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        claim = not self.locked and (sysid, compid) == (self.agent_id, COMP_AUTOPILOT)
+        if claim and not self.gate.fresh(msg, addr):
+            return  # signed before the daemon's start: nothing goes back (lock_gate)
         if not self._admit(sysid, compid, kind, now):
-            if not self.locked and (sysid, compid) == (self.agent_id, COMP_AUTOPILOT):
-                self._ask_heartbeat(addr, now)
+            if claim:
+                self._ask_heartbeat(addr, now, self.gate.answered(msg, addr))
+            return
+        if claim and not self.gate.may_lock(addr):  # no answer to the challenge yet
+            self._ask_heartbeat(addr, now)
             return
         if not self.locked:  # this HEARTBEAT locks the link
             self.locked = True
@@ -257,15 +267,22 @@ class VehicleLink:
             return False
         return True
 
-    def _ask_heartbeat(self, addr: tuple[str, int] | None, now: float) -> None:
+    def _ask_heartbeat(self, addr: tuple[str, int] | None, now: float, now_proven: bool = False
+                       ) -> None:
         """Before the lock, a decoded (and, with signing, verified) frame of this link's
         vehicle names its address: ask it for its HEARTBEAT at once
         (MAV_CMD_REQUEST_MESSAGE) instead of waiting for its 1 Hz stream, which cost
         every run's start up to a second (docs/performance.md, twenty-second round). At
-        most every HEARTBEAT_ASK_S; the lock itself still takes the HEARTBEAT."""
-        if self.sock is None or addr is None or now - self.heartbeat_asked_at < HEARTBEAT_ASK_S:
+        most every HEARTBEAT_ASK_S (at once when ``addr`` has ``now_proven`` itself); the
+        lock itself still takes the HEARTBEAT. A signed link sends its lock challenge first
+        (:mod:`offboard.daemon.mavlink.lock_gate`)."""
+        if self.sock is None or addr is None or (
+                not now_proven and now - self.heartbeat_asked_at < HEARTBEAT_ASK_S):
             return
         self.heartbeat_asked_at = now
+        challenge = self.gate.challenge(addr)
+        if challenge is not None:
+            self._send(challenge, addr)
         ask = mavlink.MAVLink_command_long_message(
             self.agent_id, COMP_AUTOPILOT, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
             mavlink.MAVLINK_MSG_ID_HEARTBEAT, 0, 0, 0, 0, 0, 0)

@@ -35,8 +35,9 @@ from pymavlink import mavutil  # noqa: E402
 M = mavutil.mavlink
 
 # the vehicle messages the daemon reads (offboard.daemon.mavlink.link.VehicleLink._handle), and
-# the answer to its own request
-READ_KINDS = frozenset({"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "STATUSTEXT", "DATA_STREAM"})
+# the answers to its own requests (TIMESYNC: the lock challenge, mavlink.lock_gate)
+READ_KINDS = frozenset({"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "STATUSTEXT", "DATA_STREAM",
+                        "TIMESYNC"})
 # the telemetry of the legacy stream groups (ArduPilot's grouping, which MAVProxy and our
 # simulator use): receiving one of these means the request has not taken (yet). Messages
 # outside every group (MISSION_CURRENT, ...) cannot be stopped this way and never retrigger.

@@ -81,6 +81,10 @@ def test_a_verified_frame_before_the_lock_asks_for_the_heartbeat() -> None:
         assert req.get_srcSystem() == 2 and req.get_srcComponent() == 191
         assert req.get_msgbuf()[2] & M.MAVLINK_IFLAG_SIGNED  # signed like every frame
         assert not link.locked  # the lock still takes the HEARTBEAT
+        # a signed link first challenges the address (lock_gate): the vehicle echoes ts1
+        challenge = next(m for m in got if m.get_type() == "TIMESYNC")
+        vehicle.sendto(bytes(M.MAVLink_timesync_message(1, challenge.ts1).pack(signed)),
+                       ("127.0.0.1", port))
         vehicle.sendto(bytes(M.MAVLink_heartbeat_message(2, 12, 0, 0, 3, 3).pack(signed)),
                        ("127.0.0.1", port))
         assert poll_until(lambda: link.locked)
