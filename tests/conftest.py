@@ -352,6 +352,54 @@ def free_tcp_port() -> int:
     return int(port)
 
 
+class HeldPorts:
+    """Ports a test makes busy itself, bound on 127.0.0.1 as their owners bind them: TCP
+    with ``SO_REUSEADDR`` and listening, as a server and Zenoh do (an earlier test's
+    TIME_WAIT does not fail the bind; the listener makes the port busy all the same)."""
+
+    def __init__(self) -> None:
+        self.socks: list[socket.socket] = []
+
+    def udp(self, port: int) -> bool:
+        """Hold UDP ``port``; False when something else holds it already (busy all the
+        same)."""
+        return self._hold(socket.SOCK_DGRAM, port)
+
+    def tcp(self, port: int) -> bool:
+        """Hold TCP ``port`` (listening); False when something else holds it already."""
+        return self._hold(socket.SOCK_STREAM, port)
+
+    def release(self, i: int = -1) -> None:
+        """Free the ``i``-th port held (in the order held; the last by default)."""
+        self.socks.pop(i).close()
+
+    def close(self) -> None:
+        while self.socks:
+            self.release()
+
+    def _hold(self, kind: int, port: int) -> bool:
+        s = socket.socket(socket.AF_INET, kind)
+        if kind == socket.SOCK_STREAM:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            s.close()
+            return False
+        if kind == socket.SOCK_STREAM:
+            s.listen()
+        self.socks.append(s)
+        return True
+
+
+@pytest.fixture
+def held_ports() -> Iterator[HeldPorts]:
+    """:class:`HeldPorts`, every port freed after the test."""
+    held = HeldPorts()
+    yield held
+    held.close()
+
+
 def stop_processes(procs: list[subprocess.Popen], grace_s: float = 15.0) -> None:
     """SIGTERM every process still running, wait ``grace_s`` for each, then SIGKILL."""
     for p in procs:

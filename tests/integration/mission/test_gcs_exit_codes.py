@@ -6,14 +6,13 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
-from conftest import CUBE8, ROOT, free_port_offset
+from conftest import CUBE8, ROOT, HeldPorts, free_port_offset
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
 from swarm_common.ports import vehicle_ports
@@ -53,25 +52,19 @@ def leftovers(off: int) -> bytes:
 
 
 @pytest.mark.parametrize("kind", ["udp", "tcp"])
-def test_busy_port_exits_2_with_one_line(tmp_path: Path, kind: str) -> None:
+def test_busy_port_exits_2_with_one_line(tmp_path: Path, kind: str,
+                                         held_ports: HeldPorts) -> None:
     off = free_port_offset()
     if kind == "udp":
         port = vehicle_ports(2, off).api_local
-        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        assert held_ports.udp(port)
     else:
-        port = DEFAULT_ZENOH_PORT + off
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        # as a server binds it: free_port_offset accepts a TIME_WAIT left there by an
+        # bound as a server binds it: free_port_offset accepts a TIME_WAIT left there by an
         # earlier test (Zenoh binds the same way); the listener makes it busy all the same
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    s.bind(("127.0.0.1", port))
-    if kind == "tcp":
-        s.listen()
-    try:
-        r = gcs("mission", "run", CUBE8, "--duration", "1", "--port-offset", str(off),
-                "--out", str(tmp_path))
-    finally:
-        s.close()
+        port = DEFAULT_ZENOH_PORT + off
+        assert held_ports.tcp(port)
+    r = gcs("mission", "run", CUBE8, "--duration", "1", "--port-offset", str(off),
+            "--out", str(tmp_path))
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and f"{kind} {port}" in lines[0] and "--port-offset" in lines[0]

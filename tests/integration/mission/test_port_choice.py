@@ -5,15 +5,13 @@ from __future__ import annotations
 
 import json
 import re
-import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import CUBE8, ROOT, _claim_offset, free_port_offset
+from conftest import CUBE8, ROOT, HeldPorts, _claim_offset, free_port_offset
 
 from swarm_common.ports import vehicle_ports
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT
@@ -29,33 +27,8 @@ def leftovers(off: int) -> bytes:
                           capture_output=True).stdout.strip()
 
 
-@pytest.fixture
-def held() -> Iterator[list[socket.socket]]:
-    socks: list[socket.socket] = []
-    yield socks
-    for s in socks:
-        s.close()
-
-
-def _hold(socks: list[socket.socket], kind: int, port: int) -> bool:
-    """Bind (and for TCP listen on) 127.0.0.1:port; False when something else holds it
-    already (busy all the same)."""
-    s = socket.socket(socket.AF_INET, kind)
-    if kind == socket.SOCK_STREAM:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as Zenoh binds it
-    try:
-        s.bind(("127.0.0.1", port))
-    except OSError:
-        s.close()
-        return False
-    if kind == socket.SOCK_STREAM:
-        s.listen()
-    socks.append(s)
-    return True
-
-
 def test_without_an_offset_the_run_chooses_free_ports(tmp_path: Path,
-                                                      held: list[socket.socket]) -> None:
+                                                      held_ports: HeldPorts) -> None:
     """Offset 0's agent-1 API port (UDP 14540) and Zenoh router port (TCP 7447) held: the
     run takes the next block, 1000 (claimed against the other tests, which then leave it
     alone), and flies."""
@@ -63,8 +36,9 @@ def test_without_an_offset_the_run_chooses_free_ports(tmp_path: Path,
     while not _claim_offset(1000):  # another test flies at 1000: wait for its end
         assert time.monotonic() < deadline, "offset 1000 stayed claimed"
         time.sleep(1.0)
-    _hold(held, socket.SOCK_DGRAM, vehicle_ports(1, 0).api_remote)
-    _hold(held, socket.SOCK_STREAM, DEFAULT_ZENOH_PORT)
+    # held here, or by another program (False): busy all the same
+    held_ports.udp(vehicle_ports(1, 0).api_remote)
+    held_ports.tcp(DEFAULT_ZENOH_PORT)
     r = gcs("mission", "run", CUBE8, "--method", "none", "--duration", "1", "--processes", "2",
             "--out", str(tmp_path), "--json")
     assert r.returncode == 0, r.stderr[-3000:]
@@ -80,11 +54,11 @@ def test_without_an_offset_the_run_chooses_free_ports(tmp_path: Path,
 
 @pytest.mark.parametrize("cmd", ["run", "compare"])
 def test_a_forced_busy_offset_exits_2_before_anything_starts(
-    tmp_path: Path, held: list[socket.socket], cmd: str
+    tmp_path: Path, held_ports: HeldPorts, cmd: str
 ) -> None:
     off = free_port_offset()
     port = vehicle_ports(1, off).api_remote
-    assert _hold(held, socket.SOCK_DGRAM, port)
+    assert held_ports.udp(port)
     extra = ["--method", "none"] if cmd == "run" else []
     t0 = time.monotonic()
     r = gcs("mission", cmd, CUBE8, *extra, "--duration", "1", "--port-offset", str(off),

@@ -455,20 +455,14 @@ def test_busy_port_exits_nonzero_naming_it(sim_factory):
     assert len(lines) == 1 and str(port) in lines[0], lines
 
 
-def test_busy_zenoh_port_exits_nonzero(sim_factory):
+def test_busy_zenoh_port_exits_nonzero(sim_factory, held_ports):
     off = free_port_offset()
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     # bound as a server binds it (free_port_offset accepts a TIME_WAIT left by an earlier
     # test there, as Zenoh does); the listener makes the port busy all the same
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    s.bind(("127.0.0.1", DEFAULT_ZENOH_PORT + off))
-    s.listen(1)
-    try:
-        sim = sim_factory([], offset=off, ready=False)
-        rc = sim.proc.wait(20)
-        sim.stop()
-    finally:
-        s.close()
+    assert held_ports.tcp(DEFAULT_ZENOH_PORT + off)
+    sim = sim_factory([], offset=off, ready=False)
+    rc = sim.proc.wait(20)
+    sim.stop()
     assert rc != 0
     lines = [ln for ln in sim.lines if ln.strip()]
     assert len(lines) == 1 and str(DEFAULT_ZENOH_PORT + off) in lines[0], lines

@@ -5,8 +5,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
+from report_runs import D_SAFE, EDGES, ENERGY_U, FOLLOWERS, three_methods
 
 from gcs.report.comparison import (
     compare_legend,
@@ -18,34 +18,6 @@ from gcs.report.plots import snapshot_times
 from gcs.report.safety_table import safety_legend, safety_table
 from gcs.report.shared import closest_approach
 from gcs.report.sweep import seeds_legend, seeds_table
-
-D_SAFE = 0.5
-FOLLOWERS = [2, 3]
-EDGES = [(0, 1), (0, 2), (1, 3), (2, 3)]
-
-
-def _series(dip_t: float, dip_d: float, n: int = 60, dt: float = 0.1) -> dict:
-    """4 vehicles (leaders 0, 1 at 4 m apart; followers 2, 3) whose followers close to
-    ``dip_d`` at ``dip_t``."""
-    t = np.arange(n) * dt
-    p = np.zeros((n, 4, 3))
-    p[:, 0] = (0.0, 0.0, 5.0)
-    p[:, 1] = (4.0, 0.0, 5.0)
-    gap = 2.0 - (2.0 - dip_d) * np.exp(-(((t - dip_t) / 0.3) ** 2))
-    p[:, 2] = np.stack([2.0 - gap / 2, np.full(n, 3.0), np.full(n, 5.0)], axis=1)
-    p[:, 3] = np.stack([2.0 + gap / 2, np.full(n, 3.0), np.full(n, 5.0)], axis=1)
-    zeros = np.zeros_like(p)
-    return {
-        "t": t,
-        "p": p,
-        "v": zeros,
-        "p_des": p + 0.01,
-        "z1": p,
-        "z2": zeros,
-        "lumped_est": zeros,
-        "lumped_true": zeros + 0.01,
-        "min_dist": np.minimum(gap, 4.0),
-    }
 
 
 def _metrics(min_d: float, eu: float, formed: float | None) -> dict:
@@ -71,10 +43,10 @@ def _metrics(min_d: float, eu: float, formed: float | None) -> dict:
 
 @pytest.fixture
 def inputs() -> tuple[dict, dict]:
-    series = {"rcbf": _series(2.0, 0.8), "apf": _series(1.5, 0.2), "none": _series(1.0, 0.1)}
+    series = three_methods()
     metrics = {
-        m: _metrics(float(s["min_dist"].min()), eu, 4.0 if m != "none" else None)
-        for (m, s), eu in zip(series.items(), (300.0, 900.0, 200.0), strict=True)
+        m: _metrics(float(s["min_dist"].min()), ENERGY_U[m], 4.0 if m != "none" else None)
+        for m, s in series.items()
     }
     return metrics, series
 

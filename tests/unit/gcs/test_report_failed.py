@@ -10,30 +10,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from report_runs import D_SAFE, EDGES, ENERGY_U, FOLLOWERS, closing_series, three_methods
 
 from gcs.report import animation, paths, plots
 from gcs.report.comparison import compare_table, paper_differences, write_report
 from gcs.report.safety_table import safety_table
 
-D_SAFE = 0.5
-FOLLOWERS = [2, 3]
-EDGES = [(0, 1), (0, 2), (1, 3), (2, 3)]
 WHY = ("the daemon of agent(s) 1 exited before the start: offboard: cannot open MAVLink "
        "udpin:127.0.0.1:14540: [Errno 98] Address already in use (log: x/offboard-1.log)")
-
-
-def _series(dip_t: float, dip_d: float, n: int = 60, dt: float = 0.1) -> dict:
-    """4 vehicles (leaders 0, 1; followers 2, 3 closing to ``dip_d`` m at ``dip_t`` s)."""
-    t = np.arange(n) * dt
-    p = np.zeros((n, 4, 3))
-    p[:, 0] = (0.0, 0.0, 5.0)
-    p[:, 1] = (4.0, 0.0, 5.0)
-    gap = 2.0 - (2.0 - dip_d) * np.exp(-(((t - dip_t) / 0.3) ** 2))
-    p[:, 2] = np.stack([2.0 - gap / 2, np.full(n, 3.0), np.full(n, 5.0)], axis=1)
-    p[:, 3] = np.stack([2.0 + gap / 2, np.full(n, 3.0), np.full(n, 5.0)], axis=1)
-    z = np.zeros_like(p)
-    return {"t": t, "p": p, "v": z, "p_des": p + 0.01, "z1": p, "z2": z, "lumped_est": z,
-            "lumped_true": z + 0.01, "min_dist": np.minimum(gap, 4.0)}
 
 
 def _metrics(min_d: float, eu: float) -> dict:
@@ -44,9 +28,8 @@ def _metrics(min_d: float, eu: float) -> dict:
 
 @pytest.fixture
 def finished() -> tuple[dict, dict]:
-    series = {"rcbf": _series(2.0, 0.8), "apf": _series(1.5, 0.2), "none": _series(1.0, 0.1)}
-    metrics = {m: _metrics(float(s["min_dist"].min()), eu)
-               for (m, s), eu in zip(series.items(), (300.0, 900.0, 200.0), strict=True)}
+    series = three_methods()
+    metrics = {m: _metrics(float(s["min_dist"].min()), ENERGY_U[m]) for m, s in series.items()}
     return metrics, series
 
 
@@ -106,7 +89,7 @@ def test_report_is_written_with_the_methods_that_finished(
 
 def test_method_count_follows_the_table() -> None:
     """Four methods, one (dcbf) not in the paper's table: the text says 4."""
-    series = {m: _series(1.0 + k, 0.3 + 0.2 * k)
+    series = {m: closing_series(1.0 + k, 0.3 + 0.2 * k)
               for k, m in enumerate(("rcbf", "dcbf", "apf", "none"))}
     metrics = {m: _metrics(float(s["min_dist"].min()), 100.0 * (k + 1))
                for k, (m, s) in enumerate(series.items())}
@@ -166,7 +149,7 @@ def test_energy_labels_do_not_overlap(finished: tuple[dict, dict], figures: list
 
 @pytest.mark.full
 def test_snapshot_title_and_legend_give_one_number(figures: list[Any], tmp_path: Path) -> None:
-    s = _series(2.0, 0.3)
+    s = closing_series(2.0, 0.3)
     # the recorded distance differs from the centre-to-centre distance of the positions
     # by 0.008 m (as the simulator's record can): both texts must still show one number
     s["min_dist"] = s["min_dist"] + 0.008

@@ -1,64 +1,24 @@
 """vehicle_sim.physics.position_control and the AUTO modes, flown on the real dynamics.
 
 One vehicle of ground8 (on its pad at z = 0), stepped as the server steps it: the
-vehicle's update, its command, physics_hz / control_hz dynamics steps."""
+vehicle's update, its command, physics_hz / control_hz dynamics steps
+(:class:`one_vehicle.OneVehicle`)."""
 
 from __future__ import annotations
 
-import math
-from pathlib import Path
-
 import numpy as np
 import pytest
+from one_vehicle import NAN, OneVehicle
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.enums import VehicleMode
-from swarm_common.scenario.model import load_scenario
-from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.nav_flight import OFFBOARD_LIMITS
-from vehicle_sim.physics import geo
-from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.physics.position_control import PositionController, PositionSetpoint, SpeedLimits
-from vehicle_sim.services.command import Command, execute
-from vehicle_sim.vehicle import Vehicle
-
-GROUND8 = Path(__file__).resolve().parents[3] / "scenarios" / "ground8.toml"
-NAN = math.nan
 
 
-class Sim:
-    def __init__(self) -> None:
-        sc = load_scenario(GROUND8)
-        self.dyn = SwarmDynamics(sc, held=True)
-        self.v = Vehicle(1, 0, self.dyn, AutopilotConfig())
-        self.dt = 1.0 / sc.run.control_hz
-        self.sub = sc.substeps_per_control
-        self.t = 0.0
-
-    def step(self, seconds: float) -> None:
-        v = self.v
-        for _ in range(int(round(seconds / self.dt))):
-            v.update(self.t)
-            if v.release_requested:
-                self.dyn.release(v.idx)
-                v.release_requested = False
-            self.dyn.set_command(v.idx, *v.command(self.dt))
-            for _ in range(self.sub):
-                self.dyn.step()
-            self.t += self.dt
-
-    def run(self, cmd: int, *p: float, frame: int = M.MAV_FRAME_GLOBAL) -> int:
-        params = (*p, *(NAN,) * (7 - len(p)))
-        return execute(self.v, Command(cmd, params, 0.0, self.t, None, frame))[0]
-
-    @property
-    def p(self) -> np.ndarray:
-        return self.dyn.p[0].copy()
-
-
-def fly_controller(pc: PositionController, sp: PositionSetpoint, seconds: float) -> Sim:
+def fly_controller(pc: PositionController, sp: PositionSetpoint, seconds: float) -> OneVehicle:
     """The bare controller on a vehicle released in the air at 5 m."""
-    s = Sim()
+    s = OneVehicle()
     s.dyn.p[0, 2] = 5.0
     s.dyn.release(0)
     for _ in range(int(round(seconds / s.dt))):
@@ -70,7 +30,7 @@ def fly_controller(pc: PositionController, sp: PositionSetpoint, seconds: float)
 
 
 def _pc(hover: float | None = None) -> tuple[PositionController, float]:
-    s = Sim()
+    s = OneVehicle()
     d = s.dyn
     true_hover = d.hold_thrust() / d.f_max
     return PositionController(d.g, d.f_max, d.tilt_max, hover or true_hover), true_hover
@@ -106,7 +66,7 @@ def test_wrong_hover_thrust_is_a_transient_the_integrator_removes(factor: float)
     _, true_hover = _pc()
     pc, _ = _pc(true_hover * factor)
     hold = np.array([4.0, 0.0, 5.0])
-    s = Sim()
+    s = OneVehicle()
     s.dyn.p[0] = hold
     s.dyn.release(0)
     dz = []
@@ -122,7 +82,7 @@ def test_wrong_hover_thrust_is_a_transient_the_integrator_removes(factor: float)
 
 
 def test_takeoff_goto_rtl_land_disarm() -> None:
-    s = Sim()
+    s = OneVehicle()
     v = s.v
     home = s.p
     v.params.set("MIS_TAKEOFF_ALT", 3.0)
@@ -134,10 +94,7 @@ def test_takeoff_goto_rtl_land_disarm() -> None:
     s.step(6.0)
     assert v.mode == VehicleMode.HOLD and s.p[2] == pytest.approx(3.0, abs=0.2)
     # DO_REPOSITION 10 m north at 5 m relative altitude (COMMAND_INT, relative frame)
-    lat_e7, lon_e7 = geo.latlon_e7(v.cfg, np.array([home[1] + 10.0, home[0], 0.0]))
-    res = s.run(M.MAV_CMD_DO_REPOSITION, -1, 1, 0, NAN, lat_e7 * 1e-7, lon_e7 * 1e-7, 5.0,
-                frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)  # fmt: skip
-    assert res == M.MAV_RESULT_ACCEPTED
+    assert s.goto(home[1] + 10.0, home[0], 5.0) == M.MAV_RESULT_ACCEPTED
     s.step(10.0)
     assert s.p == pytest.approx(home + [0.0, 10.0, 5.0], abs=0.3)
     assert s.run(M.MAV_CMD_NAV_RETURN_TO_LAUNCH) == M.MAV_RESULT_ACCEPTED
@@ -152,7 +109,7 @@ def test_takeoff_goto_rtl_land_disarm() -> None:
 
 
 def test_land_and_speed_commands() -> None:
-    s = Sim()
+    s = OneVehicle()
     v = s.v
     v.arm(0.0)
     s.run(M.MAV_CMD_NAV_TAKEOFF)
@@ -169,7 +126,7 @@ def test_land_and_speed_commands() -> None:
 
 
 def test_disarmed_vehicle_cannot_rtl_or_reposition() -> None:
-    s = Sim()
+    s = OneVehicle()
     assert s.run(M.MAV_CMD_NAV_RETURN_TO_LAUNCH) == M.MAV_RESULT_DENIED
     assert s.run(M.MAV_CMD_DO_REPOSITION, -1, 1, 0, NAN, NAN, NAN, 500.0) == M.MAV_RESULT_DENIED
     assert s.run(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_DENIED  # no mission stored

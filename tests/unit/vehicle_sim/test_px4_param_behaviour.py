@@ -6,31 +6,22 @@ altitude rule (vehicle_sim.autopilot.modes.takeoff_altitude) and the range check
 
 from __future__ import annotations
 
-import math
-from pathlib import Path
-
 import numpy as np
 import pytest
+from one_vehicle import NAN, OneVehicle
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import px4
 from swarm_common.enums import VehicleMode
-from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot import setpoints
-from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.autopilot.modes import takeoff_altitude
 from vehicle_sim.autopilot.nav_flight import OFFBOARD_LIMITS
 from vehicle_sim.autopilot.params import INT32
-from vehicle_sim.physics import geo
-from vehicle_sim.physics.dynamics import SwarmDynamics
 from vehicle_sim.physics.position_control import PositionSetpoint
-from vehicle_sim.services.command import Command, execute
 from vehicle_sim.services.param import int32_to_wire, wire_to_int32
 from vehicle_sim.vehicle import Vehicle
 
-GROUND8 = Path(__file__).resolve().parents[3] / "scenarios" / "ground8.toml"
 GCS = ("gcs", ("127.0.0.1", 14550))
-NAN = math.nan
 # a measured peak speed against the limit it should fly at: the velocity loop (with its
 # integral) overshoots by up to 20 %; 0.9 × below: the limit is flown, not only a bound
 PEAK_LO, PEAK_HI = 0.9, 1.25
@@ -38,55 +29,6 @@ PEAK_LO, PEAK_HI = 0.9, 1.25
 
 def at_rate(peak: float, limit: float) -> bool:
     return PEAK_LO * limit <= peak <= PEAK_HI * limit
-
-
-class Sim:
-    """One ground8 vehicle; ``vel`` holds its velocity (ENU) after every control step."""
-
-    def __init__(self) -> None:
-        sc = load_scenario(GROUND8)
-        self.dyn = SwarmDynamics(sc, held=True)
-        self.v = Vehicle(1, 0, self.dyn, AutopilotConfig())
-        self.dt = 1.0 / sc.run.control_hz
-        self.sub = sc.substeps_per_control
-        self.t = 0.0
-        self.vel: list[np.ndarray] = []
-        self.pos: list[np.ndarray] = []
-        self.modes: list[VehicleMode] = []
-
-    def step(self, seconds: float) -> None:
-        v = self.v
-        for _ in range(int(round(seconds / self.dt))):
-            v.update(self.t)
-            if v.release_requested:
-                self.dyn.release(v.idx)
-                v.release_requested = False
-            self.dyn.set_command(v.idx, *v.command(self.dt))
-            for _ in range(self.sub):
-                self.dyn.step()
-            self.t += self.dt
-            self.vel.append(self.dyn.v[0].copy())
-            self.pos.append(self.dyn.p[0].copy())
-            self.modes.append(v.mode)
-
-    def run(self, cmd: int, *p: float, frame: int = M.MAV_FRAME_GLOBAL) -> int:
-        params = (*p, *(NAN,) * (7 - len(p)))
-        return execute(self.v, Command(cmd, params, 0.0, self.t, None, frame))[0]
-
-    def goto(self, north: float, east: float, up: float) -> int:
-        """DO_REPOSITION to ENU (east, north, up) from the scenario origin (relative alt)."""
-        lat_e7, lon_e7 = geo.latlon_e7(self.v.cfg, np.array([north, east, 0.0]))
-        return self.run(M.MAV_CMD_DO_REPOSITION, -1, 1, 0, NAN, lat_e7 * 1e-7, lon_e7 * 1e-7,
-                        up, frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)  # fmt: skip
-
-    def trace(self) -> np.ndarray:
-        out = np.array(self.vel)
-        self.vel.clear()
-        return out
-
-    @property
-    def p(self) -> np.ndarray:
-        return self.dyn.p[0].copy()
 
 
 def mav_set(v: Vehicle, name: str, value: float) -> None:
@@ -128,7 +70,7 @@ def test_takeoff_altitude_rule(z_now, requested, mis, expected) -> None:
 
 
 def test_mis_takeoff_alt_is_the_minimum_and_a_higher_request_wins() -> None:
-    s = Sim()
+    s = OneVehicle()
     v = s.v
     assert mav_read(v, "MIS_TAKEOFF_ALT") == pytest.approx(2.5)
     mav_set(v, "MIS_TAKEOFF_ALT", 4.0)
@@ -161,7 +103,7 @@ def test_mis_takeoff_alt_is_the_minimum_and_a_higher_request_wins() -> None:
 # -- speeds --------------------------------------------------------------------------------
 @pytest.mark.parametrize("tko_speed", [1.0, 2.5])
 def test_mpc_tko_speed_is_the_takeoff_climb_rate(tko_speed: float) -> None:
-    s = Sim()
+    s = OneVehicle()
     assert mav_read(s.v, "MPC_TKO_SPEED") == pytest.approx(1.5)
     mav_set(s.v, "MPC_TKO_SPEED", tko_speed)
     mav_set(s.v, "MIS_TAKEOFF_ALT", 10.0)
@@ -172,7 +114,7 @@ def test_mpc_tko_speed_is_the_takeoff_climb_rate(tko_speed: float) -> None:
 
 
 def test_mpc_z_vel_max_up_caps_the_takeoff_speed_and_every_climb() -> None:
-    s = Sim()
+    s = OneVehicle()
     mav_set(s.v, "MPC_TKO_SPEED", 2.5)
     mav_set(s.v, "MPC_Z_VEL_MAX_UP", 1.0)
     mav_set(s.v, "MIS_TAKEOFF_ALT", 3.0)
@@ -185,8 +127,8 @@ def test_mpc_z_vel_max_up_caps_the_takeoff_speed_and_every_climb() -> None:
     assert at_rate(s.trace()[:, 2].max(), 1.0)  # not 3 (the default ceiling)
 
 
-def _airborne(alt: float = 6.0) -> Sim:
-    s = Sim()
+def _airborne(alt: float = 6.0) -> OneVehicle:
+    s = OneVehicle()
     mav_set(s.v, "MIS_TAKEOFF_ALT", alt)
     s.v.arm(0.0)
     s.run(M.MAV_CMD_NAV_TAKEOFF)
@@ -218,7 +160,7 @@ def test_mpc_xy_vel_max_caps_the_cruise_speed(xy_max: float | None) -> None:
 def test_speed_ceilings_reach_the_offboard_velocity_reference() -> None:
     """OFFBOARD flies OFFBOARD_LIMITS (PX4's defaults); after a PARAM_SET the vehicle's
     position controller caps them at the new ceilings from the next step on."""
-    s = Sim()
+    s = OneVehicle()
     far = PositionSetpoint(pos=np.array([1000.0, 1000.0, 1000.0]))
     below = PositionSetpoint(pos=np.array([1000.0, 1000.0, -1000.0]))
     s.step(s.dt)
@@ -254,7 +196,7 @@ def test_mpc_land_speed_is_the_descent_rate_within_the_ceiling(land, dn_max, exp
 
 
 # -- offboard loss ----------------------------------------------------------------------------
-def _offboard(s: Sim) -> float:
+def _offboard(s: OneVehicle) -> float:
     """OFFBOARD entered on two setpoints; returns the time of the last one."""
     m = M.MAVLink_set_position_target_local_ned_message(
         0, 1, 1, M.MAV_FRAME_LOCAL_NED,
@@ -273,7 +215,7 @@ def _offboard(s: Sim) -> float:
 @pytest.mark.parametrize(("act", "mode"), [(4, VehicleMode.LAND), (3, VehicleMode.RTL),
                                            (5, VehicleMode.HOLD)])  # fmt: skip
 def test_com_of_loss_t_and_com_obl_rc_act(act: int, mode: VehicleMode) -> None:
-    s = Sim()
+    s = OneVehicle()
     v = s.v
     mav_set(v, "COM_OF_LOSS_T", 2.0)
     mav_set(v, "COM_OBL_RC_ACT", act)
@@ -303,7 +245,7 @@ def test_gf_max_hor_dist_with_gf_action_rtl() -> None:
 
 
 def test_gf_max_ver_dist_with_gf_action_land() -> None:
-    s = Sim()
+    s = OneVehicle()
     v = s.v
     mav_set(v, "GF_MAX_VER_DIST", 5.0)
     mav_set(v, "GF_ACTION", 5)
@@ -340,7 +282,7 @@ def test_gf_action_none_does_nothing() -> None:
     ],
 )  # fmt: skip
 def test_out_of_range_set_is_refused_and_the_value_kept(name: str, bad: float) -> None:
-    v = Sim().v
+    v = OneVehicle().v
     before = mav_read(v, name)
     spec = v.params.spec(name)
     wire = int32_to_wire(int(bad)) if spec.ptype == INT32 else bad
