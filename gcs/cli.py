@@ -81,7 +81,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
 
         return cli_run(args, sc)
     from gcs.mission.inproc import run_inproc
-    from gcs.mission.launch_spec import LaunchError, check_physics
+    from gcs.mission.launch_spec import LaunchError
+    from gcs.mission.preflight import check_physics
     from gcs.mission.run_output import print_result, write_run
 
     try:  # the observer's gains on this graph, the deadline against --duration

@@ -6,6 +6,8 @@ Modules, from the wire up (only ``app``, ``replay_app`` and ``widgets`` import T
 * :mod:`.mavlink_gcs` - the MAVLink GCS link (UDP 14550+offset), per-system tracking,
   commands with COMMAND_ACK, timeout and retry.
 * :mod:`.zenoh_feed` - truth / status / estimate subscriber, command publisher.
+* :mod:`.zenoh_commands` - the UI's Zenoh commands published through the commander, each
+  logged in the event log.
 * :mod:`.view` - what is shown, as plain data: the snapshot (:mod:`.view.state`), one sim
   clock and merged repeats (:mod:`.view.timeline`), the pre-flight checks
   (:mod:`.view.preflight`), the mission's progress (:mod:`.view.mission_progress`), the

@@ -53,6 +53,7 @@ from swarm_common.world.config import World
 
 from . import group_commands as gc
 from . import navigate as nav
+from . import zenoh_commands as zc
 from .group_commands import COMMAND_REPEAT_S, LAND_LEAD_S
 from .mavlink_gcs import CommandResult
 from .palette import OUTAGES_S, palette_commands
@@ -376,29 +377,9 @@ class DashboardApp(App[int]):
         )
 
     def send_zenoh(self, cmd: Command) -> None:
-        who = "all" if cmd.agent == 0 else f"#{cmd.agent}"
-        what = {
-            "method": f"method {cmd.method}", "outage": f"outage {cmd.duration_s:g} s",
-            "land": f"land-all at t={cmd.at_s:.2f} s" if cmd.at_s >= 0 else "land-all now",
-            "takeoff": f"take-off at t={cmd.at_s:.2f} s" if cmd.at_s >= 0 else "take-off now",
-        }.get(cmd.kind, cmd.kind)
-        if self.commander is None:
-            self.log_event(0, "cmd", f"{what} ({who}): read-only (no command link)", WARNING)
-            return
-        try:
-            key = self.commander.zenoh(cmd)
-        except Exception as exc:  # RuntimeError, ValueError, zenoh.ZError, ...: logged, go on
-            log.warning("publishing %s failed", what, exc_info=True)
-            self.log_event(cmd.agent, "cmd", f"{what} ({who}) failed: {exc}", ERROR)
-            return
-        self.published.append(key)
-        self.log_event(
-            cmd.agent,
-            cmd.kind if cmd.kind in ("outage", "land", "takeoff") else "method",
-            f"{what} ({who}) published",
-            NOTICE,
-        )
-        if cmd.kind in ("land", "takeoff"):
+        """Publish ``cmd`` (:func:`.zenoh_commands.publish`); a take-off or land-all is
+        published again COMMAND_REPEATS times (:func:`.group_commands.repeat_command`)."""
+        if zc.publish(self, cmd) and cmd.kind in ("land", "takeoff"):
             self.run_worker(gc.repeat_command(self, cmd), group="repeat", exit_on_error=False)
 
     def palette_takeoff(self) -> None:

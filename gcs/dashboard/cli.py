@@ -164,7 +164,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     offset = 0 if args.port_offset is None else args.port_offset
     if args.launch:  # free ports (or the forced offset's, checked): LaunchError, exit 2
         from gcs.formation.vehicle import FORMATION_PORT
-        from gcs.mission.launch_spec import resolve_port_offset
+        from gcs.mission.preflight import resolve_port_offset
 
         base = FORMATION_PORT if args.formation_vehicle else None
         offset = resolve_port_offset(sc, args.port_offset, base, gcs_port=True)

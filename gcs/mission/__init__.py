@@ -8,8 +8,11 @@ Entry points:
   and :mod:`.score` scores the record as the in-process runner would.
 
 Support: :mod:`.launch_spec` (ports, endpoints and command lines), :mod:`.ports` (every
-port a run binds, the probe, the free offset), :mod:`.procs` (child processes, the
-spawn worker pool), :mod:`.router`, :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
+port a run binds, the probe, the free offset), :mod:`.preflight` (what a run checks
+before it starts: the port offset, the physics, the formation's liveness), :mod:`.procs`
+(child processes, the spawn worker pool), :mod:`.supervise` (the watch of a started
+distributed run: a child's death, a stall, checkpoints), :mod:`.router`,
+:mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
 :mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
 :mod:`.compare_cli` (``gcs mission compare``);
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);

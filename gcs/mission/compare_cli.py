@@ -60,7 +60,8 @@ def _compare_distributed(
     import numpy as np
 
     from gcs.mission.distributed import MissionError, run_and_score
-    from gcs.mission.launch_spec import LaunchError, resolve_port_offset
+    from gcs.mission.launch_spec import LaunchError
+    from gcs.mission.preflight import resolve_port_offset
 
     forced = getattr(args, "port_offset", None)
     if forced is not None:  # every port bound and released before anything starts

@@ -15,7 +15,6 @@ arms and starts). Topology, for port offset ``o``:
 
 from __future__ import annotations
 
-import logging
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -25,16 +24,13 @@ from typing import Any
 from gcs.mission.ports import (
     PortUse,
     busy_uses,
-    choose_port_offset,
     port_in_use_line,
     swarm_port_uses,
 )
 from gcs.mission.procs import python_entry, remove_on_death
 from offboard.daemon.packing import format_agents
-from offboard.estimation.deso_gains import scenario_gain_problem
 from swarm_common.enums import DefaultStreams
 from swarm_common.ports import GCS_PORT, MAX_ID, vehicle_ports
-from swarm_common.scenario.feasibility import deadline_problem
 from swarm_common.scenario.model import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
@@ -60,8 +56,6 @@ def _max_port_offset() -> int:
     highest = max(max(p.api_local, p.api_remote, p.gcs_local, p.gcs_remote) for p in vp)
     highest = max(highest, DEFAULT_ZENOH_PORT + 1, GCS_PORT)
     return 65535 - highest
-
-log = logging.getLogger(__name__)
 
 
 class LaunchError(RuntimeError):
@@ -354,29 +348,6 @@ class LaunchSpec:
 MAX_PORT_OFFSET = _max_port_offset()
 
 
-def resolve_port_offset(
-    sc: Scenario, forced: int | None, formation_base: int | None = None,
-    gcs_port: bool = False,
-) -> int:
-    """The port offset of a launch of ``sc``: ``forced`` (``--port-offset N``) when every
-    port it gives is free, else :class:`LaunchError` naming the first busy one; with
-    ``forced`` None the first offset 0, 1000, ... whose ports are all free
-    (:func:`gcs.mission.ports.choose_port_offset`, logged). Every port is bound and released
-    here, before anything starts. ``formation_base``: the formation vehicle's UDP port at
-    offset 0, when it is served; ``gcs_port``: also the GCS port (a ground station's)."""
-    if forced is not None:
-        fport = None if formation_base is None else formation_base + forced
-        busy = busy_uses(swarm_port_uses(sc.ids, forced, True, gcs_port, fport))
-        if busy:
-            raise LaunchError(port_in_use_line(busy, can_choose=True))
-        return forced
-    off = choose_port_offset(sc.ids, MAX_PORT_OFFSET, True, gcs_port, formation_base)
-    if off is None:
-        raise LaunchError(f"no port offset 0..{MAX_PORT_OFFSET} has every port of "
-                          f"{len(sc.ids)} agents free; pass one with --port-offset")
-    return off
-
-
 def add_signing_flags(g: Any, launch_note: str = "") -> None:
     """``--signing-key``, ``--no-signing``, ``--unsigned-gcs-link`` (docs/security.md,
     "Defaults"): a launched swarm's MAVLink links are signed unless ``--no-signing``.
@@ -389,21 +360,3 @@ def add_signing_flags(g: Any, launch_note: str = "") -> None:
     g.add_argument("--unsigned-gcs-link", action="store_true",
                    help=f"{launch_note}let unsigned clients (MAVSDK, QGC) request telemetry on "
                    "the GCS port; they can never arm, fly or switch modes")
-
-
-def check_physics(sc: Scenario, duration: float) -> None:
-    """What the loader cannot check (issue 42): the followers' DESO gains on this graph
-    (:func:`~offboard.estimation.deso_gains.scenario_gain_problem`): a
-    :class:`LaunchError` (exit 2), or a warning when the scenario
-    was loaded with --allow-infeasible; and a ``--duration`` that ends the run before
-    ``scenario.formation_deadline_s`` (a warning: a short smoke run is legitimate, but
-    its tracking metrics are empty)."""
-    late = deadline_problem(sc.run.formation_deadline_s, duration, "--duration")
-    if late is not None:
-        log.warning("%s: %s", sc.path, late)
-    problem = scenario_gain_problem(sc)
-    if problem is None:
-        return
-    if not sc.allow_infeasible:
-        raise LaunchError(f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway")
-    log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)

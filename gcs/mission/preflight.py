@@ -1,10 +1,17 @@
-"""What a run checks before it starts that needs the agents' own code (the scenario loader,
-in ``swarm_common``, cannot import it): whether the formation can form at all under the
-dcbf filter (docs/safety.md 5f, "Dense formations: liveness").
+"""What a run checks before it starts, with what the scenario loader (in ``swarm_common``)
+cannot use: the agents' own code and the machine's ports.
 
-:func:`liveness_problem` is one line or None; :func:`warn_liveness` logs it as a WARNING.
-It is a warning, not a refusal: such a run stays safe, it only never forms, and its
-followers then raise the DEADLOCK event in flight.
+* :func:`liveness_problem` - whether the formation can form at all under the dcbf filter
+  (docs/safety.md 5f, "Dense formations: liveness"): one line or None;
+  :func:`warn_liveness` logs it as a WARNING. It is a warning, not a refusal: such a run
+  stays safe, it only never forms, and its followers then raise the DEADLOCK event in
+  flight.
+* :func:`check_physics` - the followers' DESO gains on the scenario's graph (a refusal)
+  and a ``--duration`` that ends before the formation deadline (a warning).
+* :func:`resolve_port_offset` - the port offset of a launch, forced or chosen, every one
+  of its ports free (:mod:`gcs.mission.ports`).
+
+A refusal is a :class:`~gcs.mission.launch_spec.LaunchError` (one line, exit 2).
 """
 
 from __future__ import annotations
@@ -13,10 +20,14 @@ import logging
 
 import numpy as np
 
+from gcs.mission.launch_spec import MAX_PORT_OFFSET, LaunchError
+from gcs.mission.ports import busy_uses, choose_port_offset, port_in_use_line, swarm_port_uses
 from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.deso_gains import scenario_gain_problem
 from offboard.safety.dcbf.liveness import rest_spacing_m
 from swarm_common.enums import Method
-from swarm_common.scenario.model import Scenario
+from swarm_common.scenario.feasibility import deadline_problem
+from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -59,3 +70,44 @@ def warn_liveness(sc: Scenario, method: str) -> bool:
     if line is not None:
         log.warning("%s", line)
     return line is not None
+
+
+def check_physics(sc: Scenario, duration: float) -> None:
+    """What the loader cannot check (issue 42): the followers' DESO gains on this graph
+    (:func:`~offboard.estimation.deso_gains.scenario_gain_problem`): a
+    :class:`LaunchError` (exit 2), or a warning when the scenario
+    was loaded with --allow-infeasible; and a ``--duration`` that ends the run before
+    ``scenario.formation_deadline_s`` (a warning: a short smoke run is legitimate, but
+    its tracking metrics are empty)."""
+    late = deadline_problem(sc.run.formation_deadline_s, duration, "--duration")
+    if late is not None:
+        log.warning("%s: %s", sc.path, late)
+    problem = scenario_gain_problem(sc)
+    if problem is None:
+        return
+    if not sc.allow_infeasible:
+        raise LaunchError(f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway")
+    log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)
+
+
+def resolve_port_offset(
+    sc: Scenario, forced: int | None, formation_base: int | None = None,
+    gcs_port: bool = False,
+) -> int:
+    """The port offset of a launch of ``sc``: ``forced`` (``--port-offset N``) when every
+    port it gives is free, else :class:`LaunchError` naming the first busy one; with
+    ``forced`` None the first offset 0, 1000, ... whose ports are all free
+    (:func:`gcs.mission.ports.choose_port_offset`, logged). Every port is bound and released
+    here, before anything starts. ``formation_base``: the formation vehicle's UDP port at
+    offset 0, when it is served; ``gcs_port``: also the GCS port (a ground station's)."""
+    if forced is not None:
+        fport = None if formation_base is None else formation_base + forced
+        busy = busy_uses(swarm_port_uses(sc.ids, forced, True, gcs_port, fport))
+        if busy:
+            raise LaunchError(port_in_use_line(busy, can_choose=True))
+        return forced
+    off = choose_port_offset(sc.ids, MAX_PORT_OFFSET, True, gcs_port, formation_base)
+    if off is None:
+        raise LaunchError(f"no port offset 0..{MAX_PORT_OFFSET} has every port of "
+                          f"{len(sc.ids)} agents free; pass one with --port-offset")
+    return off

@@ -11,7 +11,8 @@ from typing import Any
 from gcs.exit_codes import EXIT_RUN_FAILED, EXIT_USAGE
 from gcs.formation.vehicle import FORMATION_PORT
 from gcs.mission.distributed import MissionError, run_and_score
-from gcs.mission.launch_spec import LaunchError, SigningChoice, resolve_port_offset
+from gcs.mission.launch_spec import LaunchError, SigningChoice
+from gcs.mission.preflight import resolve_port_offset
 from gcs.mission.run_output import out_dir_problem, print_result
 from gcs.mission.score import default_out_dir, late_steps
 from gcs.records.live import start_live
@@ -24,7 +25,7 @@ log = logging.getLogger(__name__)
 
 def cli_run(args: Any, sc: Scenario) -> int:
     """``gcs mission run SCENARIO`` (distributed), at ``--port-offset`` or, without it, the
-    first offset whose ports are all free (:func:`~gcs.mission.launch_spec.resolve_port_offset`).
+    first offset whose ports are all free (:func:`~gcs.mission.preflight.resolve_port_offset`).
     Exit 2: bad input or a busy port;
     1: a child died or the run stalled; 3: the safety verdict (:mod:`gcs.exit_codes`)."""
     method = str(args.method or sc.controller.method)

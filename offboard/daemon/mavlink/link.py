@@ -3,7 +3,8 @@
 Listens where the vehicle streams its API link (``udpin:127.0.0.1:<api_remote>``, PX4's
 14540 for vehicle 1), talks as system = agent id, component 191 (onboard computer): its own
 HEARTBEAT once a second (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID) and one
-sequence number per packet sent (docs/px4/offboard-component.md).
+sequence number per packet sent (docs/px4/offboard-component.md; the sending half:
+:class:`offboard.daemon.mavlink.sending.LinkSender`).
 
 Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
 
@@ -49,8 +50,8 @@ import select
 import socket
 import struct
 import time
-from collections.abc import Callable, Iterable
-from typing import Any, BinaryIO, SupportsFloat
+from collections.abc import Callable
+from typing import Any, BinaryIO
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -60,6 +61,7 @@ from offboard.daemon.mavlink.commands import VehicleCommands  # noqa: E402
 from offboard.daemon.mavlink.frame_peek import unread_frames  # noqa: E402
 from offboard.daemon.mavlink.lock_gate import LockGate  # noqa: E402
 from offboard.daemon.mavlink.odometry import Odometry, read_odometry  # noqa: E402
+from offboard.daemon.mavlink.sending import LinkSender  # noqa: E402
 from offboard.daemon.mavlink.stream_trim import StreamTrim, stop_streams_message  # noqa: E402
 from offboard.daemon.mavlink.url import parse_udpin  # noqa: E402
 from offboard.daemon.output_burst import OutputBurst  # noqa: E402
@@ -77,23 +79,15 @@ log = logging.getLogger(__name__)
 
 COMP_ONBOARD = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 COMP_AUTOPILOT = mavlink.MAV_COMP_ID_AUTOPILOT1
-# SET_ATTITUDE_TARGET type_mask: ignore the three body rates
-ATT_MASK_IGNORE_RATES = (
-    mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
-    | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
-    | mavlink.ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
-)
 MAX_DATAGRAM = 65535
 PARSE_ERRORS: tuple[type[Exception], ...] = (
     mavlink.MAVError, struct.error, ValueError, IndexError, TypeError,
 )
 
-
-HEARTBEAT_PERIOD_S = 1.0  # the daemon's own HEARTBEAT (MAVLink microservice: 1 Hz)
 HEARTBEAT_ASK_S = 0.5  # s between two requests for the vehicle's HEARTBEAT before the lock
 
 
-class VehicleLink:
+class VehicleLink(LinkSender):
     """MAVLink connection of one offboard daemon to its vehicle."""
 
     def __init__(
@@ -158,10 +152,6 @@ class VehicleLink:
         self.trim = StreamTrim(trim_streams)
 
     # -- receive ------------------------------------------------------------------------
-    def _log(self, buf: bytes) -> None:
-        if self._tlog is not None:
-            self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + buf)
-
     def fileno(self) -> int | None:
         """The socket a ``select`` may wait on (``udpin``); None for pymavlink transports."""
         return None if self.sock is None else self.sock.fileno()
@@ -339,77 +329,9 @@ class VehicleLink:
                          self.agent_id, self.agent_id, self.url, now - start)
         return self.locked
 
-    # -- send ---------------------------------------------------------------------------
-    def _send(self, msg: Any, to: tuple[str, int] | None = None) -> None:
-        """Pack (signed when signing is on) with the link's sequence number, which goes up
-        by one per packed message (mod 256) like ``MAVLink.send`` does, so a receiver's loss
-        count (pymavlink ``mavloss``) is right; then send to the locked vehicle (``to``:
-        the one address a frame before the lock goes to, :meth:`_ask_heartbeat`)."""
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
-        dest = self.peer or to
-        if self.sock is None:
-            self.conn.write(buf)
-        elif dest is None:
-            return  # nothing goes out before the lock
-        elif self.faults is not None:
-            self.faults.send((buf, dest), self._sendto)
-        elif self.burst is not None:
-            self.burst.hold(self._deliver, (buf, dest))
-            return
-        else:
-            self._deliver((buf, dest))
-            return
-        self.sent += 1
-        self._log(buf)
-
-    def _deliver(self, frame: tuple[bytes, tuple[str, int]]) -> None:
-        """Send ``frame`` now (also a held one, :mod:`offboard.daemon.output_burst`): counted and
-        logged if it went."""
-        if self._sendto(frame):
-            self.sent += 1
-            self._log(frame[0])
-
-    def _sendto(self, frame: tuple[bytes, tuple[str, int]]) -> bool:
-        assert self.sock is not None
-        try:
-            self.sock.sendto(frame[0], frame[1])
-        except OSError as exc:  # a full buffer or an ICMP error: the datagram is lost
-            self.drops.drop("send failed", str(exc), time.monotonic())
-            return False
-        return True
-
     @property
     def in_offboard(self) -> bool:
         return px4.split_mode(self.custom_mode)[0] == px4.MAIN_OFFBOARD
-
-    def send_attitude_target(
-        self, time_boot_ms: int, q_wxyz: Iterable[SupportsFloat], thrust_norm: SupportsFloat
-    ) -> None:
-        """SET_ATTITUDE_TARGET (NED/FRD quaternion, normalised thrust, rates ignored)."""
-        q = [float(c) for c in q_wxyz]
-        msg = mavlink.MAVLink_set_attitude_target_message(
-            int(time_boot_ms) & 0xFFFFFFFF, self.agent_id, COMP_AUTOPILOT,
-            ATT_MASK_IGNORE_RATES, q, 0.0, 0.0, 0.0, float(thrust_norm),
-        )
-        self._send(msg)
-
-    def send_heartbeat(self, now: float | None = None) -> bool:
-        """Our own HEARTBEAT as an onboard-computer component (MAV_TYPE_ONBOARD_CONTROLLER,
-        MAV_AUTOPILOT_INVALID, system = agent id, component 191) once per
-        :data:`HEARTBEAT_PERIOD_S`; True when one went out. Signed when signing is on.
-        Nothing goes out on a ``udpin`` link before the vehicle's lock (no peer yet)."""
-        now = time.monotonic() if now is None else now
-        if now - self.heartbeat_sent_at < HEARTBEAT_PERIOD_S:
-            return False
-        if self.sock is not None and self.peer is None:
-            return False
-        self.heartbeat_sent_at = now
-        self._send(mavlink.MAVLink_heartbeat_message(
-            mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
-            mavlink.MAV_STATE_ACTIVE, 3,  # mavlink_version: 3 for MAVLink 1.0 and later
-        ))
-        return True
 
     def close(self) -> None:
         if self.faults is not None:

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from conftest import CUBE8
 
-from gcs.mission.launch_spec import LaunchError, check_physics
+from gcs.mission.launch_spec import LaunchError
+from gcs.mission.preflight import check_physics
 from swarm_common.scenario.feasibility import min_control_hz, sampled_loop_radius
 from swarm_common.scenario.model import (
     InfeasibleScenarioError,

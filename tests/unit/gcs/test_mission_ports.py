@@ -3,15 +3,13 @@ named in one line, the first free offset, and the cause of a child's early exit.
 
 from __future__ import annotations
 
-import socket
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import HeldPorts
 
-from gcs.mission.distributed import MissionError, _early_death
-from gcs.mission.launch_spec import LaunchError, LaunchSpec, resolve_port_offset
+from gcs.mission.launch_spec import LaunchError, LaunchSpec
 from gcs.mission.ports import (
     PortUse,
     bind_failure_line,
@@ -19,7 +17,9 @@ from gcs.mission.ports import (
     port_in_use_line,
     swarm_port_uses,
 )
+from gcs.mission.preflight import resolve_port_offset
 from gcs.mission.procs import ProcessGroup, cause_line
+from gcs.mission.supervise import MissionError, early_death
 from swarm_common.scenario.model import load_scenario
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -38,28 +38,6 @@ def _free_block(start: int, ids: list[int], blocks: int) -> int:
         if all(u.free() for o in offs for u in swarm_port_uses(ids, o)):
             return off
     pytest.skip("no free block of ports near the test offsets")
-
-
-@pytest.fixture
-def held() -> Iterator[list[socket.socket]]:
-    socks: list[socket.socket] = []
-    yield socks
-    for s in socks:
-        s.close()
-
-
-def _hold_udp(socks: list[socket.socket], port: int) -> None:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", port))
-    socks.append(s)
-
-
-def _hold_tcp(socks: list[socket.socket], port: int) -> None:
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as a server binds it
-    s.bind(("127.0.0.1", port))
-    s.listen()
-    socks.append(s)
 
 
 def test_every_port_of_a_swarm_is_listed_with_its_protocol_and_role() -> None:
@@ -81,10 +59,10 @@ def test_every_port_of_a_swarm_is_listed_with_its_protocol_and_role() -> None:
     assert {14650, 14660} <= extra
 
 
-def test_a_busy_port_is_named_in_one_line(held: list[socket.socket]) -> None:
+def test_a_busy_port_is_named_in_one_line(held_ports: HeldPorts) -> None:
     off = _free_block(BASE, [1, 2], 1)
-    _hold_udp(held, 14540 + off)
-    _hold_tcp(held, 7447 + off)
+    assert held_ports.udp(14540 + off)
+    assert held_ports.tcp(7447 + off)
     busy = [u for u in swarm_port_uses([1, 2], off) if not u.free()]
     assert [(u.proto, u.port) for u in busy] == [("TCP", 7447 + off), ("UDP", 14540 + off)]
     line = port_in_use_line(busy[1:])
@@ -93,29 +71,29 @@ def test_a_busy_port_is_named_in_one_line(held: list[socket.socket]) -> None:
     assert "(and 1 more)" in port_in_use_line(busy)
 
 
-def test_the_first_offset_with_every_port_free_is_chosen(held: list[socket.socket]) -> None:
+def test_the_first_offset_with_every_port_free_is_chosen(held_ports: HeldPorts) -> None:
     off = _free_block(BASE, [1, 2], 3)
     assert choose_port_offset([1, 2], 40000, start=off) == off
-    _hold_udp(held, 14541 + off)  # agent 2's API port at the first offset
+    assert held_ports.udp(14541 + off)  # agent 2's API port at the first offset
     assert choose_port_offset([1, 2], 40000, start=off) == off + 1000
-    _hold_tcp(held, 7448 + off + 1000)  # the simulator's Zenoh port at the second
+    assert held_ports.tcp(7448 + off + 1000)  # the simulator's Zenoh port at the second
     assert choose_port_offset([1, 2], 40000, start=off) == off + 2000
     assert choose_port_offset([1, 2], off + 1999, start=off) is None  # none left below
-    held.pop(0).close()
+    held_ports.release(0)
     assert choose_port_offset([1, 2], 40000, start=off) == off  # released: free again
 
 
-def test_a_forced_offset_fails_on_a_busy_port_and_none_chooses(held: list[socket.socket]) -> None:
+def test_a_forced_offset_fails_on_a_busy_port_and_none_chooses(held_ports: HeldPorts) -> None:
     sc = load_scenario(CUBE8)
     off = _free_block(BASE, list(sc.ids), 1)
     assert resolve_port_offset(sc, off) == off
-    _hold_udp(held, 14580 + 7 + off)  # vehicle 8's simulator API port
+    assert held_ports.udp(14580 + 7 + off)  # vehicle 8's simulator API port
     with pytest.raises(LaunchError, match=rf"^udp {14587 + off} \(127\.0\.0\.1, vehicle 8 "):
         resolve_port_offset(sc, off)
     spec = LaunchSpec(sc, off)
     assert spec.busy_ports() == [f"udp {14587 + off} (127.0.0.1, vehicle 8 simulator API port)"]
-    held.pop().close()
-    _hold_udp(held, 14560 + off)  # the formation vehicle's port: busy only when it is served
+    held_ports.release()
+    assert held_ports.udp(14560 + off)  # the formation vehicle's port: busy only when it is served
     assert resolve_port_offset(sc, off) == off
     with pytest.raises(LaunchError, match="formation vehicle"):
         resolve_port_offset(sc, off, formation_base=14560)
@@ -146,12 +124,12 @@ def test_a_bind_failure_names_the_port() -> None:
 
 
 def test_a_daemon_dead_before_the_start_gives_its_cause(tmp_path: Path,
-                                                       held: list[socket.socket]) -> None:
+                                                       held_ports: HeldPorts) -> None:
     """A real child that exits as the daemon does on a busy port: the run's error is one
     line naming the port (a LaunchError, exit 2); on any other cause a MissionError that
     carries the last error line of its log."""
     off = _free_block(BASE, [1], 1)
-    _hold_udp(held, 14540 + off)
+    assert held_ports.udp(14540 + off)
     group = ProcessGroup(tmp_path)
 
     def die(name: str, text: str) -> None:
@@ -163,14 +141,14 @@ def test_a_daemon_dead_before_the_start_gives_its_cause(tmp_path: Path,
 
     try:
         die("offboard-1", "OSError: [Errno 98] Address already in use")
-        err = _early_death(group, [1], ports_of)
+        err = early_death(group, [1], ports_of)
         assert isinstance(err, LaunchError)
         assert str(err).startswith(f"udp {14540 + off} (127.0.0.1, agent 1 API port) is in use")
         assert "\n" not in str(err)
         group.stop()
         group.children.clear()
         die("offboard-2", "offboard: --signing-key: not a key file")
-        err = _early_death(group, [2], ports_of)
+        err = early_death(group, [2], ports_of)
         assert isinstance(err, MissionError) and "\n" not in str(err)
         assert "agent(s) 2 exited before the start: offboard: --signing-key: not a key" in str(err)
     finally:
