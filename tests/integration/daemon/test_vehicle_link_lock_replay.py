@@ -16,11 +16,11 @@ and the daemon's :class:`VehicleLink` on real UDP over 127.0.0.1:
 from __future__ import annotations
 
 import logging
-import socket
 import time
 
 import pytest
 from pymavlink.dialects.v20 import common as M
+from udp_capture import LOCALHOST, drain, udp_socket
 
 from offboard.daemon.mavlink.link import VehicleLink
 from offboard.daemon.mavlink.lock_gate import (
@@ -33,24 +33,7 @@ from swarm_common.signing import generate_key
 
 pytestmark = pytest.mark.timeout(120)
 
-LOCALHOST = "127.0.0.1"
 WAIT_S = 10.0  # a deadline for what the simulator streams at 1 Hz, never a timing claim
-
-
-def _udp(port: int = 0) -> socket.socket:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind((LOCALHOST, port))
-    s.setblocking(False)
-    return s
-
-
-def _drain(sock: socket.socket) -> list[bytes]:
-    out: list[bytes] = []
-    while True:
-        try:
-            out.append(sock.recv(65535))
-        except BlockingIOError:
-            return out
 
 
 def _kinds(datagrams: list[bytes]) -> list[tuple[int, int, str]]:
@@ -69,8 +52,8 @@ def test_a_replayed_capture_does_not_take_the_lock_and_the_vehicle_does(
     args = ["--no-zenoh", "--vehicles", "1", "--signing-key", str(path)]
     sim = sim_factory(args)
     p1 = vehicle_ports(1, sim.offset)
-    capture, gcs = _udp(p1.api_remote), _udp(p1.gcs_remote)
-    relay = _udp()
+    capture, gcs = udp_socket(p1.api_remote), udp_socket(p1.gcs_remote)
+    relay = udp_socket()
     # a signed link for vehicle 1 where the simulator does not stream (vehicle 2's port)
     raced = VehicleLink(f"udpin:{LOCALHOST}:{vehicle_ports(2, sim.offset).api_remote}", 1,
                         50.0, lockstep=False, signing_key=key)  # fmt: skip
@@ -83,13 +66,13 @@ def test_a_replayed_capture_does_not_take_the_lock_and_the_vehicle_does(
             recorded_by and raced.drops.counts.get(UNPROVEN_ADDRESS, 0) >= 1 and challenges
         ):
             if recorded_by is None:  # record until a HEARTBEAT is in
-                recorded += _drain(capture)
+                recorded += drain(capture)
                 if (1, 1, "HEARTBEAT") in _kinds(recorded):
                     recorded_by = time.time()
-            for d in _drain(gcs):  # the live stream, relayed one way at once
+            for d in drain(gcs):  # the live stream, relayed one way at once
                 relay.sendto(d, (LOCALHOST, raced.sock.getsockname()[1]))  # type: ignore[union-attr]
             raced.poll(0.02)
-            challenges += [m for m in M.MAVLink(None).parse_buffer(b"".join(_drain(relay))) or []
+            challenges += [m for m in M.MAVLink(None).parse_buffer(b"".join(drain(relay))) or []
                            if m.get_type() == "TIMESYNC"]
         assert recorded_by is not None
         # fresh signed HEARTBEATs from an address that never echoes the challenge's nonce
@@ -106,7 +89,7 @@ def test_a_replayed_capture_does_not_take_the_lock_and_the_vehicle_does(
     time.sleep(max(0.0, recorded_by + LOCK_CLOCK_TOLERANCE_S + 0.2 - time.time()))
     link = VehicleLink(f"udpin:{LOCALHOST}:{p1.api_remote}", 1, 50.0, lockstep=False,
                        signing_key=key)
-    stranger = _udp()
+    stranger = udp_socket()
     try:
         for d in recorded:
             stranger.sendto(d, (LOCALHOST, p1.api_remote))
@@ -122,7 +105,7 @@ def test_a_replayed_capture_does_not_take_the_lock_and_the_vehicle_does(
         heartbeats = _kinds(recorded).count((1, 1, "HEARTBEAT"))
         assert link.drops.counts.get(REPLAY_BEFORE_LOCK, 0) >= heartbeats >= 1
         assert link.drops.counts.get(UNPROVEN_ADDRESS, 0) == 0  # refused before that
-        assert _drain(stranger) == [] and link.sent == 0  # nothing went back
+        assert drain(stranger) == [] and link.sent == 0  # nothing went back
         said = [r for r in caplog.records if REPLAY_BEFORE_LOCK in r.getMessage()]
         assert len(said) == 1 and said[0].levelno == logging.WARNING
 
@@ -131,7 +114,7 @@ def test_a_replayed_capture_does_not_take_the_lock_and_the_vehicle_does(
         assert link.wait_lock(WAIT_S * 3, lambda: False, 5.0)
         assert link.peer == (LOCALHOST, p1.api_local)
         assert link.gate.proven == {(LOCALHOST, p1.api_local)}
-        assert _drain(stranger) == []
+        assert drain(stranger) == []
     finally:
         link.close()
         stranger.close()

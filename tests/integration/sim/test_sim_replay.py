@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import logging
 import re
-import socket
 import time
 
 import pytest
 from pymavlink.dialects.v20 import common as M
+from udp_capture import LOCALHOST, drain, udp_socket
 
 from offboard.daemon.mavlink.link import VehicleLink
 from swarm_common.ports import vehicle_ports
@@ -23,26 +23,9 @@ from swarm_common.signing import frame_stream, generate_key
 
 pytestmark = pytest.mark.timeout(120)
 
-LOCALHOST = "127.0.0.1"
 CAPTURE_S = 1.5  # s of recording
 LISTEN_S = 2.5  # s the stranger listens after replaying (the issue asks >= 2 s)
 REPORT_RE = re.compile(r"rejected (\d+) unsigned (\d+) badsig (\d+) replay")
-
-
-def _udp(port: int = 0) -> socket.socket:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind((LOCALHOST, port))
-    s.setblocking(False)
-    return s
-
-
-def _drain(sock: socket.socket) -> list[bytes]:
-    out: list[bytes] = []
-    while True:
-        try:
-            out.append(sock.recv(65535))
-        except BlockingIOError:
-            return out
 
 
 def _frames(datagram: bytes) -> list[bytes]:
@@ -68,11 +51,11 @@ def test_replayed_signed_frames_get_nothing_back(sim_factory, tmp_path, caplog) 
     key = generate_key(path)
     sim = sim_factory(["--no-zenoh", "--vehicles", "2", "--signing-key", str(path)])
     p1, p2 = vehicle_ports(1, sim.offset), vehicle_ports(2, sim.offset)
-    gcs_port = _udp(p1.gcs_remote)  # 14550+offset: nothing binds it in a mission run
-    api2 = _udp(p2.api_remote)  # vehicle 2's daemon port, no daemon there
+    gcs_port = udp_socket(p1.gcs_remote)  # 14550+offset: nothing binds it in a mission run
+    api2 = udp_socket(p2.api_remote)  # vehicle 2's daemon port, no daemon there
     daemon = VehicleLink(f"udpin:{LOCALHOST}:{p1.api_remote}", 1, 50.0, lockstep=False,
                          signing_key=key)  # fmt: skip
-    stranger = _udp()
+    stranger = udp_socket()
     try:
         assert daemon.wait_lock(20.0, lambda: False, 5.0), sim.text()
         captured: list[bytes] = []
@@ -80,7 +63,7 @@ def test_replayed_signed_frames_get_nothing_back(sim_factory, tmp_path, caplog) 
         while time.monotonic() < end:  # the daemon runs; its HEARTBEAT is forwarded
             daemon.send_heartbeat()
             daemon.poll(0.02)
-            captured += _drain(gcs_port) + _drain(api2)
+            captured += drain(gcs_port) + drain(api2)
         frames = [f for d in captured for f in _frames(d)]
         streams = {frame_stream(f)[0] for f in frames}  # type: ignore[index]
         assert all(frame_stream(f) is not None for f in frames)  # all signed
@@ -100,7 +83,7 @@ def test_replayed_signed_frames_get_nothing_back(sim_factory, tmp_path, caplog) 
         while time.monotonic() < end:
             daemon.poll(0.02)
             daemon.send_heartbeat()
-            got += sum(len(d) for d in _drain(stranger))
+            got += sum(len(d) for d in drain(stranger))
         assert got == 0  # 0 bytes back from any port, over LISTEN_S
         assert daemon.locked and daemon.peer != stranger.getsockname()
         # the daemon drops the stranger's datagrams unparsed (its log says so)
@@ -111,7 +94,7 @@ def test_replayed_signed_frames_get_nothing_back(sim_factory, tmp_path, caplog) 
         report = None
         end = time.monotonic() + 8.0
         while report is None and time.monotonic() < end:
-            for d in _drain(gcs_port):
+            for d in drain(gcs_port):
                 for m in M.MAVLink(None).parse_buffer(d) or []:
                     if m.get_type() == "STATUSTEXT" and REPORT_RE.match(m.text):
                         report = REPORT_RE.match(m.text)
