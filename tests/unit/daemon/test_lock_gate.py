@@ -9,6 +9,8 @@ import os
 import time
 from typing import Any
 
+import pytest
+
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
@@ -31,7 +33,16 @@ KEY = bytes(range(32))
 AGENT = 3
 VEHICLE = ("127.0.0.1", 14582)
 STRANGER = ("127.0.0.1", 40000)
-START = time.time() - 10.0  # the daemon's start on the fake clock (frames stay < 60 s old)
+# the daemon's start on the fake clock, 10 s before each test (so that every frame stays
+# inside the receiver's 60 s window for a new stream, however late the test runs after
+# this module's import: set by the autouse fixture below)
+START = 0.0
+
+
+@pytest.fixture(autouse=True)
+def _start_now() -> None:
+    global START
+    START = time.time() - 10.0
 
 
 def stamp(wall_s: float) -> int:
