@@ -1,13 +1,12 @@
 """``offboard`` command line: a bad ``--mavlink`` URL is refused at once (exit 2, one line on
-stderr, before any Zenoh or MAVLink socket is opened), whatever else is on the line."""
+stderr, before any Zenoh or MAVLink socket is opened), whatever else is on the line. The
+daemon's ``main`` runs in this process (:func:`cli_inproc.run_cli`)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
-from conftest import CUBE8, ROOT
+from cli_inproc import run_cli
+from conftest import CUBE8
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -29,11 +28,8 @@ NO_ROUTER = "tcp/127.0.0.1:9"
     ],
 )
 def test_bad_mavlink_url_exits_2_with_one_line(url: str, why: str) -> None:
-    proc = subprocess.run(
-        [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", "1",
-         "--mavlink", url, "--zenoh-connect", NO_ROUTER],
-        cwd=ROOT, capture_output=True, text=True, timeout=45,
-    )
+    proc = run_cli("offboard", ["--scenario", CUBE8, "--agent", "1", "--mavlink", url,
+                                "--zenoh-connect", NO_ROUTER])
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2, proc.stderr
     assert len(lines) == 1, proc.stderr

@@ -1,4 +1,8 @@
-"""Command lines given a bad scenario or flag: non-zero exit and one stderr line."""
+"""Command lines given a bad scenario or flag: non-zero exit and one stderr line.
+
+The refusals run the command's ``main`` in this process (:func:`cli_inproc.run_cli`); what
+could block (a FIFO, ``/dev/zero``) or runs a mission is a real process.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,7 @@ import subprocess
 import sys
 
 import pytest
+from cli_inproc import CliResult, run_cli
 from conftest import CUBE8, ROOT
 from scenario_variants import CASES, scenario_variant
 
@@ -13,13 +18,7 @@ from scenario_variants import CASES, scenario_variant
 @pytest.mark.parametrize(("old", "new", "expect"), CASES[:3])
 def test_cli_exits_nonzero_with_one_line(tmp_path, old, new, expect):
     p = scenario_variant(tmp_path, old, new)
-    r = subprocess.run(
-        [sys.executable, "-m", "vehicle_sim.cli", "--scenario", str(p), "--no-zenoh"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    r = run_cli("vehicle-sim", ["--scenario", str(p), "--no-zenoh"])
     assert r.returncode != 0
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1, r.stderr
@@ -28,20 +27,19 @@ def test_cli_exits_nonzero_with_one_line(tmp_path, old, new, expect):
 
 
 def test_cli_bad_vehicles_count(tmp_path):
-    r = subprocess.run(
-        [sys.executable, "-m", "vehicle_sim.cli", "--scenario", CUBE8, "--vehicles", "9"],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    r = run_cli("vehicle-sim", ["--scenario", CUBE8, "--vehicles", "9"])
     assert r.returncode != 0
     assert r.stderr.strip().count("\n") == 0 and "--vehicles" in r.stderr
 
 
-def _gcs(*args: str) -> subprocess.CompletedProcess[str]:
+def _gcs_process(*args: str) -> subprocess.CompletedProcess[str]:
+    """A real ``gcs`` process: for what runs or could block."""
     return subprocess.run([sys.executable, "-m", "gcs.cli", *args], cwd=ROOT,
                           capture_output=True, text=True, timeout=120)
+
+
+def _gcs(*args: str) -> CliResult:
+    return run_cli("gcs", list(args))
 
 
 def test_infeasible_scenario_exits_2_unless_allowed(tmp_path):
@@ -54,14 +52,14 @@ def test_infeasible_scenario_exits_2_unless_allowed(tmp_path):
     assert len(lines) == 1, r.stderr
     assert "leader_trajectory.frequency_hz = 0.4" in lines[0]
     assert "--allow-infeasible" in lines[0]
-    r = _gcs("mission", "run", str(p), "--inproc", "--duration", "0.2", "--json",
-             "--allow-infeasible")
-    assert r.returncode == 0, r.stderr
-    assert "WARNING" in r.stderr and "leader_trajectory.frequency_hz = 0.4" in r.stderr
-    assert r.stdout.strip().startswith("{")
+    r2 = _gcs_process("mission", "run", str(p), "--inproc", "--duration", "0.2", "--json",
+                      "--allow-infeasible")  # it runs: a real process
+    assert r2.returncode == 0, r2.stderr
+    assert "WARNING" in r2.stderr and "leader_trajectory.frequency_hz = 0.4" in r2.stderr
+    assert r2.stdout.strip().startswith("{")
 
 
-def _one_line_exit_2(r: subprocess.CompletedProcess[str], *expect: str) -> None:
+def _one_line_exit_2(r: subprocess.CompletedProcess[str] | CliResult, *expect: str) -> None:
     assert r.returncode == 2, (r.returncode, r.stderr)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert "Traceback" not in r.stderr
@@ -93,12 +91,14 @@ def test_bad_scenario_files_exit_2(tmp_path):
     cases = [
         (str(nonutf), "not UTF-8"),
         (str(deep), "nested deeper"),
-        ("/dev/zero", "not a regular file"),
-        (str(fifo), "not a regular file"),
         (_variant(tmp_path, "leaders = [1, 2]", "leaders = [1, 1]"), "duplicate agent id"),
     ]
     for path, expect in cases:
         _one_line_exit_2(_gcs("mission", "run", path, "--inproc", "--duration", "0.1"), expect)
+    # a read of either would never end: a process the timeout can stop
+    for path in ("/dev/zero", str(fifo)):
+        _one_line_exit_2(_gcs_process("mission", "run", path, "--inproc", "--duration", "0.1"),
+                         "not a regular file")
 
 
 @pytest.mark.parametrize("name", ["", "**", "x$*y", "../../x", "a?b", "a//b"])
@@ -141,17 +141,15 @@ def test_router_needs_scenario_and_dir_together(tmp_path):
 @pytest.mark.parametrize(
     "argv",
     [
-        ["vehicle_sim.cli", "--scenario", CUBE8, "--no-zenoh", "--swarm", "a?b"],
-        ["offboard.cli", "--scenario", CUBE8, "--agent", "1", "--swarm", "a?b"],
-        ["vehicle_sim.cli", "--scenario", CUBE8, "--no-zenoh", "--zenoh-config", "/nonexistent"],
-        ["offboard.cli", "--scenario", CUBE8, "--agent", "1", "--zenoh-config", "/nonexistent"],
-        ["offboard.cli", "--scenario", CUBE8, "--agent", "3", "--nav-gate", "nan"],
+        ["vehicle-sim", "--scenario", CUBE8, "--no-zenoh", "--swarm", "a?b"],
+        ["offboard", "--scenario", CUBE8, "--agent", "1", "--swarm", "a?b"],
+        ["vehicle-sim", "--scenario", CUBE8, "--no-zenoh", "--zenoh-config", "/nonexistent"],
+        ["offboard", "--scenario", CUBE8, "--agent", "1", "--zenoh-config", "/nonexistent"],
+        ["offboard", "--scenario", CUBE8, "--agent", "3", "--nav-gate", "nan"],
     ],
 )
 def test_sim_and_daemon_bad_swarm_or_zenoh_config_exit_2(argv):
-    r = subprocess.run([sys.executable, "-m", *argv], cwd=ROOT, capture_output=True, text=True,
-                       timeout=60)  # fmt: skip
-    _one_line_exit_2(r, argv[-2])
+    _one_line_exit_2(run_cli(argv[0], argv[1:]), argv[-2])
 
 
 @pytest.mark.parametrize(

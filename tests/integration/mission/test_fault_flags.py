@@ -1,22 +1,22 @@
 """``gcs mission run --fault-*`` (docs/faults.md): a bad value or combination is one line and
-exit 2; good flags write the run's scenario with its ``[faults]`` into the run directory."""
+exit 2; good flags write the run's scenario with its ``[faults]`` into the run directory.
+Every case ends before a run starts: ``gcs``'s ``main`` runs in this process
+(:func:`cli_inproc.run_cli`)."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
-from conftest import CUBE8, ROOT
+from cli_inproc import CliResult, run_cli
+from conftest import CUBE8
 
 from swarm_common.scenario.model import load_scenario
 
 
-def gcs(*argv: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "gcs.cli", *argv], cwd=ROOT,
-                          capture_output=True, text=True, timeout=60)
+def gcs(*argv: str) -> CliResult:
+    return run_cli("gcs", list(argv))
 
 
 @pytest.mark.parametrize(

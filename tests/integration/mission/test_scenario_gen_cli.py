@@ -1,5 +1,7 @@
 """``gcs scenario``: the written file runs with ``gcs mission run FILE --inproc``; bad flags
-exit 2 with one line (after argparse's usage line, where argparse refuses the flag)."""
+exit 2 with one line (after argparse's usage line, where argparse refuses the flag). The
+refusals run ``gcs``'s ``main`` in this process (:func:`cli_inproc.run_cli`); the same seed
+is compared across two real processes (their hash seeds differ)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import subprocess
 import sys
 
 import pytest
+from cli_inproc import run_cli
 from conftest import ROOT
 
 GCS = [sys.executable, "-m", "gcs.cli"]
@@ -50,7 +53,7 @@ def test_same_seed_same_file():
     ],
 )
 def test_bad_flags_exit_2_one_line(argv, expect):
-    r = _gcs("scenario", *argv, timeout=60)
+    r = run_cli("gcs", ["scenario", *argv])
     assert r.returncode == 2, r.stderr
     assert r.stdout == "" and "Traceback" not in r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]

@@ -1,4 +1,5 @@
-"""``gcs mission sweep`` as a real subprocess: runs.csv, summary.md, crashed runs, bad input."""
+"""``gcs mission sweep`` as a real subprocess: runs.csv, summary.md, crashed runs. Bad input
+ends before anything starts: ``gcs``'s ``main`` in this process (:func:`cli_inproc.run_cli`)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_inproc import run_cli
 from conftest import CUBE8, ROOT
 
 from gcs.report.sweep import CSV_COLUMNS
@@ -75,7 +77,7 @@ def test_crashed_run_is_a_row_not_lost(tmp_path: Path) -> None:
     ],
 )
 def test_bad_input_exits_2_with_one_line(args: list[str], needle: str, tmp_path: Path) -> None:
-    r = _sweep(CUBE8, *args, "--out", str(tmp_path / "o"))
+    r = run_cli("gcs", ["mission", "sweep", CUBE8, *args, "--out", str(tmp_path / "o")])
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("gcs mission sweep:") and needle in lines[0]
@@ -83,7 +85,8 @@ def test_bad_input_exits_2_with_one_line(args: list[str], needle: str, tmp_path:
 
 
 def test_unknown_scenario_exits_2(tmp_path: Path) -> None:
-    r = _sweep(str(tmp_path / "nope.toml"), "--seeds", "1", "--out", str(tmp_path / "o"))
+    r = run_cli("gcs", ["mission", "sweep", str(tmp_path / "nope.toml"), "--seeds", "1",
+                        "--out", str(tmp_path / "o")])
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "nope.toml" in lines[0]
