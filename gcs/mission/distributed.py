@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import zenoh
 
+from gcs.launch import forkserver
 from gcs.mission.audit import audit_document
 from gcs.mission.launch_spec import (
     LaunchError,
@@ -153,9 +154,12 @@ def run_distributed(
     cpu0 = time.process_time()
     reason = ""
     try:
-        # compile (or load) the kernels here once, so the simulator and the daemons load
-        # them from the cache instead of all compiling them at once (gcs.mission.warmup)
-        log.debug("kernels ready in %.1f s", compile_kernels())
+        # compile (or load) the kernels once before the children start, so they do not all
+        # compile them at once: in the fork server that the children are forked from
+        # (gcs.launch.preload), else here, and the children load them from the cache
+        # (gcs.mission.warmup)
+        if not forkserver.enabled():
+            log.debug("kernels ready in %.1f s", compile_kernels())
         for name, argv in spec.processes():
             group.start(name, argv, env=spec.child_env(name), gated=spec.is_daemon(name))
         bar = Progress(duration, label=str(method)) if show_progress else None

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import logging
 import multiprocessing
+import multiprocessing.util
 import os
 import re
 import shutil
@@ -17,8 +18,9 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Protocol
 
+from gcs.launch import forkserver
 from offboard.daemon.start_gate import GATE_ENV, gate_value
 from swarm_common.logsetup import configure_logging
 
@@ -43,10 +45,28 @@ def _die_with_parent(parent_pid: int) -> Callable[[], None]:
     return setup
 
 
+class ChildProcess(Protocol):
+    """What a run needs of a child process: :class:`subprocess.Popen`, or one forked from
+    the preloaded server (:class:`gcs.launch.forkserver.ForkedProcess`)."""
+
+    pid: int
+
+    @property
+    def returncode(self) -> int | None: ...
+
+    def poll(self) -> int | None: ...
+
+    def wait(self, timeout: float | None = None) -> int: ...
+
+    def send_signal(self, sig: int) -> None: ...
+
+    def kill(self) -> None: ...
+
+
 @dataclass
 class Child:
     name: str
-    proc: subprocess.Popen[bytes]
+    proc: ChildProcess
     log_path: Path
     log_file: IO[bytes]
 
@@ -83,12 +103,20 @@ class ProcessGroup:
                 self._gate = Path(tempfile.mkdtemp(prefix="swarm-start-"))
                 remove_on_death(self._gate)
             full_env[GATE_ENV] = gate_value(start_slots(), self._gate)
-        # own process group: a terminal's Ctrl-C reaches the runner only, which stops the
-        # children in order; PDEATHSIG: no child outlives the runner, even after kill -9
-        proc = subprocess.Popen(
-            argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=full_env,
-            process_group=0, preexec_fn=_die_with_parent(os.getpid()),
-        )
+        proc: ChildProcess
+        if forkserver.enabled() and forkserver.module_of(argv) is not None:
+            # ``python -m MODULE``: forked from the preloaded server (gcs.launch.forkserver),
+            # in its own process group too, and killed with the server, which ends with us
+            _remove_server_dir_on_death()  # before the server makes its socket there
+            proc = forkserver.start(argv, log_path, full_env)
+        else:
+            # own process group: a terminal's Ctrl-C reaches the runner only, which stops
+            # the children in order; PDEATHSIG: no child outlives the runner, even after
+            # kill -9
+            proc = subprocess.Popen(
+                argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                env=full_env, process_group=0, preexec_fn=_die_with_parent(os.getpid()),
+            )
         child = Child(name, proc, log_path, f)
         self.children.append(child)
         return child
@@ -349,6 +377,14 @@ def remove_on_death(path: Path) -> None:
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
     )
     _watchdogs[path] = proc
+
+
+def _remove_server_dir_on_death() -> None:
+    """The fork server's socket lives in ``multiprocessing``'s temporary folder of this
+    process, removed at a normal exit only: a watchdog removes it however we end (once)."""
+    path = Path(multiprocessing.util.get_temp_dir())
+    if path not in _watchdogs:
+        remove_on_death(path)
 
 
 def release_dir(path: Path | None) -> None:

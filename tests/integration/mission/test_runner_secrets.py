@@ -37,8 +37,9 @@ def _alive(pid: int) -> bool:
 
 
 def _children_of(pid: int) -> list[int]:
-    """Pids of the live processes whose parent is ``pid`` (from /proc)."""
-    out = []
+    """Pids of the live descendants of ``pid`` (from /proc): its children, theirs, ... (a
+    run's simulator and daemons are children of its fork server, gcs.launch.forkserver)."""
+    parent: dict[int, int] = {}
     for d in Path("/proc").iterdir():
         if not d.name.isdigit():
             continue
@@ -46,8 +47,14 @@ def _children_of(pid: int) -> list[int]:
             stat = (d / "stat").read_text().rsplit(")", 1)[1].split()
         except OSError:
             continue
-        if int(stat[1]) == pid and stat[0] != "Z":
-            out.append(int(d.name))
+        if stat[0] != "Z":
+            parent[int(d.name)] = int(stat[1])
+    out: list[int] = []
+    frontier = [pid]
+    while frontier:
+        kids = [c for c, p in parent.items() if p in frontier]
+        out += kids
+        frontier = kids
     return out
 
 
@@ -81,13 +88,15 @@ def test_kill_9_of_the_runner_leaves_no_secret_and_no_child(tmp_path: Path) -> N
         assert len(secure) == 1
         assert (secure[0] / "mavlink.key").exists()
         kids = _children_of(proc.pid)
-        assert len(kids) >= 3  # the watchdog(s), the simulator, daemons
+        assert len(kids) >= 3  # the watchdog(s), the fork server, the simulator, daemons
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         assert _wait(lambda: not secure[0].exists(), GONE_WITHIN_S), f"{secure[0]} left"
         assert _wait(lambda: not any(_alive(k) for k in kids), GONE_WITHIN_S), (
             f"children left: {[k for k in kids if _alive(k)]}")
-        assert list(tmp.iterdir()) == []  # the start gate's folder too
+        # the start gate's folder and the fork server's too (gcs.launch.forkserver), each
+        # removed by its own watchdog
+        assert _wait(lambda: list(tmp.iterdir()) == [], GONE_WITHIN_S), list(tmp.iterdir())
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -1,0 +1,48 @@
+"""What the fork server (:mod:`gcs.launch.forkserver`) holds before it forks a child.
+
+Imported once, in the server: the daemon's and the simulator's programs with everything
+they import, then their compiled kernels loaded by the same warm-ups each program runs
+before its first step (:func:`offboard.daemon.warmup.warm_kernels` for every safety
+method, :func:`vehicle_sim.server.load_kernels`) on cube8. A child forked afterwards finds
+them in memory; a kernel that cube8 does not reach loads in the child, as it would have.
+
+BLAS is held to one thread before numpy loads, as each child's environment asks
+(:meth:`gcs.mission.procs.ProcessGroup.start`), so the server forks with one thread.
+A warm-up that fails is logged and skipped: each child then loads its own kernels.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import logging  # noqa: E402 - after the BLAS settings above
+from pathlib import Path  # noqa: E402
+
+import offboard.__main__  # noqa: E402, F401 - the daemon's entry and the modules it imports
+import offboard.cli  # noqa: E402, F401
+import vehicle_sim.cli  # noqa: E402, F401
+from offboard.daemon.warmup import warm_kernels  # noqa: E402
+from offboard.estimation.bearing import formation_from_scenario  # noqa: E402
+from swarm_common.enums import Method  # noqa: E402
+from swarm_common.scenario.model import load_scenario  # noqa: E402
+from vehicle_sim.server import load_kernels  # noqa: E402
+
+log = logging.getLogger(__name__)
+SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
+
+
+def _warm() -> None:
+    try:
+        sc = load_scenario(SCENARIO)
+        form = formation_from_scenario(sc)
+        for method in Method:
+            warm_kernels(sc, str(method), form)
+        load_kernels(sc)
+    except Exception as exc:  # noqa: BLE001 - an optimisation: never stop the server
+        log.warning("fork server: kernel warm-up skipped (%s: %s)", type(exc).__name__, exc)
+
+
+_warm()
