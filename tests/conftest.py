@@ -13,7 +13,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -21,7 +21,9 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from gcs.launch import forkserver  # noqa: E402
 from gcs.mission.launch_spec import MAX_PORT_OFFSET  # noqa: E402
+from gcs.mission.procs import ChildProcess, python_entry  # noqa: E402
 from swarm_common.ports import port_free, swarm_udp_ports  # noqa: E402
 from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
 from swarm_common.zenoh_session import DEFAULT_ZENOH_PORT  # noqa: E402
@@ -159,30 +161,48 @@ def _port_offset_claims() -> Iterator[None]:
 
 
 class SimProcess:
-    """``vehicle-sim`` as a subprocess; stderr is collected in :attr:`lines`."""
+    """``vehicle-sim`` as a child process, started as a run starts it: forked from the
+    preloaded server (:mod:`gcs.launch.forkserver`; an interpreter of its own with
+    ``SWARM_LAUNCH=exec``). Its log (stderr and stdout) is collected in :attr:`lines`."""
 
     def __init__(self, args: list[str], offset: int) -> None:
         self.offset = offset
         self.args = args
-        self.proc = subprocess.Popen(
-            [*SIM_CMD, *args],
-            cwd=ROOT,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
+        fd, name = tempfile.mkstemp(prefix="vehicle-sim-", suffix=".log")
+        os.close(fd)
+        self.log_path = Path(name)
+        argv = [*python_entry("vehicle_sim.cli"), *args]
+        self.proc: ChildProcess
+        if forkserver.enabled():
+            self.proc = forkserver.start(argv, self.log_path, dict(os.environ), cwd=ROOT)
+        else:
+            with self.log_path.open("wb") as out:
+                self.proc = subprocess.Popen(argv, cwd=ROOT, stdout=out,
+                                             stderr=subprocess.STDOUT)
         self.lines: list[str] = []
         self._cv = threading.Condition()
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
 
     def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            with self._cv:
-                self.lines.append(line.rstrip("\n"))
-                self._cv.notify_all()
+        """Follow the log until the process has exited and every line is read."""
+        with self.log_path.open(errors="replace") as f:
+            partial = ""
+            while True:
+                exited = self.proc.poll() is not None
+                chunk = f.read()
+                if chunk:
+                    *done, partial = (partial + chunk).split("\n")
+                    with self._cv:
+                        self.lines.extend(done)
+                        self._cv.notify_all()
+                elif exited:
+                    break
+                else:
+                    time.sleep(0.02)
         with self._cv:
+            if partial:
+                self.lines.append(partial)
             self._cv.notify_all()
 
     def wait_log(self, pattern: str, timeout: float = 10.0) -> str | None:
@@ -213,7 +233,10 @@ class SimProcess:
                 self.proc.kill()
                 self.proc.wait(5)
         self._reader.join(2)
-        return self.proc.returncode
+        self.log_path.unlink(missing_ok=True)
+        rc = self.proc.returncode
+        assert rc is not None
+        return rc
 
     def text(self) -> str:
         with self._cv:
@@ -400,7 +423,7 @@ def held_ports() -> Iterator[HeldPorts]:
     held.close()
 
 
-def stop_processes(procs: list[subprocess.Popen], grace_s: float = 15.0) -> None:
+def stop_processes(procs: Sequence[ChildProcess], grace_s: float = 15.0) -> None:
     """SIGTERM every process still running, wait ``grace_s`` for each, then SIGKILL."""
     for p in procs:
         if p.poll() is None:

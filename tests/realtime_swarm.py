@@ -27,7 +27,9 @@ os.environ.setdefault("MAVLINK20", "1")
 from conftest import CUBE8, ROOT, free_port_offset, stop_processes  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
+from gcs.launch import forkserver  # noqa: E402
 from gcs.mission.launch_spec import LaunchSpec  # noqa: E402
+from gcs.mission.procs import ChildProcess  # noqa: E402
 from swarm_common.ports import GCS_PORT, vehicle_ports  # noqa: E402
 from swarm_common.scenario.model import load_scenario  # noqa: E402
 
@@ -138,10 +140,15 @@ class Observer(threading.Thread):
         self.conn.close()
 
 
-def start(argv: list[str], log: Path, env: dict[str, str] | None = None) -> subprocess.Popen:
+def start(argv: list[str], log: Path, env: dict[str, str] | None = None) -> ChildProcess:
+    """``argv`` as a child process logging to ``log``: forked from the preloaded server
+    when a run would fork it (gcs.launch.forkserver), else an interpreter of its own."""
+    full_env = {**os.environ, **(env or {})}
+    if forkserver.enabled() and forkserver.module_of(argv) is not None:
+        log.write_bytes(b"")
+        return forkserver.start(argv, log, full_env, cwd=ROOT)
     out: IO[bytes] = log.open("wb")
-    return subprocess.Popen(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
-                            env={**os.environ, **(env or {})})
+    return subprocess.Popen(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, env=full_env)
 
 
 def wait_for(pred: object, timeout: float, what: str) -> None:
@@ -164,8 +171,8 @@ class Swarm:
     """A flying real-time swarm: its observer, router process, daemons' processes and logs."""
 
     obs: Observer
-    router: subprocess.Popen
-    procs: list[subprocess.Popen]
+    router: ChildProcess
+    procs: list[ChildProcess]
     logs: list[Path]
 
 
@@ -184,7 +191,7 @@ def flying_swarm(tmp_path: Path, fly_s: float, scenario: str = CUBE8, method: st
     obs.start()
     router = start([sys.executable, "-m", "gcs.cli", "router", "--listen",
                      spec.router_endpoint], tmp_path / "router.log")
-    procs: list[subprocess.Popen] = []
+    procs: list[ChildProcess] = []
     try:
         wait_for(lambda: port_open(spec.router_port) or router.poll() is not None, 30, "router")
         assert router.poll() is None, (tmp_path / "router.log").read_text()

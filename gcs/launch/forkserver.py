@@ -110,17 +110,18 @@ class ForkedProcess:
         self.send_signal(signal.SIGKILL)
 
 
-def start(argv: list[str], log_path: Path, env: dict[str, str]) -> ForkedProcess:
+def start(argv: list[str], log_path: Path, env: dict[str, str],
+          cwd: Path | None = None) -> ForkedProcess:
     """Fork ``python -m MODULE ARGS`` (``argv``, see :func:`module_of`) from the server,
     its stdout and stderr appended to ``log_path``, with exactly ``env`` as its
-    environment and this process's working directory."""
+    environment, in ``cwd`` (default: this process's working directory)."""
     module = module_of(argv)
     if module is None:
         raise ValueError(f"not a 'python -P -m MODULE' command line of {sorted(ENTRIES)}: "
                          f"{argv[:4]}")
     ctx = _context_started()
     proc = ctx.Process(
-        target=_child, args=(module, argv, str(log_path), env, os.getcwd()),
+        target=_child, args=(module, argv, str(log_path), env, str(cwd or os.getcwd())),
         name=module, daemon=True,
     )
     proc.start()

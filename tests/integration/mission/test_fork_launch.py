@@ -1,0 +1,95 @@
+"""A run's children forked from the preloaded server (gcs.launch.forkserver) are processes
+of their own: their program's exit status, their own argv in /proc, their own process
+group and environment, a signal's death reported as Popen reports it; and
+``SWARM_LAUNCH=exec`` starts them as interpreters instead."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from conftest import CUBE8, free_port_offset
+
+from gcs.launch.forkserver import LAUNCH_ENV, ForkedProcess
+from gcs.mission.procs import ProcessGroup, python_entry
+from offboard.daemon.start_gate import GATE_ENV
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _wait_log(path: Path, text: str, timeout: float = 60.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if text in path.read_text(errors="replace"):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_a_forked_daemon_refusing_its_flags_exits_2_with_its_one_line(tmp_path: Path) -> None:
+    group = ProcessGroup(tmp_path)
+    try:
+        child = group.start("offboard-1", [*python_entry("offboard"), "--scenario", CUBE8,
+                                           "--agent", "99"], gated=True)
+        assert isinstance(child.proc, ForkedProcess)
+        assert child.proc.wait(60.0) == 2
+        lines = [ln for ln in child.log_path.read_text().splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("offboard: "), lines
+        assert "99" in lines[0]
+    finally:
+        group.stop()
+
+
+def test_a_forked_simulator_is_its_own_process_and_dies_by_its_signal(tmp_path: Path) -> None:
+    off = free_port_offset()
+    argv = [*python_entry("vehicle_sim.cli"), "--scenario", CUBE8, "--no-zenoh",
+            "--port-offset", str(off)]
+    group = ProcessGroup(tmp_path)
+    try:
+        child = group.start("vehicle-sim", argv)
+        assert isinstance(child.proc, ForkedProcess)
+        assert _wait_log(child.log_path, "port map"), child.log_path.read_text()
+        pid = child.proc.pid
+        assert pid != os.getpid() and child.proc.poll() is None
+        # its own command line (ps, pgrep -f) and process group
+        cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode()
+        assert f"-m vehicle_sim.cli --scenario {CUBE8} --no-zenoh --port-offset {off}" in cmdline
+        assert os.getpgid(pid) == pid
+        child.proc.send_signal(signal.SIGKILL)
+        assert child.proc.wait(10.0) == -signal.SIGKILL
+        assert "killed by SIGKILL" in group.fault(child)
+    finally:
+        group.stop()
+
+
+def test_a_forked_child_runs_with_the_environment_it_was_given(tmp_path: Path) -> None:
+    """The daemon's entry reads its start gate from the environment before anything else
+    (offboard.__main__): a malformed value given to this child only is refused."""
+    group = ProcessGroup(tmp_path)
+    try:
+        child = group.start("offboard-1", [*python_entry("offboard"), "--scenario", CUBE8,
+                                           "--agent", "1"], env={GATE_ENV: "no-such-gate"})
+        assert isinstance(child.proc, ForkedProcess)
+        assert child.proc.wait(60.0) == 2
+        assert f"offboard: ${GATE_ENV}: " in child.log_path.read_text()
+        assert GATE_ENV not in os.environ  # this process's own is untouched
+    finally:
+        group.stop()
+
+
+def test_swarm_launch_exec_starts_an_interpreter(tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(LAUNCH_ENV, "exec")
+    group = ProcessGroup(tmp_path)
+    try:
+        child = group.start("offboard-1", [*python_entry("offboard"), "--scenario", CUBE8,
+                                           "--agent", "99"])
+        assert isinstance(child.proc, subprocess.Popen)
+        assert child.proc.wait(60.0) == 2
+        assert "offboard: " in child.log_path.read_text()
+    finally:
+        group.stop()
