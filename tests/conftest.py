@@ -160,25 +160,15 @@ def _port_offset_claims() -> Iterator[None]:
     release_port_offsets()
 
 
-class SimProcess:
-    """``vehicle-sim`` as a child process, started as a run starts it: forked from the
-    preloaded server (:mod:`gcs.launch.forkserver`; an interpreter of its own with
-    ``SWARM_LAUNCH=exec``). Its log (stderr and stdout) is collected in :attr:`lines`."""
+class FollowedChild:
+    """``argv`` as a child process (:func:`start_child`: forked as a run forks it, where a
+    run would), its log (stderr and stdout) followed into :attr:`lines` as it is written."""
 
-    def __init__(self, args: list[str], offset: int) -> None:
-        self.offset = offset
-        self.args = args
-        fd, name = tempfile.mkstemp(prefix="vehicle-sim-", suffix=".log")
+    def __init__(self, argv: list[str], prefix: str = "child-") -> None:
+        fd, name = tempfile.mkstemp(prefix=prefix, suffix=".log")
         os.close(fd)
         self.log_path = Path(name)
-        argv = [*python_entry("vehicle_sim.cli"), *args]
-        self.proc: ChildProcess
-        if forkserver.enabled():
-            self.proc = forkserver.start(argv, self.log_path, dict(os.environ), cwd=ROOT)
-        else:
-            with self.log_path.open("wb") as out:
-                self.proc = subprocess.Popen(argv, cwd=ROOT, stdout=out,
-                                             stderr=subprocess.STDOUT)
+        self.proc = start_child(argv, self.log_path)
         self.lines: list[str] = []
         self._cv = threading.Condition()
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -218,12 +208,6 @@ class SimProcess:
                     return None
                 self._cv.wait(min(left, 0.2))
 
-    def wait_ready(self, timeout: float = 60.0) -> None:
-        # start-up is import and compile time: seconds idle, tens of seconds on a loaded
-        # 2-core machine running the suite in parallel (a wait, not a timing assertion)
-        if self.wait_log(r"vehicles, (real-time|lockstep)", timeout) is None:
-            raise RuntimeError("vehicle-sim did not start:\n" + "\n".join(self.lines[-20:]))
-
     def stop(self, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
@@ -241,6 +225,23 @@ class SimProcess:
     def text(self) -> str:
         with self._cv:
             return "\n".join(self.lines)
+
+
+class SimProcess(FollowedChild):
+    """``vehicle-sim`` as a child process, started as a run starts it (forked from the
+    preloaded server, :mod:`gcs.launch.forkserver`; an interpreter of its own with
+    ``SWARM_LAUNCH=exec``)."""
+
+    def __init__(self, args: list[str], offset: int) -> None:
+        self.offset = offset
+        self.args = args
+        super().__init__([*python_entry("vehicle_sim.cli"), *args], prefix="vehicle-sim-")
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        # start-up is import and compile time: seconds idle, tens of seconds on a loaded
+        # 2-core machine running the suite in parallel (a wait, not a timing assertion)
+        if self.wait_log(r"vehicles, (real-time|lockstep)", timeout) is None:
+            raise RuntimeError("vehicle-sim did not start:\n" + "\n".join(self.lines[-20:]))
 
 
 @pytest.fixture
@@ -421,6 +422,21 @@ def held_ports() -> Iterator[HeldPorts]:
     held = HeldPorts()
     yield held
     held.close()
+
+
+def start_child(argv: list[str], log: Path, env: dict[str, str] | None = None) -> ChildProcess:
+    """``argv`` as a child process in :data:`ROOT`, its stdout and stderr in ``log``: forked
+    from the preloaded server when a run would fork it (``python -P -m offboard|
+    offboard.cli|vehicle_sim.cli``: :func:`gcs.mission.procs.python_entry`,
+    :mod:`gcs.launch.forkserver`), else an interpreter of its own. ``env`` is added to
+    this process's environment."""
+    full_env = {**os.environ, **(env or {})}
+    if forkserver.enabled() and forkserver.module_of(argv) is not None:
+        log.write_bytes(b"")
+        return forkserver.start(argv, log, full_env, cwd=ROOT)
+    with log.open("wb") as out:
+        return subprocess.Popen(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
+                                env=full_env)
 
 
 def stop_processes(procs: Sequence[ChildProcess], grace_s: float = 15.0) -> None:

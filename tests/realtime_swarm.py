@@ -10,7 +10,6 @@ import os
 import re
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
@@ -19,15 +18,13 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import combinations
 from pathlib import Path
-from typing import IO
 
 import numpy as np
 
 os.environ.setdefault("MAVLINK20", "1")
-from conftest import CUBE8, ROOT, free_port_offset, stop_processes  # noqa: E402
+from conftest import CUBE8, free_port_offset, start_child, stop_processes  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
-from gcs.launch import forkserver  # noqa: E402
 from gcs.mission.launch_spec import LaunchSpec  # noqa: E402
 from gcs.mission.procs import ChildProcess  # noqa: E402
 from swarm_common.ports import GCS_PORT, vehicle_ports  # noqa: E402
@@ -140,15 +137,7 @@ class Observer(threading.Thread):
         self.conn.close()
 
 
-def start(argv: list[str], log: Path, env: dict[str, str] | None = None) -> ChildProcess:
-    """``argv`` as a child process logging to ``log``: forked from the preloaded server
-    when a run would fork it (gcs.launch.forkserver), else an interpreter of its own."""
-    full_env = {**os.environ, **(env or {})}
-    if forkserver.enabled() and forkserver.module_of(argv) is not None:
-        log.write_bytes(b"")
-        return forkserver.start(argv, log, full_env, cwd=ROOT)
-    out: IO[bytes] = log.open("wb")
-    return subprocess.Popen(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT, env=full_env)
+start = start_child  # the router, simulator and daemons (conftest.start_child)
 
 
 def wait_for(pred: object, timeout: float, what: str) -> None:

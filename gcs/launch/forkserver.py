@@ -45,6 +45,7 @@ PR_SET_PDEATHSIG = 1  # linux/prctl.h
 # ``python -m MODULE`` -> (module, function) that its ``if __name__ == "__main__"`` runs
 ENTRIES = {
     "offboard": ("offboard.__main__", "gated_main"),
+    "offboard.cli": ("offboard.cli", "main"),
     "vehicle_sim.cli": ("vehicle_sim.cli", "main"),
 }
 

@@ -12,10 +12,10 @@ router hosted by the test, over 127.0.0.1.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,9 +23,10 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from conftest import CUBE8, ROOT, MavClient  # noqa: E402
+from conftest import CUBE8, ROOT, FollowedChild, MavClient  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
+from gcs.mission.procs import python_entry  # noqa: E402
 from swarm_common import px4  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.zenoh_session import default_endpoint, open_session  # noqa: E402
@@ -37,45 +38,25 @@ GROUND8 = ROOT / "scenarios" / "ground8.toml"
 ONBOARD = (1, M.MAV_COMP_ID_ONBOARD_COMPUTER)
 
 
-class Daemon:
-    """``offboard --agent 1`` as a subprocess, its stderr collected."""
+class Daemon(FollowedChild):
+    """``offboard --agent 1`` as a child process (forked as a run forks it), its log
+    followed."""
 
     def __init__(self, off: int, tlog: Path, extra: list[str], scenario: Path = CUBE8) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "offboard.cli", "--scenario", scenario, "--agent", "1",
+        super().__init__(
+            [*python_entry("offboard.cli"), "--scenario", str(scenario), "--agent", "1",
              "--port-offset", str(off), "--realtime", "--sensing", "odometry",
              "--zenoh-connect", default_endpoint(off), "--tlog", str(tlog), *extra],
-            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+            prefix="offboard-1-",
         )
-        self.lines: list[str] = []
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for line in self.proc.stderr:
-            self.lines.append(line.rstrip("\n"))
 
     def wait_for(self, text: str, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if any(text in ln for ln in list(self.lines)):
-                return True
-            if self.proc.poll() is not None:
-                return False
-            time.sleep(0.1)
-        return False
+        return self.wait_log(re.escape(text), timeout) is not None
 
-    def stop(self) -> str:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        self._reader.join(5)
-        return "\n".join(self.lines)
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 15.0) -> str:  # type: ignore[override]
+        """Stop it (SIGTERM, then SIGKILL after ``timeout``); its whole log."""
+        super().stop(sig, timeout)
+        return self.text()
 
 
 @pytest.fixture

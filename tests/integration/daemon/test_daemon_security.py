@@ -10,8 +10,6 @@ import os
 import re
 import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -22,10 +20,11 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from conftest import CUBE8, free_port_offset, free_tcp_port  # noqa: E402
+from conftest import CUBE8, free_port_offset, free_tcp_port, start_child  # noqa: E402
 from pymavlink.dialects.v20 import common as mavlink  # noqa: E402
 
 from gcs.mission.distributed import recorded_metrics, run_distributed  # noqa: E402
+from gcs.mission.procs import ChildProcess, python_entry  # noqa: E402
 from swarm_common import wire  # noqa: E402
 from swarm_common.ports import vehicle_ports  # noqa: E402
 from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
@@ -212,10 +211,12 @@ def _daemon_pid(agent: int, off: int) -> int:
         if not entry.name.isdigit():
             continue
         try:
-            argv = (entry / "cmdline").read_bytes().decode(errors="replace").split("\0")
+            # NUL-separated, or one string when the title was set (a forked child's)
+            raw = (entry / "cmdline").read_bytes().decode(errors="replace")
         except OSError:
             continue
-        joined = " ".join(argv)
+        joined = " ".join(raw.split("\0"))
+        argv = joined.split()
         if all(w in argv for w in want[1:]) and want[0] in joined:
             return int(entry.name)
     raise AssertionError(f"no offboard daemon for agent {agent} at offset {off}")
@@ -246,14 +247,13 @@ def test_stopped_daemon_gets_its_vehicle_back_into_offboard(tmp_path: Path) -> N
     assert "back in OFFBOARD after a failsafe" in text
 
 
-def _daemon(tmp: Path, off: int, key: Path, name: str) -> subprocess.Popen[bytes]:
+def _daemon(tmp: Path, off: int, key: Path, name: str) -> ChildProcess:
     """One daemon (agent 1) of a real-time swarm, Zenoh as a lone listening peer."""
     zen = f"tcp/127.0.0.1:{free_tcp_port()}"
-    argv = [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", "1",
+    argv = [*python_entry("offboard.cli"), "--scenario", CUBE8, "--agent", "1",
             "--port-offset", str(off), "--realtime", "--zenoh-mode", "peer",
             "--zenoh-listen", zen, "--zenoh-connect", "--signing-key", str(key)]
-    log = (tmp / f"{name}.log").open("wb")
-    return subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
+    return start_child(argv, tmp / f"{name}.log")
 
 
 def test_signed_vehicle_link(tmp_path: Path, sim_factory: Any) -> None:

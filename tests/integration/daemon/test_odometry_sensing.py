@@ -9,17 +9,16 @@ equals it bit for bit (tests/integration/mission/test_mission_distributed.py).""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import threading
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from conftest import CUBE8, ROOT, free_port_offset, stop_processes
+from conftest import CUBE8, free_port_offset, start_child, stop_processes
 
 from gcs.mission.inproc import run_inproc
+from gcs.mission.procs import python_entry
 from swarm_common import wire
 from swarm_common.scenario.model import load_scenario
 from swarm_common.zenoh_session import default_endpoint, open_session
@@ -72,17 +71,16 @@ def _run(tmp: Path) -> tuple[dict[str, Any], dict[int, float], list[float]]:
     router = open_session(mode="router", listen=[router_ep])
     subs = [router.declare_subscriber(wire.key_odometry(sc.name, "*"), rec.on_sample),
             router.declare_subscriber(wire.key_status(sc.name, "*"), rec.on_sample)]
-    sim_args = [sys.executable, "-m", "vehicle_sim.cli", "--scenario", CUBE8,
+    sim_args = [*python_entry("vehicle_sim.cli"), "--scenario", CUBE8,
                 "--port-offset", str(off), "--lockstep", "--step-timeout", "1.0",
                 "--duration", str(DURATION_S), "--stats-out", str(stats), "--quiet",
                 "--no-zenoh"]  # no truth anywhere
-    logs = [open(tmp / f"{sensing}-{name}.log", "w") for name in ("sim", *map(str, sc.ids))]  # noqa: SIM115
-    procs = [subprocess.Popen(sim_args, cwd=ROOT, stderr=logs[0], stdout=subprocess.DEVNULL)]
-    for n, i in enumerate(sc.ids, start=1):
-        procs.append(subprocess.Popen(
-            [sys.executable, "-m", "offboard.cli", "--scenario", CUBE8, "--agent", str(i),
+    procs = [start_child(sim_args, tmp / f"{sensing}-sim.log")]
+    for i in sc.ids:
+        procs.append(start_child(
+            [*python_entry("offboard.cli"), "--scenario", CUBE8, "--agent", str(i),
              "--port-offset", str(off), "--zenoh-connect", router_ep, "--sensing", sensing],
-            cwd=ROOT, stderr=logs[n], stdout=subprocess.DEVNULL))
+            tmp / f"{sensing}-{i}.log"))
     try:
         assert procs[0].wait(360) == 0
     finally:
@@ -90,8 +88,6 @@ def _run(tmp: Path) -> tuple[dict[str, Any], dict[int, float], list[float]]:
         for s in subs:
             s.undeclare()
         router.close()
-        for f in logs:
-            f.close()
     with rec.lock:
         steps = sorted({k for k, _ in rec.p})
         min_d = []

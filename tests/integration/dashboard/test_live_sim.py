@@ -7,12 +7,10 @@ from __future__ import annotations
 
 import argparse
 import stat
-import subprocess
-import sys
 import time
 
 import pytest
-from conftest import ROOT  # noqa: E402
+from conftest import ROOT, start_child, stop_processes  # noqa: E402
 
 from gcs.dashboard.app import DashboardApp
 from gcs.dashboard.cli import build, configure_parser
@@ -20,6 +18,7 @@ from gcs.dashboard.commands import LiveCommander
 from gcs.dashboard.mavlink_gcs import MavlinkGcs
 from gcs.dashboard.view.state import LiveSource
 from gcs.dashboard.widgets import EventLog
+from gcs.mission.procs import python_entry
 from swarm_common.scenario.model import load_scenario
 
 SCENARIO = ROOT / "scenarios" / "cube8.toml"
@@ -31,20 +30,13 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture
 def sim(port_offset, tmp_path):
-    log = open(tmp_path / "sim.log", "wb")  # noqa: SIM115
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_sim.cli", "--scenario", str(SCENARIO),
+    proc = start_child(
+        [*python_entry("vehicle_sim.cli"), "--scenario", str(SCENARIO),
          "--port-offset", str(port_offset), "--no-zenoh", "--duration", "60", "--quiet"],
-        cwd=ROOT, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+        tmp_path / "sim.log",
     )  # fmt: skip
     yield port_offset
-    proc.terminate()
-    try:
-        proc.wait(5)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(5)
-    log.close()
+    stop_processes([proc], grace_s=5.0)
 
 
 def log_text(app) -> str:
