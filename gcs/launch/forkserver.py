@@ -32,6 +32,7 @@ from __future__ import annotations
 import ctypes
 import importlib
 import io
+import logging
 import multiprocessing
 import os
 import signal
@@ -50,11 +51,28 @@ ENTRIES = {
 }
 
 _context: multiprocessing.context.ForkServerContext | None = None
+log = logging.getLogger(__name__)
+
+
+_failed: str | None = None  # why the server could not start in this process, if it failed
 
 
 def enabled() -> bool:
-    """Whether children are forked from the server: Linux, and not ``SWARM_LAUNCH=exec``."""
-    return sys.platform.startswith("linux") and os.environ.get(LAUNCH_ENV, "") != "exec"
+    """Whether children are forked from the server: Linux, not ``SWARM_LAUNCH=exec``, and
+    the server has not failed to start in this process (:func:`give_up`)."""
+    return (sys.platform.startswith("linux") and os.environ.get(LAUNCH_ENV, "") != "exec"
+            and _failed is None)
+
+
+def give_up(why: str) -> None:
+    """The server could not start (for one, ``multiprocessing`` puts its socket under
+    ``$TMPDIR``, and a socket's path has at most 107 bytes): say so once, and start every
+    later child of this process as an interpreter of its own."""
+    global _failed
+    if _failed is None:
+        _failed = why
+        log.warning("fork server unavailable (%s): each child starts its own interpreter "
+                    "(slower start-up)", why)
 
 
 def module_of(argv: list[str]) -> str | None:

@@ -103,13 +103,16 @@ class ProcessGroup:
                 self._gate = Path(tempfile.mkdtemp(prefix="swarm-start-"))
                 remove_on_death(self._gate)
             full_env[GATE_ENV] = gate_value(start_slots(), self._gate)
-        proc: ChildProcess
+        proc: ChildProcess | None = None
         if forkserver.enabled() and forkserver.module_of(argv) is not None:
             # ``python -m MODULE``: forked from the preloaded server (gcs.launch.forkserver),
             # in its own process group too, and killed with the server, which ends with us
-            _remove_server_dir_on_death()  # before the server makes its socket there
-            proc = forkserver.start(argv, log_path, full_env)
-        else:
+            try:
+                _remove_server_dir_on_death()  # before the server makes its socket there
+                proc = forkserver.start(argv, log_path, full_env)
+            except OSError as exc:  # the server could not start: an interpreter instead
+                forkserver.give_up(str(exc))
+        if proc is None:
             # own process group: a terminal's Ctrl-C reaches the runner only, which stops
             # the children in order; PDEATHSIG: no child outlives the runner, even after
             # kill -9

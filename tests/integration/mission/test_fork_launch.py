@@ -8,11 +8,12 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
-from conftest import CUBE8, free_port_offset
+from conftest import CUBE8, ROOT, free_port_offset
 
 from gcs.launch.forkserver import LAUNCH_ENV, ForkedProcess
 from gcs.mission.procs import ProcessGroup, python_entry
@@ -93,3 +94,28 @@ def test_swarm_launch_exec_starts_an_interpreter(tmp_path: Path,
         assert "offboard: " in child.log_path.read_text()
     finally:
         group.stop()
+
+
+PROBE = """
+import sys
+from pathlib import Path
+from gcs.mission.procs import ProcessGroup, python_entry
+group = ProcessGroup(Path(sys.argv[1]))
+child = group.start("offboard-1", [*python_entry("offboard"), "--scenario", sys.argv[2],
+                                   "--agent", "99"])
+print(type(child.proc).__name__, child.proc.wait(60.0), flush=True)
+group.stop()
+"""
+
+
+def test_a_server_that_cannot_start_gives_interpreters_and_one_warning(tmp_path: Path) -> None:
+    """multiprocessing puts the server's socket under $TMPDIR; past a socket path's 107
+    bytes it cannot bind: the run says so once and starts its children as interpreters."""
+    deep = tmp_path / ("t" * 100)
+    deep.mkdir()
+    r = subprocess.run([sys.executable, "-c", PROBE, str(tmp_path), CUBE8], cwd=ROOT,
+                       env={**os.environ, "TMPDIR": str(deep)}, capture_output=True,
+                       text=True, timeout=120)
+    assert r.stdout.split() == ["Popen", "2"], (r.stdout, r.stderr)
+    assert r.stderr.count("fork server unavailable") == 1, r.stderr
+    assert "AF_UNIX path too long" in r.stderr
