@@ -54,6 +54,7 @@ def test_transition_is_one_period_of_the_real_observers(path):
 
 
 @pytest.mark.full
+@pytest.mark.slow  # about 20 s idle: started first, not left to the tier's end
 def test_spectral_radius_sparse_equals_dense_on_grid64():
     """Above DENSE_MAX the radius comes from ARPACK: on grid64's four loops (orders 540 and
     1080) it equals every eigenvalue's maximum modulus to 1e-10."""

@@ -96,6 +96,7 @@ def test_paper_paragraph_uses_the_run(inputs: tuple[dict, dict]) -> None:
 
 
 @pytest.mark.full
+@pytest.mark.slow  # the GIF and every figure: started first, not left to the end
 def test_write_report_writes_markdown_and_plots(inputs: tuple[dict, dict], tmp_path: Path) -> None:
     metrics, series = inputs
     seeds = {m: [metrics[m]] * 3 for m in metrics}
