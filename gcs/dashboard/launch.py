@@ -24,8 +24,9 @@ from typing import Any
 
 import zenoh
 
+from gcs.launch.watchdog import release_dir
 from gcs.mission.launch_spec import LaunchError, LaunchSpec, SigningChoice, secure_dir
-from gcs.mission.procs import ProcessGroup, release_dir
+from gcs.mission.procs import ProcessGroup
 from gcs.mission.router import open_router
 from swarm_common.scenario.model import Scenario
 from swarm_common.zenoh_session import write_swarm_security

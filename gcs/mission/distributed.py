@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 
 from gcs.launch import forkserver
+from gcs.launch.watchdog import release_dir
 from gcs.mission.audit import audit_document
 from gcs.mission.launch_spec import (
     LaunchError,
@@ -34,7 +35,7 @@ from gcs.mission.launch_spec import (
 )
 from gcs.mission.live_feed import recorder_hook
 from gcs.mission.preflight import check_physics, warn_liveness
-from gcs.mission.procs import ProcessGroup, release_dir
+from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
 from gcs.mission.recorder import Recorder
 from gcs.mission.router import open_router

@@ -21,13 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gcs.launch.watchdog import remove_on_death
 from gcs.mission.ports import (
     PortUse,
     busy_uses,
     port_in_use_line,
     swarm_port_uses,
 )
-from gcs.mission.procs import python_entry, remove_on_death
+from gcs.mission.procs import python_entry
 from offboard.daemon.packing import format_agents
 from swarm_common.enums import DefaultStreams
 from swarm_common.ports import GCS_PORT, MAX_ID, vehicle_ports
@@ -67,9 +68,9 @@ RUN_KEY_NAME = "mavlink.key"  # the per-run signing key, inside the run's secure
 
 def secure_dir() -> Path:
     """A fresh private directory (mode 0700) for one run's Zenoh credentials and signing
-    key; the caller deletes it with :func:`gcs.mission.procs.release_dir` when the run ends.
+    key; the caller deletes it with :func:`gcs.launch.watchdog.release_dir` when the run ends.
     A watchdog process deletes it if this process dies first, kill -9 included
-    (:func:`gcs.mission.procs.remove_on_death`): no secret outlives its run."""
+    (:func:`gcs.launch.watchdog.remove_on_death`): no secret outlives its run."""
     path = Path(tempfile.mkdtemp(prefix="swarm-secure-"))
     try:
         remove_on_death(path)

@@ -5,10 +5,8 @@ from __future__ import annotations
 import ctypes
 import logging
 import multiprocessing
-import multiprocessing.util
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -21,6 +19,7 @@ from pathlib import Path
 from typing import IO, Any, Protocol
 
 from gcs.launch import forkserver
+from gcs.launch.watchdog import release_dir, remove_on_death, remove_server_dir_on_death
 from offboard.daemon.start_gate import GATE_ENV, gate_value
 from swarm_common.logsetup import configure_logging
 
@@ -108,7 +107,7 @@ class ProcessGroup:
             # ``python -m MODULE``: forked from the preloaded server (gcs.launch.forkserver),
             # in its own process group too, and killed with the server, which ends with us
             try:
-                _remove_server_dir_on_death()  # before the server makes its socket there
+                remove_server_dir_on_death()  # before the server makes its socket there
                 proc = forkserver.start(argv, log_path, full_env)
             except OSError as exc:  # the server could not start: an interpreter instead
                 forkserver.give_up(str(exc))
@@ -348,60 +347,6 @@ def child_pythonpath(current: str | None) -> str:
     root = str(code_root())
     rest = [p for p in (current or "").split(os.pathsep) if p and p != root]
     return os.pathsep.join([root, *rest])
-
-
-# the watchdog of :func:`remove_on_death`: stdlib only, isolated mode (-I: no PYTHON*
-# variables, no user site, no working directory on sys.path). It ignores the terminal's
-# signals, waits for EOF on stdin (the runner's end of the pipe closes however the runner
-# ends, kill -9 included) and removes the paths given
-_WATCHDOG = (
-    "import os,shutil,signal,sys\n"
-    "for s in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):\n"
-    "    signal.signal(s, signal.SIG_IGN)\n"
-    "try:\n"
-    "    while os.read(0, 64):\n"
-    "        pass\n"
-    "finally:\n"
-    "    for p in sys.argv[1:]:\n"
-    "        shutil.rmtree(p, ignore_errors=True)\n"
-)
-_watchdogs: dict[Path, subprocess.Popen[bytes]] = {}
-
-
-def remove_on_death(path: Path) -> None:
-    """Start a watchdog process that deletes ``path`` (a per-run secrets directory) when
-    this process ends, however it ends: it holds the read end of a pipe whose only write
-    end this process keeps, and EOF on it (the kernel closes the write end at our exit,
-    SIGKILL included) makes it remove the directory and exit. In its own session, so a
-    terminal's Ctrl-C does not end it first. :func:`release_dir` removes the directory
-    now and lets the watchdog go."""
-    proc = subprocess.Popen(
-        [sys.executable, "-I", "-c", _WATCHDOG, str(path)], stdin=subprocess.PIPE,
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
-    )
-    _watchdogs[path] = proc
-
-
-def _remove_server_dir_on_death() -> None:
-    """The fork server's socket lives in ``multiprocessing``'s temporary folder of this
-    process, removed at a normal exit only: a watchdog removes it however we end (once)."""
-    path = Path(multiprocessing.util.get_temp_dir())
-    if path not in _watchdogs:
-        remove_on_death(path)
-
-
-def release_dir(path: Path | None) -> None:
-    """Delete ``path`` now and end its :func:`remove_on_death` watchdog (if any)."""
-    if path is None:
-        return
-    shutil.rmtree(path, ignore_errors=True)
-    proc = _watchdogs.pop(path, None)
-    if proc is not None and proc.stdin is not None:
-        proc.stdin.close()  # EOF: the watchdog removes (nothing left) and exits
-        try:
-            proc.wait(5.0)
-        except subprocess.TimeoutExpired:
-            log.warning("the watchdog of %s did not exit", path)
 
 
 def worker_pool(workers: int) -> ProcessPoolExecutor:

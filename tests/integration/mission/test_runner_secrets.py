@@ -1,7 +1,7 @@
 """Secrets never outlive a run, and the children run the runner's code (issue 42).
 
 * ``kill -9`` of ``gcs mission run`` mid-run: its secure directory (signing key, Zenoh
-  passwords) is deleted by the watchdog (:func:`gcs.mission.procs.remove_on_death`) and no
+  passwords) is deleted by the watchdog (:func:`gcs.launch.watchdog.remove_on_death`) and no
   child is left.
 * A child started from inside another checkout imports the runner's packages, not that
   checkout's (``python -P`` and the runner's root on ``PYTHONPATH``).
@@ -20,7 +20,9 @@ import pytest
 from conftest import CUBE8, ROOT, free_port_offset
 
 import gcs
-from gcs.mission.procs import ProcessGroup, python_entry, release_dir, remove_on_death
+from gcs.launch import watchdog
+from gcs.launch.watchdog import release_dir, remove_on_death
+from gcs.mission.procs import ProcessGroup, python_entry
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -107,9 +109,8 @@ def test_release_dir_removes_now_and_ends_the_watchdog(tmp_path: Path) -> None:
     d.mkdir()
     (d / "k").write_text("x")
     remove_on_death(d)
-    from gcs.mission import procs
 
-    dog = procs._watchdogs[d]
+    dog = watchdog._watchdogs[d]
     assert dog.poll() is None  # waiting while we live
     release_dir(d)
     assert not d.exists()
