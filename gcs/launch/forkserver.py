@@ -38,6 +38,8 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+from multiprocessing.connection import wait as mp_wait
 from pathlib import Path
 
 LAUNCH_ENV = "SWARM_LAUNCH"  # "exec": no fork server (module docstring)
@@ -95,7 +97,14 @@ def _context_started() -> multiprocessing.context.ForkServerContext:
 
 
 class ForkedProcess:
-    """A child forked from the server, seen as :class:`subprocess.Popen` sees one."""
+    """A child forked from the server, seen as :class:`subprocess.Popen` sees one.
+
+    Thread-safe as ``Popen`` is: ``multiprocessing`` reads a child's exit status from a
+    pipe, once; two threads reading it at once (a thread following a child's log while
+    another waits for it) left one of them at the pipe's end, and that one's status read as
+    255. Every read here is under one lock, and the child is taken off ``multiprocessing``'s
+    own list of children, whose clean-up on each start would read it from yet another
+    thread."""
 
     def __init__(self, proc: multiprocessing.process.BaseProcess, argv: list[str]) -> None:
         self._proc = proc
@@ -103,23 +112,32 @@ class ForkedProcess:
         pid = proc.pid
         assert pid is not None  # started
         self.pid: int = pid
+        self._lock = threading.Lock()
+        self._rc: int | None = None
+        children = getattr(multiprocessing.process, "_children", None)
+        if isinstance(children, set):
+            children.discard(proc)
 
     @property
     def returncode(self) -> int | None:
-        return self._proc.exitcode
+        return self._rc
 
     def poll(self) -> int | None:
-        return self._proc.exitcode
+        with self._lock:
+            if self._rc is None:
+                self._rc = self._proc.exitcode
+            return self._rc
 
     def wait(self, timeout: float | None = None) -> int:
-        self._proc.join(timeout)
-        rc = self._proc.exitcode
+        if self.poll() is None:
+            mp_wait([self._proc.sentinel], timeout)  # readable once it has exited
+        rc = self.poll()
         if rc is None:
             raise subprocess.TimeoutExpired(self.args, timeout or 0.0)
         return rc
 
     def send_signal(self, sig: int) -> None:
-        if self._proc.exitcode is None:
+        if self.poll() is None:
             os.kill(self.pid, sig)
 
     def terminate(self) -> None:

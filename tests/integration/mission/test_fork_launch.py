@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -98,6 +99,7 @@ def test_swarm_launch_exec_starts_an_interpreter(tmp_path: Path,
 
 PROBE = """
 import sys
+import threading
 from pathlib import Path
 from gcs.mission.procs import ProcessGroup, python_entry
 group = ProcessGroup(Path(sys.argv[1]))
@@ -119,3 +121,36 @@ def test_a_server_that_cannot_start_gives_interpreters_and_one_warning(tmp_path:
     assert r.stdout.split() == ["Popen", "2"], (r.stdout, r.stderr)
     assert r.stderr.count("fork server unavailable") == 1, r.stderr
     assert "AF_UNIX path too long" in r.stderr
+
+
+def test_every_thread_reads_the_same_exit_status(tmp_path: Path) -> None:
+    """A child's exit status is read once from multiprocessing's pipe: threads polling it
+    while another waits (a log follower and a stop) must all get the real status, not the
+    255 that a second read at the pipe's end gave."""
+    group = ProcessGroup(tmp_path)
+    try:
+        for n in range(3):
+            child = group.start(f"offboard-{n}", [*python_entry("offboard"), "--scenario",
+                                                  CUBE8, "--agent", "99"])
+            seen: list[int | None] = []
+            stop = threading.Event()
+
+            def hammer(proc=child.proc, stop=stop, seen=seen) -> None:
+                while not stop.is_set():
+                    rc = proc.poll()
+                    if rc is not None:
+                        seen.append(rc)
+                        return
+
+            threads = [threading.Thread(target=hammer) for _ in range(4)]
+            for t in threads:
+                t.start()
+            try:
+                assert child.proc.wait(60.0) == 2
+            finally:
+                stop.set()
+                for t in threads:
+                    t.join(10.0)
+            assert seen == [2] * len(threads) and child.proc.returncode == 2
+    finally:
+        group.stop()
