@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ctypes
 import logging
 import multiprocessing
 import os
@@ -12,37 +11,18 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Protocol
 
 from gcs.launch import forkserver
+from gcs.launch.forkserver import die_with_parent
 from gcs.launch.watchdog import release_dir, remove_on_death, remove_server_dir_on_death
 from offboard.daemon.start_gate import GATE_ENV, gate_value
 from swarm_common.logsetup import configure_logging
 
 log = logging.getLogger(__name__)
-
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
-_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
-
-
-def _die_with_parent(parent_pid: int) -> Callable[[], None]:
-    """``preexec_fn``: the child gets SIGKILL when the runner's thread that started it
-    dies, however it dies (kill -9 included); if the runner is already gone, exit now.
-    Only async-signal-safe work here (a prctl call and getppid)."""
-    prctl = None if _LIBC is None else _LIBC.prctl
-
-    def setup() -> None:
-        if prctl is not None:
-            prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-        if os.getppid() != parent_pid:
-            os._exit(1)
-
-    return setup
-
 
 class ChildProcess(Protocol):
     """What a run needs of a child process: :class:`subprocess.Popen`, or one forked from
@@ -117,7 +97,7 @@ class ProcessGroup:
             # kill -9
             proc = subprocess.Popen(
                 argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                env=full_env, process_group=0, preexec_fn=_die_with_parent(os.getpid()),
+                env=full_env, process_group=0, preexec_fn=die_with_parent(os.getpid()),
             )
         child = Child(name, proc, log_path, f)
         self.children.append(child)
