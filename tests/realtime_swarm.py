@@ -137,9 +137,6 @@ class Observer(threading.Thread):
         self.conn.close()
 
 
-start = start_child  # the router, simulator and daemons (conftest.start_child)
-
-
 def wait_for(pred: object, timeout: float, what: str) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -178,7 +175,7 @@ def flying_swarm(tmp_path: Path, fly_s: float, scenario: str = CUBE8, method: st
     spec = LaunchSpec(sc, port_offset=off, lockstep=False, run_dir=tmp_path, method=method)
     obs = Observer(GCS_PORT + off, list(sc.ids))
     obs.start()
-    router = start([sys.executable, "-m", "gcs.cli", "router", "--listen",
+    router = start_child([sys.executable, "-m", "gcs.cli", "router", "--listen",
                      spec.router_endpoint], tmp_path / "router.log")
     procs: list[ChildProcess] = []
     try:
@@ -187,7 +184,7 @@ def flying_swarm(tmp_path: Path, fly_s: float, scenario: str = CUBE8, method: st
         for name, argv in spec.processes():
             who = name.removeprefix("offboard-")  # one agent per process here
             more = (extra_args or {}).get(int(who), []) if who.isdigit() else []
-            procs.append(start(argv + more,
+            procs.append(start_child(argv + more,
                                tmp_path / f"{name}.log"))
         logs = [tmp_path / f"offboard-{i}.log" for i in sc.ids]
         wait_for(lambda: all(p.exists() and "ARM accepted" in p.read_text() for p in logs), 90,
