@@ -7,8 +7,9 @@ PYTEST := $(VENV)/bin/python -m pytest -q
 # test processes, one per core: the suite is CPU-bound (its integration tests start
 # simulators and daemons), and more workers than cores starve lockstep runs into timeouts
 # on a loaded machine (docs/testing.md)
-UNIT_JOBS ?= 2
-INTEGRATION_JOBS ?= 2
+TEST_JOBS ?= 2
+UNIT_JOBS ?= $(TEST_JOBS)
+INTEGRATION_JOBS ?= $(TEST_JOBS)
 SMOKE_DIR := $(VENV)/smoke
 # a standard client the tests drive unmodified; --no-deps: its map and camera modules'
 # vtk and opencv (200 MB) are never loaded by mavproxy.py on a UDP link (its other
@@ -22,7 +23,7 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet --no-deps $(CLIENT_TOOLS)
 	touch $(STAMP)
 
-.PHONY: venv mission test check static smoke test-unit test-unit-quick test-integration lint typecheck warm bench bytecode
+.PHONY: venv mission test check static smoke test-all test-unit test-unit-quick test-integration lint typecheck warm bench bytecode
 venv: $(STAMP)
 
 # every module's bytecode written once (only what changed since): where the environment
@@ -39,7 +40,7 @@ mission: $(STAMP)
 	$(VENV)/bin/gcs mission compare scenarios/cube8.toml --out runs/compare \
 	  $(if $(PORT_OFFSET),--port-offset $(PORT_OFFSET))
 
-test: bytecode static test-unit test-integration
+test: bytecode static test-all
 
 # the quick tier: unit tests marked `full` (a few seconds each) run in `make test` only
 check: bytecode static test-unit-quick smoke
@@ -51,6 +52,12 @@ static: $(STAMP)
 	$(VENV)/bin/python -c 'from gcs.mission.warmup import compile_kernels; compile_kernels()' & \
 	  warm=$$!; $(VENV)/bin/mypy; types=$$?; wait $$warm; kernels=$$?; \
 	  test $$types -eq 0 && test $$kernels -eq 0
+
+# unit and integration tests in one pytest session: one start of the workers, and the
+# unit tests fill the gaps the long integration tests leave at the end (slow ones first:
+# tests/conftest.py)
+test-all: $(STAMP)
+	$(PYTEST) -n $(TEST_JOBS) tests
 
 test-unit: $(STAMP)
 	$(PYTEST) -n $(UNIT_JOBS) tests/unit

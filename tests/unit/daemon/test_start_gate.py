@@ -1,5 +1,5 @@
 """offboard.daemon.start_gate's value parsing (unit test of one module; the slots themselves are
-tested with real processes in tests/integration/daemon/test_start_gate.py)."""
+tested with real processes in tests/integration/daemon/test_start_gate_processes.py)."""
 
 from __future__ import annotations
 
