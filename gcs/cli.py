@@ -34,11 +34,12 @@ from gcs.exit_codes import (
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.records.cli import add_log_parser
-from gcs.records.live import add_live_flags, start_live
-from gcs.report.verdict import safety_exit_status
+from gcs.records.live_flags import add_live_flags
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.inputs import (
+    MAX_SCENARIO_BYTES,
     OneLineParser,
+    bounded_file,
     float_in,
     int_in,
     port_offset,
@@ -84,6 +85,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     from gcs.mission.launch_spec import LaunchError
     from gcs.mission.preflight import check_physics
     from gcs.mission.run_output import print_result, write_run
+    from gcs.records.live import start_live
+    from gcs.report.verdict import safety_exit_status
 
     try:  # the observer's gains on this graph, the deadline against --duration
         check_physics(sc, float(sc.run.duration_s if args.duration is None else args.duration))
@@ -129,6 +132,7 @@ def add_router_parser(sub: argparse._SubParsersAction) -> None:
                    default=[default_endpoint()], metavar="EP",
                    help=f"endpoints to listen on (default {default_endpoint()})")
     p.add_argument("--scenario", default=None,
+                   type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"),
                    help="authenticate and apply this swarm's ACL (docs/security.md)")
     p.add_argument("--secure-dir", type=Path, default=None, metavar="DIR",
                    help="credentials + ACL: generated here (0700/0600) unless present")
@@ -196,7 +200,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("mission", help="run or compare missions")
     msub = p.add_subparsers(dest="mission_cmd", required=True)
     r = msub.add_parser("run", help="run one mission")
-    r.add_argument("scenario")
+    r.add_argument("scenario", type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"))
     r.add_argument("--inproc", action="store_true", help="all in one process (no MAVLink)")
     r.add_argument("--method", choices=METHODS, default=None)
     r.add_argument("--seed", type=_seed, default=None)
@@ -233,7 +237,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     _add_allow_infeasible(r)
     r.set_defaults(func=cmd_mission_run)
     c = msub.add_parser("compare", help="run every method and write a report")
-    c.add_argument("scenario")
+    c.add_argument("scenario", type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"))
     c.add_argument("--inproc", action="store_true")
     c.add_argument("--seed", type=_seed, default=None)
     c.add_argument("--duration", type=_duration, default=None)

@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 
 from gcs.exit_codes import EXIT_USAGE
-from offboard.estimation.deso_gains import scenario_gain_problem
 from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
 
@@ -167,6 +166,9 @@ def _formation(v: np.ndarray, n_leaders: int, graph: GraphKind, k: int,
 
 def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     """The scenario document of the flags and the knn_k used (validated: it loads)."""
+    # the DESO gain check needs scipy and numba: loaded here, not when gcs builds its parser
+    from offboard.estimation.deso_gains import scenario_gain_problem
+
     n, n_lead = args.agents, args.leaders
     if n < 3:
         raise GenError(f"--agents {n}: need at least 3 (2 leaders and a follower)")

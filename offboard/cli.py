@@ -19,28 +19,27 @@ import signal
 import sys
 import threading
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from offboard.daemon import start_gate
-from offboard.daemon.core import WAIT_LOG_S, DaemonConfig, OffboardDaemon
-from offboard.daemon.host import DaemonHost
-from offboard.daemon.mavlink.link import COMP_ONBOARD
+from offboard.daemon.limits import (
+    LAND_AFTER_S,
+    MAX_NAV_GATE_M,
+    MIN_LAND_AFTER_S,
+    MIN_NAV_GATE_M,
+    NAV_GATE_M,
+    NAV_GATE_STEPS,
+)
 from offboard.daemon.mavlink.url import mavlink_url_problem
-from offboard.daemon.nav_check import MAX_NAV_GATE_M, MIN_NAV_GATE_M, NAV_GATE_M, NAV_GATE_STEPS
 from offboard.daemon.packing import parse_agents
-from offboard.daemon.runner_loss import LAND_AFTER_S, MIN_LAND_AFTER_S
-from offboard.daemon.warmup import warm_kernels
-from offboard.daemon.zenoh.link import FIFO_DEPTH, ZENOH_ERRORS
-from offboard.daemon.zenoh.shared_batch import SharedBatch
-from offboard.daemon.zenoh.shared_subs import SharedSubscriptions
-from offboard.estimation.bearing import formation_from_scenario
-from swarm_common.blas import single_thread_blas
 from swarm_common.enums import Method, SensingSource
 from swarm_common.inputs import (
+    MAX_SCENARIO_BYTES,
     MAX_ZENOH_CONFIG_BYTES,
     BoundedReadError,
     OneLineParser,
     agent_id,
+    bounded_file,
     out_file_problem,
     port_offset,
     read_bounded,
@@ -51,15 +50,13 @@ from swarm_common.inputs import (
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
 from swarm_common.process_life import exit_now, freeze_startup
-from swarm_common.scenario.model import (
+from swarm_common.scenario.files import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
-    Scenario,
     ScenarioError,
-    load_scenario,
     swarm_name_problem,
 )
-from swarm_common.signing import SigningKeyError, load_key
+from swarm_common.signing import SigningKeyError, key_file, load_key
 from swarm_common.zenoh_session import (
     ZENOH_CONFIG_ENV,
     ZENOH_CONFIG_FLAG,
@@ -67,8 +64,23 @@ from swarm_common.zenoh_session import (
     open_session,
 )
 
-# a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
-OPEN_ERRORS: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
+if TYPE_CHECKING:  # the daemon's modules load after the flags and files are checked
+    from offboard.daemon.config import DaemonConfig
+    from offboard.daemon.core import OffboardDaemon
+    from swarm_common.scenario.spec import Scenario
+
+# what :func:`main` imports once the flags are checked: the fork server
+# (gcs.launch.preload) imports them before it forks a daemon
+RUNTIME_MODULES = (
+    "offboard.daemon.core",
+    "offboard.daemon.host",
+    "offboard.daemon.warmup",
+    "offboard.daemon.zenoh.shared_batch",
+    "offboard.daemon.zenoh.shared_subs",
+    "offboard.estimation.bearing",
+    "swarm_common.scenario.model",
+)
+
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 log = logging.getLogger("offboard.cli")
 UNSIGNED_WARNING = ("no --signing-key: the daemon accepts unsigned MAVLink frames from its "
@@ -96,13 +108,18 @@ def open_session_saying(
     """open_session in a helper thread (a client blocks until its router is up), logging
     what it waits for every WAIT_LOG_S; the main thread stays free for signals.
     ``config_file``: Zenoh credentials (default: ``$SWARM_ZENOH_CONFIG`` if set)."""
+    from offboard.daemon.core import WAIT_LOG_S
+    from offboard.daemon.zenoh.link import ZENOH_ERRORS
+
     box: dict[str, Any] = {}
+    # a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
+    open_errors: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
 
     def opener() -> None:
         try:
             box["session"] = open_session(mode=mode, connect=connect, listen=listen,
                                           config_file=config_file)
-        except OPEN_ERRORS as exc:
+        except open_errors as exc:
             box["error"] = exc
 
     th = threading.Thread(target=opener, name="zenoh-open", daemon=True)
@@ -141,7 +158,8 @@ def nav_gate(text: object) -> float | None:
 
 def build_parser() -> argparse.ArgumentParser:
     ap = OneLineParser(prog="offboard", description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", required=True, help="scenario TOML file")
+    ap.add_argument("--scenario", required=True, help="scenario TOML file",
+                    type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"))
     who = ap.add_mutually_exclusive_group(required=True)
     who.add_argument("--agent", type=agent_id, help="agent id (= MAVLink system id)")
     who.add_argument("--agents", default=None, metavar="IDS",
@@ -162,6 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
                     metavar="EP")
     ap.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
     ap.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
+                    type=bounded_file(MAX_ZENOH_CONFIG_BYTES, "zenoh config"),
                     help="Zenoh JSON5 config with this agent's credentials (as written by "
                     f"gcs router --secure-dir; default: ${ZENOH_CONFIG_ENV} if set)")
     ap.add_argument("--manual-start", action="store_true",
@@ -171,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "{id}, replaced by each agent's id)")
     ap.add_argument("--die-with-parent", action="store_true",
                     help="exit when the parent process (the mission runner) dies (Linux)")
-    ap.add_argument("--signing-key", default=None, metavar="PATH",
+    ap.add_argument("--signing-key", default=None, metavar="PATH", type=key_file,
                     help="MAVLink 2 signing key file (0600): sign everything sent to the "
                          "vehicle, drop unsigned or wrongly signed frames")
     ap.add_argument("--loss-land-after", default=LAND_AFTER_S, metavar="S",
@@ -224,6 +243,8 @@ def main(argv: list[str] | None = None) -> int:
     if (why := file_problem(args)) is not None:
         print(f"offboard: {why}", file=sys.stderr)
         return 2
+    from swarm_common.scenario.model import load_scenario
+
     try:
         sc = load_scenario(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except ScenarioError as exc:
@@ -261,10 +282,14 @@ def main(argv: list[str] | None = None) -> int:
     if connect is None:
         connect = [default_endpoint(args.port_offset)]
     cfgs = [daemon_config(args, sc, i, connect, key, land_after, gate) for i in ids]
+    from offboard.daemon.zenoh.link import ZENOH_ERRORS
+
+    # a bad endpoint (ValueError), zenoh refusing (RuntimeError from open_session, ZError)
+    open_errors: tuple[type[Exception], ...] = (ValueError, *ZENOH_ERRORS)
     try:
         session = open_session_saying(cfgs[0].zenoh_mode, connect, cfgs[0].zenoh_listen,
                                       args.zenoh_config)
-    except OPEN_ERRORS as exc:
+    except open_errors as exc:
         print(f"offboard: cannot open Zenoh session ({connect}): {exc}", file=sys.stderr)
         return 2
     try:
@@ -309,6 +334,9 @@ def agent_ids(args: argparse.Namespace, ids: list[int]) -> list[int] | str:
 def daemon_config(args: argparse.Namespace, sc: Scenario, agent_id: int, connect: list[str],
                   key: bytes | None, land_after: float, gate: float) -> DaemonConfig:
     """One agent's :class:`DaemonConfig` from the checked command line."""
+    from offboard.daemon.config import DaemonConfig
+    from offboard.daemon.mavlink.link import COMP_ONBOARD
+
     ports = vehicle_ports(agent_id, args.port_offset)
     url = args.mavlink or f"udpin:127.0.0.1:{ports.api_remote}"
     method = Method(args.method) if args.method else sc.controller.method
@@ -346,6 +374,15 @@ def run_daemons(cfgs: list[DaemonConfig], session: Any, name: str) -> int:
     (:class:`offboard.daemon.host.DaemonHost`). ``$OFFBOARD_PROFILE``: a developer aid,
     cProfile (the main thread's CPU time, not Zenoh's threads) of the whole run written
     to ``$OFFBOARD_PROFILE.<name>``."""
+    from offboard.daemon.core import OffboardDaemon
+    from offboard.daemon.host import DaemonHost
+    from offboard.daemon.warmup import warm_kernels
+    from offboard.daemon.zenoh.link import FIFO_DEPTH
+    from offboard.daemon.zenoh.shared_batch import SharedBatch
+    from offboard.daemon.zenoh.shared_subs import SharedSubscriptions
+    from offboard.estimation.bearing import formation_from_scenario
+    from swarm_common.blas import single_thread_blas
+
     single_thread_blas()  # tiny matrices: BLAS worker threads only cost (swarm_common.blas)
     form = formation_from_scenario(cfgs[0].scenario)
     warm_kernels(cfgs[0].scenario, cfgs[0].method, form)  # before any daemon's first step

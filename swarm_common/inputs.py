@@ -6,7 +6,9 @@
 (``/dev/zero``), a socket or a directory is refused at once and never blocks; a file larger
 than its kind's cap (the ``MAX_*_BYTES`` constants) is refused from its size, and no more
 than cap + 1 bytes are ever read (a 1 GB sparse file costs one ``fstat``). Every refusal is
-one :class:`BoundedReadError` line naming the path and why.
+one :class:`BoundedReadError` line naming the path and why. A command's file options use
+:func:`bounded_file` as their argparse ``type=``, so the refusal comes as the flags are
+parsed, before the command imports numba, Zenoh or pymavlink.
 
 **Output paths** (:func:`out_dir_problem`, :func:`out_file_problem`): checked before a run
 starts (creatable and writable, by writing and removing a probe file);
@@ -52,14 +54,9 @@ class BoundedReadError(ValueError):
     """A file that cannot be read within its bounds; ``str()`` is one line naming it."""
 
 
-def read_bounded(path: str | os.PathLike[str], limit: int, what: str) -> bytes:
-    """The bytes of ``path``: a regular file of at most ``limit`` bytes.
-
-    ``what`` names the kind of file in the error (``"scenario file"``). A FIFO, device,
-    socket or directory, a missing or unreadable file, or one larger than ``limit`` raises
-    :class:`BoundedReadError` (``"<path>: cannot read <what> (<why>)"``) without blocking
-    and without reading more than ``limit + 1`` bytes."""
-    p = Path(path)
+def _open_bounded(p: Path, limit: int, what: str) -> int:
+    """An fd of ``p`` opened without blocking, once it is known to be a regular file of at
+    most ``limit`` bytes; :class:`BoundedReadError` (one line) if it is not."""
     try:
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
     except OSError as exc:
@@ -73,6 +70,22 @@ def read_bounded(path: str | os.PathLike[str], limit: int, what: str) -> bytes:
             raise BoundedReadError(f"{p}: cannot read {what} (not a regular file{kind})")
         if st.st_size > limit:
             raise BoundedReadError(f"{p}: {what} larger than {limit} bytes")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def read_bounded(path: str | os.PathLike[str], limit: int, what: str) -> bytes:
+    """The bytes of ``path``: a regular file of at most ``limit`` bytes.
+
+    ``what`` names the kind of file in the error (``"scenario file"``). A FIFO, device,
+    socket or directory, a missing or unreadable file, or one larger than ``limit`` raises
+    :class:`BoundedReadError` (``"<path>: cannot read <what> (<why>)"``) without blocking
+    and without reading more than ``limit + 1`` bytes."""
+    p = Path(path)
+    fd = _open_bounded(p, limit, what)
+    try:
         chunks: list[bytes] = []
         got = 0
         while got <= limit:  # a file growing while read stops at limit + 1 bytes
@@ -88,6 +101,27 @@ def read_bounded(path: str | os.PathLike[str], limit: int, what: str) -> bytes:
     if got > limit:
         raise BoundedReadError(f"{p}: {what} larger than {limit} bytes")
     return b"".join(chunks)
+
+
+def bounded_file(limit: int, what: str, missing_ok: bool = False) -> Callable[[str], str]:
+    """argparse ``type=`` of a file option: the path, once :func:`read_bounded` would take
+    it (a regular file of at most ``limit`` bytes; with ``missing_ok`` also a path where
+    nothing is yet). Refused at parse time, one line and exit 2, before the command loads
+    anything heavy: a process given ``/dev/zero`` or a FIFO ends at once and small. The
+    command reads the file later with :func:`read_bounded`, which checks again."""
+
+    def check(text: str) -> str:
+        p = Path(text)
+        if missing_ok and not os.path.lexists(p):
+            return text
+        try:
+            os.close(_open_bounded(p, limit, what))
+        except BoundedReadError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+
+    check.__name__ = what.replace(" ", "_")  # argparse names the type in some errors
+    return check
 
 
 def read_bounded_text(path: str | os.PathLike[str], limit: int, what: str) -> str:

@@ -125,6 +125,19 @@ def generate_key(path: str | os.PathLike[str], overwrite: bool = False) -> bytes
     return key
 
 
+def key_file(text: str) -> str:
+    """argparse ``type=`` of a ``--signing-key`` option: the path, once :func:`load_key`
+    takes it, so a bad key file is refused (one line, exit 2) as the flags are parsed,
+    before the command loads anything heavy. The command loads the key again later."""
+    import argparse
+
+    try:
+        load_key(text)
+    except SigningKeyError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def load_key(path: str | os.PathLike[str]) -> bytes:
     """Read and validate a key file: a regular file, mode without group/other bits,
     64 hexadecimal digits (a trailing newline allowed). Returns the 32 key bytes."""

@@ -21,9 +21,11 @@ from swarm_common.blas import single_thread_blas
 from swarm_common.enums import DefaultStreams, FailsafeAction
 from swarm_common.inputs import (
     MAX_PARAMS_BYTES,
+    MAX_SCENARIO_BYTES,
     MAX_ZENOH_CONFIG_BYTES,
     BoundedReadError,
     OneLineParser,
+    bounded_file,
     float_in,
     host,
     int_in,
@@ -37,21 +39,29 @@ from swarm_common.inputs import (
 from swarm_common.logsetup import LogLevel, add_log_level_argument, configure_logging
 from swarm_common.ports import MAX_ID
 from swarm_common.process_life import exit_now, freeze_startup
-from swarm_common.scenario.model import (
+from swarm_common.scenario.files import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
-    Scenario,
     ScenarioError,
-    load_scenario,
     swarm_name_problem,
 )
-from swarm_common.signing import SigningKeyError, load_key
+from swarm_common.signing import SigningKeyError, key_file, load_key
 from swarm_common.zenoh_session import ZENOH_CONFIG_ENV, ZENOH_CONFIG_FLAG
-from vehicle_sim.options import SimOptions
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the scenario model and the server load after the flags are checked
+    from swarm_common.scenario.spec import Scenario
+    from vehicle_sim.options import SimOptions
     from vehicle_sim.server import SimServer
 
+# what :func:`main` imports once the flags are checked: the fork server
+# (gcs.launch.preload) imports them before it forks a simulator
+RUNTIME_MODULES = (
+    "swarm_common.scenario.model",
+    "vehicle_sim.autopilot.params",
+    "vehicle_sim.link.endpoint",
+    "vehicle_sim.options",
+    "vehicle_sim.server",
+)
 log = logging.getLogger("vehicle_sim")
 MAX_TIMEOUT_S = 3600.0  # --offboard-timeout, --step-timeout
 MAX_RATE_HZ = 5000.0  # --odometry-hz: the highest physics rate a scenario may have
@@ -65,7 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="vehicle-sim",
         description="SITL-style multi-vehicle MAVLink 2 simulator (PX4 conventions).",
     )
-    ap.add_argument("--scenario", required=True, help="scenario TOML file (scenarios/cube8.toml)")
+    ap.add_argument("--scenario", required=True, type=bounded_file(MAX_SCENARIO_BYTES,
+                                                                    "scenario file"),
+                    help="scenario TOML file (scenarios/cube8.toml)")
     ap.add_argument("--lockstep", action="store_true", help="advance only when controllers answer")
     ap.add_argument("--seed", type=seed, default=None,
                     help="dynamics seed, 0..2^32-1 (default: scenario)")
@@ -89,9 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--zenoh-mode", choices=("peer", "client", "router"), default="peer")
     ap.add_argument("--no-zenoh", action="store_true", help="do not publish truth")
     ap.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
+                    type=bounded_file(MAX_ZENOH_CONFIG_BYTES, "zenoh config"),
                     help="Zenoh JSON5 config with this process's credentials (as written by "
                     f"gcs router --secure-dir; default: ${ZENOH_CONFIG_ENV} if set)")
-    ap.add_argument("--signing-key", default=None, metavar="PATH",
+    ap.add_argument("--signing-key", default=None, metavar="PATH", type=key_file,
                     help="MAVLink 2 signing key file (gcs keys generate): reject unsigned or "
                     "wrongly signed frames, sign every frame sent (default: signing off)")
     ap.add_argument("--unsigned-gcs-link", action="store_true",
@@ -136,6 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--params-file",
         default=None,
         metavar="PATH",
+        type=bounded_file(MAX_PARAMS_BYTES, "parameter file", missing_ok=True),
         help="PX4 parameters per vehicle (JSON, docs/px4/params.md): loaded at start, "
         "rewritten on every accepted PARAM_SET; created if missing",
     )
@@ -151,6 +165,8 @@ class _Fatal(Exception):
 
 def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
     """Check the options that depend on the scenario and type them."""
+    from vehicle_sim.options import SimOptions
+
     if args.vehicles is not None and not 1 <= args.vehicles <= sc.n:
         raise _Fatal(f"--vehicles {args.vehicles}: must be in [1, {sc.n}]")
     if args.swarm is not None and (problem := swarm_name_problem(args.swarm)) is not None:
@@ -215,6 +231,7 @@ def check_files(args: argparse.Namespace) -> None:
 
 def _server(args: argparse.Namespace) -> SimServer:
     """Load the scenario and open every socket; :class:`_Fatal` with one line if not."""
+    from swarm_common.scenario.model import load_scenario
     from vehicle_sim.link.endpoint import LinkError
     from vehicle_sim.server import SimServer
 

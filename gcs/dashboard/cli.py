@@ -24,14 +24,16 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from gcs.formation.steer import FormationSteer
 from gcs.mission.launch_spec import add_signing_flags
-from gcs.records.live import add_live_flags, start_live
+from gcs.records.live_flags import add_live_flags
 from swarm_common.enums import Method
 from swarm_common.inputs import (
+    MAX_SCENARIO_BYTES,
+    MAX_ZENOH_CONFIG_BYTES,
     OneLineParser,
+    bounded_file,
     float_in,
     int_in,
     out_dir_arg,
@@ -48,6 +50,9 @@ from swarm_common.scenario.model import (
 from swarm_common.signing import load_key
 from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 
+if TYPE_CHECKING:  # loaded by build(), once the flags are checked
+    from gcs.formation.steer import FormationSteer
+
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"
 
 
@@ -56,7 +61,9 @@ MAX_RETRIES = 100
 
 
 def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    p.add_argument("--scenario", default=None, help="scenario TOML (default scenarios/cube8.toml)")
+    p.add_argument("--scenario", default=None,
+                   type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"),
+                   help="scenario TOML (default scenarios/cube8.toml)")
     p.add_argument("--port-offset", type=port_offset, default=None,
                    help="shift every port by N (default: with --launch the first offset whose "
                    "ports are all free, else 0)")
@@ -76,6 +83,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--zenoh-mode", choices=("client", "peer"), default="client")
     p.add_argument("--no-zenoh", action="store_true", help="MAVLink only")
     p.add_argument(ZENOH_CONFIG_FLAG, default=None, metavar="FILE",
+                   type=bounded_file(MAX_ZENOH_CONFIG_BYTES, "zenoh config"),
                    help="attached: Zenoh config with the gcs credentials (gcs router --secure-dir)")
     add_signing_flags(p, "with --launch: ")
     add_live_flags(p)
@@ -83,6 +91,7 @@ def configure_parser(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
         "--launch",
         metavar="SCENARIO",
         default=None,
+        type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"),
         help="start vehicle-sim (real time) and the offboard daemons; stop on exit",
     )
     p.add_argument("--no-daemons", action="store_true", help="with --launch: simulator only")
@@ -138,7 +147,9 @@ def _err(msg: str) -> int:
 
 def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     """(app, source, launch, title) from parsed args; raises ValueError/OSError/RuntimeError."""
+    from gcs.formation.steer import FormationSteer
     from gcs.mission.launch_spec import SigningChoice
+    from gcs.records.live import start_live
 
     from .app import DashboardApp
     from .commands import LiveCommander

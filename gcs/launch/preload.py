@@ -1,7 +1,8 @@
 """What the fork server (:mod:`gcs.launch.forkserver`) holds before it forks a child.
 
 Imported once, in the server: the daemon's and the simulator's programs with everything
-they import, then their compiled kernels loaded by the same warm-ups each program runs
+they import, also what their ``main`` imports only once its flags are checked (each CLI's
+``RUNTIME_MODULES``), then their compiled kernels loaded by the same warm-ups each program runs
 before its first step (:func:`offboard.daemon.warmup.warm_kernels` for every safety
 method, :func:`vehicle_sim.server.load_kernels`) on cube8. A child forked afterwards finds
 them in memory; a kernel that cube8 does not reach loads in the child, as it would have.
@@ -18,7 +19,8 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import logging  # noqa: E402 - after the BLAS settings above
+import importlib  # noqa: E402 - after the BLAS settings above
+import logging  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import offboard.__main__  # noqa: E402, F401 - the daemon's entry and the modules it imports
@@ -29,6 +31,9 @@ from offboard.estimation.bearing import formation_from_scenario  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
 from swarm_common.scenario.model import load_scenario  # noqa: E402
 from vehicle_sim.server import load_kernels  # noqa: E402
+
+for _module in (*offboard.cli.RUNTIME_MODULES, *vehicle_sim.cli.RUNTIME_MODULES):
+    importlib.import_module(_module)
 
 log = logging.getLogger(__name__)
 SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "cube8.toml"

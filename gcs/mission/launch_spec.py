@@ -38,7 +38,7 @@ from swarm_common.scenario.model import (
     Scenario,
     swarm_name_problem,
 )
-from swarm_common.signing import generate_key, load_key
+from swarm_common.signing import generate_key, key_file, load_key
 from swarm_common.zenoh_session import (
     DEFAULT_ZENOH_PORT,
     SIM_USER,
@@ -353,7 +353,7 @@ def add_signing_flags(g: Any, launch_note: str = "") -> None:
     """``--signing-key``, ``--no-signing``, ``--unsigned-gcs-link`` (docs/security.md,
     "Defaults"): a launched swarm's MAVLink links are signed unless ``--no-signing``.
     ``launch_note`` prefixes the help of the two launch-only flags (e.g. "with --launch: ")."""
-    g.add_argument("--signing-key", default=None, metavar="PATH",
+    g.add_argument("--signing-key", default=None, metavar="PATH", type=key_file,
                    help="MAVLink 2 signing key file (gcs keys generate): sign commands, accept "
                    "only signed frames (launched swarm: default a fresh per-run key)")
     g.add_argument("--no-signing", action="store_true",

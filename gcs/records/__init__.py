@@ -11,6 +11,7 @@ Foxglove and PlotJuggler, CSV files per vehicle, written with the maintained ``m
 * :mod:`.channels` - the record's channels and the messages of a step (file and live).
 * :mod:`.writer` - :func:`~gcs.records.writer.write_record`: ``record.mcap`` of a run.
 * :mod:`.live` - the live view: the same channels on a Foxglove WebSocket server.
+* :mod:`.live_flags` - the live view's flags (``--foxglove``), light to import.
 * :mod:`.reader` - read a record back: checks and the ROS 2 topics as arrays.
 * :mod:`.export` - load a run folder or record; write the CSV files.
 * :mod:`.layout` - the Foxglove layout shipped in docs/foxglove/.

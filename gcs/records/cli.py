@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs.exit_codes import EXIT_USAGE
+from swarm_common.inputs import MAX_SCENARIO_BYTES, bounded_file
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -32,6 +33,7 @@ def add_log_parser(subparsers: Any) -> None:
     e.add_argument("--format", choices=("csv", "mcap"), required=True)
     e.add_argument("--out", required=True, metavar="DIR", help="folder to write into")
     e.add_argument("--scenario", default=None,
+                   type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"),
                    help="the run's scenario TOML (default scenarios/<name>.toml)")
     e.set_defaults(func=cmd_log_export)
 

@@ -21,35 +21,33 @@ import logging
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gcs.exit_codes import EXIT_USAGE
-from gcs.report.sweep import write_outputs
-from gcs.sweep.jobs import (
-    SweepInputError,
-    load_all,
-    make_jobs,
-    parse_address,
-    parse_duration,
-    parse_jobs,
-    parse_methods,
-    parse_seeds,
-)
-from gcs.sweep.local import run_sweep
-from gcs.sweep.rows import RowSink, resumable_rows
 from swarm_common.enums import Method
-from swarm_common.inputs import out_dir_problem
-from swarm_common.scenario.model import (
-    ALLOW_INFEASIBLE_FLAG,
-    ALLOW_UNSAFE_FLAG,
-    Scenario,
-)
+from swarm_common.inputs import MAX_SCENARIO_BYTES, bounded_file, out_dir_problem
+from swarm_common.scenario.files import ALLOW_INFEASIBLE_FLAG, ALLOW_UNSAFE_FLAG
+
+if TYPE_CHECKING:
+    from swarm_common.scenario.spec import Scenario
 
 log = logging.getLogger(__name__)
 
 def cmd_mission_sweep(args: argparse.Namespace) -> int:
     """``gcs mission sweep``: exit 0 (even with crashed runs: they are in runs.csv), 2 on
     bad input."""
+    # the sweep's machinery (runs, report, figures) loads once the flags are parsed: a bad
+    # flag or file is refused without it
+    from gcs.sweep.jobs import (
+        SweepInputError,
+        load_all,
+        parse_address,
+        parse_duration,
+        parse_jobs,
+        parse_methods,
+        parse_seeds,
+    )
+
     try:
         seeds = parse_seeds(args.seeds)
         methods = parse_methods(args.methods)
@@ -81,6 +79,11 @@ def _sweep_into(
     args: argparse.Namespace, client: Any, scenarios: list[tuple[str, str, Scenario]],
     methods: list[str], seeds: list[int], duration: float | None, workers: int,
 ) -> int:
+    from gcs.report.sweep import write_outputs
+    from gcs.sweep.jobs import make_jobs
+    from gcs.sweep.local import run_sweep
+    from gcs.sweep.rows import RowSink, resumable_rows
+
     out = Path(args.out or f"runs/sweep-{time.strftime('%Y%m%d-%H%M%S')}")
     if (why := out_dir_problem(out, "--out")) is not None:  # before any run starts
         print(f"gcs mission sweep: {why}", file=sys.stderr)
@@ -124,7 +127,8 @@ def _sweep_into(
 def add_sweep_parser(msub: argparse._SubParsersAction) -> None:
     """Register ``gcs mission sweep`` (values validated by the command: one-line errors)."""
     s = msub.add_parser("sweep", help="many seeds x methods x scenarios in parallel")
-    s.add_argument("scenario", nargs="+", help="scenario file(s)")
+    s.add_argument("scenario", nargs="+", help="scenario file(s)",
+                   type=bounded_file(MAX_SCENARIO_BYTES, "scenario file"))
     s.add_argument("--seeds", default="1-20", help="range 1-100 or list 1,4,9 (default 1-20)")
     s.add_argument("--methods", default=",".join(str(m) for m in Method),
                    help="comma-separated methods (default: all)")

@@ -13,7 +13,8 @@ its links through :mod:`.ports` and leaves lockstep and real time to the two dri
 * :mod:`offboard.daemon.zenoh` - the link to the swarm.
 * :mod:`.commands` - ground-station commands (a handler per ``CommandKind``);
   :mod:`.stream` - the setpoint stream and the estimate re-sends.
-* :mod:`.runner_loss`, :mod:`.nav_check` - failsafes of a real-time daemon.
+* :mod:`.runner_loss`, :mod:`.nav_check` - failsafes of a real-time daemon;
+  :mod:`.limits` - their defaults and bounds, as the command line shows them.
 * :mod:`.sensing_source` - the sensor's inputs (truth or the swarm's odometry).
 * :mod:`.link_guard` - pure guards of both links; :mod:`.wire_convert` - records to payloads.
 * :mod:`.start_gate`, :mod:`.warmup`, :mod:`.output_burst`, :mod:`.packing` - start-up and

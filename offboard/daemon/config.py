@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from offboard.daemon.nav_check import NAV_GATE_M
-from offboard.daemon.runner_loss import LAND_AFTER_S
+from offboard.daemon.limits import LAND_AFTER_S, NAV_GATE_M
 from swarm_common.enums import Method, SensingSource
 from swarm_common.scenario.model import Scenario
 

@@ -23,10 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.agent.follower import MAX_COAST_PERIODS
+from offboard.daemon.limits import NAV_GATE_M, NAV_GATE_STEPS
 
-NAV_GATE_M = 2.0  # m, |estimate − odometry| above this is a disagreement ...
-NAV_GATE_STEPS = 3  # ... at this many consecutive checks: the estimate has diverged
-MIN_NAV_GATE_M, MAX_NAV_GATE_M = 0.001, 1000.0  # m: the gates `offboard --nav-gate` takes
 NAV_GRACE_S = 2.0  # s not counted after the first step and after a long gap
 # steps between two checks (10 Hz at 50 Hz): converting the ODOMETRY costs about 54 µs,
 # and an estimate runs away over seconds (docs/performance.md, twenty-first round)

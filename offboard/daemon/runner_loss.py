@@ -46,6 +46,7 @@ import numpy as np
 
 from offboard.agent.attitude import Setpoint, setpoint_from_accel
 from offboard.agent.landing import LandingPlan, LandingReference, landed, landing_plan
+from offboard.daemon.limits import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.estimation.reference import xi_a, xi_at_rest, xi_j, xi_p, xi_v
 from swarm_common.scenario.input_set import control_box
 from swarm_common.scenario.model import Scenario
@@ -54,9 +55,7 @@ log = logging.getLogger(__name__)
 
 STALLED_PERIODS = 10  # real time: truth this many steps behind the vehicle -> brake, hold
 RUNNER_LOST_PERIODS = 25  # ... this many: the runner or router is lost -> land at t_L
-LAND_AFTER_S = 3.0  # s after the last truth: the default land time t_L − t_s
 LEAD_S = 1.0  # s before t_L the landing is committed
-MIN_LAND_AFTER_S = 2.0  # s: lost (0.2 s) + settling in the hold + LEAD_S
 DISARM_AFTER_S = 1.0  # s of landed idle before the disarm (retried every 2 s while armed)
 
 

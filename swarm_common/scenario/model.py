@@ -24,13 +24,6 @@ from swarm_common import faults
 from swarm_common.enums import Role, StartMode
 from swarm_common.faults import FaultError, FaultPlan
 from swarm_common.mission.config import MissionConfig, MissionError, parse_mission
-from swarm_common.scenario.checks import (
-    check_feasible,
-    check_pads,
-    check_safe,
-    check_separation,
-    graph_problem,
-)
 from swarm_common.scenario.files import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
@@ -45,7 +38,6 @@ from swarm_common.scenario.files import (
     read_scenario_text,
     swarm_name_problem,
 )
-from swarm_common.scenario.mission_check import mission_problem
 from swarm_common.scenario.schema import (
     AGENT_OPTIONAL,
     AGENT_SCHEMA,
@@ -80,9 +72,7 @@ __all__ = [
     "SCHEMA",
     "SWARM_NAME_RULE",
     "FaultPlan",
-    "check_feasible",
     "dump_toml",
-    "graph_problem",
     "read_scenario_text",
     "swarm_name_problem",
     "AgentSpec",
@@ -129,6 +119,17 @@ def parse_scenario(
     :class:`InfeasibleScenarioError`, or only logs a warning with ``allow_infeasible``; one
     that breaks a load-time safety assumption (:func:`check_safe`) raises
     :class:`UnsafeScenarioError`, or only logs warnings with ``allow_unsafe``."""
+    # the checks (graphs, the mission plan, the kernels they run: scipy and numba) are
+    # imported here, not with this module: a command line refuses a bad flag or file
+    # before it loads a scenario, without paying for them (swarm_common.inputs)
+    from swarm_common.scenario.checks import (
+        check_feasible,
+        check_pads,
+        check_safe,
+        check_separation,
+        graph_problem,
+    )
+    from swarm_common.scenario.mission_check import mission_problem
 
     def fail(msg: str) -> ScenarioError:
         return ScenarioError(f"{path}: {msg}")

@@ -155,12 +155,17 @@ def test_sim_and_daemon_bad_swarm_or_zenoh_config_exit_2(argv):
 @pytest.mark.parametrize(
     ("argv", "expect"),
     [
-        (["--no-signing", "--signing-key", "k"], "--no-signing"),
+        (["--no-signing", "--signing-key", "KEY"], "--no-signing"),
         (["--no-signing", "--unsigned-gcs-link"], "--unsigned-gcs-link"),
         (["--signing-key", "/nonexistent/key"], "key file"),
     ],
 )
-def test_bad_signing_flags_exit_2(argv, expect):
+def test_bad_signing_flags_exit_2(tmp_path, argv, expect):
+    """KEY: a valid key file (a missing or bad one is refused as the flags are parsed)."""
+    key = tmp_path / "swarm.key"
+    key.write_text("ab" * 32 + "\n")
+    key.chmod(0o600)
+    argv = [str(key) if a == "KEY" else a for a in argv]
     _one_line_exit_2(_gcs("mission", "run", CUBE8, "--duration", "0.1", *argv), expect)
 
 
