@@ -11,7 +11,7 @@ from typing import Any
 from gcs.exit_codes import EXIT_RUN_FAILED, EXIT_USAGE
 from gcs.formation.vehicle import FORMATION_PORT
 from gcs.mission.distributed import MissionError, run_and_score
-from gcs.mission.launch_spec import LaunchError, SigningChoice
+from gcs.mission.launch_spec import LaunchError, SigningChoice, split_packs
 from gcs.mission.preflight import resolve_port_offset
 from gcs.mission.run_output import out_dir_problem, print_result
 from gcs.mission.score import default_out_dir, late_steps
@@ -41,6 +41,7 @@ def cli_run(args: Any, sc: Scenario) -> int:
     try:
         out = Path(args.out) if args.out else default_out_dir(sc, method)
         signing = SigningChoice.from_args(args)
+        split_packs(list(sc.ids), getattr(args, "processes", None))  # a bad --processes
         # every port bound and released before anything starts: a forced offset with a busy
         # port stops here (exit 2, one line); without one, the first offset all free
         offset = resolve_port_offset(sc, args.port_offset,

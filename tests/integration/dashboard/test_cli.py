@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import socket
 
+from cli_inproc import run_cli
 from conftest import CUBE8  # noqa: E402
 
 from gcs.dashboard.cli import add_dashboard_parser, run_dashboard
@@ -26,10 +27,11 @@ def test_hook_registers_subcommand():
     assert args.launch is None and not args.demo
 
 
-def test_bad_scenario_is_one_line_exit_2(capsys, tmp_path):
-    args = parser().parse_args(["dashboard", "--scenario", str(tmp_path / "nope.toml")])
-    assert run_dashboard(args) == 2
-    err = capsys.readouterr().err.strip()
+def test_bad_scenario_is_one_line_exit_2(tmp_path):
+    """Refused as the flags are parsed (swarm_common.inputs.bounded_file)."""
+    r = run_cli("gcs", ["dashboard", "--scenario", str(tmp_path / "nope.toml")])
+    err = r.stderr.strip()
+    assert r.returncode == 2
     assert err.startswith("gcs dashboard:") and "nope.toml" in err and "\n" not in err
 
 
