@@ -27,7 +27,6 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
-import math
 import threading
 import time
 import zlib
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from swarm_common.enums import FaultLink
+from swarm_common.inputs import finite_float
 
 log = logging.getLogger(__name__)
 
@@ -102,12 +102,12 @@ def check_fault_value(name: str, key: str, value: object) -> float:
     spec = {f.name: f.metadata for f in fields(FaultConfig)}.get(key)
     if spec is None:
         raise FaultError(f"unknown key {name}; allowed: {', '.join(FaultConfig.keys())}")
-    if isinstance(value, int | float) and not isinstance(value, bool):
-        x = float(value)
-        if math.isfinite(x) and spec["lo"] <= x <= spec["hi"]:
-            return x
+    x = finite_float(value) if isinstance(value, int | float) else None
+    if x is not None and spec["lo"] <= x <= spec["hi"]:  # an int too large: None, not raised
+        return x
+    shown = repr(value) if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."
     raise FaultError(
-        f"{name} = {value!r}: must be a number in [{spec['lo']:g}, {spec['hi']:g}] "
+        f"{name} = {shown}: must be a number in [{spec['lo']:g}, {spec['hi']:g}] "
         f"({spec['desc']})"
     )
 

@@ -50,8 +50,28 @@ MAX_KEY_FILE_BYTES = 1024  # a signing key file: 64 hexadecimal digits and a new
 MAX_RECORD_BYTES = 64 << 20  # 64 MiB: a run record read back (metrics.json, stats JSON)
 
 
+def one_line(text: str) -> str:
+    """``text`` with every character that is not printable (a newline, CR, NUL, U+2028 or
+    another control or separator) written as its escape (``\\n``): an error that quotes a
+    path or a key the user gave stays one line, whatever the path or key holds."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
+                   for c in text)
+
+
+def _nul_problem(path: str | os.PathLike[str], flag: str) -> str | None:
+    """A path with a NUL byte can be neither created nor opened (``ValueError``)."""
+    text = os.fspath(path)
+    return f"{flag} {text!r}: not a valid path (a NUL byte)" if "\x00" in text else None
+
+
 class BoundedReadError(ValueError):
-    """A file that cannot be read within its bounds; ``str()`` is one line naming it."""
+    """A file that cannot be read within its bounds; ``str()`` is one line naming it
+    (:func:`one_line`: a newline in the path is written as ``\\n``)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(one_line(message))
 
 
 def _open_bounded(p: Path, limit: int, what: str) -> int:
@@ -332,38 +352,42 @@ def out_dir_problem(out: str | os.PathLike[str], flag: str = "--out") -> str | N
     is created if missing and a probe file written and removed in it, so a path that a run
     could not write (``/proc/nope/run``, a read-only mount, a file in the way) is refused
     before anything starts; what the check created is removed again (a refused run
-    leaves nothing behind)."""
+    leaves nothing behind). The reason is one line (:func:`one_line`)."""
+    if (why := _nul_problem(out, flag)) is not None:
+        return why
     p = Path(out)
     if p.exists() and not p.is_dir():
-        return f"{flag} {p}: exists and is not a directory"
+        return one_line(f"{flag} {p}: exists and is not a directory")
     made = [q for q in (p, *p.parents) if not q.exists()]  # created here: removed again
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        return f"{flag} {p}: cannot create the directory ({exc.strerror})"
+        return one_line(f"{flag} {p}: cannot create the directory ({exc.strerror})")
     why = _probe_dir(p)
     for q in made:  # deepest first; a check writes nothing (the run creates them)
         try:
             q.rmdir()
         except OSError:
             break
-    return None if why is None else f"{flag} {p}: {why}"
+    return None if why is None else one_line(f"{flag} {p}: {why}")
 
 
 def out_file_problem(out: str | os.PathLike[str], flag: str) -> str | None:
     """Why ``out`` cannot be written as a file at the end of a run, or None: its folder must
     exist and be writable, and ``out`` must not be a directory or other non-regular file.
-    Nothing is created at ``out`` itself."""
+    Nothing is created at ``out`` itself. The reason is one line (:func:`one_line`)."""
+    if (why := _nul_problem(out, flag)) is not None:
+        return why
     p = Path(out)
     if not str(out) or p.name in ("", ".", ".."):
         return f"{flag} {out!r}: not a file name"
     if p.exists() and not p.is_file():
-        return f"{flag} {p}: exists and is not a regular file"
+        return one_line(f"{flag} {p}: exists and is not a regular file")
     parent = p.parent
     if not parent.is_dir():
-        return f"{flag} {p}: its folder {parent} does not exist"
+        return one_line(f"{flag} {p}: its folder {parent} does not exist")
     if (why := _probe_dir(parent)) is not None:
-        return f"{flag} {p}: {why}"
+        return one_line(f"{flag} {p}: {why}")
     return None
 
 

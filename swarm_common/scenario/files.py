@@ -16,14 +16,24 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from swarm_common.inputs import MAX_SCENARIO_BYTES, BoundedReadError, read_bounded_text
+from swarm_common.inputs import (
+    MAX_SCENARIO_BYTES,
+    BoundedReadError,
+    one_line,
+    read_bounded_text,
+)
 
 ALLOW_INFEASIBLE_FLAG = "--allow-infeasible"
 ALLOW_UNSAFE_FLAG = "--allow-unsafe"
 
 
 class ScenarioError(ValueError):
-    """A scenario file is missing, unreadable or invalid. ``str()`` is one line."""
+    """A scenario file is missing, unreadable or invalid. ``str()`` is one line: a newline
+    or another unprintable character in a file name or a key is written as its escape
+    (:func:`swarm_common.inputs.one_line`)."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(one_line(message))
 
 
 class InfeasibleScenarioError(ScenarioError):

@@ -109,6 +109,13 @@ def _shown(value: Any, width: int = 40) -> str:
     return text if len(text) <= width else f"{text[:width - 3]}..."
 
 
+def _key(key: str) -> str:
+    """A table key as an error shows it: a plain name as it is, anything else (a newline,
+    20 000 characters) as :func:`_shown` cuts its ``repr``."""
+    plain = key.replace("_", "a").isalnum() and key.isascii() and len(key) <= 64
+    return key if plain else _shown(key)
+
+
 def parse_scenario(
     data: dict[str, Any], path: str = "<scenario>", allow_infeasible: bool = False,
     allow_unsafe: bool = False,
@@ -137,7 +144,7 @@ def parse_scenario(
     for section in data:
         if section not in EXTRA_SECTIONS and section not in SCHEMA:
             allowed = ", ".join(sorted([*SCHEMA, *EXTRA_SECTIONS]))
-            raise fail(f"unknown section [{section}]; allowed: {allowed}")
+            raise fail(f"unknown section [{_key(section)}]; allowed: {allowed}")
     mission = _parse_mission(data, fail)
     raw: dict[str, dict[str, Any]] = {}
     for section, keys in SCHEMA.items():
@@ -152,7 +159,7 @@ def parse_scenario(
             raise fail(f"[{section}] must be a table")
         for key in given:
             if key not in keys:
-                raise fail(f"unknown key {section}.{key}; allowed: {', '.join(keys)}")
+                raise fail(f"unknown key {section}.{_key(key)}; allowed: {', '.join(keys)}")
         out: dict[str, Any] = {}
         cls_fields = fields(SECTIONS[section])
         defaults = {f.name: f.default for f in cls_fields if f.default is not MISSING}
@@ -168,7 +175,7 @@ def parse_scenario(
     sc = raw["scenario"]
     name_problem = swarm_name_problem(sc["name"])
     if name_problem is not None:
-        raise fail(f"scenario.name = {sc['name']!r}: {name_problem}")
+        raise fail(f"scenario.name = {_shown(sc['name'])}: {name_problem}")
     if sc["physics_hz"] % sc["control_hz"] != 0:
         raise fail(
             f"scenario.physics_hz = {sc['physics_hz']}: must be a multiple of "
@@ -198,7 +205,7 @@ def parse_scenario(
         for key in a:
             if key not in AGENT_SCHEMA and key not in AGENT_OPTIONAL:
                 allowed = ", ".join([*AGENT_SCHEMA, *AGENT_OPTIONAL])
-                raise fail(f"unknown key {where}.{key}; allowed: {allowed}")
+                raise fail(f"unknown key {where}.{_key(key)}; allowed: {allowed}")
         for key, spec in AGENT_SCHEMA.items():
             if key not in a:
                 raise fail(f"missing key {where}.{key} ({describe_spec(spec)})")
@@ -235,7 +242,8 @@ def parse_scenario(
     for a in agents:
         if a.is_leader != (a.id in leaders):
             raise fail(
-                f"agent id {a.id}: role = {a.role!r} disagrees with formation.leaders = {leaders}"
+                f"agent id {a.id}: role = {str(a.role)!r} disagrees with formation.leaders = "
+                f"{leaders}"
             )
     if len(leaders) < 2:
         raise fail(f"formation.leaders = {leaders}: need at least 2 leaders (bearing scale)")

@@ -273,7 +273,8 @@ def describe_spec(spec: Spec) -> str:
     if kind == "int":
         return f"an integer in [{spec[1]}, {spec[2]}]"
     if kind == "str":
-        return "one of " + ", ".join(repr(c) for c in spec[1]) if spec[1] else "a string"
+        # str(c): an enum member as its TOML value ('rcbf'), not <Method.RCBF: 'rcbf'>
+        return "one of " + ", ".join(repr(str(c)) for c in spec[1]) if spec[1] else "a string"
     if kind == "vec":
         return f"a list of {spec[1]} numbers in [{spec[2]:g}, {spec[3]:g}]"
     if kind == "windows":
