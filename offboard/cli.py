@@ -10,8 +10,6 @@ started by ``gcs mission run`` or ``gcs router`` on tcp/127.0.0.1:7447+offset.
 from __future__ import annotations
 
 import argparse
-import ctypes
-import ctypes.util
 import faulthandler
 import logging
 import os
@@ -49,7 +47,7 @@ from swarm_common.inputs import (
 )
 from swarm_common.logsetup import add_log_level_argument, configure_logging
 from swarm_common.ports import vehicle_ports
-from swarm_common.process_life import exit_now, freeze_startup
+from swarm_common.process_life import die_with_parent, exit_now, freeze_startup
 from swarm_common.scenario.files import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
@@ -81,25 +79,10 @@ RUNTIME_MODULES = (
     "swarm_common.scenario.model",
 )
 
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
 log = logging.getLogger("offboard.cli")
 UNSIGNED_WARNING = ("no --signing-key: the daemon accepts unsigned MAVLink frames from its "
                     "vehicle link, from anyone who reaches its port (gcs keys generate; "
                     "docs/security.md)")
-
-
-def die_with_parent() -> str | None:
-    """Linux: SIGTERM this process when its parent dies (prctl PR_SET_PDEATHSIG), so no
-    daemon outlives a killed runner. None, or why it could not be set."""
-    if not sys.platform.startswith("linux"):
-        return "PR_SET_PDEATHSIG needs Linux"
-    parent = os.getppid()
-    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-    if libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0:
-        return f"prctl failed: {os.strerror(ctypes.get_errno())}"
-    if os.getppid() != parent:  # the parent died before the prctl took effect
-        os.kill(os.getpid(), signal.SIGTERM)
-    return None
 
 
 def open_session_saying(
@@ -230,7 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     # SIGUSR1 writes every thread's stack to stderr (the daemon's log): a stalled or hung
     # daemon on a companion computer can be inspected without stopping it
     faulthandler.register(signal.SIGUSR1, all_threads=True)
-    if args.die_with_parent and (why := die_with_parent()) is not None:
+    if args.die_with_parent and (
+            why := die_with_parent(signal.SIGTERM, os.getppid())()) is not None:
         print(f"offboard: --die-with-parent: {why}", file=sys.stderr)
         return 2
     key = None

@@ -19,17 +19,28 @@ teardown, where it kept a stopped simulator and each stopped daemon alive for ab
   has closed its sockets, files and Zenoh session: the log is flushed and the exit
   status kept.
 
+* :func:`die_with_parent` asks the kernel for a signal when the parent dies (Linux
+  ``PR_SET_PDEATHSIG``): a child launched by the runner (``gcs.launch``) or a daemon
+  started with ``--die-with-parent`` never outlives its runner.
+
 Standard library only: ``python -m offboard`` imports this before its start-up slot
 (:mod:`offboard.daemon.start_gate`).
 """
 
 from __future__ import annotations
 
+import ctypes
 import gc
 import logging
 import os
+import signal
 import sys
+from collections.abc import Callable
 from typing import NoReturn
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+# the running program's own symbols (libc's prctl among them): loaded here, never in a child
+_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
 
 
 def freeze_startup() -> None:
@@ -45,3 +56,23 @@ def exit_now(rc: int) -> NoReturn:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(rc)
+
+
+def die_with_parent(sig: signal.Signals, parent_pid: int) -> Callable[[], str | None]:
+    """A setup for a child of ``parent_pid`` to run first (a ``preexec_fn``, a forked
+    child's first step, a daemon's start): the kernel sends it ``sig`` when the thread of
+    ``parent_pid`` that started it dies, however it dies (kill -9 included); if that parent
+    is already gone, ``sig`` now. The setup returns None, or why it could not be set (not
+    Linux, prctl refused). Only async-signal-safe work in it: a prctl call, getppid, kill."""
+    prctl = None if _LIBC is None else _LIBC.prctl
+
+    def setup() -> str | None:
+        if prctl is None:
+            return "PR_SET_PDEATHSIG needs Linux"
+        if prctl(PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
+            return f"prctl failed: {os.strerror(ctypes.get_errno())}"
+        if os.getppid() != parent_pid:  # the parent died before the prctl took effect
+            os.kill(os.getpid(), sig)
+        return None
+
+    return setup

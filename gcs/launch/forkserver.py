@@ -29,7 +29,6 @@ as its own interpreter (``subprocess``), as before.
 
 from __future__ import annotations
 
-import ctypes
 import importlib
 import io
 import logging
@@ -39,14 +38,13 @@ import signal
 import subprocess
 import sys
 import threading
-from collections.abc import Callable
 from multiprocessing.connection import wait as mp_wait
 from pathlib import Path
 
+from swarm_common.process_life import die_with_parent
+
 LAUNCH_ENV = "SWARM_LAUNCH"  # "exec": no fork server (module docstring)
 PRELOAD = "gcs.launch.preload"
-PR_SET_PDEATHSIG = 1  # linux/prctl.h
-_LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
 # ``python -m MODULE`` -> (module, function) that its ``if __name__ == "__main__"`` runs
 ENTRIES = {
     "offboard": ("offboard.__main__", "gated_main"),
@@ -77,22 +75,6 @@ def give_up(why: str) -> None:
         _failed = why
         log.warning("fork server unavailable (%s): each child starts its own interpreter "
                     "(slower start-up)", why)
-
-
-def die_with_parent(parent_pid: int) -> Callable[[], None]:
-    """In a new child (a ``preexec_fn``, or a forked child's first step): it gets SIGKILL
-    when the thread of ``parent_pid`` that started it dies, however it dies (kill -9
-    included); if that parent is already gone, exit now. Only async-signal-safe work here
-    (a prctl call and getppid). The one implementation for both launches."""
-    prctl = None if _LIBC is None else _LIBC.prctl
-
-    def setup() -> None:
-        if prctl is not None:
-            prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-        if os.getppid() != parent_pid:
-            os._exit(1)
-
-    return setup
 
 
 def module_of(argv: list[str]) -> str | None:
@@ -186,7 +168,8 @@ def start(argv: list[str], log_path: Path, env: dict[str, str],
 def _child(module: str, argv: list[str], log_path: str, env: dict[str, str], cwd: str) -> None:
     """In the forked child: become the program ``argv`` names, then run it."""
     os.setpgid(0, 0)  # its own process group: a terminal's Ctrl-C reaches the runner only
-    die_with_parent(os.getppid())()  # the server's death, however it dies, is ours too
+    # the server's death, however it dies, is ours too
+    die_with_parent(signal.SIGKILL, os.getppid())()
     _let_go_of_the_server()
     fd = os.open(log_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     os.dup2(fd, 1)

@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import IO, Any, Protocol
 
 from gcs.launch import forkserver
-from gcs.launch.forkserver import die_with_parent
 from gcs.launch.watchdog import release_dir, remove_on_death, remove_server_dir_on_death
 from offboard.daemon.start_gate import GATE_ENV, gate_value
 from swarm_common.logsetup import configure_logging
+from swarm_common.process_life import die_with_parent
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +97,8 @@ class ProcessGroup:
             # kill -9
             proc = subprocess.Popen(
                 argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                env=full_env, process_group=0, preexec_fn=die_with_parent(os.getpid()),
+                env=full_env, process_group=0,
+                preexec_fn=die_with_parent(signal.SIGKILL, os.getpid()),
             )
         child = Child(name, proc, log_path, f)
         self.children.append(child)
