@@ -34,7 +34,7 @@ from gcs.exit_codes import (
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.records.cli import add_log_parser
-from gcs.records.live_flags import add_live_flags
+from gcs.records.live_flags import add_live_flags, live_endpoint
 from swarm_common.enums import DefaultStreams, Method
 from swarm_common.inputs import (
     MAX_SCENARIO_BYTES,
@@ -68,6 +68,11 @@ def _load(path: str, allow_infeasible: bool, allow_unsafe: bool) -> Scenario:
 
 
 def cmd_mission_run(args: argparse.Namespace) -> int:
+    try:  # the live view's flags first: a refusal before any preflight WARNING is one line
+        live_endpoint(args)
+    except ValueError as exc:
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     sc = _load(args.scenario, args.allow_infeasible, args.allow_unsafe)
     _check_run_args(args, sc, "mission run")
     try:
@@ -109,14 +114,28 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     return safety_exit_status(res.metrics, res.method)
 
 
-def cmd_router(args: argparse.Namespace) -> int:
-    from gcs.mission.router import run_router
+def _secure_dir_problem(d: Path) -> str | None:
+    """Why the router cannot use ``--secure-dir d``, or None: credentials already there are
+    used as they are; otherwise they are written there, so it must be a folder that can be
+    created and written (a NUL byte, ``/proc/...``: one line before the router starts)."""
+    from swarm_common.inputs import out_dir_problem
 
+    if "\x00" not in str(d) and (d / "router.json5").is_file():
+        return None
+    return out_dir_problem(d, "--secure-dir")
+
+
+def cmd_router(args: argparse.Namespace) -> int:
     sc = (None if args.scenario is None
           else _load(args.scenario, args.allow_infeasible, args.allow_unsafe))
     if (sc is None) != (args.secure_dir is None):
         print("gcs router: --scenario and --secure-dir go together", file=sys.stderr)
         return EXIT_USAGE
+    if args.secure_dir is not None and (why := _secure_dir_problem(args.secure_dir)):
+        print(f"gcs router: {why}", file=sys.stderr)
+        return EXIT_USAGE
+    from gcs.mission.router import run_router
+
     return run_router(args.listen, sc, args.secure_dir, args.swarm)
 
 

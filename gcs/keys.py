@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from swarm_common.inputs import one_line
 from swarm_common.signing import SigningKeyError, generate_key
 
 EXIT_BAD_INPUT = 2
@@ -20,9 +21,9 @@ def cmd_keys_generate(args: argparse.Namespace) -> int:
     try:
         generate_key(args.out, overwrite=args.force)
     except SigningKeyError as exc:
-        print(f"gcs keys generate: {exc}", file=sys.stderr)
+        print(one_line(f"gcs keys generate: {exc}"), file=sys.stderr)  # a NUL in --out
         return EXIT_BAD_INPUT
-    print(f"gcs keys generate: wrote a new signing key to {args.out} (mode 0600)",
+    print(one_line(f"gcs keys generate: wrote a new signing key to {args.out} (mode 0600)"),
           file=sys.stderr)  # fmt: skip
     return 0
 

@@ -36,6 +36,8 @@ import numpy as np
 
 from gcs.exit_codes import EXIT_USAGE
 from swarm_common.enums import GraphKind, Role, Shape
+from swarm_common.inputs import one_line
+from swarm_common.scenario.files import swarm_name_problem
 from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
 
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
@@ -188,7 +190,7 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     starts = scrambled_starts(v, n_lead, args.scramble, args.mix, args.shrink, args.spacing)
     ks = [args.k] if args.k is not None or args.graph is not GraphKind.KNN else \
         list(range(min(DEFAULT_K, n - 1), n))
-    name = args.name or f"{args.shape}{n}"
+    name = f"{args.shape}{n}" if args.name is None else args.name  # "" refused by _name
     doc = _template(name, args.scramble, args.duration, args.deadline)
     doc["agent"] = [{"id": i + 1, "role": str(Role.LEADER if i < n_lead else Role.FOLLOWER),
                      "position": starts[i].tolist(), "velocity": [0.0, 0.0, 0.0],
@@ -239,6 +241,16 @@ def _number(lo: float, hi: float, integer: bool) -> Any:
     return parse
 
 
+def _name(text: str) -> str:
+    """argparse ``type=`` of ``--name``: a valid swarm name (it is every Zenoh key's swarm
+    part), refused as the flags are parsed; an empty ``--name`` is refused too, never taken
+    as "no name" (the default), which would write a scenario the user did not ask for."""
+    if (why := swarm_name_problem(text)) is not None:
+        shown = repr(text) if len(text) <= 40 else repr(text[:37]) + "..."
+        raise argparse.ArgumentTypeError(one_line(f"{shown}: scenario.name {why}"))
+    return text
+
+
 def cmd_scenario(args: argparse.Namespace) -> int:
     """Write the generated scenario on stdout; exit 2 with one line on a bad flag."""
     try:
@@ -272,5 +284,6 @@ def add_scenario_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=_number(1.0, 3600.0, False), default=60.0, metavar="S")
     p.add_argument("--deadline", type=_number(0.0, 3600.0, False), default=30.0, metavar="S",
                    help="formation_deadline_s: tracking metrics from this time (default 30)")
-    p.add_argument("--name", default=None, help="scenario.name (default SHAPE + N)")
+    p.add_argument("--name", type=_name, default=None,
+                   help="scenario.name (default SHAPE + N)")
     p.set_defaults(func=cmd_scenario)

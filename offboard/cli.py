@@ -29,7 +29,7 @@ from offboard.daemon.limits import (
     NAV_GATE_STEPS,
 )
 from offboard.daemon.mavlink.url import mavlink_url_problem
-from offboard.daemon.packing import parse_agents
+from offboard.daemon.packing import brief_ids, brief_text, parse_agents
 from swarm_common.enums import Method, SensingSource
 from swarm_common.inputs import (
     MAX_SCENARIO_BYTES,
@@ -300,14 +300,15 @@ def agent_ids(args: argparse.Namespace, ids: list[int]) -> list[int] | str:
     """The agents this process runs (``--agent`` or ``--agents``), or a one-line error."""
     if args.agent is not None:
         if args.agent not in ids:
-            return f"--agent {args.agent}: not an agent of the scenario {ids}"
+            return f"--agent {args.agent}: not an agent of the scenario {brief_ids(ids)}"
         return [args.agent]
     try:
         chosen = parse_agents(args.agents)
     except ValueError as exc:
-        return f"--agents {args.agents!r}: {exc}"
-    if bad := [i for i in chosen if i not in ids]:
-        return f"--agents {args.agents!r}: {bad} not agents of the scenario {ids}"
+        return f"--agents {brief_text(args.agents)}: {exc}"
+    if bad := [i for i in chosen if i not in ids]:  # lists cut: --agents 1-300 is 292 ids
+        return (f"--agents {brief_text(args.agents)}: {brief_ids(bad)} not agents of the "
+                f"scenario {brief_ids(ids)}")
     if args.mavlink is not None:
         return "--mavlink names one vehicle: use it with --agent (--agents: default ports)"
     if args.tlog is not None and "{id}" not in args.tlog:

@@ -37,7 +37,7 @@ import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from swarm_common.ports import GCS_PORT, MAX_ID, vehicle_ports
 
@@ -173,10 +173,19 @@ MAX_PORT_OFFSET = _max_port_offset()
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """``ArgumentParser`` whose errors are one stderr line (``prog: error: msg``), exit 2."""
+    """``ArgumentParser`` whose errors are one stderr line (``prog: error: msg``), exit 2.
+
+    Abbreviated flags are refused (``allow_abbrev=False`` unless the caller says otherwise):
+    with them ``gcs mission sweep S --seed 1`` ran as ``--seeds 1``, and a flag added later
+    could change what an old command line means. Subparsers are built with this class
+    (``add_subparsers`` passes ``type(self)``), so they refuse abbreviations too."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
-        line = " ".join(message.split())  # never more than one line
+        line = one_line(" ".join(message.split()))  # never more than one line, no raw NUL
         sys.stderr.write(f"{self.prog}: error: {line}\n")
         raise SystemExit(EXIT_USAGE)
 

@@ -22,9 +22,15 @@ def show(value: object, limit: int = 40) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+MAX_PLAIN_KEY = 64  # characters: a longer plain key is cut like any other (one short line)
+
+
 def key_text(key: object) -> str:
-    """A table key as it may appear in a message: plain names as they are, others quoted."""
-    if isinstance(key, str) and key.replace("_", "a").isalnum() and key.isascii():
+    """A table key as it may appear in a message: plain names of at most
+    :data:`MAX_PLAIN_KEY` characters as they are, others (a newline, 20 000 characters)
+    quoted and cut by :func:`show`, so that the error line stays short."""
+    if (isinstance(key, str) and key.replace("_", "a").isalnum() and key.isascii()
+            and len(key) <= MAX_PLAIN_KEY):
         return key
     return show(str(key) if not isinstance(key, str) else key, 30)
 

@@ -106,7 +106,9 @@ def run_cli(prog: str, argv: list[str]) -> CliResult:
 
 
 def _abbreviates(arg: str, flag: str) -> bool:
-    """``arg`` is ``flag`` or an abbreviation argparse accepts (``--die-with``)."""
+    """``arg`` is ``flag`` or an abbreviation of it (``--die-with``): the commands' parsers
+    refuse abbreviations (``OneLineParser``), but a regression there must not reach the
+    flag in the test process."""
     name = arg.split("=", 1)[0]
     return name.startswith("--") and len(name) > 2 and flag.startswith(name)
 

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gcs.mission.launch_spec import add_signing_flags
-from gcs.records.live_flags import add_live_flags
+from gcs.records.live_flags import add_live_flags, live_endpoint
 from swarm_common.enums import Method
 from swarm_common.inputs import (
     MAX_SCENARIO_BYTES,
@@ -169,6 +169,7 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
         return build_replay(args)
     if args.demo:
         return DashboardApp(recorded_source(), None, title="demo (recorded)"), None, None, None
+    live_endpoint(args)  # before the scenario's and the port choice's warnings: one line
     path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
     sc = load_scenario(path, allow_infeasible=args.allow_infeasible,
                        allow_unsafe=args.allow_unsafe)

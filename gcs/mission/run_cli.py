@@ -16,6 +16,7 @@ from gcs.mission.preflight import resolve_port_offset
 from gcs.mission.run_output import out_dir_problem, print_result
 from gcs.mission.score import default_out_dir, late_steps
 from gcs.records.live import start_live
+from gcs.records.live_flags import live_endpoint
 from gcs.report.verdict import safety_exit_status
 from swarm_common.enums import DefaultStreams
 from swarm_common.scenario.model import Scenario
@@ -39,6 +40,7 @@ def cli_run(args: Any, sc: Scenario) -> int:
         return EXIT_USAGE
     formation = getattr(args, "formation_vehicle", False)
     try:
+        live_endpoint(args)  # before the port choice logs anything: the refusal is one line
         out = Path(args.out) if args.out else default_out_dir(sc, method)
         signing = SigningChoice.from_args(args)
         split_packs(list(sc.ids), getattr(args, "processes", None))  # a bad --processes

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs.exit_codes import EXIT_USAGE
-from swarm_common.inputs import MAX_SCENARIO_BYTES, bounded_file
+from swarm_common.inputs import MAX_SCENARIO_BYTES, bounded_file, one_line
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -39,7 +39,8 @@ def add_log_parser(subparsers: Any) -> None:
 
 
 def _fail(msg: str) -> int:
-    print(f"gcs log export: {' '.join(msg.split())}", file=sys.stderr)
+    """One stderr line, exit 2: a NUL or another control character of a path escaped."""
+    print(one_line(f"gcs log export: {' '.join(msg.split())}"), file=sys.stderr)
     return EXIT_USAGE
 
 

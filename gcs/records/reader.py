@@ -21,8 +21,8 @@ from mcap.reader import make_reader
 
 from gcs.records import topics as tp
 from gcs.records.payloads import layout
+from gcs.records.topics import MAGIC
 
-MAGIC = b"\x89MCAP0\r\n"
 _AGENT = re.compile(r"^/agent/(\d+)/(estimate|qp)$")
 
 

@@ -9,6 +9,8 @@ nanoseconds from the start of the run. Agents are named by their scenario id.
 
 from __future__ import annotations
 
+MAGIC = b"\x89MCAP0\r\n"  # the first bytes of every MCAP file
+
 WORLD_FRAME = "world"
 TF = "/world/tf"  # foxglove.FrameTransforms: world -> vehicle_<id>, one per vehicle per step
 SCENE = "/scene"  # foxglove.SceneUpdate: vehicles, bearings sensed, obstacles, geofence

@@ -672,9 +672,18 @@ def cases() -> list[Case]:
           build=lambda t: t + f"\n[{'s' * HUGE}]\nx = 1\n"),
         C("huge", "key", f"a key of {HUGE} characters", "unknown key vehicle.",
           (("mass_kg = 1.8", f"mass_kg = 1.8\n{'k' * HUGE} = 1"),)),
-        # BUG: a 20 000-character key in [mission], [[obstacle]] or [geofence] is quoted whole:
-        # a 20 kB error line (swarm_common/table_check.py key_text cuts only keys that are
-        # not plain names); add C("huge", "mission-key", ...) back once it is cut
+        # once a bug: a 20 000-character key in [mission], [[obstacle]] or [geofence] was
+        # quoted whole, a 20 kB error line; fixed in swarm_common/table_check.py (key_text)
+        C("huge", "mission-key", f"a [mission] key of {HUGE} characters",
+          "unknown key mission.'kkk",
+          (("speed_mps = 1.5 ", f"{'k' * HUGE} = 1\nspeed_mps = 1.5 "),), base=COURSE8),
+        C("huge", "obstacle-key", f"an [[obstacle]] key of {HUGE} characters",
+          "unknown key obstacle[1].'kkk", ((SPHERE_1, SPHERE_1 + f"\n{'k' * HUGE} = 1"),),
+          base=OBSTACLES),
+        C("huge", "geofence-key", f"a [geofence] key of {HUGE} characters",
+          "unknown key geofence.'kkk",
+          (("max_m = [8.0, 7.0, 9.5]", f"max_m = [8.0, 7.0, 9.5]\n{'k' * HUGE} = 1"),),
+          base=OBSTACLES),
         C("huge", "fault-value", "a faults value of 401 digits", "faults.mavlink.drop",
           build=lambda t: t + f"\n[faults.mavlink]\ndrop = {DIGITS_400}\n"),
         # --- consistent keys, unsafe or infeasible together --------------------------------

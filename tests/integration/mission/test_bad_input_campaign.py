@@ -79,8 +79,9 @@ FILES = _files_by_kind()
 def _refusal_problem(r: CliResult, expect: str) -> str | None:
     """What is wrong with ``r`` as a refusal, or None: exit 2, no traceback, one non-empty
     stderr line (argparse's usage line may come first) holding ``expect``, at most
-    :data:`MAX_LINE` characters. The rule of ``test_cli_errors._one_line_exit_2``, as a
-    value, so that one test reports every failing case of its kind."""
+    :data:`MAX_LINE` characters, all printable (a NUL of a path escaped). The rule of
+    ``test_cli_errors._one_line_exit_2``, as a value, so that one test reports every
+    failing case of its kind."""
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     if r.returncode != 2:
         return f"exit {r.returncode}, stderr {r.stderr[-300:]!r}"
@@ -94,6 +95,8 @@ def _refusal_problem(r: CliResult, expect: str) -> str | None:
         return f"{expect!r} not in {lines[-1][:300]!r}"
     if len(lines[-1]) > MAX_LINE:
         return f"a line of {len(lines[-1])} characters"
+    if not lines[-1].isprintable():  # a raw NUL or control character of a path
+        return f"an unprintable character in {lines[-1][:300]!r}"
     return None
 
 

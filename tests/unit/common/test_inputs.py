@@ -207,3 +207,33 @@ def test_one_line_parser_error(capsys):
     assert ei.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("demo: error: argument --seed")
+
+
+def test_one_line_parser_refuses_abbreviations_in_subparsers_too(capsys):
+    """``--seed`` is not taken for ``--seeds`` (it ran a sweep with one seed), in a
+    subcommand as at the top; a caller may still ask for abbreviations."""
+    ap = inputs.OneLineParser(prog="demo")
+    ap.add_argument("--log-level", default="info")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    sweep = sub.add_parser("sweep")
+    sweep.add_argument("--seeds", default="0")
+    assert ap.parse_args(["--log-level", "debug", "sweep", "--seeds", "1"]).seeds == "1"
+    for argv in (["sweep", "--seed", "1"], ["--log-lev", "debug", "sweep"]):
+        with pytest.raises(SystemExit) as ei:
+            ap.parse_args(argv)
+        assert ei.value.code == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and ("unrecognized arguments: --seed 1" in err
+                                          or "invalid choice: 'debug'" in err), err
+    loose = inputs.OneLineParser(prog="loose", allow_abbrev=True)
+    loose.add_argument("--seeds", default="0")
+    assert loose.parse_args(["--seed", "3"]).seeds == "3"
+
+
+def test_one_line_parser_escapes_a_nul_in_its_line(capsys):
+    """argparse quotes an unknown flag raw; the error line writes a NUL as ``\\x00``."""
+    ap = inputs.OneLineParser(prog="demo")
+    with pytest.raises(SystemExit):
+        ap.parse_args(["--bo\x00gus"])
+    err = capsys.readouterr().err
+    assert err == "demo: error: unrecognized arguments: --bo\\x00gus\n", err

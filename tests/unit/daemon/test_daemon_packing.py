@@ -9,7 +9,7 @@ import pytest
 
 from gcs.mission.launch_spec import LaunchError, LaunchSpec
 from offboard.agent.peers import peer_ids, ready_ids
-from offboard.daemon.packing import format_agents, parse_agents
+from offboard.daemon.packing import brief_ids, brief_text, format_agents, parse_agents
 from offboard.daemon.zenoh.link import DecodeCache
 from offboard.estimation.bearing import formation_from_scenario
 from swarm_common import wire
@@ -89,3 +89,16 @@ def test_decode_cache_judges_finiteness_once_per_payload() -> None:
         assert g.check(msg, finite) is None
         assert g.check(bad_msg, bad_finite) == "estimate has non-finite values"
         assert g.check(bad_msg) == "estimate has non-finite values"  # computed when absent
+
+
+def test_brief_ids_and_text_keep_an_error_line_short():
+    """``--agents 1-300`` on an 8-agent scenario: 292 unknown ids, shown as the first few
+    and the count (the whole list was a 1.4 kB line); a long --agents text is cut."""
+    assert brief_ids([9]) == "[9]"
+    shown = brief_ids(list(range(9, 301)))
+    assert shown == "[9, 10, 11, 12, 13, 14, 15, 16, ... (292 ids)]"
+    assert brief_text("1-300") == "'1-300'"
+    assert len(brief_text("1," * 5000)) < 50
+    with pytest.raises(ValueError) as ei:
+        parse_agents("9" * 5000)
+    assert len(str(ei.value)) < 100
