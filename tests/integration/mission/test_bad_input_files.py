@@ -57,6 +57,9 @@ OPTIONS = [
     ("gcs-dashboard-scenario", GCS, ["dashboard", "--scenario", "{}"]),
     ("gcs-dashboard-signing-key", GCS, ["dashboard", "--signing-key", "{}"]),
     ("gcs-dashboard-zenoh-config", GCS, ["dashboard", "--zenoh-config", "{}"]),
+    ("gcs-dashboard-launch", GCS, ["dashboard", "--launch", "{}"]),
+    ("gcs-export-scenario", GCS, ["log", "export", "RUN", "--format", "csv", "--out", "OUT",
+                                  "--scenario", "{}"]),
 ]
 
 # runs MODULE.main(argv) for each argv of argv[2] (JSON), stderr of each call captured
@@ -116,8 +119,10 @@ def _wait(proc: subprocess.Popen[bytes], t0: float,
 def test_file_options_refuse_what_they_must_not_read(tmp_path, module):
     """Every file option of ``module``'s command given each of :data:`KINDS`."""
     paths = [_special(tmp_path, kind) for kind in KINDS]
+    run = tmp_path / "run"  # never read: the bad --scenario is refused as flags are parsed
+    named = {"SECURE": tmp_path / "secure", "RUN": run, "OUT": tmp_path / "out"}
     calls = [(name, kind, path,
-              [str(path) if a == "{}" else str(tmp_path / "secure") if a == "SECURE" else a
+              [str(path) if a == "{}" else str(named[a]) if a in named else a
                for a in argv])
              for name, mod, argv in OPTIONS if mod == module
              for kind, path in zip(KINDS, paths, strict=True)]
