@@ -147,8 +147,10 @@ def test_every_thread_reads_the_same_exit_status(tmp_path: Path) -> None:
                 t.start()
             try:
                 assert child.proc.wait(60.0) == 2
+                for t in threads:  # each ends once it has read the status, however late
+                    t.join(30.0)
             finally:
-                stop.set()
+                stop.set()  # only a safety net: a thread stopped here has read nothing
                 for t in threads:
                     t.join(10.0)
             assert seen == [2] * len(threads) and child.proc.returncode == 2
