@@ -47,7 +47,7 @@ def _seeds(text: str) -> list[int]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="1-10")
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--jobs", type=int, default=2)

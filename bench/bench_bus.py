@@ -50,7 +50,7 @@ def payload(aid: int, step: int, rng: np.random.Generator) -> bytes:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--agents", type=int, default=64)
     ap.add_argument("--peers", type=int, default=14)
     ap.add_argument("--steps", type=int, default=400)

@@ -154,7 +154,7 @@ def per_agent(sc: Scenario, method: str, duration: float) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n")[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "cube8.toml"))
     ap.add_argument("--duration", type=float, default=20.0, help="s per real-time run")
     ap.add_argument("--profile-s", type=float, default=20.0, help="s of the timed run")

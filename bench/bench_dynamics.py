@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "cube8.toml"))
     ap.add_argument("--steps", type=int, default=20000)
     a = ap.parse_args()

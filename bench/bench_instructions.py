@@ -108,7 +108,7 @@ def count(scenario: str, method: str | None, durations: list[float]) -> list[int
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "cube8.toml"))
     ap.add_argument("--method", default=None, help="default: the scenario's")
     ap.add_argument("--short", type=float, default=2.0, help="s of mission, first run")

@@ -115,7 +115,7 @@ def inprocess(n: int = 20000) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--rates", type=float, nargs="+", default=[2000, 5000, 10000, 20000, 0])
     a = ap.parse_args()

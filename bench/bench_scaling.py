@@ -41,7 +41,7 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
     from gcs.scenario_gen import add_scenario_parser, build
     from swarm_common.scenario.model import parse_scenario
 
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     add_scenario_parser(ap.add_subparsers())
     gen = ap.parse_args(["scenario", "grid", "--agents", str(opts.child),
                          "--leaders", str(opts.leaders), "--scramble", str(opts.scramble),
@@ -75,7 +75,7 @@ def _rng(vals: list[float], fmt: str) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="8,27,64,125")
     ap.add_argument("--duration", type=float, default=4.0, help="simulated seconds per run")
     ap.add_argument("--repeats", type=int, default=2)

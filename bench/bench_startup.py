@@ -56,7 +56,7 @@ def one_run(launch: str, duration: float, processes: int | None) -> tuple[float,
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--processes", type=int, default=None)

@@ -45,7 +45,7 @@ def one_run(drop: float, duration: float, offset: int, out: Path) -> dict[str, f
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--drop", type=float, default=0.2, help="loss probability per link")
     ap.add_argument("--duration", type=float, default=25.0, help="simulated seconds")
     ap.add_argument("--repeats", type=int, default=2)

@@ -62,7 +62,7 @@ def one(scenario: str, duration: float, record: bool) -> tuple[float, float | No
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "cube8.toml"))
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--repeats", type=int, default=5)

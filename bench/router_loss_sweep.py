@@ -63,7 +63,7 @@ def one_run(scenario: str, at: float, event: str, method: str) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="+", default=["cube8", "cube8_dist5", "swap_centre"])
     ap.add_argument("--at", nargs="+", type=float, default=[6.0, 10.0, 14.0])
     ap.add_argument("--events", nargs="+", choices=["kill", "stall"], default=["kill", "stall"])

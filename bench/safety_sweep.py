@@ -85,7 +85,7 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", nargs="+", default=SCENARIOS)
     ap.add_argument("--methods", nargs="+", default=["rcbf", "dcbf"])
     ap.add_argument("--seeds", type=int, default=10)

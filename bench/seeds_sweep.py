@@ -32,7 +32,7 @@ def _one(job: tuple[str, str, int, float | None]) -> tuple[str, int, dict]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(allow_abbrev=False)
     ap.add_argument("scenario", nargs="?", default=str(ROOT / "scenarios" / "cube8.toml"))
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--first", type=int, default=1)

@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from swarm_common.inputs import one_line
 from swarm_common.scenario.model import Scenario, swarm_name_problem
 from swarm_common.zenoh_session import open_session, write_swarm_security
 
@@ -47,8 +48,9 @@ def run_router(
             if not cfg.exists():
                 write_swarm_security(secure_dir, name, sc.ids)
                 log.info("wrote credentials and ACL for swarm %s to %s/", name, secure_dir)
-        except OSError as exc:
-            print(f"gcs router: {secure_dir}: {exc.strerror}", file=sys.stderr)
+        except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the path
+            why = exc.strerror if isinstance(exc, OSError) else "not a valid path"
+            print(one_line(f"gcs router: {secure_dir}: {why}"), file=sys.stderr)
             return 2
     else:
         log.warning("no --scenario/--secure-dir: anyone who reaches %s may publish",
