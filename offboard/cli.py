@@ -283,16 +283,16 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def file_problem(args: argparse.Namespace) -> str | None:
-    """``--zenoh-config`` (or ``$SWARM_ZENOH_CONFIG``): a regular file within its cap, read
-    before anything starts (:mod:`swarm_common.inputs`); None, or the one-line error."""
-    path = args.zenoh_config or os.environ.get(ZENOH_CONFIG_ENV) or None
-    if path is None:
+    """``$SWARM_ZENOH_CONFIG``, when no ``--zenoh-config`` is given: a regular file within
+    its cap, read before anything starts (:mod:`swarm_common.inputs`; the flag itself was
+    checked as it was parsed); None, or the one-line error."""
+    path = os.environ.get(ZENOH_CONFIG_ENV) or None
+    if args.zenoh_config is not None or path is None:
         return None
-    flag = ZENOH_CONFIG_FLAG if args.zenoh_config else f"${ZENOH_CONFIG_ENV}"
     try:
         read_bounded(path, MAX_ZENOH_CONFIG_BYTES, "zenoh config")
     except BoundedReadError as exc:
-        return f"{flag}: {exc}"
+        return f"${ZENOH_CONFIG_ENV}: {exc}"
     return None
 
 

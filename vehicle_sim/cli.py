@@ -205,22 +205,17 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
 
 
 def check_files(args: argparse.Namespace) -> None:
-    """The file options, before anything starts (:mod:`swarm_common.inputs`): the Zenoh
-    config and an existing ``--params-file`` are regular files within their caps;
-    ``--stats-out`` and a ``--params-file`` still to be created can be written.
-    :class:`_Fatal` with one line if not."""
-    zenoh_config = args.zenoh_config
-    flag = ZENOH_CONFIG_FLAG
-    if zenoh_config is None and not args.no_zenoh:
-        zenoh_config, flag = os.environ.get(ZENOH_CONFIG_ENV) or None, f"${ZENOH_CONFIG_ENV}"
-    try:
-        if zenoh_config is not None:
-            read_bounded(zenoh_config, MAX_ZENOH_CONFIG_BYTES, "zenoh config")
-        if args.params_file is not None and os.path.lexists(args.params_file):
-            flag = "--params-file"
-            read_bounded(args.params_file, MAX_PARAMS_BYTES, "parameter file")
-    except BoundedReadError as exc:
-        raise _Fatal(f"{flag}: {exc}") from None
+    """What the flags' parse did not check, before anything starts
+    (:mod:`swarm_common.inputs`): ``$SWARM_ZENOH_CONFIG`` (without ``--zenoh-config``) is a
+    regular file within its cap; ``--stats-out`` and a ``--params-file`` still to be
+    created can be written. The file options themselves were checked as they were parsed
+    (``bounded_file``). :class:`_Fatal` with one line if not."""
+    env_config = os.environ.get(ZENOH_CONFIG_ENV) or None
+    if args.zenoh_config is None and not args.no_zenoh and env_config is not None:
+        try:
+            read_bounded(env_config, MAX_ZENOH_CONFIG_BYTES, "zenoh config")
+        except BoundedReadError as exc:
+            raise _Fatal(f"${ZENOH_CONFIG_ENV}: {exc}") from None
     if args.params_file is not None and not os.path.lexists(args.params_file):
         if (why := out_file_problem(args.params_file, "--params-file")) is not None:
             raise _Fatal(why)

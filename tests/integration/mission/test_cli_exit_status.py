@@ -103,3 +103,19 @@ def test_run_cli_captures_the_log_and_puts_the_process_back(tmp_path: Path) -> N
     assert ZENOH_CONFIG_ENV in COMMAND_ENV  # vehicle-sim --zenoh-config sets it
     with pytest.raises(ValueError, match="--die-with-parent"):
         run_cli("offboard", ["--scenario", CUBE8, "--agent", "1", "--die-with-par"])
+
+
+@pytest.mark.parametrize("module", ["vehicle_sim.cli", "offboard.cli"])
+def test_a_bad_zenoh_config_in_the_environment_is_one_line_exit_2(module: str) -> None:
+    """``$SWARM_ZENOH_CONFIG`` is not a flag, so the parse cannot check it: the command checks
+    it before anything starts (a process: a regression would open sockets or wait for a
+    router)."""
+    env = {**os.environ, ZENOH_CONFIG_ENV: "/dev/zero"}
+    r = subprocess.run([sys.executable, "-m", module, "--scenario", str(CUBE8), "--agent", "1"]
+                       if module == "offboard.cli" else
+                       [sys.executable, "-m", module, "--scenario", str(CUBE8), "--duration",
+                        "0.05"], env=env, capture_output=True, text=True, timeout=60)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert lines and "$SWARM_ZENOH_CONFIG: /dev/zero" in lines[-1], r.stderr[-2000:]
+    assert "Traceback" not in r.stderr
