@@ -48,7 +48,7 @@ class LeaderAgent(AgentBase):
         # a [mission] replaces the sinusoid: its timeline (the plan, then what ground-station
         # commands change) gives this leader's ξ at mission time
         self.timeline = checked_timeline(sc) if sc.mission is not None else None
-        self._last_xi: tuple[float, object, np.ndarray] | None = None
+        self._last_xi: tuple[float, int, np.ndarray] | None = None
         # velocity ESO: v̂' = u + d̂ + l1 (v − v̂),  d̂' = l2 (v − v̂)   (double pole at −5)
         self.l1, self.l2 = 10.0, 25.0
         self.v_hat = sc.agents[self.index].velocity.astype(float).copy()
@@ -78,13 +78,15 @@ class LeaderAgent(AgentBase):
     def trajectory_state(self, tau: float) -> np.ndarray:
         """ξ (12,) ``tau`` (s) after the trajectory's start: the mission plan's for this
         leader, else the sinusoid's."""
-        if self.timeline is not None:
+        tl = self.timeline
+        if tl is not None:
             # a step asks for t_k and t_k+1, the next one for t_k+1 again: keep the last
+            # (valid while no new plan was installed)
             last = self._last_xi
-            if last is not None and last[0] == tau and last[1] is self.timeline.plan_at(tau):
+            if last is not None and last[0] == tau and last[1] == tl.revision:
                 return last[2].copy()
-            xi = self.timeline.agent_xi(tau, self.index)
-            self._last_xi = (tau, self.timeline.plan_at(tau), xi)
+            xi = tl.agent_xi(tau, self.index)
+            self._last_xi = (tau, tl.revision, xi)
             return xi.copy()
         return self.traj.state(tau)
 

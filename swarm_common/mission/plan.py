@@ -19,15 +19,20 @@ p''' = P''' sigma_t^3 + 3 P'' sigma_t sigma_tt + P' sigma_ttt with sigma_t = sig
 from __future__ import annotations
 
 import bisect
-import cmath
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm_common.jit import kernel
 from swarm_common.mission.config import MissionConfig, MissionError
-from swarm_common.mission.profile import SIGMA1_PEAK, sigma_jet, sigma_jets
+from swarm_common.mission.plan_kernel import (
+    agent_xi_kernel,
+    hold_xi_kernel,
+    legs_table,
+    plan_xi_kernel,
+    pose_row,
+)
+from swarm_common.mission.profile import POWERS, SIGMA1_PEAK, sigma_jet, sigma_jets
 
 __all__ = ["Leg", "Limits", "MissionPlan", "Pose", "build_plan", "leg_duration"]
 
@@ -94,13 +99,13 @@ class Leg:
 
 
 def _positions(pose: Pose, q: np.ndarray) -> np.ndarray:
-    """(N, 3) agent positions (m) at ``pose`` for offsets ``q`` (N, 3)."""
-    c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-    out = np.empty_like(q)
-    out[:, 0] = pose.centroid[0] + pose.scale * (c * q[:, 0] - s * q[:, 1])
-    out[:, 1] = pose.centroid[1] + pose.scale * (s * q[:, 0] + c * q[:, 1])
-    out[:, 2] = pose.centroid[2] + pose.scale * q[:, 2]
-    return out
+    """(N, 3) agent positions (m) at ``pose`` for offsets ``q`` (N, 3) (compiled:
+    :func:`~swarm_common.mission.plan_kernel.hold_xi_kernel`)."""
+    out = np.empty((q.shape[0], 12))
+    hold_xi_kernel(float(pose.centroid[0]), float(pose.centroid[1]), float(pose.centroid[2]),
+                   float(pose.scale), float(pose.yaw_rad), np.ascontiguousarray(q, dtype=float),
+                   out)
+    return out[:, 0:3]
 
 
 def _moves(start: Pose, end: Pose) -> bool:
@@ -155,8 +160,16 @@ class MissionPlan:
     shape_offsets: np.ndarray  # (N, 3) m, shape - mean(shape)
     _t0: list[float] = field(init=False, repr=False)
 
+    _tab: np.ndarray = field(init=False, repr=False)
+    _start: np.ndarray = field(init=False, repr=False)
+    _q: np.ndarray = field(init=False, repr=False)
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "_t0", [leg.t0 for leg in self.legs])
+        # the legs as numbers for the compiled evaluation (swarm_common.mission.plan_kernel)
+        object.__setattr__(self, "_tab", legs_table(self.legs))
+        object.__setattr__(self, "_start", pose_row(self.start_pose))
+        object.__setattr__(self, "_q", np.ascontiguousarray(self.shape_offsets, dtype=float))
 
     @property
     def arrival_s(self) -> tuple[float, ...]:
@@ -218,28 +231,20 @@ class MissionPlan:
         return c, s, y
 
     def _xi(self, t: float, q: np.ndarray) -> np.ndarray:
-        """(N, 12) the jets of the agents of offsets ``q`` (N, 3) at ``t`` (compiled:
-        :func:`agent_xi_kernel`, one call for all of them)."""
-        pose, leg, tau = self._locate(t)
-        out = np.zeros((q.shape[0], 12))
-        if leg is None:
-            out[:, 0:3] = _positions(pose, q)
-            return out
-        d = leg.duration_s
-        s0, s1, s2, s3 = sigma_jet(tau)
-        st = np.array((s0, s1 / d, s2 / (d * d), s3 / (d * d * d)))
-        a, b = leg.start, leg.end
-        agent_xi_kernel(a.centroid, b.centroid - a.centroid, a.scale, b.scale - a.scale,
-                        a.yaw_rad, b.yaw_rad - a.yaw_rad, np.ascontiguousarray(q), st, out)
+        """(N, 12) the jets of the agents of offsets ``q`` (N, 3, contiguous) at ``t``
+        (compiled: :func:`~swarm_common.mission.plan_kernel.plan_xi_kernel`, one call for all
+        of them; the same bits as :meth:`pose_jet`'s walk)."""
+        out = np.empty((q.shape[0], 12))
+        plan_xi_kernel(float(t), self._tab, self._start, q, POWERS, out)
         return out
 
     def all_xi(self, t: float) -> np.ndarray:
         """(N, 12): every agent's [p, p', p'', p'''] (m, m/s, m/s^2, m/s^3) at ``t`` (s)."""
-        return self._xi(t, self.shape_offsets)
+        return self._xi(t, self._q)
 
     def agent_xi(self, t: float, i: int) -> np.ndarray:
         """(12,): agent ``i``'s (0-based row of the shape) [p, p', p'', p'''] at ``t`` (s)."""
-        return self._xi(t, self.shape_offsets[i : i + 1])[0]
+        return self._xi(t, self._q[i : i + 1])[0]
 
     def at_rest_from(self, t: float) -> float:
         """The first time >= ``t`` (s) at which the formation is at rest: ``t`` itself
@@ -333,35 +338,3 @@ def build_plan(
         legs.append(leg)
         t0, prev = leg.departure_s, pose
     return MissionPlan(legs=tuple(legs), start_pose=start, shape_offsets=q)
-
-
-@kernel
-def agent_xi_kernel(
-    c0: np.ndarray, dc: np.ndarray, s0: float, ds: float, psi0: float, dpsi: float,
-    q: np.ndarray, st: np.ndarray, out: np.ndarray,
-) -> None:
-    """Every agent's time jet [p, ṗ, p̈, p⃛] into the rows of ``out`` (N, 12) on a moving
-    leg (module docstring): centroid ``c0`` + σ ``dc``, scale ``s0`` + σ ``ds``, yaw ``psi0`` +
-    σ ``dpsi`` (rad), offsets ``q`` (N, 3) m, ``st`` = [σ, σ_t, σ_tt, σ_ttt] (1/s^k)."""
-    sig, s1, s2, s3 = st[0], st[1], st[2], st[3]
-    scale = s0 + sig * ds
-    e = cmath.exp(complex(0.0, psi0 + sig * dpsi))
-    c_xy = complex(c0[0], c0[1])
-    dc_xy = complex(dc[0], dc[1])
-    k1 = complex(ds, scale * dpsi)
-    k2 = complex(-scale * dpsi * dpsi, 2.0 * ds * dpsi)
-    k3 = complex(-3.0 * ds * dpsi * dpsi, -scale * dpsi * dpsi * dpsi)
-    for i in range(q.shape[0]):
-        base = e * complex(q[i, 0], q[i, 1])
-        p0 = c_xy + sig * dc_xy + scale * base
-        p1 = dc_xy + k1 * base
-        p2 = k2 * base
-        p3 = k3 * base
-        t1 = p1 * s1
-        t2 = p2 * s1 * s1 + p1 * s2
-        t3 = p3 * s1 * s1 * s1 + 3.0 * p2 * s1 * s2 + p1 * s3
-        z1 = dc[2] + ds * q[i, 2]
-        out[i, 0], out[i, 1], out[i, 2] = p0.real, p0.imag, c0[2] + sig * dc[2] + scale * q[i, 2]
-        out[i, 3], out[i, 4], out[i, 5] = t1.real, t1.imag, z1 * s1
-        out[i, 6], out[i, 7], out[i, 8] = t2.real, t2.imag, z1 * s2
-        out[i, 9], out[i, 10], out[i, 11] = t3.real, t3.imag, z1 * s3

@@ -17,7 +17,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SIGMA1_PEAK", "SIGMA2_PEAK", "SIGMA3_PEAK", "sigma_jet", "sigma_jets"]
+from swarm_common.jit import kernel
+
+__all__ = [
+    "POWERS", "SIGMA1_PEAK", "SIGMA2_PEAK", "SIGMA3_PEAK", "sigma_jet", "sigma_jet_kernel",
+    "sigma_jets",
+]
 
 # max over [0, 1] of |sigma'| = 140 (1/4)^3, |sigma''| = 840 |w| (1/4 - w^2)^2 at w^2 = 1/20,
 # |sigma'''| = 840 (1/4)^2 at w = 0 (the other extremum, w^2 = 3/20, gives only 42)
@@ -34,20 +39,42 @@ def _sigma(t: Any) -> Any:
 
 def sigma_jet(tau: float) -> tuple[float, float, float, float]:
     """(sigma, sigma', sigma'', sigma''') at ``tau`` (derivatives w.r.t. tau), clamped
-    outside [0, 1]."""
+    outside [0, 1] (compiled: :func:`sigma_jet_kernel`)."""
+    st = np.empty(4)
+    sigma_jet_kernel(float(tau), POWERS, st)
+    return (float(st[0]), float(st[1]), float(st[2]), float(st[3]))
+
+
+# the exponents of the profile's powers, passed to the kernels as data: with a constant
+# exponent LLVM turns pow(x, 2.0) into x·x, which can differ from the C library's pow (what
+# Python's ``x**2`` calls) in the last bit
+POWERS = np.array([2.0, 3.0, 4.0])
+
+
+@kernel
+def sigma_jet_kernel(tau: float, pw: np.ndarray, st: np.ndarray) -> None:
+    """(σ, σ', σ'', σ''') at ``tau`` into ``st`` (4,), clamped outside [0, 1]; ``pw``:
+    :data:`POWERS`. σ by :func:`_sigma`'s Horner form (``1 − _sigma(1 − τ)`` above 1/2) and
+    the factored derivatives of the module docstring, each power the C library's ``pow``
+    as in :func:`sigma_jets`' scalar form, so the same bits as Python's ``x**n``."""
     if tau <= 0.0:
-        return (0.0, 0.0, 0.0, 0.0)
+        st[0] = st[1] = st[2] = st[3] = 0.0
+        return
     if tau >= 1.0:
-        return (1.0, 0.0, 0.0, 0.0)
-    t = float(tau)
+        st[0] = 1.0
+        st[1] = st[2] = st[3] = 0.0
+        return
+    t = tau
     u = t * (1.0 - t)
     w = t - 0.5
-    return (
-        _sigma(t) if t <= 0.5 else 1.0 - _sigma(1.0 - t),
-        140.0 * u**3,
-        -840.0 * w * u**2,
-        -840.0 * u * (0.25 - 5.0 * w * w),
-    )
+    if t <= 0.5:
+        st[0] = math.pow(t, pw[2]) * (35.0 + t * (-84.0 + t * (70.0 - 20.0 * t)))
+    else:
+        r = 1.0 - t
+        st[0] = 1.0 - math.pow(r, pw[2]) * (35.0 + r * (-84.0 + r * (70.0 - 20.0 * r)))
+    st[1] = 140.0 * math.pow(u, pw[1])
+    st[2] = -840.0 * w * math.pow(u, pw[0])
+    st[3] = -840.0 * u * (0.25 - 5.0 * w * w)
 
 
 def sigma_jets(tau: np.ndarray) -> np.ndarray:

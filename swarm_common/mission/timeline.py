@@ -53,6 +53,7 @@ class MissionTimeline:
         self._starts: list[float] = [-np.inf]
         self._plans: list[Plan] = [first]
         self.last_at_s = -np.inf
+        self.revision = 0  # counts the plans installed: a cached ξ of another is stale
         # what else a new plan must pass before it is installed (the scenario's world:
         # swarm_common.scenario.flight_check): one line of what it breaks, or None
         self.check: Callable[[Plan, float], str | None] | None = None
@@ -97,6 +98,7 @@ class MissionTimeline:
         self._starts.append(t)
         self._plans.append(plan)
         self.last_at_s = at_s
+        self.revision += 1
 
     def fly(self, cfg: MissionConfig, at_s: float) -> float:
         """Fly ``cfg``'s waypoints from the first rest at or after ``at_s`` (s), from the
