@@ -9,6 +9,9 @@ Entry points:
   :mod:`offboard.estimation.deso_gains` checks its gains.
 * :class:`offboard.estimation.reference.DesiredStateObserver` - the desired state from the
   leaders'.
+* :class:`offboard.estimation.formation_frame.FormationFrameObserver` - that observer for a
+  yawing formation, run in its frame; :mod:`offboard.estimation.yaw_turn` turns jets by
+  the formation's yaw.
 * :class:`offboard.estimation.predictor.NeighbourPredictor` and
   :class:`offboard.estimation.peer_table.PeerTable` - received estimates, aged to now.
 * :mod:`offboard.estimation.neighbour_accel` - neighbours' accelerations from their velocities.

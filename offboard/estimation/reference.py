@@ -34,6 +34,7 @@ from scipy.linalg import expm
 
 from offboard.estimation.bearing import Formation
 from offboard.estimation.peer_table import XI_COL
+from offboard.estimation.yaw_turn import turn_by_kernel, turn_coeffs_kernel
 from swarm_common.jit import kernel
 
 XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
@@ -117,7 +118,20 @@ def observer_step(
 ) -> None:
     """One period of the desired-state observer (§4.1), compiled:
     ``ξ̂⁺ = M_x ξ̂ + M_c c`` with ``c = Σ_j (I₄ ⊗ P*_ij) ξ̂_j``, written into ``out`` (12,)
-    (the caller's new array, not ``xi``: none to box).
+    (the caller's new array, not ``xi``: none to box). :func:`observer_core` with the
+    neighbours read as they are (its ``yaw`` unread: ``xi`` stands in, no array to make)."""
+    observer_core(mx, mc, pu, idx, peer_rows, xi, xi, False, out)
+
+
+@kernel
+def observer_core(
+    mx: np.ndarray, mc: np.ndarray, pu: np.ndarray, idx: np.ndarray, peer_rows: np.ndarray,
+    xi: np.ndarray, yaw: np.ndarray, turn: bool, out: np.ndarray,
+) -> None:
+    """:func:`observer_step`, each neighbour's ξ̂_j turned by −ψ (the jet ``yaw`` (4,),
+    :func:`~offboard.estimation.yaw_turn.turn_by_kernel`) as it is read when ``turn``: the
+    step of a yawing formation's observer in its frame
+    (:mod:`offboard.estimation.formation_frame`).
 
     mx, mc (12,12) the exact one-period maps of :meth:`DesiredStateObserver._matrices`;
     pu (k,3,3) the P*_ij of the k neighbours used and idx (k,) their scenario indices
@@ -130,13 +144,21 @@ def observer_step(
         if not 0 <= idx[n] < peer_rows.shape[0]:
             raise ValueError("observer_step: a neighbour index outside the rows")
     c = np.zeros(12)
+    seg = np.empty(12)
+    e = np.empty(4, dtype=np.complex128)
+    if turn:
+        turn_coeffs_kernel(yaw, -1.0, e)
     for n in range(pu.shape[0]):
         row = idx[n]
+        for q in range(12):
+            seg[q] = peer_rows[row, XI_COL + q]
+        if turn:
+            turn_by_kernel(seg, e, seg)
         for d in range(4):
             for i in range(3):
                 acc = 0.0
                 for j in range(3):
-                    acc += pu[n, i, j] * peer_rows[row, XI_COL + 3 * d + j]
+                    acc += pu[n, i, j] * seg[3 * d + j]
                 c[3 * d + i] += acc
     for r in range(12):
         acc = 0.0
@@ -168,6 +190,8 @@ class DesiredStateObserver:
         self.nbrs = list(form.neighbours[index])
         self.xi = np.array(xi0, dtype=float)
         self.exo = exo_propagator(self.omega, self.dt)
+        self._have_key = b""  # :meth:`maps`' last ``have`` and its maps
+        self._have_maps: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._cache: dict[
             tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
         ] = {}
@@ -194,15 +218,28 @@ class DesiredStateObserver:
             self._cache[used] = m
         return m
 
+    def maps(
+        self, have: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The one-period maps of :meth:`_matrices` for the neighbours that ``have`` (N,)
+        marks usable, or None when there is none (the estimate then runs open loop on the
+        exosystem)."""
+        key = np.asarray(have, dtype=bool).tobytes()
+        if key != self._have_key:  # the last set is kept: it rarely changes between steps
+            used = tuple([j for j in self.nbrs if have[j]])
+            self._have_maps = self._matrices(used) if used else None
+            self._have_key = key
+        return self._have_maps
+
     def update(self, peer_rows: np.ndarray, have: np.ndarray) -> None:
         """Advance ξ̂ from t_k to t_k+1 given neighbours' ξ̂_j (leaders' ξ) for t_k: the
         rows (N,21) of :mod:`offboard.estimation.peer_table` by scenario index, usable where
         ``have`` (N,)."""
-        used = tuple([j for j in self.nbrs if have[j]])
-        if not used:
+        maps = self.maps(have)
+        if maps is None:
             self.xi = self.exo @ self.xi
             return
-        mx, mc, pu, idx = self._matrices(used)
+        mx, mc, pu, idx = maps
         out = np.empty(12)  # a new array from Python: cheaper than one the kernel boxes
         observer_step(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float), self.xi,
                       out)

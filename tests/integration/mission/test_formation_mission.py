@@ -21,7 +21,7 @@ from conftest import ROOT, free_port_offset
 from gcs.mission.distributed import recorded_metrics, run_distributed
 from gcs.mission.inproc import run_inproc
 from offboard.estimation.bearing import formation_from_scenario
-from offboard.estimation.formation_frame import turn_xi
+from offboard.estimation.yaw_turn import turn_xi
 from swarm_common.scenario.mission_check import plan_for
 from swarm_common.scenario.model import dump_toml, load_scenario, with_overrides
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from offboard.estimation.formation_frame import extrapolate, turn_xi, yaw_jet_from_offset
+from offboard.estimation.yaw_turn import extrapolate, turn_xi, yaw_jet_from_offset
 from swarm_common.mission.config import parse_mission
 from swarm_common.mission.plan import Limits, build_plan
 
