@@ -5,6 +5,8 @@ Rooms, bottom up (each imports only the ones above it in this list, and ``swarm_
 * :mod:`offboard.records` - the records an agent exchanges (estimate, status, output).
 * :mod:`offboard.estimation` - bearing geometry, synthetic sensing, the DESO, the
   desired-state observer and neighbour prediction.
+* :mod:`offboard.inner_loop` - virtual control to attitude setpoint, and the inner-loop
+  model that realises it.
 * :mod:`offboard.safety` - the safety filters (``dcbf``, ``rcbf``, ``apf``, ``none``) and
   their QP solvers.
 * :mod:`offboard.agent` - one agent's control step (:func:`offboard.agent.factory.make_agent`),

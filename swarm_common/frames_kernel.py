@@ -1,7 +1,7 @@
 """Compiled conversions of :mod:`swarm_common.frames` (issue 11): the per-step ones.
 
 :mod:`swarm_common.frames` stays the one NED↔ENU conversion boundary: its public functions
-call these kernels, and other compiled code (:mod:`offboard.agent.attitude_kernel`) calls them
+call these kernels, and other compiled code (:mod:`offboard.inner_loop.attitude_kernel`) calls them
 directly. The conventions are those of :mod:`swarm_common.frames` (ENU/FLU inside, NED/FRD
 on the wire, ZYX Euler, quaternions [w, x, y, z]).
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offboard.agent.attitude import accel_from_attitude, setpoint_from_accel
+from offboard.inner_loop.attitude import accel_from_attitude, setpoint_from_accel
 from swarm_common.scenario.model import VehicleConfig
 
 

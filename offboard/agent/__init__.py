@@ -4,7 +4,6 @@ Entry point: :func:`offboard.agent.factory.make_agent` returns a
 :class:`~offboard.agent.follower.FollowerAgent` or a :class:`~offboard.agent.leader.LeaderAgent`;
 both derive from :class:`offboard.agent.base.AgentBase`.
 
-* :mod:`.attitude` - virtual control to attitude/thrust, and the inner-loop model.
 * :mod:`.takeoff`, :mod:`.landing` - coordinated take-off from pads and land-all.
 * :mod:`.governor` - slows an infeasible leader trajectory until it fits the input set.
 * :mod:`.peers` - whose estimates an agent needs and waits for.

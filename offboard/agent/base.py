@@ -9,10 +9,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from offboard.agent.attitude import InnerLoopModel, Setpoint
 from offboard.agent.landing import LANDED_Z, LandingPlan, LandingReference, landed
 from offboard.agent.takeoff import TakeoffPlan, is_ground_start, takeoff_plan
 from offboard.estimation.peer_table import EstimateBatch
+from offboard.inner_loop.attitude import InnerLoopModel, Setpoint
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.safety.filter import parse_method
 from swarm_common.enums import Method

@@ -33,12 +33,12 @@ setup), :mod:`offboard.agent.follower`, :mod:`offboard.agent.leader`,
 
 from __future__ import annotations
 
-from offboard.agent.attitude import accel_from_attitude
 from offboard.agent.base import AgentBase
 from offboard.agent.follower import FollowerAgent
 from offboard.agent.leader import LeaderAgent
 from offboard.estimation.bearing import Formation
 from offboard.estimation.predictor import NeighbourPredictor
+from offboard.inner_loop.attitude import accel_from_attitude
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method, Role
 from swarm_common.scenario.model import Scenario

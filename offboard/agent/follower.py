@@ -13,7 +13,6 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from offboard.agent.attitude import Setpoint
 from offboard.agent.base import CLIP_TOL, AgentBase
 from offboard.agent.detour import Detour
 from offboard.agent.governor import governor_for, log_governor
@@ -32,6 +31,7 @@ from offboard.estimation.predictor import NeighbourPredictor
 from offboard.estimation.reference import DesiredStateObserver, xi_a, xi_at_rest
 from offboard.estimation.sensing import DropoutHold, Sensor
 from offboard.estimation.sensing_kernel import pair_rows
+from offboard.inner_loop.attitude import Setpoint
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.safety.base import SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter

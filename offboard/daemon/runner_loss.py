@@ -44,10 +44,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from offboard.agent.attitude import Setpoint, setpoint_from_accel
 from offboard.agent.landing import LandingPlan, LandingReference, landed, landing_plan
 from offboard.daemon.limits import LAND_AFTER_S, MIN_LAND_AFTER_S
 from offboard.estimation.reference import xi_a, xi_at_rest, xi_j, xi_p, xi_v
+from offboard.inner_loop.attitude import Setpoint, setpoint_from_accel
 from swarm_common.scenario.input_set import control_box
 from swarm_common.scenario.model import Scenario
 

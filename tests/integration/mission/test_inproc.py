@@ -10,8 +10,8 @@ from conftest import ROOT  # noqa: E402
 
 from gcs.mission.inproc import f32, run_inproc, wire_to_command
 from gcs.report.metrics import METRIC_KEYS
-from offboard.agent.attitude import setpoint_from_accel
 from offboard.agent.factory import FollowerAgent, make_agent
+from offboard.inner_loop.attitude import setpoint_from_accel
 from swarm_common.scenario.model import load_scenario, with_overrides
 
 CUBE8 = ROOT / "scenarios" / "cube8.toml"

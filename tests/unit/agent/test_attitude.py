@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from offboard.agent.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
+from offboard.inner_loop.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
 from swarm_common.frames import thrust_accel
 from swarm_common.scenario.model import VehicleConfig
 

@@ -1,6 +1,6 @@
 """The compiled setpoint conversion, inner-loop model and frame conversions
-(offboard.agent.attitude_kernel, swarm_common.frames_kernel) against the numpy/Python formulation
-they replaced, on random inputs.
+(offboard.inner_loop.attitude_kernel, swarm_common.frames_kernel) against the numpy/Python
+formulation they replaced, on random inputs.
 
 Within rounding everywhere (tests/reference/close.py: two implementations may round
 differently in the last bits, and an un-jitted kernel runs in Python floats): where the
@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from reference.close import assert_close
 
-from offboard.agent.attitude import (
+from offboard.inner_loop.attitude import (
     InnerLoopModel,
     Setpoint,
     accel_from_attitude,

@@ -85,7 +85,7 @@ def _track_saturated(anti_windup: bool, e0: np.ndarray, v0: np.ndarray) -> np.nd
     with A = (1.6, 0.8, 0.4) m (needs ~2.6 of the box's 3.19 m/s²). Position errors (m)."""
     import math
 
-    from offboard.agent.attitude import InnerLoopModel, setpoint_from_accel
+    from offboard.inner_loop.attitude import InnerLoopModel, setpoint_from_accel
     from swarm_common.scenario.input_set import control_box
     from swarm_common.scenario.model import load_scenario
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from reference.dcbf_rows import dcbf_rows, ground_rows, predict
 
-from offboard.agent.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
+from offboard.inner_loop.attitude import InnerLoopModel, accel_from_attitude, setpoint_from_accel
 from offboard.safety.dcbf.filter import GROUND_ACCEL_ERR, GROUND_GAMMA, input_set_of
 from offboard.safety.dcbf.model import LagCoefficients
 from offboard.safety.dcbf.qp import DcbfQP
@@ -168,9 +168,9 @@ def test_head_on_pair_at_input_limit_is_braked() -> None:
 
 
 def test_input_clipped_flag_and_neighbour_acceleration() -> None:
-    from offboard.agent.attitude import InnerLoopModel
     from offboard.agent.base import CLIP_TOL
     from offboard.estimation.neighbour_accel import NeighbourAccel
+    from offboard.inner_loop.attitude import InnerLoopModel
     from offboard.records import NeighbourEstimate
 
     inside, outside = np.array([2.0, 1.0, 0.0]), np.array([7.0, 0.0, -3.0])  # 30° cone

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offboard.agent.attitude_kernel import (
+from offboard.inner_loop.attitude_kernel import (
     accel_from_attitude_kernel,
     command_kernel,
     inner_loop_kernel,
@@ -68,7 +68,7 @@ def setpoint_from_accel(
     The conversion (:func:`swarm_common.frames.accel_to_attitude`, the quaternion of
     :func:`swarm_common.frames.quat_ned_from_euler_enu`,
     :func:`swarm_common.frames.thrust_to_norm`) is the compiled
-    :func:`offboard.agent.attitude_kernel.setpoint_kernel`.
+    :func:`offboard.inner_loop.attitude_kernel.setpoint_kernel`.
     """
     ua = _virtual_control(u)
     f_max = veh.thrust_max_n
@@ -88,7 +88,7 @@ def accel_from_attitude(
     """Virtual control realised by an attitude/thrust: R e3 F/m − g e_z (ENU).
 
     Angles in rad, thrust in N, mass in kg, g in m/s²; the result (3,) in m/s² (compiled:
-    :func:`offboard.agent.attitude_kernel.accel_from_attitude_kernel`).
+    :func:`offboard.inner_loop.attitude_kernel.accel_from_attitude_kernel`).
     """
     return accel_from_attitude_kernel(
         float(roll), float(pitch), float(yaw), float(thrust_n), float(mass), float(g)
@@ -130,7 +130,7 @@ class InnerLoopModel:
         rows of :meth:`run` under it, whether the setpoint realises an acceleration
         farther than ``clip_tol`` (m/s²) from u on some axis (tilt or thrust clipped), and
         the rows' mean (m/s²). One compiled call
-        (:func:`offboard.agent.attitude_kernel.command_kernel`), the same bits as those calls.
+        (:func:`offboard.inner_loop.attitude_kernel.command_kernel`), the same bits as those calls.
 
         The rows and the mean are this model's own buffers, rewritten by the next call:
         valid until then (each step reads them before its next command)."""
@@ -151,7 +151,8 @@ class InnerLoopModel:
     def run(self, sp: Setpoint, n_sub: int) -> np.ndarray:
         """Advance ``n_sub`` sub-steps under ``sp``; (n_sub, 3) realised u (m/s²) at each
         sub-step end. The command is clipped to the tilt and thrust limits and the
-        sub-steps run in the compiled :func:`offboard.agent.attitude_kernel.inner_loop_kernel`."""
+        sub-steps run in the compiled
+        :func:`offboard.inner_loop.attitude_kernel.inner_loop_kernel`."""
         r, p, y, f0 = self.state.tolist()
         rows, r, p, y, f = inner_loop_kernel(
             r, p, y, f0, float(sp.roll), float(sp.pitch),

@@ -1,4 +1,5 @@
-"""Compiled setpoint conversion and inner-loop model (:mod:`offboard.agent.attitude`; §2.2, §5.1).
+"""Compiled setpoint conversion and inner-loop model (:mod:`offboard.inner_loop.attitude`;
+§2.2, §5.1).
 
 * :func:`setpoint_kernel`: virtual control u → (roll, pitch, yaw, F) within the tilt and
   thrust limits (:func:`swarm_common.frames_kernel.accel_to_attitude_kernel`, the kernel
