@@ -24,7 +24,9 @@ from gcs.mission.launch_spec import MAX_PORT_OFFSET, LaunchError
 from gcs.mission.ports import busy_uses, choose_port_offset, port_in_use_line, swarm_port_uses
 from offboard.estimation.bearing import formation_from_scenario
 from offboard.estimation.deso_gains import scenario_gain_problem
+from offboard.safety.dcbf.filter import input_set_of
 from offboard.safety.dcbf.liveness import rest_spacing_m
+from offboard.safety.dcbf.trust import model_error_table
 from swarm_common.enums import Method
 from swarm_common.scenario.feasibility import deadline_problem
 from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario
@@ -52,16 +54,28 @@ def liveness_problem(sc: Scenario, method: str) -> str | None:
     if method != Method.DCBF:
         return None
     c, v = sc.controller, sc.vehicle
+    key, e_bar = "dcbf_accel_error_mps2", c.dcbf_accel_error_mps2
+    if c.dcbf_trust_jump_mps2 > 0.0:  # hovering, the trust region's margin at its least
+        key, e_bar = "dcbf_trust_error_mps2", hover_margin(sc)
     d_star = rest_spacing_m(v.tau_rollpitch_s, v.tau_thrust_s, sc.control_dt, c.tau_safe_s,
-                            c.d_safe_m, c.dcbf_gamma_lin, c.dcbf_gamma_cubic,
-                            c.dcbf_accel_error_mps2)
+                            c.d_safe_m, c.dcbf_gamma_lin, c.dcbf_gamma_cubic, e_bar)
     spacing = smallest_spacing_m(sc)
     if spacing >= d_star:
         return None
     return (f"{sc.name}: two desired positions are {spacing:.2f} m apart, closer than the "
             f"{d_star:.2f} m at which dcbf lets two agents hover (controller."
-            f"dcbf_accel_error_mps2 = {c.dcbf_accel_error_mps2:g}, dcbf_gamma_lin = "
+            f"{key} = {getattr(c, key):g}, dcbf_gamma_lin = "
             f"{c.dcbf_gamma_lin:g}): the formation cannot form (docs/safety.md 5f)")
+
+
+def hover_margin(sc: Scenario) -> float:
+    """The dcbf trust region's margin ē (m/s²) for a hovering agent (a0 = u = 0): its
+    ē_base plus the lag model's error for its smallest bound in the smallest bin
+    (:mod:`offboard.safety.dcbf.trust`)."""
+    c, v = sc.controller, sc.vehicle
+    table = model_error_table(v, input_set_of(c, v), v.tau_rollpitch_s + sc.control_dt,
+                              c.dcbf_trust_jump_mps2)
+    return c.dcbf_trust_error_mps2 + table[0]
 
 
 def warn_liveness(sc: Scenario, method: str) -> bool:

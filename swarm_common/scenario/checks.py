@@ -65,6 +65,29 @@ def check_safe(sc: Scenario) -> None:
     )
 
 
+def trust_problem(sc: Scenario) -> str | None:
+    """One line naming the key if the dcbf trust region's keys disagree, else None
+    (docs/safety.md 5f): ``dcbf_trust_error_mps2`` without a jump bound, a trust region
+    without it (it must cover the noise and estimate errors), or one at or above the full
+    margin ``dcbf_accel_error_mps2`` that the trust region falls back to."""
+    c = sc.controller
+    jump, base, full = c.dcbf_trust_jump_mps2, c.dcbf_trust_error_mps2, c.dcbf_accel_error_mps2
+    if jump == 0.0:
+        if base > 0.0:
+            return (f"controller.dcbf_trust_error_mps2 = {base:g}: only read with "
+                    f"controller.dcbf_trust_jump_mps2 > 0 (the trust region is off)")
+        return None
+    if base <= 0.0:
+        return (f"controller.dcbf_trust_jump_mps2 = {jump:g}: needs "
+                f"controller.dcbf_trust_error_mps2 > 0 (the noise and estimate part of the "
+                f"trust region's margin)")
+    if base >= full:
+        return (f"controller.dcbf_trust_error_mps2 = {base:g}: must be below "
+                f"controller.dcbf_accel_error_mps2 = {full:g}, the full margin the trust "
+                f"region falls back to")
+    return None
+
+
 def graph_problem(sc: Scenario) -> str | None:
     """One line naming the ``[formation]`` key if the neighbour graph is unusable, else None
     (docs/graphs.md): ``formation.edges`` listing an unknown id, a self-loop or a pair twice,

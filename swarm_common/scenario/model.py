@@ -135,6 +135,7 @@ def parse_scenario(
         check_safe,
         check_separation,
         graph_problem,
+        trust_problem,
     )
     from swarm_common.scenario.mission_check import mission_problem
 
@@ -275,7 +276,7 @@ def parse_scenario(
     scen = Scenario(path=path, agents=tuple(agents), allow_infeasible=allow_infeasible,
                     allow_unsafe=allow_unsafe, faults=plan, mission=mission, world=world,
                     **typed)
-    problem = graph_problem(scen)
+    problem = trust_problem(scen) or graph_problem(scen)
     if problem is not None:
         raise fail(problem)
     problem = mission_problem(scen)

@@ -227,10 +227,15 @@ def noise_accel_rms(sc: Scenario, distance: float) -> float:
 
 
 def noise_problem(sc: Scenario) -> str | None:
-    """(d): NOISE_SIGMAS × the noise RMS above ``controller.dcbf_accel_error_mps2``."""
+    """(d): NOISE_SIGMAS × the noise RMS above ``controller.dcbf_accel_error_mps2``, or
+    above ``dcbf_trust_error_mps2`` when the trust region is on (its rows' margin for the
+    noise, docs/safety.md 5f)."""
     d = entry_range(sc, closing_speed(sc))
     need = NOISE_SIGMAS * noise_accel_rms(sc, d)
-    e_bar = sc.controller.dcbf_accel_error_mps2
+    c = sc.controller
+    key, e_bar = "dcbf_accel_error_mps2", c.dcbf_accel_error_mps2
+    if c.dcbf_trust_jump_mps2 > 0.0:
+        key, e_bar = "dcbf_trust_error_mps2", c.dcbf_trust_error_mps2
     if need <= e_bar:
         return None
     s = sc.sensing
@@ -238,7 +243,7 @@ def noise_problem(sc: Scenario) -> str | None:
         f"sensing.range_rate_noise_mps = {s.range_rate_noise_mps:g} (bearing_rate_noise_radps"
         f" = {s.bearing_rate_noise_radps:g}): {NOISE_SIGMAS:g} RMS of the relative-"
         f"acceleration noise at {d:.2f} m is {need:.2f} m/s², above the margin "
-        f"controller.dcbf_accel_error_mps2 = {e_bar:g}"
+        f"controller.{key} = {e_bar:g}"
     )
 
 

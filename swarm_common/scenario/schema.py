@@ -175,6 +175,15 @@ class ControllerConfig:
     dcbf_cone_sides: int = _int(3, 64)
     # dcbf: altitude (m) below which an airborne follower may not descend (ground barrier)
     dcbf_ground_clearance_m: float = _num(0.0, 100.0)
+    # dcbf trust region (optional; docs/safety.md 5f): J (m/s²), the bound on the command
+    # jump |u - a0|_inf of a tight QP whose rows carry a margin from the measured lag-model
+    # error for that jump plus dcbf_trust_error_mps2 (the noise and estimate part); 0 = off
+    dcbf_trust_jump_mps2: float = field(
+        default=0.0, metadata={"spec": ("float", 0.0, 10.0, False, False)}
+    )
+    dcbf_trust_error_mps2: float = field(
+        default=0.0, metadata={"spec": ("float", 0.0, 10.0, False, False)}
+    )
     # solver of the rcbf and dcbf QPs (optional; docs/safety.md §4b)
     qp_solver: QPSolver = field(
         default=QPSolver.DAQP, metadata={"spec": ("str", tuple(QPSolver)), "enum": QPSolver}

@@ -18,6 +18,9 @@ from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.dcbf.step_kernel import (
+    NO_ALT_G,
+    NO_ALT_RHS,
+    P_ALT_ERR,
     P_DT,
     P_GROUND_ERR,
     P_TAU,
@@ -29,9 +32,10 @@ from offboard.safety.dcbf.step_kernel import (
     dcbf_filter_rows_into,
     dcbf_params,
 )
+from offboard.safety.dcbf.trust import TrustRegion
 from offboard.safety.dcbf.world_rows import WorldPlanes, plane_rows_into
 from offboard.safety.rcbf.clf_rcbf import ACTIVE_TOL_MPS2, ClfTerms, QPResult
-from swarm_common.enums import Method, QPRow
+from swarm_common.enums import Method, QPRow, QPStatus
 from swarm_common.fastnp import f64, rows3, vec3
 from swarm_common.scenario.model import ControllerConfig, VehicleConfig
 
@@ -92,6 +96,14 @@ class DcbfFilter(SafetyFilter):
         self._g = np.zeros((2 * n + 2, 3))
         self._rhs = np.zeros(2 * n + 2)
         self._side = np.zeros(3)
+        # the trust region (offboard.safety.dcbf.trust; configure, when the scenario sets
+        # dcbf_trust_jump_mps2): its QP, the tight rows' buffers and per-step counts of
+        # the steps it solved, those that fell back to the full rows and those where a0
+        # was outside its table
+        self.trust: TrustRegion | None = None
+        self.tight_qp: DcbfQP | None = None
+        self._g_alt, self._rhs_alt = NO_ALT_G, NO_ALT_RHS
+        self.trust_counts = np.zeros(3, dtype=np.int64)
         # where the step's rows come from, for the active rows it reports (_active): the
         # pair rows' scenario indices (sensed, then predicted), the ground's two rows, and
         # the world's (its planes, their first row, the agent's position)
@@ -120,6 +132,14 @@ class DcbfFilter(SafetyFilter):
                          limit=rows, solver=self.ctl.qp_solver)
         tau = np.array([veh.tau_rollpitch_s, veh.tau_rollpitch_s, veh.tau_thrust_s])
         self.lag = LagCoefficients.of(tau, veh.tau_rollpitch_s + dt)
+        jump = self.ctl.dcbf_trust_jump_mps2
+        if jump > 0.0:
+            self.trust = TrustRegion(jump, self.ctl.dcbf_trust_error_mps2,
+                                     self.ctl.dcbf_accel_error_mps2, veh, uset, self.lag.T)
+            self.tight_qp = DcbfQP(min(rows, QP_INITIAL_ROWS), uset, self.ctl.rho,
+                                   self.ctl.clf_c, limit=rows, solver=self.ctl.qp_solver,
+                                   trust=True)
+            self._g_alt, self._rhs_alt = np.zeros_like(self._g), np.zeros_like(self._rhs)
         self._dt = float(dt)
         ctl = self.ctl
         self._params = dcbf_params(
@@ -127,6 +147,19 @@ class DcbfFilter(SafetyFilter):
             ctl.dcbf_accel_error_mps2, ctl.deadlock_gain, ctl.deadlock_h_m2, dt,
             REL_ACC_SMOOTH, GROUND_GAMMA, GROUND_ACCEL_ERR, self.lag.T,
         )
+
+    def prepare_trust(self, a0: np.ndarray, u_prev: np.ndarray) -> None:
+        """Before a step's rows: the trust region's bound J (:meth:`TrustRegion.level`,
+        from the previous command ``u_prev``) and tight margin ē(J, a0) for realised
+        acceleration ``a0`` (m/s²) into the rows' parameters (0: no tight rows this step),
+        its box ``a0 ± J`` into the tight QP. Nothing without a trust region."""
+        if self.trust is None or self.tight_qp is None:
+            return
+        jump = self.trust.level(a0, u_prev)
+        e = self.trust.margin(a0, jump)
+        self._params[P_ALT_ERR] = e
+        if e > 0.0:
+            self.tight_qp.set_trust(a0 - jump, a0 + jump)
 
     def set_span(self, periods: int) -> None:
         """The step before was ``periods`` control periods ago (1 in process and in
@@ -182,6 +215,7 @@ class DcbfFilter(SafetyFilter):
             float(x.floor_m) if ground and x.floor_m is not None else 0.0,
         )
         self.note_rows(rows.pairs, NO_ROWS, ground)
+        self.prepare_trust(own.a_real, own.u_prev)
         k, h_min = dcbf_filter_rows_into(rows, own, floor, self.rows_state(), self.rows_out())
         return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
 
@@ -204,6 +238,9 @@ class DcbfFilter(SafetyFilter):
             vec3(saturate_norm(w, W_SAFE)), self.lag.table, self.lag.T, prm[P_TAU],
             WORLD_GAMMA, prm[P_GROUND_ERR], prm[P_GROUND_ERR], self._g, self._rhs, k,
         )
+        if prm[P_ALT_ERR] > 0.0:  # the same rows for the tight QP
+            self._g_alt[k : k + 2 * m] = self._g[k : k + 2 * m]
+            self._rhs_alt[k : k + 2 * m] = self._rhs[k : k + 2 * m]
         return k + 2 * m
 
     def solve_rows(
@@ -212,12 +249,30 @@ class DcbfFilter(SafetyFilter):
     ) -> SafetyOutput:
         """The QP over the K rows in the buffers, from ``u_try`` = u_nom + sidestep (m/s²);
         its fallback brakes on ``−w − gain·z2`` (w the saturated disturbance estimate,
-        z2 the velocity estimate). ``unheld``: :meth:`DcbfQP.solve`'s."""
+        z2 the velocity estimate). ``unheld``: :meth:`DcbfQP.solve`'s.
+
+        With a trust region whose tight rows were made this step (:meth:`prepare_trust`),
+        the tight QP is solved first, and its answer flown when it needs no slack (σ = 0,
+        so the jump bound that its margin assumes holds); else the full QP's, as without
+        a trust region."""
         if self.qp is None:
             raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
         gain = self.brake_gain
-        res = self.qp.solve(u_try, clf, self._g[:k], self._rhs[:k], h_min,
-                            lambda: -w - gain * z2, unheld)  # the fallback, formed if taken
+        res = None
+        if self.tight_qp is not None:
+            if self._params[P_ALT_ERR] > 0.0:
+                res = self.tight_qp.solve(u_try, clf, self._g_alt[:k], self._rhs_alt[:k],
+                                          h_min, lambda: -w - gain * z2)
+                if res.status in (QPStatus.INACTIVE, QPStatus.SOLVED):
+                    self.trust_counts[0] += 1
+                else:
+                    self.trust_counts[1] += 1
+                    res = None
+            else:
+                self.trust_counts[2] += 1
+        if res is None:
+            res = self.qp.solve(u_try, clf, self._g[:k], self._rhs[:k], h_min,
+                                lambda: -w - gain * z2, unheld)  # the fallback, formed if taken
         return SafetyOutput(
             res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback,
             self._active(res),
@@ -266,4 +321,4 @@ class DcbfFilter(SafetyFilter):
     def rows_out(self) -> RowsOut:
         """The row buffers and the sidestep of :func:`dcbf_filter_rows_into` (rewritten
         each step; the QP reads them within the step)."""
-        return RowsOut(self._g, self._rhs, self._side)
+        return RowsOut(self._g, self._rhs, self._side, self._g_alt, self._rhs_alt)

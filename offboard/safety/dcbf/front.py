@@ -214,7 +214,7 @@ def dcbf_front_into(
         GroundInput(ground, z1[2] if ground else 0.0, z2[2], floor if ground else 0.0),
         state, rows_out,
     )
-    g_out, r_out, side_out = rows_out
+    g_out, r_out, side_out = rows_out[0], rows_out[1], rows_out[2]
     for c in range(3):
         u_try[c] = clf[5 + c] + side_out[c]
     held = rows_hold_kernel(a_u, lo_u, hi_u, g_out, r_out, min(k, k_cap), u_try)
@@ -283,6 +283,7 @@ class DcbfFront:
         ground = floor is not None
         qp.fit_rows(2 * m + 2 if ground else 2 * m)  # room for every row before the call
         self.filt.note_rows(meas.sel, unsensed.idx, ground)  # the rows' layout, as the call's
+        self.filt.prepare_trust(inner.a_real, inner.u_prev)  # the trust region, if any
         lumped, w, clf, u_try = np.empty((2, 3)), np.empty(3), np.empty(CLF_OUT), np.empty(3)
         tab = self.acc.table
         k, h_min, held = _front_call(  # the groups in their order, as plain tuples

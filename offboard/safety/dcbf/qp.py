@@ -35,11 +35,16 @@ class DcbfQP(_ClfRowsQP):
     def __init__(
         self, max_pairs: int, uset: ProjectedInputSet, rho: float, clf_c: float,
         violation_weight: float = 100.0, eps: float = 1e-5, limit: int | None = None,
-        solver: QPSolver | str = QPSolver.DAQP,
+        solver: QPSolver | str = QPSolver.DAQP, trust: bool = False,
     ) -> None:
         """Room for ``max_pairs`` barrier rows, grown on demand up to ``limit`` rows
-        (default: ``max_pairs``; :meth:`_ClfRowsQP.fit_rows`), solved by ``solver``."""
+        (default: ``max_pairs``; :meth:`_ClfRowsQP.fit_rows`), solved by ``solver``.
+        ``trust``: three more hard input rows, the trust region ``lo ≤ u ≤ hi`` of
+        :meth:`set_trust` (offboard.safety.dcbf.trust); until set, no bound."""
         self.uset = uset
+        self._trust = np.full((2, 3), np.inf) if trust else None
+        if self._trust is not None:
+            self._trust[0] = -np.inf
         self.c = float(clf_c)
         self.lin_sigma = max(1e3, 50.0 * rho)
         self._half_inv_rho = 0.5 / float(rho)  # the CLF slack's δ = ν/(2ρ) (pre_solve_kernel)
@@ -51,6 +56,10 @@ class DcbfQP(_ClfRowsQP):
         eps = self._weights[2]
         uset = self.uset
         a_u, lo_u, hi_u = uset.rows()
+        if self._trust is not None:  # the trust region's rows after the input set's
+            a_u = np.vstack([a_u, np.eye(3)])
+            lo_u = np.concatenate([lo_u, self._trust[0]])
+            hi_u = np.concatenate([hi_u, self._trust[1]])
         self.a_u, self.lo_u, self.hi_u = a_u, lo_u, hi_u
         nu = len(lo_u)
         self.nrow = nrow = 1 + m + nu + 1
@@ -71,6 +80,17 @@ class DcbfQP(_ClfRowsQP):
         self.q = np.zeros(5)
         self.q[4] = self.lin_sigma
         self._defer_osqp(pat, self._a.T[self._mask_t], eps)
+
+    def set_trust(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """The trust region's bounds ``lo ≤ u ≤ hi`` (3,) (m/s²) from now on (a QP built
+        with ``trust``; hard rows like the input set's)."""
+        if self._trust is None:
+            raise RuntimeError("DcbfQP.set_trust: the QP was built without trust rows")
+        self._trust[0], self._trust[1] = lo, hi
+        nu = len(self.lo_u)
+        self.lo_u[nu - 3 :], self.hi_u[nu - 3 :] = lo, hi
+        first = 1 + self.m + nu - 3  # the rows' place in the solver's problem (_setup)
+        self.l[first : first + 3], self.u[first : first + 3] = lo, hi
 
     def solve(
         self, u_nom: np.ndarray, clf: ClfTerms, g: np.ndarray, rhs: np.ndarray,

@@ -44,7 +44,13 @@ P_SMOOTH = 8  # low-pass weight of the previous relative-acceleration estimate
 P_GROUND_GAMMA = 9  # the ground barrier's class-K gain (1/s)
 P_GROUND_ERR = 10  # error bound on the predicted own vertical acceleration (m/s²)
 P_HORIZON = 11  # prediction horizon T = τ_rp + dt (s)
-N_PARAMS = 12
+# ē of the second set of pair rows, the trust region's tight ones (m/s²; 0: none this
+# step; offboard.safety.dcbf.trust), written before each step
+P_ALT_ERR = 12
+N_PARAMS = 13
+# RowsOut's second set of rows when there is none (never written)
+NO_ALT_G = np.zeros((0, 3))
+NO_ALT_RHS = np.zeros(0)
 
 
 class PairRows(NamedTuple):
@@ -91,20 +97,24 @@ class RowsState(NamedTuple):
 
 
 class RowsOut(NamedTuple):
-    """The caller's buffers for the rows ``gᵀu ≥ r`` and the sidestep."""
+    """The caller's buffers for the rows ``gᵀu ≥ r`` and the sidestep, and for the second
+    set of rows, with the margin ``params[P_ALT_ERR]`` (written only where that is > 0)."""
 
     g: np.ndarray  # (≥ K, 3)
     rhs: np.ndarray  # (≥ K,) (m/s²)
     side: np.ndarray  # (3,) sidestep (m/s²)
+    g_alt: np.ndarray = NO_ALT_G  # (≥ K, 3) where used
+    rhs_alt: np.ndarray = NO_ALT_RHS  # (≥ K,) (m/s²) where used
 
 
 def dcbf_params(
     tau_s: float, d_safe: float, gamma1: float, gamma3: float, accel_err: float,
     side_gain: float, side_h: float, dt: float, smooth: float, ground_gamma: float,
-    ground_err: float, horizon: float,
+    ground_err: float, horizon: float, alt_err: float = 0.0,
 ) -> np.ndarray:
     """The parameter array of :func:`dcbf_filter_rows_into` (units at the ``P_*``)."""
     out = np.empty(N_PARAMS)
+    out[P_ALT_ERR] = alt_err
     out[P_TAU], out[P_D_SAFE], out[P_GAMMA1], out[P_GAMMA3] = tau_s, d_safe, gamma1, gamma3
     out[P_ACCEL_ERR], out[P_SIDE_GAIN], out[P_SIDE_H] = accel_err, side_gain, side_h
     out[P_DT], out[P_SMOOTH], out[P_GROUND_GAMMA] = dt, smooth, ground_gamma
@@ -131,7 +141,10 @@ def dcbf_filter_rows_into(
     """The K = 2M [+2] rows of one dcbf step, ``g_iᵀu ≥ r_i``, into the caller's buffers
     ``out`` (no new arrays boxed per step): g in the first K rows of ``out.g``, r (m/s²)
     in those of ``out.rhs``, the sidestep (m/s²) in ``out.side``. Returns (K, h_min (m²));
-    buffers too small are refused before any state is touched.
+    buffers too small are refused before any state is touched. Where ``params[P_ALT_ERR]``
+    > 0, the same K rows with that margin ē instead of ``P_ACCEL_ERR``'s (the pair rows;
+    the ground's are the same) go to ``out.g_alt``, ``out.rhs_alt``: the other agents'
+    accelerations, and the state they update, are computed once for both.
 
     ``rows`` the M pair rows, ``own`` the own motion; when ``ground.on`` the two ground
     rows follow the pair rows. ``state``: the parameters, the lag table and sensitivities
@@ -144,10 +157,13 @@ def dcbf_filter_rows_into(
     a_real, u_prev, a_mean, w_safe = own
     ground_on, z, vz, floor = ground
     params, lag, sens, prev_dv, prev_ok, rel_acc, rel_ok = state
-    g_out, r_out, side_out = out
+    g_out, r_out, side_out, g_alt, r_alt = out
     m = dp.shape[0]
     k = 2 * m + 2 if ground_on else 2 * m
     if g_out.shape[0] < k or r_out.shape[0] < k or g_out.shape[1] != 3 or side_out.shape[0] != 3:
+        raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
+    alt = params[P_ALT_ERR] > 0.0
+    if alt and (g_alt.shape[0] < k or r_alt.shape[0] < k or g_alt.shape[1] != 3):
         raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
     tau = params[P_TAU]
     h = barrier_kernel(dp, dv, tau, params[P_D_SAFE])
@@ -175,6 +191,15 @@ def dcbf_filter_rows_into(
         r_out[r] = rhs[r]
         for c in range(3):
             g_out[r, c] = g[r, c]
+    if alt:
+        g2, rhs2 = dcbf_rows_kernel(
+            dp, dv, a_real, u_prev, other, share, d, lag, sens, params[P_HORIZON], tau,
+            params[P_GAMMA1], params[P_GAMMA3], params[P_ALT_ERR],
+        )
+        for r in range(2 * m):
+            r_alt[r] = rhs2[r]
+            for c in range(3):
+                g_alt[r, c] = g2[r, c]
     if ground_on:
         gg, rg = ground_rows_kernel(
             z, vz, a_real[2], w_safe[2], floor, params[P_HORIZON],
@@ -186,4 +211,8 @@ def dcbf_filter_rows_into(
             r_out[2 * m + r] = rg[r]
             for c in range(3):
                 g_out[2 * m + r, c] = gg[r, c]
+                if alt:
+                    g_alt[2 * m + r, c] = gg[r, c]
+            if alt:
+                r_alt[2 * m + r] = rg[r]
     return k, h_min

@@ -10,7 +10,7 @@ from conftest import ROOT  # noqa: E402
 from gcs.mission.inproc import run_inproc
 from gcs.report.metrics import pair_barrier
 from offboard.safety.dcbf.liveness import rest_spacing_m
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import load_scenario, with_overrides
 
 DENSE2 = ROOT / "scenarios" / "dense_cube2.toml"
 
@@ -43,13 +43,16 @@ def test_dense_cube_forms_with_every_true_barrier_nonnegative(scenario):
 
 
 def test_a_cube_that_cannot_form_reports_a_deadlock_and_stays_safe():
-    """dense_cube1p5 (cube8's margins, spacing inside d*): the followers' formation errors
+    """dense_cube1p5 with cube8's filter (margins and sidestep; its spacing inside d*), not
+    its own trust region: the followers' formation errors
     stall with the filter holding them; those that also stay put for a detector window
     (6 s, less than 0.5 m of travel) raise the DEADLOCK liveness event, the first a window
     after the start (measured: agent 5 at 7.1 s, four more by 16 s; the others creep and
     are not named). The verdict stays "safe" (a liveness event is not a safety break),
     while cube8 forms and raises none."""
-    sc = load_scenario(ROOT / "scenarios" / "dense_cube1p5.toml")
+    sc = with_overrides(load_scenario(ROOT / "scenarios" / "dense_cube1p5.toml"), controller={
+        "dcbf_trust_jump_mps2": 0.0, "dcbf_trust_error_mps2": 0.0, "dcbf_accel_error_mps2": 2.0,
+        "dcbf_gamma_lin": 0.3, "deadlock_h_m2": 3.0})
     m = run_inproc(sc, "dcbf", seed=1, duration=12.0).metrics
     stalled = {e["agent"] for e in m["safety_alarms"] if e["assumption"] == "deadlock"}
     assert stalled and stalled <= set(sc.follower_ids)

@@ -81,7 +81,7 @@ def test_dcbf_head_on_reports_the_tight_pair_rows_and_the_correction(
     # the rows as the QP saw them: per pair a (C1) row, then per pair a (C2) row, unit
     # normals, g u ≥ r
     m = len(x.pairs)
-    g, rhs, _ = filt.rows_out()
+    g, rhs = filt.rows_out()[:2]
     value = g[:2 * m] @ u - rhs[:2 * m]  # m/s², ≥ 0 when kept, 0 when tight
     assert value.min() >= -1e-9
     tight = value <= ACTIVE_TOL_MPS2
