@@ -10,6 +10,8 @@ both derive from :class:`offboard.agent.base.AgentBase`.
 * :mod:`.unsensed` - neighbours in range by prediction but not sensed now.
 * :mod:`.shares` - who takes a pair's whole avoidance budget (leaders, silent or
   non-cooperative neighbours).
+* :mod:`.leader_guard` - a dcbf leader's filter against the scenario's non-cooperative
+  agents, whose pairs with it nobody else keeps.
 * :mod:`.detour` - the way out of a pocket of obstacles when a follower is stuck.
 * :mod:`.guard`, :mod:`.fallback` - a follower's safety monitor, and the brake-hold-land it
   falls back to when its estimates diverge.

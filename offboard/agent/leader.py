@@ -10,6 +10,7 @@ import numpy as np
 
 from offboard.agent.base import CLIP_TOL, AgentBase
 from offboard.agent.governor import governor_for, log_governor
+from offboard.agent.leader_guard import leader_guard
 from offboard.agent.takeoff import climb_xi, leader_origin
 from offboard.estimation.bearing import Formation
 from offboard.estimation.peer_table import EstimateBatch
@@ -55,6 +56,11 @@ class LeaderAgent(AgentBase):
         self.d_hat = np.zeros(3)
         self.start_time = 0.0
         self.gains = None
+        # dcbf: the pairs with the scenario's non-cooperative agents are the leader's to keep
+        # (offboard.agent.leader_guard); None where there are none
+        self.guard = (leader_guard(sc, self.index, agent_id,
+                                   sc.seed if seed is None else int(seed), self.u_lo, self.u_hi)
+                      if self.cooperative else None)
 
     def reference(self, t: float) -> np.ndarray:
         """ξ_L(t) = [p, ṗ, p̈, p⃛] of the leader trajectory; held at p_L(0) before
@@ -153,10 +159,19 @@ class LeaderAgent(AgentBase):
             f64(self.current_reference(t)), p, v, self.d_hat, self.veh.tau_rollpitch_s,
             self.kp, self.kd, self.u_lo, self.u_hi, u,
         )
+        status = AgentStatus(method=self.method, comm_ok=comm_ok, u_nom=u)
+        guarded = self.guard is not None and self.method == Method.DCBF
+        if self.guard is not None and guarded:  # the nominal goes through its filter
+            u = self.guard.apply(t, truth_p, truth_v, u, self.d_hat, status)
         if self.landing is not None:
             u = self.landed_idle(t, float(p[2]), u)
         u = self.on_pad_floor(t, float(p[2]), u)
+        if not guarded:  # no filter: its command is its nominal control
+            status.u_nom = u
         sp, u_sub, clipped, u_mean = self.inner.command(u, self.yaw, self.substeps, CLIP_TOL)
+        status.input_clipped = clipped
+        if self.guard is not None:
+            self.guard.realised(u, u_sub[-1], u_mean)
         self._update_eso(v, u_sub)
         pv = np.empty((2, 3))
         leader_prediction_kernel(p, v, u_mean, self.d_hat, self.dt, pv)
@@ -164,8 +179,6 @@ class LeaderAgent(AgentBase):
             self.id, t + self.dt, pv[0], pv[1], self.d_hat.copy(),
             self.current_reference(t + self.dt), True,
         )
-        status = AgentStatus(method=self.method, comm_ok=comm_ok, input_clipped=clipped,
-                             u_nom=u)  # no filter: its command is its nominal control
         return self._output(sp, u, est, status, self.d_hat.copy())
 
     def _update_eso(self, v: np.ndarray, u_sub: np.ndarray) -> None:
