@@ -103,7 +103,8 @@ def round_estimates(ests: list[NeighbourEstimate]) -> list[NeighbourEstimate]:
     """:func:`round_estimate` of each of ``ests``: the four vectors of all of them rounded
     in one array (the same float32 value per element)."""
     x = _rounded_rows(ests)
-    return [NeighbourEstimate(e.id, e.t, r[0:3], r[3:6], r[6:9], r[9:], e.is_leader)
+    return [NeighbourEstimate(e.id, e.t, r[0:3], r[3:6], r[6:9], r[9:], e.is_leader,
+                              e.cooperative)
             for e, r in zip(ests, x, strict=True)]
 
 
@@ -121,11 +122,14 @@ def _rounded_rows(ests: list[NeighbourEstimate]) -> np.ndarray:
 def published_batch(ests: list[NeighbourEstimate]) -> EstimateBatch:
     """The estimates of all agents (scenario order) as every receiver sees them: one
     :class:`~offboard.estimation.peer_table.EstimateBatch`, rows as :func:`round_estimates` rounds
-    them (t exact; every agent cooperates in process)."""
-    n = len(ests)
+    them (t exact). Each row keeps its estimate's ``cooperative`` flag, as the wire does
+    (offboard.daemon.wire_convert.put_row): a non-cooperative follower's estimates say so
+    from its initial one on, and the others' full shares against it (offboard.agent.shares)
+    start at the same step in both runs."""
     return EstimateBatch(
         np.array([e.t for e in ests], dtype=np.float64), _rounded_rows(ests),
-        np.array([e.is_leader for e in ests], dtype=np.bool_), np.ones(n, dtype=np.bool_),
+        np.array([e.is_leader for e in ests], dtype=np.bool_),
+        np.array([e.cooperative for e in ests], dtype=np.bool_),
     )
 
 

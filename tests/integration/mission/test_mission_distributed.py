@@ -11,6 +11,7 @@ import sys
 import threading
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -20,9 +21,13 @@ from conftest import CUBE8, ROOT, free_port_offset  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from gcs.mission.distributed import MissionError, recorded_metrics, run_distributed  # noqa: E402
-from gcs.mission.inproc import run_inproc  # noqa: E402
+from gcs.mission.inproc import MissionResult, run_inproc  # noqa: E402
+from gcs.mission.recorder import Recorder  # noqa: E402
+from gcs.records.series import RunSeries  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
-from swarm_common.scenario.model import load_scenario  # noqa: E402
+from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
+
+ROGUE = str(ROOT / "scenarios" / "cube8_rogue.toml")  # agent 4 non-cooperative
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -40,8 +45,51 @@ def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
     rec, facts = run_distributed(
         sc, tmp_path, "rcbf", None, dur, port_offset=free_port_offset(), show_progress=False
     )
+    _assert_equals_inproc(sc, ref, rec, facts, dur)
+    # every process ran and was measured
+    assert {"vehicle-sim", *(f"offboard-{i}" for i in sc.ids)} <= set(facts["processes"])
+    # the daemons' .tlog files are real MAVLink logs pymavlink reads
+    log = mavutil.mavlink_connection(str(tmp_path / "vehicle_3.tlog"))
+    kinds: Counter[str] = Counter()
+    while (msg := log.recv_match()) is not None:
+        kinds[msg.get_type()] += 1
+    assert {"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "SET_ATTITUDE_TARGET"} <= set(kinds)
+    # the daemon switched off the telemetry it does not read (offboard.daemon.mavlink.stream_trim):
+    # the
+    # vehicle streams ATTITUDE at 15 Hz by default, i.e. more than one per ten ODOMETRY
+    # over the wall time of any run; only what was in flight before the request remains
+    assert kinds["REQUEST_DATA_STREAM"] >= 1 and kinds["DATA_STREAM"] >= 1
+    assert kinds["ATTITUDE"] < kinds["ODOMETRY"] / 10, kinds
+
+
+def test_lockstep_run_with_a_rogue_matches_inproc(tmp_path: Path) -> None:
+    """cube8_rogue, dcbf: agent 4 flies no filter and its estimates say so from its
+    initial one on; the others take the whole budget against it and the leaders guard
+    against it. Both runners hand that flag to the followers at the same step (the
+    in-process batch used to drop it, and agent 8's step-0 QP differed), so the two runs
+    agree as cube8's do (test_lockstep_distributed_run_matches_inproc)."""
+    sc = load_scenario(ROGUE)
+    rogue = sc.index_of(4)
+    assert [i for i, a in enumerate(sc.agents) if not a.cooperative] == [rogue]
+    dur = 2.0
+    ref = run_inproc(sc, "dcbf", duration=dur)
+    rec, facts = run_distributed(
+        sc, tmp_path, "dcbf", None, dur, port_offset=free_port_offset(), show_progress=False
+    )
+    _assert_equals_inproc(sc, ref, rec, facts, dur)
+    # the case is not vacuous: the rogue runs no QP, and someone's QP has active rows
+    ser = ref.series
+    assert isinstance(ser, RunSeries)
+    assert not ser.qp_active[:, rogue].any() and ser.qp_active.any()
+
+
+def _assert_equals_inproc(
+    sc: Scenario, ref: MissionResult, rec: Recorder, facts: dict[str, Any], dur: float
+) -> None:
+    """The distributed run (``rec``, ``facts``) equals the in-process ``ref`` of the same
+    ``dur`` (s): the "equal" of test_lockstep_distributed_run_matches_inproc."""
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
-    assert len(ser.t) == len(ref.series.t) == int(dur * 50)
+    assert len(ser.t) == len(ref.series.t) == int(round(dur * sc.run.control_hz))
     assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
     # clipped inputs travel in the status record: the same steps as in process
     assert m["input_clipped_steps"] == ref.metrics["input_clipped_steps"]
@@ -62,20 +110,6 @@ def test_lockstep_distributed_run_matches_inproc(tmp_path: Path) -> None:
     e_i = np.linalg.norm(ref.series.p[:, f] - ref.series.p_des[:, f], axis=2)
     assert np.sqrt(np.mean(e_d**2)) == pytest.approx(np.sqrt(np.mean(e_i**2)), abs=1e-6)
     assert m["collisions"] == ref.metrics["collisions"] == 0
-    # every process ran and was measured
-    assert {"vehicle-sim", *(f"offboard-{i}" for i in sc.ids)} <= set(facts["processes"])
-    # the daemons' .tlog files are real MAVLink logs pymavlink reads
-    log = mavutil.mavlink_connection(str(tmp_path / "vehicle_3.tlog"))
-    kinds: Counter[str] = Counter()
-    while (msg := log.recv_match()) is not None:
-        kinds[msg.get_type()] += 1
-    assert {"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "SET_ATTITUDE_TARGET"} <= set(kinds)
-    # the daemon switched off the telemetry it does not read (offboard.daemon.mavlink.stream_trim):
-    # the
-    # vehicle streams ATTITUDE at 15 Hz by default, i.e. more than one per ten ODOMETRY
-    # over the wall time of any run; only what was in flight before the request remains
-    assert kinds["REQUEST_DATA_STREAM"] >= 1 and kinds["DATA_STREAM"] >= 1
-    assert kinds["ATTITUDE"] < kinds["ODOMETRY"] / 10, kinds
 
 
 def test_killed_follower_enters_failsafe_and_others_stay_clear(tmp_path: Path) -> None:

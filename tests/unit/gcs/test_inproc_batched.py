@@ -82,7 +82,7 @@ def test_commands_set_one_by_one_and_at_once() -> None:
 def _estimate(rng: np.random.Generator, aid: int) -> NeighbourEstimate:
     return NeighbourEstimate(aid, float(rng.uniform(0, 60)), rng.normal(size=3) * 10,
                              rng.normal(size=3), rng.normal(size=3), rng.normal(size=12),
-                             bool(rng.random() < 0.3))
+                             bool(rng.random() < 0.3), cooperative=bool(rng.random() < 0.7))
 
 
 def test_estimates_rounded_at_once_equal_one_by_one() -> None:
@@ -90,9 +90,11 @@ def test_estimates_rounded_at_once_equal_one_by_one() -> None:
     wire's float32 block), its time and flags unchanged; round_estimate is one of them."""
     rng = np.random.default_rng(3)
     ests = [_estimate(rng, aid) for aid in range(1, 10)]
+    assert len({e.cooperative for e in ests}) == 2  # both flags among them
     for got, e in zip(round_estimates(ests), ests, strict=True):
         one = round_estimate(e)
-        assert (got.id, got.t, got.is_leader, got.cooperative) == (e.id, e.t, e.is_leader, True)
+        assert ((got.id, got.t, got.is_leader, got.cooperative)
+                == (e.id, e.t, e.is_leader, e.cooperative))
         for a, b, c in ((got.z1, one.z1, e.z1), (got.z2, one.z2, e.z2),
                         (got.z3, one.z3, e.z3), (got.xi, one.xi, e.xi)):
             want = c.astype(np.float32).astype(np.float64)
@@ -162,3 +164,17 @@ def test_followers_given_the_batch_equal_followers_given_dicts() -> None:
         pub_batch = published_batch([o.estimate for o in outs_b])
         pub_dict = {e.id: e for e in round_estimates([o.estimate for o in outs_d])}
     assert compared == 120 * SC.n
+
+
+def test_published_batch_keeps_each_cooperative_flag() -> None:
+    """The in-process batch carries each estimate's ``cooperative`` flag as the wire does
+    (offboard.daemon.wire_convert.put_row): a non-cooperative follower's initial estimate
+    already gets the others' full share against it, in process as in a distributed run."""
+    from gcs.mission.inproc import published_batch
+
+    rng = np.random.default_rng(5)
+    ests = [_estimate(rng, aid) for aid in range(1, 10)]
+    b = published_batch(ests)
+    assert b.cooperative.tolist() == [e.cooperative for e in ests]
+    assert not b.cooperative.all()
+    assert b.leader.tolist() == [e.is_leader for e in ests]
