@@ -44,7 +44,8 @@ BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only cli
 JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
 RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this
 DEFAULT_K = 6  # first knn_k tried when --k is not given
-MAX_AGENTS = 250  # MAVLink system ids 1..250 leave room for the GCS and companions
+# in process; a distributed run takes MAVLink's system ids, 1..255 (Scenario.process_problem)
+MAX_AGENTS = 2048
 HELIX_PER_TURN = 8  # vertices per helix turn
 
 

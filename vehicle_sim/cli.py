@@ -227,6 +227,7 @@ def check_files(args: argparse.Namespace) -> None:
 def _server(args: argparse.Namespace) -> SimServer:
     """Load the scenario and open every socket; :class:`_Fatal` with one line if not."""
     from swarm_common.scenario.model import load_scenario
+    from swarm_common.scenario.schema import mavlink_id_problem
     from vehicle_sim.link.endpoint import LinkError
     from vehicle_sim.server import SimServer
 
@@ -235,6 +236,8 @@ def _server(args: argparse.Namespace) -> SimServer:
         sc = load_scenario(args.scenario, args.allow_infeasible, args.allow_unsafe)
     except ScenarioError as exc:
         raise _Fatal(str(exc)) from None
+    if (why := mavlink_id_problem(list(sc.ids))) is not None:  # a vehicle is a MAVLink system
+        raise _Fatal(f"{sc.path}: {why}")
     opts = _options(args, sc)
     if args.zenoh_config is not None:
         # read by swarm_common.zenoh_session.make_config when the truth session opens

@@ -47,6 +47,7 @@ from swarm_common.scenario.model import (
     ScenarioError,
     load_scenario,
 )
+from swarm_common.scenario.schema import mavlink_id_problem
 from swarm_common.signing import load_key
 from swarm_common.zenoh_session import ZENOH_CONFIG_FLAG, default_endpoint
 
@@ -173,6 +174,8 @@ def build(args: argparse.Namespace) -> tuple[Any, Any, Any, Any]:
     path = args.launch or args.scenario or str(DEFAULT_SCENARIO)
     sc = load_scenario(path, allow_infeasible=args.allow_infeasible,
                        allow_unsafe=args.allow_unsafe)
+    if (why := mavlink_id_problem(list(sc.ids))) is not None:  # it watches MAVLink vehicles
+        raise ValueError(why)
     offset = 0 if args.port_offset is None else args.port_offset
     if args.launch:  # free ports (or the forced offset's, checked): LaunchError, exit 2
         from gcs.formation.vehicle import FORMATION_PORT

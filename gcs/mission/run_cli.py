@@ -39,6 +39,9 @@ def cli_run(args: Any, sc: Scenario) -> int:
         print("gcs mission run: --kill-at needs --kill-agent", file=sys.stderr)
         return EXIT_USAGE
     formation = getattr(args, "formation_vehicle", False)
+    if (why := sc.process_problem()) is not None:  # e.g. agent ids past MAVLink's 255
+        print(f"gcs mission run: {sc.path}: {why}", file=sys.stderr)
+        return EXIT_USAGE
     try:
         live_endpoint(args)  # before the port choice logs anything: the refusal is one line
         out = Path(args.out) if args.out else default_out_dir(sc, method)

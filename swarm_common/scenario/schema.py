@@ -13,6 +13,7 @@ from typing import Any
 
 from swarm_common.enums import GraphKind, Method, QPSolver, Role, StartMode
 from swarm_common.inputs import is_finite_number
+from swarm_common.ports import MAX_ID
 
 # ---------------------------------------------------------------------------
 # Schema. Each section is a frozen dataclass; each field carries its spec in its
@@ -231,8 +232,24 @@ SCHEMA: dict[str, dict[str, Spec]] = {
     section: {f.name: f.metadata["spec"] for f in fields(cls)} for section, cls in SECTIONS.items()
 }
 
+# agent ids: an in-process swarm may be this large; a distributed run gives each vehicle a
+# MAVLink system id and takes 1..MAVLINK_MAX_ID only (mavlink_id_problem)
+MAX_AGENT_ID = 65535
+MAVLINK_MAX_ID = MAX_ID  # swarm_common.ports: the MAVLink system ids the port scheme covers
+
+
+def mavlink_id_problem(ids: list[int]) -> str | None:
+    """One line when an agent id is outside MAVLink's system ids (1..255), else None: a
+    distributed run flies each agent as its own MAVLink vehicle."""
+    big = [i for i in ids if i > MAVLINK_MAX_ID]
+    if not big:
+        return None
+    return (f"agent ids up to {max(big)}: a distributed run gives every vehicle a MAVLink "
+            f"system id, 1..{MAVLINK_MAX_ID}; run a swarm this large in process (--inproc)")
+
+
 AGENT_SCHEMA: dict[str, Spec] = {
-    "id": ("int", 1, 255),
+    "id": ("int", 1, MAX_AGENT_ID),
     "role": ("str", tuple(Role)),
     "position": ("vec", 3, -1e4, 1e4),
     "velocity": ("vec", 3, -100.0, 100.0),
@@ -289,9 +306,9 @@ def describe_spec(spec: Spec) -> str:
     if kind == "windows":
         return "a list of [start, end] pairs with 0 <= start < end"
     if kind == "ids":
-        return "a non-empty list of agent ids (integers 1..255)"
+        return f"a non-empty list of agent ids (integers 1..{MAX_AGENT_ID})"
     if kind == "pairs":
-        return "a list of [id, id] pairs of agent ids (integers 1..255)"
+        return f"a list of [id, id] pairs of agent ids (integers 1..{MAX_AGENT_ID})"
     if kind == "bool":
         return "true or false"
     raise AssertionError(kind)
@@ -329,7 +346,8 @@ def check_value(value: Any, spec: Spec) -> bool:
         return (
             isinstance(value, list)
             and len(value) > 0
-            and all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 255 for v in value)
+            and all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= MAX_AGENT_ID
+                    for v in value)
         )
     if kind == "pairs":
         return isinstance(value, list) and all(

@@ -29,6 +29,7 @@ from swarm_common.scenario.schema import (
     SensingConfig,
     UnmodeledConfig,
     VehicleConfig,
+    mavlink_id_problem,
     toml_value,
 )
 from swarm_common.world.config import World, world_toml
@@ -154,12 +155,13 @@ class Scenario:
     def process_problem(self) -> str | None:
         """Why this scenario cannot fly as processes (daemons, a distributed run), or None:
         a latency (``communication.delay_s``) is modelled in process only; a process's is
-        its network's, or a ``[faults]`` delay (docs/faults.md)."""
+        its network's, or a ``[faults]`` delay (docs/faults.md); and every vehicle is a
+        MAVLink system, so agent ids above 255 fly in process only."""
         if self.communication.delay_s > 0.0:
             return (f"communication.delay_s = {self.communication.delay_s:g} is modelled in "
                     f"process only (--inproc); processes take their network's latency or a "
                     f"[faults] delay_s")
-        return None
+        return mavlink_id_problem(list(self.ids))
 
     @property
     def physics_dt(self) -> float:

@@ -100,7 +100,7 @@ def test_explicit_k_and_range_graph() -> None:
         (["grid", "--agents", "2", "--leaders", "1"], "--agents 2"),
         (["grid", "--agents", "8", "--leaders", "8"], "--leaders 8"),
         (["grid", "--agents", "8", "--leaders", "1"], "--leaders 1"),
-        (["grid", "--agents", "300", "--leaders", "4"], "--agents 300"),
+        (["grid", "--agents", "3000", "--leaders", "4"], "--agents 3000"),
         (["grid", "--agents", "27", "--leaders", "4", "--k", "3"], "knn_k"),
         (["grid", "--agents", "8", "--leaders", "2", "--k", "8"], "--k 8"),
         (["grid", "--agents", "8", "--leaders", "2", "--graph", "range", "--k", "4"], "--k"),
