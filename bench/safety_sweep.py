@@ -51,7 +51,8 @@ def one(job: tuple[str, str, int, float]) -> dict[str, Any]:
     res = run_inproc(sc, method, seed=seed, duration=dur)
     fol = formation_from_scenario(sc).follower_idx
     s = res.series
-    tb = true_barrier(s.p, s.v, fol, sc.controller.tau_safe_s, sc.controller.d_safe_m)
+    tb = true_barrier(s.p, s.v, fol, sc.controller.tau_safe_s, sc.controller.d_safe_m,
+                      sc.controller.dcbf_vertical_scale)
     m = res.metrics
     return {
         "scenario": name, "method": method, "seed": seed, "h_min": tb.h_min,

@@ -58,14 +58,17 @@ def liveness_problem(sc: Scenario, method: str) -> str | None:
     if c.dcbf_trust_jump_mps2 > 0.0:  # hovering, the trust region's margin at its least
         key, e_bar = "dcbf_trust_error_mps2", hover_margin(sc)
     d_star = rest_spacing_m(v.tau_rollpitch_s, v.tau_thrust_s, sc.control_dt, c.tau_safe_s,
-                            c.d_safe_m, c.dcbf_gamma_lin, c.dcbf_gamma_cubic, e_bar)
+                            c.d_safe_m, c.dcbf_gamma_lin, c.dcbf_gamma_cubic, e_bar,
+                            vertical_scale=c.dcbf_vertical_scale)
     spacing = smallest_spacing_m(sc)
     if spacing >= d_star:
         return None
+    scale = (f", dcbf_vertical_scale = {c.dcbf_vertical_scale:g}"
+             if c.dcbf_vertical_scale != 1.0 else "")
     return (f"{sc.name}: two desired positions are {spacing:.2f} m apart, closer than the "
             f"{d_star:.2f} m at which dcbf lets two agents hover (controller."
             f"{key} = {getattr(c, key):g}, dcbf_gamma_lin = "
-            f"{c.dcbf_gamma_lin:g}): the formation cannot form (docs/safety.md 5f)")
+            f"{c.dcbf_gamma_lin:g}{scale}): the formation cannot form (docs/safety.md 5f)")
 
 
 def hover_margin(sc: Scenario) -> float:

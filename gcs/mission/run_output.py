@@ -49,7 +49,8 @@ def safety_spec(sc: Scenario, clipped_known: bool = True) -> SafetySpec:
     ``input_clipped``."""
     return SafetySpec(sc.controller.tau_safe_s, sc.controller.d_safe_m,
                       sc.run.formation_deadline_s, clipped_known, tuple(sc.ids),
-                      sc.vehicle.collision_radius_m, sc.world)
+                      sc.vehicle.collision_radius_m, sc.world,
+                      sc.controller.dcbf_vertical_scale)
 
 
 def tilt_deg(att: np.ndarray) -> np.ndarray:

@@ -62,6 +62,7 @@ class RecordContext:
                  radius_m: float, tau_s: float, d_safe_m: float, world: Any) -> None:
         self.ids, self.leaders, self.sensed = ids, leaders, sensed
         self.radius_m, self.tau_s, self.d_safe_m, self.world = radius_m, tau_s, d_safe_m, world
+        self.vertical_scale = 1.0  # the barrier's κ (docs/safety.md §4c), from the scenario
 
     @classmethod
     def from_scenario(cls, sc: Any) -> RecordContext:
@@ -69,10 +70,12 @@ class RecordContext:
 
         form = formation_from_scenario(sc)
         ids = [int(i) for i in sc.ids]
-        return cls(ids, [ids[i] for i in form.leader_idx],
-                   sensed_pairs(form.sensed, form.follower_idx),
-                   float(sc.vehicle.collision_radius_m), float(sc.controller.tau_safe_s),
-                   float(sc.controller.d_safe_m), sc.world)
+        out = cls(ids, [ids[i] for i in form.leader_idx],
+                  sensed_pairs(form.sensed, form.follower_idx),
+                  float(sc.vehicle.collision_radius_m), float(sc.controller.tau_safe_s),
+                  float(sc.controller.d_safe_m), sc.world)
+        out.vertical_scale = float(sc.controller.dcbf_vertical_scale)
+        return out
 
     @classmethod
     def bare(cls, n: int, tau_s: float = 0.0, d_safe_m: float = 0.0) -> RecordContext:
@@ -126,7 +129,7 @@ def cdr_messages(s: Series, c: RecordContext) -> CdrMessages:
         "qp_status": _by_agent(f["qp_status"]), "active_rows": _by_agent(f["qp_active"]),
         "active_kinds": _by_agent(f["qp_kinds"])}, n * k)
     i, j = np.triu_indices(n, k=1)
-    h = pair_barrier(s.p, s.v, c.tau_s, c.d_safe_m)
+    h = pair_barrier(s.p, s.v, c.tau_s, c.d_safe_m, c.vertical_scale)
     with np.errstate(invalid="ignore"):
         hmin = np.min(h, axis=1) if h.shape[1] else np.full(k, np.nan)
     ids = np.asarray(c.ids)

@@ -95,7 +95,8 @@ def cmd_log_export(args: argparse.Namespace) -> int:
             ids = [int(i) for i in sc.ids]
             i, j = np.triu_indices(n, k=1)
             dist = np.linalg.norm(ser.p[:, i] - ser.p[:, j], axis=2)
-            h = pair_barrier(ser.p, ser.v, sc.controller.tau_safe_s, sc.controller.d_safe_m)
+            h = pair_barrier(ser.p, ser.v, sc.controller.tau_safe_s, sc.controller.d_safe_m,
+                             sc.controller.dcbf_vertical_scale)
     except (RecordError, ValueError) as exc:
         return _fail(str(exc))
     try:

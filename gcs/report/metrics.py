@@ -186,6 +186,9 @@ class SafetySpec:
     ids: tuple[int, ...] = ()  # the agents' ids in column order (the verdict's events name them)
     collision_radius_m: float = 0.0  # m, a pair closer than this is in contact
     world: World = field(default_factory=World)  # obstacles and geofence (docs/world.md)
+    # κ of the pair barrier (controller.dcbf_vertical_scale, docs/safety.md §4c): the
+    # scenario's safe set, the same for every method flown in it; 1 = the sphere
+    vertical_scale: float = 1.0
 
 
 def ground_strikes(p: np.ndarray, v: np.ndarray) -> int:
@@ -232,7 +235,8 @@ def compute_metrics(
     thr = s.thrust[:, f]
     deadline = spec.formation_deadline_s
     # the true barrier of every pair and step, once: the barrier metrics and the verdict
-    h = pair_barrier(s.p, s.v, spec.tau_safe_s, spec.d_safe_m) if s.p.shape[1] >= 2 else None
+    h = (pair_barrier(s.p, s.v, spec.tau_safe_s, spec.d_safe_m, spec.vertical_scale)
+         if s.p.shape[1] >= 2 else None)
     world = world_truth(spec.world, s.p, s.v, spec.tau_safe_s)
     return {
         "min_distance_m": float(s.min_dist.min()),

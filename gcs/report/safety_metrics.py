@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offboard.inner_loop.attitude import accel_from_attitude, setpoint_from_accel
+from swarm_common.barrier import vertically_scaled
 from swarm_common.scenario.model import VehicleConfig
 
 
@@ -28,8 +29,11 @@ class TrueBarrier:
 
 def true_barrier(
     p: np.ndarray, v: np.ndarray, follower_idx: list[int], tau: float, d_safe: float,
+    vertical_scale: float = 1.0,
 ) -> TrueBarrier:
-    """Statistics of the true h from p, v (K,N,3) for pairs with a follower."""
+    """Statistics of the true h from p, v (K,N,3) for pairs with a follower; with
+    ``vertical_scale`` κ > 1 the ellipsoidal h of docs/safety.md §4c (the distance stays
+    Euclidean)."""
     n = p.shape[1]
     fol = set(follower_idx)
     pairs = [(i, j) for i in range(n) for j in range(i + 1, n) if i in fol or j in fol]
@@ -37,7 +41,8 @@ def true_barrier(
     jj = np.array([b for _, b in pairs])
     dp = p[:, ii] - p[:, jj]
     dv = v[:, ii] - v[:, jj]
-    h = np.einsum("kmc,kmc->km", dp, dp) + 2.0 * tau * np.einsum("kmc,kmc->km", dv, dp)
+    sdp, sdv = vertically_scaled(dp, vertical_scale), vertically_scaled(dv, vertical_scale)
+    h = np.einsum("kmc,kmc->km", sdp, sdp) + 2.0 * tau * np.einsum("kmc,kmc->km", sdv, sdp)
     h -= d_safe**2
     neg = h < 0.0
     fol_neg = np.zeros((p.shape[0], n), dtype=bool)

@@ -293,6 +293,11 @@ def _stat(values: list[float], q: float) -> str:
     return f"{np.percentile(values, q):.3f}" if values else "–"
 
 
+def _kappa(vertical_scale: float) -> str:
+    """The clause naming κ of a barrier taller than wide (docs/safety.md §4c); empty for 1."""
+    return f" κ = {vertical_scale:g}," if vertical_scale != 1.0 else ""
+
+
 def summary_markdown(
     rows: Sequence[Mapping[str, Any]], specs: Mapping[str, Scenario], methods: list[str],
     wall_s: float,
@@ -308,7 +313,8 @@ def summary_markdown(
         summary_table(rows, methods),
         "Barrier parameters: "
         + "; ".join(f"{n}: τ = {sc.controller.tau_safe_s:g} s, D = {sc.controller.d_safe_m:g} m,"
-                    f" formation deadline {sc.run.formation_deadline_s:g} s"
+                    + _kappa(sc.controller.dcbf_vertical_scale)
+                    + f" formation deadline {sc.run.formation_deadline_s:g} s"
                     for n, sc in sorted(specs.items())) + ".",
         "",
         "* **Min dist p0 / p5 / p50**: percentiles over the runs (linear interpolation) of each "

@@ -63,12 +63,14 @@ def onsets(cond: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return k, m
 
 
-def pair_barrier(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
+def pair_barrier(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float,
+                 vertical_scale: float = 1.0) -> np.ndarray:
     """True barrier of every unordered pair i < j at every step (m²), shape (K, N(N−1)/2):
     ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` with Δp = p_i − p_j, Δv = v_i − v_j (paper eq. 9;
-    τ in s, D in m, p in m, v in m/s)."""
+    τ in s, D in m, p in m, v in m/s); with ``vertical_scale`` κ > 1, of S Δp, S Δv,
+    S = diag(1, 1, 1/κ) (the scenario's ``controller.dcbf_vertical_scale``: docs/safety.md §4c)."""
     i, j = np.triu_indices(p.shape[1], k=1)
-    return barrier(p[:, i] - p[:, j], v[:, i] - v[:, j], tau, d_safe)
+    return barrier(p[:, i] - p[:, j], v[:, i] - v[:, j], tau, d_safe, vertical_scale)
 
 
 def ground_strike_steps(p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

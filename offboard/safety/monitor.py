@@ -64,6 +64,7 @@ class MonitorConfig:
     tau_s: float
     d_safe_m: float
     range_m: float  # m, the sensing range R
+    vertical_scale: float = 1.0  # κ of the barrier (docs/safety.md §4c; 1: the sphere)
 
 
 def residual_bound(init_pos_error_m: float, distance_noise_m: float,
@@ -85,7 +86,8 @@ def monitor_config(sc: Scenario) -> MonitorConfig:
     dt = sc.control_dt
     return MonitorConfig(bound, V_IMPOSSIBLE_MPS, max(1, round(PERSIST_S / dt)),
                          max(1, round(FALLBACK_AFTER_S / dt)), sc.controller.tau_safe_s,
-                         sc.controller.d_safe_m, sc.formation.sensing_range_m)
+                         sc.controller.d_safe_m, sc.formation.sensing_range_m,
+                         sc.controller.dcbf_vertical_scale)
 
 
 class SafetyMonitor:
@@ -153,7 +155,8 @@ class SafetyMonitor:
         if self._first:
             return False
         new = self._new
-        h = barrier(pair_p[new], pair_v[new], self.cfg.tau_s, self.cfg.d_safe_m)
+        h = barrier(pair_p[new], pair_v[new], self.cfg.tau_s, self.cfg.d_safe_m,
+                    self.cfg.vertical_scale)
         return bool(np.any(h < 0.0))
 
 

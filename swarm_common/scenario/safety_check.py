@@ -7,6 +7,10 @@ with ``--allow-unsafe`` logs each as a warning. Notation: D = ``controller.d_saf
 τ_s = ``controller.tau_safe_s``, τ = ``vehicle.tau_rollpitch_s``, dt = 1/``control_hz``,
 the barrier h = ‖Δp‖² + 2τ_s ΔvᵀΔp − D² (docs/safety.md §1).
 
+With κ = ``controller.dcbf_vertical_scale`` > 1 (docs/safety.md §4c) the barrier is that of
+S Δp, S Δv, S = diag(1, 1, 1/κ): (a) evaluates it so, and (b), (d) take the distance along
+z, κD, wherever D enters (the worst direction: R_h and R_b grow with D), for every method.
+
 (a) **Start inside the safe set.** The filter's claim (§5) is invariance of {h ≥ 0}: it
     holds from t = 0 only if every pair starts with h(0) ≥ 0 and ‖Δp(0)‖ ≥ D.
 
@@ -61,16 +65,30 @@ EMA_NOISE_GAIN = math.sqrt(1.0 / 3.0)  # √Σh² of the differenced, low-passed
 # ---------------------------------------------------------------------------
 # (a) start inside the safe set
 # ---------------------------------------------------------------------------
-def pair_barriers(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
-    """(N, N) h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) of positions p, velocities v (N, 3)."""
-    return barrier(p[:, None, :] - p[None, :, :], v[:, None, :] - v[None, :, :], tau, d_safe)
+def pair_barriers(p: np.ndarray, v: np.ndarray, tau: float, d_safe: float,
+                  vertical_scale: float = 1.0) -> np.ndarray:
+    """(N, N) h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) of positions p, velocities v (N, 3); with
+    ``vertical_scale`` κ, of S Δp, S Δv (module docstring)."""
+    return barrier(p[:, None, :] - p[None, :, :], v[:, None, :] - v[None, :, :], tau, d_safe,
+                   vertical_scale)
+
+
+def vertical_d_safe(sc: Scenario) -> float:
+    """κD (m): the barrier's distance along z, its largest (D when κ = 1)."""
+    return sc.controller.dcbf_vertical_scale * sc.controller.d_safe_m
+
+
+def _kappa_note(sc: Scenario) -> str:
+    """The clause naming κ in a message, empty when κ = 1."""
+    k = sc.controller.dcbf_vertical_scale
+    return f", controller.dcbf_vertical_scale = {k:g}" if k != 1.0 else ""
 
 
 def start_problem(sc: Scenario) -> str | None:
     """(a): the pair with the lowest h(0) < 0 (or distance < D), named by its keys."""
     c = sc.controller
     p, v = sc.initial_positions(), sc.initial_velocities()
-    h = pair_barriers(p, v, c.tau_safe_s, c.d_safe_m)
+    h = pair_barriers(p, v, c.tau_safe_s, c.d_safe_m, c.dcbf_vertical_scale)
     iu = np.triu_indices(sc.n, 1)
     k = int(np.argmin(h[iu]))
     i, j = int(iu[0][k]), int(iu[1][k])
@@ -85,7 +103,8 @@ def start_problem(sc: Scenario) -> str | None:
         f"h = {h[i, j]:.2f} m² < 0 with agent id {sc.agents[j].id} (agent[{j}].velocity = "
         f"{v[j].tolist()}; {d:.2f} m apart, closing "
         f"at {closing:.2f} m/s; controller.tau_safe_s = {c.tau_safe_s:g}, "
-        f"controller.d_safe_m = {c.d_safe_m:g}): no filter can keep h ≥ 0 from there"
+        f"controller.d_safe_m = {c.d_safe_m:g}{_kappa_note(sc)}): no filter can keep h ≥ 0 "
+        "from there"
     )
 
 
@@ -132,16 +151,18 @@ def braking_accel(sc: Scenario) -> float:
 
 
 def entry_range(sc: Scenario, v_bar: float) -> float:
-    """R_h (m): the distance at which a pair closing head-on at v̄ has h = 0."""
-    t, d = sc.controller.tau_safe_s, sc.controller.d_safe_m
+    """R_h (m): the distance at which a pair closing head-on at v̄ has h = 0, along z
+    (where it is largest: with D → κD; S scales distance and speed alike)."""
+    t, d = sc.controller.tau_safe_s, vertical_d_safe(sc)
     return t * v_bar + math.sqrt((t * v_bar) ** 2 + d * d)
 
 
 def stop_range(sc: Scenario, v_bar: float, a_b: float) -> float:
-    """R_b (m): D + v̄(dt + τ) + v̄²/(2a_b), inf when a_b ≤ 0."""
+    """R_b (m): κD + v̄(dt + τ) + v̄²/(2a_b) (stopping before the barrier's distance along
+    z), inf when a_b ≤ 0."""
     if a_b <= 0.0:
         return math.inf
-    return (sc.controller.d_safe_m + v_bar * (sc.control_dt + sc.vehicle.tau_rollpitch_s)
+    return (vertical_d_safe(sc) + v_bar * (sc.control_dt + sc.vehicle.tau_rollpitch_s)
             + v_bar * v_bar / (2.0 * a_b))
 
 
@@ -170,7 +191,7 @@ def range_problem(sc: Scenario) -> str | None:
         f"{v_bar - ref:.2f} m/s) must be "
         f"sensed from {need:.2f} m (h ≥ 0 there: {r_h:.2f} m; braking at {a_b:.2f} m/s² "
         f"after dt + vehicle.tau_rollpitch_s = {sc.control_dt + sc.vehicle.tau_rollpitch_s:g} s"
-        f": {r_b:.2f} m)"
+        f": {r_b:.2f} m{_kappa_note(sc)})"
     )
 
 

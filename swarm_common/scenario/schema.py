@@ -185,6 +185,12 @@ class ControllerConfig:
     dcbf_trust_error_mps2: float = field(
         default=0.0, metadata={"spec": ("float", 0.0, 10.0, False, False)}
     )
+    # dcbf pair barrier taller than wide (optional; docs/safety.md §4c): κ ≥ 1 scales the
+    # barrier's vertical axis, safe set outside the ellipsoid of semi-axes (D, D, κD),
+    # for the downwash below a quadrotor; 1 = the sphere
+    dcbf_vertical_scale: float = field(
+        default=1.0, metadata={"spec": ("float", 1.0, 10.0, False, False)}
+    )
     # solver of the rcbf and dcbf QPs (optional; docs/safety.md §4b)
     qp_solver: QPSolver = field(
         default=QPSolver.DAQP, metadata={"spec": ("str", tuple(QPSolver)), "enum": QPSolver}

@@ -146,6 +146,7 @@ class DcbfFilter(SafetyFilter):
             ctl.tau_safe_s, ctl.d_safe_m, ctl.dcbf_gamma_lin, ctl.dcbf_gamma_cubic,
             ctl.dcbf_accel_error_mps2, ctl.deadlock_gain, ctl.deadlock_h_m2, dt,
             REL_ACC_SMOOTH, GROUND_GAMMA, GROUND_ACCEL_ERR, self.lag.T,
+            vertical_scale=ctl.dcbf_vertical_scale,
         )
 
     def prepare_trust(self, a0: np.ndarray, u_prev: np.ndarray) -> None:

@@ -30,6 +30,7 @@ def dcbf_rows_kernel(
     dp: np.ndarray, dv: np.ndarray, a0: np.ndarray, u_ref: np.ndarray, a_other: np.ndarray,
     share: np.ndarray, d_safe: np.ndarray, lag: np.ndarray, sens: np.ndarray,
     horizon: float, tau_s: float, gamma1: float, gamma3: float, accel_err: float,
+    vertical_scale: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rows ``gᵀu ≥ r`` (g (2M,3) unit rows, r (2M,) m/s²): first the M (C1) rows, then
     the M (C2) rows, pair by pair in the order of ``dp``.
@@ -55,26 +56,44 @@ def dcbf_rows_kernel(
     ca, cv, cp, ea, ia, iia of :class:`offboard.safety.dcbf.model.LagCoefficients`; sens (3,2,3) its
     sensitivities (p|v|a, error|command, axis); horizon T (s); tau_s look-ahead τ (s);
     gamma1 (1/s), gamma3 (1/(m⁴ s)) of α(h) = γ1 h + γ3 h³; accel_err ē (m/s²).
+
+    ``vertical_scale`` κ ≥ 1 (docs/safety.md §4c): the barrier of the scaled relative state
+    S Δp, S Δv, S = diag(1, 1, 1/κ) (safe set outside the ellipsoid (D, D, κD)). Every
+    term of the prediction is linear in Δp, Δv, a0, u, a_other and the lag is per axis, so
+    the rows of S x are those of the inputs scaled by S, with the command entering as S u
+    (the command's gradient is S times the scaled one) and the margins ``‖S ∂/∂a‖ ē`` (the
+    error e, ‖e‖ ≤ ē, enters as S e). κ = 1 multiplies by 1.0, which changes no bit.
     """
     m = dp.shape[0]
     t = horizon
     ca, cv, cp, ea, ia, iia = lag[0], lag[1], lag[2], lag[3], lag[4], lag[5]
-    own_v = ia * a0 + cv * u_ref
-    own_p = iia * a0 + cp * u_ref
-    own_a = ea * a0 + ca * u_ref
+    sc = np.ones(3)
+    sc[2] = 1.0 / vertical_scale
+    a0s = a0 * sc
+    us = u_ref * sc
+    own_v = ia * a0s + cv * us
+    own_p = iia * a0s + cp * us
+    own_a = ea * a0s + ca * us
     g = np.empty((2 * m, 3))
     rhs = np.empty(2 * m)
     pv = np.empty(3)
     pp = np.empty(3)
     pa = np.empty(3)
+    sdp = np.empty(3)
+    sdv = np.empty(3)
+    e_hd = np.empty(3)
+    e_hh = np.empty(3)
     hd = np.empty((2, 3))
     hh = np.empty((2, 3))
     two_tau = 2.0 * tau_s
     for i in range(m):
         for k in range(3):
-            pv[k] = dv[i, k] + own_v[k] - a_other[i, k] * t
-            pp[k] = dp[i, k] + dv[i, k] * t + own_p[k] - 0.5 * a_other[i, k] * t * t
-            pa[k] = own_a[k] - a_other[i, k]
+            sdp[k] = dp[i, k] * sc[k]
+            sdv[k] = dv[i, k] * sc[k]
+            ao = a_other[i, k] * sc[k]
+            pv[k] = sdv[k] + own_v[k] - ao * t
+            pp[k] = sdp[k] + sdv[k] * t + own_p[k] - 0.5 * ao * t * t
+            pa[k] = own_a[k] - ao
         dd = d_safe[i] ** 2
         vp = _dot3(pv, pp)
         h = _dot3(pp, pp) + two_tau * vp - dd
@@ -87,19 +106,22 @@ def dcbf_rows_kernel(
                     2.0 * sv * pv[k] + sp * pa[k] + sa * pp[k]
                 )
                 hh[s, k] = 2.0 * sp * pp[k] + two_tau * (sv * pp[k] + sp * pv[k])
-        m_h = math.sqrt(_dot3(hh[0], hh[0])) * accel_err
+        for k in range(3):  # the error enters as S e
+            e_hd[k] = hd[0, k] * sc[k]
+            e_hh[k] = hh[0, k] * sc[k]
+        m_h = math.sqrt(_dot3(e_hh, e_hh)) * accel_err
         h_lo = h - m_h
         k_h = gamma1 + 3.0 * gamma3 * h_lo**2
-        c1 = hdot - math.sqrt(_dot3(hd[0], hd[0])) * accel_err + gamma1 * h_lo
+        c1 = hdot - math.sqrt(_dot3(e_hd, e_hd)) * accel_err + gamma1 * h_lo
         c1 = c1 + gamma3 * (h_lo * h_lo * h_lo)
-        h0 = _dot3(dp[i], dp[i]) + two_tau * _dot3(dv[i], dp[i]) - dd
+        h0 = _dot3(sdp, sdp) + two_tau * _dot3(sdv, sdp) - dd
         drop = t * (gamma1 * h0 + gamma3 * (h0 * h0 * h0))
         if h0 > 0.0:
             drop = min(drop, 0.5 * h0)
         c2 = h - m_h - (h0 - drop)
-        for k in range(3):
-            g[i, k] = hd[1, k] + k_h * hh[1, k]
-            g[m + i, k] = hh[1, k]
+        for k in range(3):  # the command enters as S u
+            g[i, k] = (hd[1, k] + k_h * hh[1, k]) * sc[k]
+            g[m + i, k] = hh[1, k] * sc[k]
         for r, c in ((i, c1), (m + i, c2)):
             nrm = max(math.sqrt(_dot3(g[r], g[r])), 1e-9)
             rhs[r] = (_dot3(g[r], u_ref) - share[i] * c) / nrm

@@ -47,7 +47,10 @@ P_HORIZON = 11  # prediction horizon T = τ_rp + dt (s)
 # ē of the second set of pair rows, the trust region's tight ones (m/s²; 0: none this
 # step; offboard.safety.dcbf.trust), written before each step
 P_ALT_ERR = 12
-N_PARAMS = 13
+# κ ≥ 1: the pair barrier's vertical scale, safe set outside the ellipsoid (D, D, κD)
+# (docs/safety.md §4c); 1 = the sphere
+P_VERT_SCALE = 13
+N_PARAMS = 14
 # RowsOut's second set of rows when there is none (never written)
 NO_ALT_G = np.zeros((0, 3))
 NO_ALT_RHS = np.zeros(0)
@@ -110,11 +113,11 @@ class RowsOut(NamedTuple):
 def dcbf_params(
     tau_s: float, d_safe: float, gamma1: float, gamma3: float, accel_err: float,
     side_gain: float, side_h: float, dt: float, smooth: float, ground_gamma: float,
-    ground_err: float, horizon: float, alt_err: float = 0.0,
+    ground_err: float, horizon: float, alt_err: float = 0.0, vertical_scale: float = 1.0,
 ) -> np.ndarray:
     """The parameter array of :func:`dcbf_filter_rows_into` (units at the ``P_*``)."""
     out = np.empty(N_PARAMS)
-    out[P_ALT_ERR] = alt_err
+    out[P_ALT_ERR], out[P_VERT_SCALE] = alt_err, vertical_scale
     out[P_TAU], out[P_D_SAFE], out[P_GAMMA1], out[P_GAMMA3] = tau_s, d_safe, gamma1, gamma3
     out[P_ACCEL_ERR], out[P_SIDE_GAIN], out[P_SIDE_H] = accel_err, side_gain, side_h
     out[P_DT], out[P_SMOOTH], out[P_GROUND_GAMMA] = dt, smooth, ground_gamma
@@ -135,6 +138,24 @@ def _min_or_nan(h: np.ndarray) -> float:
 
 
 @kernel
+def _scaled_barrier(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float,
+                    vertical_scale: float) -> np.ndarray:
+    """:func:`barrier_kernel` of S Δp, S Δv, S = diag(1, 1, 1/κ) (m²): the pair barrier
+    with vertical scale κ = ``vertical_scale`` (exactly :func:`barrier_kernel` for κ = 1)."""
+    if vertical_scale == 1.0:
+        return barrier_kernel(dp, dv, tau, d_safe)
+    sdp = np.empty((dp.shape[0], 3))
+    sdv = np.empty((dp.shape[0], 3))
+    for i in range(dp.shape[0]):
+        for c in range(3):
+            sdp[i, c] = dp[i, c]
+            sdv[i, c] = dv[i, c]
+        sdp[i, 2] = dp[i, 2] / vertical_scale
+        sdv[i, 2] = dv[i, 2] / vertical_scale
+    return barrier_kernel(sdp, sdv, tau, d_safe)
+
+
+@kernel
 def dcbf_filter_rows_into(
     rows: PairRows, own: OwnMotion, ground: GroundInput, state: RowsState, out: RowsOut,
 ) -> tuple[int, float]:
@@ -147,7 +168,10 @@ def dcbf_filter_rows_into(
     accelerations, and the state they update, are computed once for both.
 
     ``rows`` the M pair rows, ``own`` the own motion; when ``ground.on`` the two ground
-    rows follow the pair rows. ``state``: the parameters, the lag table and sensitivities
+    rows follow the pair rows. With ``params[P_VERT_SCALE]`` κ > 1 the pair barrier is the
+    ellipsoidal one (:func:`_scaled_barrier`): h_min, the sidestep's weights and the pair
+    rows; the sidestep's direction stays the tangent of Δp itself. ``state``: the
+    parameters, the lag table and sensitivities
     of :class:`offboard.safety.dcbf.model.LagCoefficients` and the per-index state of
     :func:`offboard.safety.dcbf.kernel.other_term_kernel`, read and updated in place.
     """
@@ -166,7 +190,8 @@ def dcbf_filter_rows_into(
     if alt and (g_alt.shape[0] < k or r_alt.shape[0] < k or g_alt.shape[1] != 3):
         raise ValueError("dcbf_filter_rows_into: buffers smaller than the rows")
     tau = params[P_TAU]
-    h = barrier_kernel(dp, dv, tau, params[P_D_SAFE])
+    kappa = params[P_VERT_SCALE]
+    h = _scaled_barrier(dp, dv, tau, params[P_D_SAFE], kappa)
     h_min = _min_or_nan(h)
     for c in range(3):
         side_out[c] = 0.0
@@ -185,7 +210,7 @@ def dcbf_filter_rows_into(
     )
     g, rhs = dcbf_rows_kernel(
         dp, dv, a_real, u_prev, other, share, d, lag, sens, params[P_HORIZON], tau,
-        params[P_GAMMA1], params[P_GAMMA3], params[P_ACCEL_ERR],
+        params[P_GAMMA1], params[P_GAMMA3], params[P_ACCEL_ERR], kappa,
     )
     for r in range(2 * m):
         r_out[r] = rhs[r]
@@ -194,7 +219,7 @@ def dcbf_filter_rows_into(
     if alt:
         g2, rhs2 = dcbf_rows_kernel(
             dp, dv, a_real, u_prev, other, share, d, lag, sens, params[P_HORIZON], tau,
-            params[P_GAMMA1], params[P_GAMMA3], params[P_ALT_ERR],
+            params[P_GAMMA1], params[P_GAMMA3], params[P_ALT_ERR], kappa,
         )
         for r in range(2 * m):
             r_alt[r] = rhs2[r]
