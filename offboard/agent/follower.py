@@ -15,6 +15,7 @@ import numpy as np
 
 from offboard.agent.base import CLIP_TOL, AgentBase
 from offboard.agent.detour import Detour
+from offboard.agent.fence_swap import swap_fence
 from offboard.agent.governor import governor_for, log_governor
 from offboard.agent.guard import InFlightGuard
 from offboard.agent.peers import peer_ids
@@ -43,6 +44,7 @@ from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
+from swarm_common.world.config import Geofence
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
 SENSE_HOLD_S = 0.2  # s, a dropped pair's last measurement is extrapolated this long
@@ -144,6 +146,19 @@ class FollowerAgent(AgentBase):
         self._front = (DcbfFront(self.deso, dcbf, self.acc_est, ctl, self.tau_ff, W_MAX,
                                  self._dp, self._dv)
                        if isinstance(dcbf, DcbfFilter) else None)
+
+    def replace_fence(self, fence: Geofence) -> bool:
+        """Keep ``fence`` instead of the scenario's from the next step on, the obstacles as
+        they are: the fence uploaded to the vehicle (offboard.daemon.fence_sync). False
+        without a dcbf filter, the only one with world rows."""
+        dcbf = self.filters.get(Method.DCBF)
+        if not isinstance(dcbf, DcbfFilter) or self._front is None:
+            return False
+        self._world = swap_fence(self._world, dcbf, self._front, fence,
+                                 self.sc.formation.sensing_range_m)
+        if self.detour is None:
+            self.detour = Detour(self._world, self.index)
+        return True
 
     @property
     def gains(self) -> GainReport:

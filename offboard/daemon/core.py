@@ -25,7 +25,9 @@ In real-time mode (``--realtime``) it still steps once per new ODOMETRY stamp, b
 the latest truth and neighbour data it holds instead of waiting (stale neighbours are
 predicted by the agent); vehicle-sim measures how late each answer is. A ground start in
 real time with ``--manual-start`` holds the agent idle on its pad until the ground
-station's take-off command (docs/lifecycle.md).
+station's take-off command (docs/lifecycle.md). A follower's filter keeps the fence its
+vehicle stores, downloaded whenever a ground station uploads another
+(:mod:`offboard.daemon.fence_sync`, docs/world.md).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from offboard.agent.peers import peer_ids, ready_ids
 from offboard.daemon.commands import TAKEOFF_LATE_S, TAKEOFF_LEAD_S, GroundCommands
 from offboard.daemon.config import DaemonConfig
 from offboard.daemon.drivers import LockstepDriver, RealtimeDriver, StepDriver
+from offboard.daemon.fence_sync import FenceSync
 from offboard.daemon.link_guard import PayloadGuard
 from offboard.daemon.loop import AgentLoop
 from offboard.daemon.mavlink.link import VehicleLink, mavlink
@@ -96,6 +99,10 @@ class OffboardDaemon:
         ready = [] if cfg.solo else ready_ids(form, cfg.agent_id)  # heard before flying
         agent = make_agent(sc, cfg.agent_id, method=cfg.method, seed=cfg.seed, form=form)
         control_hz = int(sc.run.control_hz)
+        # the follower's filter keeps the fence its vehicle stores (docs/world.md)
+        self.fence = (FenceSync(cfg.agent_id, sc.world.geofence, sc.controller.d_safe_m,
+                                agent.replace_fence)
+                      if isinstance(agent, FollowerAgent) else None)
         # the transport
         self.link = VehicleLink(cfg.mavlink_url, cfg.agent_id, control_hz, cfg.lockstep,
                                 tlog=cfg.tlog, signing_key=cfg.signing_key,
@@ -192,6 +199,7 @@ class OffboardDaemon:
             stream.gap(now)  # the vehicle must see the stream again first
             log.warning("agent %d: main loop stalled %.2f s", self.id, now - last_iter)
         self.link.poll(poll_s)
+        self.follow_fence(time.monotonic())
         self.link.send_heartbeat()
         self.loop.vehicle_clock()
         self.bus.pump(with_shared=False)  # a packed process's host pumps those once a pass
@@ -215,6 +223,15 @@ class OffboardDaemon:
         self.link.commands.tick()
         return None
 
+    def follow_fence(self, now: float) -> None:
+        """The fence download's next request, and a finished download to the follower's
+        filter (offboard.daemon.fence_sync): here, between two steps, so a step never sees
+        half a swap."""
+        self.link.fence.tick(now)
+        got = self.link.fence.take()
+        if got is not None and self.fence is not None:
+            self.fence.on_download(got)
+
     def say_stopped(self) -> None:
         """The last line: drops, and the CPU the control law took (bench_distributed reads
         it to tell the control from the plumbing)."""
@@ -223,6 +240,9 @@ class OffboardDaemon:
                  "%d steps; truth lag at most %d periods%s", self.id, self.link.drops.counts,
                  self.bus.drops.counts, loop.control_cpu_s, loop.control_steps,
                  self.loss.max_lag, loop.driver.summary())
+        fence = "" if self.fence is None else self.fence.summary()
+        if fence:
+            log.info("agent %d: %s", self.id, fence)
 
     def close(self) -> None:
         self.link.close()

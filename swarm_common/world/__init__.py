@@ -14,9 +14,14 @@ Entry points:
 
 * :mod:`.config` - the ``[[obstacle]]`` and ``[geofence]`` tables: validation, typed view.
 * :mod:`.geometry` - the compiled geometry: closest points, half-spaces, distances.
+* :mod:`.geodesy` - the simulator's shared geodetic origin, latitude/longitude to ENU.
+* :mod:`.mavlink_fence` - a fence as a vehicle stores it (MAVLink FENCE items) read back
+  into a :class:`~swarm_common.world.config.Geofence` for the filter.
+* :mod:`.mission_current` - MISSION_CURRENT with its ``fence_id``, which tells that a
+  vehicle's fence changed.
 
 The scenario's load-time check of its world is
 :mod:`swarm_common.scenario.world_check`. All coordinates ENU, z up (m).
 """
 
-__all__ = ["config", "geometry"]
+__all__ = ["config", "geodesy", "geometry", "mavlink_fence", "mission_current"]

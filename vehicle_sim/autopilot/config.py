@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common.enums import FailsafeAction
+from swarm_common.world import geodesy
 
 DEFAULT_RATES: dict[int, float] = {
     M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
@@ -69,9 +70,11 @@ class AutopilotConfig:
     setpoint_window: float = 0.5  # s: OFFBOARD needs >= setpoint_min_count in this window
     setpoint_min_count: int = 2
     land_disarm_delay: float = 1.0  # s on the ground in LAND before auto-disarm
-    home_lat: float = 47.397742  # PX4 SITL default home (Zurich)
-    home_lon: float = 8.545594
-    home_alt: float = 488.0
+    # the shared geodetic origin (PX4 SITL's default home): the daemons read fences back
+    # about the same one (swarm_common.world.geodesy)
+    home_lat: float = geodesy.ORIGIN_LAT_DEG
+    home_lon: float = geodesy.ORIGIN_LON_DEG
+    home_alt: float = geodesy.ORIGIN_ALT_M
     uid_base: int = 0x4253574152000000  # "BSWAR" + offset << 8 + id
     port_offset: int = 0
     # default stream rates (Hz) of the API link; 0 = off. ODOMETRY uses odometry_hz.

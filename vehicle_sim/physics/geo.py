@@ -14,7 +14,9 @@ from typing import Any
 
 import numpy as np
 
-EARTH_R = 6378137.0  # m, WGS-84 equatorial radius
+from swarm_common.world.geodesy import EARTH_R
+
+__all__ = ["EARTH_R", "down_from_amsl", "latlon_e7", "ned_from_latlon"]
 
 
 def latlon_e7(cfg: Any, ned: np.ndarray) -> tuple[int, int]:

@@ -14,8 +14,9 @@ distinguished); it must be outside every exclusion zone. Zones are 2-D (no altit
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import astuple, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -92,7 +93,7 @@ def scenario_fence_items(cfg: Any, fence: Any) -> list[Item]:
     """The FENCE items of a scenario's ``[geofence]`` (:class:`swarm_common.world.config.
     Geofence`): one inclusion polygon, the box's x-y rectangle or the polygon's vertices,
     global frame (lat/lon degE7 about ``cfg``'s origin). Its altitude limits have no zone
-    item (PX4's zones are 2-D): the offboard filter keeps them."""
+    item (PX4's zones are 2-D): the offboard filter keeps them (docs/world.md)."""
     if fence.polygon_m:
         xy = [(float(x), float(y)) for x, y in fence.polygon_m]
     else:
@@ -128,3 +129,12 @@ def fence_from_items(cfg: Any, items: Sequence[Item]) -> Geofence:
             zones.append(Circle(cx, cy, float(it.param1), inc))
         i += 1
     return Geofence(zones)
+
+
+def plan_id(items: Sequence[Item]) -> int:
+    """MISSION_CURRENT's id of a stored plan (``fence_id`` for the fence): a CRC-32 of its
+    items, as PX4 sends one, so that a client learns of any change without downloading;
+    0 for an empty store (never 0 otherwise)."""
+    if not items:
+        return 0
+    return zlib.crc32(repr([astuple(it) for it in items]).encode()) or 1

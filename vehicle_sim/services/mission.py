@@ -8,7 +8,8 @@ Contract: :class:`vehicle_sim.autopilot.nav.VehicleService`. The pieces, each pu
 :mod:`vehicle_sim.services.geofence` (inclusion/exclusion zones and PX4's distance limits).
 
 This module wires them to one vehicle: MAVLink handlers, MISSION_CURRENT at
-:data:`CURRENT_HZ` and on every change, MISSION_ITEM_REACHED, and once per step the
+:data:`CURRENT_HZ` and on every change (its ``fence_id`` changes with the stored fence:
+how the offboard daemons learn of an upload), MISSION_ITEM_REACHED, and once per step the
 geofence (``fence_breached``, and ``GF_ACTION`` once per breach while flying).
 A store is applied in the handler that commits it, before its MISSION_ACK is queued, so
 the ACK always acknowledges the store that a following MISSION_START sees.
@@ -26,10 +27,11 @@ import numpy as np
 from pymavlink.dialects.v20 import common as M
 
 from swarm_common import frames, px4
+from swarm_common.world.mission_current import MissionCurrent
 from vehicle_sim.autopilot import audit
 from vehicle_sim.autopilot.nav import NavTarget
 from vehicle_sim.services import mission_items as mi
-from vehicle_sim.services.geofence import Geofence, fence_from_items
+from vehicle_sim.services.geofence import Geofence, fence_from_items, plan_id
 from vehicle_sim.services.mission_executor import MissionExecutor
 from vehicle_sim.services.mission_items import Item
 from vehicle_sim.services.mission_transfer import MissionTransfer, ack
@@ -62,7 +64,8 @@ class MissionService:
         self._breach_handled = False
         self.started = False  # AUTO.MISSION entered since the mission was stored
         self._next_current = 0.0
-        self._last_current: tuple[int, int, int] | None = None
+        self._last_current: tuple[int, int, int, int] | None = None
+        self._fence_id = 0  # MISSION_CURRENT.fence_id of the stored fence (plan_id)
 
     def handlers(self) -> dict[int, Handler]:
         """MAVLink message id -> ``handler(msg, src, wall, sim_t)``."""
@@ -209,6 +212,7 @@ class MissionService:
         self.transfer.stores[mi.FENCE] = list(items)
         self.geofence = fence_from_items(self.vehicle.cfg, items)
         self._preloaded = list(items)
+        self._fence_id = plan_id(items)
 
     def _apply_changes(self) -> None:
         v = self.vehicle
@@ -226,9 +230,11 @@ class MissionService:
                 self.started = False
             elif mt == mi.FENCE:
                 self.geofence = fence_from_items(v.cfg, items)
+                self._fence_id = plan_id(items)  # MISSION_CURRENT tells every peer at once
                 if self._preloaded is not None and items != self._preloaded:
                     v.event(
-                        "geofence changed: the offboard filter keeps the scenario's [geofence]",
+                        "geofence changed: the offboard filter takes it if it is one convex "
+                        "inclusion polygon, else keeps its own (docs/world.md)",
                         M.MAV_SEVERITY_WARNING,
                     )
         self.transfer.changed.clear()
@@ -247,12 +253,14 @@ class MissionService:
         return ex.current, total, state
 
     def _send_current(self, force: bool) -> None:
-        st = self._mission_state()
+        """MISSION_CURRENT, with the stored fence's ``fence_id`` (PX4's plan-change
+        signal, which the offboard daemon follows: swarm_common.world.mission_current)."""
+        st = (*self._mission_state(), self._fence_id)
         if not force and st == self._last_current:
             return
         self._last_current = st
         mode = 1 if self._in_mission_mode() else 2  # 1: in mission mode, 2: suspended
-        self._send([(M.MAVLink_mission_current_message(st[0], st[1], st[2], mode), None)])
+        self._send([(MissionCurrent(st[0], st[1], st[2], mode, fence_id=st[3]), None)])
 
     def _in_mission_mode(self) -> bool:
         try:

@@ -16,6 +16,8 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
   implausibly far stamps are dropped (:class:`offboard.daemon.link_guard.StampGuard`);
 * **commands** never block: :attr:`VehicleLink.commands` queues a COMMAND_LONG, (re)sends
   it on ``tick`` and the ACK completes it (:mod:`offboard.daemon.mavlink.commands`);
+* **fence**: :attr:`VehicleLink.fence` downloads the vehicle's stored geofence whenever
+  MISSION_CURRENT's ``fence_id`` changes (:mod:`offboard.daemon.mavlink.fence_download`);
 * **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
   dropped and counted (``bad signature``); replayed frames (a stream's timestamp not
   above its last, a new stream older than 60 s) and reflected ones (claiming the daemon's
@@ -58,6 +60,7 @@ from pymavlink import mavutil  # noqa: E402
 
 from offboard.daemon.link_guard import DropLog, StampGuard  # noqa: E402
 from offboard.daemon.mavlink.commands import VehicleCommands  # noqa: E402
+from offboard.daemon.mavlink.fence_download import FenceDownload  # noqa: E402
 from offboard.daemon.mavlink.frame_peek import unread_frames  # noqa: E402
 from offboard.daemon.mavlink.lock_gate import LockGate  # noqa: E402
 from offboard.daemon.mavlink.odometry import Odometry, read_odometry  # noqa: E402
@@ -84,6 +87,11 @@ PARSE_ERRORS: tuple[type[Exception], ...] = (
     mavlink.MAVError, struct.error, ValueError, IndexError, TypeError,
 )
 
+# the mission-protocol messages of the fence download (offboard.daemon.mavlink.fence_download)
+FENCE_KINDS: dict[str, Callable[[FenceDownload, Any, float], None]] = {
+    "MISSION_CURRENT": FenceDownload.on_current, "MISSION_COUNT": FenceDownload.on_count,
+    "MISSION_ITEM_INT": FenceDownload.on_item, "MISSION_ACK": FenceDownload.on_ack,
+}
 HEARTBEAT_ASK_S = 0.5  # s between two requests for the vehicle's HEARTBEAT before the lock
 
 
@@ -134,6 +142,7 @@ class VehicleLink(LinkSender):
         self.drops = DropLog(f"agent {agent_id}: MAVLink")
         self.gate = LockGate(agent_id, self.drops, self.signed, challenge=self.sock is not None)
         self.commands = VehicleCommands(agent_id, self._send)  # COMMAND_LONG, ACK, retry
+        self.fence = FenceDownload(agent_id, self._send)  # the vehicle's stored geofence
         self.statustexts: list[str] = []
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
         self.offboard_lost_texts = 0  # ... that say "failsafe" and "offboard"
@@ -298,6 +307,8 @@ class VehicleLink(LinkSender):
             self._odometry(msg, now)
         elif kind == "COMMAND_ACK":
             self.commands.on_ack(msg, now)
+        elif kind in FENCE_KINDS:
+            FENCE_KINDS[kind](self.fence, msg, now)
         elif kind == "STATUSTEXT":
             text = str(msg.text)
             self.statustexts = [*self.statustexts[-31:], text]

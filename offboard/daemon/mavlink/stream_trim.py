@@ -1,10 +1,11 @@
 """Telemetry the daemon does not read is switched off on its API link (docs/performance.md).
 
 A PX4 vehicle streams its default telemetry (ATTITUDE, LOCAL_POSITION_NED, VFR_HUD, ...)
-to every MAVLink peer, the companion computer included. The daemon reads four messages of
+to every MAVLink peer, the companion computer included. The daemon reads a few messages of
 its vehicle: HEARTBEAT, ODOMETRY, COMMAND_ACK and STATUSTEXT (and the DATA_STREAM answer
-to its own request). Decoding the rest cost it about three pymavlink decodes per control
-step, and the simulator one pack and one ``sendto`` each.
+to its own request), and MISSION_CURRENT (1 Hz) with the fence download's answers.
+Decoding the rest cost it about three pymavlink decodes per control step, and the
+simulator one pack and one ``sendto`` each.
 
 So, once the link is locked, the daemon asks its vehicle to stop every legacy stream
 group on its link: REQUEST_DATA_STREAM(MAV_DATA_STREAM_ALL, start_stop = 0), the request
@@ -35,9 +36,11 @@ from pymavlink import mavutil  # noqa: E402
 M = mavutil.mavlink
 
 # the vehicle messages the daemon reads (offboard.daemon.mavlink.link.VehicleLink._handle), and
-# the answers to its own requests (TIMESYNC: the lock challenge, mavlink.lock_gate)
+# the answers to its own requests (TIMESYNC: the lock challenge, mavlink.lock_gate; the
+# MISSION_* of the fence download, mavlink.fence_download, which MISSION_CURRENT starts)
 READ_KINDS = frozenset({"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "STATUSTEXT", "DATA_STREAM",
-                        "TIMESYNC"})
+                        "TIMESYNC", "MISSION_CURRENT", "MISSION_COUNT", "MISSION_ITEM_INT",
+                        "MISSION_ACK"})
 # the telemetry of the legacy stream groups (ArduPilot's grouping, which MAVProxy and our
 # simulator use): receiving one of these means the request has not taken (yet). Messages
 # outside every group (MISSION_CURRENT, ...) cannot be stopped this way and never retrigger.

@@ -220,6 +220,24 @@ class DcbfFilter(SafetyFilter):
         k, h_min = dcbf_filter_rows_into(rows, own, floor, self.rows_state(), self.rows_out())
         return self.solve_rows(x.clf.u_nom + self._side, x.clf, k, h_min, x.w, x.z2)
 
+    def reserve_world(self, more_planes: int) -> bool:
+        """Room for ``more_planes`` half-spaces of the world beyond those :meth:`configure`
+        made room for (a fence with more faces than the scenario's, uploaded in flight):
+        two rows each in the row buffers and in the QPs' growth limit. True when the
+        buffers were replaced, so that a caller holding :meth:`rows_out` takes them again."""
+        if self.qp is None:
+            raise RuntimeError("DcbfFilter.configure(vehicle, dt) was not called")
+        if more_planes <= 0:
+            return False
+        for qp in (self.qp, self.tight_qp):
+            if qp is not None:
+                qp.limit += 2 * more_planes
+        self._g = np.zeros((len(self._g) + 2 * more_planes, 3))
+        self._rhs = np.zeros(len(self._g))
+        if self.tight_qp is not None:
+            self._g_alt, self._rhs_alt = np.zeros_like(self._g), np.zeros_like(self._rhs)
+        return True
+
     def add_world_rows(self, planes: WorldPlanes, k: int, p: np.ndarray, v: np.ndarray,
                        a0: np.ndarray, w: np.ndarray) -> int:
         """Append the rows of the world's half-spaces for an agent at ``p`` (m) with

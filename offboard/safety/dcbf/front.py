@@ -270,6 +270,11 @@ class DcbfFront:
         self._rows_out = tuple(filt.rows_out())
         self.dp, self.dv = dp, dv
 
+    def rebind(self) -> None:
+        """Take the filter's row buffers again: :meth:`DcbfFilter.reserve_world
+        <offboard.safety.dcbf.filter.DcbfFilter.reserve_world>` replaced them."""
+        self._rows_out = tuple(self.filt.rows_out())
+
     def run(
         self, xi: np.ndarray, meas: Measured, silence: Silence, inner: InnerMotion,
         floor: float | None, unsensed: Unsensed = NO_UNSENSED,

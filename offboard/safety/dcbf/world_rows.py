@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from swarm_common.jit import kernel
-from swarm_common.world.config import World
+from swarm_common.world.config import Geofence, World, make_world
 from swarm_common.world.geometry import world_planes
 
 
@@ -99,6 +99,18 @@ class WorldPlanes:
         self.capacity = len(self.table) + len(self.fence)
         self.normals = np.zeros((self.capacity, 3))
         self.offsets = np.zeros(self.capacity)
+
+    def set_fence(self, fence: Geofence) -> None:
+        """Keep ``fence`` from now on instead of the world's, the obstacles as they are:
+        the fence a ground station uploaded to the vehicle (offboard.daemon.fence_sync).
+        The buffers grow when it has more faces; call between two steps."""
+        planes, self.fence_margin = make_world((), fence).fence_arrays()
+        self.fence = np.ascontiguousarray(planes, dtype=float)
+        need = len(self.table) + len(self.fence)
+        if need > self.capacity:
+            self.capacity = need
+            self.normals = np.zeros((need, 3))
+            self.offsets = np.zeros(need)
 
     def at(self, p: np.ndarray) -> int:
         """The number of half-spaces for an agent at ``p`` (3,) (m), written into

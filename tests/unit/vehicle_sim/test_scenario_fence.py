@@ -12,9 +12,10 @@ from pymavlink.dialects.v20 import common as M
 from swarm_common.scenario.model import load_scenario
 from swarm_common.world.config import parse_world
 from swarm_common.world.geometry import fence_margins
+from swarm_common.world.mission_current import fence_id_of
 from vehicle_sim.autopilot.config import AutopilotConfig
 from vehicle_sim.physics.dynamics import SwarmDynamics
-from vehicle_sim.services.geofence import fence_from_items, scenario_fence_items
+from vehicle_sim.services.geofence import fence_from_items, plan_id, scenario_fence_items
 from vehicle_sim.vehicle import Vehicle
 
 BOX = load_scenario(ROOT / "scenarios" / "cube8_obstacles.toml").world
@@ -45,7 +46,7 @@ def test_the_simulators_fence_is_the_filters_horizontally(world) -> None:
 
 def test_a_vehicle_lists_the_scenario_fence_and_warns_when_a_client_changes_it() -> None:
     """Preloaded: a download lists the fence's vertices; an upload of another fence is
-    taken (the simulator checks it), with a warning that the filter keeps the scenario's."""
+    taken (the simulator checks it), with a warning, and a new MISSION_CURRENT.fence_id."""
     v = Vehicle(1, 0, SwarmDynamics(load_scenario(ROOT / "scenarios" / "cube8.toml"),
                                     held=True), AutopilotConfig())
     items = scenario_fence_items(v.cfg, HEXAGON.geofence)
@@ -58,7 +59,13 @@ def test_a_vehicle_lists_the_scenario_fence_and_warns_when_a_client_changes_it()
     assert counts and counts[0].count == 6 and counts[0].mission_type == M.MAV_MISSION_TYPE_FENCE
     v.update(0.0)
     assert not [e for e in v.events if "geofence changed" in e[1]]  # its own fence: quiet
+    first = [fence_id_of(m) for m, _ in v.outbox if m.get_type() == "MISSION_CURRENT"]
+    assert first and first[-1] == plan_id(items) != 0
+    v.outbox.clear()
     v.mission.transfer.stores[M.MAV_MISSION_TYPE_FENCE] = items[:3]  # a client's upload
     v.mission.transfer.changed.append(M.MAV_MISSION_TYPE_FENCE)
     v.update(0.1)
-    assert [e for e in v.events if "offboard filter keeps the scenario" in e[1]]
+    assert [e for e in v.events if "the offboard filter takes it" in e[1]]
+    # MISSION_CURRENT tells every peer at once (not at its next 1 Hz turn): a new fence_id
+    now = [fence_id_of(m) for m, _ in v.outbox if m.get_type() == "MISSION_CURRENT"]
+    assert now == [plan_id(items[:3])] and now[0] not in (0, first[-1])

@@ -1,0 +1,118 @@
+"""The filter follows the fence its vehicle stores (docs/world.md, "A fence uploaded over
+MAVLink").
+
+The simulator enforces whatever fence its vehicle stores: the scenario's ``[geofence]``
+at start, or one a ground station uploaded since. The daemon downloads it
+(:mod:`offboard.daemon.mavlink.fence_download`) and here decides what the follower's
+dcbf filter keeps, so that the filter and the simulator agree:
+
+* the same outline as the filter's fence (to :data:`~swarm_common.world.mavlink_fence.
+  MATCH_TOL_M`): nothing changes, bit for bit. That is every run where nobody uploads, so a
+  lockstep run stays deterministic and equal to the same run in process;
+* another convex inclusion polygon: the filter takes it at the next step boundary, with
+  the altitude band and margin of its fence (MAVLink's zones carry no altitude);
+* a fence the filter cannot represent (non-convex, exclusion zones, circles, several
+  inclusion polygons, too many vertices) or no fence at all: the filter keeps its fence,
+  and one WARNING line says that the filter and the simulator disagree;
+* a download that failed or is not a valid fence: counted in :attr:`FenceSync.bad`,
+  dropped, one WARNING line; the filter keeps its fence.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+from swarm_common.world.config import Geofence
+from swarm_common.world.mavlink_fence import (
+    FenceItem,
+    filter_fence,
+    horizontal_vertices,
+    read_fence,
+    same_outline,
+)
+
+log = logging.getLogger("offboard.daemon.core")  # the daemon's lines keep one logger name
+
+
+class FenceSync:
+    """The filter's fence of agent ``agent_id`` against its vehicle's. ``fence``: the
+    scenario's (what the filter starts with); ``apply(fence)``: swap the filter's fence,
+    False when its agent has no world rows (not dcbf)."""
+
+    def __init__(self, agent_id: int, fence: Geofence | None, d_safe: float,
+                 apply: Callable[[Geofence], bool]) -> None:
+        self.id = agent_id
+        self.fence = fence  # the filter's fence now
+        self.d_safe = d_safe
+        self._apply = apply
+        self.adopted = 0  # fences the filter took from its vehicle
+        self.refused = 0  # fences it could not take (it kept its own)
+        self.bad = 0  # downloads that failed or held no valid fence
+        self.disagree = ""  # why the filter's fence is not the vehicle's; "" when it is
+
+    def on_download(self, got: tuple[int, list[FenceItem]] | str) -> None:
+        """One finished download (:meth:`FenceDownload.take
+        <offboard.daemon.mavlink.fence_download.FenceDownload.take>`)."""
+        if isinstance(got, str):
+            self._bad(f"the fence download failed: {got}")
+            return
+        fence_id, items = got
+        read = read_fence(items)
+        which = f"fence_id {fence_id:#x}, {len(items)} items"
+        if read.kind == "bad":
+            self._bad(f"the vehicle's fence ({which}) is not valid: {read.reason}")
+        elif read.kind == "none":
+            self._keep(which, "it stores no inclusion zone", quiet=self.fence is None)
+        elif read.kind == "unsupported":
+            self._keep(which, f"the filter cannot represent {read.reason}")
+        elif same_outline(read.xy, self.fence):
+            if self.disagree:
+                log.info("agent %d: the vehicle's fence (%s) is the filter's again", self.id,
+                         which)
+            self.disagree = ""
+        else:
+            self._take(which, read.xy)
+
+    def _take(self, which: str, xy: tuple[tuple[float, float], ...]) -> None:
+        fence = filter_fence(xy, self.fence, self.d_safe)
+        if isinstance(fence, str):
+            self._keep(which, fence)
+            return
+        if not self._apply(fence):
+            self._keep(which, "this agent's filter has no world rows")
+            return
+        self.fence = fence
+        self.adopted += 1
+        self.disagree = ""
+        bottom, top = fence.z_range_m
+        log.warning("agent %d: the filter takes the vehicle's fence (%s): %d vertices %s, "
+                    "z %g to %g m, margin %g m", self.id, which, len(xy),
+                    _outline(horizontal_vertices(fence)), bottom, top, fence.margin_m)
+
+    def _keep(self, which: str, why: str, quiet: bool = False) -> None:
+        """The filter keeps its fence although the vehicle's differs (``quiet``: both have
+        none, which is agreement)."""
+        if quiet:
+            self.disagree = ""
+            return
+        self.refused += 1
+        self.disagree = why
+        log.warning("agent %d: the vehicle's fence (%s): %s; the filter keeps its own: the "
+                    "filter and the simulator disagree", self.id, which, why)
+
+    def _bad(self, line: str) -> None:
+        self.bad += 1
+        log.warning("agent %d: %s; dropped, the filter keeps its fence", self.id, line)
+
+    def summary(self) -> str:
+        """One line for the daemon's last words; "" when nothing happened."""
+        if not (self.adopted or self.refused or self.bad):
+            return ""
+        state = f"disagree ({self.disagree})" if self.disagree else "agree"
+        return (f"fence: {self.adopted} taken, {self.refused} kept against the vehicle's, "
+                f"{self.bad} bad downloads; filter and simulator {state}")
+
+
+def _outline(xy: tuple[tuple[float, float], ...]) -> str:
+    return "[" + ", ".join(f"({x:.2f}, {y:.2f})" for x, y in xy) + "]"
