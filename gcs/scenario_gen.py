@@ -10,7 +10,8 @@ formations"):
   their own vertices, so the leaders' separation is the formation's scale (Departure 1);
 * a **sparse graph** (``--graph knn`` by default): without ``--k`` the smallest
   ``knn_k`` ≥ ``DEFAULT_K`` whose graph passes the loader's rigidity and observability
-  check (docs/graphs.md); the sensing range is the longest edge plus ``RANGE_MARGIN``;
+  check (docs/graphs.md); the sensing range is the longest edge plus ``RANGE_MARGIN``, and
+  with ``--mix`` > 0 at least the swarm's span (start or formation) times it;
 * **follower starts**, seeded by ``--scramble SEED``: a fraction ``--mix`` (default 0) of
   the followers permuted over each other's vertices, every follower vertex shrunk by
   ``--shrink`` (default 0.15) toward the formation's centroid and moved by a jitter of at
@@ -156,13 +157,24 @@ def _longest_edge(v: np.ndarray, graph: GraphKind, k: int) -> float:
     return max(float(np.linalg.norm(v[i] - v[j])) for i, j in edges)
 
 
+def swarm_span(v: np.ndarray, starts: np.ndarray) -> float:
+    """The largest distance (m) between two agents, in the formation ``v`` or at the
+    ``starts`` (both (N, 3))."""
+    def widest(p: np.ndarray) -> float:
+        return float(np.max(np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)))
+    return max(widest(v), widest(starts))
+
+
 def _formation(v: np.ndarray, n_leaders: int, graph: GraphKind, k: int,
-               range_m: float | None) -> dict[str, Any]:
+               range_m: float | None, span_m: float = 0.0) -> dict[str, Any]:
+    """The ``[formation]`` table. Without ``range_m``: every graph edge sensed in the
+    formation, with a margin, and at least ``span_m`` (m; a scrambled start's)."""
     fm: dict[str, Any] = {"leaders": list(range(1, n_leaders + 1)), "graph": str(graph)}
     if graph is GraphKind.KNN:
         fm["knn_k"] = k
-    if range_m is None:  # every graph edge sensed in the formation, with a margin
-        range_m = math.ceil(_longest_edge(v, graph, k) * RANGE_MARGIN * 10) / 10
+    if range_m is None:
+        need = max(_longest_edge(v, graph, k) * RANGE_MARGIN, span_m)
+        range_m = math.ceil(need * 10) / 10
     fm["sensing_range_m"] = range_m
     return fm
 
@@ -196,9 +208,13 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     doc["agent"] = [{"id": i + 1, "role": str(Role.LEADER if i < n_lead else Role.FOLLOWER),
                      "position": starts[i].tolist(), "velocity": [0.0, 0.0, 0.0],
                      "vertex": v[i].tolist()} for i in range(n)]
+    # a scrambled start sends followers across the whole formation, at speeds the scenario
+    # does not bound: a pair that first came into range in flight could not brake in time
+    # (docs/safety.md, load check (b)), so every pair is sensed from the first step on
+    span = swarm_span(v, starts) * RANGE_MARGIN if args.mix > 0.0 else 0.0
     problem = ""
     for k in ks:
-        doc["formation"] = _formation(v, n_lead, args.graph, k or DEFAULT_K, args.range)
+        doc["formation"] = _formation(v, n_lead, args.graph, k or DEFAULT_K, args.range, span)
         where = f"{args.shape} --agents {n}"
         try:
             sc = parse_scenario(doc, where)
@@ -281,7 +297,8 @@ def add_scenario_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--k", type=int, default=None, metavar="K",
                    help="knn_k (default: the smallest >= 6 that passes the rigidity check)")
     p.add_argument("--range", type=_number(0.1, 1000.0, False), default=None, metavar="M",
-                   help="formation.sensing_range_m (default: longest edge x 1.2)")
+                   help="formation.sensing_range_m (default: longest edge x 1.2; with --mix > 0 at "
+                   "least the swarm's span x 1.2)")
     p.add_argument("--duration", type=_number(1.0, 3600.0, False), default=60.0, metavar="S")
     p.add_argument("--deadline", type=_number(0.0, 3600.0, False), default=30.0, metavar="S",
                    help="formation_deadline_s: tracking metrics from this time (default 30)")

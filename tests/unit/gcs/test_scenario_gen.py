@@ -84,6 +84,26 @@ def test_mix_and_shrink() -> None:
     assert np.abs(full.initial_positions() - full.vertices()).max() > 1.0
 
 
+def test_a_scrambled_start_is_sensed_whole_from_the_first_step() -> None:
+    """With --mix > 0 followers cross the formation at speeds nothing bounds, so every
+    pair is in sensing range from the start: the range is at least the widest pair, at
+    the start or in the formation. Without --mix the range is the graph's."""
+    def widest(p: np.ndarray) -> float:
+        return float(np.max(np.linalg.norm(p[:, None] - p[None, :], axis=-1)))
+
+    for mix in ("0.5", "1"):
+        sc = _load(dump_toml(build(_args("grid", "--agents", "27", "--leaders", "3",
+                                         "--scramble", "2", "--mix", mix))[0]))
+        span = max(widest(sc.initial_positions()), widest(sc.vertices()))
+        assert sc.formation.sensing_range_m >= span
+    calm = _load(dump_toml(build(_args("grid", "--agents", "27", "--leaders", "3",
+                                       "--scramble", "2"))[0]))
+    assert calm.formation.sensing_range_m < widest(calm.vertices())
+    forced = _load(dump_toml(build(_args("grid", "--agents", "27", "--leaders", "3",
+                                         "--scramble", "2", "--mix", "1", "--range", "6"))[0]))
+    assert forced.formation.sensing_range_m == 6.0  # --range is the user's: kept
+
+
 @pytest.mark.full
 def test_explicit_k_and_range_graph() -> None:
     doc, k = build(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1",
