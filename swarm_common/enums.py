@@ -170,6 +170,9 @@ class AgentAlarm(IntFlag):
     NEAR_ENTRY = 2  # a neighbour first heard closer than the distance it must be heard at
     FALLBACK = 4  # the agent left formation control for its safe fallback (hold, then land)
     DEADLOCK = 8  # its formation error stalls while its filter holds it (a liveness event)
+    # the vehicle stores a fence the filter cannot take: the filter keeps its own fence, so
+    # the filter and the simulator's breach check disagree (docs/world.md)
+    FENCE_MISMATCH = 16
 
 
 class SafetyAlarmKind(StrEnum):
@@ -188,3 +191,4 @@ class SafetyAlarmKind(StrEnum):
     NEAR_ENTRY = "near_entry"  # AgentAlarm.NEAR_ENTRY
     FALLBACK = "fallback"  # AgentAlarm.FALLBACK
     DEADLOCK = "deadlock"  # AgentAlarm.DEADLOCK: liveness, not safety (the verdict ignores it)
+    FENCE_MISMATCH = "fence_mismatch"  # AgentAlarm.FENCE_MISMATCH

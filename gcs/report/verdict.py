@@ -35,6 +35,7 @@ _BIT_KIND = {
     AgentAlarm.NEAR_ENTRY: SafetyAlarmKind.NEAR_ENTRY,
     AgentAlarm.FALLBACK: SafetyAlarmKind.FALLBACK,
     AgentAlarm.DEADLOCK: SafetyAlarmKind.DEADLOCK,
+    AgentAlarm.FENCE_MISMATCH: SafetyAlarmKind.FENCE_MISMATCH,
 }
 
 

@@ -142,6 +142,8 @@ class OffboardDaemon:
             stream=stream, outbox=EstimateOutbox(self.bus),
             ready=SwarmReady(cfg.agent_id, ready, cfg.solo, WAIT_LOG_S), driver=driver,
         )
+        if self.fence is not None:  # the filter and the simulator disagree: every step says so
+            self.loop.daemon_alarms = self.fence.alarm_bits
 
     def run(self) -> int:
         """The whole life of a daemon alone in its process (``offboard --agent``)."""

@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
+from swarm_common.enums import AgentAlarm
 from swarm_common.world.config import Geofence
 from swarm_common.world.mavlink_fence import (
     FenceItem,
@@ -104,6 +105,12 @@ class FenceSync:
     def _bad(self, line: str) -> None:
         self.bad += 1
         log.warning("agent %d: %s; dropped, the filter keeps its fence", self.id, line)
+
+    def alarm_bits(self) -> int:
+        """:data:`~swarm_common.enums.AgentAlarm.FENCE_MISMATCH` while the filter keeps a
+        fence other than the vehicle's (:attr:`disagree`), else 0: raised on every step's
+        status, so the run's metrics, verdict and the dashboard say it, not the log alone."""
+        return int(AgentAlarm.FENCE_MISMATCH) if self.disagree else 0
 
     def summary(self) -> str:
         """One line for the daemon's last words; "" when nothing happened."""

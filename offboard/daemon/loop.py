@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -62,6 +63,9 @@ class AgentLoop:
         self.last_step = -1
         self.odo_pub_step = -1  # the last step whose own odometry went out
         self.alarms = 0  # the last step's AgentAlarm bits (a WARNING at each onset)
+        # alarm bits that the daemon, not the agent's step, finds (the vehicle's fence that
+        # the filter could not take: offboard.daemon.fence_sync), added to every step's
+        self.daemon_alarms: Callable[[], int] = _no_alarms
         self.cooperative = True
         # CPU of this thread inside agent.step (s): the control law runs on the main thread
         # alone (numba kernels, single-threaded BLAS). Not the process's CPU clock: it
@@ -131,6 +135,7 @@ class AgentLoop:
         cpu0 = time.thread_time()
         out = self.agent.step(k, t, sensed[0], sensed[1], neighbours, comm_ok)
         self.control_cpu_s += time.thread_time() - cpu0
+        out.status.alarms |= self.daemon_alarms()
         self.control_steps += 1
         self.driver.after_step(k, t)
         self.stream.set_answer((time_boot_ms, out.q_ned, out.thrust_norm), k, from_loss=False)
@@ -168,3 +173,8 @@ class AgentLoop:
             est.z1, est.z2 = got
             est.z3 = np.zeros(3)
         return est
+
+
+def _no_alarms() -> int:
+    """No alarm bit of the daemon's own (:attr:`AgentLoop.daemon_alarms`' default)."""
+    return 0

@@ -170,4 +170,5 @@ ALARM_TEXT = {
     AgentAlarm.NEAR_ENTRY: "a neighbour first heard inside its barrier (heard too late to brake)",
     AgentAlarm.FALLBACK: "formation control left for the fallback: hold on odometry, then land",
     AgentAlarm.DEADLOCK: "formation error stalled while the filter holds it (liveness)",
+    AgentAlarm.FENCE_MISMATCH: "the vehicle's fence is not the filter's (a fence it cannot take)",
 }

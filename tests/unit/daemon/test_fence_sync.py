@@ -13,7 +13,7 @@ from pymavlink.dialects.v20 import common as M
 from offboard.agent.factory import FollowerAgent, make_agent
 from offboard.daemon.fence_sync import FenceSync
 from offboard.safety.dcbf.filter import DcbfFilter
-from swarm_common.enums import Method
+from swarm_common.enums import AgentAlarm, Method
 from swarm_common.scenario.model import load_scenario
 from swarm_common.world.config import Geofence
 from swarm_common.world.mavlink_fence import FenceItem
@@ -54,7 +54,7 @@ def test_the_scenarios_own_fence_changes_nothing(caplog) -> None:
     with caplog.at_level(logging.INFO):
         sync.on_download((1, items))
     assert not rec.fences and sync.fence is BOX and not sync.disagree
-    assert sync.summary() == "" and not caplog.records
+    assert sync.summary() == "" and not caplog.records and sync.alarm_bits() == 0
 
 
 def test_a_smaller_convex_polygon_is_taken_with_the_scenarios_band(caplog) -> None:
@@ -82,6 +82,12 @@ def test_what_the_filter_cannot_take_is_kept_and_said(case, caplog) -> None:
     assert sync.fence is BOX and sync.refused == 1 and sync.adopted == 0 and sync.disagree
     assert "the filter and the simulator disagree" in caplog.text
     assert "disagree" in sync.summary()
+    # every step's status carries it, so metrics, verdict and dashboard say it too
+    assert sync.alarm_bits() == AgentAlarm.FENCE_MISMATCH
+    if case != "no-filter":  # the vehicle back on the filter's fence: the alarm clears
+        sync.on_download((5, [FenceItem(i.seq, i.frame, i.command, i.param1, i.x, i.y)
+                              for i in scenario_fence_items(CFG, BOX)]))
+        assert not sync.disagree and sync.alarm_bits() == 0
 
 
 def test_a_bad_download_is_counted_and_dropped(caplog) -> None:

@@ -108,6 +108,15 @@ def test_own_barrier_and_alarm_bits_are_alarms_not_unsafe() -> None:
     assert m["safety_verdict"] == "alarm" and m["safety_alarm_count"] == 3
 
 
+def test_a_fence_the_filter_could_not_take_is_an_alarm() -> None:
+    t, p, v = still(5, [2.0] * 5)
+    own, al = quiet(5)
+    al[2:, 1] = AgentAlarm.FENCE_MISMATCH  # held from step 2: one event at its onset
+    m = verdict_metrics(t, p, v, np.full(5, 2.0), own, al, IDS, [1, 2], TAU, D, R_COLL)
+    assert [(e["assumption"], e["agent"]) for e in m["safety_alarms"]] == [("fence_mismatch", 8)]
+    assert m["safety_verdict"] == "alarm" and safety_exit_status(m, "dcbf") == EXIT_SAFETY
+
+
 def test_a_quiet_run_is_safe_and_exits_0() -> None:
     t, p, v = still(5, [2.0] * 5)
     own, al = quiet(5)
