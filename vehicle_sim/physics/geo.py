@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from swarm_common.world.geodesy import EARTH_R
+from swarm_common.world.geodesy import EARTH_R, north_east_of
 
 __all__ = ["EARTH_R", "down_from_amsl", "latlon_e7", "ned_from_latlon"]
 
@@ -29,10 +29,9 @@ def latlon_e7(cfg: Any, ned: np.ndarray) -> tuple[int, int]:
 
 
 def ned_from_latlon(cfg: Any, lat_deg: float, lon_deg: float) -> tuple[float, float]:
-    """(north, east) in metres of a latitude/longitude (degrees) from the origin."""
-    north = math.radians(lat_deg - cfg.home_lat) * EARTH_R
-    east = math.radians(lon_deg - cfg.home_lon) * EARTH_R * math.cos(math.radians(cfg.home_lat))
-    return north, east
+    """(north, east) in metres of a latitude/longitude (degrees) from ``cfg``'s origin
+    (:func:`swarm_common.world.geodesy.north_east_of`, the daemons' reading too)."""
+    return north_east_of(lat_deg, lon_deg, cfg.home_lat, cfg.home_lon)
 
 
 def down_from_amsl(cfg: Any, alt_amsl_m: float) -> float:
