@@ -406,14 +406,11 @@ class FollowerAgent(AgentBase):
         u = res.u
         if res.fallback:
             self.fallbacks += 1
-        status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
-        status.slack, status.violation, status.active = res.slack, res.violation, res.active
         if not finite(u):
             u = np.clip(np.nan_to_num(-w), self.u_lo, self.u_hi)
             self.fallbacks += 1
         status.fallbacks = self.fallbacks
-        (a, b, c), (x, y, z) = u.tolist(), status.u_nom.tolist()
-        status.correction = math.sqrt((a - x) * (a - x) + (b - y) * (b - y) + (c - z) * (c - z))
+        res.report_into(status, u)
         return u
 
     def current_reference(self, t: float) -> np.ndarray:

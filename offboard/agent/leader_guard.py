@@ -25,7 +25,7 @@ import numpy as np
 
 from offboard.estimation.sensing import DropoutHold, Sensor
 from offboard.records import AgentStatus
-from offboard.safety.base import SafetyInput, SafetyOutput
+from offboard.safety.base import SafetyInput
 from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.rcbf.clf_rcbf import ClfTerms
 from swarm_common.scenario.model import Scenario
@@ -87,7 +87,7 @@ class LeaderGuard:
             z1=np.array(p, dtype=float), floor_m=None,
         )
         res = self.filter.apply(x)
-        report(res, status)
+        res.report_into(status, res.u)
         if not np.all(np.isfinite(res.u)):  # never fly a non-finite command: keep the nominal
             status.fallbacks += 1
             return u_nom
@@ -99,14 +99,6 @@ class LeaderGuard:
         self.u_prev = np.array(u, dtype=float)
         self.a_real = np.array(a_real, dtype=float)
         self.a_mean = np.array(a_mean, dtype=float)
-
-
-def report(res: SafetyOutput, status: AgentStatus) -> None:
-    """The filter's report of a step into the leader's ``status``."""
-    status.qp_status, status.solve_us, status.h_min = res.qp_status, res.solve_us, res.h_min
-    status.slack, status.violation, status.active = res.slack, res.violation, res.active
-    (a, b, c), (x, y, z) = res.u.tolist(), status.u_nom.tolist()
-    status.correction = float(np.sqrt((a - x) ** 2 + (b - y) ** 2 + (c - z) ** 2))
 
 
 def leader_guard(

@@ -16,7 +16,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from offboard.records import NO_ACTIVE, ActiveRows
+from offboard.records import NO_ACTIVE, ActiveRows, AgentStatus
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, barrier, tangential_term
 from swarm_common.enums import Method, QPStatus
 from swarm_common.scenario.model import ControllerConfig
@@ -84,6 +84,14 @@ class SafetyOutput:
     violation: float = 0.0  # relaxation σ of the barrier rows (m/s²)
     fallback: bool = False  # counted in the agent's fallbacks
     active: ActiveRows = NO_ACTIVE  # the QP's rows active at its solution (the record's)
+
+    def report_into(self, status: AgentStatus, u: np.ndarray) -> None:
+        """This step's QP report into the agent's ``status``, with the correction
+        ‖u − u_nom‖ (m/s²) of the command ``u`` it flies from ``status.u_nom``."""
+        status.qp_status, status.solve_us, status.h_min = self.qp_status, self.solve_us, self.h_min
+        status.slack, status.violation, status.active = self.slack, self.violation, self.active
+        (a, b, c), (x, y, z) = u.tolist(), status.u_nom.tolist()
+        status.correction = math.sqrt((a - x) * (a - x) + (b - y) * (b - y) + (c - z) * (c - z))
 
 
 class SafetyFilter(ABC):
