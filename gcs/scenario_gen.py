@@ -29,6 +29,7 @@ tuned set of ``scenarios/grid27_knn.toml``. Bad flags: one line on stderr, exit 
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import sys
 from typing import Any
@@ -40,10 +41,12 @@ from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.inputs import one_line
 from swarm_common.scenario.files import swarm_name_problem
 from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
+from swarm_common.scenario.safety_check import allowed_transient_speed, pairs_enter
 
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
 JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
 RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this
+TRANSIENT_STEP = 0.05  # m/s: the written max_transient_speed_mps is a multiple of this
 DEFAULT_K = 6  # first knn_k tried when --k is not given
 # in process; a distributed run takes MAVLink's system ids, 1..255 (Scenario.process_problem)
 MAX_AGENTS = 2048
@@ -179,6 +182,27 @@ def _formation(v: np.ndarray, n_leaders: int, graph: GraphKind, k: int,
     return fm
 
 
+def _transient_speed(doc: dict[str, Any], where: str) -> None:
+    """Write ``controller.max_transient_speed_mps``: the largest the sensing range allows,
+    floored to TRANSIENT_STEP, when pairs come into range in flight (the range is shorter
+    than the swarm; docs/safety.md §5i); without it the load check (b) refuses the file.
+    A range too short for any limit is a :class:`GenError` naming ``--range``."""
+    doc["controller"].pop("max_transient_speed_mps", None)
+    off = logging.root.manager.disable
+    logging.disable(logging.WARNING)  # the first parse only measures: no warnings
+    try:
+        sc = parse_scenario(doc, where, allow_unsafe=True)
+    finally:
+        logging.disable(off)
+    if not pairs_enter(sc):
+        return
+    x = math.floor(allowed_transient_speed(sc) / TRANSIENT_STEP) * TRANSIENT_STEP
+    if x <= 0.0:
+        raise GenError(f"--range {sc.formation.sensing_range_m:g}: too short for any "
+                       "controller.max_transient_speed_mps (docs/safety.md 5i)")
+    doc["controller"]["max_transient_speed_mps"] = round(x, 2)
+
+
 def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     """The scenario document of the flags and the knn_k used (validated: it loads)."""
     # the DESO gain check needs scipy and numba: loaded here, not when gcs builds its parser
@@ -217,6 +241,7 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         doc["formation"] = _formation(v, n_lead, args.graph, k or DEFAULT_K, args.range, span)
         where = f"{args.shape} --agents {n}"
         try:
+            _transient_speed(doc, where)
             sc = parse_scenario(doc, where)
         except ScenarioError as exc:
             problem = str(exc)

@@ -60,6 +60,7 @@ class QPRow(IntFlag):
     OBSTACLE = 8  # a row of an obstacle's tangent plane (dcbf, docs/world.md)
     FENCE = 16  # a row of a geofence face (dcbf)
     INPUT = 32  # a bound of the input set (dcbf: the polytope; rcbf: the box)
+    SPEED = 64  # a row of the dcbf transient speed limit (docs/safety.md §5i)
 
 
 class QPSolver(StrEnum):

@@ -320,7 +320,12 @@ class FollowerAgent(AgentBase):
             world_rows = k > k_pairs
         else:
             world_rows = False
-        if held and not world_rows:
+        speed = front.filt.speed  # the transient speed limit (docs/safety.md §5i)
+        if speed is not None:
+            speed.prepare(odo[1], self.a_real, w, self._reference_xi(t))
+            res = front.filt.solve_limited(u_try, clf_terms_from(clf), k, h_min, w,
+                                           self.deso.z2, held, t0, world_rows)
+        elif held and not world_rows:
             res = SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
                                (time.perf_counter() - t0) * 1e6)
         else:  # held with world rows: the QP checks u_try against every row itself

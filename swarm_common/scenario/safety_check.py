@@ -52,6 +52,13 @@ import numpy as np
 from swarm_common.barrier import barrier
 from swarm_common.enums import StartMode
 from swarm_common.scenario.input_set import InputSet
+from swarm_common.scenario.transient_check import (
+    largest_transient_speed,
+    limited_closing_speed,
+    span,
+    speed_for_range,
+    start_speeds,
+)
 from swarm_common.scenario.world_check import world_problem
 
 if TYPE_CHECKING:
@@ -129,16 +136,35 @@ def trajectory_speed(sc: Scenario) -> float:
     return v
 
 
-def closing_speed(sc: Scenario) -> float:
-    """v̄ (m/s): the largest initial relative speed of a pair plus the reference's peak
-    speed. The reference motion is common to every agent (the bearing Laplacian annihilates
-    translations, :mod:`swarm_common.scenario.feasibility`), so it closes a pair only while
-    one of them lags it: by at most the whole reference speed. The controller has no speed
-    limit, so the transient of a follower far from its vertex is not bounded here (left to
-    the in-flight checks, docs/safety.md "Load-time checks")."""
+def start_closing_speed(sc: Scenario) -> float:
+    """v̄ (m/s) of the pairs in range from the start: the largest initial relative speed of
+    a pair plus the reference's peak speed. The reference motion is common to every agent
+    (the bearing Laplacian annihilates translations,
+    :mod:`swarm_common.scenario.feasibility`), so it closes a pair only while one of them
+    lags it: by at most the whole reference speed."""
     v = sc.initial_velocities()
     dv = np.linalg.norm(v[:, None, :] - v[None, :, :], axis=-1)
     return float(dv.max()) + trajectory_speed(sc)
+
+
+def pairs_enter(sc: Scenario) -> bool:
+    """Whether pairs can come into sensing range in flight: the range is below the
+    agents' span (:func:`swarm_common.scenario.transient_check.span`)."""
+    return sc.formation.sensing_range_m < span(sc)
+
+
+def closing_speed(sc: Scenario) -> float:
+    """v̄ (m/s): :func:`start_closing_speed`, or, where pairs come into range in flight and
+    ``controller.max_transient_speed_mps`` = v_t > 0 bounds the followers' transient, the
+    larger of it and :func:`~swarm_common.scenario.transient_check.limited_closing_speed`.
+    With v_t = 0 such pairs close at a speed nothing bounds: (b) refuses the scenario
+    (:func:`transient_problem`), and this is the start's v̄."""
+    v_bar = start_closing_speed(sc)
+    v_t = sc.controller.max_transient_speed_mps
+    if v_t <= 0.0 or not pairs_enter(sc):
+        return v_bar
+    s_f, s_l = start_speeds(sc)
+    return max(v_bar, limited_closing_speed(v_t, trajectory_speed(sc), s_f, s_l))
 
 
 # ---------------------------------------------------------------------------
@@ -166,15 +192,69 @@ def stop_range(sc: Scenario, v_bar: float, a_b: float) -> float:
             + v_bar * v_bar / (2.0 * a_b))
 
 
-def range_problem(sc: Scenario) -> str | None:
-    """(b): ``formation.sensing_range_m`` below max(R_h, R_b)."""
+def needed_range(sc: Scenario, v_bar: float) -> float:
+    """max(R_h, R_b) (m) for a pair closing at ``v_bar`` (m/s)."""
+    return max(entry_range(sc, v_bar), stop_range(sc, v_bar, braking_accel(sc)))
+
+
+def range_speed(sc: Scenario) -> float:
+    """v̄_R (m/s): the largest closing speed at which ``formation.sensing_range_m`` keeps
+    (b) (:func:`~swarm_common.scenario.transient_check.speed_for_range`)."""
+    return speed_for_range(sc.formation.sensing_range_m, sc.controller.tau_safe_s,
+                           vertical_d_safe(sc), braking_accel(sc),
+                           sc.control_dt + sc.vehicle.tau_rollpitch_s)
+
+
+def allowed_transient_speed(sc: Scenario) -> float:
+    """The largest ``controller.max_transient_speed_mps`` (m/s) that the sensing range
+    allows (:func:`~swarm_common.scenario.transient_check.largest_transient_speed`); ≤ 0 or
+    below the followers' initial speeds when none does."""
+    return largest_transient_speed(range_speed(sc), trajectory_speed(sc), start_speeds(sc)[1])
+
+
+def transient_problem(sc: Scenario) -> str | None:
+    """(b) for the pairs that come into range in flight (:func:`pairs_enter`): v_t =
+    ``controller.max_transient_speed_mps`` must be > 0 and small enough for the range
+    (docs/safety.md §5i)."""
+    c, r = sc.controller, sc.formation.sensing_range_m
+    v_t, ref = c.max_transient_speed_mps, trajectory_speed(sc)
     v_bar = closing_speed(sc)
+    need = needed_range(sc, v_bar)
+    if v_t > 0.0 and r >= need:
+        return None
+    s_f = start_speeds(sc)[0]
+    v_r = range_speed(sc)
+    x = math.floor(100.0 * allowed_transient_speed(sc)) / 100.0
+    reach = span(sc)
+    y = max(reach, needed_range(sc, start_closing_speed(sc)))  # no pair comes into range
+    head = (f"formation.sensing_range_m = {r:g}: pairs come into range in flight (the "
+            f"agents span {reach:.2f} m at the start or in the formation)")
+    if v_t <= 0.0:
+        why = ", and nothing bounds how fast (controller.max_transient_speed_mps = 0)"
+    else:
+        y = min(y, need)
+        why = (f", closing at up to {v_bar:.2f} m/s with controller.max_transient_speed_mps"
+               f" = {v_t:g} (the reference {ref:.2f} m/s + {v_bar - ref:.2f} m/s of "
+               f"transients), which must be sensed from {need:.2f} m{_kappa_note(sc)}")
+    if x > 0.0 and x >= s_f:
+        fix = f": set controller.max_transient_speed_mps ≤ {x:.2f} m/s or the range ≥ {y:.2f} m"
+    else:
+        fix = (f": no controller.max_transient_speed_mps fits (the range allows a closing "
+               f"speed of {v_r:.2f} m/s; the reference {ref:.2f} m/s and the initial speeds "
+               f"take it): set the range ≥ {y:.2f} m")
+    return head + why + fix
+
+
+def range_problem(sc: Scenario) -> str | None:
+    """(b): ``formation.sensing_range_m`` below max(R_h, R_b) at the start's closing speed;
+    then, where pairs come into range in flight, :func:`transient_problem`."""
+    v_bar = start_closing_speed(sc)
     a_b = braking_accel(sc)
     r_h, r_b = entry_range(sc, v_bar), stop_range(sc, v_bar, a_b)
     need = max(r_h, r_b)
     r = sc.formation.sensing_range_m
     if r >= need:
-        return None
+        return None if not pairs_enter(sc) else transient_problem(sc)
     if a_b <= 0.0:
         return (
             f"disturbance.amplitude_n = {sc.disturbance.amplitude_n:g}: "

@@ -191,6 +191,12 @@ class ControllerConfig:
     dcbf_vertical_scale: float = field(
         default=1.0, metadata={"spec": ("float", 1.0, 10.0, False, False)}
     )
+    # dcbf followers' speed relative to their desired velocity (optional; docs/safety.md
+    # §5i): ‖v − v*‖ ≤ v_t (m/s), so the closing speed of a pair that comes into sensing
+    # range is bounded at load (check (b)); 0 = off
+    max_transient_speed_mps: float = field(
+        default=0.0, metadata={"spec": ("float", 0.0, 100.0, False, False)}
+    )
     # solver of the rcbf and dcbf QPs (optional; docs/safety.md §4b)
     qp_solver: QPSolver = field(
         default=QPSolver.DAQP, metadata={"spec": ("str", tuple(QPSolver)), "enum": QPSolver}

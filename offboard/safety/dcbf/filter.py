@@ -11,12 +11,15 @@ them through :mod:`offboard.safety.dcbf.front` (one compiled call from its state
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from offboard.records import NO_ACTIVE, ActiveRows
 from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from offboard.safety.dcbf.qp import DcbfQP
+from offboard.safety.dcbf.speed_rows import MAX_CUTS, TOL, TransientLimit
 from offboard.safety.dcbf.step_kernel import (
     NO_ALT_G,
     NO_ALT_RHS,
@@ -56,6 +59,7 @@ GROUND_ACCEL_ERR = 1.0
 # ē also covers the other agent's unknown acceleration, which a static surface has not).
 # At rest a plane is kept at h ≥ ē(T+τ)/γ + ē(T²/2+τT): 0.39 m in cube8
 WORLD_GAMMA = 4.0
+SLACK_TOL = 1e-6  # m/s²: the speed rows stay when they add no more than this to σ
 NO_ROWS = np.zeros(0, dtype=np.int64)  # no pair rows of that kind (never written)
 
 
@@ -109,6 +113,10 @@ class DcbfFilter(SafetyFilter):
         # the world's (its planes, their first row, the agent's position)
         self._rows_of: tuple[np.ndarray, np.ndarray, bool] = (NO_ROWS, NO_ROWS, False)
         self._world_of: tuple[WorldPlanes, int, int, np.ndarray] | None = None
+        # the transient speed limit (offboard.safety.dcbf.speed_rows; configure, when the
+        # scenario sets max_transient_speed_mps) and the first of its rows this step
+        self.speed: TransientLimit | None = None
+        self._speed_from = -1
 
     def note_rows(self, sensed: np.ndarray, predicted: np.ndarray, ground: bool) -> None:
         """The step's pair rows are those of the agents of scenario indices ``sensed``, then
@@ -117,6 +125,7 @@ class DcbfFilter(SafetyFilter):
         until :meth:`add_world_rows`. Only the report of the active rows reads it."""
         self._rows_of = (sensed, predicted, ground)
         self._world_of = None
+        self._speed_from = -1
 
     def configure(self, veh: VehicleConfig, dt: float, world_planes: int = 0) -> None:
         """Vehicle limits and lags (τ_rp horizontally, τ_F vertically), control period dt (s);
@@ -125,8 +134,11 @@ class DcbfFilter(SafetyFilter):
         uset = input_set_of(self.ctl, veh)
         # two per other agent, two for the ground, two per half-space of the world
         rows = 2 * (len(self.leader_mask) - 1) + 2 + 2 * world_planes
-        if world_planes:
-            self._g = np.zeros((len(self._g) + 2 * world_planes, 3))
+        # the speed rows: MAX_CUTS tangent planes and the inner cube's six
+        speed = MAX_CUTS + 6 if self.ctl.max_transient_speed_mps > 0.0 else 0
+        rows += speed
+        if world_planes or speed:
+            self._g = np.zeros((len(self._g) + 2 * world_planes + speed, 3))
             self._rhs = np.zeros(len(self._g))
         self.qp = DcbfQP(min(rows, QP_INITIAL_ROWS), uset, self.ctl.rho, self.ctl.clf_c,
                          limit=rows, solver=self.ctl.qp_solver)
@@ -148,6 +160,9 @@ class DcbfFilter(SafetyFilter):
             REL_ACC_SMOOTH, GROUND_GAMMA, GROUND_ACCEL_ERR, self.lag.T,
             vertical_scale=ctl.dcbf_vertical_scale,
         )
+        if speed:
+            self.speed = TransientLimit(ctl.max_transient_speed_mps, self.lag,
+                                        float(self._params[P_GROUND_ERR]), uset)
 
     def prepare_trust(self, a0: np.ndarray, u_prev: np.ndarray) -> None:
         """Before a step's rows: the trust region's bound J (:meth:`TrustRegion.level`,
@@ -262,6 +277,51 @@ class DcbfFilter(SafetyFilter):
             self._rhs_alt[k : k + 2 * m] = self._rhs[k : k + 2 * m]
         return k + 2 * m
 
+    def solve_limited(
+        self, u_try: np.ndarray, clf: ClfTerms, k: int, h_min: float, w: np.ndarray,
+        z2: np.ndarray, held: bool, t0: float, world: bool = False,
+    ) -> SafetyOutput:
+        """:meth:`solve_rows` with the speed rows of :attr:`speed` (prepared this step;
+        :mod:`offboard.safety.dcbf.speed_rows`) after the first ``k`` rows. ``held``:
+        ``u_try`` keeps the pair and ground rows and the input set; it is flown when no
+        world rows were added (``world``) and it keeps the speed limit too (``t0``: the
+        step's clock start, for ``solve_us``). A first cut goes in
+        when ``u_try`` is near the limit; while the answer is outside it, one more cut (at
+        most MAX_CUTS), then the inner cube. If the QP needs its slack (or fails) with speed
+        rows, it is solved again without them: the pair, ground and world rows come first
+        (their claim needs σ = 0). Their answer is flown unless it needs as much slack
+        (to SLACK_TOL) as the one with the speed rows: then the pair rows are relaxed
+        either way, and the speed rows stay."""
+        lim = self.speed
+        if lim is None or self.qp is None:
+            raise RuntimeError("DcbfFilter.solve_limited: no max_transient_speed_mps")
+        if held and not world and lim.excess(u_try) <= 0.0:
+            return SafetyOutput(u_try, h_min, QPStatus.INACTIVE, (time.perf_counter() - t0) * 1e6)
+        cuts = [lim.direction(u_try)] if lim.near(u_try) else []
+        cube = False
+        base: SafetyOutput | None = None  # the answer without speed rows, if needed
+        while True:
+            n = lim.write(cuts, cube, self._g, self._rhs, k)
+            self.qp.fit_rows(k + n)
+            if n and self._params[P_ALT_ERR] > 0.0:  # the same rows for the tight QP
+                self._g_alt[k : k + n] = self._g[k : k + n]
+                self._rhs_alt[k : k + n] = self._rhs[k : k + n]
+            self._speed_from = k if n else -1
+            res = self.solve_rows(u_try, clf, k + n, h_min, w, z2, unheld=not held)
+            if res.qp_status.degraded and n:  # σ > 0 (or failed) with them: without them?
+                if base is None:
+                    base = self.solve_rows(u_try, clf, k, h_min, w, z2, unheld=not held)
+                if (not base.qp_status.degraded or res.qp_status is not QPStatus.RELAXED
+                        or res.violation > base.violation + SLACK_TOL):
+                    self._speed_from = -1  # they cost the other rows slack: dropped
+                    return base
+            if cube or lim.excess(res.u) <= TOL:
+                return res
+            if len(cuts) < MAX_CUTS:
+                cuts.append(lim.direction(res.u))
+            else:
+                cube = True
+
     def solve_rows(
         self, u_try: np.ndarray, clf: ClfTerms, k: int, h_min: float, w: np.ndarray,
         z2: np.ndarray, unheld: bool = False,
@@ -322,6 +382,8 @@ class DcbfFilter(SafetyFilter):
                     pairs.append(j)
             elif ground and r < 2 * m + 2:
                 kinds |= QPRow.GROUND
+            elif 0 <= self._speed_from <= r:  # the speed rows come last
+                kinds |= QPRow.SPEED
             elif self._world_of is not None:  # two rows per plane: obstacles, then fence
                 planes, first, n_planes, p = self._world_of
                 if n_obstacle < 0:

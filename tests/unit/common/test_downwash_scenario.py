@@ -95,7 +95,9 @@ def test_sensing_range_uses_the_vertical_semi_axis() -> None:
     line = chk.range_problem(small)
     assert line is not None and "dcbf_vertical_scale = 3" in line
     sphere = replace(small, controller=replace(small.controller, dcbf_vertical_scale=1.0))
-    assert chk.range_problem(sphere) is None
+    # the sphere passes the braking part; only the in-flight entries (§5i) remain
+    rest = chk.range_problem(sphere)
+    assert rest is None or "pairs come into range in flight" in rest
 
 
 def test_rest_spacing_grows_vertically_only() -> None:

@@ -132,7 +132,9 @@ def test_bad_graph_refused_at_load_naming_the_key(sc27, over, pattern):
 
 
 def test_range_graph_loads_and_is_the_range_rule(sc27):
-    sc = with_overrides(sc27, formation={"graph": "range", "sensing_range_m": 4.3})
+    # the shorter range takes a smaller transient speed limit (docs/safety.md §5i)
+    sc = with_overrides(sc27, formation={"graph": "range", "sensing_range_m": 4.3},
+                        controller={"max_transient_speed_mps": 0.7})
     f = formation_from_scenario(sc)
     assert len(f.edges) == 54 + 72  # 4.3 m at 3 m per unit: axis edges and face diagonals
 

@@ -110,8 +110,13 @@ def test_lag_bound_is_routh_with_margin():
 
 # --- (b) sensing range vs braking ---------------------------------------------------------
 def test_short_range_for_the_mission_speed_is_refused():
-    """square27 (range 5 m) with mission.max_speed_mps 3.2: v̄ = 3.2, R_h = 5.17 m > 5."""
-    _variant(SQUARE27, mission={"max_speed_mps": 3.0})  # R_h = 4.85 m: just inside
+    """square27 (range 5 m) with mission.max_speed_mps 3.2: v̄ = 3.2, R_h = 5.17 m > 5.
+    At 3.0 m/s the start fits (R_h = 4.85 m) and leaves the followers' transient 0.04 m/s
+    (docs/safety.md §5i)."""
+    _variant(SQUARE27, mission={"max_speed_mps": 3.0},
+             controller={"max_transient_speed_mps": 0.04})
+    _refused(SQUARE27, "controller.max_transient_speed_mps ≤ 0.04 m/s",
+             mission={"max_speed_mps": 3.0}, controller={"max_transient_speed_mps": 0.5})
     msg = _refused(SQUARE27, "formation.sensing_range_m = 5", mission={"max_speed_mps": 3.2})
     assert "5.17 m" in msg
 

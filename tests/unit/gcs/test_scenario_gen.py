@@ -147,3 +147,25 @@ def test_bad_flag_values_exit_2(argv: list[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         _args(*argv)
     assert exc.value.code == 2
+
+
+def test_short_range_gets_a_transient_limit_it_allows() -> None:
+    """A 27-agent grid at its default range (1.2 × the longest edge, shorter than the
+    swarm): the file carries the largest controller.max_transient_speed_mps (a multiple of
+    0.05 m/s) that the range allows, and loads with no broken assumption (docs/safety.md
+    §5i). A scrambled one is sensed whole (range ≥ its span): no limit is written."""
+    from swarm_common.scenario.safety_check import allowed_transient_speed, safety_problems
+    from swarm_common.scenario.transient_check import span
+
+    doc, _ = build(_args("grid", "--agents", "27", "--leaders", "3", "--scramble", "2"))
+    sc = _load(dump_toml(doc))
+    v_t = sc.controller.max_transient_speed_mps
+    assert sc.formation.sensing_range_m < span(sc)
+    assert 0.0 < v_t <= allowed_transient_speed(sc) < v_t + 0.05
+    assert safety_problems(sc) == []
+    doc, _ = build(_args("grid", "--agents", "27", "--leaders", "3", "--scramble", "2",
+                         "--mix", "1"))
+    sc = _load(dump_toml(doc))
+    assert sc.formation.sensing_range_m >= span(sc)
+    assert sc.controller.max_transient_speed_mps == 0.0
+    assert safety_problems(sc) == []

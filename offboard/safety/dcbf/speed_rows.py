@@ -1,0 +1,117 @@
+"""The dcbf follower's transient speed limit (``controller.max_transient_speed_mps`` = v_t > 0;
+docs/safety.md §5i).
+
+Why: a pair gets barrier rows only once sensed, so the load-time check of the sensing range
+(swarm_common.scenario.safety_check, (b)) needs a bound on the speed at which two agents
+can close when they come into range. The nominal law has none: a follower far from its
+vertex flies toward it as fast as its gains ask. These rows bound the follower's velocity
+relative to its desired velocity v* (from the desired-state estimate ξ̂ it tracks),
+e = v − v*, so that the check can take ‖e‖ ≤ v_t.
+
+**Rows.** Over the dcbf horizon T = τ_rp + dt, with the per-axis lag of
+:class:`~offboard.safety.dcbf.model.LagCoefficients` (the pair and world rows' model), the
+predicted velocity is ``v̂_T = v + ia·a0 + w T + cv·u`` and the desired one
+``v*_T = v* + a* T + j* T²/2`` (ξ̂'s jet), so ``ê_T = e0 + cv∘u`` with
+``e0 = v + ia·a0 + w T − v*_T``, linear in u (cv > 0 per axis). The limit is the ball
+``‖ê_T‖ ≤ b``, ``b = v_t − ē_w T`` (ē_w: the world rows' norm bound on the own
+acceleration's error, so the true ‖e(T)‖ ≤ ‖ê_T‖ + ē_w T ≤ v_t). The QP gets it as
+tangent planes (cuts) ``nᵀê_T ≤ b``, n a unit direction, i.e. ``−(n∘cv)ᵀu ≥ nᵀe0 − b``,
+scaled to a unit gradient: the first at the direction of ê_T for the command tried first,
+then, while the QP's answer is outside the ball, one more at the answer's direction
+(cutting planes, at most :data:`MAX_CUTS`). If the answer is still outside, the inner cube
+``|ê_T,a| ≤ b/√3`` (six rows) is added, whose every point is in the ball. So the answer
+flown keeps ‖ê_T‖ ≤ b whenever the QP needs no slack: that, not the polytope, is the
+guarantee.
+
+**Feasibility.** A follower that is already faster than v_t (a fast start, or rows
+dropped for the pair rows) must be allowed to slow down within the input set: each row's
+right side is clipped to what ``u_b`` achieves, the command that steers ê_T to 0 projected
+into the input set (a point of the set that keeps every clipped row). So these rows never
+need the QP's slack on their own; with the others, the filter drops them rather than
+relax a pair's (:meth:`offboard.safety.dcbf.filter.DcbfFilter.solve_limited`).
+
+**Only near the limit.** No row is added while the command tried first (u_nom plus the
+sidestep) predicts ‖ê_T‖ ≤ NEAR·b and the QP's answer stays in the ball: a run that stays
+below NEAR·b is bit for bit the run without the key.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from offboard.safety.base import W_SAFE, saturate_norm
+from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
+
+NEAR = 0.8  # a first cut is added once the tried command predicts this fraction of b
+TOL = 1e-6  # m/s: an answer this little outside the ball needs no further cut (rounding)
+MAX_CUTS = 3  # tangent planes before the inner cube is added
+
+
+class TransientLimit:
+    """One follower's speed rows (module docstring): :meth:`prepare` each step, then
+    :meth:`excess` to test a command and :meth:`write` to append rows."""
+
+    def __init__(self, v_t: float, lag: LagCoefficients, err: float,
+                 uset: ProjectedInputSet) -> None:
+        if v_t <= 0.0:
+            raise ValueError("TransientLimit: max_transient_speed_mps must be > 0")
+        self.v_t = float(v_t)
+        self.T = float(lag.T)
+        self.ia = lag.ia.copy()
+        self.cv = lag.cv.copy()
+        self.uset = uset
+        # the ball's radius for ê_T; ≥ 0 (a zero radius asks ê_T = 0, clipped to what u can do)
+        self.bound = max(0.0, self.v_t - float(err) * self.T)
+        self.e0 = np.zeros(3)  # ê_T at u = 0 (m/s)
+        self.u_b = np.zeros(3)  # the command toward ê_T = 0, in the input set (m/s²)
+
+    def prepare(self, v: np.ndarray, a0: np.ndarray, w: np.ndarray, xi: np.ndarray) -> None:
+        """The step's ê_T at u = 0 from the own velocity ``v`` (m/s), realised acceleration
+        ``a0`` and disturbance estimate ``w`` (m/s², saturated at W_SAFE here, as for the
+        world rows), and the desired state ``xi`` (12,) the nominal law tracks; and ``u_b``."""
+        t = self.T
+        w = saturate_norm(w, W_SAFE)
+        v_star = xi[3:6] + xi[6:9] * t + 0.5 * xi[9:12] * (t * t)
+        self.e0 = v + self.ia * a0 + w * t - v_star
+        self.u_b = self.uset.project(-self.e0 / self.cv)
+
+    def predicted(self, u: np.ndarray) -> np.ndarray:
+        """ê_T (3,) (m/s) for the command ``u`` (m/s²)."""
+        return self.e0 + self.cv * u
+
+    def excess(self, u: np.ndarray) -> float:
+        """‖ê_T(u)‖ − b (m/s): > 0 is outside the ball."""
+        return float(np.linalg.norm(self.predicted(u))) - self.bound
+
+    def near(self, u: np.ndarray) -> bool:
+        """Whether ``u`` predicts ‖ê_T‖ > NEAR·b (a first cut is due)."""
+        return float(np.linalg.norm(self.predicted(u))) > NEAR * self.bound
+
+    def direction(self, u: np.ndarray) -> np.ndarray:
+        """The unit direction of ê_T(u) (a cut's normal; any unit vector at ê_T = 0)."""
+        e = self.predicted(u)
+        n = float(np.linalg.norm(e))
+        return e / n if n > 0.0 else np.array([1.0, 0.0, 0.0])
+
+    def write(self, cuts: list[np.ndarray], cube: bool, g: np.ndarray, rhs: np.ndarray,
+              start: int) -> int:
+        """The rows ``gᵀu ≥ r`` of the ``cuts`` (unit normals n: nᵀê_T ≤ b) and, with
+        ``cube``, of the inner cube (±e_a: ±ê_T,a ≤ b/√3), into ``g``, ``rhs`` from row
+        ``start``; each clipped to what ``u_b`` achieves. Returns how many."""
+        planes = list(cuts)
+        radius = [self.bound] * len(planes)
+        if cube:
+            for a in range(6):
+                n = np.zeros(3)
+                n[a % 3] = 1.0 if a < 3 else -1.0
+                planes.append(n)
+                radius.append(self.bound / math.sqrt(3.0))
+        for i, (n, b) in enumerate(zip(planes, radius, strict=True)):
+            grad = -(n * self.cv)
+            norm = float(np.linalg.norm(grad))
+            g[start + i] = grad / norm
+            need = (float(n @ self.e0) - b) / norm
+            rhs[start + i] = min(need, float(g[start + i] @ self.u_b))
+        return len(planes)
