@@ -217,6 +217,13 @@ def transient_problem(sc: Scenario) -> str | None:
     ``controller.max_transient_speed_mps`` must be > 0 and small enough for the range
     (docs/safety.md §5i)."""
     c, r = sc.controller, sc.formation.sensing_range_m
+    rogue = next((k for k, a in enumerate(sc.agents) if not a.cooperative), None)
+    if rogue is not None:  # it flies no filter, so no speed row bounds it (§5i)
+        reach = max(span(sc), needed_range(sc, start_closing_speed(sc)))
+        return (f"agent[{rogue}].cooperative = false: pairs come into range in flight "
+                f"(formation.sensing_range_m = {r:g} < the agents' span {span(sc):.2f} m) "
+                "and nothing bounds how fast a follower with no filter closes: set the "
+                f"range ≥ {reach:.2f} m")
     v_t, ref = c.max_transient_speed_mps, trajectory_speed(sc)
     v_bar = closing_speed(sc)
     need = needed_range(sc, v_bar)

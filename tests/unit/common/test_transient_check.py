@@ -119,3 +119,18 @@ def test_allow_unsafe_runs_it_with_a_warning(caplog):
 
 def test_the_limit_is_ignored_where_no_pair_comes_into_range():
     assert chk.closing_speed(_cube8(10.0, 0.3)) == chk.start_closing_speed(_cube8(10.0))
+
+
+def test_a_non_cooperative_follower_needs_the_whole_span_sensed() -> None:
+    """A follower with no filter has no speed rows, so no v_t bounds how fast it comes into
+    range: below the span, cube8_rogue is refused naming the agent and the range, whatever
+    v_t; at the span it loads."""
+    data = load_scenario(ROOT / "scenarios" / "cube8_rogue.toml").to_toml_dict()
+    data["controller"]["max_transient_speed_mps"] = 1.15
+    data["formation"]["sensing_range_m"] = 5.7
+    with pytest.raises(UnsafeScenarioError) as exc:
+        parse_scenario(data, "rogue.toml")
+    msg = str(exc.value)
+    assert "\n" not in msg and "cooperative = false" in msg and "formation.sensing_range_m" in msg
+    data["formation"]["sensing_range_m"] = round(tc.span(_cube8(10.0)) + 0.01, 2)
+    assert chk.range_problem(parse_scenario(data, "rogue.toml")) is None
