@@ -23,7 +23,9 @@ formations"):
   until it is back in sensing range (docs/scenarios.md).
 
 Everything else (vehicle, observer and controller gains, the leaders' trajectory) is the
-tuned set of ``scenarios/grid27_knn.toml``. Bad flags: one line on stderr, exit 2.
+tuned set of ``scenarios/grid27_knn.toml``, but for ``[sensing] noise_draws = "in_range"``:
+a sensor draws noise for the agents in its range only, so a step's cost follows the
+neighbours, not the swarm's size (docs/scenarios.md). Bad flags: one line on stderr, exit 2.
 """
 
 from __future__ import annotations
@@ -135,7 +137,7 @@ def _template(name: str, seed: int, duration: float, deadline: float) -> dict[st
         "leader_trajectory": {"frequency_hz": 0.2, "amplitude_m": [0.8, 0.4, 0.2]},
         "sensing": {"bearing_noise_rad": 0.001, "bearing_rate_noise_radps": 0.002,
                     "distance_noise_m": 0.005, "range_rate_noise_mps": 0.005,
-                    "dropout_prob": 0.0},
+                    "dropout_prob": 0.0, "noise_draws": "in_range"},
         "communication": {"outages_s": [[5.0, 5.5], [15.0, 15.5], [40.0, 40.5]],
                           "max_age_s": 1.0},
         "observer": {"beta": [24.0, 108.0, 108.0], "mu": 0.005, "sigma": 0.15, "substeps": 4,

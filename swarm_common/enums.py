@@ -36,6 +36,14 @@ class GraphKind(StrEnum):
     EDGES = "edges"  # the id pairs listed in formation.edges
 
 
+class NoiseDraws(StrEnum):
+    """Which pairs a follower's sensor draws noise for each step (docs/scenarios.md
+    ``[sensing] noise_draws``)."""
+
+    EVERY_AGENT = "every_agent"  # N×9 draws a step, whatever is in range (the default)
+    IN_RANGE = "in_range"  # 9 draws per pair in range: the cost follows the neighbours
+
+
 class QPStatus(StrEnum):
     """Outcome of one safety-filter step (``offboard.safety.rcbf.clf_rcbf.QPResult.status``)."""
 

@@ -6,9 +6,13 @@ the bearing ``g_ij``, the bearing rate ``ġ_ij = P_ij (v_j − v_i)/d_ij``, the 
 (``[sensing]``), and independent per-pair dropouts. From them the relative position and
 velocity follow: ``p_j − p_i = g_ij d_ij`` and ``v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij``.
 
-Reproducibility: the generator is ``np.random.default_rng([seed, agent_id, 0x5E])`` and
-every call draws the same count of numbers (N×8 normals and N uniforms) whatever is in
-range, so runs with the same seed are identical.
+Reproducibility: the generator is ``np.random.default_rng([seed, agent_id, 0x5E])``.
+With ``[sensing] noise_draws = "every_agent"`` (the default) every call draws the same
+count of numbers (N×8 normals and N uniforms) whatever is in range. With ``"in_range"``
+it draws 8 normals and 1 uniform per agent in range, in index order, so the cost of a
+call follows the number of neighbours, not N (a large swarm). Both depend only on the
+seed and the true states, so runs with the same seed are identical, in process and
+distributed.
 """
 
 from __future__ import annotations
@@ -17,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offboard.estimation.sensing_kernel import hold_kernel, measure_into
+from offboard.estimation.sensing_kernel import hold_kernel, measure_into, range_rows
+from swarm_common.enums import NoiseDraws
 from swarm_common.fastnp import rows3
 from swarm_common.scenario.model import SensingConfig
 
@@ -70,30 +75,39 @@ class Sensor:
         self._sig = tuple(float(x) for x in self.sig)  # plain floats: no numpy scalars
         self.dropout = float(sensing.dropout_prob)
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
+        self.in_range_only = sensing.noise_draws is NoiseDraws.IN_RANGE
         # the draws of a call, written in place (``out=``: the same numbers as drawing new
         # arrays of that shape, without the allocations); read only within the call
         self._noise = np.empty((n, 8))
         self._drop = np.empty(n)
+        self._rows = np.arange(n, dtype=np.int64)  # agent j's row of the draws
 
     def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:
         """Measurements from ground-truth (N,3) ENU positions (m) and velocities (m/s).
 
-        The noise is drawn here (N×8 standard normals, then N uniforms: the same draws for
-        the same seed); the geometry, the noisy measurements and the validity mask are the
-        compiled :func:`offboard.estimation.sensing_kernel.measure_into`.
+        The noise is drawn here (N×8 standard normals, then N uniforms, or as many rows as
+        agents in range: module docstring); the geometry, the noisy measurements and the
+        validity mask are the compiled
+        :func:`offboard.estimation.sensing_kernel.measure_into`.
         """
         n = self.n
         p, v = np.asarray(p), np.asarray(v)
         if p.shape != (n, 3) or v.shape != (n, 3):  # the kernel writes n rows, unchecked
             raise ValueError(f"truth of shapes {p.shape} and {v.shape}, expected ({n}, 3)")
-        noise = self.rng.standard_normal(out=self._noise)
-        drop = self.rng.random(out=self._drop)
+        if self.in_range_only:
+            p = rows3(p)
+            k = range_rows(p, self.index, self.range, self._rows)
+            noise = self.rng.standard_normal(out=self._noise[:k])
+            drop = self.rng.random(out=self._drop[:k])
+        else:
+            noise = self.rng.standard_normal(out=self._noise)
+            drop = self.rng.random(out=self._drop)
         sb, sr, sd, sdd = self._sig
         vec, sca = np.empty((4, n, 3)), np.empty((2, n))  # C-contiguous (n,3) and (n,) views
         out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
                            vec[3])
         measure_into(
-            rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
+            rows3(p), rows3(v), self.index, noise, drop, self._rows, sb, sr, sd, sdd, self.range,
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
         )
         return out

@@ -29,8 +29,28 @@ def dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> fl
 
 
 @kernel
+def range_rows(p: np.ndarray, i: int, range_m: float, rows: np.ndarray) -> int:
+    """Numbers the agents in agent ``i``'s range: writes ``rows[j]`` (N,) = 0, 1, ... for
+    each j ≠ i with true distance ≤ ``range_m`` (m), in index order, −1 for the others,
+    and returns their count. The distance is :func:`measure_into`'s, so the two agree on
+    who is in range."""
+    n = p.shape[0]
+    k = 0
+    for j in range(n):
+        r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+        d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
+        if j != i and d <= range_m:
+            rows[j] = k
+            k += 1
+        else:
+            rows[j] = -1
+    return k
+
+
+@kernel
 def measure_into(
     p: np.ndarray, v: np.ndarray, i: int, noise: np.ndarray, drop: np.ndarray,
+    rows: np.ndarray,
     sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
     valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
     rel_p: np.ndarray, rel_v: np.ndarray,
@@ -40,9 +60,11 @@ def measure_into(
     rel_v``, every element; the last two from the measured ones, ``g̃ d̃`` (m) and
     ``ġ̃ d̃ + g̃ ḋ̃`` (m/s).
 
-    p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (N,8) standard
-    normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate); drop (N,)
-    uniforms in [0,1); sb (rad), sr (rad/s), sd (m), sdd (m/s) noise standard deviations;
+    p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (M,8) standard
+    normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate); drop (M,)
+    uniforms in [0,1); rows (N,) int64: agent j's row of noise and drop, −1 for none
+    (zero noise, not dropped: an agent out of range, invalid anyway); sb (rad), sr (rad/s),
+    sd (m), sdd (m/s) noise standard deviations;
     range_m sensing range (m); dropout per-pair dropout probability.
 
     Per row j, with r = p_j − p_i, w = v_j − v_i: ``d = ‖r‖`` (1 for j = i), ``g = r/d``
@@ -58,7 +80,17 @@ def measure_into(
     n = p.shape[0]
     g = np.empty(3)
     w = np.empty(3)
+    nz = np.zeros(8)
     for j in range(n):
+        q = rows[j]
+        if q >= 0:
+            for k in range(8):
+                nz[k] = noise[q, k]
+            dr = drop[q]
+        else:
+            for k in range(8):
+                nz[k] = 0.0
+            dr = 1.0
         r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
         w[0], w[1], w[2] = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
         d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
@@ -69,16 +101,16 @@ def measure_into(
             g[0] = 1.0  # placeholder row for itself (marked invalid)
         gd = dot3(g[0], g[1], g[2], w[0], w[1], w[2])
         # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
-        b0 = g[0] + noise[j, 0] * sb
-        b1 = g[1] + noise[j, 1] * sb
-        b2 = g[2] + noise[j, 2] * sb
+        b0 = g[0] + nz[0] * sb
+        b1 = g[1] + nz[1] * sb
+        b2 = g[2] + nz[2] * sb
         nb = math.sqrt(dot3(b0, b1, b2, b0, b1, b2))
         gm[j, 0], gm[j, 1], gm[j, 2] = b0 / nb, b1 / nb, b2 / nb
         for k in range(3):
-            gdm[j, k] = (w[k] - g[k] * gd) / d + noise[j, 3 + k] * sr
-        dm[j] = d + noise[j, 6] * sd
-        ddm[j] = gd + noise[j, 7] * sdd
-        valid[j] = (d <= range_m) and (drop[j] >= dropout) and j != i
+            gdm[j, k] = (w[k] - g[k] * gd) / d + nz[3 + k] * sr
+        dm[j] = d + nz[6] * sd
+        ddm[j] = gd + nz[7] * sdd
+        valid[j] = (d <= range_m) and (dr >= dropout) and j != i
         for k in range(3):
             rel_p[j, k] = gm[j, k] * dm[j]
             rel_v[j, k] = gdm[j, k] * dm[j] + gm[j, k] * ddm[j]

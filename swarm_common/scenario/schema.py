@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from swarm_common.enums import GraphKind, Method, QPSolver, Role, StartMode
+from swarm_common.enums import GraphKind, Method, NoiseDraws, QPSolver, Role, StartMode
 from swarm_common.inputs import is_finite_number
 from swarm_common.ports import MAX_ID
 
@@ -111,13 +111,18 @@ class LeaderTrajectoryConfig:
 
 @dataclass(frozen=True)
 class SensingConfig:
-    """``[sensing]``: noise standard deviations and per-pair dropout probability."""
+    """``[sensing]``: noise standard deviations, per-pair dropout probability and which
+    pairs draw noise (``noise_draws``, optional; docs/scenarios.md)."""
 
     bearing_noise_rad: float = _num(0.0, 1.0)
     bearing_rate_noise_radps: float = _num(0.0, 10.0)
     distance_noise_m: float = _num(0.0, 10.0)
     range_rate_noise_mps: float = _num(0.0, 10.0)
     dropout_prob: float = _num(0.0, 1.0, hi_open=True)
+    noise_draws: NoiseDraws = field(
+        default=NoiseDraws.EVERY_AGENT,
+        metadata={"spec": ("str", tuple(NoiseDraws)), "enum": NoiseDraws},
+    )
 
 
 @dataclass(frozen=True)

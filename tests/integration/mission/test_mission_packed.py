@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ from conftest import CUBE8, ROOT, free_port_offset
 
 from gcs.mission.distributed import recorded_metrics, run_distributed
 from gcs.mission.inproc import run_inproc
-from swarm_common.scenario.model import load_scenario
+from swarm_common.scenario.model import dump_toml, load_scenario
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -41,6 +43,28 @@ def test_lockstep_packed_run_matches_inproc(tmp_path: Path) -> None:
         assert (tmp_path / f"vehicle_{i}.tlog").stat().st_size > 0
 
 
+def test_in_range_noise_draws_packed_run_matches_inproc(tmp_path: Path) -> None:
+    """``[sensing] noise_draws = "in_range"`` on cube8 with a 5.7 m range (pairs come into
+    and out of range, so each sensor's draws change in count from step to step): two daemon
+    processes give the in-process run's numbers, as with the default draws."""
+    doc = tomllib.loads(Path(CUBE8).read_text())
+    doc["formation"]["sensing_range_m"] = 5.7
+    doc["controller"]["max_transient_speed_mps"] = 1.15
+    doc["sensing"]["noise_draws"] = "in_range"
+    path = tmp_path / "cube8_in_range.toml"  # the daemons read the file
+    path.write_text(dump_toml(doc))
+    sc = load_scenario(path)
+    dur = 3.0
+    ref = run_inproc(sc, "dcbf", duration=dur)
+    out = tmp_path / "run"
+    rec, facts = run_distributed(sc, out, "dcbf", None, dur, port_offset=free_port_offset(),
+                                 show_progress=False, processes=2)
+    m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
+    assert facts["failed_agents"] == []
+    assert len(ser.t) == len(ref.series.t) == int(dur * 50)
+    _same_as_inproc(out, facts, ser, ref.series)
+
+
 def test_sparse_graph_packed_run_matches_inproc(tmp_path: Path) -> None:
     """grid27_knn (each daemon subscribes to its peers' keys only, offboard.agent.peers)
     in three daemon processes: the in-process runner gives each agent the same peers'
@@ -56,12 +80,18 @@ def test_sparse_graph_packed_run_matches_inproc(tmp_path: Path) -> None:
     assert facts["failed_agents"] == []
     assert len(ser.t) == len(ref.series.t) == int(dur * sc.run.control_hz)
     assert m["collisions"] == 0
-    missed = _lockstep_misses(tmp_path, facts)
+    _same_as_inproc(tmp_path, facts, ser, ref.series)
+
+
+def _same_as_inproc(run_dir: Path, facts: dict, ser: Any, ref: Any) -> None:
+    """The distributed series equals the in-process one (float32 wire rounding only),
+    unless the run reported a lockstep wait it gave up (:func:`_lockstep_misses`)."""
+    missed = _lockstep_misses(run_dir, facts)
     if missed:  # a starved machine: lockstep gave up waiting, and the run said so
         print(f"not compared with the in-process run: {missed[:3]}")
         return
-    assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
-    np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)
+    assert np.max(np.abs(ser.p - ref.p)) < 1e-6
+    np.testing.assert_allclose(ser.z1, ref.z1, atol=1e-9, rtol=0)
 
 
 def _lockstep_misses(run_dir: Path, facts: dict) -> list[str]:
