@@ -3,6 +3,8 @@
 * :class:`gcs.report.metrics.Series` and :func:`gcs.report.metrics.compute_metrics` - mission
   metrics from a run's time series.
 * :mod:`gcs.report.safety_metrics` - offline safety metrics from ground truth.
+* :mod:`gcs.report.pair_barriers` - the true barrier of every pair and step, summarised
+  (least value, counts, onsets below 0) in one compiled pass without the whole array.
 * :mod:`gcs.report.verdict` - a run's safety verdict: every broken assumption as a timed event,
   one word for the run, and `gcs mission run`'s exit status.
 * :mod:`gcs.report.safety_table` - the comparison report's safety and tracking table.

@@ -4,8 +4,8 @@ Every metric is defined, with its unit and window, in docs/metrics.md. In short:
 
 * safety, from the simulator's TRUE states: ``min_distance_m`` (also per phase), the true
   barrier ``h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D²`` (paper eq. 9, τ = ``tau_safe_s``,
-  D = ``d_safe_m``) over every pair and step (:func:`pair_barrier`), and the steps where
-  it is negative;
+  D = ``d_safe_m``) over every pair and step (:func:`gcs.report.verdict.pair_barrier`),
+  and the steps where it is negative;
 * tracking, over the FIXED window [``formation_deadline_s``, end] of the followers'
   ‖p − p_des‖ (:func:`window_tracking`), unconditionally;
 * energies over the followers (the methods differ only there): ``energy_u = ∫Σ‖u_i‖²dt``,
@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from gcs.report.verdict import ground_strike_steps, pair_barrier, verdict_metrics
+from gcs.report.pair_barriers import PairBarrierSummary, pair_barrier_summary
+from gcs.report.verdict import ground_strike_steps, verdict_metrics
 from gcs.report.world_metrics import WORLD_KEYS, world_metric_values, world_truth
 from swarm_common.world.config import World
 
@@ -112,19 +113,20 @@ def formation_time(t: np.ndarray, err: np.ndarray, tol: float = TRACK_TOL_M) -> 
 
 
 def barrier_metrics(
-    p: np.ndarray, v: np.ndarray, tau: float, d_safe: float, h: np.ndarray | None = None,
+    p: np.ndarray, v: np.ndarray, tau: float, d_safe: float,
+    pairs: PairBarrierSummary | None = None,
 ) -> dict[str, float | int | None]:
-    """``h_min`` (m², min of :func:`pair_barrier` over pairs and steps), the steps where some
-    pair has h < 0 (``barrier_violation_steps``) and the (pair, step) samples with h < 0
-    (``barrier_violation_pair_steps``). ``h``: that barrier when the caller has it already."""
+    """``h_min`` (m², min of :func:`~gcs.report.verdict.pair_barrier` over pairs and steps),
+    the steps where some pair has h < 0 (``barrier_violation_steps``) and the (pair, step)
+    samples with h < 0 (``barrier_violation_pair_steps``). ``pairs``: their summary when the
+    caller has it already (:func:`~gcs.report.pair_barriers.pair_barrier_summary`)."""
     if p.shape[0] == 0 or p.shape[1] < 2:
         return {"h_min": None, "barrier_violation_steps": 0, "barrier_violation_pair_steps": 0}
-    h = pair_barrier(p, v, tau, d_safe) if h is None else h
-    neg = h < 0.0
+    pairs = pair_barrier_summary(p, v, tau, d_safe) if pairs is None else pairs
     return {
-        "h_min": float(h.min()),
-        "barrier_violation_steps": int(np.sum(np.any(neg, axis=1))),
-        "barrier_violation_pair_steps": int(np.sum(neg)),
+        "h_min": pairs.h_min,
+        "barrier_violation_steps": pairs.violation_steps,
+        "barrier_violation_pair_steps": pairs.violation_pair_steps,
     }
 
 
@@ -235,8 +237,8 @@ def compute_metrics(
     thr = s.thrust[:, f]
     deadline = spec.formation_deadline_s
     # the true barrier of every pair and step, once: the barrier metrics and the verdict
-    h = (pair_barrier(s.p, s.v, spec.tau_safe_s, spec.d_safe_m, spec.vertical_scale)
-         if s.p.shape[1] >= 2 else None)
+    h = (pair_barrier_summary(s.p, s.v, spec.tau_safe_s, spec.d_safe_m, spec.vertical_scale)
+         if s.p.shape[1] >= 2 and len(s.t) else None)
     world = world_truth(spec.world, s.p, s.v, spec.tau_safe_s)
     return {
         "min_distance_m": float(s.min_dist.min()),

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
+from gcs.report.pair_barriers import PairBarrierSummary, pair_barrier_summary
 from gcs.report.world_metrics import WorldTruth
 from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm, Method, SafetyAlarmKind
@@ -96,24 +97,26 @@ def _event(t: float, kind: SafetyAlarmKind, agent: int | None, other: int | None
 def safety_events(
     t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
     alarms: np.ndarray, ids: list[int], tau_s: float, d_safe_m: float,
-    collision_radius_m: float, h: np.ndarray | None = None, world: WorldTruth | None = None,
+    collision_radius_m: float, h: PairBarrierSummary | None = None,
+    world: WorldTruth | None = None,
 ) -> list[dict[str, Any]]:
     """Every onset, sorted by time: ``t`` (K,) s; ``p``, ``v`` (K,N,3) true positions (m)
     and velocities (m/s); ``min_dist`` (K,) the smallest pair distance over the physics
     steps of the period after t_k (m; a contact between two control steps is seen there);
     ``own_h`` (K,N) each agent's own smallest barrier (m², inf or NaN where it computed
     none); ``alarms`` (K,N) :class:`AgentAlarm` bits; ``ids`` the agents' ids in column
-    order. τ (s) and D (m): the barrier's horizon and distance; ``h`` (K, pairs) their
-    :func:`pair_barrier` when the caller has it already; ``world`` the run's truth against
-    its obstacles and geofence (an obstacle event names the obstacle's index as ``other``).
-    A contact names the pair closest at its control step."""
+    order. τ (s) and D (m): the barrier's horizon and distance; ``h`` the summary of their
+    :func:`pair_barrier` (:mod:`gcs.report.pair_barriers`) when the caller has it already;
+    ``world`` the run's truth against its obstacles and geofence (an obstacle event names
+    the obstacle's index as ``other``). A contact names the pair closest at its control step."""
     out: list[dict[str, Any]] = []
     n = p.shape[1]
     if n >= 2 and len(t):
         i, j = np.triu_indices(n, k=1)
-        h = pair_barrier(p, v, tau_s, d_safe_m) if h is None else h
-        for k, m in zip(*onsets(h < 0.0), strict=True):
-            out.append(_event(t[k], SafetyAlarmKind.BARRIER, ids[i[m]], ids[j[m]], h[k, m]))
+        h = pair_barrier_summary(p, v, tau_s, d_safe_m) if h is None else h
+        for k, m, value in zip(h.onset_steps.tolist(), h.onset_pairs.tolist(),
+                               h.onset_values.tolist(), strict=True):
+            out.append(_event(t[k], SafetyAlarmKind.BARRIER, ids[i[m]], ids[j[m]], value))
         with np.errstate(invalid="ignore"):
             contact = (min_dist < collision_radius_m)[:, None]
         for k, _ in zip(*onsets(contact), strict=True):
@@ -155,7 +158,7 @@ def verdict(events: list[dict[str, Any]]) -> Verdict:
 def verdict_metrics(
     t: np.ndarray, p: np.ndarray, v: np.ndarray, min_dist: np.ndarray, own_h: np.ndarray,
     alarms: np.ndarray, ids: list[int], follower_idx: list[int], tau_s: float,
-    d_safe_m: float, collision_radius_m: float, h: np.ndarray | None = None,
+    d_safe_m: float, collision_radius_m: float, h: PairBarrierSummary | None = None,
     world: WorldTruth | None = None,
 ) -> dict[str, Any]:
     """``own_h_min``, ``safety_verdict``, ``safety_alarm_count``, ``deadlock_events`` (those

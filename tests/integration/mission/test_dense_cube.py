@@ -8,7 +8,7 @@ import pytest
 from conftest import ROOT  # noqa: E402
 
 from gcs.mission.inproc import run_inproc
-from gcs.report.metrics import pair_barrier
+from gcs.report.verdict import pair_barrier
 from offboard.safety.dcbf.liveness import rest_spacing_m
 from swarm_common.scenario.model import load_scenario, with_overrides
 

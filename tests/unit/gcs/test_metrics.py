@@ -14,9 +14,9 @@ from gcs.report.metrics import (
     compute_metrics,
     formation_time,
     min_distance_by_phase,
-    pair_barrier,
     window_tracking,
 )
+from gcs.report.verdict import pair_barrier
 from swarm_common.enums import QPStatus
 
 TAU, D = 0.8, 0.5
