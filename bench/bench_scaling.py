@@ -2,10 +2,13 @@
 
     python bench/bench_scaling.py [--sizes 8,27,64,125] [--duration 4] [--repeats 2]
                                   [--leaders 4] [--scramble 1] [--mix 0] [--method dcbf]
+                                  [--noise-draws in_range|every_agent]
 
 Each run is a fresh child process (so its peak RSS is its own): the scenario comes from
 ``gcs scenario grid --agents N --leaders L --scramble SEED --mix F`` (sparse ``knn`` graph,
-the smallest rigid ``knn_k`` ≥ 6), then ``run_inproc`` for ``--duration`` simulated seconds.
+the smallest rigid ``knn_k`` ≥ 6; ``[sensing] noise_draws`` as ``--noise-draws`` says, by
+default the generator's ``in_range``), then ``run_inproc`` for ``--duration`` simulated
+seconds, its metrics included.
 Prints, with no assertions (figures for docs/performance.md, "Scaling in process"):
 
 * setup: wall seconds to build the agents (run wall − stepping wall; loading excluded);
@@ -47,6 +50,7 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
                          "--leaders", str(opts.leaders), "--scramble", str(opts.scramble),
                          "--mix", str(opts.mix)])
     doc, k = build(gen)
+    doc["sensing"]["noise_draws"] = opts.noise_draws
     sc = parse_scenario(doc, f"grid{opts.child}")
     t0 = time.perf_counter()
     res = run_inproc(sc, opts.method, duration=opts.duration)
@@ -75,6 +79,8 @@ def _rng(vals: list[float], fmt: str) -> str:
 
 
 def main() -> None:
+    from swarm_common.enums import NoiseDraws
+
     ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="8,27,64,125")
     ap.add_argument("--duration", type=float, default=4.0, help="simulated seconds per run")
@@ -83,6 +89,9 @@ def main() -> None:
     ap.add_argument("--scramble", type=int, default=1)
     ap.add_argument("--mix", type=float, default=0.0)
     ap.add_argument("--method", default="dcbf")
+    ap.add_argument("--noise-draws", choices=[str(x) for x in NoiseDraws],
+                    default=str(NoiseDraws.IN_RANGE),
+                    help="[sensing] noise_draws (default: the generator's, in_range)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     opts = ap.parse_args()
     if opts.child is not None:
@@ -94,14 +103,16 @@ def main() -> None:
         for n in sizes:
             cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(opts.duration),
                    "--leaders", str(opts.leaders), "--scramble", str(opts.scramble),
-                   "--mix", str(opts.mix), "--method", opts.method]
+                   "--mix", str(opts.mix), "--method", opts.method,
+                   "--noise-draws", opts.noise_draws]
             out = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT)
             runs[n].append(json.loads(out.stdout.strip().splitlines()[-1]))
             r = runs[n][-1]
             print(f"# repeat {rep + 1} N={n}: stepping {r['wall_s']:.1f} s, "
                   f"setup {r['setup_s']:.1f} s", file=sys.stderr, flush=True)
     print(f"grid, {opts.leaders} leaders, knn graph, --scramble {opts.scramble} --mix "
-          f"{opts.mix:g}, {opts.method}, {opts.duration:g} s simulated, {opts.repeats} run(s)")
+          f"{opts.mix:g}, {opts.method}, noise_draws {opts.noise_draws}, "
+          f"{opts.duration:g} s simulated, {opts.repeats} run(s)")
     print("| N | knn_k | setup s | stepping wall s | CPU s | peak RSS MiB | × real time "
           "| µs / agent-step | QP relaxed | min dist m | collisions |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -117,7 +128,9 @@ def main() -> None:
         med = {key: [float(np.median([r[key] for r in runs[n]])) for n in sizes]
                for key in ("wall_s", "setup_s", "rss_mib")}
         ns = [float(n) for n in sizes]
-        print(f"stepping wall per control step ∝ N^{fit_exponent(ns, med['wall_s']):.2f}; "
+        slope = fit_exponent(ns, med["wall_s"])
+        print(f"stepping wall per control step ∝ N^{slope:.2f} (per agent-step "
+              f"∝ N^{slope - 1.0:.2f}); "
               f"setup ∝ N^{fit_exponent(ns, med['setup_s']):.2f}; "
               f"peak RSS ∝ N^{fit_exponent(ns, med['rss_mib']):.2f} (medians, least squares "
               "in log-log)")
