@@ -43,7 +43,6 @@ from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.inputs import one_line
 from swarm_common.scenario.files import swarm_name_problem
 from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
-from swarm_common.scenario.safety_check import allowed_transient_speed, pairs_enter
 
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
 JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
@@ -189,6 +188,9 @@ def _transient_speed(doc: dict[str, Any], where: str) -> None:
     floored to TRANSIENT_STEP, when pairs come into range in flight (the range is shorter
     than the swarm; docs/safety.md §5i); without it the load check (b) refuses the file.
     A range too short for any limit is a :class:`GenError` naming ``--range``."""
+    # the check needs scipy and numba: loaded here, not when gcs builds its parser
+    from swarm_common.scenario.safety_check import allowed_transient_speed, pairs_enter
+
     doc["controller"].pop("max_transient_speed_mps", None)
     off = logging.root.manager.disable
     logging.disable(logging.WARNING)  # the first parse only measures: no warnings

@@ -16,14 +16,16 @@ Every metric is defined, with its unit and window, in docs/metrics.md. In short:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gcs.report.pair_barriers import PairBarrierSummary, pair_barrier_summary
 from gcs.report.verdict import ground_strike_steps, verdict_metrics
 from gcs.report.world_metrics import WORLD_KEYS, world_metric_values, world_truth
 from swarm_common.world.config import World
+
+if TYPE_CHECKING:  # compiled: imported where a run is scored, not by every CLI
+    from gcs.report.pair_barriers import PairBarrierSummary
 
 METRIC_KEYS = (
     "min_distance_m",
@@ -122,7 +124,10 @@ def barrier_metrics(
     caller has it already (:func:`~gcs.report.pair_barriers.pair_barrier_summary`)."""
     if p.shape[0] == 0 or p.shape[1] < 2:
         return {"h_min": None, "barrier_violation_steps": 0, "barrier_violation_pair_steps": 0}
-    pairs = pair_barrier_summary(p, v, tau, d_safe) if pairs is None else pairs
+    if pairs is None:
+        from gcs.report.pair_barriers import pair_barrier_summary
+
+        pairs = pair_barrier_summary(p, v, tau, d_safe)
     return {
         "h_min": pairs.h_min,
         "barrier_violation_steps": pairs.violation_steps,
@@ -237,6 +242,8 @@ def compute_metrics(
     thr = s.thrust[:, f]
     deadline = spec.formation_deadline_s
     # the true barrier of every pair and step, once: the barrier metrics and the verdict
+    from gcs.report.pair_barriers import pair_barrier_summary
+
     h = (pair_barrier_summary(s.p, s.v, spec.tau_safe_s, spec.d_safe_m, spec.vertical_scale)
          if s.p.shape[1] >= 2 and len(s.t) else None)
     world = world_truth(spec.world, s.p, s.v, spec.tau_safe_s)

@@ -16,15 +16,17 @@ earliest kept; ``safety_alarm_count`` counts them all. Pure: arrays in, plain da
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
-from gcs.report.pair_barriers import PairBarrierSummary, pair_barrier_summary
 from gcs.report.world_metrics import WorldTruth
 from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm, Method, SafetyAlarmKind
+
+if TYPE_CHECKING:  # compiled: imported where a run is scored, not by every CLI
+    from gcs.report.pair_barriers import PairBarrierSummary
 
 ALARM_LIST_MAX = 200  # entries kept in metrics.json (the earliest); the count is complete
 # the methods that claim safety: a run of one of them that breaks it exits non-zero
@@ -113,7 +115,10 @@ def safety_events(
     n = p.shape[1]
     if n >= 2 and len(t):
         i, j = np.triu_indices(n, k=1)
-        h = pair_barrier_summary(p, v, tau_s, d_safe_m) if h is None else h
+        if h is None:
+            from gcs.report.pair_barriers import pair_barrier_summary
+
+            h = pair_barrier_summary(p, v, tau_s, d_safe_m)
         for k, m, value in zip(h.onset_steps.tolist(), h.onset_pairs.tolist(),
                                h.onset_values.tolist(), strict=True):
             out.append(_event(t[k], SafetyAlarmKind.BARRIER, ids[i[m]], ids[j[m]], value))
