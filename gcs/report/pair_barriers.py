@@ -6,12 +6,10 @@ A run of N agents over K steps has K·N(N−1)/2 pair barriers: at 1,024 agents 
 The metrics need only their least value and two counts, and the verdict only the steps
 where a pair's barrier goes below 0 (its onsets). :func:`pair_barrier_summary` computes
 them in one compiled pass over the steps and pairs (O(N²K) time, O(N²) memory: the
-previous step's signs), with the formula of :func:`swarm_common.barrier.barrier` in the
-order numpy evaluates it:
-
-    h = (‖Δp‖² + (2τ)(ΔvᵀΔp)) − D²,   ‖x‖² = (x₀x₀ + x₁x₁) + x₂x₂
-
-(the z components divided by κ first, ``controller.dcbf_vertical_scale``). The pairs are
+previous step's signs), each pair's h from the filters' compiled formula
+(:func:`offboard.safety.pair_kernel.pair_h`, summed in the order numpy sums
+:func:`swarm_common.barrier.barrier`), the z components divided by κ first
+(``controller.dcbf_vertical_scale``). The pairs are
 numbered as ``np.triu_indices(N, 1)`` numbers them (i < j, row by row).
 """
 
@@ -21,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from offboard.safety.pair_kernel import pair_h
 from swarm_common.jit import kernel
 
 
@@ -65,9 +64,7 @@ def _summary_kernel(
                 if kappa != 1.0:
                     d2z = d2z / kappa
                     w2 = w2 / kappa
-                pp = (d0 * d0 + d1 * d1) + d2z * d2z
-                vp = (w0 * d0 + w1 * d1) + w2 * d2z
-                h = (pp + two_tau * vp) - d2
+                h = pair_h(d0, d1, d2z, w0, w1, w2, two_tau, d2)
                 if h < h_min or h != h:  # a NaN (a diverged state) is the least, as in numpy
                     h_min = h if h_min == h_min else h_min
                 neg = h < 0.0

@@ -22,6 +22,17 @@ SPLIT_SHARE = 0.5
 
 
 @kernel
+def pair_h(d0: float, d1: float, d2: float, w0: float, w1: float, w2: float,
+           two_tau: float, dd: float) -> float:
+    """h = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) of one pair: Δp = (d0, d1, d2) (m), Δv = (w0, w1,
+    w2) (m/s), ``two_tau`` = 2τ (s), ``dd`` = D² (m²); the sums left to right, as numpy's
+    sum over a row of three."""
+    pp = d0 * d0 + d1 * d1 + d2 * d2
+    vp = w0 * d0 + w1 * d1 + w2 * d2
+    return pp + two_tau * vp - dd
+
+
+@kernel
 def barrier_kernel(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) -> np.ndarray:
     """h_ij = ‖Δp‖² + 2τ ΔvᵀΔp − D² (m²) per row of Δp (m), Δv (m/s); τ (s), D (m)."""
     m = dp.shape[0]
@@ -29,9 +40,7 @@ def barrier_kernel(dp: np.ndarray, dv: np.ndarray, tau: float, d_safe: float) ->
     two_tau = 2.0 * tau
     dd = d_safe**2
     for i in range(m):
-        pp = dp[i, 0] * dp[i, 0] + dp[i, 1] * dp[i, 1] + dp[i, 2] * dp[i, 2]
-        vp = dv[i, 0] * dp[i, 0] + dv[i, 1] * dp[i, 1] + dv[i, 2] * dp[i, 2]
-        h[i] = pp + two_tau * vp - dd
+        h[i] = pair_h(dp[i, 0], dp[i, 1], dp[i, 2], dv[i, 0], dv[i, 1], dv[i, 2], two_tau, dd)
     return h
 
 
