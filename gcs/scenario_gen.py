@@ -161,14 +161,6 @@ def _longest_edge(v: np.ndarray, graph: GraphKind, k: int) -> float:
     return max(float(np.linalg.norm(v[i] - v[j])) for i, j in edges)
 
 
-def swarm_span(v: np.ndarray, starts: np.ndarray) -> float:
-    """The largest distance (m) between two agents, in the formation ``v`` or at the
-    ``starts`` (both (N, 3))."""
-    def widest(p: np.ndarray) -> float:
-        return float(np.max(np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)))
-    return max(widest(v), widest(starts))
-
-
 def _formation(v: np.ndarray, n_leaders: int, graph: GraphKind, k: int,
                range_m: float | None, span_m: float = 0.0) -> dict[str, Any]:
     """The ``[formation]`` table. Without ``range_m``: every graph edge sensed in the
@@ -211,6 +203,7 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     """The scenario document of the flags and the knn_k used (validated: it loads)."""
     # the DESO gain check needs scipy and numba: loaded here, not when gcs builds its parser
     from offboard.estimation.deso_gains import scenario_gain_problem
+    from swarm_common.scenario.transient_check import widest
 
     n, n_lead = args.agents, args.leaders
     if n < 3:
@@ -239,7 +232,7 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     # a scrambled start sends followers across the whole formation, at speeds the scenario
     # does not bound: a pair that first came into range in flight could not brake in time
     # (docs/safety.md, load check (b)), so every pair is sensed from the first step on
-    span = swarm_span(v, starts) * RANGE_MARGIN if args.mix > 0.0 else 0.0
+    span = widest(v, starts) * RANGE_MARGIN if args.mix > 0.0 else 0.0
     problem = ""
     for k in ks:
         doc["formation"] = _formation(v, n_lead, args.graph, k or DEFAULT_K, args.range, span)

@@ -39,25 +39,35 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from swarm_common.memo import IdentityMemo
 from swarm_common.scenario.feasibility import desired_origins
 from swarm_common.scenario.graphs import formation_scale
 
 if TYPE_CHECKING:
     from swarm_common.scenario.spec import Scenario
 
+_SPANS: IdentityMemo[float] = IdentityMemo()
+
+
+def widest(*layouts: np.ndarray) -> float:
+    """The largest distance (m) between two agents of any of the (N, 3) ``layouts``."""
+    return max(float(np.max(np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)))
+               for p in layouts)
+
 
 def span(sc: Scenario) -> float:
-    """The largest distance (m) between two agents at the start or in the formation."""
+    """The largest distance (m) between two agents at the start or in the formation (once
+    per scenario object: the load check asks several times)."""
+    return _SPANS.get(sc, (), lambda: _span(sc))
+
+
+def _span(sc: Scenario) -> float:
     p0 = sc.initial_positions()
     want = desired_origins(sc)
     if want is None:  # the formation does not fix the followers: the scaled vertices
         k1, k2 = (sc.index_of(i) for i in sc.formation.leaders[:2])
         want = sc.vertices() * formation_scale(p0, sc.vertices(), k1, k2)
-    out = 0.0
-    for p in (p0, want):
-        d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
-        out = max(out, float(d.max()))
-    return out
+    return widest(p0, want)
 
 
 def start_speeds(sc: Scenario) -> tuple[float, float]:
