@@ -21,7 +21,7 @@ from offboard.agent.guard import InFlightGuard
 from offboard.agent.peers import peer_ids
 from offboard.agent.shares import ShareRule
 from offboard.agent.takeoff import follower_xi
-from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours
+from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours, heard_reach
 from offboard.estimation.bearing import Formation, formation_from_scenario
 from offboard.estimation.deso import DESO
 from offboard.estimation.deso_gains import GainReport, formation_gain_report
@@ -131,8 +131,9 @@ class FollowerAgent(AgentBase):
         # neighbours predicted into sensing range but not sensed (dcbf, docs/safety.md §5c)
         # the in-flight alarms and the fallback (offboard.agent.guard, docs/safety.md)
         self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)
-        self.unsensed = UnsensedNeighbours(self.pred, self.index, sc.n,
-                                           sc.formation.sensing_range_m, ctl.tau_safe_s)
+        self.unsensed = UnsensedNeighbours(
+            self.pred, self.index, sc.n, sc.formation.sensing_range_m, ctl.tau_safe_s,
+            heard_reach(sc), 2.0 * math.sqrt(3.0) * ctl.u_max_mps2 * self.dt)
         # who takes a pair's whole avoidance budget in the dcbf filter
         self.shares = ShareRule(self.pred, self.leader_mask, self.dt)
         self._zero_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _no_margin

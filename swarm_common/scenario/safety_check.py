@@ -55,6 +55,7 @@ from swarm_common.scenario.input_set import InputSet
 from swarm_common.scenario.transient_check import (
     largest_transient_speed,
     limited_closing_speed,
+    pair_reach,
     span,
     speed_for_range,
     start_speeds,
@@ -194,7 +195,8 @@ def stop_range(sc: Scenario, v_bar: float, a_b: float) -> float:
 
 def needed_range(sc: Scenario, v_bar: float) -> float:
     """max(R_h, R_b) (m) for a pair closing at ``v_bar`` (m/s)."""
-    return max(entry_range(sc, v_bar), stop_range(sc, v_bar, braking_accel(sc)))
+    return pair_reach(v_bar, sc.controller.tau_safe_s, vertical_d_safe(sc), braking_accel(sc),
+                      sc.control_dt + sc.vehicle.tau_rollpitch_s)
 
 
 def range_speed(sc: Scenario) -> float:

@@ -97,6 +97,17 @@ def speed_for_range(r: float, tau_s: float, d: float, a_b: float, lag: float) ->
     return min(v_h, v_b)
 
 
+def pair_reach(v_bar: float, tau_s: float, d: float, a_b: float, lag: float) -> float:
+    """max(R_h, R_b) (m) of (b) for a pair closing at ``v_bar`` (m/s): the distance from
+    which it must have barrier rows, h ≥ 0 there (R_h = τ_s v̄ + √(τ_s² v̄² + d²)) and able
+    to stop before ``d`` (R_b = d + v̄ lag + v̄²/(2 a_b), inf when a_b ≤ 0); the inverse of
+    :func:`speed_for_range`."""
+    r_h = tau_s * v_bar + math.sqrt((tau_s * v_bar) ** 2 + d * d)
+    if a_b <= 0.0:
+        return math.inf
+    return max(r_h, d + v_bar * lag + v_bar * v_bar / (2.0 * a_b))
+
+
 def largest_transient_speed(v_range: float, v_ref: float, s_l: float) -> float:
     """The largest v_t (m/s) with v_ref + max(2 v_t, v_t + s_l) ≤ ``v_range``; may be ≤ 0
     (no v_t helps)."""

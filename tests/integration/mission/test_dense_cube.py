@@ -60,3 +60,19 @@ def test_a_cube_that_cannot_form_reports_a_deadlock_and_stays_safe():
     cube8 = run_inproc(load_scenario(ROOT / "scenarios" / "cube8.toml"), "dcbf", seed=1,
                        duration=10.0).metrics
     assert cube8["safety_alarm_count"] == 0
+
+
+def test_a_dense_cube_at_a_short_range_brakes_for_the_pairs_it_hears(scenario):
+    """dense_cube2 with a 3 m range (below its 3.46 m span) and the transient speed limit
+    that its refusal names (0.3 m/s; docs/safety.md §5j). The speed rows give way to the
+    pair rows in its crowded first seconds, and two followers that hear each other came
+    into range closing at 2.2 m/s: the true barrier (pairs 4–8, then 4–7) went below 0
+    from t = 2.76 s, to −1.99 m², when rows began at the range. With rows for heard
+    neighbours beyond the range, those pairs brake before it and every true barrier
+    stays ≥ 0."""
+    sc = with_overrides(scenario, formation={"sensing_range_m": 3.0},
+                        controller={"max_transient_speed_mps": 0.3})
+    r = run_inproc(sc, "dcbf", seed=1, duration=5.0)
+    h = pair_barrier(r.series.p, r.series.v, sc.controller.tau_safe_s, sc.controller.d_safe_m)
+    assert np.min(h) >= 0.0
+    assert r.metrics["collisions"] == 0
