@@ -216,7 +216,7 @@ class FollowerAgent(AgentBase):
         if self.landing is not None:
             u = self.landed_idle(t, float(self.deso.z1[2]), u)
         u = self.on_pad_floor(t, float(self.deso.z1[2]), u)
-        u = self.guard.command(t, own_p, own_v, u)
+        u = self.guard.command(t, own_p, own_v, u, rp, sel)
         # setpoint, the inner-loop model's realised control over the period (sub-steps)
         # and their mean, whether the setpoint clips u: one compiled call
         sp, u_sub, status.input_clipped, a_mean = self.inner.command(

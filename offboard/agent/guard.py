@@ -26,6 +26,9 @@ from swarm_common.scenario.model import Scenario
 # Shorter windows flagged the crossings of cube8 and swap_centre, where followers first move
 # apart under the filter before they close on their vertices (docs/safety.md 5f).
 DEADLOCK_WINDOW_S = 6.0
+# the fallback's horizontal clearance to a sensed agent below it, in D_safe: two landed
+# agents then stand at least 2 D apart
+FALLBACK_CLEAR_D = 2.0
 
 class InFlightGuard:
     """The guard of follower ``index`` of ``sc``; ``peers`` the scenario indices whose
@@ -35,7 +38,8 @@ class InFlightGuard:
     def __init__(self, sc: Scenario, index: int, peers: np.ndarray, lo: np.ndarray,
                  hi: np.ndarray) -> None:
         self.monitor = SafetyMonitor(monitor_config(sc), sc.n)
-        self.fallback = Fallback(sc.controller.leader_kp, sc.controller.leader_kd, lo, hi)
+        self.fallback = Fallback(sc.controller.leader_kp, sc.controller.leader_kd, lo, hi,
+                                 FALLBACK_CLEAR_D * sc.controller.d_safe_m)
         self.index = index
         self.dt = sc.control_dt
         self._peers = np.zeros(sc.n, dtype=bool)
@@ -75,11 +79,14 @@ class InFlightGuard:
         self.bits = bits
         return bits
 
-    def command(self, t: float, p: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``u``, or in the fallback its command from the odometry ``p`` (m), ``v`` (m/s)."""
+    def command(self, t: float, p: np.ndarray, v: np.ndarray, u: np.ndarray,
+                rel_p: np.ndarray | None = None, sel: np.ndarray | None = None) -> np.ndarray:
+        """``u``, or in the fallback its command from the odometry ``p`` (m), ``v`` (m/s)
+        and the relative positions p_j − p_i ``rel_p`` (N, 3, m) of the sensed ``sel``."""
         if not self.fallback.active:
             return u
-        return self.fallback.command(t, p, v)
+        below = None if rel_p is None or sel is None else rel_p[sel]
+        return self.fallback.command(t, p, v, below)
 
     def estimate(self, est: NeighbourEstimate, p: np.ndarray, v: np.ndarray) -> NeighbourEstimate:
         """``est``, or in the fallback the odometry ``p``, ``v`` predicted to ``est.t``
