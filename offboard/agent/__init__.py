@@ -9,6 +9,7 @@ both derive from :class:`offboard.agent.base.AgentBase`.
 * :mod:`.peers` - whose estimates an agent needs and waits for.
 * :mod:`.unsensed` - heard neighbours not sensed now whose rows come from prediction: in
   range by it, or beyond the range within the distance a pair must brake from.
+* :mod:`.pair_inputs` - the pairs a part-by-part filter reads (sensed, then predicted).
 * :mod:`.shares` - who takes a pair's whole avoidance budget (leaders, silent or
   non-cooperative neighbours).
 * :mod:`.leader_guard` - a dcbf leader's filter against the scenario's non-cooperative

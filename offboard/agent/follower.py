@@ -18,6 +18,7 @@ from offboard.agent.detour import Detour
 from offboard.agent.fence_swap import swap_fence
 from offboard.agent.governor import governor_for, log_governor
 from offboard.agent.guard import InFlightGuard
+from offboard.agent.pair_inputs import PairInputs
 from offboard.agent.peers import peer_ids
 from offboard.agent.shares import ShareRule
 from offboard.agent.takeoff import follower_xi
@@ -27,9 +28,9 @@ from offboard.estimation.deso import DESO
 from offboard.estimation.deso_gains import GainReport, formation_gain_report
 from offboard.estimation.formation_frame import FormationFrameObserver, formation_frame_observer
 from offboard.estimation.neighbour_accel import NeighbourAccel
-from offboard.estimation.peer_table import XI, EstimateBatch
+from offboard.estimation.peer_table import EstimateBatch
 from offboard.estimation.predictor import NeighbourPredictor
-from offboard.estimation.reference import DesiredStateObserver, xi_a, xi_at_rest
+from offboard.estimation.reference import DesiredStateObserver, xi_at_rest
 from offboard.estimation.sensing import DropoutHold, Sensor
 from offboard.estimation.sensing_kernel import pair_rows
 from offboard.inner_loop.attitude import Setpoint
@@ -39,7 +40,7 @@ from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.dcbf.front import DcbfFront, InnerMotion, Measured, Silence, unsensed_rows
 from offboard.safety.dcbf.world_rows import WorldPlanes
 from offboard.safety.filter import make_filters
-from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_from, clf_terms_of_reference
+from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
 from swarm_common.scenario.mission_check import yaws as mission_yaws
@@ -127,7 +128,7 @@ class FollowerAgent(AgentBase):
         # the ones predicted to t_k for the observers: graph neighbours and leaders
         nb = set(self.form.neighbours[self.index])
         self._predict_idx = np.array(sorted(nb | set(self.form.leader_idx)), dtype=np.int64)
-        self._lead_peers = list(self.form.leader_idx)  # their a* for the rcbf filter
+        self.pair_inputs = PairInputs(self.form.leader_idx)  # part-by-part filters' pairs
         # neighbours predicted into sensing range but not sensed (dcbf, docs/safety.md §5c)
         # the in-flight alarms and the fallback (offboard.agent.guard, docs/safety.md)
         self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)
@@ -136,7 +137,6 @@ class FollowerAgent(AgentBase):
             heard_reach(sc), 2.0 * math.sqrt(3.0) * ctl.u_max_mps2 * self.dt)
         # who takes a pair's whole avoidance budget in the dcbf filter
         self.shares = ShareRule(self.pred, self.leader_mask, self.dt)
-        self._zero_rows: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # _no_margin
         self.fallbacks = 0
         self._airborne = False  # latched once the altitude estimate reached the ground floor
         self._gains: GainReport | None = None
@@ -321,25 +321,9 @@ class FollowerAgent(AgentBase):
             world_rows = k > k_pairs
         else:
             world_rows = False
-        speed = front.filt.speed  # the transient speed limit (docs/safety.md §5i)
-        if speed is not None:
-            speed.prepare(odo[1], self.a_real, w, self._reference_xi(t))
-            res = front.filt.solve_limited(u_try, clf_terms_from(clf), k, h_min, w,
-                                           self.deso.z2, held, t0, world_rows)
-        elif held and not world_rows:
-            res = SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
-                               (time.perf_counter() - t0) * 1e6)
-        else:  # held with world rows: the QP checks u_try against every row itself
-            res = front.filt.solve_rows(u_try, clf_terms_from(clf), k, h_min, w,
-                                        self.deso.z2, unheld=not held)
+        res = front.solve(u_try, clf, k, h_min, w, held, t0, world_rows, odo[1], self.a_real,
+                          self._reference_xi(t))
         return lumped[1], w, float(clf[0]), clf[5:8], res
-
-    def _leader_accels(self, rows: np.ndarray, have: np.ndarray) -> dict[int, np.ndarray]:
-        """The leaders' a* (m/s²) predicted to t_k, by scenario index: the rcbf filter's
-        known acceleration of a leader (Departure 13; the other filters do not read it)."""
-        if self.method != Method.RCBF:
-            return {}
-        return {j: xi_a(rows[j, XI]) for j in self._lead_peers if have[j]}
 
     def _safety_input(
         self, t: float, clf: ClfTerms, w: np.ndarray, sel: np.ndarray, dp: np.ndarray,
@@ -347,29 +331,15 @@ class FollowerAgent(AgentBase):
     ) -> SafetyInput:
         """The filter's input: the sensed pairs (Δp = p_i − p_j, Δv), and ``extra``, the
         neighbours that are not sensed now but predicted (:class:`UnsensedNeighbours`)."""
-        margin, predicted = self._no_margin(len(sel))
-        if extra is not None:
-            idx, pp, pv, pm = extra
-            sel = np.concatenate([sel, idx])
-            dp, dv = np.concatenate([dp, pp]), np.concatenate([dv, pv])
-            margin = np.concatenate([margin, pm])
-            predicted = np.concatenate([predicted, np.ones(len(idx), dtype=bool)])
+        sel, dp, dv, margin, predicted = self.pair_inputs.pairs(sel, dp, dv, extra)
         # only the dcbf filter reads the share mask (rcbf keeps the paper's shares)
         full = self.shares.full(sel, t) if self.method == Method.DCBF else None
         return SafetyInput(
-            clf, w, self.deso.z2, dp, dv, sel, self._leader_accels(rows, have), self.a_real,
+            clf, w, self.deso.z2, dp, dv, sel,
+            self.pair_inputs.leader_accels(self.method, rows, have), self.a_real,
             self.u_prev, self.a_mean, self.acc_est.rows(sel), full, self.deso.z1,
             self._ground_floor(), margin, predicted,
         )
-
-    def _no_margin(self, m: int) -> tuple[np.ndarray, np.ndarray]:
-        """(M,) zero margins and (M,) False predicted flags: the sensed pairs' part of the
-        filter's input, made once per M (the filters only read them)."""
-        got = self._zero_rows.get(m)
-        if got is None:
-            got = (np.zeros(m), np.zeros(m, dtype=bool))
-            self._zero_rows[m] = got
-        return got
 
     def _ground_floor(self) -> float | None:
         """The dcbf ground barrier's floor (m) once this follower has been above it, None

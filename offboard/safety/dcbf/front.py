@@ -34,6 +34,7 @@ NamedTuple argument from Python on its slow path, which doubled the call's time.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -44,7 +45,7 @@ from offboard.estimation.deso_kernel import lumped_into
 from offboard.estimation.neighbour_accel import NeighbourAccel, neighbour_accel_rows
 from offboard.estimation.peer_table import full_share_rows
 from offboard.estimation.sensing_kernel import pair_rows
-from offboard.safety.base import W_SAFE
+from offboard.safety.base import W_SAFE, SafetyOutput
 from offboard.safety.clf_kernel import nominal_into
 from offboard.safety.dcbf.filter import DcbfFilter
 from offboard.safety.dcbf.kernel import rows_hold_kernel
@@ -56,7 +57,14 @@ from offboard.safety.dcbf.step_kernel import (
     RowsState,
     dcbf_filter_rows_into,
 )
-from offboard.safety.rcbf.clf_rcbf import AW_BRAKE_SHARE, AW_RESERVE, CLF_OUT, NO_BOX
+from offboard.safety.rcbf.clf_rcbf import (
+    AW_BRAKE_SHARE,
+    AW_RESERVE,
+    CLF_OUT,
+    NO_BOX,
+    clf_terms_from,
+)
+from swarm_common.enums import QPStatus
 from swarm_common.fastnp import f64, rows3
 from swarm_common.jit import kernel
 from swarm_common.scenario.model import ControllerConfig
@@ -299,3 +307,23 @@ class DcbfFront:
         )
         d.adopt_lumped(lumped)
         return lumped, w, clf, k, h_min, held, u_try
+
+    def solve(
+        self, u_try: np.ndarray, clf: np.ndarray, k: int, h_min: float, w: np.ndarray,
+        held: bool, t0: float, world: bool, v: np.ndarray, a_real: np.ndarray,
+        xi: np.ndarray,
+    ) -> SafetyOutput:
+        """The step's answer from :meth:`run`'s ``u_try``, ``clf``, ``k`` rows, ``h_min``
+        and ``held``, and the saturated disturbance ``w`` (``world``: world rows were
+        added; ``t0``: the step's clock start, for ``solve_us``). With the transient speed
+        limit (docs/safety.md §5i) its rows are prepared from the own odometry velocity
+        ``v`` (m/s), the realised acceleration ``a_real`` and the tracked ``xi``; held
+        without world rows, ``u_try`` is flown; else the QP checks it against every row."""
+        filt, terms = self.filt, clf_terms_from(clf)
+        if filt.speed is not None:
+            filt.speed.prepare(v, a_real, w, xi)
+            return filt.solve_limited(u_try, terms, k, h_min, w, self.deso.z2, held, t0, world)
+        if held and not world:
+            return SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
+                                (time.perf_counter() - t0) * 1e6)
+        return filt.solve_rows(u_try, terms, k, h_min, w, self.deso.z2, unheld=not held)
