@@ -1,6 +1,8 @@
-"""Rows of heard neighbours beyond the sensing range (offboard.agent.unsensed, docs/safety.md
-§5j): a heard pair gets rows from its prediction where the load check's reach at its
-closing speed says it must, and not where its prediction's error reaches into the range."""
+"""Rows of heard neighbours that are not sensed (offboard.agent.unsensed, docs/safety.md §5c
+and §5j): a heard pair beyond the sensing range gets rows from its prediction where the
+load check's reach at its closing speed says it must, and not where its prediction's error
+reaches into the range; stale data is predicted at constant velocity with the bounds of a
+follower's largest acceleration."""
 
 from __future__ import annotations
 
@@ -14,47 +16,44 @@ from offboard.agent.unsensed import HEARD_AFTER_S, UnsensedNeighbours
 from swarm_common.scenario.transient_check import pair_reach, speed_for_range
 
 TAU_S, D, A_B, LAG, RANGE = 0.8, 0.5, 5.0, 0.17, 3.0
+A_MAX = 16.0  # m/s², the stand-in predictor's bound on a follower's acceleration
+T_NOW = 10.0  # s, when the rows are asked for
 
 
 class _Pred:
-    """A predictor stand-in: agents 1..n−1 at positions ``p`` with velocities ``v`` and
-    error bounds ``b`` (position, m) and ``bv`` (velocity, m/s), current at t = 1."""
+    """A predictor stand-in: agents with positions ``p`` and velocities ``v`` received at
+    ``T_NOW − age`` (followers); ``get_at`` gives current data as received."""
 
-    def __init__(self, p: np.ndarray, v: np.ndarray, b: np.ndarray, bv: np.ndarray) -> None:
+    def __init__(self, p: np.ndarray, v: np.ndarray, age: np.ndarray) -> None:
         n = len(p)
-        rows = np.zeros((n, 12))
-        rows[:, 0:3] = p
-        self.table = SimpleNamespace(t=np.ones(n), rows=rows)
-        self.revision = 1
-        self.p, self.v, self.b, self.bv = p, v, b, bv
+        rows = np.zeros((n, 21))
+        rows[:, 0:3], rows[:, 3:6] = p, v
+        self.table = SimpleNamespace(t=T_NOW - age, rows=rows, leader=np.zeros(n, bool))
+        self.revision, self.a_max, self.max_age, self.drop_bound = 1, A_MAX, 1.0, 1.0
 
     def get_at(self, j: int, t: float):
-        return self.p[j], self.v[j], np.zeros(12)
-
-    def bound_at(self, j: int, t: float) -> float:
-        return float(self.b[j])
-
-    def velocity_bound_at(self, j: int, t: float) -> float:
-        return float(self.bv[j])
+        assert t - self.table.t[j] <= 1e-9, "only current data is read through get_at"
+        return self.table.rows[j, 0:3], self.table.rows[j, 3:6], np.zeros(12)
 
 
 def _reach(v: float) -> float:
     return pair_reach(v, TAU_S, D, A_B, LAG)
 
 
-def _rows(p, v, b=None, bv=None, reach=_reach):
+def _rows(p, v, age=None, reach=_reach):
+    """The rows agent 0 keeps at T_NOW, sensing nobody: {index: (Δp, Δv, margin)}."""
     n = len(p)
     pred = _Pred(np.asarray(p, float), np.asarray(v, float),
-                 np.zeros(n) if b is None else np.asarray(b, float),
-                 np.zeros(n) if bv is None else np.asarray(bv, float))
+                 np.zeros(n) if age is None else np.asarray(age, float))
     un = UnsensedNeighbours(pred, 0, n, RANGE, TAU_S, reach, 0.0)  # type: ignore[arg-type]
     none = np.zeros(0, dtype=np.int64)
-    first = un.pairs(0.0, none, pred.p[0], pred.v[0])  # the start transient: in range only
-    got = un.pairs(HEARD_AFTER_S, none, pred.p[0], pred.v[0])
-    in_range = [] if first is None else first[0].tolist()
-    assert set(in_range) <= set([] if got is None else got[0].tolist())
-    assert all(np.linalg.norm(pred.p[j] - pred.p[0]) <= RANGE for j in in_range)
-    return [] if got is None else got[0].tolist()
+    z1, z2 = pred.table.rows[0, 0:3].copy(), pred.table.rows[0, 3:6].copy()
+    first = un.pairs(T_NOW - HEARD_AFTER_S, none, z1, z2)  # the start transient: in range only
+    got = un.pairs(T_NOW, none, z1, z2)
+    out = {} if got is None else {int(j): (a, b, c) for j, a, b, c in zip(*got, strict=True)}
+    if first is not None:
+        assert all(np.linalg.norm(d) <= RANGE for d in first[1])
+    return out
 
 
 def test_reach_is_the_inverse_of_the_range_speed():
@@ -71,22 +70,34 @@ def test_a_fast_closing_heard_pair_beyond_range_gets_rows():
     assert _reach(v_fast) > 6.0 > _reach(0.0)
     p = [[0, 0, 0], [6, 0, 0], [0, 6, 0]]
     v = [[0, 0, 0], [-v_fast, 0, 0], [0, 0, 0]]
-    assert _rows(p, v) == [1]
+    assert list(_rows(p, v)) == [1]
     # without a reach (rcbf, or the rows kept to the range) neither
-    assert _rows(p, v, reach=None) == []
+    assert _rows(p, v, reach=None) == {}
+
+
+def test_stale_data_is_predicted_at_constant_velocity_with_the_acceleration_bound():
+    p = [[0, 0, 0], [6.5, 0, 0]]
+    v = [[0, 0, 0], [-4.0, 0, 0]]
+    age = 0.1
+    rows = _rows(p, v, age=[0.0, age])
+    dp, dv, margin = rows[1]
+    np.testing.assert_allclose(dp, [-(6.5 - 4.0 * age), 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(dv, [4.0, 0.0, 0.0], atol=1e-12)
+    assert margin == pytest.approx(0.5 * A_MAX * age**2 + TAU_S * A_MAX * age)
 
 
 def test_a_prediction_whose_error_reaches_into_the_range_is_not_a_row():
-    p = [[0, 0, 0], [6, 0, 0]]
+    p = [[0, 0, 0], [6.5, 0, 0]]
     v = [[0, 0, 0], [-4.0, 0, 0]]
-    # margin b + τ b_v = 0.2 + 0.8·3 = 2.6 m: 6 − 2.6 = 3.4 m stays beyond the 3 m range
-    assert _rows(p, v, b=[0, 0.2], bv=[0, 3.0]) == [1]
-    # 0.2 + 0.8·4 = 3.4 m: the ball reaches 2.6 m, inside the range the sensor sees empty
-    assert _rows(p, v, b=[0, 0.2], bv=[0, 4.0]) == []
+    # age 0.3 s: predicted at 5.3 m with a margin of 0.72 + 0.8·4.8 = 4.56 m, reaching to
+    # 0.74 m, inside the 3 m range that the sensor sees empty
+    assert _rows(p, v, age=[0.0, 0.3]) == {}
+    # age 0.4 s: the position bound 1.28 m is past the drop bound, even in range
+    assert _rows([[0, 0, 0], [2.0, 0, 0]], [[0, 0, 0], [0, 0, 0]], age=[0.0, 0.4]) == {}
 
 
 def test_inside_the_range_every_unsensed_prediction_is_a_row():
     p = [[0, 0, 0], [2.5, 0, 0]]
     v = [[0, 0, 0], [0, 0, 0]]
-    assert _rows(p, v, b=[0, 1.0], bv=[0, 5.0]) == [1]
-    assert _rows(p, v, b=[0, 1.0], bv=[0, 5.0], reach=None) == [1]
+    assert list(_rows(p, v, age=[0.0, 0.3])) == [1]
+    assert list(_rows(p, v, age=[0.0, 0.3], reach=None)) == [1]
