@@ -53,12 +53,14 @@ from swarm_common.barrier import barrier
 from swarm_common.enums import StartMode
 from swarm_common.scenario.input_set import InputSet
 from swarm_common.scenario.transient_check import (
+    entry_distance,
     largest_transient_speed,
     limited_closing_speed,
     pair_reach,
     span,
     speed_for_range,
     start_speeds,
+    stop_distance,
 )
 from swarm_common.scenario.world_check import world_problem
 
@@ -180,17 +182,14 @@ def braking_accel(sc: Scenario) -> float:
 def entry_range(sc: Scenario, v_bar: float) -> float:
     """R_h (m): the distance at which a pair closing head-on at v̄ has h = 0, along z
     (where it is largest: with D → κD; S scales distance and speed alike)."""
-    t, d = sc.controller.tau_safe_s, vertical_d_safe(sc)
-    return t * v_bar + math.sqrt((t * v_bar) ** 2 + d * d)
+    return entry_distance(v_bar, sc.controller.tau_safe_s, vertical_d_safe(sc))
 
 
 def stop_range(sc: Scenario, v_bar: float, a_b: float) -> float:
     """R_b (m): κD + v̄(dt + τ) + v̄²/(2a_b) (stopping before the barrier's distance along
     z), inf when a_b ≤ 0."""
-    if a_b <= 0.0:
-        return math.inf
-    return (vertical_d_safe(sc) + v_bar * (sc.control_dt + sc.vehicle.tau_rollpitch_s)
-            + v_bar * v_bar / (2.0 * a_b))
+    return stop_distance(v_bar, vertical_d_safe(sc), a_b,
+                         sc.control_dt + sc.vehicle.tau_rollpitch_s)
 
 
 def needed_range(sc: Scenario, v_bar: float) -> float:

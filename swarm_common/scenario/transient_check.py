@@ -97,15 +97,26 @@ def speed_for_range(r: float, tau_s: float, d: float, a_b: float, lag: float) ->
     return min(v_h, v_b)
 
 
-def pair_reach(v_bar: float, tau_s: float, d: float, a_b: float, lag: float) -> float:
-    """max(R_h, R_b) (m) of (b) for a pair closing at ``v_bar`` (m/s): the distance from
-    which it must have barrier rows, h ≥ 0 there (R_h = τ_s v̄ + √(τ_s² v̄² + d²)) and able
-    to stop before ``d`` (R_b = d + v̄ lag + v̄²/(2 a_b), inf when a_b ≤ 0); the inverse of
-    :func:`speed_for_range`."""
-    r_h = tau_s * v_bar + math.sqrt((tau_s * v_bar) ** 2 + d * d)
+def entry_distance(v_bar: float, tau_s: float, d: float) -> float:
+    """R_h (m) of (b): the distance at which a pair closing head-on at ``v_bar`` (m/s) has
+    h = 0, τ_s v̄ + √(τ_s² v̄² + d²)."""
+    return tau_s * v_bar + math.sqrt((tau_s * v_bar) ** 2 + d * d)
+
+
+def stop_distance(v_bar: float, d: float, a_b: float, lag: float) -> float:
+    """R_b (m) of (b): d + v̄ lag + v̄²/(2 a_b), the distance in which a pair closing at
+    ``v_bar`` (m/s) stops before ``d`` braking at ``a_b`` (m/s²) after ``lag`` (s); inf when
+    a_b ≤ 0."""
     if a_b <= 0.0:
         return math.inf
-    return max(r_h, d + v_bar * lag + v_bar * v_bar / (2.0 * a_b))
+    return d + v_bar * lag + v_bar * v_bar / (2.0 * a_b)
+
+
+def pair_reach(v_bar: float, tau_s: float, d: float, a_b: float, lag: float) -> float:
+    """max(R_h, R_b) (m) of (b) for a pair closing at ``v_bar`` (m/s): the distance from
+    which it must have barrier rows (:func:`entry_distance`, :func:`stop_distance`); the
+    inverse of :func:`speed_for_range`."""
+    return max(entry_distance(v_bar, tau_s, d), stop_distance(v_bar, d, a_b, lag))
 
 
 def largest_transient_speed(v_range: float, v_ref: float, s_l: float) -> float:
