@@ -15,8 +15,8 @@ import time
 
 import numpy as np
 
-from offboard.records import NO_ACTIVE, ActiveRows
 from offboard.safety.base import W_SAFE, SafetyFilter, SafetyInput, SafetyOutput, saturate_norm
+from offboard.safety.dcbf.active_rows import RowsOf, WorldOf, active_rows
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from offboard.safety.dcbf.qp import DcbfQP
 from offboard.safety.dcbf.speed_rows import MAX_CUTS, TOL, TransientLimit
@@ -37,8 +37,8 @@ from offboard.safety.dcbf.step_kernel import (
 )
 from offboard.safety.dcbf.trust import TrustRegion
 from offboard.safety.dcbf.world_rows import WorldPlanes, plane_rows_into
-from offboard.safety.rcbf.clf_rcbf import ACTIVE_TOL_MPS2, ClfTerms, QPResult
-from swarm_common.enums import Method, QPRow, QPStatus
+from offboard.safety.rcbf.clf_rcbf import ClfTerms
+from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, rows3, vec3
 from swarm_common.scenario.model import ControllerConfig, VehicleConfig
 
@@ -108,11 +108,11 @@ class DcbfFilter(SafetyFilter):
         self.tight_qp: DcbfQP | None = None
         self._g_alt, self._rhs_alt = NO_ALT_G, NO_ALT_RHS
         self.trust_counts = np.zeros(3, dtype=np.int64)
-        # where the step's rows come from, for the active rows it reports (_active): the
+        # where the step's rows come from, for the active rows it reports (active_rows): the
         # pair rows' scenario indices (sensed, then predicted), the ground's two rows, and
         # the world's (its planes, their first row, the agent's position)
-        self._rows_of: tuple[np.ndarray, np.ndarray, bool] = (NO_ROWS, NO_ROWS, False)
-        self._world_of: tuple[WorldPlanes, int, int, np.ndarray] | None = None
+        self._rows_of: RowsOf = (NO_ROWS, NO_ROWS, False)
+        self._world_of: WorldOf | None = None
         # the transient speed limit (offboard.safety.dcbf.speed_rows; configure, when the
         # scenario sets max_transient_speed_mps) and the first of its rows this step
         self.speed: TransientLimit | None = None
@@ -354,42 +354,8 @@ class DcbfFilter(SafetyFilter):
                                 lambda: -w - gain * z2, unheld)  # the fallback, formed if taken
         return SafetyOutput(
             res.u, res.h_min, res.status, res.solve_us, res.slack, res.violation, res.fallback,
-            self._active(res),
+            active_rows(res, self._rows_of, self._world_of, self._speed_from),
         )
-
-    def _active(self, res: QPResult) -> ActiveRows:
-        """The rows active at ``res``'s solution by kind (:meth:`note_rows`,
-        :meth:`add_world_rows`): none unless the QP was solved."""
-        if res.tight is None:
-            return NO_ACTIVE
-        kinds, count = QPRow(0), len(res.tight) + res.tight_input
-        if res.tight_input:
-            kinds |= QPRow.INPUT
-        if res.slack > ACTIVE_TOL_MPS2:
-            kinds |= QPRow.CLF
-            count += 1
-        sensed, predicted, ground = self._rows_of
-        n_s = len(sensed)
-        m = n_s + len(predicted)
-        pairs: list[int] = []
-        n_obstacle = -1  # obstacle planes of the step's world rows, counted when needed
-        for r in res.tight.tolist():
-            if r < 2 * m:  # the (C1) rows of the pairs, then their (C2) rows
-                i = r % m
-                j = int(sensed[i]) if i < n_s else int(predicted[i - n_s])
-                kinds |= QPRow.PAIR
-                if j not in pairs:
-                    pairs.append(j)
-            elif ground and r < 2 * m + 2:
-                kinds |= QPRow.GROUND
-            elif 0 <= self._speed_from <= r:  # the speed rows come last
-                kinds |= QPRow.SPEED
-            elif self._world_of is not None:  # two rows per plane: obstacles, then fence
-                planes, first, n_planes, p = self._world_of
-                if n_obstacle < 0:
-                    n_obstacle = n_planes - planes.fence_planes_at(p)
-                kinds |= QPRow.OBSTACLE if (r - first) // 2 < n_obstacle else QPRow.FENCE
-        return ActiveRows(count, kinds, tuple(pairs))
 
     def rows_state(self) -> RowsState:
         """The parameters, lag tables and per-pair state of :func:`dcbf_filter_rows_into`,
