@@ -26,6 +26,7 @@ from swarm_common.inputs import (
     BoundedReadError,
     OneLineParser,
     bounded_file,
+    finite_float,
     float_in,
     host,
     int_in,
@@ -46,6 +47,7 @@ from swarm_common.scenario.files import (
     swarm_name_problem,
 )
 from swarm_common.signing import SigningKeyError, key_file, load_key
+from swarm_common.world.geodesy import MAX_LAT_DEG
 from swarm_common.zenoh_session import ZENOH_CONFIG_ENV, ZENOH_CONFIG_FLAG
 
 if TYPE_CHECKING:  # the scenario model and the server load after the flags are checked
@@ -68,6 +70,25 @@ MAX_RATE_HZ = 5000.0  # --odometry-hz: the highest physics rate a scenario may h
 MAX_SIM_DURATION_S = 1e7  # --duration: about 116 days of simulated time
 UNSIGNED_WARNING = ("no --signing-key: the vehicles accept unsigned MAVLink commands from "
                     "anyone who reaches their ports (gcs keys generate; docs/security.md)")
+
+
+MAX_HOME_ALT_M = 9000.0  # --home: AMSL altitudes in [-MAX_HOME_ALT_M / 18, MAX_HOME_ALT_M]
+
+
+def home_point(text: str) -> tuple[float, float, float]:
+    """argparse ``type=`` of ``--home LAT,LON,ALT``: degrees, degrees, metres AMSL (PX4
+    SITL's PX4_HOME_LAT/LON/ALT); a latitude within ±85° (the flat-earth conversion)."""
+    parts = text.split(",")
+    vals = [finite_float(p) for p in parts] if len(parts) == 3 else []
+    if len(vals) != 3 or any(v is None for v in vals):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be LAT,LON,ALT (three numbers)")
+    lat, lon, alt = (float(v) for v in vals if v is not None)
+    if not (abs(lat) <= MAX_LAT_DEG and abs(lon) <= 180.0
+            and -MAX_HOME_ALT_M / 18 <= alt <= MAX_HOME_ALT_M):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: latitude within ±{MAX_LAT_DEG:g}°, longitude within ±180°, altitude "
+            f"in [{-MAX_HOME_ALT_M / 18:g}, {MAX_HOME_ALT_M:g}] m")
+    return lat, lon, alt
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -136,6 +157,12 @@ def build_parser() -> argparse.ArgumentParser:
              "batch run with no ground station pays nothing for telemetry)",
     )
     ap.add_argument(
+        "--home", type=home_point, default=None, metavar="LAT,LON,ALT",
+        help="the geodetic origin of every vehicle's local frame (degrees, degrees, m AMSL; "
+             "default PX4 SITL's, 47.397742,8.545594,488): GPS positions, HOME_POSITION, "
+             "GPS_GLOBAL_ORIGIN and the stored fences are about it",
+    )
+    ap.add_argument(
         "--quiet", action="store_true", help="no event log on stderr (same as --log-level warning)"
     )
     add_log_level_argument(ap)
@@ -201,6 +228,7 @@ def _options(args: argparse.Namespace, sc: Scenario) -> SimOptions:
         vehicles=args.vehicles,
         stats_out=args.stats_out,
         params_file=args.params_file,
+        home=args.home,
     )
 
 

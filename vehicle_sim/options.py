@@ -34,6 +34,9 @@ class SimOptions:
     # --default-streams: a link's default remote gets the telemetry always (PX4) or only
     # once a client there has spoken (HEARTBEAT before that; vehicle_sim.link.server_io)
     default_streams: DefaultStreams = DefaultStreams.ALWAYS
+    # --home: the geodetic origin (lat °, lon °, alt m AMSL) of the vehicles' local frames;
+    # None: PX4 SITL's default (swarm_common.world.geodesy)
+    home: tuple[float, float, float] | None = None
 
 
 def restrict(sc: Scenario, k: int | None) -> Scenario:

@@ -123,6 +123,8 @@ class SimServer(ServerIO):
                 lockstep=o.lockstep,
                 port_offset=o.port_offset,
             )
+            if o.home is not None:
+                cfg.home_lat, cfg.home_lon, cfg.home_alt = o.home
             v = Vehicle(aid, idx, self.dyn, cfg)
             if self.sc.world.geofence is not None:  # listed and checked as the filter keeps it
                 v.mission.preload_fence(scenario_fence_items(cfg, self.sc.world.geofence))

@@ -231,8 +231,11 @@ class OffboardDaemon:
         half a swap."""
         self.link.fence.tick(now)
         got = self.link.fence.take()
-        if got is not None and self.fence is not None:
-            self.fence.on_download(got)
+        if self.fence is None:
+            return
+        if got is not None:
+            self.fence.on_download(got, now)
+        self.fence.on_origin(self.link.origin, now)
 
     def say_stopped(self) -> None:
         """The last line: drops, and the CPU the control law took (bench_distributed reads

@@ -16,6 +16,12 @@ dcbf filter keeps, so that the filter and the simulator agree:
   and one WARNING line says that the filter and the simulator disagree;
 * a download that failed or is not a valid fence: counted in :attr:`FenceSync.bad`,
   dropped, one WARNING line; the filter keeps its fence.
+
+Latitudes and longitudes are read about the vehicle's GPS_GLOBAL_ORIGIN, the origin of the
+local frame its odometry (and so the filter) is in. A download finished before the first
+origin waits for it; a vehicle that sends none within :data:`ORIGIN_WAIT_S` has its fence
+read about the default origin (:data:`~swarm_common.world.geodesy.DEFAULT_ORIGIN`), with
+one WARNING line. An origin that moves later has the last download read again about it.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ import logging
 from collections.abc import Callable
 
 from swarm_common.enums import AgentAlarm
+from swarm_common.world import geodesy
 from swarm_common.world.config import Geofence
 from swarm_common.world.mavlink_fence import (
     FenceItem,
@@ -34,6 +41,8 @@ from swarm_common.world.mavlink_fence import (
 )
 
 log = logging.getLogger("offboard.daemon.core")  # the daemon's lines keep one logger name
+
+ORIGIN_WAIT_S = 5.0  # s (monotonic) a finished download waits for the vehicle's origin
 
 
 class FenceSync:
@@ -51,15 +60,58 @@ class FenceSync:
         self.refused = 0  # fences it could not take (it kept its own)
         self.bad = 0  # downloads that failed or held no valid fence
         self.disagree = ""  # why the filter's fence is not the vehicle's; "" when it is
+        self.origin: geodesy.Origin | None = None  # the vehicle's GPS_GLOBAL_ORIGIN
+        # the last download, the origin it was read about (None: waiting for one) and the
+        # monotonic time it finished
+        self._last: tuple[int, list[FenceItem]] | None = None
+        self._read_about: geodesy.Origin | None = None
+        self._since = 0.0
 
-    def on_download(self, got: tuple[int, list[FenceItem]] | str) -> None:
+    def on_download(self, got: tuple[int, list[FenceItem]] | str, now: float = 0.0) -> None:
         """One finished download (:meth:`FenceDownload.take
-        <offboard.daemon.mavlink.fence_download.FenceDownload.take>`)."""
+        <offboard.daemon.mavlink.fence_download.FenceDownload.take>`) at monotonic ``now``."""
         if isinstance(got, str):
             self._bad(f"the fence download failed: {got}")
             return
-        fence_id, items = got
-        read = read_fence(items)
+        self._last, self._read_about, self._since = got, None, now
+        if self.origin is not None:
+            self._read(self.origin)
+
+    def on_origin(self, origin: geodesy.Origin | None, now: float) -> None:
+        """The vehicle's GPS_GLOBAL_ORIGIN as last heard (None: none yet) at monotonic
+        ``now``: a download waiting for it, or read about another, is read about it; one
+        that waited ORIGIN_WAIT_S for none is read about the default origin."""
+        if origin is None:
+            if self._last is not None and self._read_about is None \
+                    and now - self._since >= ORIGIN_WAIT_S:
+                log.warning("agent %d: the vehicle sent no GPS_GLOBAL_ORIGIN in %g s; its "
+                            "fence is read about the default origin", self.id, ORIGIN_WAIT_S)
+                self._read(geodesy.DEFAULT_ORIGIN)
+            return
+        moved = self.origin is not None and geodesy.origin_offset_m(
+            origin, self.origin) > geodesy.ORIGIN_SAME_M
+        if moved or (self.origin is None and geodesy.origin_offset_m(
+                origin, geodesy.DEFAULT_ORIGIN) > geodesy.ORIGIN_SAME_M):
+            log.info("agent %d: the vehicle's local origin is %.7f, %.7f (%.2f m from the "
+                     "default)", self.id, origin[0], origin[1],
+                     geodesy.origin_offset_m(origin, geodesy.DEFAULT_ORIGIN))
+        self.origin = origin
+        if self._last is not None and (self._read_about is None or geodesy.origin_offset_m(
+                origin, self._read_about) > geodesy.ORIGIN_SAME_M):
+            self._read(origin)
+
+    @property
+    def read_about(self) -> geodesy.Origin | None:
+        """The origin the last download was read about; None before one was read."""
+        return self._read_about
+
+    def _read(self, origin: geodesy.Origin) -> None:
+        """The last download, read about ``origin``."""
+        if self._last is None:
+            return
+        self._read_about = origin
+        fence_id, items = self._last
+        read = read_fence(items, origin)
         which = f"fence_id {fence_id:#x}, {len(items)} items"
         if read.kind == "bad":
             self._bad(f"the vehicle's fence ({which}) is not valid: {read.reason}")

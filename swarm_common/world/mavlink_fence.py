@@ -73,14 +73,14 @@ class FenceRead:
     reason: str = ""
 
 
-def _enu_xy(it: FenceItem) -> tuple[float, float] | str:
-    """The item's ENU (x, y) (m), or why it has none."""
+def _enu_xy(it: FenceItem, origin: geodesy.Origin) -> tuple[float, float] | str:
+    """The item's ENU (x, y) (m) about ``origin``, or why it has none."""
     if it.frame == FRAME_LOCAL_NED:
         x, y = it.y / LOCAL_SCALE, it.x / LOCAL_SCALE
     elif it.frame in GLOBAL_FRAMES:
         if not (abs(it.x) <= 90 * geodesy.DEG_E7 and abs(it.y) <= 180 * geodesy.DEG_E7):
             return f"item {it.seq}: latitude/longitude {it.x}, {it.y} (degE7) out of range"
-        x, y = geodesy.enu_xy_of_e7(it.x, it.y)
+        x, y = geodesy.enu_xy_of_e7(it.x, it.y, *origin)
     else:
         return f"item {it.seq}: frame {it.frame} is not a position frame"
     if not math.hypot(x, y) <= MAX_RANGE_M:
@@ -96,8 +96,11 @@ def _polygon_count(it: FenceItem) -> int | str:
     return int(n)
 
 
-def read_fence(items: Sequence[FenceItem]) -> FenceRead:
-    """The fence of a downloaded FENCE list (module docstring)."""
+def read_fence(items: Sequence[FenceItem],
+               origin: geodesy.Origin = geodesy.DEFAULT_ORIGIN) -> FenceRead:
+    """The fence of a downloaded FENCE list (module docstring), its latitudes and longitudes
+    read about ``origin``: the vehicle's GPS_GLOBAL_ORIGIN, the origin of the local frame
+    its odometry is in."""
     if len(items) > MAX_ITEMS:
         return FenceRead("bad", reason=f"{len(items)} items (> {MAX_ITEMS})")
     polygons: list[tuple[int, tuple[tuple[float, float], ...]]] = []
@@ -120,7 +123,7 @@ def read_fence(items: Sequence[FenceItem]) -> FenceRead:
                 if v.seq != i + j or v.command != it.command or v.param1 != it.param1:
                     return FenceRead("bad", reason=f"item {i + j}: not vertex {j} of the "
                                      f"polygon at item {i}")
-                p = _enu_xy(v)
+                p = _enu_xy(v, origin)
                 if isinstance(p, str):
                     return FenceRead("bad", reason=p)
                 xy.append(p)
@@ -130,12 +133,12 @@ def read_fence(items: Sequence[FenceItem]) -> FenceRead:
         if it.command in (CIRCLE_IN, CIRCLE_OUT):
             if not (math.isfinite(it.param1) and 0.0 < it.param1 <= MAX_RANGE_M):
                 return FenceRead("bad", reason=f"item {i}: circle radius {it.param1!r}")
-            p = _enu_xy(it)
+            p = _enu_xy(it, origin)
             if isinstance(p, str):
                 return FenceRead("bad", reason=p)
             other.append("inclusion circle" if it.command == CIRCLE_IN else "exclusion circle")
         elif it.command == RETURN_POINT:
-            p = _enu_xy(it)
+            p = _enu_xy(it, origin)
             if isinstance(p, str):
                 return FenceRead("bad", reason=p)
         else:

@@ -239,6 +239,14 @@ def home_position(v: VehicleState, sim_t: float) -> M.MAVLink_home_position_mess
     )  # fmt: skip
 
 
+def gps_global_origin(v: VehicleState, sim_t: float) -> M.MAVLink_gps_global_origin_message:
+    """GPS_GLOBAL_ORIGIN: the geodetic point of the local frame's origin (NED 0, 0, 0), the
+    frame of LOCAL_POSITION_NED and ODOMETRY (PX4 streams it at 1 Hz on an onboard link)."""
+    lat, lon = latlon(v.cfg, np.zeros(3))
+    return M.MAVLink_gps_global_origin_message(lat, lon, int(round(v.cfg.home_alt * 1000)),
+                                               _t_us(sim_t))
+
+
 def extended_sys_state(v: VehicleState, sim_t: float) -> M.MAVLink_extended_sys_state_message:
     return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed_state(v))
 
@@ -332,6 +340,7 @@ BUILDERS: dict[int, Builder] = {
     M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
     M.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
     M.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
     M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: extended_sys_state,
     M.MAVLINK_MSG_ID_SYS_STATUS: sys_status,
     M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,

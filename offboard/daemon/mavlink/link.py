@@ -18,6 +18,8 @@ Link hygiene (docs/security.md, "Offboard daemon: link hygiene and failsafes"):
   it on ``tick`` and the ACK completes it (:mod:`offboard.daemon.mavlink.commands`);
 * **fence**: :attr:`VehicleLink.fence` downloads the vehicle's stored geofence whenever
   MISSION_CURRENT's ``fence_id`` changes (:mod:`offboard.daemon.mavlink.fence_download`);
+  :attr:`VehicleLink.origin` keeps the vehicle's GPS_GLOBAL_ORIGIN (one out of range is
+  dropped and counted), about which the fence is read;
 * **signing** (optional key): outgoing frames signed, unsigned or wrongly signed frames
   dropped and counted (``bad signature``); replayed frames (a stream's timestamp not
   above its last, a new stream older than 60 s) and reflected ones (claiming the daemon's
@@ -76,6 +78,7 @@ from swarm_common.signing import (  # noqa: E402
     REPLAY_REASONS,
     setup_signing,
 )
+from swarm_common.world import geodesy  # noqa: E402
 
 mavlink = mavutil.mavlink
 log = logging.getLogger(__name__)
@@ -143,6 +146,9 @@ class VehicleLink(LinkSender):
         self.gate = LockGate(agent_id, self.drops, self.signed, challenge=self.sock is not None)
         self.commands = VehicleCommands(agent_id, self._send)  # COMMAND_LONG, ACK, retry
         self.fence = FenceDownload(agent_id, self._send)  # the vehicle's stored geofence
+        # the vehicle's GPS_GLOBAL_ORIGIN (lat, lon in degrees): the geodetic point of its
+        # local frame, about which its fence is read (offboard.daemon.fence_sync)
+        self.origin: geodesy.Origin | None = None
         self.statustexts: list[str] = []
         self.failsafe_texts = 0  # STATUSTEXTs of the vehicle that say "failsafe"
         self.offboard_lost_texts = 0  # ... that say "failsafe" and "offboard"
@@ -309,6 +315,12 @@ class VehicleLink(LinkSender):
             self.commands.on_ack(msg, now)
         elif kind in FENCE_KINDS:
             FENCE_KINDS[kind](self.fence, msg, now)
+        elif kind == "GPS_GLOBAL_ORIGIN":
+            got = geodesy.origin_of_e7(int(msg.latitude), int(msg.longitude))
+            if isinstance(got, str):
+                self.drops.drop(got, "GPS_GLOBAL_ORIGIN", now)
+            else:
+                self.origin = got
         elif kind == "STATUSTEXT":
             text = str(msg.text)
             self.statustexts = [*self.statustexts[-31:], text]

@@ -37,10 +37,11 @@ M = mavutil.mavlink
 
 # the vehicle messages the daemon reads (offboard.daemon.mavlink.link.VehicleLink._handle), and
 # the answers to its own requests (TIMESYNC: the lock challenge, mavlink.lock_gate; the
-# MISSION_* of the fence download, mavlink.fence_download, which MISSION_CURRENT starts)
+# MISSION_* of the fence download, mavlink.fence_download, which MISSION_CURRENT starts;
+# GPS_GLOBAL_ORIGIN, about which the fence is read)
 READ_KINDS = frozenset({"HEARTBEAT", "ODOMETRY", "COMMAND_ACK", "STATUSTEXT", "DATA_STREAM",
                         "TIMESYNC", "MISSION_CURRENT", "MISSION_COUNT", "MISSION_ITEM_INT",
-                        "MISSION_ACK"})
+                        "MISSION_ACK", "GPS_GLOBAL_ORIGIN"})
 # the telemetry of the legacy stream groups (ArduPilot's grouping, which MAVProxy and our
 # simulator use): receiving one of these means the request has not taken (yet). Messages
 # outside every group (MISSION_CURRENT, ...) cannot be stopped this way and never retrigger.
