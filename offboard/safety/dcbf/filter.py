@@ -61,6 +61,7 @@ GROUND_ACCEL_ERR = 1.0
 WORLD_GAMMA = 4.0
 SLACK_TOL = 1e-6  # m/s²: the speed rows stay when they add no more than this to σ
 NO_ROWS = np.zeros(0, dtype=np.int64)  # no pair rows of that kind (never written)
+NO_CLF = np.zeros(3)  # L_gV of a solve without the CLF row's pull (never written)
 
 
 def input_set_of(ctl: ControllerConfig, veh: VehicleConfig) -> ProjectedInputSet:
@@ -289,9 +290,11 @@ class DcbfFilter(SafetyFilter):
         when ``u_try`` is near the limit; while the answer is outside it, one more cut (at
         most MAX_CUTS), then the inner cube. If the QP needs its slack (or fails) with speed
         rows, it is solved again without them: the pair, ground and world rows come first
-        (their claim needs σ = 0). Their answer is flown unless it needs as much slack
-        (to SLACK_TOL) as the one with the speed rows: then the pair rows are relaxed
-        either way, and the speed rows stay."""
+        (their claim needs σ = 0). Where they alone need none, the command flown is the one
+        nearest the limit's braking command that keeps them (:meth:`_recover`): the limit
+        gives way only as far as they need. Where they need slack too, their answer is
+        flown unless it needs as much (to SLACK_TOL) as the one with the speed rows: then
+        the pair rows are relaxed either way, and the speed rows stay."""
         lim = self.speed
         if lim is None or self.qp is None:
             raise RuntimeError("DcbfFilter.solve_limited: no max_transient_speed_mps")
@@ -311,7 +314,10 @@ class DcbfFilter(SafetyFilter):
             if res.qp_status.degraded and n:  # σ > 0 (or failed) with them: without them?
                 if base is None:
                     base = self.solve_rows(u_try, clf, k, h_min, w, z2, unheld=not held)
-                if (not base.qp_status.degraded or res.qp_status is not QPStatus.RELAXED
+                if not base.qp_status.degraded:  # the barrier rows alone hold: brake
+                    self._speed_from = -1
+                    return self._recover(clf, k, h_min, w, z2, base)
+                if (res.qp_status is not QPStatus.RELAXED
                         or res.violation > base.violation + SLACK_TOL):
                     self._speed_from = -1  # they cost the other rows slack: dropped
                     return base
@@ -321,6 +327,19 @@ class DcbfFilter(SafetyFilter):
                 cuts.append(lim.direction(res.u))
             else:
                 cube = True
+
+    def _recover(self, clf: ClfTerms, k: int, h_min: float, w: np.ndarray, z2: np.ndarray,
+                 base: SafetyOutput) -> SafetyOutput:
+        """The speed limit and the first ``k`` rows cannot hold together, and those rows alone
+        can (``base``, their answer for the nominal command): the command nearest the speed
+        limit's braking command ``u_b`` that keeps them (no CLF row; σ = 0 to the exact
+        penalty), so the follower exceeds v_t only as far as its barrier rows make it.
+        ``base`` if that needs slack after all."""
+        lim = self.speed
+        if lim is None:
+            raise RuntimeError("DcbfFilter._recover: no max_transient_speed_mps")
+        res = self.solve_rows(lim.u_b, ClfTerms(0.0, 0.0, NO_CLF, lim.u_b), k, h_min, w, z2)
+        return base if res.qp_status.degraded else res
 
     def solve_rows(
         self, u_try: np.ndarray, clf: ClfTerms, k: int, h_min: float, w: np.ndarray,

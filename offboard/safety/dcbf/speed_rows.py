@@ -28,7 +28,8 @@ dropped for the pair rows) must be allowed to slow down within the input set: ea
 right side is clipped to what ``u_b`` achieves, the command that steers ê_T to 0 projected
 into the input set (a point of the set that keeps every clipped row). So these rows never
 need the QP's slack on their own; with the others, the filter drops them rather than
-relax a pair's (:meth:`offboard.safety.dcbf.filter.DcbfFilter.solve_limited`).
+relax a pair's, and flies the command nearest ``u_b`` that keeps the others
+(:meth:`offboard.safety.dcbf.filter.DcbfFilter.solve_limited`).
 
 **Only near the limit.** No row is added while the command tried first (u_nom plus the
 sidestep) predicts ‖ê_T‖ ≤ NEAR·b and the QP's answer stays in the ball: a run that stays

@@ -131,3 +131,35 @@ def test_a_follower_starting_faster_slows_down_without_slack():
     assert not any(s.degraded for s in status)  # the clipped rows need no slack
     assert np.all(np.diff(speeds[:40]) < 0.0)  # it brakes from the first step
     assert speeds[-1] <= 1.0
+
+
+def test_the_limit_gives_way_only_as_far_as_a_pair_row_needs():
+    """A pair row that asks for more speed than v_t allows (a neighbour closing from behind):
+    the row holds without slack, and the command is the one nearest the limit's braking
+    command u_b that keeps it, not the nominal command through the row alone (which let a
+    follower sprint at its nominal law's pace while the limit was off)."""
+    sc = load_scenario(CUBE8)
+    ctl = dataclasses.replace(sc.controller, max_transient_speed_mps=1.0)
+    filt = DcbfFilter(ctl, -np.full(3, 8.0), np.full(3, 8.0), np.zeros(2, dtype=bool))
+    filt.configure(sc.vehicle, DT)
+    lim = filt.speed
+    assert lim is not None
+    v = np.array([1.0, 0.0, 0.0])  # at the limit, v* = 0
+    lim.prepare(v, np.zeros(3), np.zeros(3), np.zeros(12))
+    out = filt.rows_out()
+    out.g[0], out.rhs[0] = np.array([1.0, 0.0, 0.0]), 3.0  # u_x ≥ 3 m/s²
+    filt.note_rows(np.array([1]), np.zeros(0, dtype=np.int64), False)
+    clf = ClfTerms(0.0, 0.0, np.zeros(3), np.array([6.0, 4.0, 0.0]))
+    assert lim.excess(np.array([3.0, 0.0, 0.0])) > 0.0  # the row and the limit conflict
+    res = filt.solve_limited(clf.u_nom, clf, 1, math.inf, np.zeros(3), v, False, 0.0)
+    assert not res.qp_status.degraded
+    assert res.u[0] >= 3.0 - 1e-6  # the pair row holds
+    assert lim.excess(res.u) < lim.excess(clf.u_nom)  # slower than the nominal command
+    # the nearest point to u_b of {u_x ≥ 3} ∩ the input set, against a dense sample of it
+    _, uset = _limit(1.0)
+    rng = np.random.default_rng(11)
+    best = math.inf
+    for u in rng.uniform(-8.0, 8.0, (40000, 3)):
+        if u[0] >= 3.0 and uset.contains(u, 0.0):
+            best = min(best, float(np.linalg.norm(u - lim.u_b)))
+    assert float(np.linalg.norm(res.u - lim.u_b)) <= best + 1e-6
