@@ -5,7 +5,9 @@ Keys, under one root and a swarm name (``swarm/<name>/...``):
 =====================================  ==========================================  ==========
 key                                    payload                                     publisher
 =====================================  ==========================================  ==========
-``<root>/<swarm>/truth``               :class:`Truth` (all vehicles, one message)  vehicle-sim
+``<root>/<swarm>/truth``               :class:`Truth` (all vehicles, one message;  vehicle-sim
+                                       with a stored fence that changed, its
+                                       outline)
 ``<root>/<swarm>/agent/<id>/estimate`` :class:`Estimate` (post-update, for t_k+1)  offboard
 ``<root>/<swarm>/agent/<id>/status``   :class:`Status`                             offboard
 ``<root>/<swarm>/agent/<id>/odometry`` :class:`Odometry` (own vehicle, ENU, at t_k) offboard
@@ -133,6 +135,28 @@ def _opt_bool(d: dict[str, Any], key: str, default: bool) -> bool:
     return value
 
 
+MAX_FENCE_COORDS = 128  # a changed fence's vertex coordinates: 64 vertices at most
+
+
+def _fences(d: Any, ids: list[int]) -> dict[int, np.ndarray]:
+    """A truth's changed fences (``id -> x0, y0, ...``): ids of the truth, finite pairs."""
+    if not isinstance(d, dict):
+        raise WireError("field 'fence' is not a map")
+    out: dict[int, np.ndarray] = {}
+    for name, b in d.items():
+        key = int(name) if isinstance(name, str) and name.isdecimal() else -1
+        if key not in ids:
+            raise WireError(f"fence of {name!r}: not a vehicle of this truth")
+        n = len(b) // 4 if isinstance(b, bytes) else -1
+        if n % 2 or not 0 <= n <= MAX_FENCE_COORDS:
+            raise WireError(f"fence of {key}: {n} coordinates")
+        xy = _unpack_vec(b, (n,))
+        if not np.all(np.isfinite(xy)):
+            raise WireError(f"fence of {key}: not finite")
+        out[key] = xy
+    return out
+
+
 # -- payloads ------------------------------------------------------------------------
 @dataclass
 class Truth:
@@ -151,6 +175,9 @@ class Truth:
     collisions: int = 0
     # min pair distance over the physics steps of (t_k-1, t_k] (float64 on the wire)
     min_dist: float = float("inf")
+    # the vehicles whose stored fence changed since the last truth: id -> its inclusion
+    # polygon's ENU vertices (x0, y0, x1, y1, ...; m); empty: no single inclusion polygon
+    fences: dict[int, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass
@@ -270,6 +297,8 @@ def encode(obj: Payload) -> bytes:
             "coll": int(obj.collisions),
             "md": float(obj.min_dist),
         }
+        if obj.fences:  # only on the steps where a stored fence changed
+            d["fence"] = {str(int(i)): _pack_vec(np.ravel(xy)) for i, xy in obj.fences.items()}
     elif isinstance(obj, Estimate):
         d = {
             "v": VERSION,
@@ -370,6 +399,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 mode=[str(m) for m in d["mode"]],
                 collisions=int(d["coll"]),
                 min_dist=float(d.get("md", float("inf"))),
+                fences=_fences(d.get("fence", {}), ids),
             )
         if kind == "est":
             x = _unpack_vec(d["x"], (27,))

@@ -183,6 +183,8 @@ class SimServer(ServerIO):
             mode=[v.mode for v in self.vehicles],
             collisions=d.collisions,
             min_dist=self._min_dist,
+            fences={v.id: xy for v in self.vehicles
+                    if (xy := v.mission.take_fence_news()) is not None},
         )
 
     def publish_truth(self) -> None:

@@ -100,6 +100,9 @@ class Recorder:
         self.last_mode: list[str] = []
         self.dropped = 0
         self.commands: list[dict[str, Any]] = []  # Zenoh commands seen (audit records)
+        # the vehicles' stored fences as they changed (wire.Truth.fences): (time s,
+        # column, outline), what the verdict scores from then (gcs.report.world_metrics)
+        self.fence_changes: list[tuple[float, int, tuple[float, ...]]] = []
         self.commands_dropped = 0
         self._subs: list[Any] = []
 
@@ -142,6 +145,8 @@ class Recorder:
         self.p[k], self.v[k], self.att[k], self.lumped_true[k] = m.p, m.v, m.att, m.lumped
         self.thrust[k] = m.thrust
         self.have_truth[k] = True
+        for aid, xy in m.fences.items():  # ids checked by the decoder
+            self.fence_changes.append((float(m.t), self.idx[aid], tuple(map(float, xy))))
         if k >= self.max_step:  # the vehicles' modes of the newest truth (not kept per step)
             self.last_mode = [str(x) for x in m.mode]
         self.max_step = max(self.max_step, k)

@@ -5,6 +5,7 @@ aborted/checkpoint writes)."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -91,7 +92,8 @@ def recorded_metrics(
     metrics = compute_metrics(
         ser, form.follower_idx, sc.control_dt, veh.mass_kg, veh.gravity_mps2,
         last.collisions if last else 0, zeta_true, zeta_est, fallbacks, wall_s, duration,
-        safety_spec(sc, bool(rec.last_status)),
+        dataclasses.replace(safety_spec(sc, bool(rec.last_status)),
+                            fence_changes=tuple(rec.fence_changes)),
         takeoff_end_s=takeoff_plan(sc).t_blend if is_ground_start(sc) else None,
         land_at_s=land_at, extra=run_mission_metrics(sc, ser, form),
     )

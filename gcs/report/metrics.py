@@ -21,7 +21,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gcs.report.verdict import ground_strike_steps, verdict_metrics
-from gcs.report.world_metrics import WORLD_KEYS, world_metric_values, world_truth
+from gcs.report.world_metrics import (
+    WORLD_KEYS,
+    FenceChange,
+    world_metric_values,
+    world_truth,
+)
 from swarm_common.world.config import World
 
 if TYPE_CHECKING:  # compiled: imported where a run is scored, not by every CLI
@@ -196,6 +201,9 @@ class SafetySpec:
     # κ of the pair barrier (controller.dcbf_vertical_scale, docs/safety.md §4c): the
     # scenario's safe set, the same for every method flown in it; 1 = the sphere
     vertical_scale: float = 1.0
+    # the vehicles' stored fences as a ground station changed them in a distributed run
+    # (gcs.report.world_metrics.FenceChange): scored from then instead of the scenario's
+    fence_changes: tuple[FenceChange, ...] = ()
 
 
 def ground_strikes(p: np.ndarray, v: np.ndarray) -> int:
@@ -246,7 +254,8 @@ def compute_metrics(
 
     h = (pair_barrier_summary(s.p, s.v, spec.tau_safe_s, spec.d_safe_m, spec.vertical_scale)
          if s.p.shape[1] >= 2 and len(s.t) else None)
-    world = world_truth(spec.world, s.p, s.v, spec.tau_safe_s)
+    world = world_truth(spec.world, s.p, s.v, spec.tau_safe_s, s.t, spec.fence_changes,
+                        spec.d_safe_m)
     return {
         "min_distance_m": float(s.min_dist.min()),
         "min_distance_by_phase_m": min_distance_by_phase(

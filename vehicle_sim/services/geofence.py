@@ -70,6 +70,16 @@ class Geofence:
     def __bool__(self) -> bool:
         return bool(self.zones)
 
+    def outline(self) -> np.ndarray:
+        """The ENU vertices (x0, y0, x1, y1, ...; m) of a fence that is one inclusion
+        polygon; empty for any other (none, circles, exclusions, several zones): what the
+        truth reports of a changed fence (``wire.Truth.fences``, the verdict's fence)."""
+        if len(self.zones) == 1:
+            zone = self.zones[0]
+            if isinstance(zone, Polygon) and zone.inclusion:
+                return np.ravel(zone.xy).astype(float)
+        return np.zeros(0)
+
     def breach(
         self, p_enu: np.ndarray, home_enu: np.ndarray, max_hor_m: float = 0.0,
         max_ver_m: float = 0.0,

@@ -66,6 +66,9 @@ class MissionService:
         self._next_current = 0.0
         self._last_current: tuple[int, int, int, int] | None = None
         self._fence_id = 0  # MISSION_CURRENT.fence_id of the stored fence (plan_id)
+        # the outline of a fence stored since the last truth (Geofence.outline), for the
+        # run's verdict; the server takes it (take_fence_news)
+        self._fence_news: np.ndarray | None = None
 
     def handlers(self) -> dict[int, Handler]:
         """MAVLink message id -> ``handler(msg, src, wall, sim_t)``."""
@@ -214,6 +217,12 @@ class MissionService:
         self._preloaded = list(items)
         self._fence_id = plan_id(items)
 
+    def take_fence_news(self) -> np.ndarray | None:
+        """The outline of a fence stored since the last call (empty: not one inclusion
+        polygon), or None when the stored fence did not change."""
+        news, self._fence_news = self._fence_news, None
+        return news
+
     def _apply_changes(self) -> None:
         v = self.vehicle
         for line in self.transfer.errors:
@@ -231,6 +240,7 @@ class MissionService:
             elif mt == mi.FENCE:
                 self.geofence = fence_from_items(v.cfg, items)
                 self._fence_id = plan_id(items)  # MISSION_CURRENT tells every peer at once
+                self._fence_news = self.geofence.outline()
                 if self._preloaded is not None and items != self._preloaded:
                     v.event(
                         "geofence changed: the offboard filter takes it if it is one convex "

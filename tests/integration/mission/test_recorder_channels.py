@@ -91,3 +91,43 @@ def test_recorder_drains_its_channels_and_counts_garbage() -> None:
     finally:
         other.close()
         runner.close()
+
+
+def test_a_changed_fence_in_the_truth_reaches_the_verdict() -> None:
+    """A truth that reports vehicle 4's newly stored fence: the recorder keeps it with the
+    truth's time, and the run's metrics score vehicle 4 against it from then (cube8 has no
+    fence of its own, so without it the fence metrics are None)."""
+    from gcs.mission.score import recorded_metrics
+
+    sc = load_scenario(str(SCEN / "cube8.toml"))
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    runner = open_session(mode="router", listen=[ep])
+    other = open_session(connect=[ep])
+    rec = Recorder(sc, steps=3)
+    subs = rec.subscribe(runner, SWARM)
+    pub_t = other.declare_publisher(wire.key_truth(SWARM))
+    square = np.array([0.0, 0.0, 20.0, 0.0, 20.0, 20.0, 0.0, 20.0])
+    try:
+        assert wait_for(lambda: pub_t.matching_status.matching)
+        for k in range(4):
+            msg = wire.decode(_truth(sc.ids, k))
+            assert isinstance(msg, wire.Truth)
+            if k == 2:
+                msg.fences = {sc.ids[3]: square}
+            pub_t.put(wire.encode(msg))
+
+        def drained() -> bool:
+            rec.drain()
+            return rec.max_step == 3
+
+        assert wait_for(drained)
+    finally:
+        for s in subs:
+            s.undeclare()
+        other.close()
+        runner.close()
+    assert rec.fence_changes == [(2 / 50.0, 3, tuple(square))]
+    metrics, _ = recorded_metrics(rec, sc, 1.0, 3 / 50.0)
+    # vehicle 4 at (11, 12, 13) at t = 0.04 s, the run's last row: 8 m inside the square's
+    # y = 20 side (the rows before the change are not scored)
+    assert metrics["fence_min_margin_m"] == 20.0 - 12.0

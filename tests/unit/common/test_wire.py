@@ -128,3 +128,29 @@ def test_port_free_sees_a_bound_socket() -> None:
     assert port_free(port)
     ports = swarm_udp_ports([1, 2], offset=1000)
     assert ports[0] == 14550 + 1000 and len(ports) == 1 + 2 * 3 and len(set(ports)) == 7
+
+
+def test_a_truth_carries_the_fences_that_changed() -> None:
+    t = _truth()
+    assert "fence" not in msgpack.unpackb(wire.encode(t))  # none changed: not on the wire
+    t.fences = {2: np.array([0.0, 0.0, 8.0, 0.0, 8.0, 6.0]), 3: np.zeros(0)}
+    r = wire.roundtrip(t)
+    assert isinstance(r, wire.Truth) and set(r.fences) == {2, 3}
+    np.testing.assert_array_equal(r.fences[2], [0.0, 0.0, 8.0, 0.0, 8.0, 6.0])
+    assert r.fences[3].size == 0
+
+
+@pytest.mark.parametrize("fence", [
+    {"9": b""},  # not a vehicle of the truth
+    {"x2": b""},  # not an id
+    {"2": np.float32([1.0, 2.0, 3.0]).tobytes()},  # odd: not (x, y) pairs
+    {"2": np.float32([1.0, np.nan]).tobytes()},  # not finite
+    {"2": np.zeros(130, np.float32).tobytes()},  # more than 64 vertices
+    {"2": "abc"},  # not bytes
+    [1, 2],  # not a map
+])
+def test_a_bad_fence_in_a_truth_is_a_wire_error(fence) -> None:
+    d = msgpack.unpackb(wire.encode(_truth()))
+    d["fence"] = fence
+    with pytest.raises(wire.WireError):
+        wire.decode(msgpack.packb(d, use_bin_type=True))

@@ -69,3 +69,14 @@ def test_a_vehicle_lists_the_scenario_fence_and_warns_when_a_client_changes_it()
     # MISSION_CURRENT tells every peer at once (not at its next 1 Hz turn): a new fence_id
     now = [fence_id_of(m) for m, _ in v.outbox if m.get_type() == "MISSION_CURRENT"]
     assert now == [plan_id(items[:3])] and now[0] not in (0, first[-1])
+    # the truth reports the outline the vehicle now stores, once (the run's verdict)
+    news = v.mission.take_fence_news()
+    assert news is not None and v.mission.take_fence_news() is None
+    assert len(news) == 6  # the hexagon's first three vertices: a triangle
+    assert np.allclose(news.reshape(3, 2), HEXAGON.geofence.polygon_m[:3], atol=0.02)
+    v.mission.transfer.stores[M.MAV_MISSION_TYPE_FENCE] = items  # the hexagon again
+    v.mission.transfer.changed.append(M.MAV_MISSION_TYPE_FENCE)
+    v.update(0.2)
+    outline = v.mission.take_fence_news()
+    assert outline is not None and len(outline) == 12
+    assert np.allclose(outline.reshape(6, 2), HEXAGON.geofence.polygon_m, atol=0.02)
