@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 from conftest import CUBE8, wait_for
+from fence_client import BOX, request_message
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -26,25 +27,7 @@ from swarm_common.world.mavlink_fence import read_fence, same_outline  # noqa: E
 
 pytestmark = pytest.mark.timeout(120)
 M = mavutil.mavlink
-BOX = "\n[geofence]\nmin_m = [-2.0, -2.0, 0.0]\nmax_m = [9.0, 8.0, 9.5]\nmargin_m = 0.5\n"
 HOME = (47.405742, 8.556594, 500.0)
-
-
-def _asked_origin(port: int) -> tuple[int, int]:
-    """GPS_GLOBAL_ORIGIN (degE7) as a pymavlink client gets it on the GCS link at ``port``."""
-    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255,
-                                      source_component=190)
-    try:
-        deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline:
-            conn.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0,
-                                       M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0, 0, 0, 0, 0, 0)
-            m = conn.recv_match(type="GPS_GLOBAL_ORIGIN", blocking=True, timeout=0.5)
-            if m is not None:
-                return int(m.latitude), int(m.longitude)
-        raise AssertionError("no GPS_GLOBAL_ORIGIN")
-    finally:
-        conn.close()
 
 
 def test_the_fence_is_read_about_the_vehicles_origin(sim_factory, tmp_path: Path) -> None:
@@ -54,7 +37,9 @@ def test_the_fence_is_read_about_the_vehicles_origin(sim_factory, tmp_path: Path
     sim = sim_factory(["--no-zenoh", "--vehicles", "1", "--home", ",".join(map(str, HOME))],
                       scenario=str(scenario))
     ports = vehicle_ports(1, sim.offset)
-    assert _asked_origin(ports.gcs_local) == (round(HOME[0] * 1e7), round(HOME[1] * 1e7))
+    got = request_message(ports.gcs_local, 1, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,
+                          "GPS_GLOBAL_ORIGIN")
+    assert (got.latitude, got.longitude) == (round(HOME[0] * 1e7), round(HOME[1] * 1e7))
     link = VehicleLink(f"udpin:127.0.0.1:{ports.api_remote}", 1, 50.0, lockstep=False)
     taken: list[object] = []
     sync = FenceSync(1, box, 0.5, lambda f: taken.append(f) is None)

@@ -19,51 +19,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import CUBE8
+from fence_client import BOX, PENTAGON, upload_fence
 from realtime_swarm import collisions, flying_swarm, wait_for
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from swarm_common.ports import vehicle_ports  # noqa: E402
-from vehicle_sim.autopilot.config import AutopilotConfig  # noqa: E402
-from vehicle_sim.physics.geo import latlon_e7  # noqa: E402
 
 pytestmark = pytest.mark.timeout(240)
 
 M = mavutil.mavlink
 TARGET = 5  # a follower of cube8
-BOX = "\n[geofence]\nmin_m = [-2.0, -2.0, 0.0]\nmax_m = [9.0, 8.0, 9.5]\nmargin_m = 0.5\n"
-PENTAGON = ((0.0, -1.5), (8.0, -1.5), (8.0, 5.9), (4.0, 7.0), (0.0, 5.9))  # ENU, m
 WATCH_S = 5.0  # mission s vehicle 5 is watched inside the new fence
 TAKEN = re.compile(rf"agent {TARGET}: the filter takes the vehicle's fence \(fence_id (0x[0-9a-f]+)"
                    r", 5 items\): 5 vertices .*z 0 to 9\.5 m, margin 0\.5 m")
-
-
-def upload_fence(port: int, xy: tuple[tuple[float, float], ...]) -> int:
-    """Upload ``xy`` (ENU, m) as one inclusion polygon to vehicle TARGET's GCS link at
-    ``port`` with pymavlink as it comes; the final MISSION_ACK's result."""
-    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255,
-                                      source_component=190)
-    cfg = AutopilotConfig()
-    try:
-        conn.mav.mission_count_send(TARGET, 1, len(xy), M.MAV_MISSION_TYPE_FENCE)
-        deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline:
-            m = conn.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"],
-                                blocking=True, timeout=0.5)
-            if m is None or m.get_srcSystem() != TARGET:
-                continue
-            if m.get_type() == "MISSION_ACK":
-                return int(m.type)
-            x, y = xy[m.seq]
-            lat, lon = latlon_e7(cfg, np.array([y, x, 0.0]))  # NED offset from the origin
-            conn.mav.mission_item_int_send(
-                TARGET, 1, m.seq, M.MAV_FRAME_GLOBAL_INT,
-                M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, 0, 1, float(len(xy)), 0, 0, 0,
-                lat, lon, 0.0, M.MAV_MISSION_TYPE_FENCE)
-        raise AssertionError("no MISSION_ACK for the fence upload")
-    finally:
-        conn.close()
 
 
 def inside_margin(p_ned: np.ndarray) -> float:
@@ -82,7 +52,7 @@ def test_a_fence_uploaded_to_a_vehicle_reaches_its_daemons_filter(tmp_path: Path
     with flying_swarm(tmp_path, 1.0, scenario=str(scenario)) as sw:
         obs = sw.obs
         port = vehicle_ports(TARGET, obs.offset).gcs_local
-        assert upload_fence(port, PENTAGON) == M.MAV_MISSION_ACCEPTED
+        assert upload_fence(port, PENTAGON, TARGET) == M.MAV_MISSION_ACCEPTED
         log5 = tmp_path / f"offboard-{TARGET}.log"
         wait_for(lambda: TAKEN.search(log5.read_text()), 30, "agent 5's filter to take it")
         t0 = obs.time_s()
