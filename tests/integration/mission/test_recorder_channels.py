@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from conftest import free_tcp_port, wait_for
@@ -46,13 +47,19 @@ def _status(aid: int, k: int) -> bytes:
     ))
 
 
-def test_recorder_drains_its_channels_and_counts_garbage() -> None:
-    sc = load_scenario(str(SCEN / "cube8.toml"))
+def _linked(steps: int) -> tuple[Any, Any, Recorder, list[Any]]:
+    """(the runner's session, a publisher's session, a cube8 recorder of ``steps`` steps
+    subscribed on the runner's, its subscribers), over loopback TCP."""
     ep = f"tcp/127.0.0.1:{free_tcp_port()}"
     runner = open_session(mode="router", listen=[ep])
     other = open_session(connect=[ep])
-    rec = Recorder(sc, steps=10)
-    subs = rec.subscribe(runner, SWARM)
+    rec = Recorder(load_scenario(str(SCEN / "cube8.toml")), steps=steps)
+    return runner, other, rec, rec.subscribe(runner, SWARM)
+
+
+def test_recorder_drains_its_channels_and_counts_garbage() -> None:
+    runner, other, rec, subs = _linked(10)
+    sc = rec.sc
     aid = sc.ids[3]
     pub_t = other.declare_publisher(wire.key_truth(SWARM))
     pub_e = other.declare_publisher(wire.key_estimate(SWARM, aid))
@@ -99,12 +106,8 @@ def test_a_changed_fence_in_the_truth_reaches_the_verdict() -> None:
     fence of its own, so without it the fence metrics are None)."""
     from gcs.mission.score import recorded_metrics
 
-    sc = load_scenario(str(SCEN / "cube8.toml"))
-    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
-    runner = open_session(mode="router", listen=[ep])
-    other = open_session(connect=[ep])
-    rec = Recorder(sc, steps=3)
-    subs = rec.subscribe(runner, SWARM)
+    runner, other, rec, subs = _linked(3)
+    sc = rec.sc
     pub_t = other.declare_publisher(wire.key_truth(SWARM))
     square = np.array([0.0, 0.0, 20.0, 0.0, 20.0, 20.0, 0.0, 20.0])
     try:
