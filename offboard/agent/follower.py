@@ -22,7 +22,7 @@ from offboard.agent.pair_inputs import PairInputs
 from offboard.agent.peers import peer_ids
 from offboard.agent.shares import ShareRule
 from offboard.agent.takeoff import follower_xi
-from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours, heard_reach
+from offboard.agent.unsensed import PredictedPairs, UnsensedNeighbours
 from offboard.estimation.bearing import Formation, formation_from_scenario
 from offboard.estimation.deso import DESO
 from offboard.estimation.deso_gains import GainReport, formation_gain_report
@@ -45,6 +45,7 @@ from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, rows3, vec3
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
+from swarm_common.scenario.safety_check import reach_of
 from swarm_common.world.config import Geofence
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -134,7 +135,7 @@ class FollowerAgent(AgentBase):
         self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)
         self.unsensed = UnsensedNeighbours(
             self.pred, self.index, sc.n, sc.formation.sensing_range_m, ctl.tau_safe_s,
-            heard_reach(sc), 2.0 * math.sqrt(3.0) * ctl.u_max_mps2 * self.dt)
+            reach_of(sc), 2.0 * math.sqrt(3.0) * ctl.u_max_mps2 * self.dt)
         # who takes a pair's whole avoidance budget in the dcbf filter
         self.shares = ShareRule(self.pred, self.leader_mask, self.dt)
         self.fallbacks = 0

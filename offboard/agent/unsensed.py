@@ -14,7 +14,6 @@ from the prediction (docs/safety.md §5c and §5j).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable
 
@@ -23,9 +22,6 @@ import numpy as np
 from offboard.estimation.peer_table import Z1, Z2, unsensed_candidates
 from offboard.estimation.predictor import CURRENT_AGE_S, NeighbourPredictor
 from swarm_common.fastnp import norm
-from swarm_common.scenario.model import Scenario
-from swarm_common.scenario.safety_check import braking_accel, vertical_d_safe
-from swarm_common.scenario.transient_check import pair_reach
 
 # relative margin on the sensing range of the compiled pre-test of predicted pairs (its sum
 # of squares and the exact norm's BLAS dot differ by a few ulps)
@@ -41,14 +37,6 @@ HEARD_AFTER_S = 0.5
 PredictedPairs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def heard_reach(sc: Scenario) -> Callable[[float], float]:
-    """``reach(v)`` of :class:`UnsensedNeighbours` for ``sc``: max(R_h, R_b) of (b) with the
-    scenario's barrier, braking authority and lag (m, for v in m/s)."""
-    return functools.partial(pair_reach, tau_s=sc.controller.tau_safe_s,
-                             d=vertical_d_safe(sc), a_b=braking_accel(sc),
-                             lag=sc.control_dt + sc.vehicle.tau_rollpitch_s)
-
-
 class UnsensedNeighbours:
     """Agent ``index``'s neighbours to keep from prediction, read from its predictor."""
 
@@ -56,7 +44,8 @@ class UnsensedNeighbours:
                  tau_s: float, reach: Callable[[float], float] | None = None,
                  dv_step: float = 0.0) -> None:
         """``reach(v)``: the distance (m) from which a pair closing at v (m/s) must have
-        rows (None: no row beyond the sensing range); ``dv_step``: the most a pair's
+        rows (None: no row beyond the sensing range;
+        :func:`swarm_common.scenario.safety_check.reach_of`); ``dv_step``: the most a pair's
         relative speed can grow by within a period (m/s)."""
         self.pred, self.index, self.n = pred, index, n
         self.range, self.tau = float(sensing_range_m), float(tau_s)

@@ -44,7 +44,9 @@ z, κD, wherever D enters (the worst direction: R_h and R_b grow with D), for ev
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -192,18 +194,30 @@ def stop_range(sc: Scenario, v_bar: float, a_b: float) -> float:
                          sc.control_dt + sc.vehicle.tau_rollpitch_s)
 
 
+def pair_terms(sc: Scenario) -> tuple[float, float, float, float]:
+    """(τ_s, κD, a_b, dt + τ) of (b) for ``sc``: the barrier's horizon (s), its distance
+    along z (m), the braking authority (m/s²) and the lag before braking (s)."""
+    return (sc.controller.tau_safe_s, vertical_d_safe(sc), braking_accel(sc),
+            sc.control_dt + sc.vehicle.tau_rollpitch_s)
+
+
+def reach_of(sc: Scenario) -> Callable[[float], float]:
+    """``reach(v̄)``: max(R_h, R_b) (m) of (b) for a pair of ``sc`` closing at v̄ (m/s), its
+    terms computed once (the dcbf follower's rows of heard neighbours call it every step,
+    offboard.agent.unsensed)."""
+    tau_s, d, a_b, lag = pair_terms(sc)
+    return functools.partial(pair_reach, tau_s=tau_s, d=d, a_b=a_b, lag=lag)
+
+
 def needed_range(sc: Scenario, v_bar: float) -> float:
     """max(R_h, R_b) (m) for a pair closing at ``v_bar`` (m/s)."""
-    return pair_reach(v_bar, sc.controller.tau_safe_s, vertical_d_safe(sc), braking_accel(sc),
-                      sc.control_dt + sc.vehicle.tau_rollpitch_s)
+    return reach_of(sc)(v_bar)
 
 
 def range_speed(sc: Scenario) -> float:
     """v̄_R (m/s): the largest closing speed at which ``formation.sensing_range_m`` keeps
     (b) (:func:`~swarm_common.scenario.transient_check.speed_for_range`)."""
-    return speed_for_range(sc.formation.sensing_range_m, sc.controller.tau_safe_s,
-                           vertical_d_safe(sc), braking_accel(sc),
-                           sc.control_dt + sc.vehicle.tau_rollpitch_s)
+    return speed_for_range(sc.formation.sensing_range_m, *pair_terms(sc))
 
 
 def allowed_transient_speed(sc: Scenario) -> float:
