@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from offboard.estimation.peer_table import Z1, Z2, unsensed_candidates
+from offboard.estimation.peer_table import unsensed_candidates
 from offboard.estimation.predictor import CURRENT_AGE_S, NeighbourPredictor
 from swarm_common.fastnp import norm
 
@@ -78,7 +78,7 @@ class UnsensedNeighbours:
             (rng * (1.0 + RANGE_MARGIN)) ** 2 if reach is None else math.inf,
         )
         for j in cand.tolist():
-            got = self._predict(j, t)
+            got = pred.constant_velocity_at(j, t)
             if got is None:
                 continue
             p_j, v_j, b, b_v = got
@@ -94,28 +94,6 @@ class UnsensedNeighbours:
             return None
         return (np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                 np.array([r[2] for r in rows]), np.array([r[3] for r in rows]))
-
-    def _predict(self, j: int, t: float) -> tuple[np.ndarray, np.ndarray, float, float] | None:
-        """Agent ``j``'s (p (m), v (m/s)) at ``t`` with bounds on their errors (b_p m, b_v
-        m/s); None when its data is not usable. A leader's, and current data, as the
-        predictor gives them (exact: bounds 0). A follower's older data at constant velocity
-        from its last estimate, b_p = ½ a_max age², b_v = a_max age: the predictor's own
-        model bounds its error with a_dev = a_max + ā* + c_r ‖e‖ ≥ a_max, so for a row that
-        must hold against every state the other can be in, this is the tighter claim. Its
-        data is dropped past ``max_age`` or once b_p exceeds the predictor's drop bound, as
-        the predictor's is."""
-        pred = self.pred
-        tab = pred.table
-        age = t - float(tab.t[j])
-        if bool(tab.leader[j]) or age <= CURRENT_AGE_S:
-            got = pred.get_at(j, t)
-            return None if got is None else (got[0], got[1], 0.0, 0.0)
-        a = pred.a_max
-        b = 0.5 * a * age * age
-        if age > pred.max_age + 1e-9 or b > pred.drop_bound:
-            return None
-        row = tab.rows[j]
-        return row[Z1] + row[Z2] * age, row[Z2], b, a * age
 
     def _heard_indices(self) -> np.ndarray:
         """Sorted scenario indices (int64) of the agents heard from."""

@@ -238,6 +238,32 @@ class NeighbourPredictor:
         predict_row_into(r, xi_n, self.err(bool(tab.leader[j]), n), out)
         return out[Z1], out[Z2], out[XI]
 
+    def constant_velocity_at(
+        self, j: int, t: float,
+    ) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+        """Agent ``j``'s (p (m), v (m/s)) at ``t`` with bounds on their errors (b_p m, b_v
+        m/s), for a row that must hold against every state the other can be in (the dcbf
+        rows of unsensed neighbours, offboard.agent.unsensed); None when its data is not
+        usable. A leader's, and current data, as :meth:`get_at` gives them (exact: bounds
+        0). A follower's older data at constant velocity from its last estimate,
+        b_p = ½ a_max age², b_v = a_max age: the model's own bound takes
+        a_dev = a_max + ā* + c_r ‖e‖ ≥ a_max, so this is the tighter claim. Its data is
+        dropped as :meth:`get_at` drops it, with b_p as the bound."""
+        tab = self.table
+        age = t - float(tab.t[j])
+        if bool(tab.leader[j]) or age <= CURRENT_AGE_S:
+            got = self.get_at(j, t)
+            return None if got is None else (got[0], got[1], 0.0, 0.0)
+        b = 0.5 * self.a_max * age * age
+        if self._stale(age) or b > self.drop_bound:
+            return None
+        row = tab.rows[j]
+        return row[Z1] + row[Z2] * age, row[Z2], b, self.a_max * age
+
+    def _stale(self, age: float) -> bool:
+        """A follower's data of this age (s) is older than ``max_age``."""
+        return age > self.max_age + 1e-9
+
     def _periods_ahead(self, j: int, t: float) -> int | None:
         """Control periods to predict agent ``j``'s row over to reach ``t``: 0 for data
         current at ``t`` (or less than half a period old), None when it is not usable
@@ -250,7 +276,7 @@ class NeighbourPredictor:
         if age <= CURRENT_AGE_S:
             return 0
         if not bool(tab.leader[j]):
-            if age > self.max_age + 1e-9:
+            if self._stale(age):
                 return None
             b = self.bound_at(j, t)
             if b is not None and b > self.drop_bound:

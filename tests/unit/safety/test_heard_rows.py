@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from offboard.agent.unsensed import HEARD_AFTER_S, UnsensedNeighbours
+from offboard.estimation.predictor import NeighbourPredictor
 from swarm_common.scenario.transient_check import pair_reach, speed_for_range
 
 TAU_S, D, A_B, LAG, RANGE = 0.8, 0.5, 5.0, 0.17, 3.0
@@ -34,6 +35,10 @@ class _Pred:
     def get_at(self, j: int, t: float):
         assert t - self.table.t[j] <= 1e-9, "only current data is read through get_at"
         return self.table.rows[j, 0:3], self.table.rows[j, 3:6], np.zeros(12)
+
+    # the predictor's own constant-velocity prediction, over this stand-in's table
+    constant_velocity_at = NeighbourPredictor.constant_velocity_at
+    _stale = NeighbourPredictor._stale
 
 
 def _reach(v: float) -> float:
