@@ -88,10 +88,11 @@ class FenceSync:
                             "fence is read about the default origin", self.id, ORIGIN_WAIT_S)
                 self._read(geodesy.DEFAULT_ORIGIN)
             return
-        moved = self.origin is not None and geodesy.origin_offset_m(
-            origin, self.origin) > geodesy.ORIGIN_SAME_M
-        if moved or (self.origin is None and geodesy.origin_offset_m(
-                origin, geodesy.DEFAULT_ORIGIN) > geodesy.ORIGIN_SAME_M):
+        if origin is self.origin:  # the link's last message, seen before: nothing new
+            return
+        # a first origin other than the default, or one that moved: said once
+        if geodesy.origin_offset_m(origin, self.origin or geodesy.DEFAULT_ORIGIN) > \
+                geodesy.ORIGIN_SAME_M:
             log.info("agent %d: the vehicle's local origin is %.7f, %.7f (%.2f m from the "
                      "default)", self.id, origin[0], origin[1],
                      geodesy.origin_offset_m(origin, geodesy.DEFAULT_ORIGIN))
