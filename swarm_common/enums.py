@@ -184,6 +184,11 @@ class AgentAlarm(IntFlag):
     FENCE_MISMATCH = 16
 
 
+# No alarm: one shared value (an IntFlag built from an int costs an enum lookup, and the
+# guard and monitor of every follower start each step from none)
+NO_ALARM = AgentAlarm(0)
+
+
 class SafetyAlarmKind(StrEnum):
     """The ``assumption`` of one ``metrics.json`` ``safety_alarms`` entry (docs/metrics.md):
     what the run found broken, from the truth (barrier, collision, ground strike, obstacle,

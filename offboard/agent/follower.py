@@ -42,7 +42,7 @@ from offboard.safety.dcbf.world_rows import WorldPlanes
 from offboard.safety.filter import make_filters
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
-from swarm_common.fastnp import f64, finite, rows3, vec3
+from swarm_common.fastnp import f64, finite, norm, rows3, vec3
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
 from swarm_common.scenario.safety_check import reach_of
@@ -208,7 +208,7 @@ class FollowerAgent(AgentBase):
                              alarms=int(alarms), u_nom=u_nom)
         u = self._use_filter_output(res, w, status)
         stuck = self.guard.liveness(
-            t, float(np.linalg.norm(self.deso.z1 - self.ref.xi[0:3])),
+            t, norm(self.deso.z1 - self.ref.xi[0:3]),
             res.qp_status is not QPStatus.INACTIVE,
             self.in_formation_phase(t), self.deso.z1)
         status.alarms |= int(stuck)

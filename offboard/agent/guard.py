@@ -19,7 +19,7 @@ from offboard.estimation.peer_table import Z1
 from offboard.records import NeighbourEstimate
 from offboard.safety.deadlock import DeadlockConfig, DeadlockDetector
 from offboard.safety.monitor import SafetyMonitor, monitor_config
-from swarm_common.enums import AgentAlarm
+from swarm_common.enums import NO_ALARM, AgentAlarm
 from swarm_common.scenario.model import Scenario
 
 # s: the window over which a stalled formation error with the filter active is a deadlock.
@@ -44,7 +44,7 @@ class InFlightGuard:
         self.dt = sc.control_dt
         self._peers = np.zeros(sc.n, dtype=bool)
         self._peers[peers] = True
-        self.bits = AgentAlarm(0)
+        self.bits = NO_ALARM
         self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
 
     def liveness(self, t: float, err_m: float, held: bool, flying: bool,
@@ -57,10 +57,10 @@ class InFlightGuard:
         detector's travel test."""
         if not flying or self.fallback.active:
             self.deadlock.reset()
-            return AgentAlarm(0)
+            return NO_ALARM
         if self.deadlock.update_held(t, err_m, held, pos):
             return AgentAlarm.DEADLOCK
-        return AgentAlarm(0)
+        return NO_ALARM
 
     def check(
         self, t: float, z1: np.ndarray, z2: np.ndarray, rows: np.ndarray, have: np.ndarray,

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swarm_common.fastnp import norm
+
 
 @dataclass(frozen=True)
 class DeadlockConfig:
@@ -91,6 +93,6 @@ class DeadlockDetector:
             and e0 - err_m < cfg.min_progress * e0
             and self._held >= cfg.held_fraction * n
             and (p0 is None or pos is None
-                 or float(np.linalg.norm(np.asarray(pos, float) - p0)) < cfg.max_travel_m)
+                 or norm(np.asarray(pos, float) - p0) < cfg.max_travel_m)
         )
         return self.active

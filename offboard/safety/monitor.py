@@ -40,7 +40,7 @@ import numpy as np
 
 from offboard.safety.monitor_kernel import monitor_terms
 from swarm_common.barrier import barrier
-from swarm_common.enums import AgentAlarm
+from swarm_common.enums import NO_ALARM, AgentAlarm
 from swarm_common.scenario.model import Scenario
 
 RESIDUAL_FLOOR_M = 1.0  # m, the bound's floor: transients of the estimates (docs/safety.md)
@@ -119,7 +119,7 @@ class SafetyMonitor:
         self.residual, speed, any_new = monitor_terms(
             z1, z2, est_p, usable, rel_p, fresh, sel, self._sensed, self._prev, self._new,
             cfg.range_m)
-        bits = AgentAlarm(0)
+        bits = NO_ALARM
         if self._residual_step(z1, speed):
             bits |= AgentAlarm.RESIDUAL
         if any_new and self._near_entry(pair_p, pair_v):
