@@ -43,17 +43,15 @@ class Fallback:
         self._sink_i = 0.0  # m/s·s, the touchdown's integral of its sink-rate error
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
         self.t0: float | None = None  # s, the fallback's start
+        self.active = False  # latched by start(): read by the guard every step
         self.hold_p: np.ndarray | None = None  # m, the held point once braked
         self.t_hold = math.inf  # s, when the hold began
-
-    @property
-    def active(self) -> bool:
-        return self.t0 is not None
 
     def start(self, t: float) -> None:
         """Enter the fallback at ``t`` (s); idempotent."""
         if self.t0 is None:
             self.t0 = t
+            self.active = True
 
     def reference(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(p_ref, v_ref) of the hold and the descent at ``t`` (s), once braked."""

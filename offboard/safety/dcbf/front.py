@@ -319,11 +319,13 @@ class DcbfFront:
         limit (docs/safety.md §5i) its rows are prepared from the own odometry velocity
         ``v`` (m/s), the realised acceleration ``a_real`` and the tracked ``xi``; held
         without world rows, ``u_try`` is flown; else the QP checks it against every row."""
-        filt, terms = self.filt, clf_terms_from(clf)
+        filt = self.filt
         if filt.speed is not None:
             filt.speed.prepare(v, a_real, w, xi)
-            return filt.solve_limited(u_try, terms, k, h_min, w, self.deso.z2, held, t0, world)
+            return filt.solve_limited(u_try, clf_terms_from(clf), k, h_min, w, self.deso.z2,
+                                      held, t0, world)
         if held and not world:
             return SafetyOutput(u_try, h_min, QPStatus.INACTIVE,
                                 (time.perf_counter() - t0) * 1e6)
-        return filt.solve_rows(u_try, terms, k, h_min, w, self.deso.z2, unheld=not held)
+        return filt.solve_rows(u_try, clf_terms_from(clf), k, h_min, w, self.deso.z2,
+                               unheld=not held)
