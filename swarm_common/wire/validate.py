@@ -9,20 +9,8 @@ from typing import Any
 import msgpack
 import numpy as np
 
-from swarm_common.wire.payloads import (
-    COMMAND_KINDS,
-    MAX_FENCE_COORDS,
-    MAX_MISSION_TEXT,
-    VERSION,
-    Command,
-    Estimate,
-    Odometry,
-    Payload,
-    Status,
-    Truth,
-    WireError,
-    encode,
-)
+from swarm_common.wire import payloads as pl
+from swarm_common.wire.payloads import Payload, WireError
 
 
 def _unpack_vec(b: Any, shape: tuple[int, ...]) -> np.ndarray:
@@ -40,8 +28,8 @@ def _unpack_vec(b: Any, shape: tuple[int, ...]) -> np.ndarray:
 def _mission_text(x: Any) -> str:
     """A command's mission text, refused (WireError) unless a string of at most
     MAX_MISSION_TEXT bytes (its content is validated where it is used)."""
-    if not isinstance(x, str) or len(x.encode()) > MAX_MISSION_TEXT:
-        raise WireError(f"command mission: not a string of at most {MAX_MISSION_TEXT} bytes")
+    if not isinstance(x, str) or len(x.encode()) > pl.MAX_MISSION_TEXT:
+        raise WireError(f"command mission: not a string of at most {pl.MAX_MISSION_TEXT} bytes")
     return x
 
 
@@ -55,8 +43,8 @@ def _velocity(b: Any) -> tuple[float, float, float]:
 
 
 def _qp_fields(d: dict[str, Any]) -> dict[str, Any]:
-    """A status map's QP report (keys ``act``, ``qpx``) as :class:`Status` fields; none
-    when the sender had none."""
+    """A status map's QP report (keys ``act``, ``qpx``) as the fields of a
+    :class:`~swarm_common.wire.payloads.Status`; none when the sender had none."""
     if "act" not in d:
         return {}
     n, kinds = (int(x) for x in d["act"])
@@ -83,7 +71,7 @@ def _fences(d: Any, ids: list[int]) -> dict[int, np.ndarray]:
         if key not in ids:
             raise WireError(f"fence of {name!r}: not a vehicle of this truth")
         n = len(b) // 4 if isinstance(b, bytes) else -1
-        if n % 2 or not 0 <= n <= MAX_FENCE_COORDS:
+        if n % 2 or not 0 <= n <= pl.MAX_FENCE_COORDS:
             raise WireError(f"fence of {key}: {n} coordinates")
         xy = _unpack_vec(b, (n,))
         if not np.all(np.isfinite(xy)):
@@ -101,14 +89,14 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
         raise WireError(f"not msgpack: {exc}") from None
     if not isinstance(d, dict):
         raise WireError("payload is not a map")
-    if d.get("v") != VERSION:
-        raise WireError(f"payload version {d.get('v')!r}, expected {VERSION}")
+    if d.get("v") != pl.VERSION:
+        raise WireError(f"payload version {d.get('v')!r}, expected {pl.VERSION}")
     try:
         kind = d["k"]
         if kind == "truth":
             ids = [int(i) for i in d["ids"]]
             n = len(ids)
-            return Truth(
+            return pl.Truth(
                 step=int(d["step"]),
                 t=float(d["t"]),
                 ids=ids,
@@ -125,7 +113,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
             )
         if kind == "est":
             x = _unpack_vec(d["x"], (27,))
-            return Estimate(
+            return pl.Estimate(
                 id=int(d["id"]),
                 step=int(d["step"]),
                 t=float(d["t"]),
@@ -139,7 +127,7 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
                 block=x,
             )
         if kind == "status":
-            return Status(
+            return pl.Status(
                 id=int(d["id"]),
                 step=int(d["step"]),
                 t=float(d["t"]),
@@ -162,12 +150,12 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
             )
         if kind == "odo":
             x = _unpack_vec(d["x"], (6,))
-            return Odometry(id=int(d["id"]), step=int(d["step"]), t=float(d["t"]),
+            return pl.Odometry(id=int(d["id"]), step=int(d["step"]), t=float(d["t"]),
                             p=x[0:3], v=x[3:6])
         if kind == "cmd":
-            if d["kind"] not in COMMAND_KINDS:
+            if d["kind"] not in pl.COMMAND_KINDS:
                 raise WireError(f"unknown command kind {d['kind']!r}")
-            return Command(
+            return pl.Command(
                 kind=str(d["kind"]),
                 agent=int(d["agent"]),
                 method=str(d["method"]),
@@ -185,4 +173,4 @@ def decode(data: bytes | bytearray | memoryview) -> Payload:
 
 def roundtrip(obj: Payload) -> Payload:
     """encode + decode: what a receiver would see (used by the in-process runner)."""
-    return decode(encode(obj))
+    return decode(pl.encode(obj))
