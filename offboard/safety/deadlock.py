@@ -19,12 +19,16 @@ detector, feeds it after its QP, and sets an ``AgentAlarm`` bit while :attr:`act
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from swarm_common.fastnp import norm
+from swarm_common.fastnp import norm, vec3
+from swarm_common.jit import kernel
+
+START_CAPACITY = 512  # samples the window's ring holds before it grows (6 s at 50 Hz: 301)
+# the ring's counters (DeadlockDetector._n): first sample, samples, held steps, low steps
+N_HEAD, N_COUNT, N_HELD, N_LOW = range(4)
 
 
 @dataclass(frozen=True)
@@ -47,21 +51,73 @@ class DeadlockConfig:
             raise ValueError("held_fraction must be in (0, 1]")
 
 
+@kernel
+def window_step(ts: np.ndarray, errs: np.ndarray, held: np.ndarray, n: np.ndarray,
+                t: float, err_m: float, is_held: bool, window_s: float, err_tol_m: float,
+                min_progress: float, held_fraction: float) -> bool:
+    """Add the sample (``t`` s, ``err_m`` m, ``is_held``) to the ring ``ts``, ``errs``,
+    ``held`` (capacity C, at least one free slot) whose counters are ``n`` (``N_*``), drop
+    every sample but the newest at or before t − ``window_s``, and return whether the
+    window shows a deadlock but for the travel test: full, never within ``err_tol_m``, the
+    error fallen by less than ``min_progress`` of its value at the window's start, and held
+    on at least ``held_fraction`` of its samples (the module docstring). The window's first
+    sample is then at ``n[N_HEAD]``."""
+    cap = ts.shape[0]
+    k = (n[N_HEAD] + n[N_COUNT]) % cap
+    ts[k], errs[k], held[k] = t, err_m, is_held
+    n[N_COUNT] += 1
+    n[N_HELD] += is_held
+    n[N_LOW] += err_m <= err_tol_m
+    while n[N_COUNT] > 1 and ts[(n[N_HEAD] + 1) % cap] <= t - window_s:
+        h = n[N_HEAD]
+        n[N_HELD] -= held[h]
+        n[N_LOW] -= errs[h] <= err_tol_m
+        n[N_HEAD] = (h + 1) % cap
+        n[N_COUNT] -= 1
+    e0 = errs[n[N_HEAD]]
+    return bool(
+        t - ts[n[N_HEAD]] >= window_s
+        and n[N_LOW] == 0
+        and e0 - err_m < min_progress * e0
+        and n[N_HELD] >= held_fraction * n[N_COUNT]
+    )
+
+
 class DeadlockDetector:
-    """Sliding-window deadlock test of the module docstring."""
+    """Sliding-window deadlock test of the module docstring. The window is a ring of
+    samples stepped by the compiled :func:`window_step` (it runs every control step of
+    every follower); the travel test, on the few steps that reach it, is made here."""
 
     def __init__(self, cfg: DeadlockConfig | None = None) -> None:
         self.cfg = cfg or DeadlockConfig()
-        self._hist: deque[tuple[float, float, bool, np.ndarray | None]] = deque()
-        self._held = 0  # steps in the window with the filter correcting
-        self._low = 0  # steps in the window with the error at or below err_tol_m
+        self._alloc(START_CAPACITY)
         self.active = False
+
+    def _alloc(self, cap: int) -> None:
+        self._t = np.zeros(cap)  # s
+        self._err = np.zeros(cap)  # m
+        self._held = np.zeros(cap, dtype=np.int64)  # 1: the filter held the agent
+        self._pos = np.zeros((cap, 3))  # m, the agent's position
+        self._has_pos = np.zeros(cap, dtype=np.bool_)  # a position was given
+        self._n = np.zeros(4, dtype=np.int64)  # N_HEAD, N_COUNT, N_HELD, N_LOW
+
+    def _grow(self) -> None:
+        """Twice the ring's capacity, its samples unrolled in order from slot 0."""
+        head, count = int(self._n[N_HEAD]), int(self._n[N_COUNT])
+        cap = len(self._t)
+        order = (head + np.arange(count)) % cap
+        old = (self._t[order], self._err[order], self._held[order], self._pos[order],
+               self._has_pos[order])
+        counts = self._n.copy()
+        self._alloc(2 * cap)
+        self._t[:count], self._err[:count], self._held[:count] = old[0], old[1], old[2]
+        self._pos[:count], self._has_pos[:count] = old[3], old[4]
+        self._n[:] = counts
+        self._n[N_HEAD] = 0
 
     def reset(self) -> None:
         """Forget the history (a new mission phase, e.g. the land-all)."""
-        self._hist.clear()
-        self._held = 0
-        self._low = 0
+        self._n[:] = 0
         self.active = False
 
     def update(self, t: float, err_m: float, corr_mps2: float) -> bool:
@@ -75,24 +131,19 @@ class DeadlockDetector:
         (e.g. its QP had an active row) rather than the size of its correction; ``pos``
         (3,) the agent's position (m), for the travel test (none without it)."""
         cfg = self.cfg
-        self._hist.append((t, err_m, held, None if pos is None else np.array(pos, float)))
-        self._held += held
-        self._low += err_m <= cfg.err_tol_m
-        # keep the newest sample at or before t − window as the window's start (running
-        # counts instead of a scan of the window: this runs every control step)
-        while len(self._hist) > 1 and self._hist[1][0] <= t - cfg.window_s:
-            _, e_old, held_old, _ = self._hist.popleft()
-            self._held -= held_old
-            self._low -= e_old <= cfg.err_tol_m
-        t0, e0, _, p0 = self._hist[0]
-        full = t - t0 >= cfg.window_s
-        n = len(self._hist)
-        self.active = bool(
-            full
-            and self._low == 0
-            and e0 - err_m < cfg.min_progress * e0
-            and self._held >= cfg.held_fraction * n
-            and (p0 is None or pos is None
-                 or norm(np.asarray(pos, float) - p0) < cfg.max_travel_m)
-        )
+        n = self._n
+        if n[N_COUNT] == len(self._t):
+            self._grow()
+            n = self._n
+        k = (n[N_HEAD] + n[N_COUNT]) % len(self._t)  # the slot window_step fills
+        if pos is not None:
+            self._pos[k] = pos
+        self._has_pos[k] = pos is not None
+        stuck = window_step(self._t, self._err, self._held, n, float(t), float(err_m),
+                            bool(held), cfg.window_s, cfg.err_tol_m, cfg.min_progress,
+                            cfg.held_fraction)
+        if stuck and pos is not None and self._has_pos[n[N_HEAD]]:
+            p0 = self._pos[n[N_HEAD]]
+            stuck = norm(vec3(np.asarray(pos, float)) - p0) < cfg.max_travel_m
+        self.active = bool(stuck)
         return self.active

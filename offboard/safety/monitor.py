@@ -38,9 +38,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offboard.safety.monitor_kernel import monitor_terms
+from offboard.safety.monitor_kernel import CTR_FALLBACK, monitor_terms, residual_persist
 from swarm_common.barrier import barrier
 from swarm_common.enums import NO_ALARM, AgentAlarm
+from swarm_common.fastnp import vec3
 from swarm_common.scenario.model import Scenario
 
 RESIDUAL_FLOOR_M = 1.0  # m, the bound's floor: transients of the estimates (docs/safety.md)
@@ -96,10 +97,9 @@ class SafetyMonitor:
     def __init__(self, cfg: MonitorConfig, n: int) -> None:
         self.cfg = cfg
         self.residual = math.nan  # m, the last step's residual (NaN: no usable neighbour)
-        self._over = 0  # consecutive steps over the bound
-        self._under = 0  # consecutive steps under it while raised
-        self._raised = False
-        self._held = 0  # consecutive steps with RESIDUAL raised
+        # consecutive steps over the bound, under it while raised, RESIDUAL raised, steps
+        # it has been held, the fallback latched (monitor_kernel.CTR_*)
+        self._ctr = np.zeros(5, dtype=np.int64)
         self.fallback = False  # latched
         self._sensed = np.zeros(n, dtype=bool)  # the pairs the filter uses this step
         self._prev = np.zeros(n, dtype=bool)  # ... and at the step before
@@ -134,20 +134,11 @@ class SafetyMonitor:
         ``speed`` (m/s); True while RESIDUAL is raised. A step without a usable neighbour
         and a plausible speed leaves the counters as they are."""
         cfg = self.cfg
-        over = (self.residual > cfg.bound_m or not math.isfinite(speed)
-                or speed > cfg.v_max_mps or not all(map(math.isfinite, z1)))
-        if over:
-            self._over, self._under = self._over + 1, 0
-        elif math.isfinite(self.residual):
-            self._over, self._under = 0, self._under + 1
-        if not self._raised and self._over >= cfg.persist:
-            self._raised = True
-        elif self._raised and self._under >= cfg.persist:
-            self._raised = False
-        self._held = self._held + 1 if self._raised else 0
-        if self._held >= cfg.fallback_after:
+        raised = residual_persist(self._ctr, self.residual, speed, vec3(z1), cfg.bound_m,
+                                  cfg.v_max_mps, cfg.persist, cfg.fallback_after)
+        if self._ctr[CTR_FALLBACK]:
             self.fallback = True
-        return self._raised
+        return bool(raised)
 
     def _near_entry(self, pair_p: np.ndarray, pair_v: np.ndarray) -> bool:
         """Any pair first sensed this step already inside its barrier (h < 0). Not on the

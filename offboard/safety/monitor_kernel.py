@@ -68,3 +68,41 @@ def monitor_terms(z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, usable: np.
         prev[j] = sensed[j]
     speed = math.sqrt(z2[0] * z2[0] + z2[1] * z2[1] + z2[2] * z2[2])
     return res, speed, any_new
+
+
+# the persistence counters of :func:`residual_persist`, one int64 array per monitor
+CTR_OVER, CTR_UNDER, CTR_RAISED, CTR_HELD, CTR_FALLBACK = range(5)
+
+
+@kernel
+def residual_persist(ctr: np.ndarray, residual: float, speed: float, z1: np.ndarray,
+                     bound_m: float, v_max_mps: float, persist: int,
+                     fallback_after: int) -> bool:
+    """One step of the residual's persistence rule; returns whether RESIDUAL is raised.
+
+    ``ctr`` (5,) int64 holds, at the ``CTR_*`` indices, the consecutive steps over the
+    bound, under it while raised, the raised flag, the steps RESIDUAL has been held and the
+    latched fallback flag (updated in place). A step is over when ``residual`` (m) is over
+    ``bound_m``, ``speed`` (m/s) is not finite or over ``v_max_mps``, or ``z1`` (3,) is not
+    finite; a step with a NaN residual that is not over leaves the counters as they are.
+    ``persist`` steps over raise the flag and ``persist`` under clear it; ``fallback_after``
+    steps held latch the fallback."""
+    over = (residual > bound_m or not math.isfinite(speed) or speed > v_max_mps
+            or not (math.isfinite(z1[0]) and math.isfinite(z1[1]) and math.isfinite(z1[2])))
+    if over:
+        ctr[CTR_OVER] += 1
+        ctr[CTR_UNDER] = 0
+    elif math.isfinite(residual):
+        ctr[CTR_OVER] = 0
+        ctr[CTR_UNDER] += 1
+    if ctr[CTR_RAISED] == 0 and ctr[CTR_OVER] >= persist:
+        ctr[CTR_RAISED] = 1
+    elif ctr[CTR_RAISED] != 0 and ctr[CTR_UNDER] >= persist:
+        ctr[CTR_RAISED] = 0
+    if ctr[CTR_RAISED] != 0:
+        ctr[CTR_HELD] += 1
+    else:
+        ctr[CTR_HELD] = 0
+    if ctr[CTR_HELD] >= fallback_after:
+        ctr[CTR_FALLBACK] = 1
+    return ctr[CTR_RAISED] != 0

@@ -71,3 +71,63 @@ def test_a_stalled_error_while_the_agent_travels_is_not_a_deadlock() -> None:
         out = [det.update_held(k * DT, 0.5, True, np.array([speed * k * DT, 0.0, 5.0]))
                for k in range(250)]
         assert any(out) is flagged, speed
+
+
+class _DequeDetector:
+    """The detector as it was written before its window became a compiled ring: the
+    reference the ring must agree with, step for step."""
+
+    def __init__(self, cfg: DeadlockConfig) -> None:
+        from collections import deque
+
+        self.cfg = cfg
+        self.hist: deque[tuple[float, float, bool, np.ndarray | None]] = deque()
+        self.held = 0
+        self.low = 0
+
+    def update_held(self, t: float, err_m: float, held: bool, pos: np.ndarray | None) -> bool:
+        cfg = self.cfg
+        self.hist.append((t, err_m, held, None if pos is None else np.array(pos, float)))
+        self.held += held
+        self.low += err_m <= cfg.err_tol_m
+        while len(self.hist) > 1 and self.hist[1][0] <= t - cfg.window_s:
+            _, e_old, held_old, _ = self.hist.popleft()
+            self.held -= held_old
+            self.low -= e_old <= cfg.err_tol_m
+        t0, e0, _, p0 = self.hist[0]
+        return bool(
+            t - t0 >= cfg.window_s and self.low == 0 and e0 - err_m < cfg.min_progress * e0
+            and self.held >= cfg.held_fraction * len(self.hist)
+            and (p0 is None or pos is None
+                 or float(np.linalg.norm(np.asarray(pos, float) - p0)) < cfg.max_travel_m)
+        )
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_ring_agrees_with_the_deque_step_for_step(seed: int) -> None:
+    """Random runs: irregular steps (missed periods), stalls, falls, NaN errors, errors
+    within the tolerance, held and free steps, positions given or not, creeping and
+    travelling agents, and windows long enough that the ring grows past its capacity."""
+    rng = np.random.default_rng(seed)
+    window = [3.0, 6.0, 25.0][seed % 3]  # 25 s at 50 Hz: 1,251 samples, the ring grows
+    cfg = DeadlockConfig(window_s=window)
+    ring, ref = DeadlockDetector(cfg), _DequeDetector(cfg)
+    t, err, p = 0.0, 0.8, np.zeros(3)
+    flagged = 0
+    phase = int(1.6 * window / DT)  # each kind of motion lasts longer than a window
+    for k in range(5 * phase):
+        t += DT * (1 + (rng.random() < 0.05) * int(rng.integers(1, 4)))
+        mode = (k // phase) % 4  # stall, fall, creep near the tolerance, travel
+        err = {0: err, 1: err * 0.995, 2: 0.1 + 0.001 * rng.standard_normal(),
+               3: err}[mode]
+        if rng.random() < 0.01:
+            err = float("nan")
+        elif not np.isfinite(err) or err < 0.05:
+            err = 0.8
+        p = p + (rng.normal(0.0, 0.01, 3) if mode != 3 else np.array([0.01, 0.0, 0.0]))
+        held = bool(rng.random() < 0.8)
+        pos = None if seed % 2 and rng.random() < 0.3 else p.copy()
+        got = ring.update_held(t, float(err), held, pos)
+        assert got == ref.update_held(t, float(err), held, pos), (seed, k)
+        flagged += got
+    assert flagged > 0  # the runs reach the deadlock, not only its absence

@@ -218,3 +218,48 @@ def test_alarm_bits_on_the_wire() -> None:
     del d["alarm"]
     old = wire.decode(msgpack.packb(d, use_bin_type=True))
     assert isinstance(old, wire.Status) and old.alarms == 0
+
+
+def _persist_reference(cfg, residual, speed, z1, state):
+    """The persistence rule as it was written in Python before it was compiled:
+    ``state`` = [over, under, raised, held, fallback]."""
+    over_n, under_n, raised, held, fallback = state
+    over = (residual > cfg.bound_m or not math.isfinite(speed) or speed > cfg.v_max_mps
+            or not all(map(math.isfinite, z1)))
+    if over:
+        over_n, under_n = over_n + 1, 0
+    elif math.isfinite(residual):
+        over_n, under_n = 0, under_n + 1
+    if not raised and over_n >= cfg.persist:
+        raised = True
+    elif raised and under_n >= cfg.persist:
+        raised = False
+    held = held + 1 if raised else 0
+    if held >= cfg.fallback_after:
+        fallback = True
+    state[:] = [over_n, under_n, raised, held, fallback]
+    return raised
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_compiled_persistence_agrees_with_the_python_rule(seed: int) -> None:
+    """Random residuals around the bound (NaN among them), speeds (over the limit, inf,
+    NaN) and estimates (NaN): RESIDUAL and the fallback step for step as the rule says."""
+    cfg = MonitorConfig(2.77, 30.0, 10, 25, 0.4, 1.0, 6.0)
+    mon = SafetyMonitor(cfg, 4)
+    rng = np.random.default_rng(seed)
+    state: list = [0, 0, False, 0, False]
+    raised_seen = 0
+    for k in range(3000):
+        burst = (k // 40) % 3 == 0  # spells over the bound, long enough to raise it
+        mon.residual = float(rng.uniform(2.8, 4.0) if burst else rng.uniform(0.0, 2.9))
+        if rng.random() < 0.05:
+            mon.residual = math.nan
+        speed = float(rng.choice([1.0, 5.0, 31.0, math.inf, math.nan],
+                                 p=[0.9, 0.06, 0.02, 0.01, 0.01]))
+        z1 = np.array([0.0, math.nan if rng.random() < 0.005 else 1.0, 2.0])
+        got = mon._residual_step(z1, speed)
+        want = _persist_reference(cfg, mon.residual, speed, z1, state)
+        assert got == want and mon.fallback == state[4], (seed, k)
+        raised_seen += got
+    assert raised_seen > 0
