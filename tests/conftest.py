@@ -114,9 +114,27 @@ def release_port_offsets() -> None:
         (CLAIM_DIR / f"{_claimed.pop()}.pid").unlink(missing_ok=True)
 
 
+# the swarm size every claim covers at least: a test may fly a larger swarm than the size
+# it asked its offset for (the ``port_offset`` fixture asks for 8)
+CLAIM_VEHICLES = 64
+
+
+def reached_offsets(off: int, n_vehicles: int) -> list[int]:
+    """The other offsets of :data:`OFFSET_POOL` whose first 8 vehicles' UDP ports a swarm of
+    ``n_vehicles`` at ``off`` would use. A vehicle's ports are contiguous per kind, so when
+    two swarms' ports meet, one of them reaches the other's vehicle 1: with both claiming
+    what they reach (:func:`free_port_offset`), the second to come finds a claim."""
+    ours = set(swarm_udp_ports(list(range(1, n_vehicles + 1)), off))
+    return [c for c in OFFSET_POOL
+            if c != off and ours & set(swarm_udp_ports(list(range(1, 9)), c))]
+
+
 def free_port_offset(n_vehicles: int = 8) -> int:
     """A port offset of :data:`OFFSET_POOL` whose ports are all free right now, claimed
-    against other test sessions until the current test ends.
+    against other test sessions until the current test ends, together with every offset
+    whose ports a swarm of ``max(n_vehicles, CLAIM_VEHICLES)`` there would reach
+    (:func:`reached_offsets`: offsets 1300 and 5300 meet from 11 vehicles on, and a CI
+    pair once found a vehicle's port taken that way).
 
     Offsets this session has not used yet come first, in random order; then, should every
     one of those be taken, the ones it used longest ago (a session of the whole suite
@@ -124,11 +142,19 @@ def free_port_offset(n_vehicles: int = 8) -> int:
     meanwhile).
 
     Multiples of 1000 keep every port of one offset away from every port of another
-    (vehicle ports end in 540-835, 000-244, 570-824; Zenoh's in 447)."""
+    (vehicle ports end in 540-835, 000-244, 570-824; Zenoh's in 447); the offsets 300
+    above them do not, which the claims of what a swarm reaches make up for."""
     fresh = [off for off in OFFSET_POOL if off not in _used_offsets]
     random.SystemRandom().shuffle(fresh)
     for off in [*fresh, *_used_offsets]:
+        reach = reached_offsets(off, max(n_vehicles, CLAIM_VEHICLES))
         if not _claim_offset(off):
+            continue
+        got = [c for c in reach if _claim_offset(c)]
+        if len(got) < len(reach):  # another session holds a swarm our ports would meet
+            for c in [off, *got]:
+                (CLAIM_DIR / f"{c}.pid").unlink(missing_ok=True)
+                _claimed.remove(c)
             continue
         ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
         # the router's and the simulator's, judged as the launcher judges them (a
@@ -140,8 +166,9 @@ def free_port_offset(n_vehicles: int = 8) -> int:
                 _used_offsets.remove(off)
             _used_offsets.append(off)
             return off
-        (CLAIM_DIR / f"{off}.pid").unlink(missing_ok=True)
-        _claimed.remove(off)
+        for c in [off, *reach]:
+            (CLAIM_DIR / f"{c}.pid").unlink(missing_ok=True)
+            _claimed.remove(c)
     raise RuntimeError("no free port offset found")
 
 

@@ -75,3 +75,30 @@ def test_the_pool_keeps_every_port_out_of_the_ephemeral_range(tmp_path: Path) ->
     (tmp_path / "range").write_text("40000\t50000\n")
     assert conftest.ephemeral_port_range(tmp_path / "range") == (40000, 50000)
     assert len(conftest.offset_pool((1024, 65535))) == 90  # nothing outside: every one
+
+
+def test_a_claim_covers_the_offsets_its_swarm_reaches(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """From 11 vehicles on, a swarm at offset 1300 uses vehicle 1's API port of offset 5300
+    (19880): a claim of 1300 holds 5300 too, and 1300 is not given while another session
+    flies at 5300."""
+    assert 19880 in swarm_udp_ports(list(range(1, 12)), 1300)
+    assert 19880 in swarm_udp_ports([1], 5300)
+    assert conftest.reached_offsets(1300, 8) == []
+    monkeypatch.setattr(conftest, "CLAIM_DIR", tmp_path)
+    monkeypatch.setattr(conftest, "_claimed", [])
+    monkeypatch.setattr(conftest, "OFFSET_POOL", (1300, 5300, 7000))
+    monkeypatch.setattr(conftest, "port_free", lambda port, kind=None, allow_time_wait=False: True)
+    assert conftest.reached_offsets(1300, 27) == [5300]
+    monkeypatch.setattr(conftest, "_used_offsets", [5300, 7000])  # 1300 comes first
+    assert conftest.free_port_offset() == 1300
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["1300.pid", "5300.pid"]
+    conftest.release_port_offsets()
+    assert list(tmp_path.iterdir()) == []
+    # another live session flies at 5300: 1300 would meet it, 5300 is held, 7000 is given
+    (tmp_path / "5300.pid").write_text("1")
+    monkeypatch.setattr(conftest, "_used_offsets", [5300, 7000])
+    assert conftest.free_port_offset() == 7000
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["5300.pid", "7000.pid"]
+    conftest.release_port_offsets()
