@@ -29,6 +29,7 @@ from swarm_common.jit import kernel
 START_CAPACITY = 512  # samples the window's ring holds before it grows (6 s at 50 Hz: 301)
 # the ring's counters (DeadlockDetector._n): first sample, samples, held steps, low steps
 N_HEAD, N_COUNT, N_HELD, N_LOW = range(4)
+_NO_POS = np.zeros(3)  # window_step's position argument when none is given (not stored)
 
 
 @dataclass(frozen=True)
@@ -52,19 +53,23 @@ class DeadlockConfig:
 
 
 @kernel
-def window_step(ts: np.ndarray, errs: np.ndarray, held: np.ndarray, n: np.ndarray,
-                t: float, err_m: float, is_held: bool, window_s: float, err_tol_m: float,
+def window_step(ts: np.ndarray, errs: np.ndarray, held: np.ndarray, pos: np.ndarray,
+                has_pos: np.ndarray, n: np.ndarray, t: float, err_m: float, is_held: bool,
+                p: np.ndarray, given: bool, window_s: float, err_tol_m: float,
                 min_progress: float, held_fraction: float) -> bool:
-    """Add the sample (``t`` s, ``err_m`` m, ``is_held``) to the ring ``ts``, ``errs``,
-    ``held`` (capacity C, at least one free slot) whose counters are ``n`` (``N_*``), drop
-    every sample but the newest at or before t − ``window_s``, and return whether the
-    window shows a deadlock but for the travel test: full, never within ``err_tol_m``, the
-    error fallen by less than ``min_progress`` of its value at the window's start, and held
-    on at least ``held_fraction`` of its samples (the module docstring). The window's first
-    sample is then at ``n[N_HEAD]``."""
+    """Add the sample (``t`` s, ``err_m`` m, ``is_held``, the position ``p`` (3,) m where
+    ``given``) to the ring ``ts``, ``errs``, ``held``, ``pos``, ``has_pos`` (capacity C, at
+    least one free slot) whose counters are ``n`` (``N_*``), drop every sample but the
+    newest at or before t − ``window_s``, and return whether the window shows a deadlock
+    but for the travel test: full, never within ``err_tol_m``, the error fallen by less
+    than ``min_progress`` of its value at the window's start, and held on at least
+    ``held_fraction`` of its samples (the module docstring). The window's first sample is
+    then at ``n[N_HEAD]``."""
     cap = ts.shape[0]
     k = (n[N_HEAD] + n[N_COUNT]) % cap
-    ts[k], errs[k], held[k] = t, err_m, is_held
+    ts[k], errs[k], held[k], has_pos[k] = t, err_m, is_held, given
+    if given:
+        pos[k, 0], pos[k, 1], pos[k, 2] = p[0], p[1], p[2]
     n[N_COUNT] += 1
     n[N_HELD] += is_held
     n[N_LOW] += err_m <= err_tol_m
@@ -135,15 +140,11 @@ class DeadlockDetector:
         if n[N_COUNT] == len(self._t):
             self._grow()
             n = self._n
-        k = (n[N_HEAD] + n[N_COUNT]) % len(self._t)  # the slot window_step fills
-        if pos is not None:
-            self._pos[k] = pos
-        self._has_pos[k] = pos is not None
-        stuck = window_step(self._t, self._err, self._held, n, float(t), float(err_m),
-                            bool(held), cfg.window_s, cfg.err_tol_m, cfg.min_progress,
-                            cfg.held_fraction)
+        p = _NO_POS if pos is None else vec3(np.asarray(pos, float))
+        stuck = window_step(self._t, self._err, self._held, self._pos, self._has_pos, n,
+                            float(t), float(err_m), bool(held), p, pos is not None,
+                            cfg.window_s, cfg.err_tol_m, cfg.min_progress, cfg.held_fraction)
         if stuck and pos is not None and self._has_pos[n[N_HEAD]]:
-            p0 = self._pos[n[N_HEAD]]
-            stuck = norm(vec3(np.asarray(pos, float)) - p0) < cfg.max_travel_m
+            stuck = norm(p - self._pos[n[N_HEAD]]) < cfg.max_travel_m
         self.active = bool(stuck)
         return self.active
