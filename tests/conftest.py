@@ -110,8 +110,14 @@ def _claim_offset(off: int) -> bool:
 
 def release_port_offsets() -> None:
     """Give up the claims this process holds (the offsets stay used in this session)."""
-    while _claimed:
-        (CLAIM_DIR / f"{_claimed.pop()}.pid").unlink(missing_ok=True)
+    _unclaim(list(_claimed))
+
+
+def _unclaim(offsets: list[int]) -> None:
+    """Give up this process's claims of ``offsets``."""
+    for off in offsets:
+        (CLAIM_DIR / f"{off}.pid").unlink(missing_ok=True)
+        _claimed.remove(off)
 
 
 # the swarm size every claim covers at least: a test may fly a larger swarm than the size
@@ -152,9 +158,7 @@ def free_port_offset(n_vehicles: int = 8) -> int:
             continue
         got = [c for c in reach if _claim_offset(c)]
         if len(got) < len(reach):  # another session holds a swarm our ports would meet
-            for c in [off, *got]:
-                (CLAIM_DIR / f"{c}.pid").unlink(missing_ok=True)
-                _claimed.remove(c)
+            _unclaim([off, *got])
             continue
         ports = swarm_udp_ports(list(range(1, n_vehicles + 1)), off)
         # the router's and the simulator's, judged as the launcher judges them (a
@@ -166,9 +170,7 @@ def free_port_offset(n_vehicles: int = 8) -> int:
                 _used_offsets.remove(off)
             _used_offsets.append(off)
             return off
-        for c in [off, *reach]:
-            (CLAIM_DIR / f"{c}.pid").unlink(missing_ok=True)
-            _claimed.remove(c)
+        _unclaim([off, *reach])
     raise RuntimeError("no free port offset found")
 
 
