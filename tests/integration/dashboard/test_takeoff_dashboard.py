@@ -8,9 +8,11 @@ climb, ``l``, everyone back on the ground with no collision."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import signal
+import threading
 import time
 from collections.abc import Callable
 
@@ -130,19 +132,27 @@ def _record_truth(feed, leaders: set[int], leader_z: dict[float, float]) -> None
 
 def _stall_on_commands(app: DashboardApp, launch, agent: int) -> Callable[[], None]:
     """Stop (SIGSTOP) agent ``agent``'s daemon process as the dashboard publishes the
-    take-off or the land-all command; the returned function resumes it (SIGCONT). A
-    stalled companion computer: the command reaches that daemon only after it resumes,
-    late (offboard.daemon.commands)."""
+    take-off or the land-all command, and resume it (SIGCONT) STALL_S later from a timer
+    thread: a stalled companion computer, the command reaching that daemon only after it
+    resumes, late (offboard.daemon.commands). The stall is STALL_S whatever the test's own
+    loop does meanwhile: resumed from that loop, a loaded machine once kept the daemon
+    stopped past its vehicle-lost timeout (5 s), and it exited. The returned function
+    resumes it at once (a daemon that has exited has nothing to resume)."""
     (child,) = [c for c in launch.group.children if c.name == f"offboard-{agent}"]
     publish = app.send_zenoh
+
+    def resume() -> None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(child.proc.pid, signal.SIGCONT)
 
     def send(cmd: Command) -> None:
         if cmd.kind in ("takeoff", "land"):
             os.kill(child.proc.pid, signal.SIGSTOP)
+            threading.Timer(STALL_S, resume).start()
         publish(cmd)
 
     app.send_zenoh = send  # type: ignore[method-assign]
-    return lambda: os.kill(child.proc.pid, signal.SIGCONT)
+    return resume
 
 
 @pytest.mark.asyncio
@@ -210,8 +220,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
             assert await watch(lambda: "take-off at t=" in log_text(app), 60.0), (
                 log_text(app)[-1500:])
             t0 = float(re.findall(r"take-off at t=([0-9.]+) s", log_text(app))[0])
-            await pilot.pause(STALL_S)
-            resume()
+            await pilot.pause(STALL_S)  # the stalled daemon resumes meanwhile, by its timer
 
             def airborne() -> bool:
                 return all(z > 1.5 for z in z_max.values())
@@ -225,8 +234,7 @@ async def test_dashboard_takeoff_and_land_ground8(tmp_path) -> None:
             assert await watch(lambda: app.view.sim_time >= t_traj, timeout=30.0)
             await pilot.press("l", "y")
             assert await watch(lambda: "land-all at t=" in log_text(app), 10.0)
-            await pilot.pause(STALL_S)
-            resume()
+            await pilot.pause(STALL_S)  # resumed by its timer meanwhile
 
             def down() -> bool:
                 return max(rows_z()) < 0.1
