@@ -20,7 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from gcs.mission.sim_log import longest_out_of_offboard
+from gcs.mission.run_logs import longest_out_of_offboard
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -13,7 +13,8 @@ before it starts: the port offset, the physics, the formation's liveness), :mod:
 (child processes, the spawn worker pool), :mod:`.supervise` (the watch of a started
 distributed run: a child's death, a stall, checkpoints), :mod:`.router`,
 :mod:`.fault_flags`, :mod:`.progress`, :mod:`.run_output`,
-:mod:`.sim_log`, :mod:`.warmup`, :mod:`.run_cli` (the distributed ``gcs mission run``),
+:mod:`.run_logs` (what the children's logs say), :mod:`.warmup`,
+:mod:`.run_cli` (the distributed ``gcs mission run``),
 :mod:`.compare_cli` (``gcs mission compare``);
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);
 :mod:`.audit` (the commands a run received, for ``metrics.json``);

@@ -39,6 +39,7 @@ from gcs.mission.procs import ProcessGroup
 from gcs.mission.progress import Progress
 from gcs.mission.recorder import Recorder
 from gcs.mission.router import open_router
+from gcs.mission.run_logs import lockstep_gaps
 from gcs.mission.run_output import warn_verdict, write_run
 from gcs.mission.score import (
     default_out_dir,
@@ -221,6 +222,9 @@ def run_distributed(
     sim_audit = sim.pop("audit", None) if isinstance(sim, dict) else None
     facts["audit"] = audit_document(sim_audit, rec.commands, rec.commands_dropped)
     facts["recorder_dropped"] = rec.dropped
+    if not realtime:  # what the daemons stepped without (gcs.mission.score.lockstep_misses)
+        count, first = lockstep_gaps(out_dir)
+        facts["lockstep_gaps"] = {"count": count, "first": first}
     return rec, facts
 
 

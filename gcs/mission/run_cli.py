@@ -14,7 +14,7 @@ from gcs.mission.distributed import MissionError, run_and_score
 from gcs.mission.launch_spec import LaunchError, SigningChoice, split_packs
 from gcs.mission.preflight import resolve_port_offset
 from gcs.mission.run_output import out_dir_problem, print_result
-from gcs.mission.score import default_out_dir, late_steps
+from gcs.mission.score import default_out_dir, late_steps, lockstep_misses
 from gcs.records.live import start_live
 from gcs.records.live_flags import live_endpoint
 from gcs.report.verdict import safety_exit_status
@@ -85,19 +85,29 @@ def cli_run(args: Any, sc: Scenario) -> int:
     log.info("wrote %s/metrics.json, series.npz, record.mcap, vehicle_*.tlog, *.log", out)
     if doc["run"]["failed_agents"]:
         log.warning("failed agents: %s", doc["run"]["failed_agents"])
-    if (late := late_steps(doc)) and not args.realtime:
-        stopped = [p.get("name", "?") for p in doc["run"].get("stopped_processes", [])]
-        failed = [f"agent {a}'s daemon" for a in doc["run"]["failed_agents"]]
-        if stopped or failed:  # the fault is known: name it, not the machine
-            why = "; ".join(filter(None, [
-                f"stopped: {', '.join(stopped)}" if stopped else "",
-                f"dead: {', '.join(failed)}" if failed else ""]))
-            log.warning("the simulator stepped %d time(s) without every answer (%s), so "
-                        "this run may differ from the in-process run", late, why)
-        else:
-            log.warning("the simulator stepped %d time(s) without every answer (lockstep "
-                        "timeouts: a daemon too slow for this machine), so this run may "
-                        "differ from the in-process run; fewer daemon processes "
-                        "(--processes N) avoid it", late)
+    if not args.realtime:
+        warn_misses(doc)
     print_result(doc, args.json)
     return safety_exit_status(doc["metrics"], method)
+
+
+def warn_misses(doc: dict[str, Any]) -> None:
+    """Say, when it happened, that a lockstep run took steps without every answer or
+    estimate, so it may differ from the in-process run, and name the cause when known."""
+    run = doc["run"]
+    misses = lockstep_misses(run)
+    if not misses:
+        return
+    stopped = [p.get("name", "?") for p in run.get("stopped_processes", [])]
+    failed = [f"agent {a}'s daemon" for a in run["failed_agents"]]
+    if stopped or failed:  # the fault is known: name it, not the machine
+        why = "; ".join(filter(None, [
+            f"stopped: {', '.join(stopped)}" if stopped else "",
+            f"dead: {', '.join(failed)}" if failed else ""]))
+    elif late_steps(doc):
+        why = ("lockstep timeouts: a daemon too slow for this machine; fewer daemon "
+               "processes (--processes N) avoid it")
+    else:
+        why = "a daemon too slow for this machine; fewer daemon processes avoid it"
+    log.warning("lockstep gave up waiting (%s; %s), so this run may differ from the "
+                "in-process run", "; ".join(misses[:4]), why)

@@ -126,3 +126,22 @@ def late_steps(doc: dict[str, Any]) -> int:
     """The simulator's lockstep timeouts in a run's document (0 when it has none)."""
     sim = doc.get("run", {}).get("simulator") or {}
     return int(sim.get("lockstep_timeouts") or 0)
+
+
+def lockstep_misses(run: dict[str, Any]) -> list[str]:
+    """What a lockstep run's facts (``doc["run"]``) report of the waits it gave up, one
+    line each: the simulator's lockstep timeouts (a step taken without every answer) and
+    the daemons' lockstep gaps (a step taken without a neighbour's estimate or odometry,
+    or without its truth; :func:`gcs.mission.run_logs.lockstep_gaps`). Equality with the
+    in-process run is promised only when this is empty (docs/architecture.md)."""
+    out = []
+    timeouts = int((run.get("simulator") or {}).get("lockstep_timeouts") or 0)
+    if timeouts:
+        out.append(f"simulator: {timeouts} lockstep timeout(s)")
+    gaps = run.get("lockstep_gaps") or {}
+    if int(gaps.get("count") or 0):
+        out.append(f"daemons: {int(gaps['count'])} lockstep gap(s)")
+        out += [f"agent {g['agent']}: no {g['kind']}"
+                + (f" of {g['neighbour']}" if g["kind"] != "truth" else "")
+                + f" at step {g['step']}" for g in gaps.get("first") or []]
+    return out

@@ -27,7 +27,7 @@ import pytest
 from conftest import CUBE8, ROOT, free_port_offset
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
-from gcs.mission.sim_log import longest_out_of_offboard, vehicles_in_offboard
+from gcs.mission.run_logs import longest_out_of_offboard, vehicles_in_offboard
 
 pytestmark = pytest.mark.timeout(400)
 

@@ -20,6 +20,7 @@ from conftest import ROOT, free_port_offset
 
 from gcs.mission.distributed import recorded_metrics, run_distributed
 from gcs.mission.inproc import run_inproc
+from gcs.mission.score import lockstep_misses
 from offboard.estimation.bearing import formation_from_scenario
 from offboard.estimation.yaw_turn import turn_xi
 from swarm_common.scenario.mission_check import plan_for
@@ -87,14 +88,17 @@ def test_a_turning_mission_flies_the_same_in_process_and_distributed(tmp_path: P
                                  processes=2)
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
     assert facts["failed_agents"] == []
+    assert m["collisions"] == 0 and m["h_min"] >= 0.0
+    assert m["mission_completed"] is True
+    if lockstep_misses(facts):  # lockstep gave up a wait and said so: not promised equal
+        return
     # the estimates and the desired states cross Zenoh as float32, the same values as the
     # in-process published ones; the truth agrees to float32 wire rounding (|p| < 20 m)
     np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)
     np.testing.assert_allclose(ser.xi_p, ref.series.xi_p, atol=1e-9, rtol=0)
     assert np.max(np.abs(ser.p - ref.series.p)) < 2e-6
-    assert m["mission_completed"] is True and m["mission_time_s"] == m_in["mission_time_s"]
+    assert m["mission_time_s"] == m_in["mission_time_s"]
     assert m["transit_error_rms_m"] == pytest.approx(m_in["transit_error_rms_m"], abs=1e-6)
-    assert m["collisions"] == 0 and m["h_min"] >= 0.0
 
 
 def test_cli_reports_the_mission_and_refuses_a_bad_one(tmp_path: Path) -> None:

@@ -23,6 +23,7 @@ from pymavlink import mavutil  # noqa: E402
 from gcs.mission.distributed import MissionError, recorded_metrics, run_distributed  # noqa: E402
 from gcs.mission.inproc import MissionResult, run_inproc  # noqa: E402
 from gcs.mission.recorder import Recorder  # noqa: E402
+from gcs.mission.score import lockstep_misses  # noqa: E402
 from gcs.records.series import RunSeries  # noqa: E402
 from swarm_common.enums import Method  # noqa: E402
 from swarm_common.scenario.model import Scenario, load_scenario  # noqa: E402
@@ -90,6 +91,11 @@ def _assert_equals_inproc(
     ``dur`` (s): the "equal" of test_lockstep_distributed_run_matches_inproc."""
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
     assert len(ser.t) == len(ref.series.t) == int(round(dur * sc.run.control_hz))
+    assert m["collisions"] == ref.metrics["collisions"] == 0
+    if missed := lockstep_misses(facts):  # a starved machine: lockstep gave up a wait and
+        # the run said so; equality is promised only without (docs/architecture.md)
+        print(f"not compared with the in-process run: {missed[:3]}")
+        return
     assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
     # clipped inputs travel in the status record: the same steps as in process
     assert m["input_clipped_steps"] == ref.metrics["input_clipped_steps"]
@@ -109,7 +115,6 @@ def _assert_equals_inproc(
     e_d = np.linalg.norm(ser.p[:, f] - ser.p_des[:, f], axis=2)
     e_i = np.linalg.norm(ref.series.p[:, f] - ref.series.p_des[:, f], axis=2)
     assert np.sqrt(np.mean(e_d**2)) == pytest.approx(np.sqrt(np.mean(e_i**2)), abs=1e-6)
-    assert m["collisions"] == ref.metrics["collisions"] == 0
 
 
 def test_killed_follower_enters_failsafe_and_others_stay_clear(tmp_path: Path) -> None:

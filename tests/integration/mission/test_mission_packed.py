@@ -15,6 +15,7 @@ from conftest import CUBE8, ROOT, free_port_offset
 
 from gcs.mission.distributed import recorded_metrics, run_distributed
 from gcs.mission.inproc import run_inproc
+from gcs.mission.score import lockstep_misses
 from swarm_common.scenario.model import dump_toml, load_scenario
 
 pytestmark = pytest.mark.timeout(240)
@@ -32,11 +33,11 @@ def test_lockstep_packed_run_matches_inproc(tmp_path: Path) -> None:
     assert facts["daemon_processes"] == 2
     assert {"offboard-1-4", "offboard-5-8"} <= set(facts["processes"])
     assert len(ser.t) == len(ref.series.t) == int(dur * 50)
-    assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
-    assert np.array_equal(ser.input_clipped, ref.series.input_clipped)
-    assert np.max(np.abs(ser.p - ref.series.p)) < 1e-6
-    np.testing.assert_allclose(ser.z1, ref.series.z1, atol=1e-9, rtol=0)
     assert m["collisions"] == ref.metrics["collisions"] == 0
+    if not lockstep_misses(facts):
+        assert abs(m["min_distance_m"] - ref.metrics["min_distance_m"]) < 1e-6
+        assert np.array_equal(ser.input_clipped, ref.series.input_clipped)
+    _same_as_inproc(facts, ser, ref.series)
     assert facts["failed_agents"] == []
     # every packed agent kept its own MAVLink link and wrote its own .tlog
     for i in sc.ids:
@@ -62,7 +63,7 @@ def test_in_range_noise_draws_packed_run_matches_inproc(tmp_path: Path) -> None:
     m, ser = recorded_metrics(rec, sc, facts["wall_s"], dur)
     assert facts["failed_agents"] == []
     assert len(ser.t) == len(ref.series.t) == int(dur * 50)
-    _same_as_inproc(out, facts, ser, ref.series)
+    _same_as_inproc(facts, ser, ref.series)
 
 
 def test_sparse_graph_packed_run_matches_inproc(tmp_path: Path) -> None:
@@ -80,35 +81,21 @@ def test_sparse_graph_packed_run_matches_inproc(tmp_path: Path) -> None:
     assert facts["failed_agents"] == []
     assert len(ser.t) == len(ref.series.t) == int(dur * sc.run.control_hz)
     assert m["collisions"] == 0
-    _same_as_inproc(tmp_path, facts, ser, ref.series)
+    _same_as_inproc(facts, ser, ref.series)
 
 
-def _same_as_inproc(run_dir: Path, facts: dict, ser: Any, ref: Any) -> None:
+def _same_as_inproc(facts: dict, ser: Any, ref: Any) -> None:
     """The distributed series equals the in-process one (float32 wire rounding only),
-    unless the run reported a lockstep wait it gave up (:func:`_lockstep_misses`)."""
-    missed = _lockstep_misses(run_dir, facts)
+    unless the run reported a lockstep wait it gave up (:func:`lockstep_misses`: the
+    simulator's lockstep timeouts, the daemons' lockstep gaps). Equality is promised only
+    without them (docs/architecture.md): once seen under double load of the whole suite,
+    grid27_knn parted by 2.4e-4 m."""
+    missed = lockstep_misses(facts)
     if missed:  # a starved machine: lockstep gave up waiting, and the run said so
         print(f"not compared with the in-process run: {missed[:3]}")
         return
     assert np.max(np.abs(ser.p - ref.p)) < 1e-6
     np.testing.assert_allclose(ser.z1, ref.z1, atol=1e-9, rtol=0)
-
-
-def _lockstep_misses(run_dir: Path, facts: dict) -> list[str]:
-    """What a run reported of the waits its lockstep gave up: the simulator's lockstep
-    timeouts (it stepped without every answer) and the daemons' neighbours declared lost
-    (a step taken without their estimates). Equality with the in-process run is promised
-    only without them (docs/architecture.md, "Lockstep, step by step"): once seen under
-    double load of the whole
-    suite, grid27_knn parted by 2.4e-4 m."""
-    out = []
-    timeouts = int((facts.get("simulator") or {}).get("lockstep_timeouts") or 0)
-    if timeouts:
-        out.append(f"simulator: {timeouts} lockstep timeout(s)")
-    for log in sorted(run_dir.glob("offboard-*.log")):
-        out += [line for line in log.read_text().splitlines()
-                if "silent at step" in line or "no truth for step" in line]
-    return out
 
 
 @pytest.mark.parametrize(
