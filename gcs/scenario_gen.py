@@ -42,7 +42,7 @@ from gcs.exit_codes import EXIT_USAGE
 from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.inputs import one_line
 from swarm_common.scenario.files import swarm_name_problem
-from swarm_common.scenario.model import ScenarioError, dump_toml, parse_scenario
+from swarm_common.scenario.model import Scenario, ScenarioError, dump_toml, parse_scenario
 
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
 JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
@@ -199,8 +199,8 @@ def _transient_speed(doc: dict[str, Any], where: str) -> None:
     doc["controller"]["max_transient_speed_mps"] = round(x, 2)
 
 
-def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
-    """The scenario document of the flags and the knn_k used (validated: it loads)."""
+def build(args: argparse.Namespace) -> tuple[dict[str, Any], int, Scenario]:
+    """The scenario document of the flags, the knn_k used and the scenario it loads as."""
     # the DESO gain check needs scipy and numba: loaded here, not when gcs builds its parser
     from offboard.estimation.deso_gains import scenario_gain_problem
     from swarm_common.scenario.transient_check import widest
@@ -251,7 +251,7 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         if unstable is not None:
             problem = f"{where}: {unstable}"
             continue
-        return doc, k or 0
+        return doc, k or 0, sc
     raise GenError(problem)
 
 
@@ -293,10 +293,14 @@ def _name(text: str) -> str:
 def cmd_scenario(args: argparse.Namespace) -> int:
     """Write the generated scenario on stdout; exit 2 with one line on a bad flag."""
     try:
-        doc, k = build(args)
+        doc, k, sc = build(args)
     except GenError as exc:
         print(f"gcs scenario: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    from gcs.mission.preflight import observer_problem  # scipy, numba: not for the parser
+
+    if (slow := observer_problem(sc)) is not None:  # written all the same: a user's choice
+        print(f"gcs scenario: warning: {slow}", file=sys.stderr)
     sys.stdout.write(_header(args, k) + dump_toml(doc))
     return 0
 

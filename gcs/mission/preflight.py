@@ -3,7 +3,9 @@ cannot use: the agents' own code and the machine's ports.
 
 * :func:`liveness_problem` - whether the formation can form at all under the dcbf filter
   (docs/safety.md 5f, "Dense formations: liveness"): one line or None;
-  :func:`warn_liveness` logs it as a WARNING. It is a warning, not a refusal: such a run
+  :func:`observer_problem` - whether the desired-state observer is too slow for the
+  formation to form (a large formation with few leaders; docs/scenarios.md);
+  :func:`warn_liveness` logs them as WARNINGs. It is a warning, not a refusal: such a run
   stays safe, it only never forms, and its followers then raise the DEADLOCK event in
   flight.
 * :func:`check_physics` - the followers' DESO gains on the scenario's graph (a refusal)
@@ -22,7 +24,7 @@ import numpy as np
 
 from gcs.mission.launch_spec import MAX_PORT_OFFSET, LaunchError
 from gcs.mission.ports import busy_uses, choose_port_offset, port_in_use_line, swarm_port_uses
-from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.bearing import Formation, formation_from_scenario
 from offboard.estimation.deso_gains import scenario_gain_problem
 from offboard.safety.dcbf.filter import input_set_of
 from offboard.safety.dcbf.liveness import rest_spacing_m
@@ -32,12 +34,18 @@ from swarm_common.scenario.feasibility import deadline_problem
 from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario
 
 log = logging.getLogger(__name__)
+# 1/s: the slowest desired-state observer channel below which a run is warned that it may
+# not form. Measured on generated grids (docs/scenarios.md): 256 agents with 4 leaders
+# (0.19 1/s) did not form in 60 s, 125 with 4 (0.41) formed at 29 s, 256 with 16 (1.36)
+# at 7.9 s; every shipped scenario is at 0.76 1/s or more.
+OBSERVER_RATE_MIN = 0.5
 
 
-def smallest_spacing_m(sc: Scenario) -> float:
+def smallest_spacing_m(sc: Scenario, form: Formation | None = None) -> float:
     """The smallest distance (m) between two desired positions of ``sc``'s formation at its
-    start, times the smallest scale its [mission] flies (1 without one)."""
-    form = formation_from_scenario(sc)
+    start, times the smallest scale its [mission] flies (1 without one). ``form``: the
+    scenario's formation when the caller has it built."""
+    form = formation_from_scenario(sc) if form is None else form
     lead = sc.initial_positions()[[sc.index_of(i) for i in sc.leader_ids]]
     p = form.desired_positions(lead)
     d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2)
@@ -48,9 +56,10 @@ def smallest_spacing_m(sc: Scenario) -> float:
     return float(d.min()) * scale
 
 
-def liveness_problem(sc: Scenario, method: str) -> str | None:
+def liveness_problem(sc: Scenario, method: str, form: Formation | None = None) -> str | None:
     """One line when ``method`` is dcbf and two desired positions are closer than the
-    spacing d* at which the filter lets two agents hover (``rest_spacing_m``), else None."""
+    spacing d* at which the filter lets two agents hover (``rest_spacing_m``), else None.
+    ``form``: the scenario's formation when the caller has it built."""
     if method != Method.DCBF:
         return None
     c, v = sc.controller, sc.vehicle
@@ -60,7 +69,7 @@ def liveness_problem(sc: Scenario, method: str) -> str | None:
     d_star = rest_spacing_m(v.tau_rollpitch_s, v.tau_thrust_s, sc.control_dt, c.tau_safe_s,
                             c.d_safe_m, c.dcbf_gamma_lin, c.dcbf_gamma_cubic, e_bar,
                             vertical_scale=c.dcbf_vertical_scale)
-    spacing = smallest_spacing_m(sc)
+    spacing = smallest_spacing_m(sc, form)
     if spacing >= d_star:
         return None
     scale = (f", dcbf_vertical_scale = {c.dcbf_vertical_scale:g}"
@@ -81,12 +90,32 @@ def hover_margin(sc: Scenario) -> float:
     return c.dcbf_trust_error_mps2 + table[0]
 
 
-def warn_liveness(sc: Scenario, method: str) -> bool:
-    """Log :func:`liveness_problem` as a WARNING; True when there was one."""
-    line = liveness_problem(sc, method)
-    if line is not None:
+def observer_problem(sc: Scenario, form: Formation | None = None) -> str | None:
+    """One line when the desired-state observer's slowest channel, reference_gain ·
+    λ_min(L_ff) (:attr:`offboard.estimation.reference.DesiredStateObserver.rate`), decays
+    slower than :data:`OBSERVER_RATE_MIN`, else None (docs/scenarios.md, "Leaders for a
+    large formation"). ``form``: the scenario's formation when the caller has it built."""
+    form = formation_from_scenario(sc) if form is None else form
+    gain = sc.observer.reference_gain
+    rate = gain * form.lambda_min
+    if rate >= OBSERVER_RATE_MIN:
+        return None
+    return (f"{sc.name}: the desired-state observer's slowest channel decays at {rate:.2f} "
+            f"1/s (observer.reference_gain = {gain:g} x lambda_min = {form.lambda_min:.3f} "
+            f"of the follower graph), below {OBSERVER_RATE_MIN:g} 1/s: its start-up errors "
+            f"last tens of seconds and the formation may not form; more leaders (gcs "
+            f"scenario --leaders) or a denser graph raise it (docs/scenarios.md)")
+
+
+def warn_liveness(sc: Scenario, method: str, form: Formation | None = None) -> bool:
+    """Log :func:`liveness_problem` and :func:`observer_problem` as WARNINGs; True when
+    there was one. ``form``: the scenario's formation when the caller has it built."""
+    form = formation_from_scenario(sc) if form is None else form
+    lines = [line for line in (liveness_problem(sc, method, form), observer_problem(sc, form))
+             if line is not None]
+    for line in lines:
         log.warning("%s", line)
-    return line is not None
+    return bool(lines)
 
 
 def check_physics(sc: Scenario, duration: float) -> None:

@@ -25,7 +25,7 @@ def big(tmp_path_factory: pytest.TempPathFactory) -> Path:
     add_scenario_parser(ap.add_subparsers(dest="command"))
     args = ap.parse_args(["scenario", "grid", "--agents", str(N), "--leaders", "4",
                           "--scramble", "1", "--duration", "2", "--deadline", "1"])
-    doc, _ = build(args)
+    doc, _, _ = build(args)
     path = tmp_path_factory.mktemp("big") / "grid300.toml"
     path.write_text(dump_toml(doc))
     return path

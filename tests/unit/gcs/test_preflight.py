@@ -8,7 +8,13 @@ import logging
 import pytest
 from conftest import ROOT
 
-from gcs.mission.preflight import liveness_problem, smallest_spacing_m, warn_liveness
+from gcs.mission.preflight import (
+    OBSERVER_RATE_MIN,
+    liveness_problem,
+    observer_problem,
+    smallest_spacing_m,
+    warn_liveness,
+)
 from swarm_common.scenario.model import load_scenario, with_overrides
 
 SC = ROOT / "scenarios"
@@ -37,3 +43,27 @@ def test_formations_that_form_are_not_named(name: str) -> None:
 def test_a_mission_is_judged_at_its_smallest_scale() -> None:
     gap8 = load_scenario(SC / "gap8.toml")  # a 6 m cube flown down to scale 0.5
     assert smallest_spacing_m(gap8) == pytest.approx(3.0, abs=1e-6)
+
+
+def test_a_slow_desired_state_observer_is_named(caplog: pytest.LogCaptureFixture) -> None:
+    """The slowest channel is reference_gain · λ_min: cube8's 0.76 1/s passes, and halving
+    its gain (0.38 1/s, under OBSERVER_RATE_MIN) is named, for every method."""
+    cube8 = load_scenario(SC / "cube8.toml")
+    assert observer_problem(cube8) is None
+    slow = with_overrides(cube8, observer={"reference_gain": 2.0})
+    line = observer_problem(slow)
+    assert line is not None and "decays at 0.38 1/s" in line and "--leaders" in line
+    assert 0.38 < OBSERVER_RATE_MIN
+    with caplog.at_level(logging.WARNING):
+        assert warn_liveness(slow, "rcbf")
+        assert not warn_liveness(cube8, "rcbf")
+    assert caplog.text.count("may not form") == 1
+
+
+@pytest.mark.parametrize("path", sorted(SC.glob("*.toml")), ids=lambda p: p.stem)
+def test_no_shipped_scenario_has_a_slow_observer(path) -> None:
+    try:
+        sc = load_scenario(path)
+    except ValueError:  # the scenarios kept to show a refusal
+        return
+    assert observer_problem(sc) is None

@@ -36,7 +36,7 @@ def _load(text: str):
 @pytest.mark.parametrize("shape", list(Shape))
 @pytest.mark.parametrize(("n", "n_lead"), [(3, 2), (8, 2), (20, 3), (30, 4)])
 def test_every_shape_loads(shape: Shape, n: int, n_lead: int) -> None:
-    doc, k = build(_args(str(shape), "--agents", str(n), "--leaders", str(n_lead),
+    doc, k, _ = build(_args(str(shape), "--agents", str(n), "--leaders", str(n_lead),
                          "--scramble", "3"))
     sc = _load(dump_toml(doc))  # the written text, not the dict, passes every check
     assert sc.n == n and sc.leader_ids == list(range(1, n_lead + 1))
@@ -106,10 +106,10 @@ def test_a_scrambled_start_is_sensed_whole_from_the_first_step() -> None:
 
 @pytest.mark.full
 def test_explicit_k_and_range_graph() -> None:
-    doc, k = build(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1",
+    doc, k, _ = build(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1",
                          "--k", "8"))
     assert k == 8 and doc["formation"]["knn_k"] == 8
-    doc, _ = build(_args("sphere", "--agents", "20", "--leaders", "3", "--scramble", "1",
+    doc, _, _ = build(_args("sphere", "--agents", "20", "--leaders", "3", "--scramble", "1",
                          "--graph", "range", "--range", "7"))
     assert _load(dump_toml(doc)).formation.graph is GraphKind.RANGE
 
@@ -157,15 +157,28 @@ def test_short_range_gets_a_transient_limit_it_allows() -> None:
     from swarm_common.scenario.safety_check import allowed_transient_speed, safety_problems
     from swarm_common.scenario.transient_check import span
 
-    doc, _ = build(_args("grid", "--agents", "27", "--leaders", "3", "--scramble", "2"))
+    doc, _, _ = build(_args("grid", "--agents", "27", "--leaders", "3", "--scramble", "2"))
     sc = _load(dump_toml(doc))
     v_t = sc.controller.max_transient_speed_mps
     assert sc.formation.sensing_range_m < span(sc)
     assert 0.0 < v_t <= allowed_transient_speed(sc) < v_t + 0.05
     assert safety_problems(sc) == []
-    doc, _ = build(_args("grid", "--agents", "27", "--leaders", "3", "--scramble", "2",
+    doc, _, _ = build(_args("grid", "--agents", "27", "--leaders", "3", "--scramble", "2",
                          "--mix", "1"))
     sc = _load(dump_toml(doc))
     assert sc.formation.sensing_range_m >= span(sc)
     assert sc.controller.max_transient_speed_mps == 0.0
     assert safety_problems(sc) == []
+
+
+def test_few_leaders_for_a_large_grid_is_warned_and_still_written(capsys) -> None:
+    """125 agents with 4 leaders: the desired-state observer's slowest channel is 0.41 1/s
+    (gcs.mission.preflight.observer_problem); the file is written all the same, with one
+    warning line. 27 agents with 4 leaders (2.4 1/s) get none."""
+    assert cmd_scenario(_args("grid", "--agents", "125", "--leaders", "4", "--scramble", "1")) == 0
+    out = capsys.readouterr()
+    assert out.err.count("\n") == 1 and out.err.startswith("gcs scenario: warning: grid125")
+    assert "decays at 0.41 1/s" in out.err
+    assert _load(out.out).n == 125
+    assert cmd_scenario(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1")) == 0
+    assert capsys.readouterr().err == ""
