@@ -45,7 +45,7 @@ from swarm_common.enums import Method, QPStatus
 from swarm_common.fastnp import f64, finite, norm, rows3, vec3
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
-from swarm_common.scenario.safety_check import reach_of
+from swarm_common.scenario.safety_check import pair_terms
 from swarm_common.world.config import Geofence
 
 W_MAX = 2.0  # m/s², bound on the lumped-disturbance estimate used by the controller
@@ -135,7 +135,7 @@ class FollowerAgent(AgentBase):
         self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)
         self.unsensed = UnsensedNeighbours(
             self.pred, self.index, sc.n, sc.formation.sensing_range_m, ctl.tau_safe_s,
-            reach_of(sc), 2.0 * math.sqrt(3.0) * ctl.u_max_mps2 * self.dt)
+            pair_terms(sc), 2.0 * math.sqrt(3.0) * ctl.u_max_mps2 * self.dt)
         # who takes a pair's whole avoidance budget in the dcbf filter
         self.shares = ShareRule(self.pred, self.leader_mask, self.dt)
         self.fallbacks = 0

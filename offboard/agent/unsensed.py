@@ -15,17 +15,18 @@ from the prediction (docs/safety.md §5c and §5j).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 
 from offboard.estimation.peer_table import unsensed_candidates
 from offboard.estimation.predictor import CURRENT_AGE_S, NeighbourPredictor
 from swarm_common.fastnp import norm
+from swarm_common.scenario.transient_check import pair_reach
 
-# relative margin on the sensing range of the compiled pre-test of predicted pairs (its sum
-# of squares and the exact norm's BLAS dot differ by a few ulps)
+# relative margin on the sensing range and the reach of the compiled pre-test of predicted
+# pairs (its sums of squares and the exact norm's BLAS dot differ by a few ulps)
 RANGE_MARGIN = 1e-6
+_NO_REACH = np.zeros(0)  # the pre-test without the reach (rows within the range only)
 
 # s after the follower's first step before a neighbour beyond the sensing range gets rows:
 # the observers' start transient (cube8, 100 seeds: the DESO's velocity estimate is off by up
@@ -41,15 +42,19 @@ class UnsensedNeighbours:
     """Agent ``index``'s neighbours to keep from prediction, read from its predictor."""
 
     def __init__(self, pred: NeighbourPredictor, index: int, n: int, sensing_range_m: float,
-                 tau_s: float, reach: Callable[[float], float] | None = None,
+                 tau_s: float, reach: tuple[float, float, float, float] | None = None,
                  dv_step: float = 0.0) -> None:
-        """``reach(v)``: the distance (m) from which a pair closing at v (m/s) must have
-        rows (None: no row beyond the sensing range;
-        :func:`swarm_common.scenario.safety_check.reach_of`); ``dv_step``: the most a pair's
-        relative speed can grow by within a period (m/s)."""
+        """``reach``: the terms (τ_s, d, a_b, lag) of the load check's (b)
+        (:func:`swarm_common.scenario.safety_check.pair_terms`), whose
+        :func:`~swarm_common.scenario.transient_check.pair_reach` at v is the distance (m)
+        from which a pair closing at v (m/s) must have rows (None: no row beyond the
+        sensing range); ``dv_step``: the most a pair's relative speed can grow by within
+        a period (m/s)."""
         self.pred, self.index, self.n = pred, index, n
         self.range, self.tau = float(sensing_range_m), float(tau_s)
-        self.reach, self.dv_step = reach, float(dv_step)
+        self.reach = None if reach is None else tuple(float(x) for x in reach)
+        self._reach_arr = _NO_REACH if reach is None else np.array(self.reach, dtype=float)
+        self.dv_step = float(dv_step)
         self._t_first: float | None = None  # the first step's time (HEARD_AFTER_S)
         # (predictor revision, sorted scenario indices (int64) of the agents heard from)
         self._heard: tuple[int, np.ndarray] = (-1, np.zeros(0, dtype=np.int64))
@@ -69,13 +74,15 @@ class UnsensedNeighbours:
         rows: list[tuple[int, np.ndarray, np.ndarray, float]] = []
         tau, rng, pred = self.tau, self.range, self.pred
         # only agents heard from can be predicted (the others' get() is None): O(peers).
-        # Current data certainly out of range (a margin over the exact test below) is
-        # passed over in the same compiled call; the rest take the exact test
+        # Current data certainly out of range, or with the reach certainly beyond range
+        # and reach (a margin over the exact test below), is passed over in the same
+        # compiled call; the rest take the exact test
         reach = self.reach if t - self._t_first >= HEARD_AFTER_S else None
         cand = unsensed_candidates(
             self._heard_indices(), self.index, np.asarray(sel, dtype=np.int64),
-            pred.table.t, pred.table.rows, z1, t, CURRENT_AGE_S,
+            pred.table.t, pred.table.rows, z1, z2, t, CURRENT_AGE_S,
             (rng * (1.0 + RANGE_MARGIN)) ** 2 if reach is None else math.inf,
+            _NO_REACH if reach is None else self._reach_arr, rng, self.dv_step, RANGE_MARGIN,
         )
         for j in cand.tolist():
             got = pred.constant_velocity_at(j, t)
@@ -87,7 +94,7 @@ class UnsensedNeighbours:
             dv = z2 - v_j
             margin = b + tau * b_v
             if dist > rng and (reach is None or dist - margin < rng
-                               or dist - b > reach(norm(dv) + b_v + self.dv_step)):
+                               or dist - b > pair_reach(norm(dv) + b_v + self.dv_step, *reach)):
                 continue
             rows.append((j, dp, dv, margin))
         if not rows:

@@ -172,15 +172,36 @@ def rows_of(
 
 
 @kernel
+def reach_bound(v_bar: float, tau_s: float, d: float, a_b: float, lag: float) -> float:
+    """:func:`swarm_common.scenario.transient_check.pair_reach` (m) for a pair closing at
+    ``v_bar`` (m/s), the same formula compiled for :func:`unsensed_candidates`' pre-test
+    (which keeps a margin on it; the exact test stays with the Python one)."""
+    tv = tau_s * v_bar
+    r_h = tv + math.sqrt(tv * tv + d * d)
+    if a_b <= 0.0:
+        return math.inf
+    return max(r_h, d + v_bar * lag + v_bar * v_bar / (2.0 * a_b))
+
+
+@kernel
 def unsensed_candidates(
     heard: np.ndarray, own: int, sensed: np.ndarray, t_tab: np.ndarray, rows: np.ndarray,
-    z1: np.ndarray, t: float, age_max: float, r2: float,
+    z1: np.ndarray, z2: np.ndarray, t: float, age_max: float, r2: float, reach: np.ndarray,
+    rng: float, dv_step: float, margin: float,
 ) -> np.ndarray:
-    """The agents of ``heard`` (scenario indices, int64, in that order) that may be within
-    sensing range but are not sensed: not ``own``, not in ``sensed`` (int64), and not
-    certainly out of range, i.e. not current at ``t`` (stamp at most ``age_max`` s before
-    it) with its z1 farther than √r2 (m) from ``z1``. That test is a sum of squares in
-    order, a cheap pre-test: callers keep a margin on r2 and test the rest exactly."""
+    """The agents of ``heard`` (scenario indices, int64, in that order) that may need rows
+    but are not sensed: not ``own``, not in ``sensed`` (int64), and not certainly passed
+    over. Only current rows (stamp at most ``age_max`` s before ``t``) are passed over:
+
+    * with ``reach`` empty, those whose z1 is farther than √r2 (m) from ``z1``;
+    * with ``reach`` = (τ_s, d, a_b, lag) of the load check's (b), those certainly
+      beyond both the sensing range ``rng`` (m) and the reach
+      (:func:`reach_bound`) at their closing speed ‖z2 − z2_j‖ + ``dv_step`` (m/s):
+      their distance, shrunk by the relative ``margin``, beyond ``rng`` and beyond the
+      reach at that speed grown by ``margin``, grown by ``margin`` again.
+
+    The norms are sums of squares in order, a cheap pre-test: callers keep a margin on r2
+    and test the rest exactly (offboard.agent.unsensed)."""
     n = t_tab.shape[0]
     if rows.shape[0] < n:
         raise ValueError("unsensed_candidates: the rows are fewer than the stamps")
@@ -190,6 +211,7 @@ def unsensed_candidates(
         if not 0 <= j < n:
             raise ValueError("unsensed_candidates: an index outside the table")
         skip[j] = True
+    with_reach = reach.shape[0] == 4
     out = np.empty(heard.shape[0], dtype=np.int64)
     m = 0
     for r in range(heard.shape[0]):
@@ -202,8 +224,19 @@ def unsensed_candidates(
             d0 = z1[0] - rows[j, 0]
             d1 = z1[1] - rows[j, 1]
             d2 = z1[2] - rows[j, 2]
-            if d0 * d0 + d1 * d1 + d2 * d2 > r2:
+            ss = d0 * d0 + d1 * d1 + d2 * d2
+            if ss > r2:
                 continue
+            if with_reach:
+                dist = math.sqrt(ss) * (1.0 - margin)
+                if dist > rng:
+                    w0 = z2[0] - rows[j, 3]
+                    w1 = z2[1] - rows[j, 4]
+                    w2 = z2[2] - rows[j, 5]
+                    v = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2) * (1.0 + margin) + dv_step
+                    far = reach_bound(v, reach[0], reach[1], reach[2], reach[3])
+                    if dist > far * (1.0 + margin):
+                        continue
         out[m] = j
         m += 1
     return out[:m]

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from offboard.estimation.neighbour_accel import NeighbourAccel
 from offboard.estimation.peer_table import EstimateBatch
@@ -132,8 +133,9 @@ def test_unsensed_candidates_pass_over_only_what_is_certainly_out_of_range() -> 
         heard = np.sort(rng.permutation(n)[: int(rng.integers(0, n + 1))]).astype(np.int64)
         sensed = rng.permutation(n)[: int(rng.integers(0, n + 1))].astype(np.int64)
         own = int(rng.integers(0, n))
-        got = unsensed_candidates(heard, own, sensed, t_tab, rows, z1, 1.0, 1e-9,
-                                  (r * (1 + RANGE_MARGIN)) ** 2).tolist()
+        got = unsensed_candidates(heard, own, sensed, t_tab, rows, z1, np.zeros(3), 1.0, 1e-9,
+                                  (r * (1 + RANGE_MARGIN)) ** 2, np.zeros(0), r, 0.0,
+                                  RANGE_MARGIN).tolist()
         others = [j for j in heard.tolist() if j != own and j not in set(sensed.tolist())]
         assert got == [j for j in others if j in got]  # a subsequence, in the order heard
         for j in others:
@@ -146,6 +148,54 @@ def test_unsensed_candidates_pass_over_only_what_is_certainly_out_of_range() -> 
             elif current:
                 assert exact <= r * (1 + 2 * RANGE_MARGIN)
     assert passed_over > 0
+
+
+def test_with_the_reach_only_pairs_certainly_beyond_range_and_reach_are_passed_over() -> None:
+    """With the load check's reach, unsensed_candidates passes over a current row only
+    where the exact test of offboard.agent.unsensed (BLAS norms, the Python pair_reach)
+    would: beyond the sensing range and beyond the reach at the closing speed. Random
+    tables with distances and closing speeds around both, and rows near each edge."""
+    from offboard.agent.unsensed import RANGE_MARGIN
+    from offboard.estimation.peer_table import ROW, reach_bound, unsensed_candidates
+    from swarm_common.scenario.transient_check import pair_reach
+
+    rng = np.random.default_rng(44)
+    passed_over = kept_beyond_range = 0
+    for _ in range(400):
+        n = int(rng.integers(2, 16))
+        terms = (float(rng.uniform(0.0, 1.5)), float(rng.uniform(0.2, 1.0)),
+                 float(rng.choice([0.0, rng.uniform(0.5, 8.0)])), float(rng.uniform(0.0, 0.3)))
+        r = float(rng.uniform(1.0, 8.0))
+        dv_step = float(rng.uniform(0.0, 0.5))
+        rows = rng.normal(0.0, 1.0, (n, ROW))
+        z1, z2 = rng.normal(0.0, 3.0, 3), rng.normal(0.0, 1.0, 3)
+        for j in range(n):  # distances around the range and the reach, closing speeds 0-6
+            u = rng.normal(size=3)
+            w = rng.normal(size=3)
+            v = float(rng.uniform(0.0, 6.0))
+            rows[j, 3:6] = z2 - v * w / np.linalg.norm(w)
+            edge = pair_reach(v + dv_step, *terms) if rng.random() < 0.5 else r
+            dist = edge * (1.0 + float(rng.choice([-1e-3, -1e-7, 0.0, 1e-7, 1e-3, 0.5])))
+            rows[j, 0:3] = z1 - dist * u / np.linalg.norm(u)
+        t_tab = rng.choice([1.0, 0.9], n)
+        heard = np.arange(n, dtype=np.int64)
+        got = set(unsensed_candidates(heard, 0, np.zeros(0, np.int64), t_tab, rows, z1, z2,
+                                      1.0, 1e-9, math.inf, np.array(terms), r, dv_step,
+                                      RANGE_MARGIN).tolist())
+        for j in range(1, n):
+            dp, dv = z1 - rows[j, 0:3], z2 - rows[j, 3:6]
+            dist = math.sqrt(float(dp.dot(dp)))
+            beyond = dist > r and dist > pair_reach(math.sqrt(float(dv.dot(dv))) + dv_step,
+                                                    *terms)
+            if j not in got:
+                assert t_tab[j] == 1.0 and beyond, (j, dist, r)
+                passed_over += 1
+            elif t_tab[j] == 1.0 and beyond:
+                kept_beyond_range += 1  # within the margin: left to the exact test
+    assert passed_over > 100 and kept_beyond_range > 0
+    for v in (0.0, 0.3, 2.0, 7.5):  # the compiled twin is the formula (a few ulps apart)
+        for terms in ((0.8, 0.5, 5.0, 0.17), (0.0, 0.4, 2.0, 0.0), (1.2, 0.7, 0.0, 0.1)):
+            assert reach_bound(v, *terms) == pytest.approx(pair_reach(v, *terms), rel=1e-14)
 
 
 def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
@@ -161,8 +211,8 @@ def test_an_index_outside_the_table_is_refused_with_nothing_written() -> None:
             tab.ingest(b, bad, True)
         for heard, sensed in ((bad, np.zeros(0, np.int64)), (np.zeros(0, np.int64), bad)):
             with pytest.raises(ValueError, match="outside"):
-                unsensed_candidates(heard, 0, sensed, tab.t, tab.rows, np.zeros(3), 1.0,
-                                    1e-9, 1.0)
+                unsensed_candidates(heard, 0, sensed, tab.t, tab.rows, np.zeros(3),
+                                    np.zeros(3), 1.0, 1e-9, 1.0, np.zeros(0), 1.0, 0.0, 1e-6)
     assert np.all(tab.t == -math.inf) and np.all(np.isnan(tab.acc_t))
     pred = NeighbourPredictor([1, 2, 3], 0.4, 0.02, (4.0, 3.0), (2.0, 2.5))
     with pytest.raises(ValueError, match="outside"):

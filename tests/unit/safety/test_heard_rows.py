@@ -45,7 +45,10 @@ def _reach(v: float) -> float:
     return pair_reach(v, TAU_S, D, A_B, LAG)
 
 
-def _rows(p, v, age=None, reach=_reach):
+TERMS = (TAU_S, D, A_B, LAG)  # the reach's terms, as UnsensedNeighbours takes them
+
+
+def _rows(p, v, age=None, reach=TERMS):
     """The rows agent 0 keeps at T_NOW, sensing nobody: {index: (Δp, Δv, margin)}."""
     n = len(p)
     pred = _Pred(np.asarray(p, float), np.asarray(v, float),
