@@ -17,6 +17,10 @@ from swarm_common.enums import QPRow
 RowsOf = tuple[np.ndarray, np.ndarray, bool]
 # the world's rows: its planes, their first row, their count and the agent's position
 WorldOf = tuple[WorldPlanes, int, int, np.ndarray]
+_INPUT, _CLF, _PAIR, _GROUND, _SPEED, _OBSTACLE, _FENCE = (
+    int(QPRow.INPUT), int(QPRow.CLF), int(QPRow.PAIR), int(QPRow.GROUND), int(QPRow.SPEED),
+    int(QPRow.OBSTACLE), int(QPRow.FENCE))
+_FLAGS: dict[int, QPRow] = {}  # the QPRow of each combination of bits met so far
 
 
 def active_rows(res: QPResult, rows_of: RowsOf, world_of: WorldOf | None,
@@ -27,11 +31,12 @@ def active_rows(res: QPResult, rows_of: RowsOf, world_of: WorldOf | None,
     ``speed_from`` (< 0: none), the speed rows."""
     if res.tight is None:
         return NO_ACTIVE
-    kinds, count = QPRow(0), len(res.tight) + res.tight_input
+    # the kinds as plain int bits (an IntFlag's | costs a microsecond), one QPRow at the end
+    kinds, count = 0, len(res.tight) + res.tight_input
     if res.tight_input:
-        kinds |= QPRow.INPUT
+        kinds |= _INPUT
     if res.slack > ACTIVE_TOL_MPS2:
-        kinds |= QPRow.CLF
+        kinds |= _CLF
         count += 1
     sensed, predicted, ground = rows_of
     n_s = len(sensed)
@@ -42,16 +47,19 @@ def active_rows(res: QPResult, rows_of: RowsOf, world_of: WorldOf | None,
         if r < 2 * m:  # the (C1) rows of the pairs, then their (C2) rows
             i = r % m
             j = int(sensed[i]) if i < n_s else int(predicted[i - n_s])
-            kinds |= QPRow.PAIR
+            kinds |= _PAIR
             if j not in pairs:
                 pairs.append(j)
         elif ground and r < 2 * m + 2:
-            kinds |= QPRow.GROUND
+            kinds |= _GROUND
         elif 0 <= speed_from <= r:  # the speed rows come last
-            kinds |= QPRow.SPEED
+            kinds |= _SPEED
         elif world_of is not None:  # two rows per plane: obstacles, then fence
             planes, first, n_planes, p = world_of
             if n_obstacle < 0:
                 n_obstacle = n_planes - planes.fence_planes_at(p)
-            kinds |= QPRow.OBSTACLE if (r - first) // 2 < n_obstacle else QPRow.FENCE
-    return ActiveRows(count, kinds, tuple(pairs))
+            kinds |= _OBSTACLE if (r - first) // 2 < n_obstacle else _FENCE
+    flag = _FLAGS.get(kinds)
+    if flag is None:
+        flag = _FLAGS[kinds] = QPRow(kinds)
+    return ActiveRows(count, flag, tuple(pairs))

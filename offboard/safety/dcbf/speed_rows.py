@@ -44,6 +44,7 @@ import numpy as np
 
 from offboard.safety.base import W_SAFE, saturate_norm
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
+from swarm_common.fastnp import norm
 
 NEAR = 0.8  # a first cut is added once the tried command predicts this fraction of b
 TOL = 1e-6  # m/s: an answer this little outside the ball needs no further cut (rounding)
@@ -84,16 +85,16 @@ class TransientLimit:
 
     def excess(self, u: np.ndarray) -> float:
         """‖ê_T(u)‖ − b (m/s): > 0 is outside the ball."""
-        return float(np.linalg.norm(self.predicted(u))) - self.bound
+        return norm(self.predicted(u)) - self.bound
 
     def near(self, u: np.ndarray) -> bool:
         """Whether ``u`` predicts ‖ê_T‖ > NEAR·b (a first cut is due)."""
-        return float(np.linalg.norm(self.predicted(u))) > NEAR * self.bound
+        return norm(self.predicted(u)) > NEAR * self.bound
 
     def direction(self, u: np.ndarray) -> np.ndarray:
         """The unit direction of ê_T(u) (a cut's normal; any unit vector at ê_T = 0)."""
         e = self.predicted(u)
-        n = float(np.linalg.norm(e))
+        n = norm(e)
         return e / n if n > 0.0 else np.array([1.0, 0.0, 0.0])
 
     def write(self, cuts: list[np.ndarray], cube: bool, g: np.ndarray, rhs: np.ndarray,
@@ -111,8 +112,8 @@ class TransientLimit:
                 radius.append(self.bound / math.sqrt(3.0))
         for i, (n, b) in enumerate(zip(planes, radius, strict=True)):
             grad = -(n * self.cv)
-            norm = float(np.linalg.norm(grad))
-            g[start + i] = grad / norm
-            need = (float(n @ self.e0) - b) / norm
+            size = norm(grad)
+            g[start + i] = grad / size
+            need = (float(n @ self.e0) - b) / size
             rhs[start + i] = min(need, float(g[start + i] @ self.u_b))
         return len(planes)
