@@ -71,6 +71,9 @@ def measure_into(
     (row i: (1,0,0)), ``ḋ = gᵀw``, ``ġ = (w − g ḋ)/d`` (module docstring of
     :mod:`offboard.estimation.sensing`); measured ``g̃ = (g + σ_b n)/‖g + σ_b n‖``, ``ġ + σ_r n``,
     ``d + σ_d n``, ``ḋ + σ_ḋ n``; valid iff ``d ≤ range``, ``drop ≥ dropout`` and j ≠ i.
+    A row out of range (``d > range``, j ≠ i) is invalid and only its true ``d`` is
+    written, zeros elsewhere: nothing reads an invalid row's measurements, and at a
+    thousand agents computing them was most of a follower's sensing.
 
     The caller allocates the outputs: a kernel that returned seven new arrays would pay
     for boxing each of them in Python (about 0.3 µs apiece), three times the cost of
@@ -92,8 +95,14 @@ def measure_into(
                 nz[k] = 0.0
             dr = 1.0
         r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
-        w[0], w[1], w[2] = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
         d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
+        if j != i and d > range_m:  # out of range: invalid, its row zeros (nobody reads it)
+            valid[j] = False
+            dm[j], ddm[j] = d, 0.0
+            for k in range(3):
+                gm[j, k] = gdm[j, k] = rel_p[j, k] = rel_v[j, k] = 0.0
+            continue
+        w[0], w[1], w[2] = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
         if j == i:
             d = 1.0
         g[0], g[1], g[2] = r0 / d, r1 / d, r2 / d

@@ -1,6 +1,7 @@
 """The compiled sensing (offboard.estimation.sensing_kernel) against the numpy formulation it
 replaced,
-on random swarms: the same measurements within rounding (tests/reference/close.py: two
+on random swarms: the same measurements within rounding for every agent in range (one out of
+range is invalid and carries its distance only) (tests/reference/close.py: two
 implementations; numpy's einsum sums rows of three as the kernel does,
 ``(a0 b0 + a2 b2) + a1 b1``, on some builds only), the same validity masks, and the same
 draws from the seeded generator (same shapes, same order), so a seed gives the same noise.
@@ -106,9 +107,7 @@ def test_compiled_measure_equals_numpy(dropout: float) -> None:
         ref = measure_numpy(p, v, i, np.random.default_rng([seed, aid, 0x5E]),
                             tuple(float(x) for x in sensor.sig), rng_m, dropout)
         assert np.array_equal(got.valid, ref[0]), trial
-        for a, b in zip((got.g, got.g_dot, got.d, got.d_dot), ref[1:], strict=True):
-            assert a.shape == b.shape, trial
-            assert_close(a, b, trial)
+        _same_in_range(got, ref, p, i, rng_m, trial)
         # the relative state from the measurements, as Measurements computed it in numpy
         assert_close(got.rel_pos(), got.g * got.d[:, None], trial)
         assert_close(got.rel_vel(), got.g_dot * got.d[:, None] + got.g * got.d_dot[:, None],
@@ -118,6 +117,25 @@ def test_compiled_measure_equals_numpy(dropout: float) -> None:
         after.standard_normal((n, 8))
         after.random(n)
         assert sensor.rng.random() == after.random(), trial
+
+
+def _same_in_range(got, ref: tuple[np.ndarray, ...], p: np.ndarray, i: int, rng_m: float,
+                   trial: int) -> int:
+    """The kernel's rows in sensing range (and its own) are numpy's; a row out of range
+    is invalid and carries only its true distance, zeros elsewhere (nothing reads it).
+    Returns how many other agents were in range."""
+    d = np.sqrt(_dots(p - p[i], p - p[i]))
+    near = ~(d > rng_m)
+    near[i] = True
+    for a, b in zip((got.g, got.g_dot, got.d, got.d_dot), ref[1:], strict=True):
+        assert a.shape == b.shape, trial
+        assert_close(a[near], b[near], trial)
+    far = ~near
+    assert not got.valid[far].any(), trial
+    assert_close(got.d[far], d[far], trial)
+    for a in (got.g, got.g_dot, got.d_dot, got.rel_p, got.rel_v):
+        assert not a[far].any(), trial
+    return int(near.sum()) - 1
 
 
 def test_compiled_measure_equals_numpy_on_a_swarm() -> None:
@@ -131,8 +149,7 @@ def test_compiled_measure_equals_numpy_on_a_swarm() -> None:
            cfg.range_rate_noise_mps)
     ref = measure_numpy(p, v, 4, np.random.default_rng([17, 5, 0x5E]), sig, 6.0, 0.1)
     assert np.array_equal(got.valid, ref[0])
-    for a, b in zip((got.g, got.g_dot, got.d, got.d_dot), ref[1:], strict=True):
-        assert_close(a, b)
+    assert 0 < _same_in_range(got, ref, p, 4, 6.0, 0) < 8  # rows both in and out of range
     # the relative state from the measurements, as Measurements computed it in numpy
     assert_close(got.rel_pos(), got.g * got.d[:, None])
     assert_close(got.rel_vel(), got.g_dot * got.d[:, None] + got.g * got.d_dot[:, None])
