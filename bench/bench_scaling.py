@@ -14,7 +14,9 @@ Prints, with no assertions (figures for docs/performance.md, "Scaling in process
 * setup: wall seconds to build the agents (run wall − stepping wall; loading excluded);
 * stepping wall (s), whole-process CPU (s, user + system), peak RSS (MiB);
 * × real time of the stepping (simulated s / stepping wall s);
-* µs per agent-step: stepping wall / (control steps × N);
+* µs per agent-step: stepping wall / (control steps × N), and the agents in range: the
+  mean number of other agents within the sensing range of a follower at its vertex, the
+  neighbours a formed follower's step works on;
 * QP steps relaxed or fallen back (metrics "qp_fallbacks"), minimum distance, collisions
   (the run is a mission, not a micro-kernel);
 * when the formation formed (metrics ``formation_time_s``: the latest over the repeats,
@@ -71,8 +73,20 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
         "collisions": m["collisions"],
         # the issue's targets ask for the formation formed too: None while it is not
         "formed_s": m["formation_time_s"], "verdict": m["safety_verdict"],
-        "alarms": m["safety_alarm_count"],
+        "alarms": m["safety_alarm_count"], "in_range": in_range(sc),
     }
+
+
+def in_range(sc: Any) -> float:
+    """The mean number of other agents within the sensing range of a follower at its
+    vertex: the neighbours whose rows a formed follower computes, the count its step's
+    cost should follow."""
+    v = sc.vertices()
+    lead = set(sc.leader_ids)
+    r = sc.formation.sensing_range_m
+    counts = [int(np.count_nonzero(np.linalg.norm(v - v[i], axis=1) <= r)) - 1
+              for i, a in enumerate(sc.agents) if a.id not in lead]
+    return float(np.mean(counts))
 
 
 def leaders_for(flag: str, n: int) -> int:
@@ -134,8 +148,9 @@ def main() -> None:
           f"{opts.mix:g}, {opts.method}, noise_draws {opts.noise_draws}, "
           f"{opts.duration:g} s simulated, {opts.repeats} run(s)")
     print("| N | knn_k | setup s | stepping wall s | CPU s | peak RSS MiB | × real time "
-          "| µs / agent-step | QP relaxed | min dist m | collisions | formed s | verdict, alarms |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| µs / agent-step | in range | QP relaxed | min dist m | collisions | formed s "
+          "| verdict, alarms |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n in sizes:
         rs = runs[n]
         col = {key: [float(r[key]) for r in rs] for key in rs[0]
@@ -146,7 +161,8 @@ def main() -> None:
         print(f"| {n} | {rs[0]['knn_k']} | {_rng(col['setup_s'], '.1f')} "
               f"| {_rng(col['wall_s'], '.1f')} | {_rng(col['cpu_s'], '.1f')} "
               f"| {_rng(col['rss_mib'], '.0f')} | {_rng(col['xrt'], '.2f')} "
-              f"| {_rng(col['us_agent_step'], '.0f')} | {_rng(col['fallbacks'], '.0f')} "
+              f"| {_rng(col['us_agent_step'], '.0f')} | {_rng(col['in_range'], '.1f')} "
+              f"| {_rng(col['fallbacks'], '.0f')} "
               f"| {min(col['min_dist_m']):.2f} | {max(col['collisions']):.0f} | {form} "
               f"| {verdicts}, {max(int(r['alarms']) for r in rs)} |")
     if len(sizes) >= 2:

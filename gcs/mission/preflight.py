@@ -107,10 +107,12 @@ def observer_problem(sc: Scenario, form: Formation | None = None) -> str | None:
             f"scenario --leaders) or a denser graph raise it (docs/scenarios.md)")
 
 
-def warn_liveness(sc: Scenario, method: str, form: Formation | None = None) -> bool:
+def warn_liveness(sc: Scenario, method: str) -> bool:
     """Log :func:`liveness_problem` and :func:`observer_problem` as WARNINGs; True when
-    there was one. ``form``: the scenario's formation when the caller has it built."""
-    form = formation_from_scenario(sc) if form is None else form
+    there was one. The formation is built here, apart from the run's own: its leader map
+    is computed with whatever BLAS threads the caller has (the in-process runner builds
+    its own under one thread, and that map's bits are the run's)."""
+    form = formation_from_scenario(sc)
     lines = [line for line in (liveness_problem(sc, method, form), observer_problem(sc, form))
              if line is not None]
     for line in lines:
