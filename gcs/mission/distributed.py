@@ -114,7 +114,7 @@ def run_distributed(
     """
     if (why := sc.process_problem()) is not None:
         raise LaunchError(why)
-    warn_liveness(sc, method)
+    preflight = warn_liveness(sc, method)
     signing = SigningChoice() if signing is None else signing
     sec_dir = secure_dir() if secure or signing.enabled else None
     try:
@@ -151,7 +151,7 @@ def run_distributed(
     group = ProcessGroup(out_dir)
     facts: dict[str, Any] = {"failed_agents": [], "killed_agents": [], "aborted": False,
                              "mavlink_signing": signing.describe(),
-                             "daemon_processes": len(spec.packs())}
+                             "daemon_processes": len(spec.packs()), "preflight": preflight}
     t_wall0 = time.monotonic()
     cpu0 = time.process_time()
     reason = ""

@@ -148,13 +148,15 @@ class MissionResult:
     collision_pairs: list[Any] = field(default_factory=list)
     # the scripted commands, as the distributed runner's audit (gcs.mission.audit)
     audit: dict[str, Any] = field(default_factory=lambda: audit_document(None, []))
+    # what the run was warned of before it started (gcs.mission.preflight.warn_liveness)
+    preflight: list[str] = field(default_factory=list)
 
     def document(self) -> dict[str, Any]:
         """The run's ``metrics.json`` document (:func:`gcs.mission.run_output.run_document`)."""
         return run_document(
             self.scenario, self.method, self.seed, self.metrics, gains=self.gains,
             collision_pairs=[list(map(float, c)) for c in self.collision_pairs],
-            audit=self.audit,
+            audit=self.audit, preflight=list(self.preflight),
         )
 
     def save(self, out_dir: str | Path, sc: Scenario | None = None) -> None:
@@ -183,7 +185,7 @@ def run_inproc(
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
     dur = float(sc.run.duration_s if duration is None else duration)
-    warn_liveness(sc, method)
+    preflight = warn_liveness(sc, method)
     if sc.faults.active:
         log.warning("%s: the in-process runner has no links, so the scenario's [faults] table "
                     "is NOT applied (a distributed run applies it; docs/faults.md)", sc.name)
@@ -284,4 +286,5 @@ def run_inproc(
     return MissionResult(
         scenario=sc.name, method=method, seed=seed, metrics=metrics, series=ser, gains=gains,
         collision_pairs=list(dyn.collision_pairs), audit=audit_document(None, scripted),
+        preflight=preflight,
     )

@@ -5,7 +5,8 @@ cannot use: the agents' own code and the machine's ports.
   (docs/safety.md 5f, "Dense formations: liveness"): one line or None;
   :func:`observer_problem` - whether the desired-state observer is too slow for the
   formation to form (a large formation with few leaders; docs/scenarios.md);
-  :func:`warn_liveness` logs them as WARNINGs. It is a warning, not a refusal: such a run
+  :func:`warn_liveness` logs them as WARNINGs, and a run's ``metrics.json`` lists them
+  (``preflight``). It is a warning, not a refusal: such a run
   stays safe, it only never forms, and its followers then raise the DEADLOCK event in
   flight.
 * :func:`check_physics` - the followers' DESO gains on the scenario's graph (a refusal)
@@ -107,17 +108,18 @@ def observer_problem(sc: Scenario, form: Formation | None = None) -> str | None:
             f"scenario --leaders) or a denser graph raise it (docs/scenarios.md)")
 
 
-def warn_liveness(sc: Scenario, method: str) -> bool:
-    """Log :func:`liveness_problem` and :func:`observer_problem` as WARNINGs; True when
-    there was one. The formation is built here, apart from the run's own: its leader map
-    is computed with whatever BLAS threads the caller has (the in-process runner builds
-    its own under one thread, and that map's bits are the run's)."""
+def warn_liveness(sc: Scenario, method: str) -> list[str]:
+    """Log :func:`liveness_problem` and :func:`observer_problem` as WARNINGs and return
+    their lines (a run keeps them in its document, ``preflight``). The formation is built
+    here, apart from the run's own: its leader map is computed with whatever BLAS threads
+    the caller has (the in-process runner builds its own under one thread, and that map's
+    bits are the run's)."""
     form = formation_from_scenario(sc)
     lines = [line for line in (liveness_problem(sc, method, form), observer_problem(sc, form))
              if line is not None]
     for line in lines:
         log.warning("%s", line)
-    return bool(lines)
+    return lines
 
 
 def check_physics(sc: Scenario, duration: float) -> None:

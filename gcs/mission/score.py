@@ -114,10 +114,11 @@ def score_run(
         metrics, ser = recorded_metrics(rec, sc, facts.get("wall_s", 0.0), duration, land_at)
     else:  # stopped before the second step: nothing to score
         metrics, ser = {}, empty_series(np.zeros(0), sc.n)
+    run = {k: v for k, v in facts.items() if k != "preflight"}  # top level, as in process
     doc = run_document(
         sc.name, method, sc.seed if seed is None else seed, metrics,
         mode="realtime" if realtime else "lockstep", aborted=bool(facts.get("aborted")),
-        run=facts,
+        run=run, preflight=list(facts.get("preflight") or []),
     )
     return doc, ser
 

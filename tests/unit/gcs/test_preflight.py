@@ -67,3 +67,24 @@ def test_no_shipped_scenario_has_a_slow_observer(path) -> None:
     except ValueError:  # the scenarios kept to show a refusal
         return
     assert observer_problem(sc) is None
+
+
+def test_a_runs_document_lists_its_preflight_warnings(tmp_path) -> None:
+    """The warnings a run starts with are in its metrics.json (``preflight``), in process
+    and distributed alike (gcs.mission.score.score_run moves them out of the run facts)."""
+    import json
+
+    from gcs.mission.inproc import run_inproc
+    from gcs.mission.recorder import Recorder
+    from gcs.mission.score import score_run
+
+    cube8 = load_scenario(SC / "cube8.toml")
+    slow = with_overrides(cube8, observer={"reference_gain": 2.0})
+    res = run_inproc(slow, "dcbf", duration=0.1)
+    res.save(tmp_path)
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["preflight"] == [observer_problem(slow)]
+    assert run_inproc(cube8, "dcbf", duration=0.1).document()["preflight"] == []
+    facts = {"failed_agents": [], "preflight": ["a line"], "wall_s": 0.0}
+    doc, _ = score_run(Recorder(slow, 5, seed=1), slow, facts, "dcbf", None, False, None, 0.1)
+    assert doc["preflight"] == ["a line"] and "preflight" not in doc["run"]
