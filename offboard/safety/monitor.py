@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from offboard.safety.monitor_kernel import CTR_FALLBACK, monitor_terms, residual_persist
+from offboard.safety.monitor_kernel import CTR_FALLBACK, monitor_step
 from swarm_common.barrier import barrier
 from swarm_common.enums import NO_ALARM, AgentAlarm
 from swarm_common.fastnp import vec3
@@ -116,29 +116,20 @@ class SafetyMonitor:
         pairs the filter uses this step (held through a dropout) and their p_j − p_i,
         v_j − v_i."""
         cfg = self.cfg
-        self.residual, speed, any_new = monitor_terms(
+        z1 = vec3(z1)
+        self.residual, any_new, raised = monitor_step(
             z1, z2, est_p, usable, rel_p, fresh, sel, self._sensed, self._prev, self._new,
-            cfg.range_m)
-        bits = NO_ALARM
-        if self._residual_step(z1, speed):
-            bits |= AgentAlarm.RESIDUAL
+            cfg.range_m, self._ctr, cfg.bound_m, cfg.v_max_mps, cfg.persist,
+            cfg.fallback_after)
+        if self._ctr[CTR_FALLBACK]:
+            self.fallback = True
+        bits = AgentAlarm.RESIDUAL if raised else NO_ALARM
         if any_new and self._near_entry(pair_p, pair_v):
             bits |= AgentAlarm.NEAR_ENTRY
         self._first = False
         if self.fallback:
             bits |= AgentAlarm.FALLBACK
         return bits
-
-    def _residual_step(self, z1: np.ndarray, speed: float) -> bool:
-        """Update the persistence counters from this step's residual and estimated
-        ``speed`` (m/s); True while RESIDUAL is raised. A step without a usable neighbour
-        and a plausible speed leaves the counters as they are."""
-        cfg = self.cfg
-        raised = residual_persist(self._ctr, self.residual, speed, vec3(z1), cfg.bound_m,
-                                  cfg.v_max_mps, cfg.persist, cfg.fallback_after)
-        if self._ctr[CTR_FALLBACK]:
-            self.fallback = True
-        return bool(raised)
 
     def _near_entry(self, pair_p: np.ndarray, pair_v: np.ndarray) -> bool:
         """Any pair first sensed this step already inside its barrier (h < 0). Not on the

@@ -1,6 +1,8 @@
 """The per-step terms of the in-flight monitor (:mod:`offboard.safety.monitor`) in one
-compiled call: the consistency residual, the estimated speed and the pairs first sensed
-this step. Numbers and units are the monitor's; its module docstring gives the maths.
+compiled call (:func:`monitor_step`): the consistency residual, the estimated speed and the
+pairs first sensed this step (:func:`monitor_terms`), and the residual's persistence rule
+(:func:`residual_persist`). Numbers and units are the monitor's; its module docstring gives
+the maths.
 """
 
 from __future__ import annotations
@@ -106,3 +108,19 @@ def residual_persist(ctr: np.ndarray, residual: float, speed: float, z1: np.ndar
     if ctr[CTR_HELD] >= fallback_after:
         ctr[CTR_FALLBACK] = 1
     return ctr[CTR_RAISED] != 0
+
+
+@kernel
+def monitor_step(z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, usable: np.ndarray,
+                 rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray, sensed: np.ndarray,
+                 prev: np.ndarray, new: np.ndarray, range_m: float, ctr: np.ndarray,
+                 bound_m: float, v_max_mps: float, persist: int,
+                 fallback_after: int) -> tuple[float, bool, bool]:
+    """:func:`monitor_terms`, then :func:`residual_persist` of its residual and speed, in
+    one call (arguments as theirs): (residual (m), any newly sensed pair, RESIDUAL
+    raised)."""
+    residual, speed, any_new = monitor_terms(z1, z2, est_p, usable, rel_p, fresh, sel, sensed,
+                                             prev, new, range_m)
+    raised = residual_persist(ctr, residual, speed, z1, bound_m, v_max_mps, persist,
+                              fallback_after)
+    return residual, any_new, raised

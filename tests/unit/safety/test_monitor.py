@@ -245,21 +245,51 @@ def _persist_reference(cfg, residual, speed, z1, state):
 def test_the_compiled_persistence_agrees_with_the_python_rule(seed: int) -> None:
     """Random residuals around the bound (NaN among them), speeds (over the limit, inf,
     NaN) and estimates (NaN): RESIDUAL and the fallback step for step as the rule says."""
+    from offboard.safety.monitor_kernel import CTR_FALLBACK, residual_persist
+
     cfg = MonitorConfig(2.77, 30.0, 10, 25, 0.4, 1.0, 6.0)
-    mon = SafetyMonitor(cfg, 4)
+    ctr = np.zeros(5, dtype=np.int64)  # a monitor's counters
     rng = np.random.default_rng(seed)
     state: list = [0, 0, False, 0, False]
     raised_seen = 0
     for k in range(3000):
         burst = (k // 40) % 3 == 0  # spells over the bound, long enough to raise it
-        mon.residual = float(rng.uniform(2.8, 4.0) if burst else rng.uniform(0.0, 2.9))
+        residual = float(rng.uniform(2.8, 4.0) if burst else rng.uniform(0.0, 2.9))
         if rng.random() < 0.05:
-            mon.residual = math.nan
+            residual = math.nan
         speed = float(rng.choice([1.0, 5.0, 31.0, math.inf, math.nan],
                                  p=[0.9, 0.06, 0.02, 0.01, 0.01]))
         z1 = np.array([0.0, math.nan if rng.random() < 0.005 else 1.0, 2.0])
-        got = mon._residual_step(z1, speed)
-        want = _persist_reference(cfg, mon.residual, speed, z1, state)
-        assert got == want and mon.fallback == state[4], (seed, k)
+        got = residual_persist(ctr, residual, speed, z1, cfg.bound_m, cfg.v_max_mps,
+                               cfg.persist, cfg.fallback_after)
+        want = _persist_reference(cfg, residual, speed, z1, state)
+        assert got == want and bool(ctr[CTR_FALLBACK]) == state[4], (seed, k)
         raised_seen += got
     assert raised_seen > 0
+
+
+def test_the_monitors_one_call_is_its_terms_then_its_persistence() -> None:
+    """monitor_step gives what monitor_terms and then residual_persist give, state and all,
+    on random steps (NaN estimates among them)."""
+    from offboard.safety.monitor_kernel import monitor_step, monitor_terms, residual_persist
+
+    rng = np.random.default_rng(9)
+    n = 6
+    a = [np.zeros(n, bool) for _ in range(3)] + [np.zeros(5, np.int64)]
+    b = [np.zeros(n, bool) for _ in range(3)] + [np.zeros(5, np.int64)]
+    for k in range(2000):
+        z1 = rng.normal(0.0, 2.0, 3)
+        if rng.random() < 0.01:
+            z1[1] = math.nan
+        z2 = rng.normal(0.0, 3.0, 3) * (12.0 if rng.random() < 0.02 else 1.0)
+        est = rng.normal(0.0, 3.0, (n, 3))
+        rel = est - z1 + rng.normal(0.0, 2.0 if (k // 50) % 2 else 0.3, (n, 3))
+        usable, fresh = rng.random(n) < 0.8, rng.random(n) < 0.7
+        sel = np.flatnonzero(rng.random(n) < 0.5).astype(np.int64)
+        res, speed, new = monitor_terms(z1, z2, est, usable, rel, fresh, sel, *a[:3], 6.0)
+        raised = residual_persist(a[3], res, speed, z1, 2.77, 30.0, 10, 25)
+        got = monitor_step(z1, z2, est, usable, rel, fresh, sel, *b[:3], 6.0, b[3], 2.77, 30.0,
+                           10, 25)
+        assert (got[0] == res or (math.isnan(got[0]) and math.isnan(res))), k
+        assert got[1:] == (new, raised), k
+        assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True)), k
