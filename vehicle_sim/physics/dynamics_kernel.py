@@ -117,6 +117,44 @@ def min_upper_kernel(d: np.ndarray) -> float:
 
 
 @kernel
+def contacts_into(p: np.ndarray, in_contact: np.ndarray, radius: float, dist_out: np.ndarray,
+                  pairs_out: np.ndarray) -> tuple[int, float]:
+    """:func:`pair_distances_kernel` of ``p`` (N,3) into ``dist_out`` (N,N) and the contacts
+    (distance < ``radius``, m, i ≠ j) into ``in_contact`` (N,N) bool, in one pass over the
+    pairs i < j: a pair's distance is computed once and written to both of its cells (the
+    other order's differences are the exact negations, so the same bits). The pairs
+    entering contact (not in ``in_contact`` before) go to the first rows of ``pairs_out``
+    as (i, j), i < j, in row order. Returns their number and :func:`min_upper_kernel` of the
+    distances (nan if any is nan; +inf for N < 2)."""
+    n = p.shape[0]
+    n_new = 0
+    m = np.inf
+    for i in range(n):
+        dx = p[i, 0] - p[i, 0]
+        dy = p[i, 1] - p[i, 1]
+        dz = p[i, 2] - p[i, 2]
+        dist_out[i, i] = math.sqrt((dx * dx + dy * dy) + dz * dz)  # 0, or nan
+        in_contact[i, i] = False
+        for j in range(i + 1, n):
+            dx = p[i, 0] - p[j, 0]
+            dy = p[i, 1] - p[j, 1]
+            dz = p[i, 2] - p[j, 2]
+            d = math.sqrt((dx * dx + dy * dy) + dz * dz)
+            c = d < radius
+            if c and not in_contact[i, j]:
+                pairs_out[n_new, 0] = i
+                pairs_out[n_new, 1] = j
+                n_new += 1
+            in_contact[i, j] = c
+            in_contact[j, i] = c
+            dist_out[i, j] = d
+            dist_out[j, i] = d
+            if m == m and (d < m or d != d):  # the first nan stays (min_upper_kernel)
+                m = d
+    return n_new, m
+
+
+@kernel
 def step_kernel(
     p: np.ndarray, v: np.ndarray, att: np.ndarray, thrust: np.ndarray,
     cmd_att: np.ndarray, cmd_thrust: np.ndarray, held: np.ndarray, zeta: np.ndarray,
@@ -181,18 +219,8 @@ def step_kernel(
             or dist_out.shape[1] != n or pairs_out.shape[0] < n * (n - 1) // 2
             or pairs_out.shape[1] != 2):
         raise ValueError("step_kernel: contact, distance or pair buffers of the wrong shape")
-    dist = pair_distances_kernel(p_n)
-    n_new = 0
-    for i in range(n):
-        for j in range(n):
-            c = i != j and dist[i, j] < radius
-            if c and j > i and not in_contact[i, j]:  # (i, j) read before it is written
-                pairs_out[n_new, 0] = i
-                pairs_out[n_new, 1] = j
-                n_new += 1
-            in_contact[i, j] = c
-            dist_out[i, j] = dist[i, j]
-    return p_n, v_n, att_n, thr_n, n_new, min_upper_kernel(dist)
+    n_new, d_min = contacts_into(p_n, in_contact, radius, dist_out, pairs_out)
+    return p_n, v_n, att_n, thr_n, n_new, d_min
 
 
 @kernel

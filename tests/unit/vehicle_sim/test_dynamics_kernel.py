@@ -227,3 +227,45 @@ def test_advance_period_equals_single_steps(cube8) -> None:
     assert entered > 50 and later > 0  # contacts are reached, in later sub-steps too (8)
     with pytest.raises(ValueError, match="n_steps 0"):
         SwarmDynamics(cube8, seed=0).advance_period(0)
+
+
+def test_one_pass_contacts_equal_the_matrix_and_its_scans() -> None:
+    """contacts_into gives, bit for bit, what the step made before from the full distance
+    matrix: the matrix itself, the contact flags, the pairs entering contact (in the same
+    order) and the minimum of the upper triangle; with coincident vehicles, pairs at the
+    radius, NaN and inf positions, and contacts carried from the step before."""
+    from vehicle_sim.physics.dynamics_kernel import (
+        contacts_into,
+        min_upper_kernel,
+        pair_distances_kernel,
+    )
+
+    rng = np.random.default_rng(12)
+    radius = 0.3
+    for trial in range(400):
+        n = int(rng.integers(0, 12))
+        p = rng.normal(0.0, 0.6, (n, 3))
+        if n > 2 and trial % 4 == 0:
+            p[1] = p[0]  # coincident
+        if n > 2 and trial % 5 == 0:
+            p[2] = p[0] + np.array([radius, 0.0, 0.0])  # at the radius
+        if n > 3 and trial % 9 == 0:
+            p[3, int(rng.integers(0, 3))] = rng.choice([math.nan, math.inf])
+        before = rng.random((n, n)) < 0.3
+        # the previous step's matrix scans, verbatim
+        dist = pair_distances_kernel(p)
+        want_contact, want_pairs = before.copy(), []
+        for i in range(n):
+            for j in range(n):
+                c = i != j and dist[i, j] < radius
+                if c and j > i and not want_contact[i, j]:
+                    want_pairs.append([i, j])
+                want_contact[i, j] = c
+        got_contact, got_dist = before.copy(), np.full((n, n), 7.0)
+        pairs = np.full((max(1, n * (n - 1) // 2), 2), -1, dtype=np.int64)
+        k, d_min = contacts_into(p, got_contact, radius, got_dist, pairs)
+        assert np.array_equal(got_dist, dist, equal_nan=True), trial
+        assert np.array_equal(got_contact, want_contact), trial
+        assert pairs[:k].tolist() == want_pairs, trial
+        want_min = min_upper_kernel(dist)
+        assert d_min == want_min or (math.isnan(d_min) and math.isnan(want_min)), trial
