@@ -185,7 +185,6 @@ def run_inproc(
     seed = sc.seed if seed is None else int(seed)
     method = str(method or sc.controller.method)
     dur = float(sc.run.duration_s if duration is None else duration)
-    preflight = warn_liveness(sc, method)
     if sc.faults.active:
         log.warning("%s: the in-process runner has no links, so the scenario's [faults] table "
                     "is NOT applied (a distributed run applies it; docs/faults.md)", sc.name)
@@ -196,9 +195,11 @@ def run_inproc(
     nsub = sc.substeps_per_control
     veh = sc.vehicle
     f_max = veh.thrust_max_n
-    form = formation_from_scenario(sc)
-    # tiny matrices only: BLAS worker threads cost, never help (swarm_common.blas)
+    # tiny matrices only: BLAS worker threads cost, never help (swarm_common.blas); the
+    # formation's leader map is computed in here, first by the preflight checks
     with single_thread_blas():
+        form = formation_from_scenario(sc)
+        preflight = warn_liveness(sc, method, form)
         dyn = SwarmDynamics(sc, seed=seed)
         agents = [make_agent(sc, a.id, method=method, seed=seed, form=form) for a in sc.agents]
         gains: list[str] = []

@@ -108,13 +108,13 @@ def observer_problem(sc: Scenario, form: Formation | None = None) -> str | None:
             f"scenario --leaders) or a denser graph raise it (docs/scenarios.md)")
 
 
-def warn_liveness(sc: Scenario, method: str) -> list[str]:
+def warn_liveness(sc: Scenario, method: str, form: Formation | None = None) -> list[str]:
     """Log :func:`liveness_problem` and :func:`observer_problem` as WARNINGs and return
-    their lines (a run keeps them in its document, ``preflight``). The formation is built
-    here, apart from the run's own: its leader map is computed with whatever BLAS threads
-    the caller has (the in-process runner builds its own under one thread, and that map's
-    bits are the run's)."""
-    form = formation_from_scenario(sc)
+    their lines (a run keeps them in its document, ``preflight``). ``form``: the run's
+    formation when the caller has it built. The checks compute its leader map (a cached
+    solve), so the in-process runner calls this inside its ``single_thread_blas()`` block:
+    that map's bits are the run's, and they depend on the BLAS threads."""
+    form = formation_from_scenario(sc) if form is None else form
     lines = [line for line in (liveness_problem(sc, method, form), observer_problem(sc, form))
              if line is not None]
     for line in lines:

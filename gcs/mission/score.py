@@ -136,7 +136,7 @@ def lockstep_misses(run: dict[str, Any]) -> list[str]:
     or without its truth; :func:`gcs.mission.run_logs.lockstep_gaps`). Equality with the
     in-process run is promised only when this is empty (docs/architecture.md)."""
     out = []
-    timeouts = int((run.get("simulator") or {}).get("lockstep_timeouts") or 0)
+    timeouts = late_steps({"run": run})
     if timeouts:
         out.append(f"simulator: {timeouts} lockstep timeout(s)")
     gaps = run.get("lockstep_gaps") or {}
