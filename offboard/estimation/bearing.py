@@ -81,7 +81,9 @@ class Formation:
     l_ff: np.ndarray
     l_fl: np.ndarray
     rank: int
-    lambda_ff: np.ndarray  # eigenvalues of L_ff, ascending
+    # eigenvalues of L_ff, ascending: above graphs.DENSE_SPECTRUM_MAX rows only the two
+    # ends [λ_min, λ_max] (graphs.spectrum)
+    lambda_ff: np.ndarray
     # per index, the agents sensed in the desired formation (graph neighbours and every
     # agent within the sensing range; everyone when the range is not given)
     sensed: list[list[int]] = field(default_factory=list)
@@ -134,11 +136,12 @@ class Formation:
         return self.l_ff + leader_anchor * np.diag(np.repeat(m, 3))
 
     def observer_eigs(self, leader_anchor: float) -> np.ndarray:
-        """Eigenvalues (ascending) of :meth:`observer_laplacian` (cached per anchor)."""
+        """Eigenvalues (ascending) of :meth:`observer_laplacian` (cached per anchor; above
+        ``graphs.DENSE_SPECTRUM_MAX`` rows the two ends only, :func:`graphs.spectrum`)."""
         key = float(leader_anchor)
         if key not in self._obs_eigs:
             lap = self.observer_laplacian(key)
-            self._obs_eigs[key] = np.linalg.eigvalsh(lap) if len(lap) else np.zeros(0)
+            self._obs_eigs[key] = graphs.spectrum(lap)
         return self._obs_eigs[key]
 
     def desired_positions(self, leader_pos: np.ndarray) -> np.ndarray:
@@ -164,7 +167,7 @@ class Formation:
     def _leader_map(self) -> np.ndarray:
         """(3F, 3L) −L_ff⁻¹ L_fl (computed once)."""
         if self._kfl is None:
-            self._kfl = -np.linalg.solve(self.l_ff, self.l_fl)
+            self._kfl = -graphs.follower_solve(self.l_ff, self.l_fl)
         return self._kfl
 
 
@@ -212,7 +215,7 @@ def build_formation(
         l_ff=l_ff,
         l_fl=lap[np.ix_(fb, lb)],
         rank=3 * n - 4,
-        lambda_ff=np.linalg.eigvalsh(l_ff) if len(fb) else np.zeros(0),
+        lambda_ff=graphs.spectrum(l_ff),
         sensed=graphs.sensed_sets(v, edges, spec.range_vu),
     )
 

@@ -31,6 +31,9 @@ log = logging.getLogger(__name__)
 DENSE_MAX = 256  # matrix order up to which every eigenvalue is computed (numpy, dense)
 ARPACK_K = 6  # eigenvalues of largest modulus asked of ARPACK (clusters near the top)
 ARPACK_NCV = 40  # its Lanczos/Arnoldi basis size
+# channels sampled across [λ_min, λ_max] when a large formation has only the ends of its
+# spectrum (swarm_common.scenario.graphs.spectrum): geometric, both ends exact
+CHANNEL_SAMPLES = 512
 
 
 @dataclass
@@ -184,10 +187,11 @@ def gain_report(
 
     The channels are the eigenvalues of the observer's Laplacian
     ``L_ff + leader_anchor·blockdiag(m_i I₃)`` (m_i leaders sensed by follower i;
-    ``Formation.observer_laplacian``; = L_ff for the paper's observer).
+    ``Formation.observer_laplacian``; = L_ff for the paper's observer), or for a large
+    formation the samples of :func:`channels` across the ends of its spectrum.
     """
     b1, b2, b3 = (float(x) for x in beta)
-    lam = form.observer_eigs(leader_anchor)
+    lam = channels(form.observer_eigs(leader_anchor), 3 * len(form.follower_idx))
     margin = b1 * b2 * lam - b3
     k2, k3 = (float(k) for k in kappa)
     poles = [
@@ -223,6 +227,18 @@ def gain_report(
         paper_condition=bool(b2 > b1 + b3 / float(lam[0])),
         kappa=(k2, k3),
     )
+
+
+def channels(lam: np.ndarray, order: int) -> np.ndarray:
+    """The channels a gain report checks: ``lam`` itself when it holds all ``order``
+    eigenvalues; when it holds only the two ends of a large formation's spectrum
+    (:func:`swarm_common.scenario.graphs.spectrum`), :data:`CHANNEL_SAMPLES` values
+    spaced geometrically from λ_min to λ_max. Every eigenvalue lies in that interval; the
+    margin β1β2λ − β3 is least at λ_min, which is exact, and the slowest pole is taken
+    over the samples (docs/performance.md, "Start-up of a large formation")."""
+    if len(lam) == order or len(lam) < 2 or not lam[0] > 0.0:
+        return lam
+    return np.geomspace(float(lam[0]), float(lam[-1]), CHANNEL_SAMPLES)
 
 
 # the gain report of a formation's content and observer gains, once per process

@@ -8,6 +8,7 @@ runs them in this order after the schema.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -125,26 +126,27 @@ def check_separation(
 ) -> None:
     """Refuse a scenario that is unsafe before it starts: two agents starting closer than
     ``controller.d_safe_m``, or a formation whose vertices, scaled by the leaders'
-    separation (Departure 1), put two agents closer than that."""
+    separation (Departure 1), put two agents closer than that. The first such pair in
+    index order is named (its start before its vertices)."""
     p = np.array([a.position for a in agents])
     v = np.array([a.vertex for a in agents])
     k1, k2 = (next(k for k, a in enumerate(agents) if a.id == lid) for lid in leaders[:2])
     scale = float(np.linalg.norm(p[k1] - p[k2]) / np.linalg.norm(v[k1] - v[k2]))
-    for i in range(len(agents)):
-        for j in range(i + 1, len(agents)):
-            d0 = float(np.linalg.norm(p[i] - p[j]))
-            if d0 < d_safe:
-                raise fail(
-                    f"agent[{j}].position = {p[j].tolist()}: starts {d0:.3f} m from agent id "
-                    f"{agents[i].id}, closer than controller.d_safe_m = {d_safe:g}"
-                )
-            dv = scale * float(np.linalg.norm(v[i] - v[j]))
-            if dv < d_safe:
-                raise fail(
-                    f"agent[{j}].vertex = {v[j].tolist()}: {dv:.3f} m from agent id "
-                    f"{agents[i].id}'s vertex at the leaders' scale, closer than "
-                    f"controller.d_safe_m = {d_safe:g}"
-                )
+    reach = d_safe / scale if scale > 0.0 else math.inf
+    for i, j in sorted(graphs.close_pairs(p, d_safe) | graphs.close_pairs(v, reach)):
+        d0 = float(np.linalg.norm(p[i] - p[j]))
+        if d0 < d_safe:
+            raise fail(
+                f"agent[{j}].position = {p[j].tolist()}: starts {d0:.3f} m from agent id "
+                f"{agents[i].id}, closer than controller.d_safe_m = {d_safe:g}"
+            )
+        dv = scale * float(np.linalg.norm(v[i] - v[j]))
+        if dv < d_safe:
+            raise fail(
+                f"agent[{j}].vertex = {v[j].tolist()}: {dv:.3f} m from agent id "
+                f"{agents[i].id}'s vertex at the leaders' scale, closer than "
+                f"controller.d_safe_m = {d_safe:g}"
+            )
 
 
 def check_pads(agents: list[AgentSpec], d_safe: float, fail: Fail) -> None:
@@ -157,14 +159,14 @@ def check_pads(agents: list[AgentSpec], d_safe: float, fail: Fail) -> None:
                 f"agent[{k}].position = {a.position.tolist()}: with lifecycle.start = 'ground' "
                 f"the position is a pad and its z must be 0"
             )
-    for i in range(len(agents)):
-        for j in range(i + 1, len(agents)):
-            d = float(np.linalg.norm(agents[i].position[:2] - agents[j].position[:2]))
-            if d < 2.0 * d_safe - 1e-9:
-                raise fail(
-                    f"agent[{j}].position = {agents[j].position.tolist()}: pad {d:.3f} m from "
-                    f"agent id {agents[i].id}'s, closer than 2 * controller.d_safe_m = "
-                    f"{2.0 * d_safe:g} (lifecycle.start = 'ground')"
-                )
+    pads = np.array([a.position[:2] for a in agents], dtype=float).reshape(-1, 2)
+    for i, j in sorted(graphs.close_pairs(pads, 2.0 * d_safe)):
+        d = float(np.linalg.norm(agents[i].position[:2] - agents[j].position[:2]))
+        if d < 2.0 * d_safe - 1e-9:
+            raise fail(
+                f"agent[{j}].position = {agents[j].position.tolist()}: pad {d:.3f} m from "
+                f"agent id {agents[i].id}'s, closer than 2 * controller.d_safe_m = "
+                f"{2.0 * d_safe:g} (lifecycle.start = 'ground')"
+            )
 
 

@@ -20,10 +20,17 @@ orthonormal basis of those four motions) and its follower block L_ff must be pos
 definite (the leaders fix every follower's desired position). Small matrices use a dense
 eigen-decomposition; larger ones the smallest eigenvalue by shift-invert Lanczos over a
 sparse LU (scipy.sparse), so the check stays cheap for a few hundred agents.
+
+Large formations (:data:`DENSE_SPECTRUM_MAX`): :func:`spectrum` gives every eigenvalue of a
+symmetric matrix up to that order and only its two ends above it, and :func:`follower_solve`
+solves with L_ff densely up to it and by a sparse LU above it. The dense problems cost
+O(n³) time and O(n²) memory (a 2,048-agent formation's L_ff is of order 5,760: 18 s per
+eigen-decomposition); below the threshold the results are the dense ones, bit for bit.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,12 +38,17 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, eigsh, splu
+from scipy.spatial import cKDTree
 
+from swarm_common.memo import ContentMemo
 from swarm_common.scenario.schema import FormationConfig
 
 DIST_TOL = 1e-6  # relative tolerance on vertex distances (ties, ranges)
 EIG_TOL = 1e-9  # eigenvalue counted as zero below EIG_TOL · max(1, Gershgorin bound)
 DENSE_MAX = 60  # matrices up to this size are checked densely
+# matrices up to this order get every eigenvalue and dense solves (spectrum, follower_solve);
+# a formation of up to 500 agents stays below it (3F rows), and its bits with it
+DENSE_SPECTRUM_MAX = 1500
 SHIFT = -0.1  # shift-invert point (below the spectrum of a positive semidefinite matrix)
 LEGACY_KINDS = ("cube_edges",)  # accepted by the builders (tests), not by scenario files
 
@@ -119,6 +131,20 @@ def range_edges(v: np.ndarray, r: float) -> list[tuple[int, int]]:
     adj = d <= r * (1.0 + DIST_TOL)
     np.fill_diagonal(adj, False)
     return _upper_pairs(adj)
+
+
+def close_pairs(x: np.ndarray, r: float) -> set[tuple[int, int]]:
+    """Index pairs (i < j) of the rows of ``x`` (N, d) that may be closer than ``r``: every
+    pair within ``r`` plus a relative 1e-9 (a k-d tree, O(N log N)), so a caller that tests
+    each pair with its own formula misses none; every pair when ``r`` or a coordinate is
+    not finite."""
+    x = np.asarray(x, dtype=float)
+    n = len(x)
+    if not (math.isfinite(r) and np.all(np.isfinite(x))):
+        return {(i, j) for i in range(n) for j in range(i + 1, n)}
+    if n < 2 or r <= 0.0:
+        return set()
+    return {(int(i), int(j)) for i, j in cKDTree(x).query_pairs(r * (1.0 + 1e-9) + 1e-12)}
 
 
 def id_edges(ids: Sequence[int], pairs: Sequence[Sequence[int]]) -> list[tuple[int, int]]:
@@ -244,6 +270,42 @@ def smallest_eig(m: sp.spmatrix, deflate: np.ndarray | None = None) -> float:
     return float(ev[0])
 
 
+def _dense(a: sp.spmatrix | np.ndarray) -> np.ndarray:
+    """``a`` as a dense float array (itself when it is one)."""
+    return np.asarray(a, dtype=float) if isinstance(a, np.ndarray) else a.toarray()
+
+
+def spectrum(m: sp.spmatrix | np.ndarray, dense_max: int | None = None) -> np.ndarray:
+    """Eigenvalues, ascending, of the symmetric positive semidefinite matrix ``m`` (dense
+    or sparse): all of them (numpy's ``eigvalsh``) up to order ``dense_max``; above it only
+    the two ends [λ_min, λ_max], by Lanczos over the sparse matrix (:func:`smallest_eig`'s
+    shift-invert for λ_min; from a fixed start vector, so every run gets the same bits).
+    ``dense_max`` None: :data:`DENSE_SPECTRUM_MAX`."""
+    n = m.shape[0]
+    if n == 0:
+        return np.zeros(0)
+    if n <= (DENSE_SPECTRUM_MAX if dense_max is None else dense_max):
+        return np.linalg.eigvalsh(_dense(m))
+    s = sp.csr_matrix(m)
+    lo = smallest_eig(s)
+    v0 = np.random.default_rng(0).standard_normal(n)
+    hi = float(eigsh(s, k=1, which="LA", v0=v0, return_eigenvectors=False)[0])
+    return np.array([lo, hi])
+
+
+def follower_solve(
+    l_ff: sp.spmatrix | np.ndarray, rhs: sp.spmatrix | np.ndarray,
+    dense_max: int | None = None,
+) -> np.ndarray:
+    """L_ff⁻¹ rhs (dense result) for a positive definite ``l_ff``: numpy's dense solve up to
+    order ``dense_max`` (its bits; None: :data:`DENSE_SPECTRUM_MAX`), a sparse LU (SuperLU)
+    above it."""
+    if l_ff.shape[0] <= (DENSE_SPECTRUM_MAX if dense_max is None else dense_max):
+        return np.linalg.solve(_dense(l_ff), _dense(rhs))
+    out = splu(sp.csc_matrix(l_ff)).solve(np.asfortranarray(_dense(rhs)))
+    return np.asarray(out, dtype=float)
+
+
 def trivial_null_space(v: np.ndarray) -> np.ndarray:
     """(3N, 4) orthonormal basis of the motions every bearing Laplacian of ``v`` annihilates:
     the three translations and the scaling about the centroid (§2.1)."""
@@ -277,7 +339,21 @@ def rigidity_problem(
 ) -> str | None:
     """What is wrong with the graph (one line, without the key), or None: λ_min(L_ff) > 0
     (naming the followers the leaders leave free) and rank L = 3N − 4 are required (§2.1,
-    Departure 3)."""
+    Departure 3). Once per content in a process: the loader and the formation both ask
+    (two sparse eigenvalue problems, about 2 s at 2,048 agents)."""
+    v = np.asarray(v, dtype=float)
+    h = hashlib.sha256(np.ascontiguousarray(v).tobytes())
+    h.update(repr((list(edges), list(ids), list(leader_idx))).encode())
+    return _rigidity.get(h.hexdigest(), lambda: _rigidity_problem(v, edges, ids, leader_idx))
+
+
+_rigidity: ContentMemo[str | None] = ContentMemo()
+
+
+def _rigidity_problem(
+    v: np.ndarray, edges: Sequence[tuple[int, int]], ids: Sequence[int],
+    leader_idx: Sequence[int],
+) -> str | None:
     n = len(v)
     lap = sparse_laplacian(v, edges)
     fol = [k for k in range(n) if k not in set(leader_idx)]

@@ -137,6 +137,7 @@ def parse_scenario(
         graph_problem,
         trust_problem,
     )
+    from swarm_common.scenario.graphs import close_pairs
     from swarm_common.scenario.mission_check import mission_problem
 
     def fail(msg: str) -> ScenarioError:
@@ -249,12 +250,11 @@ def parse_scenario(
     if len(leaders) < 2:
         raise fail(f"formation.leaders = {leaders}: need at least 2 leaders (bearing scale)")
     verts = np.array([a.vertex for a in agents])
-    for i in range(len(agents)):
-        for j in range(i + 1, len(agents)):
-            if np.linalg.norm(verts[i] - verts[j]) < 1e-9:
-                raise fail(
-                    f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
-                )
+    for i, j in sorted(close_pairs(verts, 1e-9)):  # the first pair in index order
+        if np.linalg.norm(verts[i] - verts[j]) < 1e-9:
+            raise fail(
+                f"agent ids {agents[i].id} and {agents[j].id} share vertex {verts[i].tolist()}"
+            )
     check_separation(agents, leaders, float(raw["controller"]["d_safe_m"]), fail)
     if raw["lifecycle"]["start"] == StartMode.GROUND:
         check_pads(agents, float(raw["controller"]["d_safe_m"]), fail)
