@@ -22,17 +22,28 @@ log = logging.getLogger(__name__)
 # the watchdog of :func:`remove_on_death`: stdlib only, isolated mode (-I: no PYTHON*
 # variables, no user site, no working directory on sys.path). It ignores the terminal's
 # signals, waits for EOF on stdin (the runner's end of the pipe closes however the runner
-# ends, kill -9 included) and removes the paths given
+# ends, kill -9 included) and removes the paths given. It removes them again while they
+# come back, for up to REMOVE_FOR_S: a child of the run still dying may create an entry
+# between rmtree's listing and its last rmdir (a daemon in its start-up opens its start
+# gate's slot files with O_CREAT, offboard.daemon.start_gate), and rmtree then leaves the
+# folder. Found under two suites' load: a kill -9 left the start gate's folder behind.
+REMOVE_FOR_S = 30.0
 _WATCHDOG = (
-    "import os,shutil,signal,sys\n"
+    "import os,shutil,signal,sys,time\n"
     "for s in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):\n"
     "    signal.signal(s, signal.SIG_IGN)\n"
     "try:\n"
     "    while os.read(0, 64):\n"
     "        pass\n"
     "finally:\n"
-    "    for p in sys.argv[1:]:\n"
-    "        shutil.rmtree(p, ignore_errors=True)\n"
+    f"    end = time.monotonic() + {REMOVE_FOR_S!r}\n"
+    "    while True:\n"
+    "        for p in sys.argv[1:]:\n"
+    "            shutil.rmtree(p, ignore_errors=True)\n"
+    "        left = [p for p in sys.argv[1:] if os.path.lexists(p)]\n"
+    "        if not left or time.monotonic() > end:\n"
+    "            break\n"
+    "        time.sleep(0.05)\n"
 )
 _watchdogs: dict[Path, subprocess.Popen[bytes]] = {}
 

@@ -117,6 +117,42 @@ def test_release_dir_removes_now_and_ends_the_watchdog(tmp_path: Path) -> None:
     assert dog.wait(5.0) == 0
 
 
+# a dying child of the run: it keeps creating files in the folder (O_CREAT, as a daemon's
+# start gate opens its slot files) for a while after the runner is gone, then ends
+_WRITER = (
+    "import os,sys,time\n"
+    "end = time.monotonic() + float(sys.argv[2])\n"
+    "i = 0\n"
+    "while time.monotonic() < end:\n"
+    "    try:\n"
+    "        os.close(os.open(os.path.join(sys.argv[1], f'slot-{i % 8}.lock'),\n"
+    "                         os.O_RDWR | os.O_CREAT, 0o600))\n"
+    "    except OSError:\n"
+    "        pass\n"
+    "    i += 1\n"
+)
+
+
+def test_the_watchdog_removes_a_folder_a_dying_child_still_writes_to(tmp_path: Path) -> None:
+    """The runner's end of the pipe closes (as at kill -9) while a child still creates
+    entries in the folder: the watchdog removes it again until it stays gone."""
+    d = tmp_path / "gate"
+    d.mkdir()
+    remove_on_death(d)
+    dog = watchdog._watchdogs.pop(d)
+    writer = subprocess.Popen([sys.executable, "-c", _WRITER, str(d), "1.5"])
+    try:
+        time.sleep(0.3)  # the writer is creating files
+        assert dog.stdin is not None
+        dog.stdin.close()  # EOF: what the runner's death gives the watchdog
+        assert writer.wait(30.0) == 0
+        assert dog.wait(watchdog.REMOVE_FOR_S + 30.0) == 0
+        assert not d.exists(), sorted(p.name for p in d.iterdir())
+    finally:
+        writer.kill()
+        dog.kill()
+
+
 def test_a_child_runs_the_runners_code_not_the_callers_checkout(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
 ) -> None:
