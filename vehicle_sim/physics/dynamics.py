@@ -30,6 +30,7 @@ from swarm_common.fastnp import f64
 from swarm_common.scenario.model import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 from vehicle_sim.physics.dynamics_kernel import (
+    GRID_MIN,
     lumped_accel_kernel,
     min_upper_kernel,
     pair_distances_kernel,
@@ -84,9 +85,13 @@ class SwarmDynamics:
         self.collisions = 0
         self.collision_pairs: list[tuple[float, int, int]] = []
         self._in_contact = np.zeros((self.n, self.n), dtype=bool)
+        self._contact_count = np.zeros(1, dtype=np.int64)  # pairs in _in_contact
         self._iu = np.triu_indices(self.n, 1)
-        self._step_dist = self.pair_distances()  # of the last step (step_min_distance)
-        self._step_min = min_upper_kernel(self._step_dist)  # its minimum (m)
+        # the last step's distance matrix, kept up to GRID_MIN vehicles; a larger swarm's
+        # step finds its contacts on a grid, without one (dynamics_kernel.contacts_into)
+        dist = self.pair_distances()
+        self._step_min = min_upper_kernel(dist)  # the last step's minimum (m)
+        self._step_dist = dist if self.n <= GRID_MIN else np.zeros((0, 0))
         # the pairs entering contact in a period's sub-steps and the sub-step of each
         # (advance_period writes the first rows)
         self._period_pairs = np.zeros((0, 2), dtype=np.int64)
@@ -174,7 +179,7 @@ class SwarmDynamics:
             self._a_f, self.mass, self.g, self.dt, self.ge_height, self.dist_amp,
             self.dist_omega, self.t, self.step_count, n_steps, self._in_contact,
             self.collision_radius, self._step_dist, self._period_pairs,
-            self._period_pair_step,
+            self._period_pair_step, self._contact_count,
         )
         self.p, self.v, self.att, self.thrust = p, v, att, thrust
         first = self.step_count
@@ -200,7 +205,7 @@ class SwarmDynamics:
         """:meth:`min_pair_distance` right after :meth:`step`, from the distances its
         collision check computed (not recomputed: call it before p changes again)."""
         if self.n < 2:
-            return float(self._step_dist[self._iu].min())  # numpy's error, as before
+            return float(self.pair_distances()[self._iu].min())  # numpy's error, as before
         return self._step_min
 
     def on_ground(self) -> np.ndarray:

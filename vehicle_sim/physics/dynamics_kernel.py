@@ -116,42 +116,204 @@ def min_upper_kernel(d: np.ndarray) -> float:
     return m
 
 
+# above this many vehicles a step without a distance matrix finds its close pairs on a grid
+GRID_MIN = 64
+# the grid's cell side: the least nearest-neighbour distance of GRID_SAMPLES vehicles plus
+# GRID_SLACK_M (m), at least the collision radius
+GRID_SAMPLES = 8
+GRID_SLACK_M = 0.25
+
+
+@kernel
+def _pair_dist(p: np.ndarray, i: int, j: int) -> float:
+    """‖p_i − p_j‖ (m) in the arithmetic of :func:`pair_distances_kernel`."""
+    dx = p[i, 0] - p[j, 0]
+    dy = p[i, 1] - p[j, 1]
+    dz = p[i, 2] - p[j, 2]
+    return math.sqrt((dx * dx + dy * dy) + dz * dz)
+
+
+@kernel
+def _lower_bound(a: np.ndarray, x: int) -> int:
+    """The first index of the sorted ``a`` whose element is not below ``x``."""
+    lo, hi = 0, a.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @kernel
 def contacts_into(p: np.ndarray, in_contact: np.ndarray, radius: float, dist_out: np.ndarray,
-                  pairs_out: np.ndarray) -> tuple[int, float]:
-    """:func:`pair_distances_kernel` of ``p`` (N,3) into ``dist_out`` (N,N) and the contacts
-    (distance < ``radius``, m, i ≠ j) into ``in_contact`` (N,N) bool, in one pass over the
-    pairs i < j: a pair's distance is computed once and written to both of its cells (the
-    other order's differences are the exact negations, so the same bits). The pairs
-    entering contact (not in ``in_contact`` before) go to the first rows of ``pairs_out``
-    as (i, j), i < j, in row order. Returns their number and :func:`min_upper_kernel` of the
-    distances (nan if any is nan; +inf for N < 2)."""
+                  pairs_out: np.ndarray, count: np.ndarray) -> tuple[int, float]:
+    """The contacts (distance < ``radius``, m, i ≠ j) of ``p`` (N,3) into ``in_contact``
+    (N,N) bool and the minimum pair distance. The pairs entering contact (not in
+    ``in_contact`` before) go to the first rows of ``pairs_out`` as (i, j), i < j, in row
+    order. Returns their number and the minimum over the pairs i < j (the
+    :func:`min_upper_kernel` of the distance matrix: nan if any is nan; +inf for N < 2).
+    ``count`` (1,) int64: the pairs in contact before, then after.
+
+    With ``dist_out`` (N,N): one pass over the pairs i < j that also writes
+    :func:`pair_distances_kernel` of ``p`` into it, each distance computed once and written
+    to both of its cells (the other order's differences are the exact negations, so the
+    same bits). With ``dist_out`` of shape (0, 0) and N > :data:`GRID_MIN`:
+    :func:`_grid_contacts`, O(N log N), the same contacts, pairs and minimum, bit for bit
+    (each pair's distance in the same arithmetic), no matrix."""
     n = p.shape[0]
+    if dist_out.shape[0] != n:
+        done, n_new, m = _grid_contacts(p, in_contact, radius, pairs_out, count)
+        if done:
+            return n_new, m
     n_new = 0
     m = np.inf
+    full = dist_out.shape[0] == n
+    inside = 0
     for i in range(n):
-        dx = p[i, 0] - p[i, 0]
-        dy = p[i, 1] - p[i, 1]
-        dz = p[i, 2] - p[i, 2]
-        dist_out[i, i] = math.sqrt((dx * dx + dy * dy) + dz * dz)  # 0, or nan
         in_contact[i, i] = False
+        if full:
+            dist_out[i, i] = _pair_dist(p, i, i)  # 0, or nan
         for j in range(i + 1, n):
-            dx = p[i, 0] - p[j, 0]
-            dy = p[i, 1] - p[j, 1]
-            dz = p[i, 2] - p[j, 2]
-            d = math.sqrt((dx * dx + dy * dy) + dz * dz)
+            d = _pair_dist(p, i, j)
             c = d < radius
             if c and not in_contact[i, j]:
                 pairs_out[n_new, 0] = i
                 pairs_out[n_new, 1] = j
                 n_new += 1
+            if c:
+                inside += 1
             in_contact[i, j] = c
             in_contact[j, i] = c
-            dist_out[i, j] = d
-            dist_out[j, i] = d
+            if full:
+                dist_out[i, j] = d
+                dist_out[j, i] = d
             if m == m and (d < m or d != d):  # the first nan stays (min_upper_kernel)
                 m = d
+    count[0] = inside
     return n_new, m
+
+
+@kernel
+def _grid_contacts(p: np.ndarray, in_contact: np.ndarray, radius: float, pairs_out: np.ndarray,
+                   count: np.ndarray) -> tuple[bool, int, float]:
+    """:func:`contacts_into` without a distance matrix: (done, new pairs, minimum); done
+    False (nothing written) where it cannot decide, and the caller passes over every pair.
+
+    The vehicles are sorted into cubic cells of side h = max(radius, near + GRID_SLACK_M),
+    ``near`` the least nearest-neighbour distance of GRID_SAMPLES vehicles, at least the
+    minimum over all pairs. Every pair closer than h lies in the same or adjacent cells,
+    the closest pair and every contact among them, so the minimum over those pairs is the
+    minimum over all. Not done for N ≤ GRID_MIN, a coordinate that is not finite, or cells
+    too many to number."""
+    n = p.shape[0]
+    if n <= GRID_MIN:
+        return False, 0, np.inf
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for k in range(3):
+        lo[k] = np.inf
+        hi[k] = -np.inf
+    for i in range(n):
+        for k in range(3):
+            x = p[i, k]
+            if not math.isfinite(x):
+                return False, 0, np.inf
+            lo[k] = min(lo[k], x)
+            hi[k] = max(hi[k], x)
+    # the cell side: the nearest neighbour of any vehicle bounds the minimum above, so the
+    # least of GRID_SAMPLES vehicles' nearest (O(N) each) gives cells that hold the closest
+    # pair; the slack keeps a cell from being smaller than the contacts need
+    near = np.inf
+    for s in range(GRID_SAMPLES):
+        i = (s * n) // GRID_SAMPLES
+        for j in range(n):
+            if j != i:
+                near = min(near, _pair_dist(p, i, j))
+    h = max(radius, near + GRID_SLACK_M)
+    dims = np.empty(3, dtype=np.int64)
+    total = 1.0
+    for k in range(3):
+        dims[k] = int((hi[k] - lo[k]) / h) + 3
+        total *= dims[k]
+    if total > 4e18:
+        return False, 0, np.inf
+    keys = np.empty(n, dtype=np.int64)
+    cell = np.empty((n, 3), dtype=np.int64)
+    for i in range(n):
+        for k in range(3):
+            cell[i, k] = int((p[i, k] - lo[k]) / h) + 1
+        keys[i] = (cell[i, 0] * dims[1] + cell[i, 1]) * dims[2] + cell[i, 2]
+    # the vehicles by cell: a table of each cell's first row when the cells are few (a
+    # counting sort), else sorted keys searched by bisection
+    dense = total <= 16 * n + 4096
+    cells = int(total) + 1 if dense else 1
+    start = np.zeros(cells, dtype=np.int64)
+    if dense:
+        for i in range(n):
+            start[keys[i] + 1] += 1
+        for q in range(1, cells):
+            start[q] += start[q - 1]
+        order = np.empty(n, dtype=np.int64)
+        fill = start.copy()
+        for i in range(n):
+            order[fill[keys[i]]] = i
+            fill[keys[i]] += 1
+        sorted_keys = keys  # not read
+    else:
+        order = np.argsort(keys, kind="mergesort")
+        sorted_keys = keys[order]
+    m = np.inf
+    cand_i = np.empty(64, dtype=np.int64)
+    cand_j = np.empty(64, dtype=np.int64)
+    k_c = 0
+    for i in range(n):
+        for a in range(-1, 2):
+            for b in range(-1, 2):
+                # the three cells (x + a, y + b, z - 1 .. z + 1) are one run of the rows
+                first = ((cell[i, 0] + a) * dims[1] + cell[i, 1] + b) * dims[2] + cell[i, 2] - 1
+                if dense:
+                    r, end = start[first], start[first + 3]
+                else:
+                    r = _lower_bound(sorted_keys, first)
+                    end = _lower_bound(sorted_keys, first + 3)
+                while r < end:
+                    j = order[r]
+                    r += 1
+                    if j <= i:
+                        continue
+                    d = _pair_dist(p, i, j)
+                    if d < m:
+                        m = d
+                    if d < radius:
+                        if k_c == cand_i.shape[0]:
+                            cand_i = np.concatenate((cand_i, np.empty(k_c, np.int64)))
+                            cand_j = np.concatenate((cand_j, np.empty(k_c, np.int64)))
+                        cand_i[k_c] = i
+                        cand_j[k_c] = j
+                        k_c += 1
+    if not m < h:
+        return False, 0, np.inf
+    # the contacts now, in row order (i, then j)
+    rank = np.argsort(cand_i[:k_c] * n + cand_j[:k_c], kind="mergesort")
+    n_new = 0
+    for q in range(k_c):
+        i, j = cand_i[rank[q]], cand_j[rank[q]]
+        if not in_contact[i, j]:
+            pairs_out[n_new, 0] = i
+            pairs_out[n_new, 1] = j
+            n_new += 1
+    if count[0] > 0:  # some pair was in contact: clear every flag (rare)
+        for i in range(n):
+            for j in range(n):
+                in_contact[i, j] = False
+    for q in range(k_c):
+        i, j = cand_i[q], cand_j[q]
+        in_contact[i, j] = True
+        in_contact[j, i] = True
+    count[0] = k_c
+    return True, n_new, m
 
 
 @kernel
@@ -160,7 +322,7 @@ def step_kernel(
     cmd_att: np.ndarray, cmd_thrust: np.ndarray, held: np.ndarray, zeta: np.ndarray,
     a_att: np.ndarray, a_f: float, mass: float, g: float, dt: float, ge_height: float,
     amp: float, omega: float, t: float, in_contact: np.ndarray, radius: float,
-    dist_out: np.ndarray, pairs_out: np.ndarray,
+    dist_out: np.ndarray, pairs_out: np.ndarray, count: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float]:
     """One physics step of ``dt`` (s) from time ``t`` (s) for all N vehicles.
 
@@ -174,7 +336,9 @@ def step_kernel(
     Returns new arrays (p, v, att, thrust), the number K of pairs i < j entering contact
     this step and the minimum pair distance (m; :func:`min_upper_kernel` of dist). Written
     in place (no new arrays to box per step): ``in_contact``, the pairs in contact after
-    this step; ``dist_out`` (N,N), the pair distances (m); the first K rows of
+    this step, and ``count`` (1,) int64, their number (:func:`contacts_into`);
+    ``dist_out`` (N,N), the pair distances (m), or of shape (0, 0) for none (then a large
+    swarm's contacts come from a grid, O(N log N)); the first K rows of
     ``pairs_out`` (≥ N(N−1)/2, 2) int64, the pairs entering contact, row by row::
 
         att' = c + (att − c) a_att,  F' = F_c + (F − F_c) a_f
@@ -215,11 +379,13 @@ def step_kernel(
             v_n[i, 2] = 0.0 if vz < 0.0 else vz  # np.maximum(vz, 0): nan stays nan
             v_n[i, 0] *= 0.0  # friction: a landed vehicle stops
             v_n[i, 1] *= 0.0
-    if (in_contact.shape[0] != n or in_contact.shape[1] != n or dist_out.shape[0] != n
-            or dist_out.shape[1] != n or pairs_out.shape[0] < n * (n - 1) // 2
-            or pairs_out.shape[1] != 2):
+    no_dist = dist_out.shape[0] == 0 and dist_out.shape[1] == 0
+    if (in_contact.shape[0] != n or in_contact.shape[1] != n
+            or not (no_dist or (dist_out.shape[0] == n and dist_out.shape[1] == n))
+            or pairs_out.shape[0] < n * (n - 1) // 2 or pairs_out.shape[1] != 2
+            or count.shape[0] != 1):
         raise ValueError("step_kernel: contact, distance or pair buffers of the wrong shape")
-    n_new, d_min = contacts_into(p_n, in_contact, radius, dist_out, pairs_out)
+    n_new, d_min = contacts_into(p_n, in_contact, radius, dist_out, pairs_out, count)
     return p_n, v_n, att_n, thr_n, n_new, d_min
 
 
@@ -230,7 +396,7 @@ def steps_kernel(
     a_att: np.ndarray, a_f: float, mass: float, g: float, dt: float, ge_height: float,
     amp: float, omega: float, t: float, step_count: int, n_steps: int,
     in_contact: np.ndarray, radius: float, dist_out: np.ndarray, pairs_out: np.ndarray,
-    pair_step_out: np.ndarray,
+    pair_step_out: np.ndarray, count: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, float, float]:
     """``n_steps`` ≥ 1 calls of :func:`step_kernel` in one (the commands held): a control
     period's physics sub-steps with one call from Python and four arrays boxed instead of
@@ -243,7 +409,8 @@ def steps_kernel(
     Python's ``min`` of theirs, in order) and that of the last sub-step. The first K rows
     of ``pairs_out`` (≥ n_steps·N(N−1)/2, 2) hold the pairs and those of
     ``pair_step_out`` (≥ n_steps·N(N−1)/2,) the sub-step (0-based) each entered in;
-    ``in_contact`` and ``dist_out`` are those of the last sub-step.
+    ``in_contact``, ``count`` and ``dist_out`` (unless of shape (0, 0)) are those of the
+    last sub-step.
     """
     n = p.shape[0]
     per = n * (n - 1) // 2
@@ -256,7 +423,7 @@ def steps_kernel(
         ts = t if s == 0 else (step_count + s) * dt
         p, v, att, thrust, n_new, dmin = step_kernel(
             p, v, att, thrust, cmd_att, cmd_thrust, held, zeta, a_att, a_f, mass, g, dt,
-            ge_height, amp, omega, ts, in_contact, radius, dist_out, pairs_out[k:],
+            ge_height, amp, omega, ts, in_contact, radius, dist_out, pairs_out[k:], count,
         )
         for r in range(k, k + n_new):
             pair_step_out[r] = s

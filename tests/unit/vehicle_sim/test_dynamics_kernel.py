@@ -263,9 +263,50 @@ def test_one_pass_contacts_equal_the_matrix_and_its_scans() -> None:
                 want_contact[i, j] = c
         got_contact, got_dist = before.copy(), np.full((n, n), 7.0)
         pairs = np.full((max(1, n * (n - 1) // 2), 2), -1, dtype=np.int64)
-        k, d_min = contacts_into(p, got_contact, radius, got_dist, pairs)
+        count = np.array([int(np.triu(before, 1).sum())], dtype=np.int64)
+        k, d_min = contacts_into(p, got_contact, radius, got_dist, pairs, count)
+        assert count[0] == int(np.triu(want_contact, 1).sum()), trial
         assert np.array_equal(got_dist, dist, equal_nan=True), trial
         assert np.array_equal(got_contact, want_contact), trial
         assert pairs[:k].tolist() == want_pairs, trial
         want_min = min_upper_kernel(dist)
         assert d_min == want_min or (math.isnan(d_min) and math.isnan(want_min)), trial
+
+
+def test_grid_contacts_equal_the_pass_over_every_pair() -> None:
+    """Past GRID_MIN vehicles a step without a distance matrix finds its contacts on a
+    grid: over sequences of steps (clusters that touch, drift apart and come back, a
+    vehicle far away, coincident vehicles, one that is not finite), the same contact flags,
+    the same pairs entering contact in the same order, the same count and the same
+    minimum, bit for bit, as the pass over every pair."""
+    from vehicle_sim.physics.dynamics_kernel import GRID_MIN, contacts_into
+
+    rng = np.random.default_rng(44)
+    radius = 0.3
+    for trial in range(40):
+        n = int(rng.integers(GRID_MIN + 1, 400))
+        p = rng.uniform(-8.0, 8.0, (n, 3))
+        p[: n // 4] = rng.normal(0.0, 0.5, (n // 4, 3))  # a dense cluster: contacts
+        if trial % 3 == 0:
+            p[n - 1] = [900.0, -700.0, 50.0]  # far from everyone
+        if trial % 4 == 0:
+            p[5] = p[6]  # coincident
+        states = [(np.zeros((n, n), dtype=bool), np.zeros((0, 0)), np.zeros(1, np.int64)),
+                  (np.zeros((n, n), dtype=bool), np.empty((n, n)), np.zeros(1, np.int64))]
+        for step in range(6):
+            if step == 5 and trial % 5 == 0:
+                p[7, 1] = math.nan  # not finite: the grid gives way to the full pass
+            got = []
+            for contact, dist, count in states:
+                pairs = np.full((n * (n - 1) // 2, 2), -1, dtype=np.int64)
+                k, d_min = contacts_into(p, contact, radius, dist, pairs, count)
+                got.append((k, d_min, pairs[:k].tolist(), contact.copy(), int(count[0])))
+            (ka, ma, pa, ca, na), (kb, mb, pb, cb, nb) = got
+            assert (ka, pa, na) == (kb, pb, nb), (trial, step)
+            assert ma == mb or (math.isnan(ma) and math.isnan(mb)), (trial, step)
+            assert np.array_equal(ca, cb), (trial, step)
+            if step == 0:
+                assert na > 0 or trial % 4, trial  # the cluster touches
+            p = p + rng.normal(0.0, 0.15, p.shape)  # drift: some contacts end, some begin
+            if step == 2:
+                p[: n // 4] *= 3.0  # the cluster spreads: every contact may end
