@@ -133,7 +133,7 @@ def cdr_messages(s: Series, c: RecordContext) -> CdrMessages:
     with np.errstate(invalid="ignore"):
         hmin = np.min(h, axis=1) if h.shape[1] else np.full(k, np.nan)
     ids = np.asarray(c.ids)
-    pairs = pl.cdr_rows(tp.pairs_fields(len(i)), {
+    pairs = pl.cdr_rows(tp.pairs_fields(len(i), max(c.ids, default=0)), {
         "t_s": s.t, "min_distance_m": s.min_dist, "min_h_m2": hmin,
         "distance_m": _norm(s.p[:, i] - s.p[:, j]), "h_m2": h, "i": ids[i], "j": ids[j]}, k)
     return CdrMessages([est[a * k:(a + 1) * k] for a in range(n)],
@@ -164,7 +164,8 @@ class RecordChannels:
                                   ctx) for i in c.ids]
         self.qp = [_ros2_channel(tp.qp_topic(i), tp.QP_SCHEMA, tp.QP_FIELDS, ctx)
                    for i in c.ids]
-        self.pairs = _ros2_channel(tp.PAIRS, tp.PAIRS_SCHEMA, tp.pairs_fields(n * (n - 1) // 2),
+        self.pairs = _ros2_channel(tp.PAIRS, tp.PAIRS_SCHEMA,
+                                   tp.pairs_fields(n * (n - 1) // 2, max(c.ids, default=0)),
                                    ctx)
         self.ros2: list[Any] = [*self.est, *self.qp, self.pairs]
 

@@ -4,8 +4,8 @@ message kind whose rows are the messages, so a 60 s run's tens of thousands of m
 cost milliseconds.
 
 Layout (OMG CDR, little endian, as ROS 2 writes it): the 4-byte encapsulation header
-``00 01 00 00`` then the fields in order; fixed-size arrays have no length prefix. Every
-float64 comes before any 1-byte field, so no field needs padding (checked:
+``00 01 00 00`` then the fields in order; fixed-size arrays have no length prefix. The
+fields are ordered so that none needs padding (the float64s first; checked:
 :func:`layout`). Floats are the series' doubles bit for bit (NaN/inf included).
 """
 
@@ -18,25 +18,28 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 CDR_LE = b"\x00\x01\x00\x00"  # encapsulation: plain CDR, little endian
-_TYPES = {"float64": "<f8", "bool": "u1", "uint8": "u1"}
+_TYPES = {"float64": "<f8", "bool": "u1", "uint8": "u1", "uint16": "<u2"}
 _ARRAY = re.compile(r"^(\w+)(?:\[(\d+)\])?$")
 
 
 @functools.lru_cache(maxsize=64)  # a few field lists, each asked for at every step live
 def layout(fields: Sequence[tuple[str, str, str]]) -> np.dtype:
     """The packed numpy dtype of a message of ``fields`` (name, ROS type, comment), header
-    first; ``ValueError`` when a float64 would follow a 1-byte field (it would need
-    padding) or a type is not one of float64, bool, uint8 (fixed arrays allowed)."""
+    first; ``ValueError`` when a field would need padding (CDR aligns each to its own size
+    from the end of the header: a float64 after a 1-byte field, say) or a type is not one
+    of float64, bool, uint8, uint16 (fixed arrays allowed)."""
     parts: list[tuple[str, str, tuple[int, ...]]] = [("_cdr", "u1", (4,))]
-    seen_byte = False
+    offset = 0
     for name, typ, _ in fields:
         m = _ARRAY.match(typ)
         if m is None or m.group(1) not in _TYPES:
             raise ValueError(f"field {name}: type {typ!r} not supported")
         base = _TYPES[m.group(1)]
-        if base == "<f8" and seen_byte:
-            raise ValueError(f"field {name}: a float64 after a 1-byte field needs padding")
-        seen_byte |= base == "u1"
+        size = np.dtype(base).itemsize
+        if offset % size:
+            raise ValueError(f"field {name}: a {m.group(1)} at offset {offset} needs padding")
+        count = int(m.group(2)) if m.group(2) else 1
+        offset += size * count
         parts.append((name, base, (int(m.group(2)),) if m.group(2) else ()))
     return np.dtype(parts)
 

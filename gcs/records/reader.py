@@ -99,8 +99,8 @@ def read_arrays(path: Path) -> RecordArrays:
     if not ids or sorted(qp) != ids:
         raise RecordError(f"{path}: the agents' estimate and qp topics do not match")
     n = len(ids)
-    pairs = _decode(path, tp.PAIRS, schemas[tp.PAIRS], tp.pairs_fields(n * (n - 1) // 2),
-                    rows[tp.PAIRS])
+    pairs = _decode(path, tp.PAIRS, schemas[tp.PAIRS],
+                    tp.pairs_fields(n * (n - 1) // 2, max(ids)), rows[tp.PAIRS])
     return RecordArrays(ids, est, qp, pairs)
 
 

@@ -104,8 +104,11 @@ QP_FIELDS: tuple[tuple[str, str, str], ...] = (
 )
 
 
-def pairs_fields(n_pairs: int) -> tuple[tuple[str, str, str], ...]:
-    """The :data:`PAIRS_SCHEMA` fields of a record of ``n_pairs`` pairs i < j."""
+def pairs_fields(n_pairs: int, max_id: int = 255) -> tuple[tuple[str, str, str], ...]:
+    """The :data:`PAIRS_SCHEMA` fields of a record of ``n_pairs`` pairs i < j whose largest
+    agent id is ``max_id``: the ids as uint8, or as uint16 past 255 (a swarm of more than
+    255 agents, in process only; uint8 would wrap them)."""
+    ids = "uint8" if max_id <= 255 else "uint16"
     return (
         ("t_s", "float64", "simulation time (s)"),
         ("min_distance_m", "float64", "smallest pair distance over the period after t (m; "
@@ -113,8 +116,8 @@ def pairs_fields(n_pairs: int) -> tuple[tuple[str, str, str], ...]:
         ("min_h_m2", "float64", "smallest true barrier h over the pairs at t (m^2)"),
         ("distance_m", f"float64[{n_pairs}]", "||p_i - p_j|| of each pair at t (m)"),
         ("h_m2", f"float64[{n_pairs}]", "true barrier ||dp||^2 + 2 tau dv.dp - D^2 (m^2)"),
-        ("i", f"uint8[{n_pairs}]", "id of each pair's first agent"),
-        ("j", f"uint8[{n_pairs}]", "id of each pair's second agent (i < j by column)"),
+        ("i", f"{ids}[{n_pairs}]", "id of each pair's first agent"),
+        ("j", f"{ids}[{n_pairs}]", "id of each pair's second agent (i < j by column)"),
     )
 
 

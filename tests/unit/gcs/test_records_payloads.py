@@ -66,9 +66,27 @@ def test_pairs_rows_decode_independently() -> None:
     assert list(m.i) == [1, 1, 2] and list(m.j) == [2, 3, 3]
 
 
+def test_pairs_ids_past_255_keep_their_value() -> None:
+    """A swarm of more than 255 agents (in process): the pair ids are uint16, decoded by
+    the independent decoder to the same numbers (uint8 would have wrapped 300 to 44)."""
+    k, npair = 2, 3
+    fields = tp.pairs_fields(npair, max_id=300)
+    assert dict((f[0], f[1]) for f in fields)["i"] == "uint16[3]"
+    assert dict((f[0], f[1]) for f in tp.pairs_fields(npair, 255))["i"] == "uint8[3]"
+    vals = {"t_s": np.arange(k, dtype=float), "min_distance_m": np.full(k, 1.5),
+            "min_h_m2": np.full(k, -0.25), "distance_m": np.ones((k, npair)),
+            "h_m2": np.ones((k, npair)), "i": np.tile([1, 256, 299], (k, 1)),
+            "j": np.tile([256, 299, 300], (k, 1))}
+    m = _decoder(tp.PAIRS_SCHEMA, fields)(cdr_rows(fields, vals, k)[1])
+    assert list(m.i) == [1, 256, 299] and list(m.j) == [256, 299, 300]
+
+
 def test_layout_refuses_padding_and_unknown_types() -> None:
     with pytest.raises(ValueError, match="padding"):
         layout((("a", "uint8", ""), ("b", "float64", "")))
+    with pytest.raises(ValueError, match="padding"):
+        layout((("a", "uint8[3]", ""), ("b", "uint16", "")))
+    assert layout((("a", "uint8[4]", ""), ("b", "uint16", ""))).itemsize == 4 + 4 + 2
     with pytest.raises(ValueError, match="not supported"):
         layout((("a", "string", ""),))
     assert layout(tp.ESTIMATE_FIELDS).itemsize == 4 + 8 * (1 + 9 * 3 + 4)
