@@ -87,16 +87,23 @@ def _lumped_row(
 
 
 @kernel
+def _pair_dist(p: np.ndarray, i: int, j: int) -> float:
+    """‖p_i − p_j‖ (m), summed as ``np.add.reduce``: (x² + y²) + z²; every distance of
+    this module (the matrix, the contacts, the grid)."""
+    dx = p[i, 0] - p[j, 0]
+    dy = p[i, 1] - p[j, 1]
+    dz = p[i, 2] - p[j, 2]
+    return math.sqrt((dx * dx + dy * dy) + dz * dz)
+
+
+@kernel
 def pair_distances_kernel(p: np.ndarray) -> np.ndarray:
     """(N,N) distance matrix ‖p_i − p_j‖ (m) of positions p (N,3) (m)."""
     n = p.shape[0]
     out = np.empty((n, n))
     for i in range(n):
         for j in range(n):
-            dx = p[i, 0] - p[j, 0]
-            dy = p[i, 1] - p[j, 1]
-            dz = p[i, 2] - p[j, 2]
-            out[i, j] = math.sqrt((dx * dx + dy * dy) + dz * dz)
+            out[i, j] = _pair_dist(p, i, j)
     return out
 
 
@@ -122,28 +129,6 @@ GRID_MIN = 64
 # GRID_SLACK_M (m), at least the collision radius
 GRID_SAMPLES = 8
 GRID_SLACK_M = 0.25
-
-
-@kernel
-def _pair_dist(p: np.ndarray, i: int, j: int) -> float:
-    """‖p_i − p_j‖ (m) in the arithmetic of :func:`pair_distances_kernel`."""
-    dx = p[i, 0] - p[j, 0]
-    dy = p[i, 1] - p[j, 1]
-    dz = p[i, 2] - p[j, 2]
-    return math.sqrt((dx * dx + dy * dy) + dz * dz)
-
-
-@kernel
-def _lower_bound(a: np.ndarray, x: int) -> int:
-    """The first index of the sorted ``a`` whose element is not below ``x``."""
-    lo, hi = 0, a.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if a[mid] < x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
 
 
 @kernel
@@ -276,8 +261,8 @@ def _grid_contacts(p: np.ndarray, in_contact: np.ndarray, radius: float, pairs_o
                 if dense:
                     r, end = start[first], start[first + 3]
                 else:
-                    r = _lower_bound(sorted_keys, first)
-                    end = _lower_bound(sorted_keys, first + 3)
+                    r = np.searchsorted(sorted_keys, first)
+                    end = np.searchsorted(sorted_keys, first + 3)
                 while r < end:
                     j = order[r]
                     r += 1
