@@ -37,12 +37,12 @@ from offboard.inner_loop.attitude import Setpoint
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from offboard.safety.base import SafetyInput, SafetyOutput, saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.dcbf.front import DcbfFront, InnerMotion, Measured, Silence, unsensed_rows
+from offboard.safety.dcbf.front import DcbfFront, unsensed_rows
 from offboard.safety.dcbf.world_rows import WorldPlanes
 from offboard.safety.filter import make_filters
 from offboard.safety.rcbf.clf_rcbf import ClfTerms, clf_terms_of_reference
 from swarm_common.enums import Method, QPStatus
-from swarm_common.fastnp import f64, finite, norm, rows3, vec3
+from swarm_common.fastnp import f64, finite, rows3, vec3
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
 from swarm_common.scenario.safety_check import pair_terms
@@ -207,10 +207,9 @@ class FollowerAgent(AgentBase):
         status = AgentStatus(method=self.method, comm_ok=comm_ok, n_sensed=len(sel), V=v_clf,
                              alarms=int(alarms), u_nom=u_nom)
         u = self._use_filter_output(res, w, status)
-        stuck = self.guard.liveness(
-            t, norm(self.deso.z1 - self.ref.xi[0:3]),
-            res.qp_status is not QPStatus.INACTIVE,
-            self.in_formation_phase(t), self.deso.z1)
+        stuck = self.guard.liveness(t, self.deso.z1, self.ref.xi,
+                                    res.qp_status is not QPStatus.INACTIVE,
+                                    self.in_formation_phase(t))
         status.alarms |= int(stuck)
         if stuck and self.detour is not None and not self.detour.active(t):
             self.detour.start(t, own_p, self.ref.xi[0:3])
@@ -310,10 +309,12 @@ class FollowerAgent(AgentBase):
         since, others_heard = self.shares.silence(t)
         t0 = time.perf_counter()
         floor = self._ground_floor()
+        xi = f64(self._reference_xi(t))
+        # the groups as plain tuples in their NamedTuples' order (DcbfFront.run)
         lumped, w, clf, k, h_min, held, u_try = front.run(
-            f64(self._reference_xi(t)), Measured(sel, rows3(rp), rows3(rv)),
-            Silence(self.shares.mask(), self.pred.table.t, since, others_heard),
-            InnerMotion(vec3(self.a_real), vec3(self.u_prev), vec3(self.a_mean)),
+            xi, (sel, rows3(rp), rows3(rv)),
+            (self.shares.mask(), self.pred.table.t, since, others_heard),
+            (vec3(self.a_real), vec3(self.u_prev), vec3(self.a_mean)),
             floor, unsensed_rows(extra),
         )
         if self._world is not None and floor is not None:  # airborne, not landing
@@ -323,7 +324,7 @@ class FollowerAgent(AgentBase):
         else:
             world_rows = False
         res = front.solve(u_try, clf, k, h_min, w, held, t0, world_rows, odo[1], self.a_real,
-                          self._reference_xi(t))
+                          xi)
         return lumped[1], w, float(clf[0]), clf[5:8], res
 
     def _safety_input(

@@ -15,11 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from offboard.agent.fallback import Fallback
-from offboard.estimation.peer_table import Z1
 from offboard.records import NeighbourEstimate
 from offboard.safety.deadlock import DeadlockConfig, DeadlockDetector
 from offboard.safety.monitor import SafetyMonitor, monitor_config
 from swarm_common.enums import NO_ALARM, AgentAlarm
+from swarm_common.fastnp import f64, vec3
 from swarm_common.scenario.model import Scenario
 
 # s: the window over which a stalled formation error with the filter active is a deadlock.
@@ -47,18 +47,18 @@ class InFlightGuard:
         self.bits = NO_ALARM
         self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
 
-    def liveness(self, t: float, err_m: float, held: bool, flying: bool,
-                 pos: np.ndarray | None = None) -> AgentAlarm:
-        """DEADLOCK while the formation error ``err_m`` (m, ‖ẑ1 − ξ̂_p‖ at ``t``, s) stalls
-        with the filter holding the agent (``held``: a barrier row was active) over the
-        detector's window (:class:`~offboard.safety.deadlock.DeadlockDetector`). Only while
-        ``flying`` formation (not on the pad, landing or in the fallback): otherwise the
-        window starts again. ``pos`` (3,): the agent's position estimate (m), for the
-        detector's travel test."""
+    def liveness(self, t: float, z1: np.ndarray, xi: np.ndarray, held: bool,
+                 flying: bool) -> AgentAlarm:
+        """DEADLOCK while the formation error ‖ẑ1 − ξ̂_p‖ (m; ``z1`` (3,) the position
+        estimate at ``t`` (s), ``xi`` (12,) the tracked desired state) stalls with the
+        filter holding the agent (``held``: a barrier row was active) over the detector's
+        window (:class:`~offboard.safety.deadlock.DeadlockDetector`, its travel test on
+        ``z1``). Only while ``flying`` formation (not on the pad, landing or in the
+        fallback): otherwise the window starts again."""
         if not flying or self.fallback.active:
             self.deadlock.reset()
             return NO_ALARM
-        if self.deadlock.update_held(t, err_m, held, pos):
+        if self.deadlock.update_tracking(t, vec3(z1), f64(xi), held):
             return AgentAlarm.DEADLOCK
         return NO_ALARM
 
@@ -71,7 +71,7 @@ class InFlightGuard:
         the neighbours' predicted ``rows`` (N, ROW) with ``have`` (N,), this step's sensed
         ``rel_p`` (N,3) where ``fresh`` (N,), and the filter's pairs ``sel`` (indices) with
         their p_j − p_i, v_j − v_i ``rp``, ``rv`` (N,3). Latches the fallback at ``t``."""
-        bits = self.monitor.step(z1, z2, rows[:, Z1], have & self._peers, rel_p, fresh, sel,
+        bits = self.monitor.step(z1, z2, rows, have & self._peers, rel_p, fresh, sel,
                                  rp, rv)
         if self.monitor.fallback:
             self.fallback.start(t)

@@ -110,11 +110,11 @@ class SafetyMonitor:
              rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray, pair_p: np.ndarray,
              pair_v: np.ndarray) -> AgentAlarm:
         """The bits of one step. ``z1``, ``z2`` (3,): this agent's estimates at t_k;
-        ``est_p`` (N,3): the others' position estimates predicted to t_k, ``usable`` (N,)
-        where they are; ``rel_p`` (N,3) with ``fresh`` (N,) bool: this step's relative
-        positions p_j − p_i; ``sel`` (indices) with ``pair_p``, ``pair_v`` (N,3): the
-        pairs the filter uses this step (held through a dropout) and their p_j − p_i,
-        v_j − v_i."""
+        ``est_p`` (N, ≥ 3): the others' position estimates predicted to t_k (the first
+        three columns), ``usable`` (N,) where they are; ``rel_p`` (N,3) with ``fresh``
+        (N,) bool: this step's relative positions p_j − p_i; ``sel`` (indices) with
+        ``pair_p``, ``pair_v`` (N,3): the pairs the filter uses this step (held through a
+        dropout) and their p_j − p_i, v_j − v_i."""
         cfg = self.cfg
         z1 = vec3(z1)
         self.residual, any_new, raised = monitor_step(

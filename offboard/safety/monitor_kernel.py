@@ -21,8 +21,9 @@ def monitor_terms(z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, usable: np.
                   range_m: float) -> tuple[float, float, bool]:
     """One step's (residual (m), ‖z2‖ (m/s), any newly sensed pair).
 
-    ``z1``, ``z2`` (3,): this agent's position and velocity estimates; ``est_p`` (N,3) the
-    others' position estimates at the same time, ``usable`` (N,) bool where they may be
+    ``z1``, ``z2`` (3,): this agent's position and velocity estimates; ``est_p`` (N, ≥ 3) the
+    others' position estimates at the same time in its first three columns (the peer
+    table's rows themselves, whose first columns are ẑ_j1), ``usable`` (N,) bool where they may be
     read; ``rel_p`` (N,3) the sensed p_j − p_i where ``fresh`` (N,) bool; ``sel`` the
     indices of the pairs the filter uses this step. Writes ``sensed`` (N,) bool from
     ``sel``, ``new`` (N,) = ``sensed`` ∧ ¬``prev``, then copies ``sensed`` into ``prev``.

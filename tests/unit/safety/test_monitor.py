@@ -140,6 +140,10 @@ def test_residual_kernel_matches_numpy() -> None:
         want = residual_oracle(z1, est, rel, usable & fresh, usable & ~fresh & ~sensed, 6.0)
         res, _, any_new, new = terms(z1, est, rel, usable, fresh, sel, 6.0, prev)
         assert (math.isnan(res) and math.isnan(want)) or abs(res - want) <= 1e-12
+        # the peer table's whole rows (ẑ1 in the first three columns) give the same
+        wide = np.hstack([est, rng.normal(0, 9, (n, 5))])
+        res_wide = terms(z1, wide, rel, usable, fresh, sel, 6.0, was.copy())[0]
+        assert (math.isnan(res_wide) and math.isnan(want)) or abs(res_wide - want) <= 1e-12
         assert np.array_equal(new, sensed & ~was) and any_new == bool(np.any(new))
     # a NaN estimate in a counted row makes the residual NaN, as numpy's max does
     est = np.ones((3, 3))
