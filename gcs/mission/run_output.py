@@ -19,6 +19,7 @@ import json
 import logging
 import os
 from collections.abc import Mapping, Sequence
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -109,6 +110,8 @@ def set_truth_rows(
 # QPStatus.degraded by status (a StrEnum: its value looks up the same entry), without
 # constructing the enum per agent and step
 _DEGRADED: dict[str, bool] = {s: s.degraded for s in QPStatus}
+# the real-valued status fields set_agent_rows records, in its order
+_REAL_FIELDS = attrgetter("h_min", "solve_us", "slack", "violation", "correction")
 
 
 def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
@@ -117,20 +120,18 @@ def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
     QP degraded, whether the setpoint conversion changed u (tilt/thrust clip), the
     agent's safety alarm bits (:class:`~swarm_common.enums.AgentAlarm`) and the safety
     filter's report (status, active rows, slacks, u_nom, correction)."""
+    st = [o.status for o in outs]
     ser.u[r] = [o.u for o in outs]
     ser.lumped_est[r] = [o.lumped for o in outs]
-    ser.h_min[r] = [o.status.h_min for o in outs]
-    ser.solve_us[r] = [o.status.solve_us for o in outs]
-    ser.fallback[r] = [_DEGRADED[o.status.qp_status] for o in outs]
-    ser.input_clipped[r] = [bool(o.status.input_clipped) for o in outs]
-    ser.alarms[r] = [int(o.status.alarms) for o in outs]
-    ser.qp_status[r] = [STATUS_CODE[o.status.qp_status] for o in outs]
-    ser.qp_active[r] = [min(o.status.active.count, MAX_COUNT) for o in outs]
-    ser.qp_kinds[r] = [int(o.status.active.kinds) for o in outs]
-    ser.clf_slack[r] = [o.status.slack for o in outs]
-    ser.qp_relax[r] = [o.status.violation for o in outs]
-    ser.u_nom[r] = [o.status.u_nom for o in outs]
-    ser.u_corr[r] = [o.status.correction for o in outs]
+    ser.u_nom[r] = [s.u_nom for s in st]
+    # the scalar fields: one pass over the statuses, one array of each kind
+    (ser.h_min[r], ser.solve_us[r], ser.clf_slack[r], ser.qp_relax[r],
+     ser.u_corr[r]) = np.array([_REAL_FIELDS(s) for s in st], dtype=np.float64).T
+    (ser.fallback[r], ser.input_clipped[r], ser.alarms[r], ser.qp_status[r],
+     ser.qp_active[r], ser.qp_kinds[r]) = np.array(
+        [(_DEGRADED[s.qp_status], bool(s.input_clipped), int(s.alarms),
+          STATUS_CODE[s.qp_status], min(s.active.count, MAX_COUNT), int(s.active.kinds))
+         for s in st], dtype=np.int64).reshape(len(st), 6).T
 
 
 def run_document(
