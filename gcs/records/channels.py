@@ -37,6 +37,7 @@ from foxglove.messages import (
 from gcs.records import payloads as pl
 from gcs.records import topics as tp
 from gcs.records.events import Event
+from gcs.records.pair_table import pair_table, row_norm
 from gcs.records.scene import (
     IDENTITY,
     bearing_update,
@@ -47,7 +48,6 @@ from gcs.records.scene import (
 )
 from gcs.records.series import filter_arrays
 from gcs.report.metrics import Series
-from gcs.report.verdict import pair_barrier
 
 _LEVELS = {1: LogLevel.Debug, 2: LogLevel.Info, 3: LogLevel.Warning, 4: LogLevel.Error}
 
@@ -63,6 +63,12 @@ class RecordContext:
         self.ids, self.leaders, self.sensed = ids, leaders, sensed
         self.radius_m, self.tau_s, self.d_safe_m, self.world = radius_m, tau_s, d_safe_m, world
         self.vertical_scale = 1.0  # the barrier's κ (docs/safety.md §4c), from the scenario
+
+    def pairs_fields(self) -> tuple[tuple[str, str, str], ...]:
+        """The ``/pairs`` message's fields for these agents
+        (:func:`~gcs.records.topics.recorded_pair_count` pairs, ids up to the largest)."""
+        return tp.pairs_fields(tp.recorded_pair_count(len(self.ids)),
+                                max(self.ids, default=0))
 
     @classmethod
     def from_scenario(cls, sc: Any) -> RecordContext:
@@ -93,11 +99,6 @@ class CdrMessages:
     pairs: list[bytes]
 
 
-def _norm(x: np.ndarray) -> np.ndarray:
-    with np.errstate(invalid="ignore"):
-        return np.asarray(np.linalg.norm(x, axis=-1))
-
-
 def _by_agent(x: np.ndarray) -> np.ndarray:
     """(K, N, ...) rows -> (N K, ...): agent 0's K rows, then agent 1's, ..."""
     x = np.asarray(x)
@@ -114,10 +115,10 @@ def cdr_messages(s: Series, c: RecordContext) -> CdrMessages:
         "p_des_m": _by_agent(s.p_des), "v_des_m_s": _by_agent(s.v_des),
         "p_est_m": _by_agent(s.z1), "v_est_m_s": _by_agent(s.z2),
         "p_des_est_m": _by_agent(s.xi_p), "d_est_m_s2": _by_agent(s.lumped_est),
-        "d_true_m_s2": _by_agent(s.lumped_true), "p_err_m": _by_agent(_norm(s.z1 - s.p)),
-        "v_err_m_s": _by_agent(_norm(s.z2 - s.v)),
-        "d_err_m_s2": _by_agent(_norm(s.lumped_est - s.lumped_true)),
-        "track_err_m": _by_agent(_norm(s.p - s.p_des))}, n * k)
+        "d_true_m_s2": _by_agent(s.lumped_true), "p_err_m": _by_agent(row_norm(s.z1 - s.p)),
+        "v_err_m_s": _by_agent(row_norm(s.z2 - s.v)),
+        "d_err_m_s2": _by_agent(row_norm(s.lumped_est - s.lumped_true)),
+        "track_err_m": _by_agent(row_norm(s.p - s.p_des))}, n * k)
     f = filter_arrays(s)
     qp = pl.cdr_rows(tp.QP_FIELDS, {
         "t_s": t, "u_m_s2": _by_agent(s.u), "h_min_m2": _by_agent(s.h_min),
@@ -128,14 +129,11 @@ def cdr_messages(s: Series, c: RecordContext) -> CdrMessages:
         "input_clipped": _by_agent(s.input_clipped), "alarms": _by_agent(s.alarms),
         "qp_status": _by_agent(f["qp_status"]), "active_rows": _by_agent(f["qp_active"]),
         "active_kinds": _by_agent(f["qp_kinds"])}, n * k)
-    i, j = np.triu_indices(n, k=1)
-    h = pair_barrier(s.p, s.v, c.tau_s, c.d_safe_m, c.vertical_scale)
-    with np.errstate(invalid="ignore"):
-        hmin = np.min(h, axis=1) if h.shape[1] else np.full(k, np.nan)
+    tab = pair_table(s.p, s.v, c.tau_s, c.d_safe_m, c.vertical_scale)
     ids = np.asarray(c.ids)
-    pairs = pl.cdr_rows(tp.pairs_fields(len(i), max(c.ids, default=0)), {
-        "t_s": s.t, "min_distance_m": s.min_dist, "min_h_m2": hmin,
-        "distance_m": _norm(s.p[:, i] - s.p[:, j]), "h_m2": h, "i": ids[i], "j": ids[j]}, k)
+    pairs = pl.cdr_rows(c.pairs_fields(), {
+        "t_s": s.t, "min_distance_m": s.min_dist, "min_h_m2": tab.min_h_m2,
+        "distance_m": tab.distance_m, "h_m2": tab.h_m2, "i": ids[tab.i], "j": ids[tab.j]}, k)
     return CdrMessages([est[a * k:(a + 1) * k] for a in range(n)],
                        [qp[a * k:(a + 1) * k] for a in range(n)], pairs)
 
@@ -154,7 +152,6 @@ class RecordChannels:
 
     def __init__(self, ctx: Context, c: RecordContext, skip_unwatched: bool = False) -> None:
         self.c, self.skip = c, skip_unwatched
-        n = len(c.ids)
         self.frames = [tp.vehicle_frame(i) for i in c.ids]
         self.tf = FrameTransformsChannel(tp.TF, context=ctx)
         self.scene = SceneUpdateChannel(tp.SCENE, context=ctx)
@@ -164,9 +161,7 @@ class RecordChannels:
                                   ctx) for i in c.ids]
         self.qp = [_ros2_channel(tp.qp_topic(i), tp.QP_SCHEMA, tp.QP_FIELDS, ctx)
                    for i in c.ids]
-        self.pairs = _ros2_channel(tp.PAIRS, tp.PAIRS_SCHEMA,
-                                   tp.pairs_fields(n * (n - 1) // 2, max(c.ids, default=0)),
-                                   ctx)
+        self.pairs = _ros2_channel(tp.PAIRS, tp.PAIRS_SCHEMA, c.pairs_fields(), ctx)
         self.ros2: list[Any] = [*self.est, *self.qp, self.pairs]
 
     def _on(self, ch: Any) -> bool:

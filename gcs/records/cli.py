@@ -63,13 +63,11 @@ def run_scenario(arg: str | None, name: object, n: int) -> Any:
 
 def cmd_log_export(args: argparse.Namespace) -> int:
     """``gcs log export``; 0 when written, 2 on bad input."""
-    import numpy as np
-
     from gcs.records.channels import RecordContext
     from gcs.records.export import load_record, load_run_folder, write_csv
+    from gcs.records.pair_table import pair_table
     from gcs.records.reader import RecordError
     from gcs.records.writer import write_mcap
-    from gcs.report.verdict import pair_barrier
 
     run, out = Path(args.run), Path(args.out)
     if out.exists() and not out.is_dir():
@@ -78,7 +76,7 @@ def cmd_log_export(args: argparse.Namespace) -> int:
         if run.is_file() or run.suffix == ".mcap":
             if args.format == "mcap":
                 return _fail(f"{run}: is a record already (--format mcap converts a run folder)")
-            ids, ser, dist, h = load_record(run)
+            ids, ser, pairs = load_record(run)
         else:
             doc, ser = load_run_folder(run)
             n = ser.p.shape[1]
@@ -93,14 +91,12 @@ def cmd_log_export(args: argparse.Namespace) -> int:
                 return _fail(f"{run}: scenario {doc.get('scenario')!r} not found: give "
                              "--scenario (the barrier h needs its tau and D)")
             ids = [int(i) for i in sc.ids]
-            i, j = np.triu_indices(n, k=1)
-            dist = np.linalg.norm(ser.p[:, i] - ser.p[:, j], axis=2)
-            h = pair_barrier(ser.p, ser.v, sc.controller.tau_safe_s, sc.controller.d_safe_m,
-                             sc.controller.dcbf_vertical_scale)
+            pairs = pair_table(ser.p, ser.v, sc.controller.tau_safe_s, sc.controller.d_safe_m,
+                               sc.controller.dcbf_vertical_scale)
     except (RecordError, ValueError) as exc:
         return _fail(str(exc))
     try:
-        files = write_csv(out, ids, ser, dist, h)
+        files = write_csv(out, ids, ser, pairs)
     except OSError as exc:
         return _fail(f"--out {out}: {exc.strerror or exc}")
     print(f"wrote {len(files)} files into {out}")

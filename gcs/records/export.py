@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs.records.pair_table import PairTable
 from gcs.records.reader import RecordError, read_arrays
 from gcs.records.series import RunSeries, filter_arrays, unknown_filter
 from gcs.report.metrics import Series
@@ -112,8 +113,9 @@ def series_from_arrays(src: Path, arrays: dict[str, np.ndarray]) -> RunSeries:
     return RunSeries(**out)
 
 
-def load_record(path: Path) -> tuple[list[int], RunSeries, np.ndarray, np.ndarray]:
-    """(ids, series, pair distances (K,P) m, pair barriers (K,P) m²) of a record file."""
+def load_record(path: Path) -> tuple[list[int], RunSeries, PairTable]:
+    """(ids, series, the recorded pairs: their columns, distances (m) and barriers (m²))
+    of a record file."""
     r = read_arrays(path)
     est, qp = [r.estimate[i] for i in r.ids], [r.qp[i] for i in r.ids]
     k = len(r.pairs)
@@ -128,8 +130,20 @@ def load_record(path: Path) -> tuple[list[int], RunSeries, np.ndarray, np.ndarra
                 vals[name] = np.stack([a[f] for a in src], axis=1)
     vals["fallback"] = vals["fallback"].astype(bool)
     vals["input_clipped"] = vals["input_clipped"].astype(bool)
-    return (r.ids, RunSeries(**vals), np.asarray(r.pairs["distance_m"]),
-            np.asarray(r.pairs["h_m2"]))
+    return r.ids, RunSeries(**vals), PairTable(
+        _columns(path, r.ids, r.pairs["i"]), _columns(path, r.ids, r.pairs["j"]),
+        np.asarray(r.pairs["distance_m"]), np.asarray(r.pairs["h_m2"]),
+        np.asarray(r.pairs["min_h_m2"], float))
+
+
+def _columns(path: Path, ids: list[int], pair_ids: np.ndarray) -> np.ndarray:
+    """The agent columns of a record's pair ids (K, P), refused unless each is an agent's."""
+    known = np.asarray(ids, np.int64)
+    pid = np.asarray(pair_ids, np.int64)
+    col = np.minimum(np.searchsorted(known, pid), max(len(known) - 1, 0))
+    if pid.size and (not len(known) or not np.array_equal(known[col], pid)):
+        raise RecordError(f"{path}: /pairs names an agent that has no topics")
+    return col
 
 
 def vehicle_table(s: Series, a: int) -> tuple[list[str], np.ndarray]:
@@ -143,9 +157,9 @@ def vehicle_table(s: Series, a: int) -> tuple[list[str], np.ndarray]:
     return head, np.hstack(cols)
 
 
-def write_csv(out: Path, ids: list[int], s: Series, dist: np.ndarray, h: np.ndarray) -> list[Path]:
-    """Write ``vehicle_<id>.csv`` for each agent and ``pairs.csv`` into ``out`` (created);
-    ``dist``, ``h`` (K, P) of the pairs i < j in column order. Returns the files."""
+def write_csv(out: Path, ids: list[int], s: Series, pairs: PairTable) -> list[Path]:
+    """Write ``vehicle_<id>.csv`` for each agent and ``pairs.csv`` into ``out`` (created):
+    one row per recorded pair (:mod:`gcs.records.pair_table`) and step. Returns the files."""
     out.mkdir(parents=True, exist_ok=True)
     files = []
     for a, i in enumerate(ids):
@@ -153,11 +167,11 @@ def write_csv(out: Path, ids: list[int], s: Series, dist: np.ndarray, h: np.ndar
         f = out / f"vehicle_{i}.csv"
         np.savetxt(f, table, fmt="%.17g", delimiter=",", header=",".join(head), comments="")
         files.append(f)
-    ii, jj = np.triu_indices(len(ids), k=1)
-    k, npair = dist.shape
+    k, npair = pairs.distance_m.shape
     idv = np.asarray(ids)
-    rows = np.column_stack([np.repeat(s.t, npair), np.tile(idv[ii], k), np.tile(idv[jj], k),
-                            dist.reshape(-1), h.reshape(-1)])
+    rows = np.column_stack([np.repeat(s.t, npair), idv[pairs.i].reshape(-1),
+                            idv[pairs.j].reshape(-1), pairs.distance_m.reshape(-1),
+                            pairs.h_m2.reshape(-1)])
     f = out / "pairs.csv"
     np.savetxt(f, rows, fmt=["%.17g", "%d", "%d", "%.17g", "%.17g"], delimiter=",",
                header=",".join(PAIRS_HEADER), comments="")

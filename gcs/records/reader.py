@@ -99,8 +99,11 @@ def read_arrays(path: Path) -> RecordArrays:
     if not ids or sorted(qp) != ids:
         raise RecordError(f"{path}: the agents' estimate and qp topics do not match")
     n = len(ids)
-    pairs = _decode(path, tp.PAIRS, schemas[tp.PAIRS],
-                    tp.pairs_fields(n * (n - 1) // 2, max(ids)), rows[tp.PAIRS])
+    fields = tp.pairs_fields(tp.recorded_pair_count(n), max(ids))
+    every = tp.pairs_fields(n * (n - 1) // 2, max(ids))
+    if schemas[tp.PAIRS][1].decode(errors="replace") == tp.ros2msg(every):
+        fields = every  # a record of more than 64 agents written with every pair
+    pairs = _decode(path, tp.PAIRS, schemas[tp.PAIRS], fields, rows[tp.PAIRS])
     return RecordArrays(ids, est, qp, pairs)
 
 

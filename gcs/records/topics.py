@@ -104,6 +104,18 @@ QP_FIELDS: tuple[tuple[str, str, str], ...] = (
 )
 
 
+PAIRS_ALL_MAX = 2016  # /pairs holds every pair while there are at most this many (64 agents)
+PAIRS_PER_AGENT = 4  # past that, this many closest pairs per agent and step (pair_table)
+
+
+def recorded_pair_count(n: int) -> int:
+    """The number of pairs each ``/pairs`` message of an ``n``-agent record holds: every
+    pair up to :data:`PAIRS_ALL_MAX`, else :data:`PAIRS_PER_AGENT` × n
+    (:mod:`gcs.records.pair_table`)."""
+    every = n * (n - 1) // 2
+    return every if every <= PAIRS_ALL_MAX else min(every, PAIRS_PER_AGENT * n)
+
+
 def pairs_fields(n_pairs: int, max_id: int = 255) -> tuple[tuple[str, str, str], ...]:
     """The :data:`PAIRS_SCHEMA` fields of a record of ``n_pairs`` pairs i < j whose largest
     agent id is ``max_id``: the ids as uint8, or as uint16 past 255 (a swarm of more than

@@ -70,7 +70,7 @@ def load_run(path: Path, scenario: str | None = None) -> ReplayRun:
     a TOML path, default ``scenarios/<name>.toml`` of the run's name); a RecordError or
     ValueError of one line when either is missing, truncated or foreign."""
     if path.is_file() or path.suffix == ".mcap":
-        ids, ser, _, _ = load_record(path)
+        ids, ser, _ = load_record(path)
         doc = read_document(path)
     else:
         doc, ser = load_run_folder(path)

@@ -180,7 +180,7 @@ def test_a_record_written_before_the_filter_report_still_exports(
     with monkeypatch.context() as m:
         m.setattr(tp, "QP_FIELDS", tp.QP_FIELDS_V1)
         write_record(tmp_path, doc, series, load_scenario(str(CUBE8)))
-    ids, old, _, _ = load_record(tmp_path / "record.mcap")
+    ids, old, _ = load_record(tmp_path / "record.mcap")
     assert ids == list(load_scenario(str(CUBE8)).ids)
     np.testing.assert_array_equal(old.u, series.u)
     assert (old.qp_status == UNKNOWN_STATUS).all() and np.isnan(old.u_corr).all()
