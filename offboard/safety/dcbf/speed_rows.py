@@ -42,13 +42,66 @@ import math
 
 import numpy as np
 
-from offboard.safety.base import W_SAFE, saturate_norm
+from offboard.safety.base import W_SAFE
+from offboard.safety.dcbf.kernel import project_into
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
-from swarm_common.fastnp import norm
+from swarm_common.fastnp import f64, norm, vec3
+from swarm_common.jit import kernel
 
 NEAR = 0.8  # a first cut is added once the tried command predicts this fraction of b
 TOL = 1e-6  # m/s: an answer this little outside the ball needs no further cut (rounding)
 MAX_CUTS = 3  # tangent planes before the inner cube is added
+
+
+_SQRT3 = math.sqrt(3.0)
+
+
+@kernel
+def prepare_kernel(v: np.ndarray, a0: np.ndarray, w: np.ndarray, xi: np.ndarray,
+                   ia: np.ndarray, cv: np.ndarray, t: float, w_safe: float,
+                   proj: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray,
+                   e0: np.ndarray, u_b: np.ndarray) -> None:
+    """:meth:`TransientLimit.prepare` into ``e0`` and ``u_b`` (3,): the same operations in
+    numpy's order (``w`` saturated at ``w_safe`` as
+    :func:`offboard.safety.base.saturate_norm` does; ``u_b`` projected by
+    :func:`offboard.safety.dcbf.kernel.project_into`)."""
+    n = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    s = w_safe / n if n > w_safe else 1.0
+    for k in range(3):
+        wk = w[k] * s if n > w_safe else w[k]
+        v_star = (xi[3 + k] + xi[6 + k] * t) + (0.5 * xi[9 + k]) * (t * t)
+        e0[k] = ((v[k] + ia[k] * a0[k]) + wk * t) - v_star
+        u_b[k] = (-e0[k]) / cv[k]
+    project_into(u_b, proj, cos_a, sin_a)
+
+
+@kernel
+def write_kernel(cuts: np.ndarray, n_cuts: int, cube: bool, cv: np.ndarray, e0: np.ndarray,
+                 u_b: np.ndarray, bound: float, g: np.ndarray, rhs: np.ndarray,
+                 start: int) -> int:
+    """:meth:`TransientLimit.write` of the first ``n_cuts`` rows of ``cuts`` (unit normals)
+    and, with ``cube``, the inner cube's six planes; returns the rows written."""
+    rows = n_cuts + (6 if cube else 0)
+    nv = np.empty(3)
+    for i in range(rows):
+        if i < n_cuts:
+            for k in range(3):
+                nv[k] = cuts[i, k]
+            b = bound
+        else:
+            a = i - n_cuts
+            for k in range(3):
+                nv[k] = 0.0
+            nv[a % 3] = 1.0 if a < 3 else -1.0
+            b = bound / _SQRT3
+        grad = -(nv * cv)
+        size = math.sqrt(np.dot(grad, grad))
+        r = start + i
+        for k in range(3):
+            g[r, k] = grad[k] / size
+        need = (np.dot(nv, e0) - b) / size
+        rhs[r] = min(need, np.dot(g[r], u_b))
+    return rows
 
 
 class TransientLimit:
@@ -73,11 +126,11 @@ class TransientLimit:
         """The step's ê_T at u = 0 from the own velocity ``v`` (m/s), realised acceleration
         ``a0`` and disturbance estimate ``w`` (m/s², saturated at W_SAFE here, as for the
         world rows), and the desired state ``xi`` (12,) the nominal law tracks; and ``u_b``."""
-        t = self.T
-        w = saturate_norm(w, W_SAFE)
-        v_star = xi[3:6] + xi[6:9] * t + 0.5 * xi[9:12] * (t * t)
-        self.e0 = v + self.ia * a0 + w * t - v_star
-        self.u_b = self.uset.project(-self.e0 / self.cv)
+        e0, u_b = np.empty(3), np.empty(3)  # new arrays: callers may keep the last ones
+        proj, cos_a, sin_a = self.uset.projection
+        prepare_kernel(vec3(v), vec3(a0), vec3(w), f64(xi), self.ia, self.cv, self.T, W_SAFE,
+                       proj, cos_a, sin_a, e0, u_b)
+        self.e0, self.u_b = e0, u_b
 
     def predicted(self, u: np.ndarray) -> np.ndarray:
         """ê_T (3,) (m/s) for the command ``u`` (m/s²)."""
@@ -102,18 +155,10 @@ class TransientLimit:
         """The rows ``gᵀu ≥ r`` of the ``cuts`` (unit normals n: nᵀê_T ≤ b) and, with
         ``cube``, of the inner cube (±e_a: ±ê_T,a ≤ b/√3), into ``g``, ``rhs`` from row
         ``start``; each clipped to what ``u_b`` achieves. Returns how many."""
-        planes = list(cuts)
-        radius = [self.bound] * len(planes)
-        if cube:
-            for a in range(6):
-                n = np.zeros(3)
-                n[a % 3] = 1.0 if a < 3 else -1.0
-                planes.append(n)
-                radius.append(self.bound / math.sqrt(3.0))
-        for i, (n, b) in enumerate(zip(planes, radius, strict=True)):
-            grad = -(n * self.cv)
-            size = norm(grad)
-            g[start + i] = grad / size
-            need = (float(n @ self.e0) - b) / size
-            rhs[start + i] = min(need, float(g[start + i] @ self.u_b))
-        return len(planes)
+        rows = len(cuts) + (6 if cube else 0)
+        if start < 0 or start + rows > min(len(g), len(rhs)) or g.shape[1:] != (3,):
+            raise ValueError(f"TransientLimit.write: {rows} rows from {start} do not fit "
+                             f"buffers of {len(g)} and {len(rhs)}")
+        normals = np.array(cuts, dtype=np.float64).reshape(len(cuts), 3)
+        return int(write_kernel(normals, len(cuts), cube, self.cv, self.e0, self.u_b,
+                                self.bound, g, rhs, int(start)))

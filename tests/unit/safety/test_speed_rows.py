@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from conftest import CUBE8
 
+from offboard.safety.base import W_SAFE
 from offboard.safety.dcbf.filter import DcbfFilter, input_set_of
 from offboard.safety.dcbf.model import LagCoefficients
 from offboard.safety.dcbf.speed_rows import TransientLimit
@@ -163,3 +164,58 @@ def test_the_limit_gives_way_only_as_far_as_a_pair_row_needs():
         if u[0] >= 3.0 and uset.contains(u, 0.0):
             best = min(best, float(np.linalg.norm(u - lim.u_b)))
     assert float(np.linalg.norm(res.u - lim.u_b)) <= best + 1e-6
+
+
+def _reference_prepare(lim: TransientLimit, v: np.ndarray, a0: np.ndarray, w: np.ndarray,
+                       xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The step's (ê_T at u = 0, u_b) in numpy, as the module docstring writes them."""
+    t = lim.T
+    n = float(np.linalg.norm(w))
+    w = w * (W_SAFE / n) if n > W_SAFE else w
+    v_star = xi[3:6] + xi[6:9] * t + 0.5 * xi[9:12] * (t * t)
+    e0 = v + lim.ia * a0 + w * t - v_star
+    return e0, lim.uset.project(-e0 / lim.cv)
+
+
+def _reference_rows(lim: TransientLimit, cuts: list[np.ndarray], cube: bool
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The rows gᵀu ≥ r of the cuts and the inner cube, each scaled to a unit gradient and
+    clipped to what u_b achieves, in numpy."""
+    planes = [(n, lim.bound) for n in cuts]
+    if cube:
+        planes += [(s * e, lim.bound / math.sqrt(3.0)) for s in (1.0, -1.0) for e in np.eye(3)]
+    g = np.array([-(n * lim.cv) / np.linalg.norm(n * lim.cv) for n, _ in planes]).reshape(-1, 3)
+    need = np.array([(n @ lim.e0 - b) / np.linalg.norm(n * lim.cv) for n, b in planes])
+    return g, np.minimum(need, g @ lim.u_b)
+
+
+def test_the_compiled_rows_agree_with_numpy() -> None:
+    """The compiled prepare and write against the numpy of the module docstring (1e-12):
+    random states, disturbances over W_SAFE, zero to three cuts, with and without the cube."""
+    lim, _ = _limit(3.0)
+    rng = np.random.default_rng(12)
+    for trial in range(500):
+        v, a0 = rng.normal(0, 4, 3), rng.normal(0, 4, 3)
+        w, xi = rng.normal(0, 6, 3), rng.normal(0, 3, 12)
+        lim.prepare(v, a0, w, xi)
+        e0, u_b = _reference_prepare(lim, v, a0, w, xi)
+        np.testing.assert_allclose(lim.e0, e0, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(lim.u_b, u_b, rtol=0, atol=1e-12)
+        cuts = [c / np.linalg.norm(c) for c in rng.normal(0, 1, (int(rng.integers(0, 4)), 3))]
+        cube = trial % 3 == 0
+        g, rhs = np.full((20, 3), 7.0), np.full(20, 7.0)
+        k = lim.write(cuts, cube, g, rhs, 2)
+        want_g, want_rhs = _reference_rows(lim, cuts, cube)
+        assert k == len(want_rhs) == len(cuts) + 6 * cube
+        np.testing.assert_allclose(g[2:2 + k], want_g, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(rhs[2:2 + k], want_rhs, rtol=0, atol=1e-12)
+        assert np.all(g[:2] == 7.0) and np.all(rhs[2 + k:] == 7.0)  # nothing else written
+
+
+def test_rows_that_do_not_fit_are_refused() -> None:
+    lim, _ = _limit(3.0)
+    lim.prepare(np.ones(3), np.zeros(3), np.zeros(3), np.zeros(12))
+    g, rhs = np.zeros((8, 3)), np.zeros(8)
+    assert lim.write([np.array([1.0, 0.0, 0.0])], True, g, rhs, 1) == 7
+    with pytest.raises(ValueError, match="do not fit"):
+        lim.write([np.array([1.0, 0.0, 0.0])], True, g, rhs, 2)
