@@ -131,3 +131,30 @@ def test_the_ring_agrees_with_the_deque_step_for_step(seed: int) -> None:
         assert got == ref.update_held(t, float(err), held, pos), (seed, k)
         flagged += got
     assert flagged > 0  # the runs reach the deadlock, not only its absence
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_tracking_step_is_the_held_step_of_its_error(seed: int) -> None:
+    """update_tracking (the follower's call: the error ‖p − ξ_p‖ and the travel test on p,
+    in the compiled step) against update_held given that error (numpy's norm, 1e-12 apart
+    at most) and p: the same answers step for step, stalls and travel included."""
+    rng = np.random.default_rng(100 + seed)
+    cfg = DeadlockConfig(window_s=3.0)
+    a, b = DeadlockDetector(cfg), DeadlockDetector(cfg)
+    p, target = rng.normal(0.0, 2.0, 3), np.zeros(12)
+    flagged = 0
+    for k in range(1500):
+        mode = (k // 300) % 3  # stalled 0.8 m away, closing in, travelling away
+        if mode == 1:
+            p = p + (target[0:3] - p) * 0.02
+        elif mode == 2:
+            p = p + np.array([0.02, 0.0, 0.0])
+        p = p + rng.normal(0.0, 1e-4, 3)
+        if k % 300 == 0:
+            target[0:3] = p + rng.normal(0.0, 0.5, 3)
+        held = bool(rng.random() < 0.9)
+        got = a.update_tracking(k * DT, p.copy(), target.copy(), held)
+        want = b.update_held(k * DT, float(np.linalg.norm(p - target[0:3])), held, p.copy())
+        assert got == want, (seed, k)
+        flagged += got
+    assert flagged > 0  # the runs reach a deadlock, not only its absence
