@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 from cli_inproc import run_cli
 from mcap.reader import make_reader
+from mcap.writer import Writer as McapWriter
 from mcap_ros2.decoder import DecoderFactory as Ros2Decoder
 
 from gcs.mission.inproc import run_inproc
 from gcs.records import pair_table, topics
 from gcs.records.export import load_record
+from gcs.records.payloads import layout
 from gcs.records.series import RunSeries
 from gcs.records.writer import write_record
 from gcs.scenario_gen import add_scenario_parser, build
@@ -134,3 +136,36 @@ def test_a_record_written_with_every_pair_still_reads(flown: tuple[Scenario, Pat
     np.testing.assert_allclose(pairs.distance_m[2], np.linalg.norm(
         ser.p[2, i] - ser.p[2, j], axis=1), rtol=0, atol=1e-12)
     np.testing.assert_array_equal(back.min_dist, ser.min_dist)
+
+
+def test_a_record_naming_an_unknown_agent_is_refused(flown: tuple[Scenario, Path],
+                                                     tmp_path: Path) -> None:
+    """A record whose /pairs names an id that has no agent topics (the message's layout
+    otherwise right): one line, exit 2, nothing written."""
+    _, out = flown
+    bad = tmp_path / "bad.mcap"
+    with (out / "record.mcap").open("rb") as f, bad.open("wb") as g:
+        w = McapWriter(g)
+        w.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for sch, ch, msg in make_reader(f).iter_messages():
+            if ch.id not in channels:
+                if sch is not None and sch.id not in schemas:
+                    schemas[sch.id] = w.register_schema(sch.name, sch.encoding, sch.data)
+                channels[ch.id] = w.register_channel(
+                    ch.topic, ch.message_encoding, schemas[sch.id] if sch else 0)
+            data = msg.data
+            if ch.topic == "/pairs":
+                fields = topics.pairs_fields(topics.recorded_pair_count(N), N)
+                row = np.frombuffer(data, layout(fields)).copy()
+                row["j"][0, 0] = N + 7  # no agent has this id
+                data = row.tobytes()
+            w.add_message(channels[ch.id], msg.log_time, data, msg.publish_time)
+        w.finish()
+    res = run_cli("gcs", ["log", "export", str(bad), "--format", "csv", "--out",
+                          str(tmp_path / "csv")])
+    assert res.returncode == 2, res
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "names an agent" in lines[0]
+    assert not (tmp_path / "csv").exists()
