@@ -27,9 +27,11 @@ from gcs.records import topics as tp
 from gcs.records.channels import RecordChannels, RecordContext, cdr_messages
 from gcs.records.events import all_events
 from gcs.records.scene import BEARING_PERIOD_S
+from gcs.records.series import rows_of
 from gcs.report.metrics import Series
 
 RECORD_NAME = "record.mcap"
+CHUNK_STEPS = 64  # steps whose message bodies write_mcap builds at once
 # zstd level 1 on the writing thread: a 60 s cube8 record in about 9 MB, and the fastest
 # (level 3: 3 % smaller, 15 % slower; lz4: 12 % larger; bench/record_cost.py)
 ZSTD_LEVEL = 1
@@ -48,7 +50,6 @@ def write_mcap(path: Path, doc: Mapping[str, Any], series: Series, c: RecordCont
     if len(c.ids) != n:
         raise ValueError(f"the series has {n} agents, the scenario {len(c.ids)}")
     ns = np.round(np.asarray(s.t, float) * 1e9).astype(np.int64)
-    cdr = cdr_messages(s, c)
     events = all_events(doc, ns, c.ids, s.fallback, s.alarms, s.input_clipped)
     dt = float(np.median(np.diff(s.t))) if len(s.t) > 1 else 1.0
     every = max(1, int(round(BEARING_PERIOD_S / dt))) if dt > 0 else 1
@@ -66,13 +67,20 @@ def write_mcap(path: Path, doc: Mapping[str, Any], series: Series, c: RecordCont
             doc.get("metrics") or {}, default=lambda x: getattr(x, "item", lambda: str(x))())})
         ch = RecordChannels(ctx, c)
         e = 0
-        for k, t_ns in enumerate(ns.tolist()):
-            if k == 0:
-                ch.log_setup(t_ns)
-            ch.log_step(s, k, t_ns, cdr, lines=k % every == 0)
-            while e < len(events) and events[e].ns <= t_ns:
-                ch.log_event(events[e], t_ns)
-                e += 1
+        # the ROS 2 bodies of CHUNK_STEPS steps at a time: the same messages in the same
+        # order, without every step's bodies in memory at once (a large swarm's record)
+        for a in range(0, len(ns), CHUNK_STEPS):
+            b = min(a + CHUNK_STEPS, len(ns))
+            part = s if (a, b) == (0, len(ns)) else rows_of(s, slice(a, b))
+            cdr = cdr_messages(part, c)
+            for k in range(a, b):
+                t_ns = int(ns[k])
+                if k == 0:
+                    ch.log_setup(t_ns)
+                ch.log_step(part, k - a, t_ns, cdr, lines=k % every == 0)
+                while e < len(events) and events[e].ns <= t_ns:
+                    ch.log_event(events[e], t_ns)
+                    e += 1
         writer.close()
         os.replace(tmp, path)
     except BaseException:

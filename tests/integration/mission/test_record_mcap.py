@@ -24,6 +24,7 @@ from mcap_ros2.decoder import DecoderFactory as Ros2Decoder
 
 from gcs.cli import main as gcs_main
 from gcs.records import topics as tp
+from gcs.records import writer
 from gcs.records.export import VEHICLE_COLUMNS, load_record, read_vehicle_csv
 from gcs.records.series import UNKNOWN_STATUS, RunSeries
 from gcs.records.writer import write_record
@@ -329,3 +330,20 @@ def test_bad_input_one_line_exit_2(kind: str, run: Path, tmp_path: Path,
         assert not out.exists()
     else:
         assert out.read_text() == "a file"
+
+
+def test_a_record_built_in_chunks_is_the_same_file(run: Path, series: RunSeries,
+                                                   tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """write_mcap builds the ROS 2 bodies CHUNK_STEPS steps at a time: chunks of 7 steps
+    (a boundary inside the bearing lines' period) and one chunk of every step write the
+    same bytes."""
+    doc = json.loads((run / "metrics.json").read_text())
+    sc = load_scenario(str(CUBE8))
+    files = []
+    for steps in (7, 10**9):
+        monkeypatch.setattr(writer, "CHUNK_STEPS", steps)
+        out = tmp_path / str(steps)
+        out.mkdir()
+        files.append(write_record(out, doc, series, sc).read_bytes())
+    assert files[0] == files[1] and len(files[0]) > 10_000
