@@ -7,8 +7,9 @@ its QP. It chains these kernels:
 
 1. the lumped-disturbance estimate ``[f̂, z3 + f̂]``
    (:func:`offboard.estimation.deso_kernel.lumped_into`);
-2. its saturation at ``W_MAX`` for the controller (:func:`saturate_into`, the same
-   in-order sum as :func:`offboard.safety.base.saturate_norm`);
+2. its saturation at ``W_MAX`` for the controller
+   (:func:`~offboard.safety.dcbf.kernel.saturate_into`, the same in-order sum as
+   :func:`offboard.safety.base.saturate_norm`);
 3. the CLF terms and the nominal control (:func:`offboard.safety.clf_kernel.nominal_into`);
 4. Δp, Δv of the sensed pairs (:func:`offboard.estimation.sensing_kernel.pair_rows`),
    followed by the rows of the neighbours that are not sensed but predicted into range
@@ -33,7 +34,6 @@ NamedTuple argument from Python on its slow path, which doubled the call's time.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from typing import NamedTuple
@@ -48,7 +48,7 @@ from offboard.estimation.sensing_kernel import pair_rows
 from offboard.safety.base import W_SAFE, SafetyOutput
 from offboard.safety.clf_kernel import nominal_into
 from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.dcbf.kernel import rows_hold_kernel
+from offboard.safety.dcbf.kernel import rows_hold_kernel, saturate_into
 from offboard.safety.dcbf.step_kernel import (
     GroundInput,
     OwnMotion,
@@ -149,21 +149,6 @@ class FrontOut(NamedTuple):
     dp: np.ndarray  # (≥ M + E, 3) Δp of the rows, sensed then predicted
     dv: np.ndarray  # (≥ M + E, 3) Δv
     u_try: np.ndarray  # (3,) u_nom + sidestep
-
-
-@kernel
-def saturate_into(x: np.ndarray, bound: float, out: np.ndarray) -> None:
-    """``out`` = x (3,) scaled down to Euclidean norm ``bound`` if longer, else x: the
-    bits of :func:`offboard.safety.base.saturate_norm` (the squares summed in order,
-    ``(x0² + x1²) + x2²``; a nan norm leaves x as it is)."""
-    n = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
-    if n > bound:
-        s = bound / n
-        for k in range(3):
-            out[k] = x[k] * s
-    else:
-        for k in range(3):
-            out[k] = x[k]
 
 
 @kernel

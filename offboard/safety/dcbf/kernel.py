@@ -197,6 +197,21 @@ def rows_hold_kernel(
 
 
 @kernel
+def saturate_into(x: np.ndarray, bound: float, out: np.ndarray) -> None:
+    """``out`` = x (3,) scaled down to Euclidean norm ``bound`` if longer, else x: the
+    bits of :func:`offboard.safety.base.saturate_norm` (the squares summed in order,
+    ``(x0² + x1²) + x2²``; a nan norm leaves x as it is)."""
+    n = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    if n > bound:
+        s = bound / n
+        for k in range(3):
+            out[k] = x[k] * s
+    else:
+        for k in range(3):
+            out[k] = x[k]
+
+
+@kernel
 def project_into(out: np.ndarray, proj: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray) -> None:
     """:meth:`offboard.safety.dcbf.model.InputSet.project` of a finite u (3,) (m/s²), in place in
     ``out`` (u on entry; no array to box): with ``proj`` = (uz_lo, uz_hi, uh_lo, uh_hi,

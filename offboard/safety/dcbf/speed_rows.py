@@ -43,7 +43,7 @@ import math
 import numpy as np
 
 from offboard.safety.base import W_SAFE
-from offboard.safety.dcbf.kernel import project_into
+from offboard.safety.dcbf.kernel import project_into, saturate_into
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from swarm_common.fastnp import f64, norm, vec3
 from swarm_common.jit import kernel
@@ -62,15 +62,14 @@ def prepare_kernel(v: np.ndarray, a0: np.ndarray, w: np.ndarray, xi: np.ndarray,
                    proj: np.ndarray, cos_a: np.ndarray, sin_a: np.ndarray,
                    e0: np.ndarray, u_b: np.ndarray) -> None:
     """:meth:`TransientLimit.prepare` into ``e0`` and ``u_b`` (3,): the same operations in
-    numpy's order (``w`` saturated at ``w_safe`` as
-    :func:`offboard.safety.base.saturate_norm` does; ``u_b`` projected by
+    numpy's order (``w`` saturated at ``w_safe`` by
+    :func:`~offboard.safety.dcbf.kernel.saturate_into`; ``u_b`` projected by
     :func:`offboard.safety.dcbf.kernel.project_into`)."""
-    n = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    s = w_safe / n if n > w_safe else 1.0
+    ws = np.empty(3)
+    saturate_into(w, w_safe, ws)
     for k in range(3):
-        wk = w[k] * s if n > w_safe else w[k]
         v_star = (xi[3 + k] + xi[6 + k] * t) + (0.5 * xi[9 + k]) * (t * t)
-        e0[k] = ((v[k] + ia[k] * a0[k]) + wk * t) - v_star
+        e0[k] = ((v[k] + ia[k] * a0[k]) + ws[k] * t) - v_star
         u_b[k] = (-e0[k]) / cv[k]
     project_into(u_b, proj, cos_a, sin_a)
 

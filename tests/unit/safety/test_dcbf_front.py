@@ -21,7 +21,7 @@ from gcs.mission.inproc import MissionResult, run_inproc
 from offboard.agent.follower import FollowerAgent
 from offboard.safety.base import saturate_norm
 from offboard.safety.dcbf.filter import DcbfFilter
-from offboard.safety.dcbf.front import saturate_into
+from offboard.safety.dcbf.kernel import saturate_into
 
 # Both paths call the same kernels with the same arguments in the same order, so here
 # they give the same bits; the comparison allows a relative 1e-9 (about 4.5e6 ulp at
