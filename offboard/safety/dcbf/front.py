@@ -269,31 +269,28 @@ class DcbfFront:
         self._rows_out = tuple(self.filt.rows_out())
 
     def run(
-        self, xi: np.ndarray, meas: Measured | tuple[np.ndarray, np.ndarray, np.ndarray],
-        silence: Silence | tuple[np.ndarray, np.ndarray, float, bool],
-        inner: InnerMotion | tuple[np.ndarray, np.ndarray, np.ndarray],
+        self, xi: np.ndarray, meas: tuple[np.ndarray, np.ndarray, np.ndarray],
+        silence: tuple[np.ndarray, np.ndarray, float, bool],
+        inner: tuple[np.ndarray, np.ndarray, np.ndarray],
         floor: float | None, unsensed: Unsensed = NO_UNSENSED,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, float, bool, np.ndarray]:
-        """One call of :func:`dcbf_front_into` (arguments as there, each group its
-        NamedTuple or a plain tuple in its fields' order; ``floor`` None: no ground
-        barrier): (lumped (2,3), w (3,), clf (CLF_OUT,), K, h_min, held, u_try
-        (3,)). The DESO keeps f̂ for its update, as after
-        :meth:`~offboard.estimation.deso.DESO.lumped`; the rows are in the filter's buffers."""
+        """One call of :func:`dcbf_front_into` (arguments as there; ``meas``, ``silence``
+        and ``inner`` as plain tuples in the order of :class:`Measured`, :class:`Silence`
+        and :class:`InnerMotion`, numba's fast path; ``floor`` None: no ground barrier):
+        (lumped (2,3), w (3,), clf (CLF_OUT,), K, h_min, held, u_try (3,)). The DESO keeps
+        f̂ for its update, as after :meth:`~offboard.estimation.deso.DESO.lumped`; the rows
+        are in the filter's buffers."""
         d, qp = self.deso, self.qp
-        # plain tuples pass as they are (the fast path of numba's typing; _front_call)
-        meas_t = meas if type(meas) is tuple else tuple(meas)
-        silence_t = silence if type(silence) is tuple else tuple(silence)
-        inner_t = inner if type(inner) is tuple else tuple(inner)
-        m = len(meas_t[0]) + len(unsensed.idx)
+        m = len(meas[0]) + len(unsensed.idx)
         ground = floor is not None
         qp.fit_rows(2 * m + 2 if ground else 2 * m)  # room for every row before the call
-        self.filt.note_rows(meas_t[0], unsensed.idx, ground)  # the rows' layout, as the call's
-        self.filt.prepare_trust(inner_t[0], inner_t[1])  # the trust region, if any
+        self.filt.note_rows(meas[0], unsensed.idx, ground)  # the rows' layout, as the call's
+        self.filt.prepare_trust(inner[0], inner[1])  # the trust region, if any
         lumped, w, clf, u_try = np.empty((2, 3)), np.empty(3), np.empty(CLF_OUT), np.empty(3)
         tab = self.acc.table
         k, h_min, held = _front_call(  # the groups in their order, as plain tuples
-            self.prm, (d.z1, d.z2, d.zeta, d.z3), xi, meas_t, tuple(unsensed),
-            silence_t, (tab.acc_t, tab.acc_z2), inner_t, ground,
+            self.prm, (d.z1, d.z2, d.zeta, d.z3), xi, meas, tuple(unsensed),
+            silence, (tab.acc_t, tab.acc_z2), inner, ground,
             0.0 if floor is None else float(floor), self._rows_state, self._rows_out,
             (qp.a_u, qp.lo_u, qp.hi_u, qp.m), (lumped, w, clf, self.dp, self.dv, u_try),
         )
