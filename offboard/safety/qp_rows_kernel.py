@@ -1,8 +1,8 @@
 """Compiled bookkeeping of the safety QPs' data (:class:`offboard.safety.rcbf.clf_rcbf._ClfRowsQP`).
 
 :func:`write_rows_kernel` writes this step's CLF row and safety rows into the QP's
-constraint matrix, bounds and linear cost, and the bounds as DAQP reads them (clamped to
-±1e30), in one call instead of a dozen numpy slice assignments per solve;
+constraint matrix, bounds and linear cost, and DAQP's copy of the problem (the rows in use,
+the bounds clamped to ±1e30), in one call instead of a dozen numpy slice assignments per solve;
 :func:`rows_finite_kernel` is the QPs' finiteness guard in one call. Both copy and compare
 floats only (one division per element of the CLF row, as numpy's), so the QP data are the
 same bits as before (``tests/unit/safety/test_qp_rows_kernel.py``).
@@ -21,14 +21,20 @@ from swarm_common.jit import kernel
 def write_rows_kernel(
     a: np.ndarray, lo: np.ndarray, hi: np.ndarray, q: np.ndarray, lgv: np.ndarray,
     lgv_norm: float, clf_rhs: float, g: np.ndarray, rhs: np.ndarray, k: int, m: int,
-    u_nom: np.ndarray, lo_clamped: np.ndarray, hi_clamped: np.ndarray, inf_clamp: float,
-) -> None:
+    u_nom: np.ndarray, a_daqp: np.ndarray, lo_daqp: np.ndarray, hi_daqp: np.ndarray,
+    inf_clamp: float,
+) -> int:
     """Row 0: the CLF row ``L_gV/‖L_gV‖ u − δ ≤ clf_rhs/‖L_gV‖`` (no row when
     ``lgv_norm`` ≤ 1e-9: zero coefficients, no upper bound); rows 1..k: ``g_j u + σ ≥ r_j``;
     rows k+1..m unused (zero coefficients, no lower bound); ``q[0:3] = −u_nom``. a (rows,5),
     lo, hi, q (5,) are written in place (the columns and rows not named keep their
-    values); lo_clamped, hi_clamped (rows,) receive lo, hi clamped to ±inf_clamp (nan
-    kept)."""
+    values).
+
+    DAQP's copy of the problem leaves the unused rows k+1..m out: the first n rows of
+    a_daqp (rows,5), lo_daqp and hi_daqp (rows,) receive rows 0..k and m+1.. of a, lo and
+    hi, in their order, the bounds clamped to ±inf_clamp (nan kept); returns n. An unused
+    row bounds nothing, yet DAQP works on every row it is given: a problem grown to 256
+    rows for a follower that senses twenty cost it about three times as much per solve."""
     if lgv_norm > 1e-9:
         for c in range(3):
             a[0, c] = lgv[c] / lgv_norm
@@ -48,11 +54,18 @@ def write_rows_kernel(
         lo[1 + r] = -math.inf
     for c in range(3):
         q[c] = -u_nom[c]
+    n = 0
     for r in range(lo.shape[0]):
+        if k < r <= m:
+            continue
+        for c in range(a.shape[1]):
+            a_daqp[n, c] = a[r, c]
         x = lo[r]
-        lo_clamped[r] = -inf_clamp if x < -inf_clamp else x
+        lo_daqp[n] = -inf_clamp if x < -inf_clamp else x
         x = hi[r]
-        hi_clamped[r] = inf_clamp if x > inf_clamp else x
+        hi_daqp[n] = inf_clamp if x > inf_clamp else x
+        n += 1
+    return n
 
 
 @kernel

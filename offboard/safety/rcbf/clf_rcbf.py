@@ -194,6 +194,7 @@ class _ClfRowsQP:
         as DAQP reads them (clamped to ±DAQP_INF, written with the rows in
         :meth:`_solve_rows`) sized to match."""
         self._setup(m)
+        self._a_daqp = np.empty_like(self._a)
         self._lo_daqp, self._hi_daqp = np.empty(len(self.l)), np.empty(len(self.u))
 
     def _setup(self, m: int) -> None:
@@ -249,13 +250,13 @@ class _ClfRowsQP:
         # CLF row normalised by ‖L_gV‖: δ is the shortfall in m/s² along −ŝ, so ρδ² is
         # commensurate with ½‖u − u_nom‖² (ρ ~ 1–10 keeps it soft against the safety rows)
         nrm = math.sqrt(float(clf.lgv.dot(clf.lgv)))
-        write_rows_kernel(
+        n = write_rows_kernel(
             a, self.l, self.u, self.q, vec3(clf.lgv), nrm, float(clf_rhs), rows3(g),
-            f64(rhs), k, m, vec3(u_nom), self._lo_daqp, self._hi_daqp, DAQP_INF,
+            f64(rhs), k, m, vec3(u_nom), self._a_daqp, self._lo_daqp, self._hi_daqp, DAQP_INF,
         )
-        if self.backend is QPSolver.DAQP:
-            x_exact = daqp_solve(self._h, self.q, a, self._lo_daqp, self._hi_daqp,
-                                 clamped=True)
+        if self.backend is QPSolver.DAQP:  # the rows in use only (write_rows_kernel)
+            x_exact = daqp_solve(self._h, self.q, self._a_daqp[:n], self._lo_daqp[:n],
+                                 self._hi_daqp[:n], clamped=True)
             if x_exact is not None:
                 return int(osqp.SolverStatus.OSQP_SOLVED), x_exact
         status, x = update_solve(self.solver, self.q, self.l, self.u, a.T[self._mask_t])
