@@ -29,11 +29,13 @@ import numpy as np
 from swarm_common.fastnp import f64
 from swarm_common.scenario.model import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
-from vehicle_sim.physics.dynamics_kernel import (
+from vehicle_sim.physics.contacts_kernel import (
     GRID_MIN,
-    lumped_accel_kernel,
     min_upper_kernel,
     pair_distances_kernel,
+)
+from vehicle_sim.physics.dynamics_kernel import (
+    lumped_accel_kernel,
     set_command_kernel,
     set_commands_kernel,
     steps_kernel,
@@ -88,7 +90,7 @@ class SwarmDynamics:
         self._contact_count = np.zeros(1, dtype=np.int64)  # pairs in _in_contact
         self._iu = np.triu_indices(self.n, 1)
         # the last step's distance matrix, kept up to GRID_MIN vehicles; a larger swarm's
-        # step finds its contacts on a grid, without one (dynamics_kernel.contacts_into)
+        # step finds its contacts on a grid, without one (contacts_kernel.contacts_into)
         dist = self.pair_distances()
         self._step_min = min_upper_kernel(dist)  # the last step's minimum (m)
         self._step_dist = dist if self.n <= GRID_MIN else np.zeros((0, 0))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from swarm_common.fastnp import rows3, vec3
-from vehicle_sim.physics.dynamics_kernel import pair_distances_kernel
+from vehicle_sim.physics.contacts_kernel import pair_distances_kernel
 
 
 def _kernel_output() -> np.ndarray:

@@ -234,7 +234,7 @@ def test_one_pass_contacts_equal_the_matrix_and_its_scans() -> None:
     matrix: the matrix itself, the contact flags, the pairs entering contact (in the same
     order) and the minimum of the upper triangle; with coincident vehicles, pairs at the
     radius, NaN and inf positions, and contacts carried from the step before."""
-    from vehicle_sim.physics.dynamics_kernel import (
+    from vehicle_sim.physics.contacts_kernel import (
         contacts_into,
         min_upper_kernel,
         pair_distances_kernel,
@@ -279,7 +279,7 @@ def test_grid_contacts_equal_the_pass_over_every_pair() -> None:
     vehicle far away, coincident vehicles, one that is not finite), the same contact flags,
     the same pairs entering contact in the same order, the same count and the same
     minimum, bit for bit, as the pass over every pair."""
-    from vehicle_sim.physics.dynamics_kernel import GRID_MIN, contacts_into
+    from vehicle_sim.physics.contacts_kernel import GRID_MIN, contacts_into
 
     rng = np.random.default_rng(44)
     radius = 0.3
