@@ -89,13 +89,15 @@ def _sweep_into(
         print(f"gcs mission sweep: {why}", file=sys.stderr)
         return EXIT_USAGE
     out.mkdir(parents=True, exist_ok=True)
+    every = make_jobs(scenarios, methods, seeds, duration)
     try:
-        kept = resumable_rows(out / "runs.csv") if args.resume else []
+        kept = (resumable_rows(out / "runs.csv", {j.key: j.duration_s for j in every})
+                if args.resume else [])
     except ValueError as exc:
         print(f"gcs mission sweep: {exc}", file=sys.stderr)
         return EXIT_USAGE
     sink = RowSink(out / "runs.csv", kept)
-    jobs = [j for j in make_jobs(scenarios, methods, seeds, duration) if j.key not in sink.keys]
+    jobs = [j for j in every if j.key not in sink.keys]
     where = f"cluster {args.cluster}" if client is not None else f"{workers} workers"
     log.info("sweep: %d runs on %s -> %s (%d kept)", len(jobs), where, out, len(kept))
     t0 = time.monotonic()

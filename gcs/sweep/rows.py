@@ -127,13 +127,30 @@ class RowSink:
         self._fh.close()
 
 
-def resumable_rows(path: Path) -> list[dict[str, Any]]:
+def resumable_rows(
+    path: Path, grid: dict[tuple[str, str, int], float] | None = None,
+) -> list[dict[str, Any]]:
     """The ``ok`` rows of an earlier sweep's ``runs.csv`` (none when it is missing); a
-    crashed run is run again."""
+    crashed run is run again. ``grid``: the runs of this sweep, (scenario, method, seed)
+    to their simulated seconds. A row that is not one of them, or that ran another
+    duration, is refused (ValueError, nothing kept): the file is the record of one sweep,
+    and resuming with another grid would mix two sweeps in one summary, or drop the rows
+    that are not in the new grid when the file is written again."""
     if not path.exists():
         return []
     try:
         rows = read_csv_rows(path)
     except (OSError, ValueError, KeyError) as exc:
         raise ValueError(f"--resume: cannot read {path} ({exc})") from None
+    if grid is not None:
+        foreign = [r for r in rows if grid.get(row_key(r)) != r["duration_s"]]
+        if foreign:
+            r = foreign[0]
+            what = ("ran for another duration" if row_key(r) in grid
+                    else "is not in this sweep's grid")
+            raise ValueError(
+                f"--resume: {path} holds {len(foreign)} run(s) this sweep would not make "
+                f"(scenario {r['scenario']!r}, method {r['method']!r}, seed {r['seed']}, "
+                f"{r['duration_s']} s {what}); resume with the scenarios, methods, seeds "
+                "and duration that made them, or choose another --out")
     return [r for r in rows if r["status"] == "ok"]

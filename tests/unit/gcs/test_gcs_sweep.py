@@ -172,6 +172,24 @@ def test_runs_csv_reads_back_to_the_same_cells(tmp_path: Path) -> None:
     assert resumable_rows(tmp_path / "missing.csv") == []
 
 
+def test_resume_refuses_rows_of_another_grid(tmp_path: Path) -> None:
+    """--resume keeps the rows of the sweep's own grid only: a row of another scenario,
+    method or seed, or of another duration, is refused in one line naming it (the file
+    is left as it is), and a grid that holds every row resumes."""
+    path = tmp_path / "runs.csv"
+    write_csv(path, [_csv_row(1), _csv_row(2, status="crashed", error="E"), _csv_row(3)])
+    before = path.read_bytes()
+    grid = {("cube8", "rcbf", s): 2.0 for s in (1, 2, 3, 4)}
+    assert [r["seed"] for r in resumable_rows(path, grid)] == [1, 3]
+    for other, why in (({k: v for k, v in grid.items() if k[2] != 2}, "not in this sweep"),
+                       ({k: 3.0 for k in grid}, "another duration"),
+                       ({("cube8", "dcbf", s): 2.0 for s in (1, 2, 3)}, "not in this sweep")):
+        with pytest.raises(ValueError, match=why) as err:
+            resumable_rows(path, other)
+        assert "\n" not in str(err.value) and "--out" in str(err.value)
+    assert path.read_bytes() == before
+
+
 def test_row_sink_appends_flushed_rows_once(tmp_path: Path) -> None:
     path = tmp_path / "runs.csv"
     sink = RowSink(path, [_csv_row(1)])
