@@ -44,13 +44,14 @@ from swarm_common.inputs import one_line
 from swarm_common.scenario.files import swarm_name_problem
 from swarm_common.scenario.model import Scenario, ScenarioError, dump_toml, parse_scenario
 
+# in process; a distributed run takes MAVLink's system ids, 1..255 (Scenario.process_problem)
+from swarm_common.scenario.schema import MAX_AGENTS
+
 BASE_ALT_M = 2.0  # lowest vertex altitude (m); the leaders' trajectory only climbs (A_z > 0)
 JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
 RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this
 TRANSIENT_STEP = 0.05  # m/s: the written max_transient_speed_mps is a multiple of this
 DEFAULT_K = 6  # first knn_k tried when --k is not given
-# in process; a distributed run takes MAVLink's system ids, 1..255 (Scenario.process_problem)
-MAX_AGENTS = 2048
 HELIX_PER_TURN = 8  # vertices per helix turn
 
 
@@ -157,7 +158,10 @@ def _template(name: str, seed: int, duration: float, deadline: float) -> dict[st
 def _longest_edge(v: np.ndarray, graph: GraphKind, k: int) -> float:
     from swarm_common.scenario import graphs
     spec = graphs.GraphSpec(kind=str(graph), knn_k=k)
-    edges = graphs.build_edges(v, spec, list(range(1, len(v) + 1)))
+    try:
+        edges = graphs.build_edges(v, spec, list(range(1, len(v) + 1)))
+    except ValueError as exc:  # past the scenario's edge limit: a denser graph won't do
+        raise GenError(str(exc)) from None
     return max(float(np.linalg.norm(v[i] - v[j])) for i, j in edges)
 
 

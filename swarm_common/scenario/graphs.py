@@ -41,7 +41,7 @@ from scipy.sparse.linalg import LinearOperator, eigsh, splu
 from scipy.spatial import cKDTree
 
 from swarm_common.memo import ContentMemo
-from swarm_common.scenario.schema import FormationConfig
+from swarm_common.scenario.schema import MAX_EDGES, FormationConfig
 
 DIST_TOL = 1e-6  # relative tolerance on vertex distances (ties, ranges)
 EIG_TOL = 1e-9  # eigenvalue counted as zero below EIG_TOL · max(1, Gershgorin bound)
@@ -167,11 +167,23 @@ def id_edges(ids: Sequence[int], pairs: Sequence[Sequence[int]]) -> list[tuple[i
 
 
 def build_edges(v: np.ndarray, spec: GraphSpec, ids: Sequence[int]) -> list[tuple[int, int]]:
-    """Undirected edges (i < j) of the graph ``spec`` over vertices ``v`` (N, 3)."""
-    v = np.asarray(v, dtype=float)
+    """Undirected edges (i < j) of the graph ``spec`` over vertices ``v`` (N, 3); a
+    ValueError (one line) past :data:`~swarm_common.scenario.schema.MAX_EDGES` of them."""
+    edges = _kind_edges(np.asarray(v, dtype=float), spec, ids)
+    if len(edges) > MAX_EDGES:
+        raise ValueError(f"{spec.describe()}: {len(edges)} edges, at most {MAX_EDGES}: use a "
+                         "sparser graph")
+    return edges
+
+
+def _kind_edges(v: np.ndarray, spec: GraphSpec, ids: Sequence[int]) -> list[tuple[int, int]]:
     kind = str(spec.kind)
     if kind == "complete":
-        return [(i, j) for i in range(len(v)) for j in range(i + 1, len(v))]
+        n = len(v)
+        if n * (n - 1) // 2 > MAX_EDGES:  # not even listed
+            raise ValueError(f'formation.graph = "complete": {n} agents have {n * (n - 1) // 2} '
+                             f"pairs, at most {MAX_EDGES} edges: use knn or range")
+        return [(i, j) for i in range(n) for j in range(i + 1, n)]
     if kind == "cube_face_diagonals":
         return shell_edges(v, (1.0, math.sqrt(2.0)))
     if kind == "cube_edges":

@@ -41,6 +41,7 @@ from swarm_common.scenario.files import (
 from swarm_common.scenario.schema import (
     AGENT_OPTIONAL,
     AGENT_SCHEMA,
+    MAX_AGENTS,
     OPTIONAL_SECTIONS,
     SCHEMA,
     SECTIONS,
@@ -198,6 +199,8 @@ def parse_scenario(
     agents_raw = data.get("agent")
     if not isinstance(agents_raw, list) or len(agents_raw) < 2:
         raise fail("[[agent]] must list at least 2 agents")
+    if len(agents_raw) > MAX_AGENTS:
+        raise fail(f"[[agent]] lists {len(agents_raw)} agents: at most {MAX_AGENTS}")
     agents: list[AgentSpec] = []
     seen: set[int] = set()
     for k, a in enumerate(agents_raw):

@@ -252,6 +252,13 @@ SCHEMA: dict[str, dict[str, Spec]] = {
 # agent ids: an in-process swarm may be this large; a distributed run gives each vehicle a
 # MAVLink system id and takes 1..MAVLINK_MAX_ID only (mavlink_id_problem)
 MAX_AGENT_ID = 65535
+# the most agents a scenario may list: the largest swarm measured in process (a follower
+# keeps rows for every agent, so memory grows with N²: 3.6 GB at 2,048; docs/performance.md)
+MAX_AGENTS = 2048
+# the most edges a formation graph may have: the load-time checks work edge by edge
+# (a complete graph of 300 agents, 44,850 edges, loads in about 5 s), and a follower with
+# hundreds of neighbours is no bearing-sensing formation (docs/graphs.md)
+MAX_EDGES = 65536
 MAVLINK_MAX_ID = MAX_ID  # swarm_common.ports: the MAVLink system ids the port scheme covers
 
 

@@ -220,6 +220,8 @@ BY_KIND: dict[str, list[Case]] = {
             expect="--leaders 8: must be below --agents 8"),
         gcs("scenario", "sphere", "--agents", "2049", "--leaders", "2", "--scramble", "1",
             expect="--agents 2049: at most 2048"),
+        gcs("scenario", "grid", "--agents", "2000", "--leaders", "4", "--scramble", "1",
+            "--graph", "complete", expect="2000 agents have 1999000 pairs, at most 65536 edges"),
         gcs("scenario", "helix", "--agents", "-8", "--leaders", "2", "--scramble", "1",
             expect="--agents -8: need at least 3"),
         gcs(*GEN, "--k", "100", expect="--k 100: must be in 1..7"),

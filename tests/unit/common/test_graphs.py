@@ -263,3 +263,38 @@ def test_the_dense_bearing_laplacian_is_the_sparse_one_and_annihilates_the_forma
     moved = GRID.copy()
     moved[0] += 0.3  # one vertex off its bearings: no longer in the null space
     assert np.abs(dense @ moved.ravel()).max() > 1e-3
+
+
+def test_swarm_and_graph_size_limits_refused_in_one_line():
+    """A scenario past MAX_AGENTS agents, or whose graph has more than MAX_EDGES edges, is
+    refused at load in one line, before the checks that work agent by agent and edge by
+    edge (a complete graph of 2,000 agents took minutes and gigabytes before)."""
+    import argparse
+    import copy
+
+    from gcs.scenario_gen import add_scenario_parser, build
+    from swarm_common.scenario.model import parse_scenario
+    from swarm_common.scenario.schema import MAX_AGENTS, MAX_EDGES
+
+    ap = argparse.ArgumentParser()
+    add_scenario_parser(ap.add_subparsers())
+    doc, _, sc = build(ap.parse_args(["scenario", "grid", "--agents", "400", "--leaders", "8",
+                                      "--scramble", "1"]))
+    assert sc.n == 400  # the sparse graph loads
+    dense = copy.deepcopy(doc)
+    dense["formation"]["graph"] = "complete"
+    with pytest.raises(ScenarioError, match=rf'formation.graph = "complete": 400 agents have '
+                       rf"79800 pairs, at most {MAX_EDGES} edges: use knn or range$") as ei:
+        parse_scenario(dense, "dense")
+    assert "\n" not in str(ei.value)
+    many = copy.deepcopy(doc)
+    extra = MAX_AGENTS + 1 - len(many["agent"])
+    many["agent"] += [dict(a, id=1000 + i) for i, a in enumerate(many["agent"][-1:] * extra)]
+    with pytest.raises(ScenarioError, match=rf"\[\[agent\]\] lists {MAX_AGENTS + 1} agents: "
+                       rf"at most {MAX_AGENTS}$"):
+        parse_scenario(many, "many")
+    pts = np.random.default_rng(3).uniform(0.0, 30.0, size=(600, 3))
+    with pytest.raises(ValueError, match=rf"\(knn_k = 250\): \d+ edges, at most {MAX_EDGES}"):
+        graphs.build_edges(pts, graphs.GraphSpec(kind="knn", knn_k=250), range(1, 601))
+    assert len(graphs.build_edges(pts, graphs.GraphSpec(kind="knn", knn_k=6), range(1, 601))) \
+        < MAX_EDGES
