@@ -5,7 +5,8 @@
 exact first-order attitude and thrust lags, the thrust acceleration R e3 F / m − g e_z,
 the lumped disturbance Φ(p, v) ζ + d(t)/m (:func:`lumped_accel_kernel`), semi-implicit
 Euler, ground contact, the spawn fixture (held vehicles), and the pair distances with the
-collision bookkeeping (:mod:`vehicle_sim.physics.contacts_kernel`). The class around it keeps the state, the commands and the names.
+collision bookkeeping (:mod:`vehicle_sim.physics.contacts_kernel`). The class around it
+keeps the state, the commands and the names.
 
 The operations and their order are those of the numpy formulation it replaced, with
 these exceptions, each a last-bit difference at most
