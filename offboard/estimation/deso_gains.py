@@ -31,6 +31,10 @@ log = logging.getLogger(__name__)
 DENSE_MAX = 256  # matrix order up to which every eigenvalue is computed (numpy, dense)
 ARPACK_K = 6  # eigenvalues of largest modulus asked of ARPACK (clusters near the top)
 ARPACK_NCV = 40  # its Lanczos/Arnoldi basis size
+# its restarts before the dense fallback: the generated grids and spheres converge in far
+# fewer; a ring's loops, with clusters of eigenvalues at the top, ran scipy's 20 n restarts
+# without converging, 10-40 s a loop (a 128-agent ring took 256 s to generate)
+ARPACK_MAXITER = 1000
 # channels sampled across [λ_min, λ_max] when a large formation has only the ends of its
 # spectrum (swarm_common.scenario.graphs.spectrum): geometric, both ends exact
 CHANNEL_SAMPLES = 512
@@ -163,18 +167,18 @@ def spectral_radius(m: sparse.csr_matrix) -> float:
     """max |λ| of the square matrix ``m``: every eigenvalue (numpy, dense) up to order
     :data:`DENSE_MAX`; above it the :data:`ARPACK_K` of largest modulus (ARPACK, from a
     fixed start vector: the same answer every run), dense again if ARPACK does not
-    converge. Dense eigenvalues cost O(n³): 6.4 s for the four loops of a 125-agent grid
-    (orders 1089 and 2178), against about 0.1 s sparse; on grid64 the two agree to 10
-    digits (docs/performance.md)."""
+    converge within :data:`ARPACK_MAXITER` restarts. Dense eigenvalues cost O(n³): 6.4 s
+    for the four loops of a 125-agent grid (orders 1089 and 2178), against about 0.1 s
+    sparse; on grid64 the two agree to 10 digits (docs/performance.md)."""
     n = m.shape[0]
     if n <= DENSE_MAX:
         return float(np.max(np.abs(np.linalg.eigvals(m.toarray()))))
     v0 = np.random.default_rng(0).standard_normal(n)
     try:
         ev = eigs(m, k=ARPACK_K, which="LM", v0=v0, ncv=min(n - 1, ARPACK_NCV), tol=0.0,
-                  maxiter=20 * n, return_eigenvectors=False)
+                  maxiter=min(20 * n, ARPACK_MAXITER), return_eigenvectors=False)
     except ArpackNoConvergence:
-        log.warning("spectral radius of order %d: ARPACK did not converge, dense", n)
+        log.debug("spectral radius of order %d: ARPACK did not converge, dense", n)
         return float(np.max(np.abs(np.linalg.eigvals(m.toarray()))))
     return float(np.max(np.abs(ev)))
 

@@ -98,3 +98,22 @@ def test_spectral_radius_falls_back_to_dense(monkeypatch):
     monkeypatch.setattr(gains, "eigs", no_convergence)
     m = sparse.diags(np.linspace(-0.5, 0.97, 300), format="csr")
     assert gains.spectral_radius(m) == pytest.approx(0.97, abs=1e-12)
+
+
+def test_spectral_radius_bounds_arpack_restarts(monkeypatch):
+    """ARPACK gets at most ARPACK_MAXITER restarts, whatever the order (a generated ring's
+    loops ran scipy's 20 n before the fallback, minutes per scenario), and a matrix it
+    answers within them keeps ARPACK's answer."""
+    seen: list[int] = []
+    real = gains.eigs
+
+    def recorded(*args, **kwargs):
+        seen.append(int(kwargs["maxiter"]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(gains, "eigs", recorded)
+    m = sparse.diags(np.linspace(-0.5, 0.97, 300), format="csr") \
+        + sparse.random(300, 300, density=0.005, random_state=np.random.default_rng(2)) * 1e-3
+    dense = float(np.max(np.abs(np.linalg.eigvals(m.toarray()))))
+    assert gains.spectral_radius(m) == pytest.approx(dense, rel=1e-10)
+    assert seen == [min(20 * 300, gains.ARPACK_MAXITER)] and gains.ARPACK_MAXITER < 20 * 300
