@@ -9,8 +9,9 @@ formations"):
 * **leaders** (ids 1..L) spread over the shape by farthest-point sampling, starting on
   their own vertices, so the leaders' separation is the formation's scale (Departure 1);
 * a **sparse graph** (``--graph knn`` by default): without ``--k`` the smallest
-  ``knn_k`` ≥ ``DEFAULT_K`` whose graph passes the loader's rigidity and observability
-  check (docs/graphs.md); the sensing range is the longest edge plus ``RANGE_MARGIN``, and
+  ``knn_k`` ≥ ``DEFAULT_K`` (at most ``K_TRIES`` values) whose graph passes the loader's
+  rigidity and observability check (docs/graphs.md); the sensing range is the longest
+  edge plus ``RANGE_MARGIN``, and
   with ``--mix`` > 0 at least the swarm's span (start or formation) times it;
 * **follower starts**, seeded by ``--scramble SEED``: a fraction ``--mix`` (default 0) of
   the followers permuted over each other's vertices, every follower vertex shrunk by
@@ -52,6 +53,10 @@ JITTER = 0.1  # start jitter per axis, as a fraction of the spacing
 RANGE_MARGIN = 1.2  # sensing range = longest graph edge × this
 TRANSIENT_STEP = 0.05  # m/s: the written max_transient_speed_mps is a multiple of this
 DEFAULT_K = 6  # first knn_k tried when --k is not given
+# the knn_k tried without --k: DEFAULT_K and the K_TRIES - 1 after it. Each try checks the
+# graph (at 2,048 agents up to a minute: a ring's spectrum goes dense, docs/graphs.md), and
+# the generated shapes that form take at most 10 (a 128-agent ring); past that --k decides
+K_TRIES = 10
 HELIX_PER_TURN = 8  # vertices per helix turn
 
 
@@ -227,7 +232,7 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int, Scenario]:
     v = base[lead + [i for i in range(n) if i not in lead]]  # leaders first: ids 1..L
     starts = scrambled_starts(v, n_lead, args.scramble, args.mix, args.shrink, args.spacing)
     ks = [args.k] if args.k is not None or args.graph is not GraphKind.KNN else \
-        list(range(min(DEFAULT_K, n - 1), n))
+        list(range(min(DEFAULT_K, n - 1), min(n, DEFAULT_K + K_TRIES)))
     name = f"{args.shape}{n}" if args.name is None else args.name  # "" refused by _name
     doc = _template(name, args.scramble, args.duration, args.deadline)
     doc["agent"] = [{"id": i + 1, "role": str(Role.LEADER if i < n_lead else Role.FOLLOWER),
@@ -256,6 +261,9 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int, Scenario]:
             problem = f"{where}: {unstable}"
             continue
         return doc, k or 0, sc
+    else:  # every k tried: a graph or gain problem each time
+        if len(ks) > 1:
+            problem += f" (knn_k {ks[0]}..{ks[-1]} tried; give --k to try another)"
     raise GenError(problem)
 
 

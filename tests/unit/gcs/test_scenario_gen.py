@@ -182,3 +182,28 @@ def test_few_leaders_for_a_large_grid_is_warned_and_still_written(capsys) -> Non
     assert _load(out.out).n == 125
     assert cmd_scenario(_args("grid", "--agents", "27", "--leaders", "4", "--scramble", "1")) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_the_knn_search_stops_after_k_tries(monkeypatch) -> None:
+    """Without --k the generator tries K_TRIES values of knn_k from DEFAULT_K, each one a
+    whole check of the graph, and then refuses in one line naming them (a 2,048-agent ring
+    tried k = 6, 7, ... for more than fifteen minutes before)."""
+    import gcs.scenario_gen as gen
+    from swarm_common.scenario.model import ScenarioError
+
+    tried: list[int] = []
+
+    def never_rigid(doc, where, *args, **kwargs):
+        tried.append(int(doc["formation"]["knn_k"]))
+        raise ScenarioError(f'{where}: formation.graph = "knn": not rigid')
+
+    monkeypatch.setattr(gen, "parse_scenario", never_rigid)
+    with pytest.raises(GenError, match=r"not rigid \(knn_k 6\.\.15 tried; give --k to try "
+                       r"another\)$") as err:
+        build(_args("ring", "--agents", "40", "--leaders", "4", "--scramble", "1"))
+    assert tried == list(range(gen.DEFAULT_K, gen.DEFAULT_K + gen.K_TRIES)) == list(range(6, 16))
+    assert "\n" not in str(err.value)
+    tried.clear()
+    with pytest.raises(GenError, match=r"not rigid$"):  # --k: that one only, no suffix
+        build(_args("ring", "--agents", "40", "--leaders", "4", "--scramble", "1", "--k", "7"))
+    assert tried == [7]
