@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from swarm_common.scenario import graphs
+from swarm_common.scenario import graphs, spectra
 from swarm_common.scenario.graphs import GraphSpec
 
 
@@ -81,8 +81,8 @@ class Formation:
     l_ff: np.ndarray
     l_fl: np.ndarray
     rank: int
-    # eigenvalues of L_ff, ascending: above graphs.DENSE_SPECTRUM_MAX rows only the two
-    # ends [λ_min, λ_max] (graphs.spectrum)
+    # eigenvalues of L_ff, ascending: above spectra.DENSE_SPECTRUM_MAX rows only the two
+    # ends [λ_min, λ_max] (spectra.spectrum)
     lambda_ff: np.ndarray
     # per index, the agents sensed in the desired formation (graph neighbours and every
     # agent within the sensing range; everyone when the range is not given)
@@ -137,11 +137,11 @@ class Formation:
 
     def observer_eigs(self, leader_anchor: float) -> np.ndarray:
         """Eigenvalues (ascending) of :meth:`observer_laplacian` (cached per anchor; above
-        ``graphs.DENSE_SPECTRUM_MAX`` rows the two ends only, :func:`graphs.spectrum`)."""
+        ``spectra.DENSE_SPECTRUM_MAX`` rows the two ends only, :func:`spectra.spectrum`)."""
         key = float(leader_anchor)
         if key not in self._obs_eigs:
             lap = self.observer_laplacian(key)
-            self._obs_eigs[key] = graphs.spectrum(lap)
+            self._obs_eigs[key] = spectra.spectrum(lap)
         return self._obs_eigs[key]
 
     def desired_positions(self, leader_pos: np.ndarray) -> np.ndarray:
@@ -167,7 +167,7 @@ class Formation:
     def _leader_map(self) -> np.ndarray:
         """(3F, 3L) −L_ff⁻¹ L_fl (computed once)."""
         if self._kfl is None:
-            self._kfl = -graphs.follower_solve(self.l_ff, self.l_fl)
+            self._kfl = -spectra.follower_solve(self.l_ff, self.l_fl)
         return self._kfl
 
 
@@ -215,7 +215,7 @@ def build_formation(
         l_ff=l_ff,
         l_fl=lap[np.ix_(fb, lb)],
         rank=3 * n - 4,
-        lambda_ff=graphs.spectrum(l_ff),
+        lambda_ff=spectra.spectrum(l_ff),
         sensed=graphs.sensed_sets(v, edges, spec.range_vu),
     )
 
@@ -234,7 +234,7 @@ def check_observable(form: Formation, leader_anchor: float) -> None:
     :meth:`Formation.observer_laplacian` is positive definite (paper §3: every channel
     s³ + β1λ s² + β2λ s + β3λ needs λ > 0)."""
     lam = form.observer_eigs(leader_anchor)
-    if len(lam) and lam[0] <= graphs.EIG_TOL * max(1.0, float(lam[-1])):
+    if len(lam) and lam[0] <= spectra.EIG_TOL * max(1.0, float(lam[-1])):
         raise RigidityError(
             f"observer.leader_anchor = {leader_anchor:g}: the observer matrix L_ff + anchors "
             f"is not positive definite (lambda_min = {lam[0]:.3g}); the followers' positions "

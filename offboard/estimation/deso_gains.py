@@ -36,7 +36,7 @@ ARPACK_NCV = 40  # its Lanczos/Arnoldi basis size
 # without converging, 10-40 s a loop (a 128-agent ring took 256 s to generate)
 ARPACK_MAXITER = 1000
 # channels sampled across [λ_min, λ_max] when a large formation has only the ends of its
-# spectrum (swarm_common.scenario.graphs.spectrum): geometric, both ends exact
+# spectrum (swarm_common.scenario.spectra.spectrum): geometric, both ends exact
 CHANNEL_SAMPLES = 512
 
 
@@ -236,7 +236,7 @@ def gain_report(
 def channels(lam: np.ndarray, order: int) -> np.ndarray:
     """The channels a gain report checks: ``lam`` itself when it holds all ``order``
     eigenvalues; when it holds only the two ends of a large formation's spectrum
-    (:func:`swarm_common.scenario.graphs.spectrum`), :data:`CHANNEL_SAMPLES` values
+    (:func:`swarm_common.scenario.spectra.spectrum`), :data:`CHANNEL_SAMPLES` values
     spaced geometrically from λ_min to λ_max. Every eigenvalue lies in that interval; the
     margin β1β2λ − β3 is least at λ_min, which is exact, and the slowest pole is taken
     over the samples (docs/performance.md, "Start-up of a large formation")."""

@@ -5,5 +5,6 @@ Entry point: :func:`swarm_common.scenario.model.load_scenario` returns a
 
 * :mod:`.schema` - one frozen dataclass per TOML section; :mod:`.files` - reading and writing.
 * :mod:`.checks` - checks across keys; :mod:`.feasibility` - can every vehicle fly its path.
-* :mod:`.graphs` - neighbour graphs and their rigidity.
+* :mod:`.graphs` - neighbour graphs and their rigidity; :mod:`.spectra` - the eigenvalues
+  and solves of their matrices.
 """

@@ -48,7 +48,7 @@ from scipy.linalg import expm
 
 from swarm_common.enums import StartMode
 from swarm_common.memo import IdentityMemo
-from swarm_common.scenario import graphs
+from swarm_common.scenario import graphs, spectra
 from swarm_common.scenario.input_set import InputSet
 from swarm_common.unmodeled import regressor
 
@@ -81,17 +81,17 @@ def formation_map(sc: Scenario) -> np.ndarray | None:
     if not len(fb):
         return np.zeros((0, len(lb)))
     l_ff_s = lap[fb][:, fb]
-    if l_ff_s.shape[0] > graphs.DENSE_SPECTRUM_MAX:  # sparse, once per scenario object
+    if l_ff_s.shape[0] > spectra.DENSE_SPECTRUM_MAX:  # sparse, once per scenario object
         return _sparse_maps.get(sc, "map", lambda: _sparse_map(l_ff_s, lap[fb][:, lb]))
     l_ff = l_ff_s.toarray()
     try:
         chol = np.linalg.cholesky(l_ff)
     except np.linalg.LinAlgError:
         return None
-    if np.min(np.abs(np.diag(chol))) ** 2 <= graphs.zero_tol(l_ff_s):
+    if np.min(np.abs(np.diag(chol))) ** 2 <= spectra.zero_tol(l_ff_s):
         return None
     rhs = lap[fb][:, lb].toarray()
-    return -graphs.follower_solve(l_ff, rhs)
+    return -spectra.follower_solve(l_ff, rhs)
 
 
 # the sparse maps of large formations: the loader's check, the leaders' governors and the
@@ -102,10 +102,10 @@ _sparse_maps: IdentityMemo[np.ndarray | None] = IdentityMemo(4)
 
 def _sparse_map(l_ff: sp.spmatrix, l_fl: sp.spmatrix) -> np.ndarray | None:
     """:func:`formation_map` of a large formation: None when L_ff's smallest eigenvalue
-    is zero to :func:`graphs.zero_tol`, else the sparse LU's −L_ff⁻¹ L_fl."""
-    if graphs.smallest_eig(l_ff) <= graphs.zero_tol(l_ff):
+    is zero to :func:`spectra.zero_tol`, else the sparse LU's −L_ff⁻¹ L_fl."""
+    if spectra.smallest_eig(l_ff) <= spectra.zero_tol(l_ff):
         return None
-    return -graphs.follower_solve(l_ff, l_fl)
+    return -spectra.follower_solve(l_ff, l_fl)
 
 
 def leader_origins(sc: Scenario) -> np.ndarray:

@@ -18,7 +18,7 @@ from offboard.estimation.deso import DESO, observer_weights
 from offboard.estimation.deso_gains import gain_report
 from offboard.estimation.peer_table import rows_of
 from offboard.estimation.reference import DesiredStateObserver, LeaderTrajectory
-from swarm_common.scenario import graphs
+from swarm_common.scenario import graphs, spectra
 from swarm_common.scenario.model import ScenarioError, load_scenario, with_overrides
 
 GRID27 = ROOT / "scenarios" / "grid27_knn.toml"
@@ -87,14 +87,14 @@ def test_sparse_and_dense_checks_agree(monkeypatch):
     lap = graphs.sparse_laplacian(GRID, e)
     q = graphs.trivial_null_space(GRID)
     assert np.allclose(lap @ q, 0.0) and np.allclose(q.T @ q, np.eye(4))
-    sparse = graphs.smallest_eig(lap, q)  # 81 > DENSE_MAX: Lanczos
-    monkeypatch.setattr(graphs, "DENSE_MAX", 10**6)
-    dense = graphs.smallest_eig(lap, q)
+    sparse = spectra.smallest_eig(lap, q)  # 81 > DENSE_MAX: Lanczos
+    monkeypatch.setattr(spectra, "DENSE_MAX", 10**6)
+    dense = spectra.smallest_eig(lap, q)
     assert sparse == pytest.approx(dense, rel=1e-8) and dense > 0.1
     # knn_k = 3 keeps only the grid's axis edges: the grid can shear, rank is lost
     loose = graphs.sparse_laplacian(GRID, graphs.knn_edges(GRID, 3))
-    monkeypatch.setattr(graphs, "DENSE_MAX", 60)
-    assert graphs.smallest_eig(loose, q) < 1e-8
+    monkeypatch.setattr(spectra, "DENSE_MAX", 60)
+    assert spectra.smallest_eig(loose, q) < 1e-8
 
 
 def test_scenario_defaults_keep_old_files_valid():
@@ -308,20 +308,20 @@ def test_smallest_eig_and_spectrum_fall_back_to_dense_when_lanczos_stalls(monkey
 
     rng = np.random.default_rng(7)
     a = rng.normal(size=(200, 200))
-    m = graphs.sp.csr_matrix(a @ a.T / 200.0)
+    m = spectra.sp.csr_matrix(a @ a.T / 200.0)
     q = np.linalg.qr(rng.normal(size=(200, 2)))[0]
     want = np.linalg.eigvalsh(m.toarray())
     want_q = np.linalg.eigvalsh(m.toarray() + q @ q.T)[0]
-    assert graphs.smallest_eig(m) == pytest.approx(want[0], rel=1e-8)  # Lanczos converges
+    assert spectra.smallest_eig(m) == pytest.approx(want[0], rel=1e-8)  # Lanczos converges
     seen: list[int] = []
 
     def stalled(*args, **kwargs):
         seen.append(int(kwargs["maxiter"]))
         raise ArpackNoConvergence("stalled", np.array([]), np.array([]))
 
-    monkeypatch.setattr(graphs, "eigsh", stalled)
-    assert graphs.smallest_eig(m) == pytest.approx(want[0], rel=1e-12)
-    assert graphs.smallest_eig(m, q) == pytest.approx(want_q, rel=1e-12)
-    lo, hi = graphs.spectrum(m, dense_max=10)
+    monkeypatch.setattr(spectra, "eigsh", stalled)
+    assert spectra.smallest_eig(m) == pytest.approx(want[0], rel=1e-12)
+    assert spectra.smallest_eig(m, q) == pytest.approx(want_q, rel=1e-12)
+    lo, hi = spectra.spectrum(m, dense_max=10)
     assert lo == pytest.approx(want[0], rel=1e-12) and hi == pytest.approx(want[-1], rel=1e-12)
-    assert seen and set(seen) == {graphs.ARPACK_MAXITER}
+    assert seen and set(seen) == {spectra.ARPACK_MAXITER}

@@ -1,5 +1,5 @@
 """Start-up of a large formation: the sparse spectrum and solve above
-``graphs.DENSE_SPECTRUM_MAX``, the k-d tree pair search of the loader's checks, and the gain
+``spectra.DENSE_SPECTRUM_MAX``, the k-d tree pair search of the loader's checks, and the gain
 report's channels when only the ends of the spectrum are known (docs/performance.md)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from conftest import ROOT  # noqa: E402
 
 from offboard.estimation.bearing import formation_from_scenario
 from offboard.estimation.deso_gains import CHANNEL_SAMPLES, channels, gain_report
-from swarm_common.scenario import feasibility, graphs
+from swarm_common.scenario import feasibility, graphs, spectra
 from swarm_common.scenario.checks import check_separation
 from swarm_common.scenario.model import load_scenario
 from swarm_common.scenario.spec import AgentSpec, Role
@@ -33,9 +33,9 @@ def _blocks_125() -> tuple[object, object]:
 def test_sparse_spectrum_ends_are_the_dense_ones():
     l_ff, _ = _blocks_125()
     dense = np.linalg.eigvalsh(l_ff.toarray())
-    full = graphs.spectrum(l_ff)  # 363 rows: below the threshold, every eigenvalue
+    full = spectra.spectrum(l_ff)  # 363 rows: below the threshold, every eigenvalue
     assert len(full) == l_ff.shape[0] and np.array_equal(full, dense)
-    ends = graphs.spectrum(l_ff, dense_max=0)  # forced onto the sparse path
+    ends = spectra.spectrum(l_ff, dense_max=0)  # forced onto the sparse path
     assert len(ends) == 2
     assert ends[0] == pytest.approx(dense[0], rel=1e-8) and dense[0] > 1e-3
     assert ends[1] == pytest.approx(dense[-1], rel=1e-8)
@@ -43,9 +43,9 @@ def test_sparse_spectrum_ends_are_the_dense_ones():
 
 def test_sparse_follower_solve_matches_the_dense_solve():
     l_ff, l_fl = _blocks_125()
-    dense = graphs.follower_solve(l_ff, l_fl)
+    dense = spectra.follower_solve(l_ff, l_fl)
     assert np.array_equal(dense, np.linalg.solve(l_ff.toarray(), l_fl.toarray()))
-    sparse = graphs.follower_solve(l_ff, l_fl, dense_max=0)
+    sparse = spectra.follower_solve(l_ff, l_fl, dense_max=0)
     assert np.max(np.abs(sparse - dense)) <= 1e-9 * max(1.0, float(np.max(np.abs(dense))))
     # and it is the map: the followers' desired positions of the grid itself (scale 1)
     p = (-sparse @ GRID125[LEADERS].reshape(-1)).reshape(-1, 3)
@@ -96,7 +96,7 @@ def test_a_formation_above_the_threshold_takes_the_sparse_path(monkeypatch):
     dense_map = feasibility.formation_map(sc)
     dense_report = gain_report(dense_form, tuple(sc.observer.beta), sc.control_dt,
                                sc.observer.substeps, sc.observer.leader_anchor)
-    monkeypatch.setattr(graphs, "DENSE_SPECTRUM_MAX", 30)
+    monkeypatch.setattr(spectra, "DENSE_SPECTRUM_MAX", 30)
     sc2 = load_scenario(GRID27)
     form = formation_from_scenario(sc2)
     assert len(form.lambda_ff) == 2 and len(dense_form.lambda_ff) == 3 * len(form.follower_idx)
