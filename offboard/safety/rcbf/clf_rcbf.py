@@ -190,9 +190,9 @@ class _ClfRowsQP:
         self._build(int(max_pairs))
 
     def _build(self, m: int) -> None:
-        """The subclass's problem with room for ``m`` rows (:meth:`_setup`), and the bounds
-        as DAQP reads them (clamped to ±DAQP_INF, written with the rows in
-        :meth:`_solve_rows`) sized to match."""
+        """The subclass's problem with room for ``m`` rows (:meth:`_setup`), and DAQP's copy
+        of it sized to match: the rows in use and their bounds clamped to ±DAQP_INF, written
+        with the rows in :meth:`_solve_rows` (:func:`write_rows_kernel`)."""
         self._setup(m)
         self._a_daqp = np.empty_like(self._a)
         self._lo_daqp, self._hi_daqp = np.empty(len(self.l)), np.empty(len(self.u))
