@@ -141,14 +141,23 @@ def load_all(
     paths: list[str], allow_infeasible: bool = False, allow_unsafe: bool = False
 ) -> list[tuple[str, str, Scenario]]:
     """Read and load every scenario file up front (a bad one is bad input, before any run):
-    (path, text, scenario) each; the workers get the text."""
+    (path, text, scenario) each; the workers get the text. Two files of one
+    ``scenario.name`` (or one file given twice) are bad input too: runs.csv keys a run by
+    (scenario name, method, seed), so the second file's runs would be run and dropped."""
     out = []
+    named: dict[str, str] = {}
     for p in paths:
         try:
             text = read_scenario_text(Path(p))
-            out.append((p, text, scenario_from_text(text, p, allow_infeasible, allow_unsafe)))
+            sc = scenario_from_text(text, p, allow_infeasible, allow_unsafe)
         except ScenarioError as exc:
             raise SweepInputError(str(exc).replace("\n", " ")) from None
+        if sc.name in named:
+            raise SweepInputError(
+                f"{p}: scenario.name = {sc.name!r}, as {named[sc.name]}: a sweep keys its "
+                "runs by scenario name; give each file its own name (or list it once)")
+        named[sc.name] = p
+        out.append((p, text, sc))
     return out
 
 

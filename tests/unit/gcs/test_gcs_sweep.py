@@ -27,6 +27,7 @@ from gcs.report.sweep import (
 )
 from gcs.sweep.jobs import (
     SweepInputError,
+    load_all,
     parse_address,
     parse_duration,
     parse_jobs,
@@ -237,3 +238,21 @@ def test_local_sweep_does_not_import_dask() -> None:
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        cwd=ROOT, timeout=120)
     assert r.returncode == 0 and r.stdout.strip() == "[]", r.stderr
+
+
+def test_two_files_of_one_scenario_name_are_refused(tmp_path: Path) -> None:
+    """runs.csv keys a run by scenario name: a second file of the same name (or the same
+    file twice) would be run and its rows dropped, so the sweep refuses it in one line
+    naming both files; files of their own names load."""
+    cube8 = (ROOT / "scenarios" / "cube8.toml").read_text()
+    a, b, c = tmp_path / "a.toml", tmp_path / "b.toml", tmp_path / "c.toml"
+    a.write_text(cube8)
+    b.write_text(cube8.replace("seed = 1\n", "seed = 77\n", 1))
+    c.write_text(cube8.replace('name = "cube8"', 'name = "cube8_other"', 1))
+    assert "seed = 77" in b.read_text() and 'name = "cube8_other"' in c.read_text()
+    for paths, first in (([a, b], a), ([a, a], a)):
+        with pytest.raises(SweepInputError, match=rf"{paths[1]}: scenario.name = 'cube8', "
+                           rf"as {first}: a sweep keys its runs by scenario name") as err:
+            load_all([str(p) for p in paths])
+        assert "\n" not in str(err.value)
+    assert [sc.name for _, _, sc in load_all([str(a), str(c)])] == ["cube8", "cube8_other"]
