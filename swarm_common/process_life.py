@@ -21,7 +21,8 @@ teardown, where it kept a stopped simulator and each stopped daemon alive for ab
 
 * :func:`die_with_parent` asks the kernel for a signal when the parent dies (Linux
   ``PR_SET_PDEATHSIG``): a child launched by the runner (``gcs.launch``) or a daemon
-  started with ``--die-with-parent`` never outlives its runner.
+  started with ``--die-with-parent`` never outlives its runner;
+  :func:`outlive_parent` takes that request back.
 
 Standard library only: ``python -m offboard`` imports this before its start-up slot
 (:mod:`offboard.daemon.start_gate`).
@@ -76,3 +77,11 @@ def die_with_parent(sig: signal.Signals, parent_pid: int) -> Callable[[], str | 
         return None
 
     return setup
+
+
+def outlive_parent() -> None:
+    """Take back :func:`die_with_parent`'s request (no signal at the parent's death), for a
+    process that watches its parent another way from now on. Linux only; elsewhere, and
+    if the kernel refuses, nothing changes."""
+    if _LIBC is not None:
+        _LIBC.prctl(PR_SET_PDEATHSIG, 0, 0, 0, 0)

@@ -45,6 +45,7 @@ from swarm_common.process_life import die_with_parent
 
 LAUNCH_ENV = "SWARM_LAUNCH"  # "exec": no fork server (module docstring)
 PRELOAD = "gcs.launch.preload"
+PARENT_ENV = "SWARM_FORKSERVER_PARENT"  # the runner's pid, for the server's start
 # ``python -m MODULE`` -> (module, function) that its ``if __name__ == "__main__"`` runs
 ENTRIES = {
     "offboard": ("offboard.__main__", "gated_main"),
@@ -91,6 +92,8 @@ def _context_started() -> multiprocessing.context.ForkServerContext:
     global _context
     if _context is None:
         ctx = multiprocessing.get_context("forkserver")
+        # the server checks that we are still its parent (gcs.launch.preload)
+        os.environ[PARENT_ENV] = str(os.getpid())
         ctx.set_forkserver_preload([PRELOAD])
         _context = ctx
     return _context

@@ -172,3 +172,45 @@ def test_a_child_runs_the_runners_code_not_the_callers_checkout(
     group.stop()
     seen = Path((tmp_path / "probe.log").read_text().strip())
     assert seen.resolve() == Path(gcs.__file__).resolve()
+
+
+# a client of the fork server: it asks for a daemon (the first request starts the server,
+# which then imports and warms up for a second or more) and prints the server's pid
+_CLIENT = (
+    "import sys, threading, time\n"
+    "from pathlib import Path\n"
+    "from gcs.mission.procs import ProcessGroup, python_entry\n"
+    "from multiprocessing import forkserver\n"
+    "group = ProcessGroup(Path(sys.argv[1]))\n"
+    "threading.Thread(target=group.start, daemon=True, args=('offboard-1',\n"
+    "    [*python_entry('offboard'), '--scenario', sys.argv[2], '--agent', '99']),\n"
+    "    kwargs={'gated': True}).start()\n"
+    "end = time.monotonic() + 60.0\n"
+    "while forkserver._forkserver._forkserver_pid is None and time.monotonic() < end:\n"
+    "    time.sleep(0.001)\n"
+    "print(forkserver._forkserver._forkserver_pid, flush=True)\n"
+    "time.sleep(600)\n"
+)
+
+
+@pytest.mark.parametrize("after_s", [0.0, 0.3])
+def test_the_fork_server_dies_with_a_runner_killed_during_its_start(
+        tmp_path: Path, after_s: float) -> None:
+    """``kill -9`` of the runner while its fork server is still importing and warming up
+    (before ``multiprocessing`` watches the runner's pipe): the server goes at once
+    (gcs.launch.preload), however far it got."""
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    client = subprocess.Popen([sys.executable, "-c", _CLIENT, str(tmp_path), CUBE8],
+                              cwd=ROOT, env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        assert client.stdout is not None
+        line = client.stdout.readline()  # the client gives up after 60 s: "None"
+        assert line.strip().isdecimal(), f"no fork server started: {line!r}"
+        server = int(line)
+        time.sleep(after_s)
+        client.send_signal(signal.SIGKILL)
+        client.wait(10)
+        assert _wait(lambda: not _alive(server), GONE_WITHIN_S), "the fork server outlived it"
+    finally:
+        if client.poll() is None:
+            client.kill()
