@@ -116,16 +116,50 @@ def scrambled_starts(v: np.ndarray, n_leaders: int, seed: int, mix: float, shrin
     """Start positions (m): leaders (rows < n_leaders) on their vertices; a seeded fraction
     ``mix`` of the followers on each other's vertices (a random permutation of that subset),
     every follower shrunk by ``shrink`` toward the centroid of all vertices and jittered by
-    at most ``JITTER``·spacing per axis."""
+    at most ``JITTER``·spacing per axis.
+
+    The shrink keeps followers apart from each other (their distances scale by
+    1 − ``shrink``) but not from the leaders, which stay put: on a large or tall shape a
+    follower moves metres and may land on a leader (a 256-agent helix put one 0.33 m from a
+    leader). Such a follower starts unshrunk, on its own start vertex with the same jitter,
+    and so does any shrunk follower then too close to it, until none is
+    (:func:`_unshrink_clashes`). Without a clash the starts are those of the plain rule."""
     rng = np.random.default_rng(seed)
     p = v.copy()
     f = np.arange(n_leaders, len(v))
     moved = rng.choice(f, size=int(round(mix * len(f))), replace=False)
     p[moved] = v[rng.permutation(moved)]
     c = v.mean(axis=0)
+    jitter = rng.uniform(-JITTER * spacing, JITTER * spacing, size=(len(f), 3))
+    unshrunk = p[f] + jitter
     p[f] = c + (1.0 - shrink) * (p[f] - c)
-    p[f] += rng.uniform(-JITTER * spacing, JITTER * spacing, size=(len(f), 3))
+    p[f] += jitter
+    apart = (1.0 - shrink - 2.0 * math.sqrt(3.0) * JITTER) * spacing
+    if apart > 0.0:
+        _unshrink_clashes(p, unshrunk, n_leaders, apart)
     return np.round(p, 3)
+
+
+def _unshrink_clashes(p: np.ndarray, unshrunk: np.ndarray, n_leaders: int,
+                      apart: float) -> None:
+    """Move to its ``unshrunk`` start (rows of ``p`` from ``n_leaders`` on) every shrunk
+    follower closer than ``apart`` (m) to an agent that is not shrunk (a leader, or a
+    follower moved here), until none is. It ends: every follower unshrunk is a start of
+    the unshrunk rule, whose agents are about a spacing apart."""
+    from scipy.spatial import cKDTree
+
+    fixed = np.zeros(len(p), dtype=bool)
+    fixed[:n_leaders] = True
+    while True:
+        shrunk = np.flatnonzero(~fixed)
+        if len(shrunk) == 0:
+            return
+        near = cKDTree(p[fixed]).query(p[shrunk], distance_upper_bound=apart)[0]
+        clash = shrunk[near < apart]
+        if len(clash) == 0:
+            return
+        p[clash] = unshrunk[clash - n_leaders]
+        fixed[clash] = True
 
 
 def _template(name: str, seed: int, duration: float, deadline: float) -> dict[str, Any]:

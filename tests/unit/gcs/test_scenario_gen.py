@@ -16,6 +16,7 @@ from gcs.scenario_gen import (
     build,
     cmd_scenario,
     pick_leaders,
+    scrambled_starts,
     vertices,
 )
 from swarm_common.enums import GraphKind
@@ -82,6 +83,52 @@ def test_mix_and_shrink() -> None:
     full = _load(dump_toml(build(_args("ring", "--agents", "12", "--leaders", "2",
                                        "--scramble", "1", "--mix", "1"))[0]))
     assert np.abs(full.initial_positions() - full.vertices()).max() > 1.0
+
+
+def _starts(shape: Shape, n: int, n_lead: int, seed: int) -> tuple[np.ndarray, ...]:
+    """(vertices leaders first, starts, the plain shrink rule's starts, which followers
+    start unshrunk) of the default shrink 0.15 at spacing 3 m. Every follower is within
+    the jitter of its shrunk vertex or else of its vertex (checked); its jitter is read
+    back from its start."""
+    base = vertices(shape, n, 3.0)
+    lead = pick_leaders(base, n_lead)
+    v = base[lead + [i for i in range(n) if i not in lead]]
+    p = scrambled_starts(v, n_lead, seed, 0.0, 0.15, 3.0)
+    c = v.mean(axis=0)
+    shrunk = c + 0.85 * (v - c)
+    box = JITTER * 3.0 + 1e-3
+    # within the jitter of its vertex, not of its shrunk vertex (near the centre both hold)
+    unshrunk = np.abs(p - shrunk).max(axis=1) > box
+    unshrunk[:n_lead] = False
+    assert np.all(np.abs(p - v)[unshrunk].max(axis=1, initial=0.0) <= box)
+    jitter = np.where(unshrunk[:, None], p - v, p - shrunk)
+    plain = shrunk + jitter
+    plain[:n_lead] = v[:n_lead]
+    return v, p, plain, unshrunk
+
+
+def _closest(p: np.ndarray) -> float:
+    d = np.linalg.norm(p[:, None] - p[None], axis=2)
+    return float(d[np.triu_indices(len(p), 1)].min())
+
+
+def test_a_follower_the_shrink_puts_on_a_leader_starts_unshrunk() -> None:
+    apart = (1 - 0.15 - 2 * np.sqrt(3) * JITTER) * 3.0
+    v, p, plain, unshrunk = _starts(Shape.HELIX, 256, 16, 1)
+    n_lead = 16
+    assert _closest(plain) < 0.5  # the plain rule put a follower on a leader (32 turns)
+    assert _closest(p) >= apart - 2e-3
+    np.testing.assert_array_equal(p[:n_lead], v[:n_lead])
+    assert 0 < unshrunk.sum() < 240  # only the clashing followers (and their clashes)
+
+
+@pytest.mark.parametrize(("shape", "n", "n_lead"), [(Shape.GRID, 64, 4), (Shape.SPHERE, 100, 6),
+                                                    (Shape.HELIX, 24, 3)])
+def test_without_a_clash_the_starts_are_the_shrink_rules(shape: Shape, n: int,
+                                                         n_lead: int) -> None:
+    _, p, plain, unshrunk = _starts(shape, n, n_lead, 5)
+    assert not unshrunk.any()
+    np.testing.assert_allclose(p, plain, atol=1e-3)
 
 
 def test_a_scrambled_start_is_sensed_whole_from_the_first_step() -> None:
