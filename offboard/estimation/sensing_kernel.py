@@ -4,6 +4,9 @@
 the caller draws the (N,8) standard normals and the N uniforms with its numpy Generator
 (same shapes, same order, so a seed gives the same noise) and passes them in; the kernel
 computes the relative geometry, the noisy measurements and the validity mask row by row.
+With ``noise_draws = "in_range"`` the sensor calls :func:`range_index` then
+:func:`measure_in_range_into` instead, which write only the rows in range into outputs kept
+between calls; both compute a row with :func:`_row_into`, as :func:`measure_into` does.
 :func:`hold_kernel` is the bookkeeping of :meth:`offboard.estimation.sensing.DropoutHold.pairs`.
 
 The operations and their order are those of the numpy formulation they replaced, the
@@ -26,25 +29,6 @@ from swarm_common.jit import kernel
 def dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
     """a·b of two 3-vectors in the order of numpy's einsum: ``(a0 b0 + a2 b2) + a1 b1``."""
     return (a0 * b0 + a2 * b2) + a1 * b1
-
-
-@kernel
-def range_rows(p: np.ndarray, i: int, range_m: float, rows: np.ndarray) -> int:
-    """Numbers the agents in agent ``i``'s range: writes ``rows[j]`` (N,) = 0, 1, ... for
-    each j ≠ i with true distance ≤ ``range_m`` (m), in index order, −1 for the others,
-    and returns their count. The distance is :func:`measure_into`'s, so the two agree on
-    who is in range."""
-    n = p.shape[0]
-    k = 0
-    for j in range(n):
-        r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
-        d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
-        if j != i and d <= range_m:
-            rows[j] = k
-            k += 1
-        else:
-            rows[j] = -1
-    return k
 
 
 @kernel
@@ -81,8 +65,6 @@ def measure_into(
     (:meth:`offboard.estimation.sensing.Sensor.measure`).
     """
     n = p.shape[0]
-    g = np.empty(3)
-    w = np.empty(3)
     nz = np.zeros(8)
     for j in range(n):
         q = rows[j]
@@ -94,35 +76,107 @@ def measure_into(
             for k in range(8):
                 nz[k] = 0.0
             dr = 1.0
+        _row_into(p, v, i, j, nz, dr, sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm, dm,
+                  ddm, rel_p, rel_v)
+
+
+@kernel
+def _row_into(
+    p: np.ndarray, v: np.ndarray, i: int, j: int, nz: np.ndarray, dr: float,
+    sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
+    valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
+    rel_p: np.ndarray, rel_v: np.ndarray,
+) -> None:
+    """Row j of :func:`measure_into` (its docstring), with the noise ``nz`` (8,) and the
+    dropout draw ``dr`` of that row: the one computation of a measured row, for both
+    :func:`measure_into` and :func:`measure_in_range_into`."""
+    r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+    d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
+    if j != i and d > range_m:  # out of range: invalid, its row zeros (nobody reads it)
+        valid[j] = False
+        dm[j], ddm[j] = d, 0.0
+        for k in range(3):
+            gm[j, k] = gdm[j, k] = rel_p[j, k] = rel_v[j, k] = 0.0
+        return
+    w0, w1, w2 = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
+    if j == i:
+        d = 1.0
+    g0, g1, g2 = r0 / d, r1 / d, r2 / d
+    if j == i:
+        g0 = 1.0  # placeholder row for itself (marked invalid)
+    gd = dot3(g0, g1, g2, w0, w1, w2)
+    # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
+    b0 = g0 + nz[0] * sb
+    b1 = g1 + nz[1] * sb
+    b2 = g2 + nz[2] * sb
+    nb = math.sqrt(dot3(b0, b1, b2, b0, b1, b2))
+    gm[j, 0], gm[j, 1], gm[j, 2] = b0 / nb, b1 / nb, b2 / nb
+    gdm[j, 0] = (w0 - g0 * gd) / d + nz[3] * sr
+    gdm[j, 1] = (w1 - g1 * gd) / d + nz[4] * sr
+    gdm[j, 2] = (w2 - g2 * gd) / d + nz[5] * sr
+    dm[j] = d + nz[6] * sd
+    ddm[j] = gd + nz[7] * sdd
+    valid[j] = (d <= range_m) and (dr >= dropout) and j != i
+    for k in range(3):
+        rel_p[j, k] = gm[j, k] * dm[j]
+        rel_v[j, k] = gdm[j, k] * dm[j] + gm[j, k] * ddm[j]
+
+
+@kernel
+def range_index(p: np.ndarray, i: int, range_m: float, idx: np.ndarray,
+                dist: np.ndarray) -> int:
+    """The agents in agent ``i``'s range, for :func:`measure_in_range_into`: writes their
+    indices j ≠ i with true distance ≤ ``range_m`` (m) into ``idx`` (≥ N,) in index order
+    and every true distance into ``dist`` (N,) (m), and returns their count. The distance
+    is :func:`_row_into`'s, so the two agree on who is in range."""
+    n = p.shape[0]
+    k = 0
+    for j in range(n):
         r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
         d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
-        if j != i and d > range_m:  # out of range: invalid, its row zeros (nobody reads it)
-            valid[j] = False
-            dm[j], ddm[j] = d, 0.0
-            for k in range(3):
-                gm[j, k] = gdm[j, k] = rel_p[j, k] = rel_v[j, k] = 0.0
-            continue
-        w[0], w[1], w[2] = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
-        if j == i:
-            d = 1.0
-        g[0], g[1], g[2] = r0 / d, r1 / d, r2 / d
-        if j == i:
-            g[0] = 1.0  # placeholder row for itself (marked invalid)
-        gd = dot3(g[0], g[1], g[2], w[0], w[1], w[2])
-        # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
-        b0 = g[0] + nz[0] * sb
-        b1 = g[1] + nz[1] * sb
-        b2 = g[2] + nz[2] * sb
-        nb = math.sqrt(dot3(b0, b1, b2, b0, b1, b2))
-        gm[j, 0], gm[j, 1], gm[j, 2] = b0 / nb, b1 / nb, b2 / nb
-        for k in range(3):
-            gdm[j, k] = (w[k] - g[k] * gd) / d + nz[3 + k] * sr
-        dm[j] = d + nz[6] * sd
-        ddm[j] = gd + nz[7] * sdd
-        valid[j] = (d <= range_m) and (dr >= dropout) and j != i
-        for k in range(3):
-            rel_p[j, k] = gm[j, k] * dm[j]
-            rel_v[j, k] = gdm[j, k] * dm[j] + gm[j, k] * ddm[j]
+        dist[j] = d
+        if j != i and d <= range_m:
+            idx[k] = j
+            k += 1
+    return k
+
+
+@kernel
+def measure_in_range_into(
+    p: np.ndarray, v: np.ndarray, i: int, noise: np.ndarray, drop: np.ndarray,
+    idx: np.ndarray, k: int, prev: np.ndarray, n_prev: int,
+    sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
+    valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
+    rel_p: np.ndarray, rel_v: np.ndarray,
+) -> int:
+    """:func:`measure_into` for ``noise_draws = "in_range"`` into outputs kept between
+    calls, at a cost that follows the agents in range, not N: row ``idx[r]`` (the first
+    ``k`` of :func:`range_index`, which has written every row's true distance into ``dm``)
+    gets noise row r and draw r; the rows in range at the call before (``prev[:n_prev]``)
+    are first reset to an out-of-range row's zeros; the own row is rewritten. Every other
+    row already holds an out-of-range row's values, so the outputs equal
+    :func:`measure_into`'s with ``rows`` numbering the agents in range, element for
+    element, but for a true distance that is not a number (not in range here: its row
+    zeros). Writes ``idx[:k]`` into ``prev`` and returns k, the next call's ``n_prev``."""
+    for r in range(n_prev):
+        j = prev[r]
+        valid[j] = False
+        ddm[j] = 0.0
+        for c in range(3):
+            gm[j, c] = gdm[j, c] = rel_p[j, c] = rel_v[j, c] = 0.0
+    nz = np.zeros(8)
+    for r in range(k):
+        j = idx[r]
+        for c in range(8):
+            nz[c] = noise[r, c]
+        _row_into(p, v, i, j, nz, drop[r], sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm,
+                  dm, ddm, rel_p, rel_v)
+        prev[r] = j
+    for c in range(8):
+        nz[c] = 0.0
+    _row_into(p, v, i, i, nz, 1.0, sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm, dm, ddm,
+              rel_p, rel_v)
+    return k
 
 
 @kernel

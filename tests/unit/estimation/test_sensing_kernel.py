@@ -292,3 +292,48 @@ def test_in_range_noise_has_the_configured_spread() -> None:
     assert abs(np.mean(d) - 3.0) < 0.005 and abs(np.mean(dd) + 1.0) < 0.01
     assert np.std(d) == pytest.approx(0.05, rel=0.05)
     assert np.std(dd) == pytest.approx(0.1, rel=0.05)
+
+
+def test_in_range_outputs_kept_between_calls_equal_fresh_ones() -> None:
+    """``noise_draws = "in_range"`` keeps its outputs between calls and rewrites only the
+    rows in range now and at the call before (measure_in_range_into). Over swarms whose
+    agents cross the sensing range every few steps, each call's outputs equal, element
+    for element, those of measure_into written into new arrays from the same draws (the
+    same row code, so bit for bit), rows out of range included: invalid, their true
+    distance, zeros elsewhere."""
+    from offboard.estimation.sensing_kernel import measure_into
+
+    rng = np.random.default_rng(13)
+    seen_in, seen_out = 0, 0
+    for trial in range(40):
+        n = int(rng.integers(2, 30))
+        i = int(rng.integers(0, n))
+        cfg = _in_range(_config(rng, 0.3 * float(rng.integers(0, 2))))
+        rng_m = float(rng.uniform(2.0, 6.0))
+        seed, aid = int(rng.integers(0, 1000)), int(rng.integers(0, 50))
+        sensor = Sensor(i, aid, n, cfg, rng_m, seed)
+        twin = np.random.default_rng([seed, aid, 0x5E])
+        p = rng.normal(0.0, 4.0, (n, 3))
+        v = rng.normal(0.0, 3.0, (n, 3))
+        for step in range(30):
+            p = p + 0.3 * v  # agents enter and leave the range
+            if step % 7 == 6:
+                v = rng.normal(0.0, 3.0, (n, 3))
+            got = sensor.measure(p, v)
+            d = np.linalg.norm(p - p[i], axis=1)
+            near = (d <= rng_m) & (np.arange(n) != i)
+            rows = np.full(n, -1, dtype=np.int64)
+            rows[near] = np.arange(int(near.sum()))
+            k = int(near.sum())
+            noise, drop = twin.standard_normal((k, 8)), twin.random(k)
+            ref = [np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
+                   np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3))]
+            measure_into(p, v, i, noise, drop, rows, *sensor._sig, rng_m, cfg.dropout_prob,
+                         *ref)
+            for a, b in zip((got.valid, got.g, got.g_dot, got.d, got.d_dot, got.rel_p,
+                             got.rel_v), ref, strict=True):
+                assert np.array_equal(a, b), (trial, step)
+            seen_in += k
+            seen_out += n - 1 - k
+        assert sensor.rng.random() == twin.random(), trial
+    assert seen_in > 0 and seen_out > 0
