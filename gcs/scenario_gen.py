@@ -42,7 +42,11 @@ import numpy as np
 from gcs.exit_codes import EXIT_USAGE
 from swarm_common.enums import GraphKind, Role, Shape
 from swarm_common.inputs import one_line
-from swarm_common.scenario.files import swarm_name_problem
+from swarm_common.scenario.files import (
+    ALLOW_INFEASIBLE_FLAG,
+    ALLOW_UNSAFE_FLAG,
+    swarm_name_problem,
+)
 from swarm_common.scenario.model import Scenario, ScenarioError, dump_toml, parse_scenario
 
 # in process; a distributed run takes MAVLink's system ids, 1..255 (Scenario.process_problem)
@@ -298,7 +302,19 @@ def build(args: argparse.Namespace) -> tuple[dict[str, Any], int, Scenario]:
     else:  # every k tried: a graph or gain problem each time
         if len(ks) > 1:
             problem += f" (knn_k {ks[0]}..{ks[-1]} tried; give --k to try another)"
-    raise GenError(problem)
+    raise GenError(_without_run_flags(problem))
+
+
+def _without_run_flags(problem: str) -> str:
+    """The loader's one line with its run-time hint ("pass --allow-unsafe to run it
+    anyway", a flag of the runs, not of ``gcs scenario``) replaced by what holds here: the
+    generator writes only files that load without it."""
+    for flag in (ALLOW_UNSAFE_FLAG, ALLOW_INFEASIBLE_FLAG):
+        hint = f"; pass {flag} to run it anyway"
+        if hint in problem:
+            return problem.replace(hint, f"; not written (gcs scenario writes only files "
+                                         f"that load without {flag})")
+    return problem
 
 
 def _header(args: argparse.Namespace, k: int) -> str:

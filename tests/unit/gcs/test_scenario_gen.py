@@ -254,3 +254,15 @@ def test_the_knn_search_stops_after_k_tries(monkeypatch) -> None:
     with pytest.raises(GenError, match=r"not rigid$"):  # --k: that one only, no suffix
         build(_args("ring", "--agents", "40", "--leaders", "4", "--scramble", "1", "--k", "7"))
     assert tried == [7]
+
+
+def test_an_unsafe_file_is_refused_without_a_flag_the_generator_lacks(capsys) -> None:
+    """The loader's "pass --allow-unsafe to run it anyway" names a flag of the runs; the
+    generator's one line says the file is not written instead."""
+    rc = cmd_scenario(_args("ring", "--agents", "40", "--leaders", "3", "--scramble", "1",
+                            "--range", "25"))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert "unsafe:" in err[0] and "to run it anyway" not in err[0]
+    assert "not written" in err[0] and "--allow-unsafe" in err[0]
+
