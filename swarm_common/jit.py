@@ -27,7 +27,7 @@ import hashlib
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar, cast
+from typing import Any, TypeVar, cast, overload
 
 import numba.core.config
 from numba import njit
@@ -67,7 +67,25 @@ def _use_fingerprinted_cache() -> None:
 _use_fingerprinted_cache()
 
 
-def kernel(fn: F) -> F:
-    """``fn`` compiled with the project's settings (module docstring)."""
-    return cast(F, njit(cache=True, nogil=True, error_model="numpy")(fn))
+@overload
+def kernel(fn: F) -> F: ...
+
+
+@overload
+def kernel(*, inline: bool) -> Callable[[F], F]: ...
+
+
+def kernel(fn: F | None = None, *, inline: bool = False) -> F | Callable[[F], F]:
+    """``fn`` compiled with the project's settings (module docstring). ``@kernel(inline=True)``
+    also inlines it into every kernel that calls it (numba's ``inline="always"``, in
+    numba's own IR: the same operations, without a call's passing of each array's fields):
+    for a small kernel called in a loop."""
+    opts: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
+    if inline:
+        opts["inline"] = "always"
+
+    def compiled(f: F) -> F:
+        return cast(F, njit(**opts)(f))
+
+    return compiled if fn is None else compiled(fn)
 

@@ -80,7 +80,7 @@ def measure_into(
                   ddm, rel_p, rel_v)
 
 
-@kernel
+@kernel(inline=True)
 def _row_into(
     p: np.ndarray, v: np.ndarray, i: int, j: int, nz: np.ndarray, dr: float,
     sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
