@@ -45,6 +45,7 @@ from swarm_common.inputs import one_line
 from swarm_common.scenario.files import (
     ALLOW_INFEASIBLE_FLAG,
     ALLOW_UNSAFE_FLAG,
+    run_anyway_hint,
     swarm_name_problem,
 )
 from swarm_common.scenario.model import Scenario, ScenarioError, dump_toml, parse_scenario
@@ -310,7 +311,7 @@ def _without_run_flags(problem: str) -> str:
     anyway", a flag of the runs, not of ``gcs scenario``) replaced by what holds here: the
     generator writes only files that load without it."""
     for flag in (ALLOW_UNSAFE_FLAG, ALLOW_INFEASIBLE_FLAG):
-        hint = f"; pass {flag} to run it anyway"
+        hint = run_anyway_hint(flag)
         if hint in problem:
             return problem.replace(hint, f"; not written (gcs scenario writes only files "
                                          f"that load without {flag})")

@@ -32,6 +32,7 @@ from offboard.safety.dcbf.liveness import rest_spacing_m
 from offboard.safety.dcbf.trust import model_error_table
 from swarm_common.enums import Method
 from swarm_common.scenario.feasibility import deadline_problem
+from swarm_common.scenario.files import run_anyway_hint
 from swarm_common.scenario.model import ALLOW_INFEASIBLE_FLAG, Scenario
 
 log = logging.getLogger(__name__)
@@ -136,7 +137,7 @@ def check_physics(sc: Scenario, duration: float) -> None:
     if problem is None:
         return
     if not sc.allow_infeasible:
-        raise LaunchError(f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway")
+        raise LaunchError(f"{sc.path}: {problem}{run_anyway_hint(ALLOW_INFEASIBLE_FLAG)}")
     log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)
 
 

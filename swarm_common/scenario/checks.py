@@ -22,6 +22,7 @@ from swarm_common.scenario.files import (
     ALLOW_UNSAFE_FLAG,
     InfeasibleScenarioError,
     UnsafeScenarioError,
+    run_anyway_hint,
 )
 from swarm_common.scenario.safety_check import safety_problems
 
@@ -44,7 +45,7 @@ def check_feasible(sc: Scenario) -> None:
         log.warning("%s: %s (%s: running it anyway)", sc.path, problem, ALLOW_INFEASIBLE_FLAG)
         return
     raise InfeasibleScenarioError(
-        f"{sc.path}: {problem}; pass {ALLOW_INFEASIBLE_FLAG} to run it anyway"
+        f"{sc.path}: {problem}{run_anyway_hint(ALLOW_INFEASIBLE_FLAG)}"
     )
 
 
@@ -62,7 +63,7 @@ def check_safe(sc: Scenario) -> None:
                         ALLOW_UNSAFE_FLAG)
         return
     raise UnsafeScenarioError(
-        f"{sc.path}: unsafe: {problems[0]}; pass {ALLOW_UNSAFE_FLAG} to run it anyway"
+        f"{sc.path}: unsafe: {problems[0]}{run_anyway_hint(ALLOW_UNSAFE_FLAG)}"
     )
 
 

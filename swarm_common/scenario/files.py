@@ -27,6 +27,12 @@ ALLOW_INFEASIBLE_FLAG = "--allow-infeasible"
 ALLOW_UNSAFE_FLAG = "--allow-unsafe"
 
 
+def run_anyway_hint(flag: str) -> str:
+    """The end of a refusal that ``flag`` (:data:`ALLOW_UNSAFE_FLAG`,
+    :data:`ALLOW_INFEASIBLE_FLAG`) would lift in a run: "; pass FLAG to run it anyway"."""
+    return f"; pass {flag} to run it anyway"
+
+
 class ScenarioError(ValueError):
     """A scenario file is missing, unreadable or invalid. ``str()`` is one line: a newline
     or another unprintable character in a file name or a key is written as its escape
