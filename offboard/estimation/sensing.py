@@ -85,7 +85,6 @@ class Sensor:
         # arrays of that shape, without the allocations); read only within the call
         self._noise = np.empty((n, 8))
         self._drop = np.empty(n)
-        self._rows = np.arange(n, dtype=np.int64)  # agent j's row of the draws
         if self.in_range_only:  # the outputs kept between calls (measure)
             self._idx = np.empty(n, dtype=np.int64)  # the agents in range, in index order
             self._prev = np.empty(n, dtype=np.int64)  # ... at the call before
@@ -131,7 +130,7 @@ class Sensor:
         out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
                            vec[3])
         measure_into(
-            rows3(p), rows3(v), self.index, noise, drop, self._rows, sb, sr, sd, sdd, self.range,
+            rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
         )
         return out

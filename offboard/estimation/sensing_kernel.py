@@ -34,7 +34,6 @@ def dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> fl
 @kernel
 def measure_into(
     p: np.ndarray, v: np.ndarray, i: int, noise: np.ndarray, drop: np.ndarray,
-    rows: np.ndarray,
     sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
     valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
     rel_p: np.ndarray, rel_v: np.ndarray,
@@ -45,9 +44,8 @@ def measure_into(
     ``ġ̃ d̃ + g̃ ḋ̃`` (m/s).
 
     p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (M,8) standard
-    normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate); drop (M,)
-    uniforms in [0,1); rows (N,) int64: agent j's row of noise and drop, −1 for none
-    (zero noise, not dropped: an agent out of range, invalid anyway); sb (rad), sr (rad/s),
+    normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate) and drop (N,)
+    uniforms in [0,1), row j agent j's; sb (rad), sr (rad/s),
     sd (m), sdd (m/s) noise standard deviations;
     range_m sensing range (m); dropout per-pair dropout probability.
 
@@ -67,17 +65,10 @@ def measure_into(
     n = p.shape[0]
     nz = np.zeros(8)
     for j in range(n):
-        q = rows[j]
-        if q >= 0:
-            for k in range(8):
-                nz[k] = noise[q, k]
-            dr = drop[q]
-        else:
-            for k in range(8):
-                nz[k] = 0.0
-            dr = 1.0
-        _row_into(p, v, i, j, nz, dr, sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm, dm,
-                  ddm, rel_p, rel_v)
+        for k in range(8):
+            nz[k] = noise[j, k]
+        _row_into(p, v, i, j, nz, drop[j], sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm,
+                  dm, ddm, rel_p, rel_v)
 
 
 @kernel(inline=True)
@@ -155,9 +146,10 @@ def measure_in_range_into(
     gets noise row r and draw r; the rows in range at the call before (``prev[:n_prev]``)
     are first reset to an out-of-range row's zeros; the own row is rewritten. Every other
     row already holds an out-of-range row's values, so the outputs equal
-    :func:`measure_into`'s with ``rows`` numbering the agents in range, element for
-    element, but for a true distance that is not a number (not in range here: its row
-    zeros). Writes ``idx[:k]`` into ``prev`` and returns k, the next call's ``n_prev``."""
+    :func:`measure_into`'s given the in-range rows' draws in their agents' rows (zero noise
+    and a draw of 1, never dropped, in the others'), element for element, but for a true
+    distance that is not a number (not in range here: its row zeros). Writes ``idx[:k]``
+    into ``prev`` and returns k, the next call's ``n_prev``."""
     for r in range(n_prev):
         j = prev[r]
         valid[j] = False

@@ -322,13 +322,14 @@ def test_in_range_outputs_kept_between_calls_equal_fresh_ones() -> None:
             got = sensor.measure(p, v)
             d = np.linalg.norm(p - p[i], axis=1)
             near = (d <= rng_m) & (np.arange(n) != i)
-            rows = np.full(n, -1, dtype=np.int64)
-            rows[near] = np.arange(int(near.sum()))
             k = int(near.sum())
-            noise, drop = twin.standard_normal((k, 8)), twin.random(k)
+            # the draws in the rows of the agents in range; zero noise, never dropped, in
+            # the others' (out of range or its own: invalid either way)
+            noise, drop = np.zeros((n, 8)), np.ones(n)
+            noise[near], drop[near] = twin.standard_normal((k, 8)), twin.random(k)
             ref = [np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
                    np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3))]
-            measure_into(p, v, i, noise, drop, rows, *sensor._sig, rng_m, cfg.dropout_prob,
+            measure_into(p, v, i, noise, drop, *sensor._sig, rng_m, cfg.dropout_prob,
                          *ref)
             for a, b in zip((got.valid, got.g, got.g_dot, got.d, got.d_dot, got.rel_p,
                              got.rel_v), ref, strict=True):
