@@ -2,7 +2,7 @@
 
     python bench/bench_scaling.py [--sizes 8,27,64,125] [--duration 4] [--repeats 2]
                                   [--leaders 4|auto] [--scramble 1] [--mix 0] [--method dcbf]
-                                  [--noise-draws in_range|every_agent]
+                                  [--noise-draws in_range|every_agent] [--window T0,T1]
 
 Each run is a fresh child process (so its peak RSS is its own): the scenario comes from
 ``gcs scenario grid --agents N --leaders L --scramble SEED --mix F`` (sparse ``knn`` graph,
@@ -22,6 +22,11 @@ Prints, with no assertions (figures for docs/performance.md, "Scaling in process
 * when the formation formed (metrics ``formation_time_s``: the latest over the repeats,
   "no" if one run did not form within ``--duration``), the safety verdict and the count
   of in-flight alarms (most runs of a few seconds end before the formation has formed);
+* with ``--window T0,T1``, over the steps that start in [T0, T1) s of mission time (fixed
+  before the run; after the formation has formed it leaves the start-up transient out):
+  the median step's wall per agent (µs), the agents in range of a follower at the
+  window's last step, and the share of follower-steps that called the QP solver and that
+  relaxed it;
 * the exponent a of a least-squares fit cost ∝ N^a, for the stepping wall per control
   step and for the setup wall (a = 1: linear in the number of agents).
 """
@@ -58,6 +63,7 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
     doc, k, _ = build(gen)
     doc["sensing"]["noise_draws"] = opts.noise_draws
     sc = parse_scenario(doc, f"grid{opts.child}")
+    stamps = _stamp_steps() if opts.window else []
     t0 = time.perf_counter()
     res = run_inproc(sc, opts.method, duration=opts.duration)
     total = time.perf_counter() - t0
@@ -74,6 +80,53 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
         # the issue's targets ask for the formation formed too: None while it is not
         "formed_s": m["formation_time_s"], "verdict": m["safety_verdict"],
         "alarms": m["safety_alarm_count"], "in_range": in_range(sc),
+        **(window_figures(sc, res.series, stamps, opts.window) if opts.window else {}),
+    }
+
+
+def _stamp_steps() -> list[float]:
+    """The wall clock at the end of every control step of the next ``run_inproc``: its
+    per-step record (``set_agent_rows``, called once a step after every agent's step) is
+    wrapped to append ``perf_counter()``. Measurement only; the run is unchanged."""
+    import gcs.mission.inproc as inproc
+
+    stamps: list[float] = []
+    record = inproc.set_agent_rows
+
+    def stamped(ser: Any, k: int, outs: Any) -> None:
+        record(ser, k, outs)
+        stamps.append(time.perf_counter())
+
+    inproc.set_agent_rows = stamped  # type: ignore[assignment]
+    return stamps
+
+
+def window_figures(sc: Any, ser: Any, stamps: list[float], window: str) -> dict[str, Any]:
+    """The steps whose start time t_k lies in ``window`` (\"T0,T1\" s, fixed before the
+    run): the median wall of a step (the time between the ends of step k − 1 and step k,
+    so the agents' steps, the physics and the record) per agent (µs), the share of
+    follower-steps that called the QP solver and that relaxed it, and the mean number of
+    other agents within sensing range of a follower at the window's last step."""
+    from scipy.spatial import cKDTree
+
+    from gcs.records.series import STATUS_CODE
+    from swarm_common.enums import QPStatus
+
+    t0, t1 = (float(x) for x in window.split(","))
+    ks = [k for k in range(1, len(stamps)) if t0 <= k * sc.control_dt < t1]
+    if not ks:
+        raise SystemExit(f"--window {window}: no step of the run lies in it")
+    walls = np.diff(np.asarray(stamps))[np.asarray(ks) - 1]
+    fol = [sc.index_of(a.id) for a in sc.agents if a.id not in set(sc.leader_ids)]
+    status = ser.qp_status[ks][:, fol]
+    pos = ser.p[ks[-1]]
+    tree = cKDTree(pos)
+    near = tree.query_ball_point(pos[fol], sc.formation.sensing_range_m, return_length=True)
+    return {
+        "win_us_agent_step": float(np.median(walls)) / sc.n * 1e6,
+        "win_solver": float(np.mean(status != STATUS_CODE[QPStatus.INACTIVE])),
+        "win_relaxed": float(np.mean(ser.fallback[ks][:, fol])),
+        "win_in_range": float(np.mean(near)) - 1.0,
     }
 
 
@@ -124,6 +177,11 @@ def main() -> None:
     ap.add_argument("--noise-draws", choices=[str(x) for x in NoiseDraws],
                     default=str(NoiseDraws.IN_RANGE),
                     help="[sensing] noise_draws (default: the generator's, in_range)")
+    ap.add_argument("--window", default="",
+                    help="T0,T1: also the median wall per agent-step of the steps in "
+                    "[T0, T1) s of mission time, with the solver's share of the follower-steps "
+                    "there (a window fixed in advance: after the formation has formed, the "
+                    "per-agent cost without the transient)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     opts = ap.parse_args()
     if opts.child is not None:
@@ -136,7 +194,7 @@ def main() -> None:
             cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(opts.duration),
                    "--leaders", str(leaders_for(opts.leaders, n)), "--scramble", str(opts.scramble),
                    "--mix", str(opts.mix), "--method", opts.method,
-                   "--noise-draws", opts.noise_draws]
+                   "--noise-draws", opts.noise_draws, "--window", opts.window]
             out = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT)
             runs[n].append(json.loads(out.stdout.strip().splitlines()[-1]))
             r = runs[n][-1]
@@ -165,6 +223,17 @@ def main() -> None:
               f"| {_rng(col['fallbacks'], '.0f')} "
               f"| {min(col['min_dist_m']):.2f} | {max(col['collisions']):.0f} | {form} "
               f"| {verdicts}, {max(int(r['alarms']) for r in rs)} |")
+    if opts.window:
+        print(f"\nsteps in [{opts.window.replace(',', ', ')}) s of mission time:")
+        print("| N | µs / agent-step (median step) | in range | solver called | relaxed |")
+        print("|---|---|---|---|---|")
+        for n in sizes:
+            col = {key: [float(r[key]) for r in runs[n]] for key in
+                   ("win_us_agent_step", "win_in_range", "win_solver", "win_relaxed")}
+            print(f"| {n} | {_rng(col['win_us_agent_step'], '.0f')} "
+                  f"| {_rng(col['win_in_range'], '.1f')} "
+                  f"| {_rng([100 * x for x in col['win_solver']], '.0f')} % "
+                  f"| {_rng([100 * x for x in col['win_relaxed']], '.1f')} % |")
     if len(sizes) >= 2:
         med = {key: [float(np.median([r[key] for r in runs[n]])) for n in sizes]
                for key in ("wall_s", "setup_s", "rss_mib")}
