@@ -32,12 +32,16 @@ def vehicles_in_offboard(sim_log: str) -> set[int]:
 
 def out_of_offboard_spans(sim_log: str, end_s: float) -> dict[int, list[tuple[float, float]]]:
     """Per vehicle, the (start, end) simulation-time spans (s) out of OFFBOARD after it
-    first entered OFFBOARD (a span still open at the end of the log ends at ``end_s``)."""
+    first entered OFFBOARD, within the run: a span still open at ``end_s`` (the run's
+    duration) ends there, and the modes the log records after it (the shutdown, where
+    the daemons stop first and the vehicles fail safe) are not the run's."""
     spans: dict[int, list[tuple[float, float]]] = {}
     left: dict[int, float] = {}
     entered: set[int] = set()
     for m in MODE_LINE.finditer(sim_log):
         t, vid, old, new = float(m[1]), int(m[2]), m[3], m[4]
+        if t > end_s:
+            continue
         if new == "OFFBOARD":
             entered.add(vid)
             if vid in left:

@@ -113,3 +113,24 @@ def test_the_cli_warns_with_the_gaps_and_names_a_known_cause(
     assert "agent 3: no estimate of 6 at step 25" in first
     assert "may differ from the in-process run" in first and "too slow" in first
     assert "simulator: 2 lockstep timeout(s)" in second and "dead: agent 6's daemon" in second
+
+
+def test_spans_out_of_offboard_stay_within_the_run() -> None:
+    """A vehicle's spans out of OFFBOARD count from its first entry on, a span open at the
+    run's end closes there, and a mode change logged after the end (the shutdown's
+    failsafe) is not the run's: no span starts after the end or runs past it."""
+    from gcs.mission.run_logs import longest_out_of_offboard, out_of_offboard_spans
+
+    log = "\n".join([
+        "t=0.50 vehicle 1: mode POSCTL -> OFFBOARD",
+        "t=0.60 vehicle 2: mode POSCTL -> OFFBOARD",
+        "t=0.70 vehicle 3: mode POSCTL -> OFFBOARD",
+        "t=3.00 vehicle 1: mode OFFBOARD -> HOLD",
+        "t=4.25 vehicle 1: mode HOLD -> OFFBOARD",
+        "t=9.00 vehicle 2: mode OFFBOARD -> HOLD",
+        "t=10.50 vehicle 2: mode HOLD -> OFFBOARD",  # back after the end: clipped
+        "t=11.00 vehicle 3: mode OFFBOARD -> HOLD",  # the shutdown: not the run's
+    ])
+    spans = out_of_offboard_spans(log, 10.0)
+    assert spans == {1: [(3.0, 4.25)], 2: [(9.0, 10.0)]}
+    assert longest_out_of_offboard(log, 10.0) == {1: 1.25, 2: 1.0}
