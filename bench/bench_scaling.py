@@ -25,8 +25,8 @@ Prints, with no assertions (figures for docs/performance.md, "Scaling in process
 * with ``--window T0,T1``, over the steps that start in [T0, T1) s of mission time (fixed
   before the run; after the formation has formed it leaves the start-up transient out):
   the median step's wall per agent (µs), the agents in range of a follower at the
-  window's last step, and the share of follower-steps that called the QP solver and that
-  relaxed it;
+  window's last step, and the share of follower-steps whose QP ran (the shortcut did not
+  settle them: solved, exactly or by the solver, relaxed or fallen back) and that relaxed it;
 * the exponent a of a least-squares fit cost ∝ N^a, for the stepping wall per control
   step and for the setup wall (a = 1: linear in the number of agents).
 """
@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import resource
 import subprocess
 import sys
@@ -84,6 +85,17 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+def parse_window(text: str) -> tuple[float, float]:
+    """(T0, T1) s of ``--window``'s "T0,T1": finite, 0 ≤ T0 < T1 (ValueError, one line)."""
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise ValueError("expected T0,T1 (seconds of mission time)")
+    t0, t1 = float(parts[0]), float(parts[1])
+    if not (math.isfinite(t0) and math.isfinite(t1) and 0.0 <= t0 < t1):
+        raise ValueError("expected finite 0 <= T0 < T1")
+    return t0, t1
+
+
 def _stamp_steps() -> list[float]:
     """The wall clock at the end of every control step of the next ``run_inproc``: its
     per-step record (``set_agent_rows``, called once a step after every agent's step) is
@@ -105,14 +117,15 @@ def window_figures(sc: Any, ser: Any, stamps: list[float], window: str) -> dict[
     """The steps whose start time t_k lies in ``window`` (\"T0,T1\" s, fixed before the
     run): the median wall of a step (the time between the ends of step k − 1 and step k,
     so the agents' steps, the physics and the record) per agent (µs), the share of
-    follower-steps that called the QP solver and that relaxed it, and the mean number of
-    other agents within sensing range of a follower at the window's last step."""
+    follower-steps whose QP ran (status other than inactive) and that relaxed it (or fell
+    back), and the mean number of other agents within sensing range of a follower at the
+    window's last step."""
     from scipy.spatial import cKDTree
 
     from gcs.records.series import STATUS_CODE
     from swarm_common.enums import QPStatus
 
-    t0, t1 = (float(x) for x in window.split(","))
+    t0, t1 = parse_window(window)
     ks = [k for k in range(1, len(stamps)) if t0 <= k * sc.control_dt < t1]
     if not ks:
         raise SystemExit(f"--window {window}: no step of the run lies in it")
@@ -124,7 +137,7 @@ def window_figures(sc: Any, ser: Any, stamps: list[float], window: str) -> dict[
     near = tree.query_ball_point(pos[fol], sc.formation.sensing_range_m, return_length=True)
     return {
         "win_us_agent_step": float(np.median(walls)) / sc.n * 1e6,
-        "win_solver": float(np.mean(status != STATUS_CODE[QPStatus.INACTIVE])),
+        "win_qp": float(np.mean(status != STATUS_CODE[QPStatus.INACTIVE])),
         "win_relaxed": float(np.mean(ser.fallback[ks][:, fol])),
         "win_in_range": float(np.mean(near)) - 1.0,
     }
@@ -179,11 +192,18 @@ def main() -> None:
                     help="[sensing] noise_draws (default: the generator's, in_range)")
     ap.add_argument("--window", default="",
                     help="T0,T1: also the median wall per agent-step of the steps in "
-                    "[T0, T1) s of mission time, with the solver's share of the follower-steps "
+                    "[T0, T1) s of mission time, with the share of follower-steps whose QP ran "
                     "there (a window fixed in advance: after the formation has formed, the "
                     "per-agent cost without the transient)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     opts = ap.parse_args()
+    if opts.window:
+        try:
+            t0, t1 = parse_window(opts.window)
+        except ValueError as exc:
+            ap.error(f"--window {opts.window!r}: {exc}")
+        if t1 > opts.duration:
+            ap.error(f"--window {opts.window!r}: ends after --duration {opts.duration:g} s")
     if opts.child is not None:
         print(json.dumps(child(opts)))
         return
@@ -225,14 +245,14 @@ def main() -> None:
               f"| {verdicts}, {max(int(r['alarms']) for r in rs)} |")
     if opts.window:
         print(f"\nsteps in [{opts.window.replace(',', ', ')}) s of mission time:")
-        print("| N | µs / agent-step (median step) | in range | solver called | relaxed |")
+        print("| N | µs / agent-step (median step) | in range | QP ran | relaxed |")
         print("|---|---|---|---|---|")
         for n in sizes:
             col = {key: [float(r[key]) for r in runs[n]] for key in
-                   ("win_us_agent_step", "win_in_range", "win_solver", "win_relaxed")}
+                   ("win_us_agent_step", "win_in_range", "win_qp", "win_relaxed")}
             print(f"| {n} | {_rng(col['win_us_agent_step'], '.0f')} "
                   f"| {_rng(col['win_in_range'], '.1f')} "
-                  f"| {_rng([100 * x for x in col['win_solver']], '.0f')} % "
+                  f"| {_rng([100 * x for x in col['win_qp']], '.0f')} % "
                   f"| {_rng([100 * x for x in col['win_relaxed']], '.1f')} % |")
     if len(sizes) >= 2:
         med = {key: [float(np.median([r[key] for r in runs[n]])) for n in sizes]
