@@ -43,7 +43,7 @@ def measure_into(
     rel_v``, every element; the last two from the measured ones, ``g̃ d̃`` (m) and
     ``ġ̃ d̃ + g̃ ḋ̃`` (m/s).
 
-    p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (M,8) standard
+    p, v (N,3) ground-truth ENU positions (m) and velocities (m/s); noise (N,8) standard
     normals (columns 0-2 bearing, 3-5 bearing rate, 6 distance, 7 range rate) and drop (N,)
     uniforms in [0,1), row j agent j's; sb (rad), sr (rad/s),
     sd (m), sdd (m/s) noise standard deviations;
