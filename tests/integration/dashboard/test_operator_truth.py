@@ -1,8 +1,8 @@
 """The launched dashboard tells the truth on a loaded machine (a CPU hog beside it):
-no error line before take-off, each row's mode on screen at the first view refresh after
-the link read the heartbeat that carried it, and no link-lost event while the vehicles'
-heartbeats flow (docs/dashboard.md): a loss is only ever the whole link's silence, every
-vehicle at once and each regained after.
+no error line on the pads; each row's mode on screen at the first view refresh after
+the link read the heartbeat that carried it; and no link-lost event while the vehicles'
+heartbeats flow (docs/dashboard.md), on the pads or in flight: a loss is only ever the
+whole link's silence, every vehicle at once and each regained after.
 
 The mode's lag is counted in view refreshes, not seconds: the design guarantees no
 staleness beyond the refresh (every 0.25 s), while the seconds depend on how loaded the
@@ -14,6 +14,7 @@ import argparse
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 
 import pytest
 from conftest import ROOT, free_port_offset
@@ -31,6 +32,24 @@ SCREEN_LAG_REFRESHES = 2
 
 def _lines(app) -> list[str]:
     return list(app.query_one(EventLog).lines_text)
+
+
+def _false_losses(lines: list[str], ids: Sequence[int]) -> list[str]:
+    """The "link lost" lines of the event log (``lines``, each "TIME #ID LEVEL text") that
+    are not the truth. A loss is true only as the whole link's silence: every vehicle of
+    ``ids`` lost at one instant (the simulator or the reader starved past the timeout:
+    once 2.6 s in flight and once 5.8 s on the pads, with two suites and the hog on 2
+    cores), and each regained after."""
+    lost = [x for x in lines if "link lost" in x]
+    every = sorted(f"#{i}" for i in ids)
+    at: dict[str, list[str]] = {}
+    for x in lost:
+        when, who = x.split()[:2]
+        at.setdefault(when, []).append(who)
+    back = {x.split()[1] for x in lines if "link regained" in x}
+    if any(sorted(who) != every for who in at.values()) or (lost and sorted(back) != every):
+        return lost
+    return []
 
 
 @pytest.mark.asyncio
@@ -70,8 +89,14 @@ async def test_launched_dashboard_under_load_tells_the_truth(tmp_path) -> None:
             )
             assert await until(ready, 90.0), (launch.dead(), _lines(app)[-20:])
             await pilot.pause(3.0)  # a few more seconds on the pads, under load
+            # a true loss (the whole link's silence) is regained: wait for it to show
+            assert await until(lambda: all(not r.link_lost for r in app.view.rows), 30.0), (
+                _lines(app)[-20:])
             before = _lines(app)
-            assert not [x for x in before if any(t in x for t in ERROR_TAGS)], before
+            # on the pads nothing is wrong: no error line but a whole-link loss
+            errors = [x for x in before if any(t in x for t in ERROR_TAGS)
+                      and "link lost" not in x]
+            assert not errors and not _false_losses(before, sc.ids), before
             # take-off: OFFBOARD + arm every vehicle (y confirms the group command)
             await pilot.press("t", "u", "y")
             # when the link read OFFBOARD in a heartbeat, and when the row on screen said
@@ -101,12 +126,7 @@ async def test_launched_dashboard_under_load_tells_the_truth(tmp_path) -> None:
             # the simulator itself starved (once, 2.6 s, with two suites and the hog on 2
             # cores). Then every vehicle is lost at the same instant, and each comes back
             lines = _lines(app)
-            lost = [x.split()[:2] for x in lines if "link lost" in x]
-            if lost:
-                assert len({t for t, _ in lost}) == 1, lost  # one instant: the whole link
-                assert sorted(who for _, who in lost) == sorted(f"#{i}" for i in sc.ids), lost
-                back = {x.split()[1] for x in lines if "link regained" in x}
-                assert back == {f"#{i}" for i in sc.ids}, (back, lines[-20:])
+            assert not _false_losses(lines, sc.ids), lines[-20:]
             assert all(not r.link_lost for r in app.view.rows)
     finally:
         hog.kill()
