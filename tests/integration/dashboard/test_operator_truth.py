@@ -25,9 +25,10 @@ from swarm_common.scenario.model import load_scenario
 
 GROUND8 = ROOT / "scenarios" / "ground8.toml"
 ERROR_TAGS = (" EMERG ", " ALERT ", " CRIT ", " ERROR ")
-# refreshes from the one after the link read the mode to the one that shows it: the first
-# refresh after the read shows it; one more covers a read that lands while a refresh runs
-SCREEN_LAG_REFRESHES = 2
+# refreshes from the last one before which the link had read the mode to the one that
+# shows it, both judged inside the refresh: the refresh right after shows it (1); a mode
+# the reader takes in while a refresh runs shows in it and counts as heard one later (0)
+SCREEN_LAG_REFRESHES = 1
 
 
 def _lines(app) -> list[str]:
@@ -65,10 +66,24 @@ async def test_launched_dashboard_under_load_tells_the_truth(tmp_path) -> None:
     link = source.link
     refreshes = [0]  # view refreshes so far (the app's timer calls refresh_data)
     refresh = app.refresh_data
+    # when the link had read OFFBOARD in a heartbeat (checked just before a refresh), and
+    # when the row on screen said it (just after one): (refreshes so far, monotonic s).
+    # Both inside the refresh, so a test loop starved by load (the app's timer ticks on
+    # while the test's own coroutine waits) cannot stretch the lag it measures
+    heard: dict[int, tuple[int, float]] = {}
+    shown: dict[int, tuple[int, float]] = {}
 
     def counted_refresh() -> None:
+        before = (refreshes[0], time.monotonic())
+        for i, v in link.vehicles().items():
+            if v.mode == "OFFBOARD":
+                heard.setdefault(i, before)
         refresh()
         refreshes[0] += 1
+        after = (refreshes[0], time.monotonic())
+        for r in app.view.rows if app.view is not None else []:
+            if r.mode == "OFFBOARD":
+                shown.setdefault(r.id, after)
 
     app.refresh_data = counted_refresh  # type: ignore[method-assign]
     try:
@@ -99,23 +114,10 @@ async def test_launched_dashboard_under_load_tells_the_truth(tmp_path) -> None:
             assert not errors and not _false_losses(before, sc.ids), before
             # take-off: OFFBOARD + arm every vehicle (y confirms the group command)
             await pilot.press("t", "u", "y")
-            # when the link read OFFBOARD in a heartbeat, and when the row on screen said
-            # it: (refreshes so far, monotonic s)
-            heard: dict[int, tuple[int, float]] = {}
-            shown: dict[int, tuple[int, float]] = {}
-
-            def sample() -> bool:
-                now = (refreshes[0], time.monotonic())
-                for i, v in link.vehicles().items():
-                    if v.mode == "OFFBOARD":
-                        heard.setdefault(i, now)
-                for r in app.view.rows if app.view is not None else []:
-                    if r.mode == "OFFBOARD":
-                        shown.setdefault(r.id, now)
-                return len(shown) == len(sc.ids)
-
-            assert await until(sample, 60.0), (heard, shown, _lines(app)[-20:])
-            assert all(i in heard for i in sc.ids), heard  # the link read it first
+            assert await until(lambda: len(shown) == len(sc.ids), 60.0), (
+                heard, shown, _lines(app)[-20:])
+            # a mode read while a refresh ran is shown by it and heard at the next one
+            assert await until(lambda: len(heard) == len(sc.ids), 30.0), heard
             lag = {i: (shown[i][0] - heard[i][0], round(shown[i][1] - heard[i][1], 3))
                    for i in sc.ids}  # (refreshes, s)
             assert max(n for n, _ in lag.values()) <= SCREEN_LAG_REFRESHES, lag
