@@ -120,8 +120,6 @@ def window_figures(sc: Any, ser: Any, stamps: list[float], window: str) -> dict[
     follower-steps whose QP ran (status other than inactive) and that relaxed it (or fell
     back), and the mean number of other agents within sensing range of a follower at the
     window's last step."""
-    from scipy.spatial import cKDTree
-
     from gcs.records.series import STATUS_CODE
     from swarm_common.enums import QPStatus
 
@@ -132,22 +130,19 @@ def window_figures(sc: Any, ser: Any, stamps: list[float], window: str) -> dict[
     walls = np.diff(np.asarray(stamps))[np.asarray(ks) - 1]
     fol = [sc.index_of(a.id) for a in sc.agents if a.id not in set(sc.leader_ids)]
     status = ser.qp_status[ks][:, fol]
-    pos = ser.p[ks[-1]]
-    tree = cKDTree(pos)
-    near = tree.query_ball_point(pos[fol], sc.formation.sensing_range_m, return_length=True)
     return {
         "win_us_agent_step": float(np.median(walls)) / sc.n * 1e6,
         "win_qp": float(np.mean(status != STATUS_CODE[QPStatus.INACTIVE])),
         "win_relaxed": float(np.mean(ser.fallback[ks][:, fol])),
-        "win_in_range": float(np.mean(near)) - 1.0,
+        "win_in_range": in_range(sc, ser.p[ks[-1]]),
     }
 
 
-def in_range(sc: Any) -> float:
+def in_range(sc: Any, pos: np.ndarray | None = None) -> float:
     """The mean number of other agents within the sensing range of a follower at its
-    vertex: the neighbours whose rows a formed follower computes, the count its step's
-    cost should follow."""
-    v = sc.vertices()
+    vertex (or at ``pos`` (N,3), the agents' positions in scenario order): the neighbours
+    whose rows a formed follower computes, the count its step's cost should follow."""
+    v = sc.vertices() if pos is None else pos
     lead = set(sc.leader_ids)
     r = sc.formation.sensing_range_m
     counts = [int(np.count_nonzero(np.linalg.norm(v - v[i], axis=1) <= r)) - 1
