@@ -24,6 +24,7 @@ import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from swarm_common.scenario import graphs, spectra
 from swarm_common.scenario.graphs import GraphSpec
@@ -65,6 +66,17 @@ def _blocks(idx: list[int]) -> np.ndarray:
     return np.array([3 * i + k for i in idx for k in range(3)], dtype=int)
 
 
+def _canonical(m: sp.spmatrix) -> sp.csr_matrix:
+    """``m`` as CSR with no stored zeros and sorted indices: the matrix a dense one's
+    ``csr_matrix`` would give, so a sparse LU or Lanczos over it orders its work (and
+    rounds) as over that one."""
+    out = sp.csr_matrix(m, dtype=np.float64, copy=True)
+    out.sum_duplicates()
+    out.eliminate_zeros()
+    out.sort_indices()
+    return out
+
+
 @dataclass
 class Formation:
     """Desired bearing formation over N agents (scenario order)."""
@@ -75,11 +87,16 @@ class Formation:
     vertices: np.ndarray  # (N, 3)
     edges: list[tuple[int, int]]
     neighbours: list[list[int]]  # per index, sorted neighbour indices
-    g_star: np.ndarray  # (N, N, 3) desired bearings g*_ij of graph edges (0 elsewhere)
-    p_star: np.ndarray  # (N, N, 3, 3) desired projectors P*_ij of graph edges (0 elsewhere)
-    laplacian: np.ndarray  # (3N, 3N)
-    l_ff: np.ndarray
-    l_fl: np.ndarray
+    # per graph edge, both directions: (i, j) -> the desired bearing g*_ij (3,) and its
+    # projector P*_ij (3, 3); O(edges) memory, where (N, N, ...) arrays grew with N²
+    g_star: dict[tuple[int, int], np.ndarray]
+    p_star: dict[tuple[int, int], np.ndarray]
+    # the bearing Laplacian (3N, 3N) and its follower/leader blocks L_ff (3F, 3F), L_fl
+    # (3F, 3L), sparse (CSR, no stored zeros, sorted indices): .toarray() is the dense
+    # matrix, bit for bit, and spectra's solves and spectra take either
+    laplacian: sp.csr_matrix
+    l_ff: sp.csr_matrix
+    l_fl: sp.csr_matrix
     rank: int
     # eigenvalues of L_ff, ascending: above spectra.DENSE_SPECTRUM_MAX rows only the two
     # ends [λ_min, λ_max] (spectra.spectrum)
@@ -102,8 +119,11 @@ class Formation:
             for part in (self.ids, self.leader_idx, self.follower_idx, self.neighbours,
                          self.sensed):
                 h.update(repr(part).encode())
-            for arr in (self.p_star, self.l_ff):
-                h.update(repr((arr.shape, arr.dtype.str)).encode())
+            for key in sorted(self.p_star):
+                h.update(repr(key).encode())
+                h.update(np.ascontiguousarray(self.p_star[key], dtype=np.float64).tobytes())
+            h.update(repr(self.l_ff.shape).encode())
+            for arr in (self.l_ff.data, self.l_ff.indices, self.l_ff.indptr):
                 h.update(np.ascontiguousarray(arr).tobytes())
             self._digest = h.hexdigest()
         return self._digest
@@ -129,11 +149,15 @@ class Formation:
         lead = set(self.leader_idx)
         return [j for j in self.sensed[i] if j in lead]
 
-    def observer_laplacian(self, leader_anchor: float) -> np.ndarray:
+    def observer_laplacian(self, leader_anchor: float) -> sp.csr_matrix:
         """(3F, 3F) L_ff + leader_anchor · blockdiag(m_i I₃), m_i = len(anchor_leaders(i)):
-        the DESO's network matrix (paper §3 with the anchor of D21)."""
+        the DESO's network matrix (paper §3 with the anchor of D21), sparse as L_ff."""
         m = np.array([len(self.anchor_leaders(i)) for i in self.follower_idx], dtype=float)
-        return self.l_ff + leader_anchor * np.diag(np.repeat(m, 3))
+        return _canonical(self.l_ff + sp.diags(leader_anchor * np.repeat(m, 3)))
+
+    def projectors(self, i: int, js: list[int] | tuple[int, ...]) -> np.ndarray:
+        """(k, 3, 3) P*_ij of agent ``i`` and its graph neighbours ``js``, in that order."""
+        return np.array([self.p_star[i, j] for j in js], dtype=np.float64).reshape(-1, 3, 3)
 
     def observer_eigs(self, leader_anchor: float) -> np.ndarray:
         """Eigenvalues (ascending) of :meth:`observer_laplacian` (cached per anchor; above
@@ -187,21 +211,23 @@ def build_formation(
     problem = graphs.rigidity_problem(v, edges, ids, leader_idx)
     if problem is not None:
         raise RigidityError(f"{spec.describe()}: {problem}")
-    lap = bearing_laplacian(v, edges)
-    follower_idx = [k for k in range(n) if k not in leader_idx]
+    lap = _canonical(graphs.sparse_laplacian(v, edges))
+    lead = set(leader_idx)
+    follower_idx = [k for k in range(n) if k not in lead]
     nbrs: list[list[int]] = [[] for _ in range(n)]
     for i, j in edges:
         nbrs[i].append(j)
         nbrs[j].append(i)
-    # the observers read P*_ij of graph neighbours only: O(edges) work, not O(N²) pairs
-    g_star = np.zeros((n, n, 3))
-    p_star = np.zeros((n, n, 3, 3))
+    # the observers read P*_ij of graph neighbours only: O(edges) work and memory
+    g_star: dict[tuple[int, int], np.ndarray] = {}
+    p_star: dict[tuple[int, int], np.ndarray] = {}
     for i, j in edges:
         for a, b in ((i, j), (j, i)):
             g_star[a, b] = bearing(v[a], v[b])
             p_star[a, b] = projector(g_star[a, b])
     fb, lb = _blocks(follower_idx), _blocks(leader_idx)
-    l_ff = lap[np.ix_(fb, fb)]
+    rows_f = lap[fb]
+    l_ff = _canonical(rows_f[:, fb])
     return Formation(
         ids=list(ids),
         leader_idx=leader_idx,
@@ -213,7 +239,7 @@ def build_formation(
         p_star=p_star,
         laplacian=lap,
         l_ff=l_ff,
-        l_fl=lap[np.ix_(fb, lb)],
+        l_fl=_canonical(rows_f[:, lb]),
         rank=3 * n - 4,
         lambda_ff=spectra.spectrum(l_ff),
         sensed=graphs.sensed_sets(v, edges, spec.range_vu),

@@ -212,7 +212,7 @@ class DesiredStateObserver:
             a[:12, 12:] = self.gain * np.eye(12)
             a[12:, 12:] = sk
             full = expm(a * self.dt)
-            pu = self.form.p_star[self.index, list(used)]  # (k,3,3), symmetric
+            pu = self.form.projectors(self.index, used)  # (k,3,3), symmetric
             m = (full[:12, :12].copy(), full[:12, 12:].copy(), np.ascontiguousarray(pu),
                  np.array(used, dtype=np.int64))
             self._cache[used] = m

@@ -58,8 +58,9 @@ def test_formation_digest_is_by_content() -> None:
     sc = load_scenario(root / "scenarios" / "cube8.toml")
     a, b = formation_from_scenario(sc), formation_from_scenario(sc)
     assert a is not b and a.content_digest() == b.content_digest()
-    moved = replace(b, p_star=b.p_star.copy(), _digest=None)
-    moved.p_star[2, 3] += 1e-12 * np.eye(3)
+    edge = next(iter(b.p_star))
+    nudged = {**b.p_star, edge: b.p_star[edge] + 1e-12 * np.eye(3)}
+    moved = replace(b, p_star=nudged, _digest=None)
     assert moved.content_digest() != a.content_digest()
     fewer = replace(b, neighbours=[list(n[:-1]) for n in b.neighbours], _digest=None)
     assert fewer.content_digest() != a.content_digest()

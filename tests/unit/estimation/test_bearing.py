@@ -33,7 +33,7 @@ def test_projector_properties():
 
 def test_laplacian_properties(sc):
     f = formation_from_scenario(sc)
-    lap = f.laplacian
+    lap = f.laplacian.toarray()
     n = sc.n
     assert len(f.edges) == 24  # 12 edges + 12 face diagonals
     assert np.allclose(lap, lap.T)
