@@ -62,10 +62,6 @@ def bearing_laplacian(vertices: np.ndarray, edges: list[tuple[int, int]]) -> np.
     return graphs.sparse_laplacian(np.asarray(vertices, dtype=float), edges).toarray()
 
 
-def _blocks(idx: list[int]) -> np.ndarray:
-    return np.array([3 * i + k for i in idx for k in range(3)], dtype=int)
-
-
 def _canonical(m: sp.spmatrix) -> sp.csr_matrix:
     """``m`` as CSR with no stored zeros and sorted indices: the matrix a dense one's
     ``csr_matrix`` would give, so a sparse LU or Lanczos over it orders its work (and
@@ -225,7 +221,7 @@ def build_formation(
         for a, b in ((i, j), (j, i)):
             g_star[a, b] = bearing(v[a], v[b])
             p_star[a, b] = projector(g_star[a, b])
-    fb, lb = _blocks(follower_idx), _blocks(leader_idx)
+    fb, lb = graphs.blocks(follower_idx), graphs.blocks(leader_idx)
     rows_f = lap[fb]
     l_ff = _canonical(rows_f[:, fb])
     return Formation(

@@ -1,6 +1,7 @@
 """Start-up of a large formation: the sparse spectrum and solve above
-``spectra.DENSE_SPECTRUM_MAX``, the k-d tree pair search of the loader's checks, and the gain
-report's channels when only the ends of the spectrum are known (docs/performance.md)."""
+``spectra.DENSE_SPECTRUM_MAX``, the k-d tree pair search of the loader's checks, the gain
+report's channels when only the ends of the spectrum are known, and the formation's
+matrices held on the graph's edges (docs/performance.md)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,11 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: E402
 
-from offboard.estimation.bearing import formation_from_scenario
+from offboard.estimation.bearing import (
+    bearing_laplacian,
+    build_formation,
+    formation_from_scenario,
+)
 from offboard.estimation.deso_gains import CHANNEL_SAMPLES, channels, gain_report
 from swarm_common.scenario import feasibility, graphs, spectra
 from swarm_common.scenario.checks import check_separation
@@ -125,3 +130,29 @@ def test_channels_keep_a_full_spectrum_and_sample_its_ends():
     got = channels(np.array([0.5, 4.0]), 300)
     assert len(got) == CHANNEL_SAMPLES and got[0] == 0.5 and got[-1] == pytest.approx(4.0)
     assert np.all(np.diff(got) > 0.0)
+
+
+def test_the_formation_is_sparse_and_densifies_to_the_dense_matrices():
+    edges = graphs.knn_edges(GRID125, 6)
+    ids = list(range(1, len(GRID125) + 1))
+    form = build_formation(ids, [ids[k] for k in LEADERS], GRID125,
+                           graphs.GraphSpec(kind="knn", knn_k=6))
+    dense = bearing_laplacian(GRID125, form.edges)
+    fb, lb = graphs.blocks(form.follower_idx), graphs.blocks(LEADERS)
+    for got, want in ((form.laplacian, dense), (form.l_ff, dense[np.ix_(fb, fb)]),
+                      (form.l_fl, dense[np.ix_(fb, lb)])):
+        assert np.array_equal(got.toarray(), want)  # the former dense matrix, bit for bit
+        assert got.has_sorted_indices and np.all(got.data != 0.0)  # as csr_matrix(dense)
+    # one bearing and projector per edge and direction, and nothing else
+    assert set(form.p_star) == set(form.g_star) == {k for i, j in form.edges
+                                                    for k in ((i, j), (j, i))}
+    assert sorted(form.edges) == sorted(edges)
+    i, j = form.edges[0]
+    g = form.g_star[i, j]
+    assert np.allclose(form.p_star[i, j] @ g, 0.0) and np.isclose(np.trace(form.p_star[i, j]), 2)
+    # memory on the edges (about 400 bytes each): dense (N, N, 3, 3) projectors alone took
+    # 9 × 8 × N² bytes
+    held = sum(a.nbytes for d in (form.p_star, form.g_star) for a in d.values())
+    held += sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
+                for m in (form.laplacian, form.l_ff, form.l_fl))
+    assert held <= 600 * len(form.edges) < 9 * 8 * len(GRID125) ** 2
