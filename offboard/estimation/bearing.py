@@ -1,6 +1,7 @@
 """Bearing geometry, neighbour graph and bearing Laplacian (paper §2.1).
 
-* ``g_ij = (p_j − p_i)/‖p_j − p_i‖`` and ``P_ij = I₃ − g_ij g_ijᵀ`` (§2.1).
+* ``g_ij = (p_j − p_i)/‖p_j − p_i‖`` and ``P_ij = I₃ − g_ij g_ijᵀ`` (§2.1), per graph edge
+  (:func:`swarm_common.scenario.graphs.edge_bearings`).
 * Desired bearings ``g*_ij`` come from the agents' formation ``vertex`` coordinates.
 * Neighbour graph (Departure 3; docs/graphs.md): ``formation.graph`` is one of
   ``cube_face_diagonals``, ``complete``, ``knn`` (``formation.knn_k``), ``range``
@@ -32,18 +33,6 @@ from swarm_common.scenario.graphs import GraphSpec
 
 class RigidityError(ValueError):
     """The formation's bearing graph is not bearing rigid or leaders do not fix it."""
-
-
-def bearing(p_i: np.ndarray, p_j: np.ndarray) -> np.ndarray:
-    """Unit bearing g_ij from i to j (§2.1)."""
-    d = np.asarray(p_j, dtype=float) - np.asarray(p_i, dtype=float)
-    return d / np.linalg.norm(d)
-
-
-def projector(g: np.ndarray) -> np.ndarray:
-    """Orthogonal projector P = I − g gᵀ onto the plane normal to g (§2.1)."""
-    g = np.asarray(g, dtype=float)
-    return np.eye(3) - np.outer(g, g)
 
 
 def build_edges(
@@ -207,20 +196,15 @@ def build_formation(
     problem = graphs.rigidity_problem(v, edges, ids, leader_idx)
     if problem is not None:
         raise RigidityError(f"{spec.describe()}: {problem}")
-    lap = _canonical(graphs.sparse_laplacian(v, edges))
+    # the observers read P*_ij of graph neighbours only: O(edges) work and memory
+    g_star, p_star = graphs.edge_bearings(v, edges)
+    lap = _canonical(graphs.sparse_laplacian(v, edges, p_star))
     lead = set(leader_idx)
     follower_idx = [k for k in range(n) if k not in lead]
     nbrs: list[list[int]] = [[] for _ in range(n)]
     for i, j in edges:
         nbrs[i].append(j)
         nbrs[j].append(i)
-    # the observers read P*_ij of graph neighbours only: O(edges) work and memory
-    g_star: dict[tuple[int, int], np.ndarray] = {}
-    p_star: dict[tuple[int, int], np.ndarray] = {}
-    for i, j in edges:
-        for a, b in ((i, j), (j, i)):
-            g_star[a, b] = bearing(v[a], v[b])
-            p_star[a, b] = projector(g_star[a, b])
     fb, lb = graphs.blocks(follower_idx), graphs.blocks(leader_idx)
     rows_f = lap[fb]
     l_ff = _canonical(rows_f[:, fb])

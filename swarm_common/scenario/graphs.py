@@ -218,19 +218,51 @@ def long_edges(
     return out
 
 
-def sparse_laplacian(v: np.ndarray, edges: Sequence[tuple[int, int]]) -> sp.csr_matrix:
+def bearing(p_i: np.ndarray, p_j: np.ndarray) -> np.ndarray:
+    """Unit bearing g_ij from i to j (§2.1)."""
+    d = np.asarray(p_j, dtype=float) - np.asarray(p_i, dtype=float)
+    return d / np.linalg.norm(d)
+
+
+def projector(g: np.ndarray) -> np.ndarray:
+    """Orthogonal projector P = I − g gᵀ onto the plane normal to g (§2.1)."""
+    g = np.asarray(g, dtype=float)
+    return np.eye(3) - np.outer(g, g)
+
+
+def edge_bearings(
+    v: np.ndarray, edges: Sequence[tuple[int, int]]
+) -> tuple[dict[tuple[int, int], np.ndarray], dict[tuple[int, int], np.ndarray]]:
+    """Per edge, in both directions, the desired bearing g*_ij between the vertices and
+    its projector P*_ij: ``({(i, j): g*_ij}, {(i, j): P*_ij})``, O(edges)."""
+    v = np.asarray(v, dtype=float)
+    g_star: dict[tuple[int, int], np.ndarray] = {}
+    p_star: dict[tuple[int, int], np.ndarray] = {}
+    for i, j in edges:
+        for a, b in ((i, j), (j, i)):
+            g_star[a, b] = bearing(v[a], v[b])
+            p_star[a, b] = projector(g_star[a, b])
+    return g_star, p_star
+
+
+def sparse_laplacian(
+    v: np.ndarray,
+    edges: Sequence[tuple[int, int]],
+    p_star: dict[tuple[int, int], np.ndarray] | None = None,
+) -> sp.csr_matrix:
     """(3N, 3N) bearing Laplacian (§2.1): −P*_ij off the diagonal, Σ_k P*_ik on it, with
-    P*_ij = I − g gᵀ of the unit bearing g from vertex i to vertex j.
+    P*_ij the projector of the unit bearing from vertex i to vertex j (:func:`edge_bearings`;
+    ``p_star``: those already computed).
 
     The one implementation (the dense form is ``.toarray()``): every 3×3 block is summed
     in edge order, so the same vertices and edges give the same bits in either form."""
     v = np.asarray(v, dtype=float)
     n = len(v)
+    if p_star is None:
+        p_star = edge_bearings(v, edges)[1]
     blocks: dict[tuple[int, int], np.ndarray] = {}
     for i, j in edges:
-        d = v[j] - v[i]
-        g = d / np.linalg.norm(d)
-        p = np.eye(3) - np.outer(g, g)
+        p = p_star[i, j]
         for a, b, s in ((i, j, -1.0), (j, i, -1.0), (i, i, 1.0), (j, j, 1.0)):
             blocks[a, b] = blocks.get((a, b), np.zeros((3, 3))) + s * p
     if not blocks:

@@ -326,3 +326,23 @@ def test_smallest_eig_and_spectrum_fall_back_to_dense_when_lanczos_stalls(monkey
     lo, hi = spectra.spectrum(m, dense_max=10)
     assert lo == pytest.approx(want[0], rel=1e-12) and hi == pytest.approx(want[-1], rel=1e-12)
     assert seen and set(seen) == {spectra.ARPACK_MAXITER}
+
+
+def test_edge_bearings_are_the_laplacians_and_both_directions_agree():
+    """The per-edge bearings the formation keeps are the ones its Laplacian is built
+    from: g*_ji = −g*_ij and P*_ji = P*_ij exactly, each projector annihilates its
+    bearing, and the Laplacian of given projectors is the one computed from the
+    vertices, while different projectors give a different one."""
+    e = graphs.knn_edges(GRID, 6)
+    g_star, p_star = graphs.edge_bearings(GRID, e)
+    assert set(g_star) == set(p_star) == {(i, j) for i, j in e} | {(j, i) for i, j in e}
+    for i, j in e:
+        assert np.array_equal(g_star[j, i], -g_star[i, j])
+        assert np.array_equal(p_star[j, i], p_star[i, j])
+        d = GRID[j] - GRID[i]
+        assert np.allclose(g_star[i, j], d / np.sqrt(d @ d), atol=1e-15)
+        assert np.abs(p_star[i, j] @ g_star[i, j]).max() < 1e-15
+    lap = graphs.sparse_laplacian(GRID, e)
+    assert (graphs.sparse_laplacian(GRID, e, p_star) != lap).nnz == 0
+    bent = {k: 2.0 * p for k, p in p_star.items()}
+    assert np.allclose(graphs.sparse_laplacian(GRID, e, bent).toarray(), 2.0 * lap.toarray())

@@ -10,9 +10,9 @@ from offboard.estimation.bearing import (
     RigidityError,
     build_formation,
     formation_from_scenario,
-    projector,
 )
 from offboard.estimation.sensing import Sensor
+from swarm_common.scenario.graphs import projector
 from swarm_common.scenario.model import load_scenario
 
 
