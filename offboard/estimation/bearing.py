@@ -174,9 +174,10 @@ class Formation:
         return out
 
     def _leader_map(self) -> np.ndarray:
-        """(3F, 3L) −L_ff⁻¹ L_fl (computed once)."""
+        """(3F, 3L) −L_ff⁻¹ L_fl (:func:`spectra.leader_map`, computed once; L_ff is
+        positive definite: :func:`build_formation` checked it)."""
         if self._kfl is None:
-            self._kfl = -spectra.follower_solve(self.l_ff, self.l_fl)
+            self._kfl = spectra.leader_map(self.l_ff, self.l_fl)
         return self._kfl
 
 

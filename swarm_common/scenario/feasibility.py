@@ -90,8 +90,7 @@ def formation_map(sc: Scenario) -> np.ndarray | None:
         return None
     if np.min(np.abs(np.diag(chol))) ** 2 <= spectra.zero_tol(l_ff_s):
         return None
-    rhs = lap[fb][:, lb].toarray()
-    return -spectra.follower_solve(l_ff, rhs)
+    return spectra.leader_map(l_ff, lap[fb][:, lb].toarray())
 
 
 # the sparse maps of large formations: the loader's check, the leaders' governors and the
@@ -105,7 +104,7 @@ def _sparse_map(l_ff: sp.spmatrix, l_fl: sp.spmatrix) -> np.ndarray | None:
     is zero to :func:`spectra.zero_tol`, else the sparse LU's −L_ff⁻¹ L_fl."""
     if spectra.smallest_eig(l_ff) <= spectra.zero_tol(l_ff):
         return None
-    return -spectra.follower_solve(l_ff, l_fl)
+    return spectra.leader_map(l_ff, l_fl)
 
 
 def leader_origins(sc: Scenario) -> np.ndarray:

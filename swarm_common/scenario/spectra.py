@@ -112,6 +112,14 @@ def follower_solve(
     return np.asarray(out, dtype=float)
 
 
+def leader_map(l_ff: sp.spmatrix | np.ndarray, l_fl: sp.spmatrix | np.ndarray) -> np.ndarray:
+    """K = −L_ff⁻¹ L_fl (3F × 3L), with p*_f = K p_L (paper §2.1), by
+    :func:`follower_solve`: the one map from the leaders to the followers' desired
+    positions (the feasibility check's and the formation's). ``l_ff`` must be positive
+    definite (the caller has checked it)."""
+    return -follower_solve(l_ff, l_fl)
+
+
 def zero_tol(m: sp.spmatrix) -> float:
     """Threshold below which an eigenvalue of ``m`` counts as zero (Gershgorin-scaled)."""
     bound = float(np.max(np.abs(m).sum(axis=1))) if m.shape[0] else 0.0
