@@ -31,6 +31,8 @@ from swarm_common.enums import NoiseDraws
 from swarm_common.fastnp import rows3
 from swarm_common.scenario.model import SensingConfig
 
+DRAW_ROWS = 64  # the in-range draws' first room (agents in range), grown on demand
+
 
 @dataclass
 class Measurements:
@@ -82,9 +84,12 @@ class Sensor:
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
         self.in_range_only = sensing.noise_draws is NoiseDraws.IN_RANGE
         # the draws of a call, written in place (``out=``: the same numbers as drawing new
-        # arrays of that shape, without the allocations); read only within the call
-        self._noise = np.empty((n, 8))
-        self._drop = np.empty(n)
+        # arrays of that shape, without the allocations); read only within the call. With
+        # in-range draws they hold the agents in range only, grown when more are
+        # (_draw_rows): N rows per follower were 73 kB each at a thousand agents
+        rows = min(n, DRAW_ROWS) if self.in_range_only else n
+        self._noise = np.empty((rows, 8))
+        self._drop = np.empty(rows)
         if self.in_range_only:  # the outputs kept between calls (measure)
             self._idx = np.empty(n, dtype=np.int64)  # the agents in range, in index order
             self._prev = np.empty(n, dtype=np.int64)  # ... at the call before
@@ -116,6 +121,8 @@ class Sensor:
         if self.in_range_only:
             p, v, out = rows3(p), rows3(v), self._out
             k = range_index(p, self.index, self.range, self._idx, out.d)
+            if k > len(self._drop):
+                self._draw_rows(k)
             noise = self.rng.standard_normal(out=self._noise[:k])
             drop = self.rng.random(out=self._drop[:k])
             self._n_prev = measure_in_range_into(
@@ -134,6 +141,13 @@ class Sensor:
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
         )
         return out
+
+
+    def _draw_rows(self, k: int) -> None:
+        """Room for the draws of ``k`` agents in range: at least double, at most N rows
+        (the numbers drawn into the first ``k`` rows do not depend on the room)."""
+        rows = min(self.n, max(k, 2 * len(self._drop)))
+        self._noise, self._drop = np.empty((rows, 8)), np.empty(rows)
 
 
 class DropoutHold:

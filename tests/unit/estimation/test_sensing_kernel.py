@@ -233,11 +233,15 @@ def _in_range(cfg: SensingConfig) -> SensingConfig:
     return replace(cfg, noise_draws=NoiseDraws.IN_RANGE)
 
 
-def test_in_range_draws_ignore_agents_out_of_range() -> None:
+def test_in_range_draws_ignore_agents_out_of_range(monkeypatch: pytest.MonkeyPatch) -> None:
     """``noise_draws = "in_range"``: agents out of range change nothing. A swarm and the
     same swarm with 200 more agents far away give the same measurements of every pair in
     range, bit for bit (the same code on the same draws), and the generator advances by
-    8 normals and 1 uniform per agent in range only."""
+    8 normals and 1 uniform per agent in range only. The draws' room starts at 2 rows
+    here, so it grows in most trials, and stays within twice the agents in range."""
+    from offboard.estimation import sensing
+
+    monkeypatch.setattr(sensing, "DRAW_ROWS", 2)
     rng = np.random.default_rng(5)
     for trial in range(100):
         n = int(rng.integers(2, 12))
@@ -266,6 +270,8 @@ def test_in_range_draws_ignore_agents_out_of_range() -> None:
                          (a.rel_p, b.rel_p), (a.rel_v, b.rel_v)):
                 assert np.array_equal(x[ok], y[near][ok]), trial
         in_range = int((np.linalg.norm(p - p[i], axis=1) <= rng_m).sum() - 1)
+        # and the draws' room follows the agents in range, not the 200 far ones
+        assert len(big._noise) == len(big._drop) <= max(2, 2 * in_range), trial
         after = np.random.default_rng([seed, aid, 0x5E])
         for _ in range(3):
             after.standard_normal((in_range, 8))
