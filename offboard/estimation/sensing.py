@@ -142,7 +142,6 @@ class Sensor:
         )
         return out
 
-
     def _draw_rows(self, k: int) -> None:
         """Room for the draws of ``k`` agents in range: at least double, at most N rows
         (the numbers drawn into the first ``k`` rows do not depend on the room)."""
