@@ -150,5 +150,7 @@ def test_dropout_hold_extrapolates_a_dropped_pair() -> None:
     assert list(sel) == [2]
     off = DropoutHold(3, 0, 0.2, enabled=False)
     off.pairs(0.0, valid, rp, rv)
-    sel, _, _ = off.pairs(0.1, np.array([False, False, True]), rp, rv)
-    assert list(sel) == [2]
+    sel, rp3, _ = off.pairs(0.1, np.array([False, False, True]), rp, rv)
+    assert list(sel) == [2] and rp3 is rp
+    # disabled, it keeps no per-agent state at all
+    assert off._last_seen.size == off._last_rp.size == off._last_rv.size == 0
