@@ -39,6 +39,10 @@ class Backoff:
 
 
 FAULT_WINDOW_S = 1.5  # s: an own fault this long before leaving OFFBOARD explains it
+# what the keeper logs when it leaves the vehicle out of OFFBOARD for good (a run's logs are
+# read for them: tests/integration/mission/test_faults_realtime.py)
+LEFT_TO_OPERATOR = "vehicle out of OFFBOARD and not in HOLD: left to its operator"
+HOLD_RESPECTED = "vehicle put in HOLD by a third party: respected"
 
 
 @dataclass
@@ -108,7 +112,7 @@ class OffboardKeeper:
             self.left_at = now
         if not (v.hold and v.armed):
             if self.recovering or not self.respect:
-                log.warning("vehicle out of OFFBOARD and not in HOLD: left to its operator")
+                log.warning(LEFT_TO_OPERATOR)
             self.recovering, self.respect = False, True
             return None
         if not self.recovering and not self.respect:
@@ -121,7 +125,7 @@ class OffboardKeeper:
                 log.warning("vehicle in failsafe HOLD: OFFBOARD will be asked for again")
             elif now - self.left_at > FAULT_WINDOW_S:
                 self.respect = True
-                log.warning("vehicle put in HOLD by a third party: respected")
+                log.warning(HOLD_RESPECTED)
         if self.recovering and v.streaming_s >= self.stream_s and self.backoff.ready(now):
             return "offboard"
         return None

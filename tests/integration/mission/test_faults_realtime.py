@@ -33,6 +33,7 @@ from conftest import CUBE8, ROOT, free_port_offset
 
 from gcs.exit_codes import EXIT_OK, EXIT_SAFETY
 from gcs.mission.run_logs import out_of_offboard_spans, vehicles_in_offboard
+from offboard.daemon.mavlink.offboard_keeper import HOLD_RESPECTED, LEFT_TO_OPERATOR
 
 pytestmark = pytest.mark.timeout(400)
 
@@ -44,7 +45,7 @@ LOSS = 0.2
 RECOVERY_TAIL_S = 5.0
 # what a daemon logs when it leaves a vehicle out of OFFBOARD for good; in this run no one
 # else commands the vehicles, so either line means a failsafe was taken for something else
-GIVE_UP = re.compile(r"put in HOLD by a third party: respected|not in HOLD: left to its operator")
+GIVE_UP = re.compile(f"{re.escape(HOLD_RESPECTED)}|{re.escape(LEFT_TO_OPERATOR)}")
 STATS_LINE = re.compile(r"(mavlink|zenoh)\.\S+ faults: sent=(\d+) dropped=(\d+)")
 
 
