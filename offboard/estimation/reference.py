@@ -188,9 +188,11 @@ class DesiredStateObserver:
         self.gain = float(gain)
         self.dt = float(dt)
         self.nbrs = list(form.neighbours[index])
+        self._nbr_idx = np.array(self.nbrs, dtype=np.int64)  # read by :meth:`maps`
         self.xi = np.array(xi0, dtype=float)
         self.exo = exo_propagator(self.omega, self.dt)
-        self._have_key = b""  # :meth:`maps`' last ``have`` and its maps
+        # :meth:`maps`' last ``have`` over the neighbours, and its maps
+        self._have_key: bytes | None = None
         self._have_maps: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._cache: dict[
             tuple[int, ...], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
@@ -223,8 +225,9 @@ class DesiredStateObserver:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """The one-period maps of :meth:`_matrices` for the neighbours that ``have`` (N,)
         marks usable, or None when there is none (the estimate then runs open loop on the
-        exosystem)."""
-        key = np.asarray(have, dtype=bool).tobytes()
+        exosystem). Only the neighbours' entries are read: the cost follows the
+        neighbours, not N."""
+        key = np.asarray(have, dtype=bool)[self._nbr_idx].tobytes()
         if key != self._have_key:  # the last set is kept: it rarely changes between steps
             used = tuple([j for j in self.nbrs if have[j]])
             self._have_maps = self._matrices(used) if used else None
