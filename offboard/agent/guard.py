@@ -42,8 +42,8 @@ class InFlightGuard:
                                  FALLBACK_CLEAR_D * sc.controller.d_safe_m)
         self.index = index
         self.dt = sc.control_dt
-        self._peers = np.zeros(sc.n, dtype=bool)
-        self._peers[peers] = True
+        self._peers = np.array(sorted(set(np.asarray(peers, dtype=np.int64).tolist())),
+                               dtype=np.int64)  # the rows the monitor reads, ascending
         self.bits = NO_ALARM
         self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
 
@@ -71,8 +71,7 @@ class InFlightGuard:
         the neighbours' predicted ``rows`` (N, ROW) with ``have`` (N,), this step's sensed
         ``rel_p`` (N,3) where ``fresh`` (N,), and the filter's pairs ``sel`` (indices) with
         their p_j − p_i, v_j − v_i ``rp``, ``rv`` (N,3). Latches the fallback at ``t``."""
-        bits = self.monitor.step(z1, z2, rows, have & self._peers, rel_p, fresh, sel,
-                                 rp, rv)
+        bits = self.monitor.step(z1, z2, rows, have, self._peers, rel_p, fresh, sel, rp, rv)
         if self.monitor.fallback:
             self.fallback.start(t)
             bits |= AgentAlarm.FALLBACK

@@ -50,6 +50,7 @@ SENSE_SIGMAS = 4.0  # standard deviations of the relative-position noise in the 
 V_IMPOSSIBLE_MPS = 30.0  # m/s, an estimated speed no vehicle of this class flies
 PERSIST_S = 0.2  # s over (under) the bound that raises (clears) RESIDUAL
 FALLBACK_AFTER_S = 0.5  # s of RESIDUAL held that latches the fallback
+PAIR_ROOM = 16  # pairs the monitor's lists hold at first, grown on demand
 
 
 @dataclass(frozen=True)
@@ -101,26 +102,39 @@ class SafetyMonitor:
         # it has been held, the fallback latched (monitor_kernel.CTR_*)
         self._ctr = np.zeros(5, dtype=np.int64)
         self.fallback = False  # latched
-        self._sensed = np.zeros(n, dtype=bool)  # the pairs the filter uses this step
-        self._prev = np.zeros(n, dtype=bool)  # ... and at the step before
-        self._new = np.zeros(n, dtype=bool)  # sensed now but not before
+        # the pairs the filter used at the last step: marked by scenario index (n,) and
+        # listed (monitor_kernel.monitor_terms); the list's and the new pairs' rooms grow
+        # with the pairs, not with n
+        self._mark = np.zeros(n, dtype=np.int8)
+        self._prev = np.zeros(PAIR_ROOM, dtype=np.int64)
+        self._n_prev = 0
+        self._new = np.zeros(PAIR_ROOM, dtype=np.int64)  # sensed now but not before
+        self._n_new = 0
         self._first = True
 
-    def step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, usable: np.ndarray,
-             rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray, pair_p: np.ndarray,
-             pair_v: np.ndarray) -> AgentAlarm:
+    def step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, have: np.ndarray,
+             peers: np.ndarray, rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray,
+             pair_p: np.ndarray, pair_v: np.ndarray) -> AgentAlarm:
         """The bits of one step. ``z1``, ``z2`` (3,): this agent's estimates at t_k;
         ``est_p`` (N, ≥ 3): the others' position estimates predicted to t_k (the first
-        three columns), ``usable`` (N,) where they are; ``rel_p`` (N,3) with ``fresh``
+        three columns), ``have`` (N,) where they are, of which the rows of ``peers``
+        (scenario indices, int64) are read; ``rel_p`` (N,3) with ``fresh``
         (N,) bool: this step's relative positions p_j − p_i; ``sel`` (indices) with
         ``pair_p``, ``pair_v`` (N,3): the pairs the filter uses this step (held through a
         dropout) and their p_j − p_i, v_j − v_i."""
         cfg = self.cfg
         z1 = vec3(z1)
-        self.residual, any_new, raised = monitor_step(
-            z1, z2, est_p, usable, rel_p, fresh, sel, self._sensed, self._prev, self._new,
-            cfg.range_m, self._ctr, cfg.bound_m, cfg.v_max_mps, cfg.persist,
-            cfg.fallback_after)
+        if len(sel) > len(self._prev):  # more pairs than ever: room for them, the list kept
+            room = max(len(sel), 2 * len(self._prev))
+            self._prev = np.concatenate([self._prev, np.zeros(room - len(self._prev),
+                                                              dtype=np.int64)])
+            self._new = np.zeros(room, dtype=np.int64)
+        self.residual, self._n_new, raised = monitor_step(
+            z1, z2, est_p, have, peers, rel_p, fresh, sel, self._mark, self._prev,
+            self._n_prev, self._new, cfg.range_m, self._ctr, cfg.bound_m, cfg.v_max_mps,
+            cfg.persist, cfg.fallback_after)
+        self._n_prev = len(sel)
+        any_new = self._n_new > 0
         if self._ctr[CTR_FALLBACK]:
             self.fallback = True
         bits = AgentAlarm.RESIDUAL if raised else NO_ALARM
@@ -136,7 +150,7 @@ class SafetyMonitor:
         first step: the start positions were checked at load."""
         if self._first:
             return False
-        new = self._new
+        new = self._new[:self._n_new]
         h = barrier(pair_p[new], pair_v[new], self.cfg.tau_s, self.cfg.d_safe_m,
                     self.cfg.vertical_scale)
         return bool(np.any(h < 0.0))

@@ -11,7 +11,7 @@ import pytest
 
 from offboard.agent.fallback import BRAKED_MPS, HOLD_S, Fallback
 from offboard.safety.monitor import MonitorConfig, SafetyMonitor, residual_bound
-from offboard.safety.monitor_kernel import monitor_terms
+from offboard.safety.monitor_kernel import BEFORE, OUT, monitor_terms
 from swarm_common import wire
 from swarm_common.barrier import barrier
 from swarm_common.enums import AgentAlarm
@@ -38,7 +38,7 @@ class World:
         fresh[0] = False
         est_p = p + self.rng.normal(0.0, 0.05, (N, 3))  # the others' estimates, 5 cm off
         return dict(z1=p[0] + err, z2=self.v[0].copy(), est_p=est_p,
-                    usable=np.arange(N) > 0, rel_p=rel_p, fresh=fresh,
+                    have=np.arange(N) > 0, peers=np.arange(1, N), rel_p=rel_p, fresh=fresh,
                     sel=np.flatnonzero(fresh), pair_p=rel_p, pair_v=rel_v)
 
 
@@ -98,15 +98,29 @@ def residual_oracle(z1: np.ndarray, est_p: np.ndarray, rel_p: np.ndarray, use: n
 
 def terms(z1: np.ndarray, est: np.ndarray, rel: np.ndarray, usable: np.ndarray,
           fresh: np.ndarray, sel: np.ndarray, range_m: float,
-          prev: np.ndarray | None = None) -> tuple[float, float, bool, np.ndarray]:
+          prev: np.ndarray | None = None,
+          peers: np.ndarray | None = None) -> tuple[float, float, bool, np.ndarray]:
+    """monitor_terms with the readable rows ``usable`` (N,) bool of the ``peers`` (all
+    agents by default) and the last step's sensed set ``prev`` (N,) bool; returns the newly
+    sensed set as (N,) bool. Checks the kept state: this call's set, marked and listed."""
     n = len(est)
-    sensed, new = np.zeros(n, bool), np.zeros(n, bool)
+    sel = np.asarray(sel, np.int64)
     prev = np.zeros(n, bool) if prev is None else prev
-    res, speed, any_new = monitor_terms(z1, np.array([3.0, 4.0, 0.0]), est, usable, rel,
-                                        fresh, np.asarray(sel, np.int64), sensed, prev, new,
-                                        range_m)
-    assert list(np.flatnonzero(sensed)) == sorted(sel) and np.array_equal(prev, sensed)
-    return res, speed, any_new, new
+    mark = np.where(prev, BEFORE, OUT).astype(np.int8)
+    before = np.flatnonzero(prev).astype(np.int64)
+    listed = np.concatenate([before, np.full(n, -1, np.int64)])
+    new_idx = np.full(max(len(sel), 1), -1, np.int64)
+    peers = np.arange(n, dtype=np.int64) if peers is None else peers
+    res, speed, n_new = monitor_terms(z1, np.array([3.0, 4.0, 0.0]), est, usable, peers, rel,
+                                      fresh, sel, mark, listed, len(before), new_idx, range_m)
+    now = np.zeros(n, bool)
+    now[sel] = True
+    assert np.array_equal(mark, np.where(now, BEFORE, OUT))
+    assert list(listed[:len(sel)]) == list(sel)
+    new = np.zeros(n, bool)
+    new[new_idx[:n_new]] = True
+    assert n_new == int(np.sum(new))  # each once
+    return res, speed, n_new > 0, new
 
 
 def test_unsensed_neighbour_inside_range_is_inconsistent() -> None:
@@ -131,18 +145,21 @@ def test_residual_kernel_matches_numpy() -> None:
         n = int(rng.integers(2, 12))
         z1 = rng.normal(0, 5, 3)
         est, rel = rng.normal(0, 5, (n, 3)), rng.normal(0, 5, (n, 3))
-        usable, fresh = rng.random(n) < 0.7, rng.random(n) < 0.5
+        have, fresh = rng.random(n) < 0.8, rng.random(n) < 0.5
+        peer = rng.random(n) < 0.8  # only the peers' rows are read
+        usable = have & peer
         sel = np.flatnonzero(rng.random(n) < 0.5)
         prev = rng.random(n) < 0.5
         was = prev.copy()
         sensed = np.zeros(n, bool)
         sensed[sel] = True
         want = residual_oracle(z1, est, rel, usable & fresh, usable & ~fresh & ~sensed, 6.0)
-        res, _, any_new, new = terms(z1, est, rel, usable, fresh, sel, 6.0, prev)
+        peers = np.flatnonzero(peer).astype(np.int64)
+        res, _, any_new, new = terms(z1, est, rel, have, fresh, sel, 6.0, prev, peers)
         assert (math.isnan(res) and math.isnan(want)) or abs(res - want) <= 1e-12
         # the peer table's whole rows (ẑ1 in the first three columns) give the same
         wide = np.hstack([est, rng.normal(0, 9, (n, 5))])
-        res_wide = terms(z1, wide, rel, usable, fresh, sel, 6.0, was.copy())[0]
+        res_wide = terms(z1, wide, rel, have, fresh, sel, 6.0, was.copy(), peers)[0]
         assert (math.isnan(res_wide) and math.isnan(want)) or abs(res_wide - want) <= 1e-12
         assert np.array_equal(new, sensed & ~was) and any_new == bool(np.any(new))
     # a NaN estimate in a counted row makes the residual NaN, as numpy's max does
@@ -279,8 +296,14 @@ def test_the_monitors_one_call_is_its_terms_then_its_persistence() -> None:
 
     rng = np.random.default_rng(9)
     n = 6
-    a = [np.zeros(n, bool) for _ in range(3)] + [np.zeros(5, np.int64)]
-    b = [np.zeros(n, bool) for _ in range(3)] + [np.zeros(5, np.int64)]
+    peers = np.array([0, 2, 3, 5], dtype=np.int64)
+
+    def state() -> list[np.ndarray]:  # mark, list, new, counters
+        return [np.zeros(n, np.int8), np.zeros(n, np.int64), np.zeros(n, np.int64),
+                np.zeros(5, np.int64)]
+
+    a, b = state(), state()
+    n_prev = 0
     for k in range(2000):
         z1 = rng.normal(0.0, 2.0, 3)
         if rng.random() < 0.01:
@@ -288,12 +311,14 @@ def test_the_monitors_one_call_is_its_terms_then_its_persistence() -> None:
         z2 = rng.normal(0.0, 3.0, 3) * (12.0 if rng.random() < 0.02 else 1.0)
         est = rng.normal(0.0, 3.0, (n, 3))
         rel = est - z1 + rng.normal(0.0, 2.0 if (k // 50) % 2 else 0.3, (n, 3))
-        usable, fresh = rng.random(n) < 0.8, rng.random(n) < 0.7
+        have, fresh = rng.random(n) < 0.8, rng.random(n) < 0.7
         sel = np.flatnonzero(rng.random(n) < 0.5).astype(np.int64)
-        res, speed, new = monitor_terms(z1, z2, est, usable, rel, fresh, sel, *a[:3], 6.0)
+        res, speed, new = monitor_terms(z1, z2, est, have, peers, rel, fresh, sel, *a[:2],
+                                        n_prev, a[2], 6.0)
         raised = residual_persist(a[3], res, speed, z1, 2.77, 30.0, 10, 25)
-        got = monitor_step(z1, z2, est, usable, rel, fresh, sel, *b[:3], 6.0, b[3], 2.77, 30.0,
-                           10, 25)
+        got = monitor_step(z1, z2, est, have, peers, rel, fresh, sel, *b[:2], n_prev, b[2],
+                           6.0, b[3], 2.77, 30.0, 10, 25)
+        n_prev = len(sel)
         assert (got[0] == res or (math.isnan(got[0]) and math.isnan(res))), k
         assert got[1:] == (new, raised), k
         assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True)), k
