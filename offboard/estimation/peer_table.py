@@ -205,12 +205,11 @@ def unsensed_candidates(
     n = t_tab.shape[0]
     if rows.shape[0] < n:
         raise ValueError("unsensed_candidates: the rows are fewer than the stamps")
-    skip = np.zeros(n, dtype=np.bool_)
     for r in range(sensed.shape[0]):
-        j = sensed[r]
-        if not 0 <= j < n:
+        if not 0 <= sensed[r] < n:
             raise ValueError("unsensed_candidates: an index outside the table")
-        skip[j] = True
+    skip = np.sort(sensed)  # searched, not marked in an (N,) mask: the cost follows the pairs
+    n_skip = skip.shape[0]
     with_reach = reach.shape[0] == 4
     out = np.empty(heard.shape[0], dtype=np.int64)
     m = 0
@@ -218,7 +217,10 @@ def unsensed_candidates(
         j = heard[r]
         if not 0 <= j < n:
             raise ValueError("unsensed_candidates: an index outside the table")
-        if j == own or skip[j]:
+        if j == own:
+            continue
+        at = np.searchsorted(skip, j)
+        if at < n_skip and skip[at] == j:
             continue
         if t - t_tab[j] <= age_max:
             d0 = z1[0] - rows[j, 0]
