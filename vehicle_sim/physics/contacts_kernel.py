@@ -61,6 +61,7 @@ GRID_MIN = 64
 # GRID_SLACK_M (m), at least the collision radius
 GRID_SAMPLES = 8
 GRID_SLACK_M = 0.25
+CONTACT_ROOM = 64  # the contact pairs the grid pass has room for at first, doubled on demand
 
 
 @kernel
@@ -181,35 +182,17 @@ def _grid_contacts(p: np.ndarray, in_contact: np.ndarray, radius: float, pairs_o
     else:
         order = np.argsort(keys, kind="mergesort")
         sorted_keys = keys[order]
-    m = np.inf
-    cand_i = np.empty(64, dtype=np.int64)
-    cand_j = np.empty(64, dtype=np.int64)
-    k_c = 0
-    for i in range(n):
-        for a in range(-1, 2):
-            for b in range(-1, 2):
-                # the three cells (x + a, y + b, z - 1 .. z + 1) are one run of the rows
-                first = ((cell[i, 0] + a) * dims[1] + cell[i, 1] + b) * dims[2] + cell[i, 2] - 1
-                if dense:
-                    r, end = start[first], start[first + 3]
-                else:
-                    r = np.searchsorted(sorted_keys, first)
-                    end = np.searchsorted(sorted_keys, first + 3)
-                while r < end:
-                    j = order[r]
-                    r += 1
-                    if j <= i:
-                        continue
-                    d = _pair_dist(p, i, j)
-                    if d < m:
-                        m = d
-                    if d < radius:
-                        if k_c == cand_i.shape[0]:
-                            cand_i = np.concatenate((cand_i, np.empty(k_c, np.int64)))
-                            cand_j = np.concatenate((cand_j, np.empty(k_c, np.int64)))
-                        cand_i[k_c] = i
-                        cand_j[k_c] = j
-                        k_c += 1
+    # the pairs closer than ``radius``, in rooms doubled until they hold them all (the
+    # scan itself reassigns no array: numba would count references on every pair)
+    room = CONTACT_ROOM
+    while True:
+        cand_i = np.empty(room, dtype=np.int64)
+        cand_j = np.empty(room, dtype=np.int64)
+        k_c, m = _scan_cells(p, cell, dims, dense, start, order, sorted_keys, radius,
+                             cand_i, cand_j)
+        if k_c <= room:
+            break
+        room *= 2
     if not m < h:
         return False, 0, np.inf
     # the contacts now, in row order (i, then j)
@@ -231,3 +214,41 @@ def _grid_contacts(p: np.ndarray, in_contact: np.ndarray, radius: float, pairs_o
         in_contact[j, i] = True
     count[0] = k_c
     return True, n_new, m
+
+
+@kernel
+def _scan_cells(p: np.ndarray, cell: np.ndarray, dims: np.ndarray, dense: bool,
+                start: np.ndarray, order: np.ndarray, sorted_keys: np.ndarray, radius: float,
+                cand_i: np.ndarray, cand_j: np.ndarray) -> tuple[int, float]:
+    """:func:`_grid_contacts`' pass over the pairs of the same or adjacent cells: (the
+    pairs closer than ``radius``, the least distance (m) over the pairs passed). The first
+    of those pairs (i < j, in scan order) are written into ``cand_i``, ``cand_j`` while
+    they have room; a count over their length means they had too little, and the caller
+    passes again with more."""
+    m = np.inf
+    k_c = 0
+    room = cand_i.shape[0]
+    for i in range(p.shape[0]):
+        for a in range(-1, 2):
+            for b in range(-1, 2):
+                # the three cells (x + a, y + b, z - 1 .. z + 1) are one run of the rows
+                first = ((cell[i, 0] + a) * dims[1] + cell[i, 1] + b) * dims[2] + cell[i, 2] - 1
+                if dense:
+                    r, end = start[first], start[first + 3]
+                else:
+                    r = np.searchsorted(sorted_keys, first)
+                    end = np.searchsorted(sorted_keys, first + 3)
+                while r < end:
+                    j = order[r]
+                    r += 1
+                    if j <= i:
+                        continue
+                    d = _pair_dist(p, i, j)
+                    if d < m:
+                        m = d
+                    if d < radius:
+                        if k_c < room:
+                            cand_i[k_c] = i
+                            cand_j[k_c] = j
+                        k_c += 1
+    return k_c, m

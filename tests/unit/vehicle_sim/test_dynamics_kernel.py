@@ -279,10 +279,11 @@ def test_grid_contacts_equal_the_pass_over_every_pair() -> None:
     vehicle far away, coincident vehicles, one that is not finite), the same contact flags,
     the same pairs entering contact in the same order, the same count and the same
     minimum, bit for bit, as the pass over every pair."""
-    from vehicle_sim.physics.contacts_kernel import GRID_MIN, contacts_into
+    from vehicle_sim.physics.contacts_kernel import CONTACT_ROOM, GRID_MIN, contacts_into
 
     rng = np.random.default_rng(44)
     radius = 0.3
+    most = 0  # the most pairs in contact at once: past the grid's first room somewhere
     for trial in range(40):
         n = int(rng.integers(GRID_MIN + 1, 400))
         p = rng.uniform(-8.0, 8.0, (n, 3))
@@ -305,8 +306,10 @@ def test_grid_contacts_equal_the_pass_over_every_pair() -> None:
             assert (ka, pa, na) == (kb, pb, nb), (trial, step)
             assert ma == mb or (math.isnan(ma) and math.isnan(mb)), (trial, step)
             assert np.array_equal(ca, cb), (trial, step)
+            most = max(most, na)
             if step == 0:
                 assert na > 0 or trial % 4, trial  # the cluster touches
             p = p + rng.normal(0.0, 0.15, p.shape)  # drift: some contacts end, some begin
             if step == 2:
                 p[: n // 4] *= 3.0  # the cluster spreads: every contact may end
+    assert most > CONTACT_ROOM, most
