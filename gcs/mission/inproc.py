@@ -54,6 +54,7 @@ from swarm_common import wire
 from swarm_common.blas import single_thread_blas
 from swarm_common.enums import CommandKind
 from swarm_common.frames import euler_enu_from_quats_ned
+from swarm_common.process_life import frozen_while
 from swarm_common.scenario.model import Scenario
 from vehicle_sim.physics.dynamics import SwarmDynamics
 
@@ -231,41 +232,43 @@ def run_inproc(
             shown = InprocFeed(sc, form, live)
         scripted: list[dict[str, Any]] = []  # audit records of the scripted commands
         t_wall = time.perf_counter()
-        for k in range(n_steps):
-            t = k * dt
-            if land_at is not None and t >= land_at and agents[0].landing is None:
-                # t_L = land_at, as in offboard.daemon.commands
-                plan = landing_plan(sc, land_at, form)
-                log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
-                scripted.append(zenoh_record(
-                    t, wire.key_cmd(sc.name, CommandKind.LAND),
-                    wire.Command(kind=CommandKind.LAND, at_s=float(land_at))))
-                for ag in agents:
-                    ag.start_landing(plan)
-            tp, tv = f32(dyn.p), f32(dyn.v)
-            comm = not in_outage(t, sc.outages)
-            ser.p[k], ser.v[k], lumped_true[k] = dyn.p, dyn.v, dyn.lumped_accel()
-            thrust[k], att[k] = dyn.thrust, dyn.att
-            ser.z1[k], ser.z2[k] = published.rows[:, 0:3], published.rows[:, 3:6]
-            ser.xi_p[k] = published.rows[:, XI_COL:XI_COL + 3]
-            heard = in_flight[0]
-            outs = [ag.step(k, t, tp, tv, heard, comm) for ag in agents]
-            # the commands, estimates and records of all agents at once (each agent's
-            # step reads the estimates of the step before and never the dynamics)
-            dyn.set_commands(*wire_to_commands(
-                np.array([o.q_ned for o in outs]),
-                np.array([o.thrust_norm for o in outs], dtype=np.float32), f_max,
-            ))
-            published = published_batch([o.estimate for o in outs])
-            in_flight.append(published)
-            set_agent_rows(ser, k, outs)
-            md = dyn.advance_period(nsub)  # nsub physics steps, their min pair distance
-            ser.min_dist[k] = md
-            md_run = min(md_run, md)
-            if shown is not None:
-                shown.step(k, ser, lumped_true, thrust, att, last=k == n_steps - 1)
-            if bar is not None:
-                bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
+        # collections in the loop skip the set-up (swarm_common.process_life.frozen_while)
+        with frozen_while():
+            for k in range(n_steps):
+                t = k * dt
+                if land_at is not None and t >= land_at and agents[0].landing is None:
+                    # t_L = land_at, as in offboard.daemon.commands
+                    plan = landing_plan(sc, land_at, form)
+                    log.info("land-all at t=%.2f s (transit %.2f s)", land_at, plan.t_h)
+                    scripted.append(zenoh_record(
+                        t, wire.key_cmd(sc.name, CommandKind.LAND),
+                        wire.Command(kind=CommandKind.LAND, at_s=float(land_at))))
+                    for ag in agents:
+                        ag.start_landing(plan)
+                tp, tv = f32(dyn.p), f32(dyn.v)
+                comm = not in_outage(t, sc.outages)
+                ser.p[k], ser.v[k], lumped_true[k] = dyn.p, dyn.v, dyn.lumped_accel()
+                thrust[k], att[k] = dyn.thrust, dyn.att
+                ser.z1[k], ser.z2[k] = published.rows[:, 0:3], published.rows[:, 3:6]
+                ser.xi_p[k] = published.rows[:, XI_COL:XI_COL + 3]
+                heard = in_flight[0]
+                outs = [ag.step(k, t, tp, tv, heard, comm) for ag in agents]
+                # the commands, estimates and records of all agents at once (each agent's
+                # step reads the estimates of the step before and never the dynamics)
+                dyn.set_commands(*wire_to_commands(
+                    np.array([o.q_ned for o in outs]),
+                    np.array([o.thrust_norm for o in outs], dtype=np.float32), f_max,
+                ))
+                published = published_batch([o.estimate for o in outs])
+                in_flight.append(published)
+                set_agent_rows(ser, k, outs)
+                md = dyn.advance_period(nsub)  # nsub physics steps, their min pair distance
+                ser.min_dist[k] = md
+                md_run = min(md_run, md)
+                if shown is not None:
+                    shown.step(k, ser, lumped_true, thrust, att, last=k == n_steps - 1)
+                if bar is not None:
+                    bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
         if bar is not None:
             bar.close()
         set_truth_rows(ser, form, ser.p, ser.v, lumped_true, thrust, att,
