@@ -208,8 +208,17 @@ def unsensed_candidates(
     for r in range(sensed.shape[0]):
         if not 0 <= sensed[r] < n:
             raise ValueError("unsensed_candidates: an index outside the table")
-    skip = np.sort(sensed)  # searched, not marked in an (N,) mask: the cost follows the pairs
+    # searched, not marked in an (N,) mask: the cost follows the pairs. Sorted by insertion
+    # (they come sorted: one pass), not np.sort, whose quicksort allocates a stack per call
+    skip = sensed.copy()
     n_skip = skip.shape[0]
+    for a in range(1, n_skip):
+        x = skip[a]
+        b = a - 1
+        while b >= 0 and skip[b] > x:
+            skip[b + 1] = skip[b]
+            b -= 1
+        skip[b + 1] = x
     with_reach = reach.shape[0] == 4
     out = np.empty(heard.shape[0], dtype=np.int64)
     m = 0
