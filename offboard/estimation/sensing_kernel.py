@@ -6,7 +6,7 @@ the caller draws the (N,8) standard normals and the N uniforms with its numpy Ge
 computes the relative geometry, the noisy measurements and the validity mask row by row.
 With ``noise_draws = "in_range"`` the sensor calls :func:`range_index` then
 :func:`measure_in_range_into` instead, which write only the rows in range into outputs kept
-between calls; both compute a row with :func:`_row_into`, as :func:`measure_into` does.
+between calls; both compute their rows with :func:`_rows_into`.
 :func:`hold_kernel` is the bookkeeping of :meth:`offboard.estimation.sensing.DropoutHold.pairs`.
 
 The operations and their order are those of the numpy formulation they replaced, the
@@ -63,54 +63,69 @@ def measure_into(
     (:meth:`offboard.estimation.sensing.Sensor.measure`).
     """
     n = p.shape[0]
-    nz = np.zeros(8)
-    for j in range(n):
-        for k in range(8):
-            nz[k] = noise[j, k]
-        _row_into(p, v, i, j, nz, drop[j], sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm,
-                  dm, ddm, rel_p, rel_v)
+    _rows_into(p, v, i, np.arange(n), n, False, noise, drop, sb, sr, sd, sdd, range_m, dropout,
+               valid, gm, gdm, dm, ddm, rel_p, rel_v)
 
 
-@kernel(inline=True)
-def _row_into(
-    p: np.ndarray, v: np.ndarray, i: int, j: int, nz: np.ndarray, dr: float,
-    sb: float, sr: float, sd: float, sdd: float, range_m: float, dropout: float,
-    valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray, dm: np.ndarray, ddm: np.ndarray,
-    rel_p: np.ndarray, rel_v: np.ndarray,
+@kernel
+def _rows_into(
+    p: np.ndarray, v: np.ndarray, i: int, idx: np.ndarray, k: int, own: bool,
+    noise: np.ndarray, drop: np.ndarray, sb: float, sr: float, sd: float, sdd: float,
+    range_m: float, dropout: float, valid: np.ndarray, gm: np.ndarray, gdm: np.ndarray,
+    dm: np.ndarray, ddm: np.ndarray, rel_p: np.ndarray, rel_v: np.ndarray,
 ) -> None:
-    """Row j of :func:`measure_into` (its docstring), with the noise ``nz`` (8,) and the
-    dropout draw ``dr`` of that row: the one computation of a measured row, for both
-    :func:`measure_into` and :func:`measure_in_range_into`."""
-    r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
-    d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
-    if j != i and d > range_m:  # out of range: invalid, its row zeros (nobody reads it)
-        valid[j] = False
-        dm[j], ddm[j] = d, 0.0
-        for k in range(3):
-            gm[j, k] = gdm[j, k] = rel_p[j, k] = rel_v[j, k] = 0.0
-        return
-    w0, w1, w2 = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
-    if j == i:
-        d = 1.0
-    g0, g1, g2 = r0 / d, r1 / d, r2 / d
-    if j == i:
-        g0 = 1.0  # placeholder row for itself (marked invalid)
-    gd = dot3(g0, g1, g2, w0, w1, w2)
-    # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
-    b0 = g0 + nz[0] * sb
-    b1 = g1 + nz[1] * sb
-    b2 = g2 + nz[2] * sb
-    nb = math.sqrt(dot3(b0, b1, b2, b0, b1, b2))
-    gm[j, 0], gm[j, 1], gm[j, 2] = b0 / nb, b1 / nb, b2 / nb
-    gdm[j, 0] = (w0 - g0 * gd) / d + nz[3] * sr
-    gdm[j, 1] = (w1 - g1 * gd) / d + nz[4] * sr
-    gdm[j, 2] = (w2 - g2 * gd) / d + nz[5] * sr
-    dm[j] = d + nz[6] * sd
-    ddm[j] = gd + nz[7] * sdd
-    valid[j] = (d <= range_m) and (dr >= dropout) and j != i
-    for k in range(3):
-        rel_p[j, k] = gm[j, k] * dm[j]
-        rel_v[j, k] = gdm[j, k] * dm[j] + gm[j, k] * ddm[j]
+    """Rows ``j = idx[r]``, r < ``k``, of :func:`measure_into` (its docstring), row j with
+    noise row r of ``noise`` (·,8) and dropout draw ``drop[r]``; with ``own``, then agent
+    ``i``'s own row with zero noise and a draw of 1. The one computation of a measured row,
+    for both :func:`measure_into` and :func:`measure_in_range_into`, written out in the loop:
+    a row function inlined into it made numba count references to six output arrays on
+    every row (docs/performance.md)."""
+    for r in range(k + 1 if own else k):
+        if r < k:
+            j = idx[r]
+            n0, n1, n2, n3 = noise[r, 0], noise[r, 1], noise[r, 2], noise[r, 3]
+            n4, n5, n6, n7 = noise[r, 4], noise[r, 5], noise[r, 6], noise[r, 7]
+            dr = drop[r]
+        else:
+            j = i
+            n0 = n1 = n2 = n3 = n4 = n5 = n6 = n7 = 0.0
+            dr = 1.0
+        r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
+        d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
+        if j != i and d > range_m:  # out of range: invalid, its row zeros (nobody reads it)
+            valid[j] = False
+            dm[j] = d
+            ddm[j] = 0.0
+            for c in range(3):
+                gm[j, c] = 0.0
+                gdm[j, c] = 0.0
+                rel_p[j, c] = 0.0
+                rel_v[j, c] = 0.0
+            continue
+        w0, w1, w2 = v[j, 0] - v[i, 0], v[j, 1] - v[i, 1], v[j, 2] - v[i, 2]
+        if j == i:
+            d = 1.0
+        g0, g1, g2 = r0 / d, r1 / d, r2 / d
+        if j == i:
+            g0 = 1.0  # placeholder row for itself (marked invalid)
+        gd = dot3(g0, g1, g2, w0, w1, w2)
+        # bearing noise: isotropic perturbation, renormalised (its along-g part is 2nd order)
+        b0 = g0 + n0 * sb
+        b1 = g1 + n1 * sb
+        b2 = g2 + n2 * sb
+        nb = math.sqrt(dot3(b0, b1, b2, b0, b1, b2))
+        gm[j, 0] = b0 / nb
+        gm[j, 1] = b1 / nb
+        gm[j, 2] = b2 / nb
+        gdm[j, 0] = (w0 - g0 * gd) / d + n3 * sr
+        gdm[j, 1] = (w1 - g1 * gd) / d + n4 * sr
+        gdm[j, 2] = (w2 - g2 * gd) / d + n5 * sr
+        dm[j] = d + n6 * sd
+        ddm[j] = gd + n7 * sdd
+        valid[j] = (d <= range_m) and (dr >= dropout) and j != i
+        for c in range(3):
+            rel_p[j, c] = gm[j, c] * dm[j]
+            rel_v[j, c] = gdm[j, c] * dm[j] + gm[j, c] * ddm[j]
 
 
 @kernel
@@ -119,7 +134,7 @@ def range_index(p: np.ndarray, i: int, range_m: float, idx: np.ndarray,
     """The agents in agent ``i``'s range, for :func:`measure_in_range_into`: writes their
     indices j ≠ i with true distance ≤ ``range_m`` (m) into ``idx`` (≥ N,) in index order
     and every true distance into ``dist`` (N,) (m), and returns their count. The distance
-    is :func:`_row_into`'s, so the two agree on who is in range."""
+    is :func:`_rows_into`'s, so the two agree on who is in range."""
     n = p.shape[0]
     k = 0
     for j in range(n):
@@ -156,18 +171,10 @@ def measure_in_range_into(
         ddm[j] = 0.0
         for c in range(3):
             gm[j, c] = gdm[j, c] = rel_p[j, c] = rel_v[j, c] = 0.0
-    nz = np.zeros(8)
+    _rows_into(p, v, i, idx, k, True, noise, drop, sb, sr, sd, sdd, range_m, dropout, valid,
+               gm, gdm, dm, ddm, rel_p, rel_v)
     for r in range(k):
-        j = idx[r]
-        for c in range(8):
-            nz[c] = noise[r, c]
-        _row_into(p, v, i, j, nz, drop[r], sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm,
-                  dm, ddm, rel_p, rel_v)
-        prev[r] = j
-    for c in range(8):
-        nz[c] = 0.0
-    _row_into(p, v, i, i, nz, 1.0, sb, sr, sd, sdd, range_m, dropout, valid, gm, gdm, dm, ddm,
-              rel_p, rel_v)
+        prev[r] = idx[r]
     return k
 
 
