@@ -81,7 +81,9 @@ def write_kernel(cuts: np.ndarray, n_cuts: int, cube: bool, cv: np.ndarray, e0: 
     """:meth:`TransientLimit.write` of the first ``n_cuts`` rows of ``cuts`` (unit normals)
     and, with ``cube``, the inner cube's six planes; returns the rows written."""
     rows = n_cuts + (6 if cube else 0)
-    nv = np.empty(3)
+    # three work vectors for every row: no array made or viewed in the loop, where numba
+    # would allocate and count references on each row (the same operations, in order)
+    nv, grad, g_r = np.empty(3), np.empty(3), np.empty(3)
     for i in range(rows):
         if i < n_cuts:
             for k in range(3):
@@ -93,13 +95,15 @@ def write_kernel(cuts: np.ndarray, n_cuts: int, cube: bool, cv: np.ndarray, e0: 
                 nv[k] = 0.0
             nv[a % 3] = 1.0 if a < 3 else -1.0
             b = bound / _SQRT3
-        grad = -(nv * cv)
+        for k in range(3):
+            grad[k] = -(nv[k] * cv[k])
         size = math.sqrt(np.dot(grad, grad))
         r = start + i
         for k in range(3):
             g[r, k] = grad[k] / size
+            g_r[k] = g[r, k]
         need = (np.dot(nv, e0) - b) / size
-        rhs[r] = min(need, np.dot(g[r], u_b))
+        rhs[r] = min(need, np.dot(g_r, u_b))
     return rows
 
 
