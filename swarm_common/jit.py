@@ -17,6 +17,14 @@ fingerprint of every module that defines a kernel, ``<repository>/__pycache__/nu
 any change to any of them starts a fresh cache (a few seconds of compiling on the next
 run). ``$NUMBA_CACHE_DIR``, when set, is used as it is.
 
+**Loops and references.** numba counts references to arrays with atomic operations. An
+array variable reassigned inside a loop (``a = np.concatenate(...)``), an array made or
+viewed per iteration (``-(x * y)``, ``g[r]``), and a kernel inlined by numba into a loop
+(``inline="always"``: each inlined array argument gets its own reference) count on every
+iteration; at a thousand agents that was several per cent of a run (docs/performance.md,
+"Past 255 agents"). So a loop writes into arrays made before it, and a row computation
+called per row is written out in the loop instead.
+
 A kernel takes and returns numpy arrays and floats only; the classes around it keep the
 state, the validation and the names (docstrings of each kernel give units and equations).
 """
@@ -27,7 +35,7 @@ import hashlib
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar, cast, overload
+from typing import Any, TypeVar, cast
 
 import numba.core.config
 from numba import njit
@@ -67,25 +75,7 @@ def _use_fingerprinted_cache() -> None:
 _use_fingerprinted_cache()
 
 
-@overload
-def kernel(fn: F) -> F: ...
-
-
-@overload
-def kernel(*, inline: bool) -> Callable[[F], F]: ...
-
-
-def kernel(fn: F | None = None, *, inline: bool = False) -> F | Callable[[F], F]:
-    """``fn`` compiled with the project's settings (module docstring). ``@kernel(inline=True)``
-    also inlines it into every kernel that calls it (numba's ``inline="always"``, in
-    numba's own IR: the same operations, without a call's passing of each array's fields):
-    for a small kernel called in a loop."""
+def kernel(fn: F) -> F:
+    """``fn`` compiled with the project's settings (module docstring)."""
     opts: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
-    if inline:
-        opts["inline"] = "always"
-
-    def compiled(f: F) -> F:
-        return cast(F, njit(**opts)(f))
-
-    return compiled if fn is None else compiled(fn)
-
+    return cast(F, njit(**opts)(fn))
