@@ -42,8 +42,7 @@ class InFlightGuard:
                                  FALLBACK_CLEAR_D * sc.controller.d_safe_m)
         self.index = index
         self.dt = sc.control_dt
-        self._peers = np.array(sorted(set(np.asarray(peers, dtype=np.int64).tolist())),
-                               dtype=np.int64)  # the rows the monitor reads, ascending
+        self._peers = np.unique(np.asarray(peers, dtype=np.int64))  # rows the monitor reads
         self.bits = NO_ALARM
         self.deadlock = DeadlockDetector(DeadlockConfig(window_s=DEADLOCK_WINDOW_S))
 
