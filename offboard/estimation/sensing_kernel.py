@@ -62,9 +62,12 @@ def measure_into(
     ``np.empty``. Rows are not bounds-checked: the caller checks the shapes
     (:meth:`offboard.estimation.sensing.Sensor.measure`).
     """
-    n = p.shape[0]
-    _rows_into(p, v, i, np.arange(n), n, False, noise, drop, sb, sr, sd, sdd, range_m, dropout,
-               valid, gm, gdm, dm, ddm, rel_p, rel_v)
+    _rows_into(p, v, i, _EVERY_AGENT, p.shape[0], False, noise, drop, sb, sr, sd, sdd, range_m,
+               dropout, valid, gm, gdm, dm, ddm, rel_p, rel_v)
+
+
+# :func:`_rows_into`'s index of every agent, row r agent r's (a constant: no array per call)
+_EVERY_AGENT = np.zeros(0, dtype=np.int64)
 
 
 @kernel
@@ -76,13 +79,14 @@ def _rows_into(
 ) -> None:
     """Rows ``j = idx[r]``, r < ``k``, of :func:`measure_into` (its docstring), row j with
     noise row r of ``noise`` (·,8) and dropout draw ``drop[r]``; with ``own``, then agent
-    ``i``'s own row with zero noise and a draw of 1. The one computation of a measured row,
+    ``i``'s own row with zero noise and a draw of 1. ``idx`` :data:`_EVERY_AGENT` (empty)
+    means row r is agent r's. The one computation of a measured row,
     for both :func:`measure_into` and :func:`measure_in_range_into`, written out in the loop:
     a row function inlined into it made numba count references to six output arrays on
     every row (docs/performance.md)."""
     for r in range(k + 1 if own else k):
         if r < k:
-            j = idx[r]
+            j = idx[r] if idx.shape[0] else r
             n0, n1, n2, n3 = noise[r, 0], noise[r, 1], noise[r, 2], noise[r, 3]
             n4, n5, n6, n7 = noise[r, 4], noise[r, 5], noise[r, 6], noise[r, 7]
             dr = drop[r]
