@@ -18,7 +18,7 @@ from offboard.estimation.reference import LeaderTrajectory, xi_at_rest, xi_p
 from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method
 from swarm_common.fastnp import f64
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 from swarm_common.mission.config import MissionConfig, MissionError
 from swarm_common.mission.timeline import MissionTimeline
 from swarm_common.scenario.flight_check import checked_timeline
@@ -54,6 +54,10 @@ class LeaderAgent(AgentBase):
         self.l1, self.l2 = 10.0, 25.0
         self.v_hat = sc.agents[self.index].velocity.astype(float).copy()
         self.d_hat = np.zeros(3)
+        # the kernels' call sites: arguments through f64 or the leader's own buffers
+        self._control = CallSite(leader_control_kernel)
+        self._predict = CallSite(leader_prediction_kernel)
+        self._eso = CallSite(velocity_eso_kernel)
         self.start_time = 0.0
         self.gains = None
         # dcbf: the pairs with the scenario's non-cooperative agents are the leader's to keep
@@ -155,7 +159,7 @@ class LeaderAgent(AgentBase):
         v = f64(truth_v[self.index])
         # PD + feed-forward with lag compensation, clipped to the box (one compiled call)
         u = np.empty(3)  # new arrays from Python here: cheaper than ones the kernels box
-        leader_control_kernel(
+        self._control.call(
             f64(self.current_reference(t)), p, v, self.d_hat, self.veh.tau_rollpitch_s,
             self.kp, self.kd, self.u_lo, self.u_hi, u,
         )
@@ -174,7 +178,7 @@ class LeaderAgent(AgentBase):
             self.guard.realised(u, u_sub[-1], u_mean)
         self._update_eso(v, u_sub)
         pv = np.empty((2, 3))
-        leader_prediction_kernel(p, v, u_mean, self.d_hat, self.dt, pv)
+        self._predict.call(p, v, u_mean, self.d_hat, self.dt, pv)
         est = NeighbourEstimate(
             self.id, t + self.dt, pv[0], pv[1], self.d_hat.copy(),
             self.current_reference(t + self.dt), True,
@@ -185,7 +189,7 @@ class LeaderAgent(AgentBase):
         """Velocity ESO over the period (sub-stepped Euler, measurement ``v`` held;
         compiled: :func:`velocity_eso_kernel`)."""
         out = np.empty((2, 3))
-        velocity_eso_kernel(
+        self._eso.call(
             f64(v), self.v_hat, self.d_hat, f64(u_sub), self.dt / self.substeps, self.l1,
             self.l2, out,
         )

@@ -21,6 +21,7 @@ import numpy as np
 from offboard.estimation.peer_table import unsensed_candidates
 from offboard.estimation.predictor import CURRENT_AGE_S, NeighbourPredictor
 from swarm_common.fastnp import norm
+from swarm_common.jit import CallSite
 from swarm_common.scenario.transient_check import pair_reach
 
 # relative margin on the sensing range and the reach of the compiled pre-test of predicted
@@ -54,6 +55,7 @@ class UnsensedNeighbours:
         self.range, self.tau = float(sensing_range_m), float(tau_s)
         self.reach = None if reach is None else tuple(float(x) for x in reach)
         self._reach_arr = _NO_REACH if reach is None else np.array(self.reach, dtype=float)
+        self._candidates = CallSite(unsensed_candidates)  # its arguments' types are fixed
         self.dv_step = float(dv_step)
         self._t_first: float | None = None  # the first step's time (HEARD_AFTER_S)
         # (predictor revision, sorted scenario indices (int64) of the agents heard from)
@@ -78,7 +80,7 @@ class UnsensedNeighbours:
         # and reach (a margin over the exact test below), is passed over in the same
         # compiled call; the rest take the exact test
         reach = self.reach if t - self._t_first >= HEARD_AFTER_S else None
-        cand = unsensed_candidates(
+        cand = self._candidates.call(
             self._heard_indices(), self.index, np.asarray(sel, dtype=np.int64),
             pred.table.t, pred.table.rows, z1, z2, t, CURRENT_AGE_S,
             (rng * (1.0 + RANGE_MARGIN)) ** 2 if reach is None else math.inf,

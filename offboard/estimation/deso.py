@@ -65,6 +65,7 @@ from offboard.estimation.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
     lumped_into,
     model_accel_kernel,
 )
+from swarm_common.jit import CallSite
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
 
@@ -164,6 +165,7 @@ class DESO:
         self.last_e2 = np.zeros(3)
         self.n_used = 0
         self._f_hat: np.ndarray | None = None  # f̂ at the current state (set by lumped())
+        self._step = CallSite(deso_step_kernel)  # its arguments' types are fixed
         self.converged_s = 0.0  # s for which the innovations have stayed inside the gate
 
     def _matrices(self, used: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -256,7 +258,7 @@ class DESO:
                  else model_accel_kernel(self.z1, self.z2, self.zeta, self.h))
         c = np.ascontiguousarray
         out = np.empty(OUT_LEN)  # a new array from Python: cheaper than one the kernel boxes
-        deso_step_kernel(
+        self._step.call(
             a_s, g, dmat, pu, idx, c(peer_rows, dtype=np.float64), c(rel_pos, dtype=np.float64),
             c(rel_vel, dtype=np.float64), self.z1, self.z2, self.z3, self.zeta,
             c(u_sub, dtype=np.float64), f_hat, self.h, self.mu, self.sigma, self.dt,

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from offboard.records import NeighbourEstimate
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 
 ROW = 21  # floats per estimate row: z1, z2, z3, ξ
 XI_COL = 9  # the row's first column of ξ
@@ -94,10 +94,11 @@ class PeerTable:
         self.newest = -math.inf  # s, the newest stamp accepted from anyone
         # bumped when an agent is first heard from or its cooperative flag changes
         self.revision = 0
+        self._ingest = CallSite(ingest_kernel)  # every EstimateBatch has the same types
 
     def ingest(self, batch: EstimateBatch, idx: np.ndarray, link_up: bool) -> None:
         """Take the estimates of ``batch`` at scenario indices ``idx`` (NaN stamps skipped)."""
-        changed, newest = ingest_kernel(
+        changed, newest = self._ingest.call(
             idx, batch.t, batch.rows, batch.leader, batch.cooperative, link_up, self.t,
             self.rows, self.leader, self.cooperative, self.version, self.acc_t, self.acc_z2,
             self.acc_older,

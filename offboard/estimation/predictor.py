@@ -28,7 +28,7 @@ from scipy.linalg import expm
 from offboard.estimation.peer_table import XI, XI_COL, Z1, Z2, EstimateBatch, PeerTable
 from offboard.estimation.reference import exo_propagator, xi_a, xi_j, xi_p, xi_v
 from offboard.records import NeighbourEstimate
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 
 A_MAX_DEFAULT = 16.0  # m/s², follower acceleration bound: √3·u_max (8 m/s²) + 2 m/s² disturbance
 DROP_BOUND_M = 1.0  # m, a follower's prediction is dropped once its error bound exceeds this
@@ -92,6 +92,7 @@ class NeighbourPredictor:
         # per index: (the table's version of the row, a_dev of that row (m/s²))
         self._a_dev: dict[int, tuple[int, float]] = {}
         self._have = np.zeros(len(self.ids), dtype=np.bool_)  # predict_rows' mask
+        self._mark = CallSite(mark_current)  # its arguments' types are fixed
         self._fill_caches()
 
     def _fill_caches(self) -> None:
@@ -203,7 +204,7 @@ class NeighbourPredictor:
         lockstep) is read where it lies, the table itself; otherwise a copy holds the
         predictions of the others. Both are valid until the next ingest."""
         tab, have = self.table, self._have
-        if mark_current(peers, tab.t, t, CURRENT_AGE_S, have) == 0:
+        if self._mark.call(peers, tab.t, t, CURRENT_AGE_S, have) == 0:
             return tab.rows, have
         rows = tab.rows.copy()
         for j in peers.tolist():

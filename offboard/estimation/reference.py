@@ -35,7 +35,7 @@ from scipy.linalg import expm
 from offboard.estimation.bearing import Formation
 from offboard.estimation.peer_table import XI_COL
 from offboard.estimation.yaw_turn import turn_by_kernel, turn_coeffs_kernel
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 
 XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
 
@@ -191,6 +191,7 @@ class DesiredStateObserver:
         self._nbr_idx = np.array(self.nbrs, dtype=np.int64)  # read by :meth:`maps`
         self.xi = np.array(xi0, dtype=float)
         self.exo = exo_propagator(self.omega, self.dt)
+        self._step = CallSite(observer_step)  # its arguments' types are fixed
         # :meth:`maps`' last ``have`` over the neighbours, and its maps
         self._have_key: bytes | None = None
         self._have_maps: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -244,7 +245,7 @@ class DesiredStateObserver:
             return
         mx, mc, pu, idx = maps
         out = np.empty(12)  # a new array from Python: cheaper than one the kernel boxes
-        observer_step(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float), self.xi,
+        self._step.call(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float), self.xi,
                       out)
         self.xi = out
 

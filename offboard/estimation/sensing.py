@@ -29,6 +29,7 @@ from offboard.estimation.sensing_kernel import (
 )
 from swarm_common.enums import NoiseDraws
 from swarm_common.fastnp import rows3
+from swarm_common.jit import CallSite
 from swarm_common.scenario.model import SensingConfig
 
 DRAW_ROWS = 64  # the in-range draws' first room (agents in range), grown on demand
@@ -83,6 +84,10 @@ class Sensor:
         self.dropout = float(sensing.dropout_prob)
         self.rng = np.random.default_rng([int(seed), int(agent_id), 0x5E])
         self.in_range_only = sensing.noise_draws is NoiseDraws.IN_RANGE
+        # the kernels' call sites: truth through rows3, the rest the sensor's own buffers
+        self._range = CallSite(range_index)
+        self._in_range = CallSite(measure_in_range_into)
+        self._every = CallSite(measure_into)
         # the draws of a call, written in place (``out=``: the same numbers as drawing new
         # arrays of that shape, without the allocations); read only within the call. With
         # in-range draws they hold the agents in range only, grown when more are
@@ -120,12 +125,12 @@ class Sensor:
         sb, sr, sd, sdd = self._sig
         if self.in_range_only:
             p, v, out = rows3(p), rows3(v), self._out
-            k = range_index(p, self.index, self.range, self._idx, out.d)
+            k = self._range.call(p, self.index, self.range, self._idx, out.d)
             if k > len(self._drop):
                 self._draw_rows(k)
             noise = self.rng.standard_normal(out=self._noise[:k])
             drop = self.rng.random(out=self._drop[:k])
-            self._n_prev = measure_in_range_into(
+            self._n_prev = self._in_range.call(
                 p, v, self.index, noise, drop, self._idx, k, self._prev, self._n_prev,
                 sb, sr, sd, sdd, self.range, self.dropout, out.valid, out.g, out.g_dot,
                 out.d, out.d_dot, out.rel_p, out.rel_v,
@@ -136,7 +141,7 @@ class Sensor:
         vec, sca = np.empty((4, n, 3)), np.empty((2, n))  # C-contiguous (n,3) and (n,) views
         out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
                            vec[3])
-        measure_into(
+        self._every.call(
             rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
         )

@@ -27,6 +27,7 @@ from offboard.inner_loop.attitude_kernel import (
 )
 from swarm_common.fastnp import f64
 from swarm_common.frames import euler_enu_from_quat_ned, norm_to_thrust
+from swarm_common.jit import CallSite
 from swarm_common.scenario.model import VehicleConfig
 
 
@@ -111,6 +112,7 @@ class InnerLoopModel:
         # what :meth:`command` writes in place: its rows (one buffer per n_sub) and mean
         self._rows: dict[int, np.ndarray] = {}
         self._mean = np.zeros(3)
+        self._command = CallSite(command_kernel)  # its arguments' types are fixed
 
     @property
     def att(self) -> list[float]:
@@ -142,7 +144,7 @@ class InnerLoopModel:
             rows = self._rows[n_sub] = np.zeros((int(n_sub), 3))
         self.state = f64(self.state)
         q = np.empty(4, dtype=np.float32)  # new from Python: cheaper than one boxed
-        roll, pitch, yaw_c, f, tn, clipped = command_kernel(
+        roll, pitch, yaw_c, f, tn, clipped = self._command.call(
             ua, float(yaw), self.g, self.m, self.tilt, self.f_max, self.state, self.a_rp,
             self.a_y, self.a_f, float(clip_tol), rows, self._mean, q,
         )

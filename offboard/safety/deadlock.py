@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from swarm_common.fastnp import vec3
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 
 START_CAPACITY = 512  # samples the window's ring holds before it grows (6 s at 50 Hz: 301)
 # the ring's counters (DeadlockDetector._n): first sample, samples, held steps, low steps
@@ -123,6 +123,7 @@ class DeadlockDetector:
     def __init__(self, cfg: DeadlockConfig | None = None) -> None:
         self.cfg = cfg or DeadlockConfig()
         self._cfg = self.cfg.array()
+        self._tracking = CallSite(tracking_step)  # its arguments' types are fixed
         self._alloc(START_CAPACITY)
         self.active = False
 
@@ -170,6 +171,6 @@ class DeadlockDetector:
         follower's ẑ1 and ξ̂), at position ``p``."""
         if self._n[N_COUNT] == len(self._ring):
             self._grow()
-        self.active = tracking_step(self._ring, self._n, self._cfg, float(t), p, target,
+        self.active = self._tracking.call(self._ring, self._n, self._cfg, float(t), p, target,
                                     held)
         return self.active

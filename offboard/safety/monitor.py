@@ -42,6 +42,7 @@ from offboard.safety.monitor_kernel import CTR_FALLBACK, monitor_step
 from swarm_common.barrier import barrier
 from swarm_common.enums import NO_ALARM, AgentAlarm
 from swarm_common.fastnp import vec3
+from swarm_common.jit import CallSite
 from swarm_common.scenario.model import Scenario
 
 RESIDUAL_FLOOR_M = 1.0  # m, the bound's floor: transients of the estimates (docs/safety.md)
@@ -111,6 +112,7 @@ class SafetyMonitor:
         self._new = np.zeros(PAIR_ROOM, dtype=np.int64)  # sensed now but not before
         self._n_new = 0
         self._first = True
+        self._step = CallSite(monitor_step)  # its arguments' types are fixed
 
     def step(self, z1: np.ndarray, z2: np.ndarray, est_p: np.ndarray, have: np.ndarray,
              peers: np.ndarray, rel_p: np.ndarray, fresh: np.ndarray, sel: np.ndarray,
@@ -129,7 +131,7 @@ class SafetyMonitor:
             self._prev = np.concatenate([self._prev, np.zeros(room - len(self._prev),
                                                               dtype=np.int64)])
             self._new = np.zeros(room, dtype=np.int64)
-        self.residual, self._n_new, raised = monitor_step(
+        self.residual, self._n_new, raised = self._step.call(
             z1, z2, est_p, have, peers, rel_p, fresh, sel, self._mark, self._prev,
             self._n_prev, self._new, cfg.range_m, self._ctr, cfg.bound_m, cfg.v_max_mps,
             cfg.persist, cfg.fallback_after)

@@ -35,7 +35,6 @@ NamedTuple argument from Python on its slow path, which doubled the call's time.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -66,7 +65,7 @@ from offboard.safety.rcbf.clf_rcbf import (
 )
 from swarm_common.enums import QPStatus
 from swarm_common.fastnp import f64, rows3
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 from swarm_common.scenario.model import ControllerConfig
 
 # layout of the scalar parameters of dcbf_front_into (front_params)
@@ -225,12 +224,6 @@ def front_params(ctl: ControllerConfig, tau_ff: float, w_max: float, a_max: floa
     return out
 
 
-# dcbf_front_into as DcbfFront.run calls it: each group a plain tuple in the order of its
-# NamedTuple's fields. numba types a NamedTuple argument from Python on its slow path
-# (about 2 µs each: with the eight groups the call took twice as long), a plain tuple on
-# its fast one; the kernel unpacks each group by position, so both work.
-_front_call: Callable[..., tuple[int, float, bool]] = dcbf_front_into
-
 NO_UNSENSED = Unsensed(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
                        np.zeros(0))  # every pair sensed (never written)
 
@@ -258,7 +251,14 @@ class DcbfFront:
             raise RuntimeError("DcbfFront: the filter is not configured")
         self.deso, self.filt, self.acc, self.qp = deso, filt, acc, filt.qp
         self.prm = front_params(ctl, tau_ff, w_max, acc.a_max, float(deso.h))
-        # the constant groups as plain tuples, made once (_front_call)
+        # dcbf_front_into as run calls it: each group a plain tuple in the order of its
+        # NamedTuple's fields. numba types a NamedTuple argument from Python on its slow
+        # path (about 2 µs each: with the eight groups the call took twice as long), a
+        # plain tuple on its fast one; the kernel unpacks each group by position, so both
+        # work. Every array passes a guard or is a buffer of the follower's: one call site
+        # (swarm_common.jit.CallSite)
+        self._front_call = CallSite(dcbf_front_into)
+        # the constant groups as plain tuples, made once
         self._rows_state = tuple(filt.rows_state())
         self._rows_out = tuple(filt.rows_out())
         self.dp, self.dv = dp, dv
@@ -288,7 +288,7 @@ class DcbfFront:
         self.filt.prepare_trust(inner[0], inner[1])  # the trust region, if any
         lumped, w, clf, u_try = np.empty((2, 3)), np.empty(3), np.empty(CLF_OUT), np.empty(3)
         tab = self.acc.table
-        k, h_min, held = _front_call(  # the groups in their order, as plain tuples
+        k, h_min, held = self._front_call.call(  # the groups in their order, as plain tuples
             self.prm, (d.z1, d.z2, d.zeta, d.z3), xi, meas, tuple(unsensed),
             silence, (tab.acc_t, tab.acc_z2), inner, ground,
             0.0 if floor is None else float(floor), self._rows_state, self._rows_out,

@@ -46,7 +46,7 @@ from offboard.safety.base import W_SAFE
 from offboard.safety.dcbf.kernel import project_into, saturate_into
 from offboard.safety.dcbf.model import LagCoefficients, ProjectedInputSet
 from swarm_common.fastnp import f64, norm, vec3
-from swarm_common.jit import kernel
+from swarm_common.jit import CallSite, kernel
 
 NEAR = 0.8  # a first cut is added once the tried command predicts this fraction of b
 TOL = 1e-6  # m/s: an answer this little outside the ball needs no further cut (rounding)
@@ -124,6 +124,7 @@ class TransientLimit:
         self.bound = max(0.0, self.v_t - float(err) * self.T)
         self.e0 = np.zeros(3)  # ê_T at u = 0 (m/s)
         self.u_b = np.zeros(3)  # the command toward ê_T = 0, in the input set (m/s²)
+        self._prepare = CallSite(prepare_kernel)  # its arguments' types are fixed
 
     def prepare(self, v: np.ndarray, a0: np.ndarray, w: np.ndarray, xi: np.ndarray) -> None:
         """The step's ê_T at u = 0 from the own velocity ``v`` (m/s), realised acceleration
@@ -131,7 +132,7 @@ class TransientLimit:
         world rows), and the desired state ``xi`` (12,) the nominal law tracks; and ``u_b``."""
         e0, u_b = np.empty(3), np.empty(3)  # new arrays: callers may keep the last ones
         proj, cos_a, sin_a = self.uset.projection
-        prepare_kernel(vec3(v), vec3(a0), vec3(w), f64(xi), self.ia, self.cv, self.T, W_SAFE,
+        self._prepare.call(vec3(v), vec3(a0), vec3(w), f64(xi), self.ia, self.cv, self.T, W_SAFE,
                        proj, cos_a, sin_a, e0, u_b)
         self.e0, self.u_b = e0, u_b
 
