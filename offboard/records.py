@@ -13,7 +13,7 @@ import numpy as np
 from swarm_common.enums import Method, QPRow, QPStatus
 
 
-@dataclass
+@dataclass(slots=True)
 class NeighbourEstimate:
     """What an agent publishes: its estimate valid at time ``t``."""
 
@@ -48,7 +48,7 @@ class ActiveRows:
 NO_ACTIVE = ActiveRows()
 
 
-@dataclass
+@dataclass(slots=True)
 class AgentStatus:
     """Per-step status record (for the ground station / metrics)."""
 
@@ -75,7 +75,7 @@ class AgentStatus:
     correction: float = 0.0
 
 
-@dataclass
+@dataclass(slots=True)
 class AgentOutput:
     """One control step's result: the setpoint (as decoded from the float32 wire form),
     its MAVLink payload, the ENU virtual control ``u``, the estimate to publish (valid for

@@ -31,7 +31,7 @@ from swarm_common.jit import CallSite
 from swarm_common.scenario.model import VehicleConfig
 
 
-@dataclass
+@dataclass(slots=True)
 class Setpoint:
     """Attitude/thrust setpoint: as commanded and as decoded from the float32 wire form."""
 

@@ -72,7 +72,7 @@ class SafetyInput:
     predicted: np.ndarray | None = None  # (M,) True for rows from prediction, not sensing
 
 
-@dataclass
+@dataclass(slots=True)
 class SafetyOutput:
     """The applied control and what the status record reports about the step."""
 
