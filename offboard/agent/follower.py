@@ -187,7 +187,7 @@ class FollowerAgent(AgentBase):
         takes its peers' rows (nothing while the link is down, as a daemon then receives
         nothing)."""
         self._coast_missed(k, t)
-        meas = self.sensor.measure(np.asarray(truth_p, float), np.asarray(truth_v, float))
+        meas = self.sensor.measure(truth_p, truth_v)  # valid within this step
         rel_p = meas.rel_pos()  # p_j − p_i
         rel_v = meas.rel_vel()
         if not isinstance(neighbours, EstimateBatch):

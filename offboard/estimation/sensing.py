@@ -95,13 +95,14 @@ class Sensor:
         rows = min(n, DRAW_ROWS) if self.in_range_only else n
         self._noise = np.empty((rows, 8))
         self._drop = np.empty(rows)
-        if self.in_range_only:  # the outputs kept between calls (measure)
+        if self.in_range_only:
             self._idx = np.empty(n, dtype=np.int64)  # the agents in range, in index order
             self._prev = np.empty(n, dtype=np.int64)  # ... at the call before
             self._n_prev = 0
-            vec, sca = np.zeros((4, n, 3)), np.zeros((2, n))
-            self._out = Measurements(np.zeros(n, dtype=np.bool_), vec[0], vec[1], sca[0],
-                                     sca[1], vec[2], vec[3])
+        # the outputs, kept between calls (measure); C-contiguous (n,3) and (n,) views
+        vec, sca = np.zeros((4, n, 3)), np.zeros((2, n))
+        self._out = Measurements(np.zeros(n, dtype=np.bool_), vec[0], vec[1], sca[0],
+                                 sca[1], vec[2], vec[3])
 
     def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:
         """Measurements from ground-truth (N,3) ENU positions (m) and velocities (m/s).
@@ -111,12 +112,13 @@ class Sensor:
         validity mask are the compiled
         :func:`offboard.estimation.sensing_kernel.measure_into`.
 
-        With ``noise_draws = "in_range"`` the cost follows the agents in range: the result
-        is the sensor's own, its arrays rewritten in place by the next call (only the rows
-        in range then and at this call:
-        :func:`~offboard.estimation.sensing_kernel.measure_in_range_into`), so a caller
-        that keeps them past its step copies them. At a thousand agents a
-        new (N,·) result per call wrote 115 kB per follower and step, most of it zeros.
+        The result is the sensor's own, its arrays rewritten in place by the next call, so
+        a caller that keeps them past its step copies them. With ``noise_draws =
+        "in_range"`` the cost follows the agents in range: the next call rewrites only the
+        rows in range then and at this call
+        (:func:`~offboard.estimation.sensing_kernel.measure_in_range_into`). At a thousand
+        agents a new (N,·) result per call wrote 115 kB per follower and step, most of it
+        zeros.
         """
         n = self.n
         p, v = np.asarray(p), np.asarray(v)
@@ -138,9 +140,7 @@ class Sensor:
             return out
         noise = self.rng.standard_normal(out=self._noise)
         drop = self.rng.random(out=self._drop)
-        vec, sca = np.empty((4, n, 3)), np.empty((2, n))  # C-contiguous (n,3) and (n,) views
-        out = Measurements(np.empty(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1], vec[2],
-                           vec[3])
+        out = self._out  # every row rewritten
         self._every.call(
             rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
