@@ -256,7 +256,7 @@ def run_inproc(
                 # the commands, estimates and records of all agents at once (each agent's
                 # step reads the estimates of the step before and never the dynamics)
                 dyn.set_commands(*wire_to_commands(
-                    np.array([o.q_ned for o in outs]),
+                    np.concatenate([o.q_ned for o in outs]).reshape(n, 4),
                     np.array([o.thrust_norm for o in outs], dtype=np.float32), f_max,
                 ))
                 published = published_batch([o.estimate for o in outs])

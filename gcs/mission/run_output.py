@@ -121,9 +121,11 @@ def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
     agent's safety alarm bits (:class:`~swarm_common.enums.AgentAlarm`) and the safety
     filter's report (status, active rows, slacks, u_nom, correction)."""
     st = [o.status for o in outs]
-    ser.u[r] = [o.u for o in outs]
-    ser.lumped_est[r] = [o.lumped for o in outs]
-    ser.u_nom[r] = [s.u_nom for s in st]
+    # the three vectors of every agent in one concatenation (a list of arrays assigned to
+    # a row would make numpy discover each element's shape)
+    vec = np.concatenate([v for o in outs for v in (o.u, o.lumped, o.status.u_nom)])
+    vec = vec.reshape(len(outs), 3, 3)
+    ser.u[r], ser.lumped_est[r], ser.u_nom[r] = vec[:, 0], vec[:, 1], vec[:, 2]
     # the scalar fields: one pass over the statuses, one array of each kind
     (ser.h_min[r], ser.solve_us[r], ser.clf_slack[r], ser.qp_relax[r],
      ser.u_corr[r]) = np.array([_REAL_FIELDS(s) for s in st], dtype=np.float64).T
