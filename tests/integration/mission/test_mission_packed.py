@@ -16,6 +16,7 @@ from conftest import CUBE8, ROOT, free_port_offset
 from gcs.mission.distributed import recorded_metrics, run_distributed
 from gcs.mission.inproc import run_inproc
 from gcs.mission.score import lockstep_misses
+from swarm_common.jit import CHECK_ENV
 from swarm_common.scenario.model import dump_toml, load_scenario
 
 pytestmark = pytest.mark.timeout(240)
@@ -44,10 +45,15 @@ def test_lockstep_packed_run_matches_inproc(tmp_path: Path) -> None:
         assert (tmp_path / f"vehicle_{i}.tlog").stat().st_size > 0
 
 
-def test_in_range_noise_draws_packed_run_matches_inproc(tmp_path: Path) -> None:
+def test_in_range_noise_draws_packed_run_matches_inproc(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """``[sensing] noise_draws = "in_range"`` on cube8 with a 5.7 m range (pairs come into
     and out of range, so each sensor's draws change in count from step to step): two daemon
-    processes give the in-process run's numbers, as with the default draws."""
+    processes give the in-process run's numbers, as with the default draws. Every kernel
+    call site of both runs checks its argument types on every call (swarm_common.jit):
+    a daemon whose site changed types would raise and fail its agents."""
+    monkeypatch.setenv(CHECK_ENV, "1")
     doc = tomllib.loads(Path(CUBE8).read_text())
     doc["formation"]["sensing_range_m"] = 5.7
     doc["controller"]["max_transient_speed_mps"] = 1.15
