@@ -19,6 +19,7 @@ import json
 import logging
 import os
 from collections.abc import Mapping, Sequence
+from itertools import chain
 from operator import attrgetter
 from pathlib import Path
 from typing import Any
@@ -126,14 +127,18 @@ def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
     vec = np.concatenate([v for o in outs for v in (o.u, o.lumped, o.status.u_nom)])
     vec = vec.reshape(len(outs), 3, 3)
     ser.u[r], ser.lumped_est[r], ser.u_nom[r] = vec[:, 0], vec[:, 1], vec[:, 2]
-    # the scalar fields: one pass over the statuses, one array of each kind
+    # the scalar fields: one pass over the statuses, one array of each kind, read from a
+    # flat iterator (np.array of a list of tuples discovers each tuple's shape: 6 µs
+    # against 1.6 µs for cube8's eight agents)
+    n = len(st)
     (ser.h_min[r], ser.solve_us[r], ser.clf_slack[r], ser.qp_relax[r],
-     ser.u_corr[r]) = np.array([_REAL_FIELDS(s) for s in st], dtype=np.float64).T
+     ser.u_corr[r]) = np.fromiter(chain.from_iterable(map(_REAL_FIELDS, st)), np.float64,
+                                  5 * n).reshape(n, 5).T
     (ser.fallback[r], ser.input_clipped[r], ser.alarms[r], ser.qp_status[r],
-     ser.qp_active[r], ser.qp_kinds[r]) = np.array(
-        [(_DEGRADED[s.qp_status], bool(s.input_clipped), int(s.alarms),
-          STATUS_CODE[s.qp_status], min(s.active.count, MAX_COUNT), int(s.active.kinds))
-         for s in st], dtype=np.int64).reshape(len(st), 6).T
+     ser.qp_active[r], ser.qp_kinds[r]) = np.fromiter(chain.from_iterable(
+        (_DEGRADED[s.qp_status], bool(s.input_clipped), int(s.alarms),
+         STATUS_CODE[s.qp_status], min(s.active.count, MAX_COUNT), int(s.active.kinds))
+        for s in st), np.int64, 6 * n).reshape(n, 6).T
 
 
 def run_document(
