@@ -1,7 +1,7 @@
 """Two codes side by side: one benchmark run alternately on a base revision and this tree.
 
     .venv/bin/python bench/bench_ab.py [--base REV] [--rounds 3] [--figure REGEX] \\
-        -- bench/bench_distributed.py --skip-realtime --method dcbf [--processes 2]
+        [--together] -- bench/bench_distributed.py --skip-realtime --method dcbf [--processes 2]
 
 A speed-up is claimed only as a ratio of two codes run alternately on one machine (issue
 44; docs/performance.md): machines of the same kind differ by more than most changes do,
@@ -14,7 +14,10 @@ and a shared machine drifts within minutes. This script makes that ratio.
   issue's figures were measured on.
 * Each tree runs the command once as a warm-up (its compiled kernels are cached per source
   path, so a fresh worktree compiles them all), then ``--rounds`` times, alternating
-  base, new, base, new, ...
+  base, new, base, new, ... With ``--together`` each round starts both runs at once
+  instead: for a single-process benchmark on two cores, each run has a core and both see
+  the same moment of a shared machine, which resolved differences that alternated runs
+  could not (docs/performance.md, "Calling the kernels without typing them").
 * From each run's output ``--figure`` (a regular expression with one group) takes the last
   match as a float: by default the ``× real time`` figure the stepping benchmarks print
   (``bench_distributed.py``'s "stepping 4.2x real time", ``bench_scaling.py``'s and
@@ -44,19 +47,33 @@ ISSUE44_BASE = "210ca2a"
 DEFAULT_FIGURE = r"([0-9]+(?:\.[0-9]+)?)x real time"
 
 
-def run_once(tree: Path, command: list[str], figure: re.Pattern[str], timeout: float) -> float:
-    """Run ``command`` from ``tree`` with ``PYTHONPATH=tree``; the figure it printed."""
+def start_run(tree: Path, command: list[str]) -> subprocess.Popen[str]:
+    """Start ``command`` from ``tree`` with ``PYTHONPATH=tree``."""
     env = dict(os.environ, PYTHONPATH=str(tree))
-    argv = [sys.executable, *command]
-    proc = subprocess.run(argv, cwd=tree, env=env, capture_output=True, text=True,
-                          timeout=timeout, check=False)
-    out = proc.stdout + proc.stderr
+    return subprocess.Popen([sys.executable, *command], cwd=tree, env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def finish_run(proc: subprocess.Popen[str], tree: Path, command: list[str],
+               figure: re.Pattern[str], timeout: float) -> float:
+    """Wait for a run of :func:`start_run`; the figure it printed."""
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        stdout, stderr = proc.communicate()
+    out = stdout + stderr
     found = figure.findall(out)
     if proc.returncode != 0 or not found:
         tail = "\n".join(out.strip().splitlines()[-5:])
         raise SystemExit(f"bench_ab: {' '.join(command)} in {tree} exited "
                          f"{proc.returncode}, figure {'found' if found else 'not found'}:\n{tail}")
     return float(found[-1])
+
+
+def run_once(tree: Path, command: list[str], figure: re.Pattern[str], timeout: float) -> float:
+    """Run ``command`` from ``tree`` with ``PYTHONPATH=tree``; the figure it printed."""
+    return finish_run(start_run(tree, command), tree, command, figure, timeout)
 
 
 def add_worktree(rev: str, where: Path) -> Path:
@@ -86,6 +103,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="regex with one group: the figure (larger is faster)")
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per run")
     ap.add_argument("--no-warmup", action="store_true", help="skip each tree's warm-up run")
+    ap.add_argument("--together", action="store_true",
+                    help="start each round's two runs at once, one per core, instead of "
+                         "one after the other (a single-process benchmark on 2 cores)")
     ap.add_argument("command", nargs=argparse.REMAINDER,
                     help="-- then the benchmark script and its arguments, relative to a tree")
     args = ap.parse_args(argv)
@@ -103,8 +123,15 @@ def main(argv: list[str] | None = None) -> int:
                           flush=True)
             got: dict[str, list[float]] = {"base": [], "new": []}
             for r in range(args.rounds):
-                for name, tree in trees.items():
-                    got[name].append(run_once(tree, command, figure, args.timeout))
+                if args.together:  # both started, then both read
+                    procs = {name: start_run(tree, command) for name, tree in trees.items()}
+                    for name, tree in trees.items():
+                        got[name].append(finish_run(procs[name], tree, command, figure,
+                                                    args.timeout))
+                else:
+                    for name, tree in trees.items():
+                        got[name].append(run_once(tree, command, figure, args.timeout))
+                for name in trees:
                     print(f"# round {r + 1} {name}: {got[name][-1]:.2f}", flush=True)
         finally:
             remove_worktree(base_tree)

@@ -56,3 +56,23 @@ def test_a_missing_command_is_a_usage_error() -> None:
         AB.main(["--rounds", "2"])
     assert exc.value.code == 2
 
+
+
+def test_runs_started_together_each_give_their_figure(tmp_path: Path) -> None:
+    """--together's two runs: both started before either is read, each read whole."""
+    for name, rate in (("a", 2.5), ("b", 7.25)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "bench.py").write_text(
+            f"import sys\nprint('warming', file=sys.stderr)\nprint('stepping {rate}x real time')\n")
+    figure = re.compile(AB.DEFAULT_FIGURE)
+    procs = {n: AB.start_run(tmp_path / n, ["bench.py"]) for n in ("a", "b")}
+    got = {n: AB.finish_run(p, tmp_path / n, ["bench.py"], figure, 60.0)
+           for n, p in procs.items()}
+    assert got == {"a": 2.5, "b": 7.25}
+
+
+def test_a_run_without_its_figure_stops_the_comparison(tmp_path: Path) -> None:
+    (tmp_path / "bench.py").write_text("print('no figure here')\n")
+    proc = AB.start_run(tmp_path, ["bench.py"])
+    with pytest.raises(SystemExit, match="figure not found"):
+        AB.finish_run(proc, tmp_path, ["bench.py"], re.compile(AB.DEFAULT_FIGURE), 60.0)
