@@ -106,7 +106,9 @@ class CallSite:
         out = self.kernel(*args)  # typed, compiled if need be
         types = tuple(self.kernel.typeof_pyval(a) for a in args)  # type: ignore[attr-defined]
         compiled = self.kernel.overloads.get(types)  # type: ignore[attr-defined]
-        if compiled is not None:  # else the dispatcher stays (an object-mode fallback)
+        if compiled is None:  # the dispatcher converted the arguments to another signature:
+            self.call = self.kernel  # it keeps typing them, without typing them twice here
+        else:
             self.types, self._entry = types, compiled.entry_point
             self.call = self._checked if os.environ.get(CHECK_ENV) == "1" else self._entry
         return out

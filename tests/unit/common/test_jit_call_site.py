@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numba import typeof
+from numba import njit, typeof
 
 from gcs.mission.inproc import run_inproc
 from offboard.safety.dcbf.kernel import saturate_into
@@ -63,3 +63,21 @@ def test_flight_paths_keep_their_types(monkeypatch: pytest.MonkeyPatch, name: st
     for series in ("p", "v", "u", "z1", "h_min"):
         assert np.array_equal(getattr(checked.series, series), getattr(plain.series, series),
                               equal_nan=True), series
+
+
+
+def test_a_site_whose_first_call_was_converted_stays_with_the_dispatcher(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A first call the dispatcher served by converting an argument to a compiled
+    signature (an int where only a float64 one exists, compiling disabled) leaves the site
+    on the dispatcher, which then types every call: no entry point is taken for types it
+    was not compiled for."""
+    monkeypatch.delenv(CHECK_ENV, raising=False)
+    scaled = njit(lambda x, b: x[0] * b)
+    scaled.compile("float64(float64[::1], float64)")
+    scaled.disable_compile()
+    site = CallSite(scaled)
+    assert site.call(np.array([3.0]), 2) == 6.0  # 2 converted to 2.0
+    assert site.types is None and site.call is scaled
+    assert site.call(np.array([1.5]), 3) == 4.5
