@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from swarm_common.fastnp import vec3
 from swarm_common.frames_kernel import (
     accel_to_attitude_kernel,
     euler_enu_from_quat_ned_kernel,
@@ -29,9 +30,20 @@ from swarm_common.frames_kernel import (
     rotm_from_euler_kernel,
     rotm_from_quat_kernel,
 )
+from swarm_common.jit import CallSite
 
 T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 D_FRD_FLU = np.diag([1.0, -1.0, -1.0])
+# the conversions' call sites (swarm_common.jit.CallSite): their functions pass floats,
+# float64 C-order arrays (through ascontiguousarray or fastnp.vec3) and the two
+# constants above, whatever the caller passed
+_ROTM = CallSite(rotm_from_euler_kernel)
+_QUAT_NED = CallSite(quat_ned_from_euler_enu_kernel)
+_ODOMETRY = CallSite(odometry_ned_kernel)
+_LAG_RATES = CallSite(lag_rates_frd_kernel)
+_EULER = CallSite(euler_enu_from_quat_ned_kernel)
+_EULERS = CallSite(euler_enu_from_quats_ned_kernel)
+_TO_ATTITUDE = CallSite(accel_to_attitude_kernel)
 _SWAP_XY = np.array([1, 0, 2])
 
 
@@ -50,7 +62,7 @@ def ned_to_enu(v: np.ndarray) -> np.ndarray:
 def rotm_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """ZYX Euler angles -> rotation matrix (body to world; compiled:
     :func:`~swarm_common.frames_kernel.rotm_from_euler_kernel`)."""
-    return rotm_from_euler_kernel(float(roll), float(pitch), float(yaw))
+    return _ROTM.call(float(roll), float(pitch), float(yaw))
 
 
 def euler_from_rotm(r: np.ndarray) -> tuple[float, float, float]:
@@ -81,14 +93,14 @@ def quat_ned_from_euler_enu(roll: float, pitch: float, yaw: float) -> np.ndarray
     ``quat(T R D)``, w ≥ 0, in closed form (compiled:
     ``frames_kernel.quat_ned_from_euler_enu_kernel``; the controller's setpoints and the
     simulator's telemetry both use it)."""
-    return quat_ned_from_euler_enu_kernel(float(roll), float(pitch), float(yaw))
+    return _QUAT_NED.call(float(roll), float(pitch), float(yaw))
 
 
 def odometry_ned(p: np.ndarray, v: np.ndarray, att: np.ndarray) -> np.ndarray:
     """(10,) ODOMETRY pose and velocity of one vehicle from its ENU state (3,) each:
     NED position (m), NED/FRD quaternion [w, x, y, z] and body FRD velocity (m/s)
     (compiled: :func:`~swarm_common.frames_kernel.odometry_ned_kernel`)."""
-    return odometry_ned_kernel(p, v, att, T_ENU_NED, D_FRD_FLU)
+    return _ODOMETRY.call(vec3(p), vec3(v), vec3(att), T_ENU_NED, D_FRD_FLU)
 
 
 def lag_rates_frd(
@@ -98,7 +110,7 @@ def lag_rates_frd(
     ``att`` to ``cmd_att`` (roll, pitch, yaw; rad) with time constants ``tau`` (s): the
     Euler-angle rates ``(cmd_att − att)/tau``, y and z negated (compiled:
     :func:`~swarm_common.frames_kernel.lag_rates_frd_kernel`)."""
-    return lag_rates_frd_kernel(att, cmd_att, tau)
+    return _LAG_RATES.call(vec3(att), vec3(cmd_att), vec3(tau))
 
 
 def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
@@ -110,7 +122,7 @@ def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
     qa = np.ascontiguousarray(q, dtype=float)
     if qa.shape != (4,):
         raise ValueError(f"quaternion of shape {qa.shape}, not (4,)")
-    return euler_enu_from_quat_ned_kernel(qa, T_ENU_NED, D_FRD_FLU)
+    return _EULER.call(qa, T_ENU_NED, D_FRD_FLU)
 
 
 def euler_enu_from_quats_ned(q: np.ndarray) -> np.ndarray:
@@ -119,7 +131,7 @@ def euler_enu_from_quats_ned(q: np.ndarray) -> np.ndarray:
     qa = np.ascontiguousarray(q, dtype=float)
     if qa.ndim != 2 or qa.shape[1] != 4:
         raise ValueError(f"quaternions of shape {qa.shape}, not (N, 4)")
-    return euler_enu_from_quats_ned_kernel(qa, T_ENU_NED, D_FRD_FLU)
+    return _EULERS.call(qa, T_ENU_NED, D_FRD_FLU)
 
 
 def valid_quaternion(q: np.ndarray, tol: float = 0.05) -> bool:
@@ -156,7 +168,7 @@ def accel_to_attitude(
     ua = np.ascontiguousarray(u, dtype=float)
     if ua.shape != (3,):
         raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
-    return accel_to_attitude_kernel(
+    return _TO_ATTITUDE.call(
         ua, float(yaw), float(gravity), float(mass),
         float(tilt_max_rad), float(thrust_max_n), float(min_vertical_frac),
     )

@@ -77,14 +77,15 @@ class LeaderTrajectory:
     """p_L(t) = p_L(0) + A(1 − cos ωt) and its derivatives up to order 3."""
 
     def __init__(self, p0: np.ndarray, amplitude: np.ndarray, frequency_hz: float) -> None:
-        self.p0 = np.asarray(p0, dtype=float)
-        self.amp = np.asarray(amplitude, dtype=float)
+        self.p0 = np.ascontiguousarray(p0, dtype=float)
+        self.amp = np.ascontiguousarray(amplitude, dtype=float)
         self.omega = 2.0 * math.pi * float(frequency_hz)
+        self._state = CallSite(leader_state_kernel)  # its arguments' types are fixed
 
     def state(self, t: float) -> np.ndarray:
         """ξ(t) = [p, ṗ, p̈, p⃛] (12,) (compiled: :func:`leader_state_kernel`)."""
         out = np.empty(12)  # a new array from Python: cheaper than one the kernel boxes
-        leader_state_kernel(self.p0, self.amp, self.omega, float(t), out)
+        self._state.call(self.p0, self.amp, self.omega, float(t), out)
         return out
 
 

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from swarm_common.fastnp import f64
+from swarm_common.jit import CallSite
 from swarm_common.scenario.model import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 from vehicle_sim.physics.contacts_kernel import (
@@ -98,6 +99,13 @@ class SwarmDynamics:
         # (advance_period writes the first rows)
         self._period_pairs = np.zeros((0, 2), dtype=np.int64)
         self._period_pair_step = np.zeros(0, dtype=np.int64)
+        # the per-period kernels' call sites: every argument is guarded or its own buffer
+        # (the state arrays through f64, the flags and counters converted, since tests
+        # and the server may assign them)
+        self._steps = CallSite(steps_kernel)
+        self._set_command = CallSite(set_command_kernel)
+        self._set_commands = CallSite(set_commands_kernel)
+        self._lumped = CallSite(lumped_accel_kernel)
 
     # -- commands ---------------------------------------------------------------
     def set_command(self, idx: int, roll: float, pitch: float, yaw: float, thrust_n: float) -> None:
@@ -107,17 +115,18 @@ class SwarmDynamics:
         to ``tilt_max`` per axis, thrust to [0, F_max] (compiled:
         :func:`vehicle_sim.physics.dynamics_kernel.set_command_kernel`).
         """
-        set_command_kernel(self.cmd_att, self.cmd_thrust, int(idx), float(roll),
-                           float(pitch), float(yaw), float(thrust_n), float(self.tilt_max),
-                           float(self.f_max))
+        self._set_command.call(self.cmd_att, self.cmd_thrust, int(idx), float(roll),
+                               float(pitch), float(yaw), float(thrust_n),
+                               float(self.tilt_max), float(self.f_max))
 
     def set_commands(
         self, roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray, thrust_n: np.ndarray
     ) -> None:
         """:meth:`set_command` of every vehicle at once, (N,) arrays in scenario order (one
         compiled call: :func:`vehicle_sim.physics.dynamics_kernel.set_commands_kernel`)."""
-        set_commands_kernel(self.cmd_att, self.cmd_thrust, f64(roll), f64(pitch), f64(yaw),
-                            f64(thrust_n), float(self.tilt_max), float(self.f_max))
+        self._set_commands.call(self.cmd_att, self.cmd_thrust, f64(roll), f64(pitch),
+                                f64(yaw), f64(thrust_n), float(self.tilt_max),
+                                float(self.f_max))
 
     def release(self, idx: int | None = None) -> None:
         """Let vehicle ``idx`` (or all) leave the spawn fixture with its spawn velocity."""
@@ -146,9 +155,9 @@ class SwarmDynamics:
         """(N,3) true lumped disturbance Φ(p,v)ζ + d(t)/m (m/s²), what the DESO estimates
         (compiled: :func:`vehicle_sim.physics.dynamics_kernel.lumped_accel_kernel`)."""
         tt = self.t if t is None else t
-        return lumped_accel_kernel(
-            f64(self.p), f64(self.v), self.zeta, self.ge_height, self.dist_amp, self.mass,
-            self.dist_omega, float(tt),
+        return self._lumped.call(
+            f64(self.p), f64(self.v), f64(self.zeta), self.ge_height, self.dist_amp,
+            self.mass, self.dist_omega, float(tt),
         )
 
     def step(self) -> None:
@@ -175,12 +184,13 @@ class SwarmDynamics:
             self._period_pairs = np.zeros((rows, 2), dtype=np.int64)
             self._period_pair_step = np.zeros(rows, dtype=np.int64)
         self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
-        p, v, att, thrust, n_new, md, dmin = steps_kernel(
+        self.held = np.ascontiguousarray(self.held, dtype=np.bool_)
+        p, v, att, thrust, n_new, md, dmin = self._steps.call(
             f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
-            f64(self.cmd_att), f64(self.cmd_thrust), self.held, self.zeta, self._a_att,
+            f64(self.cmd_att), f64(self.cmd_thrust), self.held, f64(self.zeta), self._a_att,
             self._a_f, self.mass, self.g, self.dt, self.ge_height, self.dist_amp,
-            self.dist_omega, self.t, self.step_count, n_steps, self._in_contact,
-            self.collision_radius, self._step_dist, self._period_pairs,
+            self.dist_omega, float(self.t), int(self.step_count), n_steps, self._in_contact,
+            self.collision_radius, f64(self._step_dist), self._period_pairs,
             self._period_pair_step, self._contact_count,
         )
         self.p, self.v, self.att, self.thrust = p, v, att, thrust
