@@ -66,9 +66,12 @@ def f64(x: np.ndarray) -> np.ndarray:
 def vec3(x: np.ndarray) -> np.ndarray:
     """``x`` as a C-contiguous float64 (3,) array for a compiled kernel (the same array,
     no copy, when it already is one: native float64, shape (3,), stride 8; plain
-    attribute compares, cheaper than ``x.flags``)."""
-    if x.dtype == _F64 and x.shape == _VEC3_SHAPE and x.strides == _VEC3_STRIDES:
-        return x
+    attribute compares, cheaper than ``x.flags``; a list or tuple is converted)."""
+    try:
+        if x.dtype == _F64 and x.shape == _VEC3_SHAPE and x.strides == _VEC3_STRIDES:
+            return x
+    except AttributeError:  # not an array: converted below
+        pass
     return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
 
 

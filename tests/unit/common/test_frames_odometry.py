@@ -92,3 +92,29 @@ def test_odometry_message_carries_the_kernel_fields() -> None:
     assert [msg.vx, msg.vy, msg.vz] == f[7:10].tolist()
     rate = (dyn.cmd_att[0] - dyn.att[0]) / dyn.tau
     assert [msg.rollspeed, msg.pitchspeed, msg.yawspeed] == [rate[0], -rate[1], -rate[2]]
+
+
+def test_conversions_take_any_array_type_after_their_first_call() -> None:
+    """The conversions call their kernels through module-level sites typed at their first
+    call (swarm_common.jit.CallSite), so every later call must reach the kernel as the
+    same types: lists, float32 arrays and strided views give what float64 arrays of the
+    same values give."""
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        p, v = rng.normal(0.0, 5.0, 3), rng.normal(0.0, 2.0, 3)
+        att = rng.uniform(-0.5, 0.5, 3).astype(np.float32).astype(np.float64)
+        q = Rotation.from_euler("xyz", rng.uniform(-1.0, 1.0, 3)).as_quat(scalar_first=True)
+        want_odo = frames.odometry_ned(p, v, att)
+        want_eul = frames.euler_enu_from_quat_ned(q)
+        want_rates = frames.lag_rates_frd(att, att[::-1].copy(), np.array([0.1, 0.1, 0.2]))
+        wide = np.zeros((3, 2))
+        wide[:, 0] = p  # a strided (3,) view
+        assert np.array_equal(frames.odometry_ned(wide[:, 0], list(v), att.astype(np.float32)),
+                              want_odo), trial
+        assert frames.euler_enu_from_quat_ned(list(q)) == want_eul, trial
+        assert frames.lag_rates_frd(list(att), att[::-1].astype(np.float32),
+                                    [0.1, 0.1, 0.2]) == want_rates, trial
+        rows = np.stack([q, q[::-1]])
+        assert np.array_equal(frames.euler_enu_from_quats_ned(rows.astype(np.float32)),
+                              frames.euler_enu_from_quats_ned(
+                                  rows.astype(np.float32).astype(np.float64))), trial
