@@ -229,3 +229,37 @@ def test_deterministic_for_seed(cube8):
     np.testing.assert_array_equal(p1, p2)
     np.testing.assert_array_equal(z1, z2)
     assert not np.array_equal(z1, z3) and not np.array_equal(p1, p3)
+
+
+def test_state_assigned_in_other_types_flies_the_same(cube8):
+    """The physics' kernels are called through sites typed at their first call
+    (swarm_common.jit.CallSite). State assigned afterwards in other types (an int time,
+    a numpy int32 step count, a list of held flags, float32 positions, an F-order ζ,
+    float32 and list commands) flies exactly as the same state in float64: an array of
+    another dtype or layout would be misread by the compiled entry point, so the arrays
+    are converted before the call (a scalar the entry point converts itself)."""
+    a, b = SwarmDynamics(cube8, seed=3), SwarmDynamics(cube8, seed=3)
+    for d in (a, b):
+        d.advance_period(4)  # every site typed by its first call
+    steps = 1000 * round(1.0 / cube8.physics_dt)  # 1000 s of mission time
+    t = steps * a.dt
+    assert t == int(t)
+    rng = np.random.default_rng(11)
+    p32 = (a.p + rng.normal(0.0, 0.3, a.p.shape)).astype(np.float32)
+    held = rng.uniform(size=a.n) < 0.5
+    a.t, a.step_count, a.p, a.held = t, steps, p32.astype(np.float64), held
+    b.t, b.step_count, b.p, b.held = int(t), np.int32(steps), p32, [int(h) for h in held]
+    b.zeta = np.asfortranarray(b.zeta)
+    att = rng.uniform(-0.3, 0.3, (3, a.n)).astype(np.float32)  # exact in float64 too
+    thrust = cube8.vehicle.mass_kg * 9.81 * (1.0 + rng.uniform(-0.3, 0.3, a.n))
+    a.set_commands(*att.astype(np.float64), thrust)
+    b.set_commands(*att, list(thrust))
+    # the same code in one process: the same bits
+    assert np.array_equal(a.lumped_accel(), b.lumped_accel())
+    assert np.array_equal(a.lumped_accel(int(t) + 2), b.lumped_accel(int(t) + 2))
+    for _ in range(3):
+        assert a.advance_period(5) == b.advance_period(5)
+        for name in ("p", "v", "att", "thrust"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert (a.t, a.step_count, a.collisions) == (b.t, b.step_count, b.collisions)
+    assert a.t == pytest.approx(t + 15 * a.dt, rel=1e-12)
