@@ -183,14 +183,17 @@ class SwarmDynamics:
         if self._period_pairs.shape[0] < rows:
             self._period_pairs = np.zeros((rows, 2), dtype=np.int64)
             self._period_pair_step = np.zeros(rows, dtype=np.int64)
+        # the arrays the kernel reads and writes in place, made its types first (here, not
+        # in the call: a converted copy would take the writes)
         self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
+        self._step_dist = f64(self._step_dist)
         self.held = np.ascontiguousarray(self.held, dtype=np.bool_)
         p, v, att, thrust, n_new, md, dmin = self._steps.call(
             f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
             f64(self.cmd_att), f64(self.cmd_thrust), self.held, f64(self.zeta), self._a_att,
             self._a_f, self.mass, self.g, self.dt, self.ge_height, self.dist_amp,
             self.dist_omega, float(self.t), int(self.step_count), n_steps, self._in_contact,
-            self.collision_radius, f64(self._step_dist), self._period_pairs,
+            self.collision_radius, self._step_dist, self._period_pairs,
             self._period_pair_step, self._contact_count,
         )
         self.p, self.v, self.att, self.thrust = p, v, att, thrust
