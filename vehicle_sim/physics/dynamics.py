@@ -99,9 +99,9 @@ class SwarmDynamics:
         # (advance_period writes the first rows)
         self._period_pairs = np.zeros((0, 2), dtype=np.int64)
         self._period_pair_step = np.zeros(0, dtype=np.int64)
-        # the per-period kernels' call sites: every argument is guarded or its own buffer
-        # (the state arrays through f64, the flags and counters converted, since tests
-        # and the server may assign them)
+        # the per-period kernels' call sites: every array argument is guarded or is the
+        # model's own buffer (tests and the server assign the state arrays and flags;
+        # a scalar of another type is converted by the entry point itself)
         self._steps = CallSite(steps_kernel)
         self._set_command = CallSite(set_command_kernel)
         self._set_commands = CallSite(set_commands_kernel)
@@ -183,8 +183,8 @@ class SwarmDynamics:
         if self._period_pairs.shape[0] < rows:
             self._period_pairs = np.zeros((rows, 2), dtype=np.int64)
             self._period_pair_step = np.zeros(rows, dtype=np.int64)
-        # the arrays the kernel reads and writes in place, made its types first (here, not
-        # in the call: a converted copy would take the writes)
+        # the contacts and distances, which the kernel writes in place, and the held flags
+        # made its types here and kept (a copy converted in the call would take the writes)
         self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
         self._step_dist = f64(self._step_dist)
         self.held = np.ascontiguousarray(self.held, dtype=np.bool_)
