@@ -57,7 +57,6 @@ def test_a_missing_command_is_a_usage_error() -> None:
     assert exc.value.code == 2
 
 
-
 def test_runs_started_together_each_give_their_figure(tmp_path: Path) -> None:
     """--together's two runs: both started before either is read, each read whole."""
     for name, rate in (("a", 2.5), ("b", 7.25)):

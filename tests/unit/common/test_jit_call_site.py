@@ -65,7 +65,6 @@ def test_flight_paths_keep_their_types(monkeypatch: pytest.MonkeyPatch, name: st
                               equal_nan=True), series
 
 
-
 def test_a_site_whose_first_call_was_converted_stays_with_the_dispatcher(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
