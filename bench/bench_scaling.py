@@ -98,18 +98,20 @@ def parse_window(text: str) -> tuple[float, float]:
 
 def _stamp_steps() -> list[float]:
     """The wall clock at the end of every control step of the next ``run_inproc``: its
-    per-step record (``set_agent_rows``, called once a step after every agent's step) is
-    wrapped to append ``perf_counter()``. Measurement only; the run is unchanged."""
-    import gcs.mission.inproc as inproc
+    per-step record (``AgentRows.add``, called once a step after every agent's step) is
+    wrapped to append ``perf_counter()``. Measurement only; the run is unchanged. The
+    rows are written in blocks, so one step in each block also carries the block's
+    writing: a window's median step leaves that out, the whole run's figure does not."""
+    from gcs.mission.run_output import AgentRows
 
     stamps: list[float] = []
-    record = inproc.set_agent_rows
+    record = AgentRows.add
 
-    def stamped(ser: Any, k: int, outs: Any) -> None:
-        record(ser, k, outs)
+    def stamped(self: Any, k: int, outs: Any) -> None:
+        record(self, k, outs)
         stamps.append(time.perf_counter())
 
-    inproc.set_agent_rows = stamped  # type: ignore[assignment]
+    AgentRows.add = stamped  # type: ignore[method-assign,assignment]
     return stamps
 
 

@@ -79,7 +79,9 @@ class AgentStatus:
 class AgentOutput:
     """One control step's result: the setpoint (as decoded from the float32 wire form),
     its MAVLink payload, the ENU virtual control ``u``, the estimate to publish (valid for
-    t_{k+1}) and the status."""
+    t_{k+1}) and the status. An agent never writes an output, nor an array in it, after
+    the step returned it: the in-process runner records outputs in blocks of steps
+    (gcs.mission.run_output.AgentRows)."""
 
     roll: float
     pitch: float

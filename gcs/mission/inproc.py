@@ -34,12 +34,12 @@ from gcs.mission.audit import audit_document, zenoh_record
 from gcs.mission.preflight import warn_liveness
 from gcs.mission.progress import Progress
 from gcs.mission.run_output import (
+    AgentRows,
     empty_series,
     formation_yaw,
     run_document,
     run_mission_metrics,
     safety_spec,
-    set_agent_rows,
     set_truth_rows,
     warn_verdict,
     write_run,
@@ -230,6 +230,9 @@ def run_inproc(
             from gcs.mission.live_feed import InprocFeed
 
             shown = InprocFeed(sc, form, live)
+        # the agents' rows written in blocks, or one by one for a live view, which reads
+        # each (gcs.mission.run_output.AgentRows)
+        agent_rows = AgentRows(ser, n, block=None if shown is None else 1)
         scripted: list[dict[str, Any]] = []  # audit records of the scripted commands
         t_wall = time.perf_counter()
         # collections in the loop skip the set-up (swarm_common.process_life.frozen_while)
@@ -261,7 +264,7 @@ def run_inproc(
                 ))
                 published = published_batch([o.estimate for o in outs])
                 in_flight.append(published)
-                set_agent_rows(ser, k, outs)
+                agent_rows.add(k, outs)
                 md = dyn.advance_period(nsub)  # nsub physics steps, their min pair distance
                 ser.min_dist[k] = md
                 md_run = min(md_run, md)
@@ -269,6 +272,7 @@ def run_inproc(
                     shown.step(k, ser, lumped_true, thrust, att, last=k == n_steps - 1)
                 if bar is not None:
                     bar.update((k + 1) * dt, f"min dist {md_run:.3f} m")
+        agent_rows.flush()
         if bar is not None:
             bar.close()
         set_truth_rows(ser, form, ser.p, ser.v, lumped_true, thrust, att,

@@ -26,7 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from gcs.records.series import MAX_COUNT, STATUS_CODE, RunSeries, unknown_filter
+from gcs.records.series import (
+    MAX_COUNT,
+    QP_STATUS_CODES,
+    STATUS_CODE,
+    RunSeries,
+    unknown_filter,
+)
 from gcs.report.metrics import SafetySpec, Series
 from gcs.report.mission_metrics import (
     leader_yaw,
@@ -38,7 +44,6 @@ from gcs.report.verdict import summary_line
 from offboard.estimation.bearing import Formation
 from offboard.records import AgentOutput
 from swarm_common import inputs
-from swarm_common.enums import QPStatus
 from swarm_common.scenario.mission_check import yaws as mission_yaws
 from swarm_common.scenario.model import Scenario
 
@@ -108,11 +113,18 @@ def set_truth_rows(
     ser.tilt_deg[:] = tilt_deg(att)
 
 
-# QPStatus.degraded by status (a StrEnum: its value looks up the same entry), without
-# constructing the enum per agent and step
-_DEGRADED: dict[str, bool] = {s: s.degraded for s in QPStatus}
-# the real-valued status fields set_agent_rows records, in its order
+# the real-valued and the integer status fields the agents' rows record, in their order
+# (attrgetter: one C call per record; the QP's status is coded through STATUS_CODE)
 _REAL_FIELDS = attrgetter("h_min", "solve_us", "slack", "violation", "correction")
+_INT_FIELDS = attrgetter("input_clipped", "alarms", "active.count", "active.kinds")
+_QP_STATUS = attrgetter("qp_status")
+_CODE_OF = STATUS_CODE.__getitem__
+# QPStatus.degraded by status code
+_DEGRADED_BY_CODE = np.array([s.degraded for s in QP_STATUS_CODES], dtype=bool)
+# outputs the runner stages before it writes their rows (AgentRows): 50 steps of cube8,
+# 4 of 1,024 agents (what they hold alive is bounded, not the run's length)
+STAGED_OUTPUTS = 4096
+MAX_STAGED_STEPS = 50
 
 
 def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
@@ -121,24 +133,75 @@ def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
     QP degraded, whether the setpoint conversion changed u (tilt/thrust clip), the
     agent's safety alarm bits (:class:`~swarm_common.enums.AgentAlarm`) and the safety
     filter's report (status, active rows, slacks, u_nom, correction)."""
+    set_agent_blocks(ser, r, [outs])
+
+
+def set_agent_blocks(ser: RunSeries, r: int, steps: Sequence[Sequence[AgentOutput]]) -> None:
+    """:func:`set_agent_rows` of consecutive rows ``r``, ``r + 1``, ... from ``steps`` (one
+    sequence of outputs per row, every one of the same agents): one conversion of each kind
+    for the whole block, whose per-row numpy calls cost more than the values' own copying."""
+    b = len(steps)
+    if b == 0:
+        return
+    n = len(steps[0])
+    outs = [o for step in steps for o in step]
+    if len(outs) != b * n:
+        raise ValueError(f"{len(outs)} outputs for {b} rows of {n} agents")
     st = [o.status for o in outs]
-    # the three vectors of every agent in one concatenation (a list of arrays assigned to
-    # a row would make numpy discover each element's shape)
+    rows = slice(r, r + b)
+    # the three vectors of every output in one concatenation (a list of arrays assigned to
+    # rows would make numpy discover each element's shape)
     vec = np.concatenate([v for o in outs for v in (o.u, o.lumped, o.status.u_nom)])
-    vec = vec.reshape(len(outs), 3, 3)
-    ser.u[r], ser.lumped_est[r], ser.u_nom[r] = vec[:, 0], vec[:, 1], vec[:, 2]
-    # the scalar fields: one pass over the statuses, one array of each kind, read from a
-    # flat iterator (np.array of a list of tuples discovers each tuple's shape: 6 µs
-    # against 1.6 µs for cube8's eight agents)
-    n = len(st)
-    (ser.h_min[r], ser.solve_us[r], ser.clf_slack[r], ser.qp_relax[r],
-     ser.u_corr[r]) = np.fromiter(chain.from_iterable(map(_REAL_FIELDS, st)), np.float64,
-                                  5 * n).reshape(n, 5).T
-    (ser.fallback[r], ser.input_clipped[r], ser.alarms[r], ser.qp_status[r],
-     ser.qp_active[r], ser.qp_kinds[r]) = np.fromiter(chain.from_iterable(
-        (_DEGRADED[s.qp_status], bool(s.input_clipped), int(s.alarms),
-         STATUS_CODE[s.qp_status], min(s.active.count, MAX_COUNT), int(s.active.kinds))
-        for s in st), np.int64, 6 * n).reshape(n, 6).T
+    vec = vec.reshape(b, n, 3, 3)
+    ser.u[rows], ser.lumped_est[rows], ser.u_nom[rows] = (
+        vec[:, :, 0], vec[:, :, 1], vec[:, :, 2])
+    # the scalar fields: one array of each kind, read from a flat iterator of C getters
+    # (np.array of a list of tuples discovers each tuple's shape)
+    m = len(outs)
+    real = np.fromiter(chain.from_iterable(map(_REAL_FIELDS, st)), np.float64, 5 * m)
+    real = real.reshape(b, n, 5)
+    (ser.h_min[rows], ser.solve_us[rows], ser.clf_slack[rows], ser.qp_relax[rows],
+     ser.u_corr[rows]) = (real[..., 0], real[..., 1], real[..., 2], real[..., 3],
+                          real[..., 4])
+    ints = np.fromiter(chain.from_iterable(map(_INT_FIELDS, st)), np.int64, 4 * m)
+    ints = ints.reshape(b, n, 4)
+    code = np.fromiter(map(_CODE_OF, map(_QP_STATUS, st)), np.int64, m).reshape(b, n)
+    ser.input_clipped[rows], ser.alarms[rows] = ints[..., 0], ints[..., 1]
+    ser.qp_active[rows] = np.minimum(ints[..., 2], MAX_COUNT)
+    ser.qp_kinds[rows] = ints[..., 3]
+    ser.qp_status[rows], ser.fallback[rows] = code, _DEGRADED_BY_CODE[code]
+
+
+class AgentRows:
+    """The agents' rows of a run's series, written in blocks: :meth:`add` keeps each step's
+    outputs, and every ``block`` steps (or at :meth:`flush`) :func:`set_agent_blocks` writes
+    them. ``block`` defaults to what :data:`STAGED_OUTPUTS` outputs of ``n`` agents fill, at
+    most :data:`MAX_STAGED_STEPS`; 1 writes every row as it comes (a live view reads each).
+    The outputs are only read, after their step: an agent never writes an output it
+    returned."""
+
+    def __init__(self, ser: RunSeries, n: int, block: int | None = None) -> None:
+        self.ser = ser
+        self.block = (max(1, min(MAX_STAGED_STEPS, STAGED_OUTPUTS // max(1, n)))
+                      if block is None else max(1, int(block)))
+        self._first = 0  # the row of the first staged step
+        self._staged: list[Sequence[AgentOutput]] = []
+
+    def add(self, r: int, outs: Sequence[AgentOutput]) -> None:
+        """Row ``r``'s outputs (rows come in order, one after the other)."""
+        if not self._staged:
+            self._first = r
+        elif r != self._first + len(self._staged):
+            raise ValueError(f"row {r} after {self._first + len(self._staged) - 1}")
+        self._staged.append(outs)
+        if len(self._staged) >= self.block:
+            self.flush()
+
+    def flush(self) -> None:
+        """Write the staged rows."""
+        if self._staged:
+            set_agent_blocks(self.ser, self._first, self._staged)
+            self._staged = []
 
 
 def run_document(

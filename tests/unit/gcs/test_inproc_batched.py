@@ -11,10 +11,17 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.mission.inproc import round_estimate, round_estimates, wire_to_command, wire_to_commands
-from gcs.mission.run_output import empty_series, set_agent_rows
-from offboard.records import AgentOutput, AgentStatus, NeighbourEstimate
-from swarm_common.enums import Method, QPStatus
+from gcs.mission import run_output
+from gcs.mission.inproc import (
+    round_estimate,
+    round_estimates,
+    run_inproc,
+    wire_to_command,
+    wire_to_commands,
+)
+from gcs.mission.run_output import AgentRows, empty_series, set_agent_rows
+from offboard.records import ActiveRows, AgentOutput, AgentStatus, NeighbourEstimate
+from swarm_common.enums import Method, QPRow, QPStatus
 from swarm_common.frames import quat_ned_from_euler_enu
 from swarm_common.scenario.model import load_scenario
 from vehicle_sim.autopilot.setpoints import parse_attitude
@@ -126,6 +133,73 @@ def test_status_rows_written_at_once() -> None:
         assert ser.fallback[1, i] == QPStatus(st.qp_status).degraded
         assert ser.input_clipped[1, i] == st.input_clipped
     assert not ser.fallback[0].any() and not ser.fallback[2].any()  # other rows untouched
+
+
+# every field a run's agent rows fill (gcs.mission.run_output.set_agent_blocks)
+_ROW_FIELDS = ("u", "lumped_est", "u_nom", "h_min", "solve_us", "clf_slack", "qp_relax",
+               "u_corr", "fallback", "input_clipped", "alarms", "qp_status", "qp_active",
+               "qp_kinds")
+
+
+def _outputs(rng: np.random.Generator, n: int) -> list[AgentOutput]:
+    """One step's outputs of ``n`` agents, every status field drawn (every QP status, active
+    counts past the record's saturation, alarm and kind bits)."""
+    outs = []
+    for i in range(n):
+        st = AgentStatus(
+            Method.DCBF, qp_status=list(QPStatus)[int(rng.integers(len(QPStatus)))],
+            solve_us=float(rng.uniform(0, 50)), h_min=[math.inf, float(rng.normal())][i % 2],
+            slack=float(rng.uniform()), violation=float(rng.uniform()),
+            input_clipped=bool(rng.random() < 0.5), alarms=int(rng.integers(0, 256)),
+            active=ActiveRows(int(rng.integers(0, 400)), QPRow(int(rng.integers(0, 8)))),
+            u_nom=rng.normal(size=3), correction=float(rng.uniform()))
+        outs.append(AgentOutput(0.0, 0.0, 0.0, 0.0, np.zeros(4, np.float32), np.float32(0.5),
+                                rng.normal(size=3), _estimate(rng, i + 1), st,
+                                lumped=rng.normal(size=3)))
+    return outs
+
+
+def test_rows_written_in_blocks_equal_rows_written_one_by_one() -> None:
+    """AgentRows, whose blocks end at every size from one row to past the run, writes what
+    set_agent_rows writes row by row."""
+    rng = np.random.default_rng(7)
+    k, n = 11, 5
+    steps = [_outputs(rng, n) for _ in range(k)]
+    one = empty_series(np.arange(k) * 0.02, n)
+    for r, outs in enumerate(steps):
+        set_agent_rows(one, r, outs)
+    assert one.qp_active.max() == 255 and one.fallback.any() and not one.fallback.all()
+    for block in (1, 2, 3, 4, 11, 50):
+        ser = empty_series(np.arange(k) * 0.02, n)
+        rows = AgentRows(ser, n, block=block)
+        for r, outs in enumerate(steps):
+            rows.add(r, outs)
+        rows.flush()
+        for f in _ROW_FIELDS:
+            assert np.array_equal(getattr(ser, f), getattr(one, f)), (block, f)
+
+
+def test_agent_rows_refuse_a_row_out_of_order() -> None:
+    rng = np.random.default_rng(8)
+    rows = AgentRows(empty_series(np.arange(4) * 0.02, 2), 2, block=3)
+    rows.add(0, _outputs(rng, 2))
+    with pytest.raises(ValueError, match="row 2 after 0"):
+        rows.add(2, _outputs(rng, 2))
+
+
+@pytest.mark.parametrize("method", [Method.DCBF, Method.RCBF])
+def test_a_run_records_in_blocks_what_it_records_row_by_row(
+    method: Method, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A run's rows written in blocks equal its rows written as each step ends: no agent
+    writes an output after returning it (the QP's times aside, which are wall clock)."""
+    blocks = run_inproc(SC, method, duration=1.5).series
+    monkeypatch.setattr(run_output, "MAX_STAGED_STEPS", 1)
+    rows = run_inproc(SC, method, duration=1.5).series
+    assert len(blocks.t) == 75 and AgentRows(empty_series(blocks.t, SC.n), SC.n).block == 1
+    for f in _ROW_FIELDS:
+        if f != "solve_us":
+            assert np.array_equal(getattr(blocks, f), getattr(rows, f), equal_nan=True), f
 
 
 @pytest.mark.full
