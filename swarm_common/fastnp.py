@@ -39,6 +39,10 @@ einsum: Callable[..., Any] = _c_einsum()
 # returns carry an equal dtype object of their own), ≈ 40 ns against ≈ 80 ns for
 # ``== np.float64``, which converts the scalar type first
 _F64 = np.dtype(np.float64)
+# numpy's C function, given the dtype instance as a positional argument: ≈ 55 ns against
+# ≈ 95 ns for ``np.ascontiguousarray(x, dtype=np.float64)``, which parses a keyword and
+# converts the scalar type to its dtype on every call (the same array either way)
+_contiguous = np.ascontiguousarray
 _VEC3_SHAPE, _VEC3_STRIDES = (3,), (8,)
 _ROWS3_STRIDES = (24, 8)
 
@@ -54,13 +58,13 @@ def rows3(x: np.ndarray) -> np.ndarray:
     other layout, a byte-swapped dtype included, takes the converting path)."""
     if x.dtype == _F64 and x.strides == _ROWS3_STRIDES and x.ndim == 2:
         return x
-    return np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+    return _contiguous(x, _F64).reshape(-1, 3)
 
 
 def f64(x: np.ndarray) -> np.ndarray:
     """``x`` as a C-contiguous float64 array, the one layout a compiled kernel is compiled
     for (``x`` itself when it is one already)."""
-    return np.ascontiguousarray(x, dtype=np.float64)
+    return _contiguous(x, _F64)
 
 
 def vec3(x: np.ndarray) -> np.ndarray:
@@ -72,7 +76,7 @@ def vec3(x: np.ndarray) -> np.ndarray:
             return x
     except AttributeError:  # not an array: converted below
         pass
-    return np.ascontiguousarray(x, dtype=np.float64).reshape(3)
+    return _contiguous(x, _F64).reshape(3)
 
 
 def finite(x: np.ndarray) -> bool:

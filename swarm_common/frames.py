@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from swarm_common.fastnp import vec3
+from swarm_common.fastnp import f64, vec3
 from swarm_common.frames_kernel import (
     accel_to_attitude_kernel,
     euler_enu_from_quat_ned_kernel,
@@ -76,7 +76,7 @@ def euler_from_rotm(r: np.ndarray) -> tuple[float, float, float]:
 def quat_from_rotm(r: np.ndarray) -> np.ndarray:
     """Rotation matrix -> unit quaternion [w, x, y, z] with w >= 0 (compiled:
     :func:`~swarm_common.frames_kernel.quat_from_rotm_kernel`)."""
-    m = np.ascontiguousarray(r, dtype=float)
+    m = f64(r)
     if m.shape != (3, 3):
         raise ValueError(f"rotation matrix of shape {m.shape}, not (3, 3)")
     return quat_from_rotm_kernel(m)
@@ -119,7 +119,7 @@ def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
     Normalised, ``R_enu = T_ENU_NED R(q) D_FRD_FLU``, then :func:`euler_from_rotm`
     (compiled: :func:`swarm_common.frames_kernel.euler_enu_from_quat_ned_kernel`).
     """
-    qa = np.ascontiguousarray(q, dtype=float)
+    qa = f64(q)
     if qa.shape != (4,):
         raise ValueError(f"quaternion of shape {qa.shape}, not (4,)")
     return _EULER.call(qa, T_ENU_NED, D_FRD_FLU)
@@ -128,7 +128,7 @@ def euler_enu_from_quat_ned(q: np.ndarray) -> tuple[float, float, float]:
 def euler_enu_from_quats_ned(q: np.ndarray) -> np.ndarray:
     """(N,3) [roll, pitch, yaw] of :func:`euler_enu_from_quat_ned` for each row of the
     (N,4) quaternions ``q`` (one compiled call; the same bits row by row)."""
-    qa = np.ascontiguousarray(q, dtype=float)
+    qa = f64(q)
     if qa.ndim != 2 or qa.shape[1] != 4:
         raise ValueError(f"quaternions of shape {qa.shape}, not (N, 4)")
     return _EULERS.call(qa, T_ENU_NED, D_FRD_FLU)
@@ -165,7 +165,7 @@ def accel_to_attitude(
     vertical part kept); ``F <= thrust_max_n`` (the whole vector scaled).
     The compiled :func:`swarm_common.frames_kernel.accel_to_attitude_kernel`.
     """
-    ua = np.ascontiguousarray(u, dtype=float)
+    ua = f64(u)
     if ua.shape != (3,):
         raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
     return _TO_ATTITUDE.call(

@@ -65,6 +65,7 @@ from offboard.estimation.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
     lumped_into,
     model_accel_kernel,
 )
+from swarm_common.fastnp import f64
 from swarm_common.jit import CallSite
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
 
@@ -226,7 +227,7 @@ class DESO:
         with no relative information, or one the daemon missed (u_sub: (substeps, 3),
         m/s²)."""
         self._f_hat = None
-        u = np.ascontiguousarray(u_sub, dtype=np.float64)
+        u = f64(u_sub)
         self.z1, self.z2 = coast_kernel(self.z1, self.z2, self.z3, self.zeta,
                                         u[: self.substeps], self.h, self.delta)
 
@@ -256,13 +257,11 @@ class DESO:
         a_s, g, dmat, pu, idx = self._step_arrays(used)
         f_hat = (f_cached if f_cached is not None
                  else model_accel_kernel(self.z1, self.z2, self.zeta, self.h))
-        c = np.ascontiguousarray
         out = np.empty(OUT_LEN)  # a new array from Python: cheaper than one the kernel boxes
         self._step.call(
-            a_s, g, dmat, pu, idx, c(peer_rows, dtype=np.float64), c(rel_pos, dtype=np.float64),
-            c(rel_vel, dtype=np.float64), self.z1, self.z2, self.z3, self.zeta,
-            c(u_sub, dtype=np.float64), f_hat, self.h, self.mu, self.sigma, self.dt,
-            self.converged_s, out,
+            a_s, g, dmat, pu, idx, f64(peer_rows), f64(rel_pos), f64(rel_vel), self.z1,
+            self.z2, self.z3, self.zeta, f64(u_sub), f_hat, self.h, self.mu, self.sigma,
+            self.dt, self.converged_s, out,
         )
         # new arrays each period (views of the kernel's one output array)
         self.z1, self.z2, self.z3 = out[OUT_Z1], out[OUT_Z2], out[OUT_Z3]

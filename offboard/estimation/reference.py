@@ -35,6 +35,7 @@ from scipy.linalg import expm
 from offboard.estimation.bearing import Formation
 from offboard.estimation.peer_table import XI_COL
 from offboard.estimation.yaw_turn import turn_by_kernel, turn_coeffs_kernel
+from swarm_common.fastnp import f64
 from swarm_common.jit import CallSite, kernel
 
 XI_DIM = 12  # ξ = [p*, v*, a*, j*], each (3,) ENU
@@ -246,8 +247,7 @@ class DesiredStateObserver:
             return
         mx, mc, pu, idx = maps
         out = np.empty(12)  # a new array from Python: cheaper than one the kernel boxes
-        self._step.call(mx, mc, pu, idx, np.ascontiguousarray(peer_rows, dtype=float), self.xi,
-                      out)
+        self._step.call(mx, mc, pu, idx, f64(peer_rows), self.xi, out)
         self.xi = out
 
     @property

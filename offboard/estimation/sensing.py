@@ -28,7 +28,7 @@ from offboard.estimation.sensing_kernel import (
     range_index,
 )
 from swarm_common.enums import NoiseDraws
-from swarm_common.fastnp import rows3
+from swarm_common.fastnp import f64, rows3
 from swarm_common.jit import CallSite
 from swarm_common.scenario.model import SensingConfig
 
@@ -183,7 +183,7 @@ class DropoutHold:
             return valid.nonzero()[0], rel_p, rel_v
         sel, rp_s, rv_s, n_held = hold_kernel(
             float(t), np.ascontiguousarray(valid, dtype=np.bool_),
-            np.ascontiguousarray(rel_p, dtype=float), np.ascontiguousarray(rel_v, dtype=float),
+            f64(rel_p), f64(rel_v),
             self._last_seen, self._last_rp, self._last_rv, self.index, float(self.hold_s),
         )
         if n_held == 0:

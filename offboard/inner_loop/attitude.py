@@ -53,7 +53,7 @@ def decode_wire(q_ned: np.ndarray, thrust_norm: float, thrust_max_n: float) -> t
 def _virtual_control(u: np.ndarray) -> np.ndarray:
     """``u`` as the (3,) float64 array the compiled conversions take; ValueError if it has
     another shape."""
-    ua = np.ascontiguousarray(u, dtype=float)
+    ua = f64(u)
     if ua.shape != (3,):
         raise ValueError(f"virtual control of shape {ua.shape}, not (3,)")
     return ua
