@@ -399,10 +399,11 @@ class FollowerAgent(AgentBase):
         return self.ref.xi.copy()
 
     def _estimate(self, t: float) -> NeighbourEstimate:
-        """What this agent publishes, valid at ``t``."""
+        """What this agent publishes, valid at ``t``: the DESO's state arrays themselves,
+        which it replaces each period and never writes in place (no copies)."""
         d = self.deso
         return NeighbourEstimate(
-            self.id, t, d.z1.copy(), d.z2.copy(), d.z3.copy(), self.current_reference(t), False,
+            self.id, t, d.z1, d.z2, d.z3, self.current_reference(t), False,
             cooperative=self.cooperative,
         )
 

@@ -121,7 +121,9 @@ class DESO:
 
     The per-period arithmetic is compiled (:mod:`offboard.estimation.deso_kernel`); the class keeps
     the state, the neighbour bookkeeping and the matrices of each neighbour set (numpy,
-    cached). Each period replaces z1, z2, z3 (and ζ̂ when it adapts) by new arrays.
+    cached). Each period replaces z1, z2, z3 (and ζ̂ when it adapts) by new arrays, and
+    nothing writes them in place: a follower publishes them as they are
+    (:meth:`offboard.agent.follower.FollowerAgent._estimate`).
     """
 
     def __init__(

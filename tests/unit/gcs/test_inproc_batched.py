@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.mission import run_output
+from gcs.mission import inproc, run_output
 from gcs.mission.inproc import (
     round_estimate,
     round_estimates,
@@ -20,6 +20,7 @@ from gcs.mission.inproc import (
     wire_to_commands,
 )
 from gcs.mission.run_output import AgentRows, empty_series, set_agent_rows
+from offboard.estimation.peer_table import EstimateBatch
 from offboard.records import ActiveRows, AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method, QPRow, QPStatus
 from swarm_common.frames import quat_ned_from_euler_enu
@@ -200,6 +201,24 @@ def test_a_run_records_in_blocks_what_it_records_row_by_row(
     for f in _ROW_FIELDS:
         if f != "solve_us":
             assert np.array_equal(getattr(blocks, f), getattr(rows, f), equal_nan=True), f
+
+
+def test_no_agent_writes_an_estimate_it_published(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every estimate an agent returned holds, at the end of the run, the values it held
+    when its step returned (a follower publishes its DESO's arrays without copies)."""
+    seen: list[tuple[NeighbourEstimate, list[np.ndarray]]] = []
+    batch = inproc.published_batch
+
+    def kept(ests: list[NeighbourEstimate]) -> EstimateBatch:
+        seen.extend((e, [e.z1.copy(), e.z2.copy(), e.z3.copy(), e.xi.copy()]) for e in ests)
+        return batch(ests)
+
+    monkeypatch.setattr(inproc, "published_batch", kept)
+    run_inproc(SC, Method.DCBF, duration=1.0)
+    assert len(seen) == (1 + 50) * SC.n
+    for e, values in seen:
+        for now, then in zip((e.z1, e.z2, e.z3, e.xi), values, strict=True):
+            assert np.array_equal(now, then)
 
 
 @pytest.mark.full
