@@ -29,6 +29,7 @@ import numpy as np
 from offboard.estimation.peer_table import XI_COL
 from offboard.estimation.reference import DesiredStateObserver, observer_core
 from offboard.estimation.yaw_turn import extrapolate_kernel, offset_yaw_kernel, turn_xi_kernel
+from swarm_common.fastnp import f64
 from swarm_common.jit import kernel
 from swarm_common.scenario.mission_check import MIN_YAW_OFFSET_M, yaw_leaders
 from swarm_common.scenario.spec import Scenario
@@ -90,7 +91,7 @@ class FormationFrameObserver:
         observer stepped there, its estimate turned back at the next time (one compiled
         call, :func:`frame_observer_kernel`, unless no neighbour is heard)."""
         a, b = self.leaders
-        rows = np.ascontiguousarray(peer_rows, dtype=float)
+        rows = f64(peer_rows)
         maps = self.inner.maps(have)
         nxt = np.empty(4)
         out = np.empty(12)

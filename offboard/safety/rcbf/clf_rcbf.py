@@ -137,8 +137,7 @@ def tangential_term(dp: np.ndarray, h: np.ndarray, gain: float, h_on: float) -> 
     """
     if gain <= 0.0 or len(h) == 0:
         return np.zeros(3)
-    return tangential_kernel(rows3(dp), np.ascontiguousarray(h, dtype=float), float(gain),
-                             float(h_on))
+    return tangential_kernel(rows3(dp), f64(h), float(gain), float(h_on))
 
 
 @dataclass
