@@ -126,10 +126,12 @@ class FollowerAgent(AgentBase):
         self._peer_idx = np.array(
             sorted(self.form.index_of(a) for a in peer_ids(self.form, agent_id)), dtype=np.int64
         )
-        # the ones predicted to t_k for the observers: graph neighbours and leaders
+        # the ones predicted to t_k for the observers: graph neighbours and the leaders
+        # among the peers (the observer's anchors, offboard.agent.peers)
+        lead_peers = sorted(set(self._peer_idx.tolist()) & set(self.form.leader_idx))
         nb = set(self.form.neighbours[self.index])
-        self._predict_idx = np.array(sorted(nb | set(self.form.leader_idx)), dtype=np.int64)
-        self.pair_inputs = PairInputs(self.form.leader_idx)  # part-by-part filters' pairs
+        self._predict_idx = np.array(sorted(nb | set(lead_peers)), dtype=np.int64)
+        self.pair_inputs = PairInputs(lead_peers)  # part-by-part filters' pairs
         # neighbours predicted into sensing range but not sensed (dcbf, docs/safety.md §5c)
         # the in-flight alarms and the fallback (offboard.agent.guard, docs/safety.md)
         self.guard = InFlightGuard(sc, self.index, self._predict_idx, self.u_lo, self.u_hi)

@@ -32,8 +32,8 @@ FALLBACK_CLEAR_D = 2.0
 
 class InFlightGuard:
     """The guard of follower ``index`` of ``sc``; ``peers`` the scenario indices whose
-    estimates it predicts to t_k (graph neighbours and leaders); ``lo``, ``hi`` (3,) the
-    control box (m/s²)."""
+    estimates it predicts to t_k (graph neighbours and the leaders among its peers);
+    ``lo``, ``hi`` (3,) the control box (m/s²)."""
 
     def __init__(self, sc: Scenario, index: int, peers: np.ndarray, lo: np.ndarray,
                  hi: np.ndarray) -> None:

@@ -51,11 +51,27 @@ def test_peers_all_on_cube8_few_on_a_sparse_grid_none_for_leaders() -> None:
     assert all(peer_ids(form, i) == ready_ids(form, i) for i in followers)
     sc = load_scenario(str(SCEN / "grid27_knn.toml"))
     form = formation_from_scenario(sc)
+    dropped = 0
     for i in sc.ids:
-        peers = ready_ids(form, i)
-        assert i not in peers and set(sc.leader_ids) - {i} <= set(peers)
-        assert {form.ids[j] for j in form.neighbours[form.index_of(i)]} <= set(peers)
-        assert peer_ids(form, i) == ([] if i in sc.leader_ids else peers)
+        ready, x = ready_ids(form, i), form.index_of(i)
+        assert i not in ready and set(sc.leader_ids) - {i} <= set(ready)
+        nb = {form.ids[j] for j in form.neighbours[x]}
+        assert nb <= set(ready)
+        if i in sc.leader_ids:
+            assert peer_ids(form, i) == []
+            continue
+        # a follower's peers: its neighbours and the agents nearest its vertex, so a
+        # leader farther than every other peer is awaited before the first step only
+        peers = set(peer_ids(form, i))
+        assert nb <= peers <= set(ready)
+        far = set(ready) - peers
+        assert far <= set(sc.leader_ids)
+        d = np.linalg.norm(form.vertices - form.vertices[x], axis=1)
+        near = [d[form.index_of(j)] for j in peers - nb]
+        if far and near:
+            assert max(near) < min(d[form.index_of(j)] for j in far)
+        dropped += len(far)
+    assert dropped > 0
     assert min(len(ready_ids(form, i)) for i in sc.ids) < len(sc.ids) - 1
 
 
