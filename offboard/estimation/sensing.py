@@ -127,7 +127,7 @@ class Sensor:
         sb, sr, sd, sdd = self._sig
         if self.in_range_only:
             p, v, out = rows3(p), rows3(v), self._out
-            k = self._range.call(p, self.index, self.range, self._idx, out.d)
+            k = self._range.call(p, self.index, self.range, self._idx)
             if k > len(self._drop):
                 self._draw_rows(k)
             noise = self.rng.standard_normal(out=self._noise[:k])

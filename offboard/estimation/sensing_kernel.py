@@ -53,9 +53,10 @@ def measure_into(
     (row i: (1,0,0)), ``ḋ = gᵀw``, ``ġ = (w − g ḋ)/d`` (module docstring of
     :mod:`offboard.estimation.sensing`); measured ``g̃ = (g + σ_b n)/‖g + σ_b n‖``, ``ġ + σ_r n``,
     ``d + σ_d n``, ``ḋ + σ_ḋ n``; valid iff ``d ≤ range``, ``drop ≥ dropout`` and j ≠ i.
-    A row out of range (``d > range``, j ≠ i) is invalid and only its true ``d`` is
-    written, zeros elsewhere: nothing reads an invalid row's measurements, and at a
-    thousand agents computing them was most of a follower's sensing.
+    A row out of range (``d > range``, j ≠ i) is invalid and all zeros: nothing reads an
+    invalid row's measurements, and at a thousand agents computing them was most of a
+    follower's sensing (its true distance, written too until issue 44, was 8 kB of
+    writes per follower and step there).
 
     The caller allocates the outputs: a kernel that returned seven new arrays would pay
     for boxing each of them in Python (about 0.3 µs apiece), three times the cost of
@@ -98,7 +99,7 @@ def _rows_into(
         d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
         if j != i and d > range_m:  # out of range: invalid, its row zeros (nobody reads it)
             valid[j] = False
-            dm[j] = d
+            dm[j] = 0.0
             ddm[j] = 0.0
             for c in range(3):
                 gm[j, c] = 0.0
@@ -133,18 +134,17 @@ def _rows_into(
 
 
 @kernel
-def range_index(p: np.ndarray, i: int, range_m: float, idx: np.ndarray,
-                dist: np.ndarray) -> int:
+def range_index(p: np.ndarray, i: int, range_m: float, idx: np.ndarray) -> int:
     """The agents in agent ``i``'s range, for :func:`measure_in_range_into`: writes their
     indices j ≠ i with true distance ≤ ``range_m`` (m) into ``idx`` (≥ N,) in index order
-    and every true distance into ``dist`` (N,) (m), and returns their count. The distance
-    is :func:`_rows_into`'s, so the two agree on who is in range."""
+    and returns their count. The distance is :func:`_rows_into`'s, so the two agree on who
+    is in range. It reads the truth and writes only the indices: at a thousand agents the
+    distances it also wrote were 8 kB per follower and step, read by nobody."""
     n = p.shape[0]
     k = 0
     for j in range(n):
         r0, r1, r2 = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1], p[j, 2] - p[i, 2]
         d = math.sqrt(dot3(r0, r1, r2, r0, r1, r2))
-        dist[j] = d
         if j != i and d <= range_m:
             idx[k] = j
             k += 1
@@ -161,18 +161,16 @@ def measure_in_range_into(
 ) -> int:
     """:func:`measure_into` for ``noise_draws = "in_range"`` into outputs kept between
     calls, at a cost that follows the agents in range, not N: row ``idx[r]`` (the first
-    ``k`` of :func:`range_index`, which has written every row's true distance into ``dm``)
-    gets noise row r and draw r; the rows in range at the call before (``prev[:n_prev]``)
-    are first reset to an out-of-range row's zeros; the own row is rewritten. Every other
-    row already holds an out-of-range row's values, so the outputs equal
-    :func:`measure_into`'s given the in-range rows' draws in their agents' rows (zero noise
-    and a draw of 1, never dropped, in the others'), element for element, but for a true
-    distance that is not a number (not in range here: its row zeros). Writes ``idx[:k]``
-    into ``prev`` and returns k, the next call's ``n_prev``."""
+    ``k`` of :func:`range_index`) gets noise row r and draw r; the rows in range at the
+    call before (``prev[:n_prev]``) are first reset to an out-of-range row's zeros; the own
+    row is rewritten. Every other row already holds an out-of-range row's zeros, so the
+    outputs equal :func:`measure_into`'s given the in-range rows' draws in their agents'
+    rows (zero noise and a draw of 1, never dropped, in the others'), element for element.
+    Writes ``idx[:k]`` into ``prev`` and returns k, the next call's ``n_prev``."""
     for r in range(n_prev):
         j = prev[r]
         valid[j] = False
-        ddm[j] = 0.0
+        dm[j] = ddm[j] = 0.0
         for c in range(3):
             gm[j, c] = gdm[j, c] = rel_p[j, c] = rel_v[j, c] = 0.0
     _rows_into(p, v, i, idx, k, True, noise, drop, sb, sr, sd, sdd, range_m, dropout, valid,
