@@ -52,6 +52,7 @@ from offboard.estimation.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
     GATE_E1,
     GATE_E2,
     GATE_HOLD_S,
+    MASK_NEIGHBOURS,
     OUT_CONVERGED,
     OUT_E1,
     OUT_E2,
@@ -64,10 +65,13 @@ from offboard.estimation.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
     deso_step_kernel,
     lumped_into,
     model_accel_kernel,
+    used_mask,
 )
 from swarm_common.fastnp import f64
 from swarm_common.jit import CallSite
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
+
+_BOOL = np.dtype(np.bool_)  # the masks' dtype, given positionally (fastnp's cheap call)
 
 
 def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dict[int, np.ndarray]:
@@ -154,6 +158,10 @@ class DESO:
         self.delta = self.dt / self.substeps
         self.h = float(ground_effect_height)
         self.nbrs = sorted(self.weights)
+        # the neighbour set of an update as a bit mask (used_mask), and each mask's set
+        self._nbr_idx = np.array(self.nbrs, dtype=np.int64)
+        self._mask = (CallSite(used_mask) if len(self.nbrs) <= MASK_NEIGHBOURS else None)
+        self._used_of: dict[int, tuple[int, ...]] = {}
         self.z1 = np.array(z1, dtype=float)
         self.z2 = np.array(z2, dtype=float)
         self.z3 = np.zeros(3)
@@ -186,6 +194,20 @@ class DESO:
             m = (a_s, g, dmat)
             self._cache[used] = m
         return m
+
+    def _used(self, valid: np.ndarray, have: np.ndarray) -> tuple[int, ...]:
+        """The neighbours with a valid measurement (``valid`` (N,)) and a usable estimate
+        (``have`` (N,)), in order: one compiled pass to a bit mask, its set cached (a tuple
+        built in Python read two numpy scalars per neighbour)."""
+        if self._mask is None:
+            return tuple([j for j in self.nbrs if valid[j] and have[j]])
+        m = self._mask.call(self._nbr_idx, np.ascontiguousarray(valid, _BOOL),
+                            np.ascontiguousarray(have, _BOOL))
+        used = self._used_of.get(m)
+        if used is None:
+            used = tuple(j for r, j in enumerate(self.nbrs) if m >> r & 1)
+            self._used_of[m] = used
+        return used
 
     def _stacked_weights(self, used: tuple[int, ...]) -> np.ndarray:
         """(k,3,3) W_ij of the neighbours ``used``, in that order (cached per set)."""
@@ -250,7 +272,7 @@ class DESO:
         u_sub (substeps, 3): applied virtual control per sub-step.
         """
         f_cached, self._f_hat = self._f_hat, None
-        used = tuple([j for j in self.nbrs if valid[j] and have[j]])
+        used = self._used(valid, have)
         self.n_used = len(used)
         if not used:  # no relative information: dead-reckon with the model
             self.converged_s = 0.0

@@ -44,6 +44,27 @@ GATE_E2 = 1.0  # m/s, ... and ‖e2‖ ≤ GATE_E2 ...
 GATE_HOLD_S = 1.0  # s, ... have held continuously this long (the observer has converged)
 
 
+# neighbours a usage mask can hold (:func:`used_mask`); a DESO with more takes the Python way
+MASK_NEIGHBOURS = 62
+
+
+@kernel
+def used_mask(nbrs: np.ndarray, valid: np.ndarray, have: np.ndarray) -> int:
+    """Bit r set where neighbour ``nbrs[r]`` (scenario index; at most
+    :data:`MASK_NEIGHBOURS` of them) has a valid measurement and a usable estimate
+    (``valid``, ``have`` (N,) bool): the neighbour set of a DESO update as one integer, a
+    cache key that needs no tuple built in Python. Raises ValueError for an index outside
+    either mask."""
+    m = 0
+    for r in range(nbrs.shape[0]):
+        j = nbrs[r]
+        if not (0 <= j < valid.shape[0] and j < have.shape[0]):
+            raise ValueError("used_mask: a neighbour outside the masks")
+        if valid[j] and have[j]:
+            m |= 1 << r
+    return m
+
+
 @kernel
 def _v_eval(z2: np.ndarray) -> tuple[float, float, float]:
     """Velocity at which Φ is evaluated: ``z2`` with its norm saturated to V_EVAL_MAX (m/s);

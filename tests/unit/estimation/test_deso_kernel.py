@@ -285,3 +285,36 @@ def test_trajectories_equal_numpy(cube8, mu) -> None:  # type: ignore[no-untyped
             _assert_same(obs[i], ref[i], (i, k))
     if mu > 0.0:
         assert any(np.any(o.zeta != 0.0) for o in obs.values())  # the law did run
+
+
+def test_used_mask_gives_the_neighbours_read_in_python() -> None:
+    """The compiled neighbour set (deso_kernel.used_mask, its sets cached by mask) is the
+    one a Python pass over the masks finds, over random masks and neighbour lists up to
+    the mask's limit; past it the DESO takes the Python pass; an index outside the masks
+    raises."""
+    from offboard.estimation.deso_kernel import MASK_NEIGHBOURS, used_mask
+
+    sc = load_scenario(str(CUBE8))
+    form = formation_from_scenario(sc)
+    i = form.follower_idx[0]
+    obs = DESO(form, i, tuple(sc.observer.beta), 0.0, 0.15, 4, 0.02, 0.8, np.zeros(3),
+               np.zeros(3))
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        valid, have = rng.random(sc.n) < 0.6, rng.random(sc.n) < 0.8
+        want = tuple(j for j in obs.nbrs if valid[j] and have[j])
+        assert obs._used(valid, have) == want
+        assert obs._used(valid.tolist(), have.astype(np.uint8)) == want  # other array types
+    for k in (1, 17, MASK_NEIGHBOURS):
+        n = 3 * k
+        nbrs = np.sort(rng.choice(n, k, replace=False)).astype(np.int64)
+        valid, have = rng.random(n) < 0.5, rng.random(n) < 0.5
+        m = used_mask(nbrs, valid, have)
+        assert [int(j) for r, j in enumerate(nbrs) if m >> r & 1] == [
+            int(j) for j in nbrs if valid[j] and have[j]]
+    with pytest.raises(ValueError, match="outside"):
+        used_mask(np.array([0, 9], dtype=np.int64), np.ones(5, bool), np.ones(5, bool))
+    many = list(range(MASK_NEIGHBOURS + 1))
+    obs.nbrs, obs._mask = many, None  # what a DESO with more neighbours than that holds
+    valid = rng.random(len(many)) < 0.5
+    assert obs._used(valid, np.ones(len(many), bool)) == tuple(np.nonzero(valid)[0].tolist())
