@@ -36,12 +36,20 @@ from __future__ import annotations
 from offboard.estimation.bearing import Formation
 
 
+def _heard(form: Formation, i: int) -> set[int]:
+    """The scenario indices follower ``i`` reads: its graph neighbours and the agents it
+    senses in the formation (everyone when the formation sets no range), not itself."""
+    sensed = form.sensed[i] if form.sensed else range(form.n)
+    idx = set(form.neighbours[i]) | set(sensed)
+    idx.discard(i)
+    return idx
+
+
 def ready_ids(form: Formation, agent_id: int) -> list[int]:
     """The ids (sorted) agent ``agent_id`` must hear from before its first step: its graph
     neighbours, the leaders and the agents it senses in the formation (any role)."""
     i = form.index_of(agent_id)
-    sensed = form.sensed[i] if form.sensed else range(form.n)
-    idx = set(form.neighbours[i]) | set(sensed) | set(form.leader_idx)
+    idx = _heard(form, i) | set(form.leader_idx)
     idx.discard(i)
     return sorted(form.ids[j] for j in idx)
 
@@ -53,7 +61,4 @@ def peer_ids(form: Formation, agent_id: int) -> list[int]:
     i = form.index_of(agent_id)
     if i in form.leader_idx:
         return []
-    sensed = form.sensed[i] if form.sensed else range(form.n)
-    idx = set(form.neighbours[i]) | set(sensed)
-    idx.discard(i)
-    return sorted(form.ids[j] for j in idx)
+    return sorted(form.ids[j] for j in _heard(form, i))
