@@ -127,8 +127,8 @@ class FollowerAgent(AgentBase):
             sorted(self.form.index_of(a) for a in peer_ids(self.form, agent_id)), dtype=np.int64
         )
         # the ones predicted to t_k for the observers: graph neighbours and the leaders
-        # among the peers (the observer's anchors, offboard.agent.peers)
-        lead_peers = sorted(set(self._peer_idx.tolist()) & set(self.form.leader_idx))
+        # among the peers, the observer's anchors (offboard.agent.peers)
+        lead_peers = self.form.anchor_leaders(self.index)
         nb = set(self.form.neighbours[self.index])
         self._predict_idx = np.array(sorted(nb | set(lead_peers)), dtype=np.int64)
         self.pair_inputs = PairInputs(lead_peers)  # part-by-part filters' pairs
