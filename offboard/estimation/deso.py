@@ -67,11 +67,9 @@ from offboard.estimation.deso_kernel import (  # noqa: F401 (GATE_* re-exported)
     model_accel_kernel,
     used_mask,
 )
-from swarm_common.fastnp import f64
+from swarm_common.fastnp import bools, f64
 from swarm_common.jit import CallSite
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
-
-_BOOL = np.dtype(np.bool_)  # the masks' dtype, given positionally (fastnp's cheap call)
 
 
 def observer_weights(form: Formation, i: int, leader_anchor: float = 0.0) -> dict[int, np.ndarray]:
@@ -160,7 +158,7 @@ class DESO:
         self.nbrs = sorted(self.weights)
         # the neighbour set of an update as a bit mask (used_mask), and each mask's set
         self._nbr_idx = np.array(self.nbrs, dtype=np.int64)
-        self._mask = (CallSite(used_mask) if len(self.nbrs) <= MASK_NEIGHBOURS else None)
+        self._mask = CallSite(used_mask) if len(self.nbrs) <= MASK_NEIGHBOURS else None
         self._used_of: dict[int, tuple[int, ...]] = {}
         self.z1 = np.array(z1, dtype=float)
         self.z2 = np.array(z2, dtype=float)
@@ -201,8 +199,7 @@ class DESO:
         built in Python read two numpy scalars per neighbour)."""
         if self._mask is None:
             return tuple([j for j in self.nbrs if valid[j] and have[j]])
-        m = self._mask.call(self._nbr_idx, np.ascontiguousarray(valid, _BOOL),
-                            np.ascontiguousarray(have, _BOOL))
+        m = self._mask.call(self._nbr_idx, bools(valid), bools(have))
         used = self._used_of.get(m)
         if used is None:
             used = tuple(j for r, j in enumerate(self.nbrs) if m >> r & 1)

@@ -28,7 +28,7 @@ from offboard.estimation.sensing_kernel import (
     range_index,
 )
 from swarm_common.enums import NoiseDraws
-from swarm_common.fastnp import f64, rows3
+from swarm_common.fastnp import bools, f64, rows3
 from swarm_common.jit import CallSite
 from swarm_common.scenario.model import SensingConfig
 
@@ -182,7 +182,7 @@ class DropoutHold:
         if not self.enabled:
             return valid.nonzero()[0], rel_p, rel_v
         sel, rp_s, rv_s, n_held = hold_kernel(
-            float(t), np.ascontiguousarray(valid, dtype=np.bool_),
+            float(t), bools(valid),
             f64(rel_p), f64(rel_v),
             self._last_seen, self._last_rp, self._last_rv, self.index, float(self.hold_s),
         )

@@ -1,6 +1,6 @@
-"""``swarm_common.fastnp.vec3`` / ``rows3``: the array itself when it already has the one
-layout a compiled kernel is compiled for (native float64, C order), a converted copy
-with the same values otherwise."""
+"""``swarm_common.fastnp.vec3`` / ``rows3`` / ``bools``: the array itself when it already has
+the one layout a compiled kernel is compiled for (native float64 or bool, C order), a
+converted copy with the same values otherwise."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pickle
 import numpy as np
 import pytest
 
-from swarm_common.fastnp import rows3, vec3
+from swarm_common.fastnp import bools, rows3, vec3
 from vehicle_sim.physics.contacts_kernel import pair_distances_kernel
 
 
@@ -51,3 +51,12 @@ def test_rows3_returns_ready_rows_itself_and_converts_the_rest() -> None:
         assert r is not x
         assert r.dtype == np.float64 and r.dtype.isnative and r.flags.c_contiguous
         assert np.array_equal(r, np.reshape(np.asarray(x, dtype=np.float64), (-1, 3)))
+
+
+def test_bools_returns_a_bool_array_itself_and_converts_anything_else() -> None:
+    x = np.array([True, False, True])
+    assert bools(x) is x
+    for other in (x.tolist(), x.astype(np.uint8), np.array([1, 0, 0, 1, 1, 0], bool)[::2]):
+        got = bools(other)
+        assert got is not other and got.dtype == np.bool_ and got.flags.c_contiguous
+        assert got.tolist() == [True, False, True]
