@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from swarm_common.fastnp import f64
+from swarm_common.fastnp import bools, f64
 from swarm_common.jit import CallSite
 from swarm_common.scenario.model import Scenario
 from swarm_common.unmodeled import N_ZETA, regressor  # noqa: F401 (re-exported)
@@ -185,9 +185,9 @@ class SwarmDynamics:
             self._period_pair_step = np.zeros(rows, dtype=np.int64)
         # the contacts and distances, which the kernel writes in place, and the held flags
         # made its types here and kept (a copy converted in the call would take the writes)
-        self._in_contact = np.ascontiguousarray(self._in_contact, dtype=np.bool_)
+        self._in_contact = bools(self._in_contact)
         self._step_dist = f64(self._step_dist)
-        self.held = np.ascontiguousarray(self.held, dtype=np.bool_)
+        self.held = bools(self.held)
         p, v, att, thrust, n_new, md, dmin = self._steps.call(
             f64(self.p), f64(self.v), f64(self.att), f64(self.thrust),
             f64(self.cmd_att), f64(self.cmd_thrust), self.held, f64(self.zeta), self._a_att,
