@@ -22,7 +22,7 @@ from collections.abc import Mapping, Sequence
 from itertools import chain
 from operator import attrgetter
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -136,40 +136,72 @@ def set_agent_rows(ser: RunSeries, r: int, outs: Sequence[AgentOutput]) -> None:
     set_agent_blocks(ser, r, [outs])
 
 
-def set_agent_blocks(ser: RunSeries, r: int, steps: Sequence[Sequence[AgentOutput]]) -> None:
-    """:func:`set_agent_rows` of consecutive rows ``r``, ``r + 1``, ... from ``steps`` (one
-    sequence of outputs per row, every one of the same agents): one conversion of each kind
-    for the whole block, whose per-row numpy calls cost more than the values' own copying."""
+class FlatRows(NamedTuple):
+    """The agents' rows of ``b`` consecutive steps as arrays, (b, n, ...) each: the
+    vectors (u, lumped estimate, u_nom: (b, n, 3, 3)), the real status fields (h_min,
+    solve_us, slack, violation, correction: (b, n, 5)), the integer ones (input_clipped,
+    alarms, active count, active kinds: (b, n, 4)) and the QP's status code (b, n). What
+    :func:`flat_rows` reads from the outputs and :func:`write_flat_rows` writes; a shard
+    of the agents sends it from its process (gcs.mission.shards)."""
+
+    vec: np.ndarray
+    real: np.ndarray
+    ints: np.ndarray
+    code: np.ndarray
+
+
+def flat_rows(steps: Sequence[Sequence[AgentOutput]]) -> FlatRows:
+    """The :class:`FlatRows` of ``steps`` (one sequence of outputs per step, every one of
+    the same agents): one conversion of each kind for the whole block, whose per-row numpy
+    calls cost more than the values' own copying."""
     b = len(steps)
-    if b == 0:
-        return
-    n = len(steps[0])
+    n = len(steps[0]) if b else 0
     outs = [o for step in steps for o in step]
     if len(outs) != b * n:
         raise ValueError(f"{len(outs)} outputs for {b} rows of {n} agents")
     st = [o.status for o in outs]
-    rows = slice(r, r + b)
     # the three vectors of every output in one concatenation (a list of arrays assigned to
     # rows would make numpy discover each element's shape)
-    vec = np.concatenate([v for o in outs for v in (o.u, o.lumped, o.status.u_nom)])
-    vec = vec.reshape(b, n, 3, 3)
-    ser.u[rows], ser.lumped_est[rows], ser.u_nom[rows] = (
-        vec[:, :, 0], vec[:, :, 1], vec[:, :, 2])
+    vec = (np.concatenate([v for o in outs for v in (o.u, o.lumped, o.status.u_nom)])
+           if outs else np.zeros(0))
     # the scalar fields: one array of each kind, read from a flat iterator of C getters
     # (np.array of a list of tuples discovers each tuple's shape)
     m = len(outs)
     real = np.fromiter(chain.from_iterable(map(_REAL_FIELDS, st)), np.float64, 5 * m)
-    real = real.reshape(b, n, 5)
+    ints = np.fromiter(chain.from_iterable(map(_INT_FIELDS, st)), np.int64, 4 * m)
+    code = np.fromiter(map(_CODE_OF, map(_QP_STATUS, st)), np.int64, m)
+    return FlatRows(vec.reshape(b, n, 3, 3), real.reshape(b, n, 5), ints.reshape(b, n, 4),
+                    code.reshape(b, n))
+
+
+def join_flat_rows(parts: Sequence[FlatRows]) -> FlatRows:
+    """The :class:`FlatRows` of the same steps for the agents of ``parts`` one after the
+    other (each part a run of consecutive agents, in scenario order)."""
+    return FlatRows(*(np.concatenate(f, axis=1) for f in zip(*parts, strict=True)))
+
+
+def write_flat_rows(ser: RunSeries, r: int, flat: FlatRows) -> None:
+    """Rows ``r``, ``r + 1``, ... of every agent's status from ``flat`` (its steps in
+    order; fields as :func:`set_agent_rows`)."""
+    vec, real, ints, code = flat
+    rows = slice(r, r + code.shape[0])
+    ser.u[rows], ser.lumped_est[rows], ser.u_nom[rows] = (
+        vec[:, :, 0], vec[:, :, 1], vec[:, :, 2])
     (ser.h_min[rows], ser.solve_us[rows], ser.clf_slack[rows], ser.qp_relax[rows],
      ser.u_corr[rows]) = (real[..., 0], real[..., 1], real[..., 2], real[..., 3],
                           real[..., 4])
-    ints = np.fromiter(chain.from_iterable(map(_INT_FIELDS, st)), np.int64, 4 * m)
-    ints = ints.reshape(b, n, 4)
-    code = np.fromiter(map(_CODE_OF, map(_QP_STATUS, st)), np.int64, m).reshape(b, n)
     ser.input_clipped[rows], ser.alarms[rows] = ints[..., 0], ints[..., 1]
     ser.qp_active[rows] = np.minimum(ints[..., 2], MAX_COUNT)
     ser.qp_kinds[rows] = ints[..., 3]
     ser.qp_status[rows], ser.fallback[rows] = code, _DEGRADED_BY_CODE[code]
+
+
+def set_agent_blocks(ser: RunSeries, r: int, steps: Sequence[Sequence[AgentOutput]]) -> None:
+    """:func:`set_agent_rows` of consecutive rows ``r``, ``r + 1``, ... from ``steps`` (one
+    sequence of outputs per row, every one of the same agents), through one
+    :func:`flat_rows`."""
+    if steps:
+        write_flat_rows(ser, r, flat_rows(steps))
 
 
 class AgentRows:
@@ -187,8 +219,13 @@ class AgentRows:
         self._first = 0  # the row of the first staged step
         self._staged: list[Sequence[AgentOutput]] = []
 
-    def add(self, r: int, outs: Sequence[AgentOutput]) -> None:
-        """Row ``r``'s outputs (rows come in order, one after the other)."""
+    def add(self, r: int, outs: Sequence[AgentOutput] | FlatRows) -> None:
+        """Row ``r``'s outputs (rows come in order, one after the other), or its
+        :class:`FlatRows` (of one step), which is written at once."""
+        if isinstance(outs, FlatRows):
+            self.flush()
+            write_flat_rows(self.ser, r, outs)
+            return
         if not self._staged:
             self._first = r
         elif r != self._first + len(self._staged):
