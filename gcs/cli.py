@@ -31,6 +31,7 @@ from gcs.exit_codes import (
     EXIT_TERMINATED,
     EXIT_USAGE,
 )
+from gcs.mission import MAX_WORKERS
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.records.cli import add_log_parser
@@ -83,6 +84,10 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     if faulted is not None:
         sc = _load(str(faulted), sc.allow_infeasible, sc.allow_unsafe)
     if not args.inproc:
+        if args.workers != 1:
+            print("gcs mission run: --workers is for --inproc (a distributed run packs "
+                  "its daemons with --processes)", file=sys.stderr)
+            return EXIT_USAGE
         from gcs.mission.run_cli import cli_run
 
         return cli_run(args, sc)
@@ -101,7 +106,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     try:
         res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration,
-                         progress=True, land_at=args.land_at, live=live)
+                         progress=True, land_at=args.land_at, live=live, workers=args.workers)
         if live is not None:
             live.finish(res.document())
     finally:
@@ -229,6 +234,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
     r.add_argument("--land-at", type=_non_negative_seconds, default=None, metavar="T",
                    help="coordinated land-all at mission time T s (docs/lifecycle.md)")
+    r.add_argument("--workers", type=_int_in(1, MAX_WORKERS), default=1, metavar="N",
+                   help="with --inproc: step the agents in N processes, this one included "
+                   "(the same run bit for bit; for large swarms: docs/performance.md)")
     d = r.add_argument_group("distributed runs (without --inproc)")
     d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
     d.add_argument("--port-offset", type=_port_offset, default=None,

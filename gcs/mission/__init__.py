@@ -2,7 +2,8 @@
 
 Entry points:
 
-* :func:`gcs.mission.inproc.run_inproc` - dynamics and every agent in one process, lockstep.
+* :func:`gcs.mission.inproc.run_inproc` - dynamics and every agent in one process, lockstep
+  (or the agents in several: ``workers``).
 * :func:`gcs.mission.distributed.run_and_score` - ``vehicle-sim``, a Zenoh router and one
   ``offboard`` daemon per agent (or packed) as real processes; :mod:`.recorder` records them
   and :mod:`.score` scores the record as the in-process runner would.
@@ -19,5 +20,8 @@ distributed run: a child's death, a stall, checkpoints), :mod:`.router`,
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);
 :mod:`.audit` (the commands a run received, for ``metrics.json``);
 :mod:`.live_feed` (each runner's and the dashboard's rows for the live view,
-:mod:`gcs.records.live`).
+:mod:`gcs.records.live`); :mod:`.shards` (the agents of an in-process run in several
+processes, ``--workers``); :mod:`.wire_form` (what crosses a wire, rounded as it does).
 """
+
+MAX_WORKERS = 64  # processes one in-process run may step its agents in (gcs.mission.shards)

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.mission import inproc, run_output
-from gcs.mission.inproc import (
+from gcs.mission import run_output, shards
+from gcs.mission.inproc import run_inproc
+from gcs.mission.run_output import AgentRows, empty_series, set_agent_rows
+from gcs.mission.wire_form import (
     round_estimate,
     round_estimates,
-    run_inproc,
     wire_to_command,
     wire_to_commands,
 )
-from gcs.mission.run_output import AgentRows, empty_series, set_agent_rows
 from offboard.estimation.peer_table import EstimateBatch
 from offboard.records import ActiveRows, AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method, QPRow, QPStatus
@@ -207,13 +207,13 @@ def test_no_agent_writes_an_estimate_it_published(monkeypatch: pytest.MonkeyPatc
     """Every estimate an agent returned holds, at the end of the run, the values it held
     when its step returned (a follower publishes its DESO's arrays without copies)."""
     seen: list[tuple[NeighbourEstimate, list[np.ndarray]]] = []
-    batch = inproc.published_batch
+    batch = shards.published_batch
 
     def kept(ests: list[NeighbourEstimate]) -> EstimateBatch:
         seen.extend((e, [e.z1.copy(), e.z2.copy(), e.z3.copy(), e.xi.copy()]) for e in ests)
         return batch(ests)
 
-    monkeypatch.setattr(inproc, "published_batch", kept)
+    monkeypatch.setattr(shards, "published_batch", kept)
     run_inproc(SC, Method.DCBF, duration=1.0)
     assert len(seen) == (1 + 50) * SC.n
     for e, values in seen:
@@ -228,7 +228,7 @@ def test_followers_given_the_batch_equal_followers_given_dicts() -> None:
     what a daemon receives), through an outage where the batch gives nothing and the dict
     is empty. Truth moves on a fixed path (the agents' commands do not act on it), so
     every step is compared on the same inputs."""
-    from gcs.mission.inproc import published_batch
+    from gcs.mission.wire_form import published_batch
     from offboard.agent.factory import make_agent
     from offboard.agent.peers import peer_ids
     from offboard.estimation.bearing import formation_from_scenario
@@ -263,7 +263,7 @@ def test_published_batch_keeps_each_cooperative_flag() -> None:
     """The in-process batch carries each estimate's ``cooperative`` flag as the wire does
     (offboard.daemon.wire_convert.put_row): a non-cooperative follower's initial estimate
     already gets the others' full share against it, in process as in a distributed run."""
-    from gcs.mission.inproc import published_batch
+    from gcs.mission.wire_form import published_batch
 
     rng = np.random.default_rng(5)
     ests = [_estimate(rng, aid) for aid in range(1, 10)]

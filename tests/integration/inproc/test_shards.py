@@ -1,0 +1,113 @@
+"""The agents of an in-process run stepped in worker processes (gcs.mission.shards): the
+same run bit for bit as one process, a dead worker fails the run in one line, and the
+shards cover the swarm."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import ROOT, load_shipped
+
+from gcs.cli import main as gcs_main
+from gcs.mission import shards
+from gcs.mission.inproc import MissionResult, run_inproc
+from gcs.mission.shards import AgentShards, ShardError, serve_shard, shard_bounds
+
+
+def _same_run(a: MissionResult, b: MissionResult) -> None:
+    """Every series and metric of two runs equal, but the QP's and the run's wall times."""
+    da, db = a.series.as_dict(), b.series.as_dict()
+    assert da.keys() == db.keys()
+    for key in da:
+        if key != "solve_us":
+            assert np.array_equal(da[key], db[key], equal_nan=True), key
+    skip = ("wall_s", "realtime_factor")
+    assert ({k: v for k, v in a.metrics.items() if k not in skip}
+            == {k: v for k, v in b.metrics.items() if k not in skip})
+    assert a.gains == b.gains and a.collision_pairs == b.collision_pairs
+
+
+@pytest.mark.parametrize(("name", "workers", "land_at"), [
+    ("cube8_rogue", 3, 4.0),  # a rogue agent, a link outage at 5 s, a land-all at 4 s
+    ("cube8_delay50", 2, None),  # estimates two periods late
+])
+def test_workers_fly_the_same_bits(name: str, workers: int, land_at: float | None) -> None:
+    sc = load_shipped(ROOT / "scenarios" / f"{name}.toml")
+    one = run_inproc(sc, "dcbf", duration=6.0, land_at=land_at)
+    many = run_inproc(sc, "dcbf", duration=6.0, land_at=land_at, workers=workers)
+    _same_run(one, many)
+    assert one.metrics["collisions"] == 0 and one.series.h_min.shape == (300, sc.n)
+
+
+def test_a_dead_worker_fails_the_run_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A worker killed mid-run: the run raises ShardError naming it, and no worker is
+    left running."""
+    started: list[subprocess.Popen[bytes]] = []
+    step = AgentShards.step
+
+    def killing(self: AgentShards, k: int, *rest: Any) -> Any:
+        if k == 20:
+            started.extend(self._procs)
+            self._procs[0].kill()
+            self._procs[0].wait()
+        return step(self, k, *rest)
+
+    monkeypatch.setattr(AgentShards, "step", killing)
+    sc = load_shipped(ROOT / "scenarios" / "cube8.toml")
+    with pytest.raises(ShardError, match=r"agent worker agents \d+-\d+ died") as err:
+        run_inproc(sc, "dcbf", duration=2.0, workers=3)
+    assert "\n" not in str(err.value)
+    assert len(started) == 2 and all(p.poll() is not None for p in started)
+
+
+def test_a_worker_reports_its_error_and_stops() -> None:
+    """A worker whose set-up fails answers with the error's line and its traceback."""
+    mine, theirs = socket.socketpair()
+    with Connection(mine.detach()) as run, Connection(theirs.detach()) as worker:
+        run.send(("not", "a", "set-up"))
+        serve_shard(worker)  # returns after its answer
+        kind, line, trace = run.recv()
+    assert kind == "error" and line.startswith("ValueError: ") and "Traceback" in trace
+
+
+def test_the_shards_cover_the_swarm_in_order() -> None:
+    sc = load_shipped(ROOT / "scenarios" / "grid27_knn.toml")
+    leaders = {i for i, a in enumerate(sc.agents) if a.role == "leader"}
+    for workers in (1, 2, 3, 5, 27, 40):
+        bounds = shard_bounds(sc, workers)
+        assert bounds[0][0] == 0 and bounds[-1][1] == sc.n
+        assert all(hi > lo for lo, hi in bounds)
+        assert all(a[1] == b[0] for a, b in zip(bounds, bounds[1:], strict=False))
+        assert len(bounds) <= min(workers, sc.n)
+        followers = [sum(1 for i in range(lo, hi) if i not in leaders) for lo, hi in bounds]
+        if workers <= 3:  # as many as asked, as even as whole agents allow
+            assert len(bounds) == workers
+            assert max(followers) - min(followers) <= 2, (workers, followers)
+
+
+def test_workers_outside_the_range_are_refused() -> None:
+    sc = load_shipped(ROOT / "scenarios" / "cube8.toml")
+    for bad in (0, 65):
+        with pytest.raises(ValueError, match="workers"):
+            run_inproc(sc, "dcbf", duration=0.1, workers=bad)
+    assert shards.MAX_WORKERS == 64
+
+
+@pytest.mark.parametrize(("flags", "says"), [
+    (["--workers", "2"], "--workers is for --inproc"),
+    (["--inproc", "--workers", "0"], "--workers"),
+    (["--inproc", "--workers", "65"], "--workers"),
+])
+def test_the_cli_refuses_workers_in_one_line(flags: list[str], says: str,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    try:
+        rc = gcs_main(["mission", "run", str(ROOT / "scenarios" / "cube8.toml"), *flags])
+    except SystemExit as exc:
+        rc = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and says in err[0], err
