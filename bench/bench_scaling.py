@@ -3,6 +3,7 @@
     python bench/bench_scaling.py [--sizes 8,27,64,125] [--duration 4] [--repeats 2]
                                   [--leaders 4|auto] [--scramble 1] [--mix 0] [--method dcbf]
                                   [--noise-draws in_range|every_agent] [--window T0,T1]
+                                  [--workers 1]
 
 Each run is a fresh child process (so its peak RSS is its own): the scenario comes from
 ``gcs scenario grid --agents N --leaders L --scramble SEED --mix F`` (sparse ``knn`` graph,
@@ -12,7 +13,8 @@ seconds, its metrics included.
 Prints, with no assertions (figures for docs/performance.md, "Scaling in process"):
 
 * setup: wall seconds to build the agents (run wall − stepping wall; loading excluded);
-* stepping wall (s), whole-process CPU (s, user + system), peak RSS (MiB);
+* stepping wall (s), whole-process CPU (s, user + system; with ``--workers`` above 1 the
+  workers' too), peak RSS (MiB; with workers, the run's own plus the largest worker's);
 * × real time of the stepping (simulated s / stepping wall s);
 * µs per agent-step: stepping wall / (control steps × N), and the agents in range: the
   mean number of other agents within the sensing range of a follower at its vertex, the
@@ -66,14 +68,16 @@ def child(opts: argparse.Namespace) -> dict[str, Any]:
     sc = parse_scenario(doc, f"grid{opts.child}")
     stamps = _stamp_steps() if opts.window else []
     t0 = time.perf_counter()
-    res = run_inproc(sc, opts.method, duration=opts.duration)
+    res = run_inproc(sc, opts.method, duration=opts.duration, workers=opts.workers)
     total = time.perf_counter() - t0
     m = res.metrics
     ru = resource.getrusage(resource.RUSAGE_SELF)
+    rc = resource.getrusage(resource.RUSAGE_CHILDREN)  # the workers, ended with the run
     steps = int(round(opts.duration / sc.control_dt))
     return {
         "n": sc.n, "knn_k": k, "setup_s": total - m["wall_s"], "wall_s": m["wall_s"],
-        "cpu_s": ru.ru_utime + ru.ru_stime, "rss_mib": ru.ru_maxrss / 1024.0,
+        "cpu_s": ru.ru_utime + ru.ru_stime + rc.ru_utime + rc.ru_stime,
+        "rss_mib": (ru.ru_maxrss + rc.ru_maxrss) / 1024.0,
         "xrt": opts.duration / m["wall_s"],
         "us_agent_step": m["wall_s"] / (steps * sc.n) * 1e6,
         "fallbacks": m["qp_fallbacks"], "min_dist_m": m["min_distance_m"],
@@ -192,6 +196,9 @@ def main() -> None:
                     "[T0, T1) s of mission time, with the share of follower-steps whose QP ran "
                     "there (a window fixed in advance: after the formation has formed, the "
                     "per-agent cost without the transient)")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="processes stepping the agents, the run's own included "
+                    "(run_inproc's workers, gcs.mission.shards; default 1)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     opts = ap.parse_args()
     if opts.window:
@@ -211,7 +218,8 @@ def main() -> None:
             cmd = [sys.executable, __file__, "--child", str(n), "--duration", str(opts.duration),
                    "--leaders", str(leaders_for(opts.leaders, n)), "--scramble", str(opts.scramble),
                    "--mix", str(opts.mix), "--method", opts.method,
-                   "--noise-draws", opts.noise_draws, "--window", opts.window]
+                   "--noise-draws", opts.noise_draws, "--window", opts.window,
+                   "--workers", str(opts.workers)]
             out = subprocess.run(cmd, capture_output=True, text=True, check=True, cwd=ROOT)
             runs[n].append(json.loads(out.stdout.strip().splitlines()[-1]))
             r = runs[n][-1]
@@ -221,6 +229,7 @@ def main() -> None:
             else str(leaders_for(opts.leaders, sizes[0])))
     print(f"grid, {told} leaders, knn graph, --scramble {opts.scramble} --mix "
           f"{opts.mix:g}, {opts.method}, noise_draws {opts.noise_draws}, "
+          f"{opts.workers} process(es) stepping the agents, "
           f"{opts.duration:g} s simulated, {opts.repeats} run(s)")
     print("| N | knn_k | setup s | stepping wall s | CPU s | peak RSS MiB | × real time "
           "| µs / agent-step | in range | QP relaxed | min dist m | collisions | formed s "
