@@ -84,7 +84,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     if faulted is not None:
         sc = _load(str(faulted), sc.allow_infeasible, sc.allow_unsafe)
     if not args.inproc:
-        if args.workers != 1:
+        if args.workers != AUTO:
             print("gcs mission run: --workers is for --inproc (a distributed run packs "
                   "its daemons with --processes)", file=sys.stderr)
             return EXIT_USAGE
@@ -95,6 +95,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     from gcs.mission.launch_spec import LaunchError
     from gcs.mission.preflight import check_physics
     from gcs.mission.run_output import print_result, write_run
+    from gcs.mission.shards import auto_workers
     from gcs.records.live import start_live
     from gcs.report.verdict import safety_exit_status
 
@@ -106,7 +107,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     try:
         res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration,
-                         progress=True, land_at=args.land_at, live=live, workers=args.workers)
+                         progress=True, land_at=args.land_at, live=live,
+                         workers=auto_workers(sc.n) if args.workers == AUTO else args.workers)
         if live is not None:
             live.finish(res.document())
     finally:
@@ -192,6 +194,12 @@ _duration = float_in(0.0, MAX_DURATION_S, lo_open=True, unit="s")
 _non_negative_seconds = float_in(0.0, MAX_MISSION_TIME_S, unit="s")
 # the shared flag types (swarm_common.inputs): the same bounds as vehicle-sim and offboard
 _int_in = int_in
+AUTO = "auto"  # --workers
+
+
+def _workers(text: str) -> int | str:
+    """``--workers``: ``auto`` or a count of processes, 1..MAX_WORKERS."""
+    return AUTO if text == AUTO else _int_in(1, MAX_WORKERS, "a count of processes (or auto)")(text)
 _port_offset = port_offset
 _seed = seed
 
@@ -234,9 +242,10 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
     r.add_argument("--land-at", type=_non_negative_seconds, default=None, metavar="T",
                    help="coordinated land-all at mission time T s (docs/lifecycle.md)")
-    r.add_argument("--workers", type=_int_in(1, MAX_WORKERS), default=1, metavar="N",
+    r.add_argument("--workers", type=_workers, default=AUTO, metavar="N|auto",
                    help="with --inproc: step the agents in N processes, this one included "
-                   "(the same run bit for bit; for large swarms: docs/performance.md)")
+                   "(the same run bit for bit); auto (default): 1 below 64 agents, else "
+                   "one per CPU (docs/performance.md)")
     d = r.add_argument_group("distributed runs (without --inproc)")
     d.add_argument("--realtime", action="store_true", help="wall-clock ticks, not lockstep")
     d.add_argument("--port-offset", type=_port_offset, default=None,

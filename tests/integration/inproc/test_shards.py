@@ -4,6 +4,8 @@ shards cover the swarm."""
 
 from __future__ import annotations
 
+import json
+import os
 import socket
 import subprocess
 from multiprocessing.connection import Connection
@@ -102,6 +104,7 @@ def test_workers_outside_the_range_are_refused() -> None:
     (["--workers", "2"], "--workers is for --inproc"),
     (["--inproc", "--workers", "0"], "--workers"),
     (["--inproc", "--workers", "65"], "--workers"),
+    (["--inproc", "--workers", "two"], "--workers"),
 ])
 def test_the_cli_refuses_workers_in_one_line(flags: list[str], says: str,
                                              capsys: pytest.CaptureFixture[str]) -> None:
@@ -111,3 +114,26 @@ def test_the_cli_refuses_workers_in_one_line(flags: list[str], says: str,
         rc = exc.code
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and says in err[0], err
+
+
+def test_auto_shares_only_a_large_swarm() -> None:
+    assert shards.auto_workers(shards.AUTO_MIN_AGENTS - 1) == 1
+    many = shards.auto_workers(1024)
+    assert 1 <= many <= shards.MAX_WORKERS and many == min(len(os.sched_getaffinity(0)), 64)
+    assert shards.auto_workers(shards.AUTO_MIN_AGENTS) == min(many, shards.AUTO_MIN_AGENTS)
+
+
+def test_the_cli_flies_the_same_run_with_workers(capsys: pytest.CaptureFixture[str]) -> None:
+    """gcs mission run --inproc --json on grid64 (auto's size) with 1 and 2 processes:
+    the same metrics but the wall time."""
+    docs = []
+    for workers in ("1", "2"):
+        rc = gcs_main(["mission", "run", str(ROOT / "scenarios" / "grid64.toml"), "--inproc",
+                       "--duration", "0.4", "--json", "--workers", workers])
+        out = capsys.readouterr().out
+        assert rc == 0, out
+        doc = json.loads(out.strip().splitlines()[-1])
+        for key in ("wall_s", "realtime_factor"):
+            doc["metrics"].pop(key)
+        docs.append(doc)
+    assert docs[0] == docs[1] and docs[0]["metrics"]["collisions"] == 0
