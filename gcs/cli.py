@@ -31,7 +31,7 @@ from gcs.exit_codes import (
     EXIT_TERMINATED,
     EXIT_USAGE,
 )
-from gcs.mission import MAX_WORKERS
+from gcs.mission import AUTO_WORKERS, MAX_WORKERS
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.records.cli import add_log_parser
@@ -84,7 +84,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     if faulted is not None:
         sc = _load(str(faulted), sc.allow_infeasible, sc.allow_unsafe)
     if not args.inproc:
-        if args.workers != AUTO:
+        if args.workers != AUTO_WORKERS:
             print("gcs mission run: --workers is for --inproc (a distributed run packs "
                   "its daemons with --processes)", file=sys.stderr)
             return EXIT_USAGE
@@ -95,7 +95,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     from gcs.mission.launch_spec import LaunchError
     from gcs.mission.preflight import check_physics
     from gcs.mission.run_output import print_result, write_run
-    from gcs.mission.shards import auto_workers
+    from gcs.mission.shards import workers_for
     from gcs.records.live import start_live
     from gcs.report.verdict import safety_exit_status
 
@@ -108,7 +108,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     try:
         res = run_inproc(sc, args.method, seed=args.seed, duration=args.duration,
                          progress=True, land_at=args.land_at, live=live,
-                         workers=auto_workers(sc.n) if args.workers == AUTO else args.workers)
+                         workers=workers_for(args.workers, sc.n))
         if live is not None:
             live.finish(res.document())
     finally:
@@ -194,12 +194,15 @@ _duration = float_in(0.0, MAX_DURATION_S, lo_open=True, unit="s")
 _non_negative_seconds = float_in(0.0, MAX_MISSION_TIME_S, unit="s")
 # the shared flag types (swarm_common.inputs): the same bounds as vehicle-sim and offboard
 _int_in = int_in
-AUTO = "auto"  # --workers
 
 
 def _workers(text: str) -> int | str:
     """``--workers``: ``auto`` or a count of processes, 1..MAX_WORKERS."""
-    return AUTO if text == AUTO else _int_in(1, MAX_WORKERS, "a count of processes (or auto)")(text)
+    if text == AUTO_WORKERS:
+        return AUTO_WORKERS
+    return _int_in(1, MAX_WORKERS, "a count of processes (or auto)")(text)
+
+
 _port_offset = port_offset
 _seed = seed
 
@@ -242,7 +245,7 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", default=None, help="directory for metrics.json + series.npz")
     r.add_argument("--land-at", type=_non_negative_seconds, default=None, metavar="T",
                    help="coordinated land-all at mission time T s (docs/lifecycle.md)")
-    r.add_argument("--workers", type=_workers, default=AUTO, metavar="N|auto",
+    r.add_argument("--workers", type=_workers, default=AUTO_WORKERS, metavar="N|auto",
                    help="with --inproc: step the agents in N processes, this one included "
                    "(the same run bit for bit); auto (default): 1 below 64 agents, else "
                    "one per CPU (docs/performance.md)")
@@ -281,6 +284,9 @@ def add_mission_parser(sub: argparse._SubParsersAction) -> None:
                    help="also sweep N seeds per method")
     c.add_argument("--jobs", type=_int_in(1, 256), default=2,
                    help="parallel processes for the sweep")
+    c.add_argument("--workers", type=_workers, default=AUTO_WORKERS, metavar="N|auto",
+                   help="with --inproc: each run's agents in N processes, as for "
+                   "'mission run' (default auto)")
     c.add_argument("--out", default=None, help="report directory (default runs/compare)")
     c.add_argument("--port-offset", type=_port_offset, default=None,
                    help="distributed: shift every port by N (default: the first of 0, 1000, "

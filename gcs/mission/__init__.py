@@ -25,3 +25,4 @@ processes, ``--workers``); :mod:`.wire_form` (what crosses a wire, rounded as it
 """
 
 MAX_WORKERS = 64  # processes one in-process run may step its agents in (gcs.mission.shards)
+AUTO_WORKERS = "auto"  # --workers: as many as pay (gcs.mission.shards.workers_for)

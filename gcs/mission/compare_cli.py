@@ -37,14 +37,18 @@ def _gain_lines(sc: Scenario) -> list[str]:
 
 
 def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome:
+    from gcs.mission import AUTO_WORKERS
     from gcs.mission.inproc import run_inproc
+    from gcs.mission.shards import workers_for
 
     metrics: dict[str, Any] = {}
     series: dict[str, Any] = {}
     gains: list[str] = []
+    workers = workers_for(getattr(args, "workers", AUTO_WORKERS), sc.n)
     for m in METHODS:
         log.info("running %s in process ...", m)
-        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False)
+        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False,
+                         workers=workers)
         res.save(out / m, sc)
         metrics[m], series[m], gains = res.metrics, res.series.as_dict(), res.gains
     return metrics, series, gains

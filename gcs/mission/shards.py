@@ -23,8 +23,8 @@ traceback and stops; one that dies closes its socket. Either way the run raises
 worker dies with the process that started it (Linux ``PR_SET_PDEATHSIG``), so none
 outlives a killed run.
 
-Entry points: :func:`agent_steppers` (either kind for ``workers``), :func:`auto_workers`
-(``--workers auto``), :class:`LocalAgents`,
+Entry points: :func:`agent_steppers` (either kind for ``workers``), :func:`workers_for`
+(``--workers``), :class:`LocalAgents`,
 :class:`AgentShards`, :class:`StepResult`.
 """
 
@@ -43,7 +43,7 @@ from typing import Any, NamedTuple, Protocol, cast
 
 import numpy as np
 
-from gcs.mission import MAX_WORKERS
+from gcs.mission import AUTO_WORKERS, MAX_WORKERS
 from gcs.mission.procs import child_pythonpath
 from gcs.mission.run_output import FlatRows, flat_rows, join_flat_rows
 from gcs.mission.wire_form import published_batch
@@ -320,6 +320,12 @@ def auto_workers(n: int) -> int:
     except AttributeError:  # pragma: no cover - not Linux
         cpus = os.cpu_count() or 1
     return max(1, min(cpus, MAX_WORKERS, n))
+
+
+def workers_for(spec: int | str, n: int) -> int:
+    """The processes ``--workers spec`` gives a run of ``n`` agents: ``auto``
+    (:func:`auto_workers`) or the count itself."""
+    return auto_workers(n) if spec == AUTO_WORKERS else int(spec)
 
 
 def agent_steppers(sc: Scenario, method: str, seed: int, form: Formation,
