@@ -53,6 +53,7 @@ from offboard.estimation.bearing import Formation
 from offboard.estimation.peer_table import EstimateBatch
 from offboard.records import AgentOutput
 from swarm_common.blas import single_thread_blas
+from swarm_common.enums import Role
 from swarm_common.logsetup import configure_logging
 from swarm_common.process_life import die_with_parent, frozen_while
 from swarm_common.scenario.model import Scenario
@@ -157,7 +158,7 @@ def shard_bounds(sc: Scenario, workers: int) -> list[tuple[int, int]]:
     weigh too little to fill one."""
     n = sc.n
     w = max(1, min(int(workers), n))
-    weight = np.array([1.0 if a.role != "leader" else 0.1 for a in sc.agents])
+    weight = np.array([0.1 if a.role is Role.LEADER else 1.0 for a in sc.agents])
     edges = np.searchsorted(np.cumsum(weight), weight.sum() * np.arange(1, w) / w) + 1
     cuts = [0, *sorted({int(e) for e in edges if 0 < e < n}), n]
     return list(zip(cuts[:-1], cuts[1:], strict=True))
