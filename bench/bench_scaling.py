@@ -198,7 +198,7 @@ def main() -> None:
                     "per-agent cost without the transient)")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes stepping the agents, the run's own included "
-                    "(run_inproc's workers, gcs.mission.shards; default 1)")
+                    "(run_inproc's workers, gcs.mission.agents.shards; default 1)")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     opts = ap.parse_args()
     if opts.window:

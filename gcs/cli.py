@@ -31,7 +31,7 @@ from gcs.exit_codes import (
     EXIT_TERMINATED,
     EXIT_USAGE,
 )
-from gcs.mission import AUTO_WORKERS, MAX_WORKERS
+from gcs.mission.agents import AUTO_WORKERS, MAX_WORKERS
 from gcs.mission.fault_flags import add_fault_flags, write_fault_scenario
 from gcs.mission.launch_spec import add_signing_flags
 from gcs.records.cli import add_log_parser
@@ -91,11 +91,11 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         from gcs.mission.run_cli import cli_run
 
         return cli_run(args, sc)
+    from gcs.mission.agents.shards import workers_for
     from gcs.mission.inproc import run_inproc
     from gcs.mission.launch_spec import LaunchError
     from gcs.mission.preflight import check_physics
     from gcs.mission.run_output import print_result, write_run
-    from gcs.mission.shards import workers_for
     from gcs.records.live import start_live
     from gcs.report.verdict import safety_exit_status
 

@@ -24,5 +24,5 @@ distributed run: a child's death, a stall, checkpoints), :mod:`.router`,
 processes, ``--workers``); :mod:`.wire_form` (what crosses a wire, rounded as it does).
 """
 
-MAX_WORKERS = 64  # processes one in-process run may step its agents in (gcs.mission.shards)
-AUTO_WORKERS = "auto"  # --workers: as many as pay (gcs.mission.shards.workers_for)
+MAX_WORKERS = 64  # processes one in-process run may step its agents in (gcs.mission.agents.shards)
+AUTO_WORKERS = "auto"  # --workers: as many as pay (gcs.mission.agents.shards.workers_for)

@@ -37,9 +37,9 @@ def _gain_lines(sc: Scenario) -> list[str]:
 
 
 def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome:
-    from gcs.mission import AUTO_WORKERS
+    from gcs.mission.agents import AUTO_WORKERS
+    from gcs.mission.agents.shards import workers_for
     from gcs.mission.inproc import run_inproc
-    from gcs.mission.shards import workers_for
 
     metrics: dict[str, Any] = {}
     series: dict[str, Any] = {}

@@ -4,18 +4,18 @@ Same order as the distributed run (docs/architecture.md, lockstep), step k:
 
 1. truth(k) = float32(p, v) of the simulator (what the truth message carries);
 2. every agent: ``agent.step(k, t_k, truth, neighbours(k−1), comm_ok)`` (in scenario
-   order, or in several processes at once: ``workers``, :mod:`gcs.mission.shards`), where
+   order, or in several processes at once: ``workers``, :mod:`gcs.mission.agents.shards`), where
    neighbours are the float32-rounded estimates published at step k−1 (valid for
    t_k), or at step k−1−d with a latency (``communication.delay_s``, d =
    :attr:`Scenario.delay_periods`, in process only); during an outage window
    (``communication.outages_s``) comm_ok is False;
 3. each setpoint goes through the wire form (float32 quaternion + thrust_norm) and is
-   decoded exactly as the simulator does (:func:`~gcs.mission.wire_form.wire_to_command`,
-   for all agents at once :func:`~gcs.mission.wire_form.wire_to_commands`) →
+   decoded exactly as the simulator does (:func:`~gcs.mission.agents.wire_form.wire_to_command`,
+   for all agents at once :func:`~gcs.mission.agents.wire_form.wire_to_commands`) →
    ``set_command`` (``set_commands``);
 4. the dynamics advance one control period (physics_hz/control_hz physics steps).
 
-Everything that would cross a wire is rounded to float32 (:mod:`gcs.mission.wire_form`),
+Everything that would cross a wire is rounded to float32 (:mod:`gcs.mission.agents.wire_form`),
 so a distributed run can reproduce this one bit for bit.
 """
 
@@ -31,6 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gcs.mission.agents.shards import AgentSteps, agent_steppers
+from gcs.mission.agents.wire_form import f32, wire_to_commands
 from gcs.mission.audit import audit_document, zenoh_record
 from gcs.mission.preflight import warn_liveness
 from gcs.mission.progress import Progress
@@ -45,8 +47,6 @@ from gcs.mission.run_output import (
     warn_verdict,
     write_run,
 )
-from gcs.mission.shards import AgentSteps, agent_steppers
-from gcs.mission.wire_form import f32, wire_to_commands
 from gcs.records.series import RunSeries
 from gcs.report.metrics import Series, compute_metrics
 from offboard.agent.landing import landing_plan
@@ -115,7 +115,7 @@ def run_inproc(
     docs/lifecycle.md): from the first step at or after it every agent tracks its landing
     reference, the safety filter still active. ``live``: a live view fed the rows while a
     client watches it (:class:`gcs.mission.live_feed.InprocFeed`). ``workers``: processes
-    that step the agents, this one included (:mod:`gcs.mission.shards`; the same bits for
+    that step the agents, this one included (:mod:`gcs.mission.agents.shards`; the same bits for
     any count).
     """
     seed = sc.seed if seed is None else int(seed)

@@ -142,7 +142,7 @@ class FlatRows(NamedTuple):
     solve_us, slack, violation, correction: (b, n, 5)), the integer ones (input_clipped,
     alarms, active count, active kinds: (b, n, 4)) and the QP's status code (b, n). What
     :func:`flat_rows` reads from the outputs and :func:`write_flat_rows` writes; a shard
-    of the agents sends it from its process (gcs.mission.shards)."""
+    of the agents sends it from its process (gcs.mission.agents.shards)."""
 
     vec: np.ndarray
     real: np.ndarray

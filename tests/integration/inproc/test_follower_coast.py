@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from conftest import CUBE8
 
-from gcs.mission.wire_form import f32, round_estimate, wire_to_command
+from gcs.mission.agents.wire_form import f32, round_estimate, wire_to_command
 from offboard.agent.factory import FollowerAgent, make_agent
 from offboard.estimation.bearing import formation_from_scenario
 from swarm_common.scenario.model import load_scenario

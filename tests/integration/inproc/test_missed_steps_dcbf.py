@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import CUBE8, ROOT
 
-from gcs.mission.wire_form import f32, round_estimate, wire_to_command
+from gcs.mission.agents.wire_form import f32, round_estimate, wire_to_command
 from offboard.agent.factory import FollowerAgent, make_agent
 from offboard.estimation.bearing import formation_from_scenario
 from swarm_common.scenario.model import load_scenario

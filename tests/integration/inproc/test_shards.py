@@ -1,6 +1,6 @@
-"""The agents of an in-process run stepped in worker processes (gcs.mission.shards): the
-same run bit for bit as one process, a dead worker fails the run in one line, and the
-shards cover the swarm."""
+"""The agents of an in-process run stepped in worker processes
+(gcs.mission.agents.shards): the same run bit for bit as one process, a dead worker fails
+the run in one line, and the shards cover the swarm."""
 
 from __future__ import annotations
 
@@ -16,9 +16,9 @@ import pytest
 from conftest import ROOT, load_shipped
 
 from gcs.cli import main as gcs_main
-from gcs.mission import shards
+from gcs.mission.agents import MAX_WORKERS, shards
+from gcs.mission.agents.shards import AgentShards, ShardError, serve_shard, shard_bounds
 from gcs.mission.inproc import MissionResult, run_inproc
-from gcs.mission.shards import AgentShards, ShardError, serve_shard, shard_bounds
 
 
 def _same_run(a: MissionResult, b: MissionResult) -> None:
@@ -97,7 +97,7 @@ def test_workers_outside_the_range_are_refused() -> None:
     for bad in (0, 65):
         with pytest.raises(ValueError, match="workers"):
             run_inproc(sc, "dcbf", duration=0.1, workers=bad)
-    assert shards.MAX_WORKERS == 64
+    assert MAX_WORKERS == 64
 
 
 @pytest.mark.parametrize(("flags", "says"), [
@@ -119,7 +119,7 @@ def test_the_cli_refuses_workers_in_one_line(flags: list[str], says: str,
 def test_auto_shares_only_a_large_swarm() -> None:
     assert shards.auto_workers(shards.AUTO_MIN_AGENTS - 1) == 1
     many = shards.auto_workers(1024)
-    assert 1 <= many <= shards.MAX_WORKERS and many == min(len(os.sched_getaffinity(0)), 64)
+    assert 1 <= many <= MAX_WORKERS and many == min(len(os.sched_getaffinity(0)), 64)
     assert shards.auto_workers(shards.AUTO_MIN_AGENTS) == min(many, shards.AUTO_MIN_AGENTS)
 
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: E402
 
+from gcs.mission.agents.wire_form import f32, wire_to_command
 from gcs.mission.inproc import run_inproc
-from gcs.mission.wire_form import f32, wire_to_command
 from gcs.report.metrics import METRIC_KEYS
 from offboard.agent.factory import FollowerAgent, make_agent
 from offboard.inner_loop.attitude import setpoint_from_accel

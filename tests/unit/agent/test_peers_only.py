@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gcs.mission.wire_form import published_batch
+from gcs.mission.agents.wire_form import published_batch
 from offboard.agent.factory import FollowerAgent, make_agent
 from offboard.agent.peers import peer_ids
 from offboard.estimation.bearing import formation_from_scenario

@@ -11,15 +11,16 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.mission import run_output, shards
-from gcs.mission.inproc import run_inproc
-from gcs.mission.run_output import AgentRows, empty_series, set_agent_rows
-from gcs.mission.wire_form import (
+from gcs.mission import run_output
+from gcs.mission.agents import shards
+from gcs.mission.agents.wire_form import (
     round_estimate,
     round_estimates,
     wire_to_command,
     wire_to_commands,
 )
+from gcs.mission.inproc import run_inproc
+from gcs.mission.run_output import AgentRows, empty_series, set_agent_rows
 from offboard.estimation.peer_table import EstimateBatch
 from offboard.records import ActiveRows, AgentOutput, AgentStatus, NeighbourEstimate
 from swarm_common.enums import Method, QPRow, QPStatus
@@ -228,7 +229,7 @@ def test_followers_given_the_batch_equal_followers_given_dicts() -> None:
     what a daemon receives), through an outage where the batch gives nothing and the dict
     is empty. Truth moves on a fixed path (the agents' commands do not act on it), so
     every step is compared on the same inputs."""
-    from gcs.mission.wire_form import published_batch
+    from gcs.mission.agents.wire_form import published_batch
     from offboard.agent.factory import make_agent
     from offboard.agent.peers import peer_ids
     from offboard.estimation.bearing import formation_from_scenario
@@ -263,7 +264,7 @@ def test_published_batch_keeps_each_cooperative_flag() -> None:
     """The in-process batch carries each estimate's ``cooperative`` flag as the wire does
     (offboard.daemon.wire_convert.put_row): a non-cooperative follower's initial estimate
     already gets the others' full share against it, in process as in a distributed run."""
-    from gcs.mission.wire_form import published_batch
+    from gcs.mission.agents.wire_form import published_batch
 
     rng = np.random.default_rng(5)
     ests = [_estimate(rng, aid) for aid in range(1, 10)]

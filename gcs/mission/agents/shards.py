@@ -43,10 +43,10 @@ from typing import Any, NamedTuple, Protocol, cast
 
 import numpy as np
 
-from gcs.mission import AUTO_WORKERS, MAX_WORKERS
+from gcs.mission.agents import AUTO_WORKERS, MAX_WORKERS
+from gcs.mission.agents.wire_form import published_batch
 from gcs.mission.procs import child_pythonpath
 from gcs.mission.run_output import FlatRows, flat_rows, join_flat_rows
-from gcs.mission.wire_form import published_batch
 from offboard.agent.factory import FollowerAgent, LeaderAgent, make_agent
 from offboard.agent.landing import LandingPlan
 from offboard.estimation.bearing import Formation
@@ -64,7 +64,7 @@ Agent = FollowerAgent | LeaderAgent
 # --workers auto shares the agents from this many on (docs/performance.md: 64 agents ran
 # 3.15x in one process and 4.64x in two, 27 agents 7.75x and 8.15x)
 AUTO_MIN_AGENTS = 64
-WORKER_CODE = "from gcs.mission.shards import worker_main; worker_main()"
+WORKER_CODE = "from gcs.mission.agents.shards import worker_main; worker_main()"
 
 
 class ShardError(RuntimeError):
