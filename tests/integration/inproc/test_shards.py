@@ -19,6 +19,7 @@ from gcs.cli import main as gcs_main
 from gcs.mission.agents import MAX_WORKERS, shards
 from gcs.mission.agents.shards import AgentShards, ShardError, serve_shard, shard_bounds
 from gcs.mission.inproc import MissionResult, run_inproc
+from swarm_common.enums import Role
 
 
 def _same_run(a: MissionResult, b: MissionResult) -> None:
@@ -65,6 +66,24 @@ def test_a_dead_worker_fails_the_run_in_one_line(monkeypatch: pytest.MonkeyPatch
         run_inproc(sc, "dcbf", duration=2.0, workers=3)
     assert "\n" not in str(err.value)
     assert len(started) == 2 and all(p.poll() is not None for p in started)
+
+
+def test_the_gain_report_comes_from_a_worker_when_the_run_holds_no_follower() -> None:
+    """The run's own shard is one leader: the first follower's gain report is asked of a
+    worker, and it is the report a run in one process gives."""
+    from offboard.estimation.bearing import formation_from_scenario
+
+    sc = load_shipped(ROOT / "scenarios" / "cube8.toml")
+    form = formation_from_scenario(sc)
+    assert sc.agents[0].role is Role.LEADER
+    shards_ = AgentShards(sc, "dcbf", 1, form, [(0, 1), (1, sc.n)])
+    try:
+        assert shards_.local.gains() == []
+        got = shards_.gains()
+    finally:
+        shards_.close()
+    local = shards.agent_steppers(sc, "dcbf", 1, form, 1)
+    assert got == local.gains() and len(got) > 0
 
 
 def test_a_worker_reports_its_error_and_stops() -> None:
