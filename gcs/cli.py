@@ -84,10 +84,6 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
     if faulted is not None:
         sc = _load(str(faulted), sc.allow_infeasible, sc.allow_unsafe)
     if not args.inproc:
-        if args.workers != AUTO_WORKERS:
-            print("gcs mission run: --workers is for --inproc (a distributed run packs "
-                  "its daemons with --processes)", file=sys.stderr)
-            return EXIT_USAGE
         from gcs.mission.run_cli import cli_run
 
         return cli_run(args, sc)
@@ -217,6 +213,9 @@ def _check_run_args(args: argparse.Namespace, sc: Scenario, cmd: str) -> None:
                    f"({sc.control_dt:g} s)")
     elif args.out and out_dir_problem(Path(args.out)):
         problem = out_dir_problem(Path(args.out))
+    elif not args.inproc and args.workers != AUTO_WORKERS:
+        problem = ("--workers is for --inproc (a distributed run packs its daemons with "
+                   "--processes)")
     if problem:
         print(f"gcs {cmd}: {problem}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE)

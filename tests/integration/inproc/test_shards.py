@@ -9,6 +9,7 @@ import os
 import socket
 import subprocess
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -121,6 +122,7 @@ def test_workers_outside_the_range_are_refused() -> None:
 
 @pytest.mark.parametrize(("flags", "says"), [
     (["--workers", "2"], "--workers is for --inproc"),
+    (["--workers", "1"], "--workers is for --inproc"),
     (["--inproc", "--workers", "0"], "--workers"),
     (["--inproc", "--workers", "65"], "--workers"),
     (["--inproc", "--workers", "two"], "--workers"),
@@ -133,6 +135,19 @@ def test_the_cli_refuses_workers_in_one_line(flags: list[str], says: str,
         rc = exc.code
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and says in err[0], err
+
+
+def test_compare_refuses_workers_without_inproc(capsys: pytest.CaptureFixture[str],
+                                               tmp_path: Path) -> None:
+    """As `mission run`: a distributed comparison has no workers; refused before any run."""
+    try:
+        rc = gcs_main(["mission", "compare", str(ROOT / "scenarios" / "cube8.toml"),
+                       "--workers", "2", "--out", str(tmp_path / "cmp")])
+    except SystemExit as exc:
+        rc = exc.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--workers is for --inproc" in err[0], err
+    assert not (tmp_path / "cmp").exists()
 
 
 def test_auto_shares_only_a_large_swarm() -> None:
