@@ -330,13 +330,18 @@ def child_pythonpath(current: str | None) -> str:
     return os.pathsep.join([root, *rest])
 
 
+def child_log_level() -> str:
+    """This process's logging level as a child's ``configure_logging`` takes it (a level
+    it does not name: warning)."""
+    level = logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower()
+    return level if level in ("debug", "info", "warning", "error") else "warning"
+
+
 def worker_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of ``workers`` fresh interpreters (``spawn``), each logging as this process does.
 
     Never ``fork``: a caller with threads (a test runner's, a dashboard's, Zenoh's) may hold
     a lock at the moment of the fork, and the child then waits on it for ever."""
-    level = logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower()
-    if level not in ("debug", "info", "warning", "error"):
-        level = "warning"
+    level = child_log_level()
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=configure_logging, initargs=(level,))

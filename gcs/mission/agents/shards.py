@@ -45,7 +45,7 @@ import numpy as np
 
 from gcs.mission.agents import AUTO_WORKERS, MAX_WORKERS
 from gcs.mission.agents.wire_form import published_batch
-from gcs.mission.procs import child_pythonpath
+from gcs.mission.procs import child_log_level, child_pythonpath
 from gcs.mission.run_output import FlatRows, flat_rows, join_flat_rows
 from offboard.agent.factory import FollowerAgent, LeaderAgent, make_agent
 from offboard.agent.landing import LandingPlan
@@ -171,8 +171,7 @@ def serve_shard(conn: Connection) -> None:
     to finish (module docstring)."""
     try:
         sc, method, seed, form, lo, hi, level = conn.recv()
-        configure_logging(level if level in ("debug", "info", "warning", "error")
-                          else "warning")
+        configure_logging(level)
         with single_thread_blas():
             shard = LocalAgents([make_agent(sc, a.id, method=method, seed=seed, form=form)
                                  for a in sc.agents[lo:hi]], flat=True)
@@ -218,7 +217,7 @@ class AgentShards:
         self._conns: list[Connection] = []
         self._procs: list[subprocess.Popen[bytes]] = []
         self._names: list[str] = []
-        level = logging.getLevelName(logging.getLogger().getEffectiveLevel()).lower()
+        level = child_log_level()
         env = {**os.environ, "PYTHONPATH": child_pythonpath(os.environ.get("PYTHONPATH"))}
         try:
             for lo, hi in bounds[1:]:
