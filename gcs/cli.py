@@ -28,6 +28,7 @@ from types import FrameType
 
 from gcs.exit_codes import (
     EXIT_INTERRUPTED,
+    EXIT_RUN_FAILED,
     EXIT_TERMINATED,
     EXIT_USAGE,
 )
@@ -87,7 +88,7 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         from gcs.mission.run_cli import cli_run
 
         return cli_run(args, sc)
-    from gcs.mission.agents.shards import workers_for
+    from gcs.mission.agents.shards import ShardError, workers_for
     from gcs.mission.inproc import run_inproc
     from gcs.mission.launch_spec import LaunchError
     from gcs.mission.preflight import check_physics
@@ -107,6 +108,9 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
                          workers=workers_for(args.workers, sc.n))
         if live is not None:
             live.finish(res.document())
+    except ShardError as exc:  # a failed worker's traceback is in the log already
+        print(f"gcs mission run: {exc}", file=sys.stderr)
+        return EXIT_RUN_FAILED
     finally:
         if live is not None:
             live.close()

@@ -87,6 +87,24 @@ def test_the_gain_report_comes_from_a_worker_when_the_run_holds_no_follower() ->
     assert got == local.gains() and len(got) > 0
 
 
+def test_the_cli_says_a_dead_worker_in_one_line_and_exits_1(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    step = AgentShards.step
+
+    def killing(self: AgentShards, k: int, *rest: Any) -> Any:
+        if k == 5:
+            self._procs[0].kill()
+            self._procs[0].wait()
+        return step(self, k, *rest)
+
+    monkeypatch.setattr(AgentShards, "step", killing)
+    rc = gcs_main(["mission", "run", str(ROOT / "scenarios" / "cube8.toml"), "--inproc",
+                   "--duration", "1", "--workers", "2"])
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert rc == 1 and last.startswith("gcs mission run: agent worker agents ")
+    assert last.endswith("died (exit -9)"), last
+
+
 def test_a_worker_reports_its_error_and_stops() -> None:
     """A worker whose set-up fails answers with the error's line and its traceback."""
     mine, theirs = socket.socketpair()
