@@ -36,9 +36,15 @@ def _gain_lines(sc: Scenario) -> list[str]:
     return ag.gains.lines() if isinstance(ag, FollowerAgent) else []
 
 
-def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcome:
+def _compare_inproc(
+    sc: Scenario, args: argparse.Namespace, out: Path, failed: dict[str, tuple[str, int]],
+) -> Outcome | int:
+    """Every method's in-process run. A method whose run fails (a worker of ``--workers``
+    that died or raised: :class:`~gcs.mission.agents.shards.ShardError`) is left out of
+    the outcome and put in ``failed`` with its one-line reason and exit code 1, as a
+    distributed run's, and the others still run. Exit code 1 when no method finished."""
     from gcs.mission.agents import AUTO_WORKERS
-    from gcs.mission.agents.shards import workers_for
+    from gcs.mission.agents.shards import ShardError, workers_for
     from gcs.mission.inproc import run_inproc
 
     metrics: dict[str, Any] = {}
@@ -47,10 +53,18 @@ def _compare_inproc(sc: Scenario, args: argparse.Namespace, out: Path) -> Outcom
     workers = workers_for(getattr(args, "workers", AUTO_WORKERS), sc.n)
     for m in METHODS:
         log.info("running %s in process ...", m)
-        res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False,
-                         workers=workers)
+        try:
+            res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False,
+                             workers=workers)
+        except ShardError as exc:  # the worker's traceback is in the log already
+            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            print(f"gcs mission compare: {m}: {line}", file=sys.stderr)
+            failed[m] = (line, EXIT_RUN_FAILED)
+            continue
         res.save(out / m, sc)
         metrics[m], series[m], gains = res.metrics, res.series.as_dict(), res.gains
+    if not metrics:
+        return EXIT_RUN_FAILED
     return metrics, series, gains
 
 
@@ -133,7 +147,7 @@ def compare(sc: Scenario, args: argparse.Namespace) -> int:
 
     out = Path(args.out or "runs/compare")
     failed: dict[str, tuple[str, int]] = {}
-    outcome = (_compare_inproc(sc, args, out) if args.inproc
+    outcome = (_compare_inproc(sc, args, out, failed) if args.inproc
                else _compare_distributed(sc, args, out, failed))
     if isinstance(outcome, int):
         return outcome

@@ -19,6 +19,7 @@ from conftest import ROOT, load_shipped
 from gcs.cli import main as gcs_main
 from gcs.mission.agents import MAX_WORKERS, shards
 from gcs.mission.agents.shards import AgentShards, ShardError, serve_shard, shard_bounds
+from gcs.mission.compare_cli import METHODS
 from gcs.mission.inproc import MissionResult, run_inproc
 from swarm_common.enums import Role
 
@@ -103,6 +104,35 @@ def test_the_cli_says_a_dead_worker_in_one_line_and_exits_1(
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert rc == 1 and last.startswith("gcs mission run: agent worker agents ")
     assert last.endswith("died (exit -9)"), last
+
+
+def test_compare_reports_a_method_whose_worker_died(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        tmp_path: Path) -> None:
+    """`mission compare --inproc`: the first method's worker is killed; that method is
+    said in one line and marked in the report, the others run, and the exit is 1."""
+    step = AgentShards.step
+    killed: list[str] = []
+
+    def killing(self: AgentShards, k: int, *rest: Any) -> Any:
+        if k == 5 and not killed:
+            killed.append("once")
+            self._procs[0].kill()
+            self._procs[0].wait()
+        return step(self, k, *rest)
+
+    monkeypatch.setattr(AgentShards, "step", killing)
+    out = tmp_path / "cmp"
+    rc = gcs_main(["mission", "compare", str(ROOT / "scenarios" / "cube8.toml"), "--inproc",
+                   "--duration", "0.4", "--workers", "2", "--out", str(out)])
+    err = [ln for ln in capsys.readouterr().err.splitlines()
+           if ln.startswith("gcs mission compare:")]
+    assert rc == 1 and len(err) == 1, err
+    assert err[0].startswith(f"gcs mission compare: {METHODS[0]}: agent worker agents ")
+    assert err[0].endswith("died (exit -9)"), err[0]
+    assert not (out / METHODS[0]).exists()
+    assert all((out / m / "metrics.json").is_file() for m in METHODS[1:])
+    assert "did not finish" in (out / "report.md").read_text()
 
 
 def test_a_worker_reports_its_error_and_stops() -> None:
