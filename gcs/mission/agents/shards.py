@@ -234,7 +234,7 @@ class AgentShards:
                 self._conns.append(conn)
                 self._procs.append(p)
                 self._names.append(f"agents {lo}-{hi - 1}")
-                conn.send((sc, method, seed, form, lo, hi, level))
+                self._send((sc, method, seed, form, lo, hi, level), only=len(self._conns) - 1)
             # this process builds its own shard while the workers build theirs
             self.local = LocalAgents([make_agent(sc, a.id, method=method, seed=seed,
                                                  form=form) for a in sc.agents[lo0:hi0]],
@@ -256,7 +256,10 @@ class AgentShards:
                 raise self._died(i) from None
 
     def _died(self, i: int) -> ShardError:
-        self._procs[i].poll()
+        try:  # its socket closed as it exited: its exit status comes at once
+            self._procs[i].wait(timeout=2.0)
+        except subprocess.TimeoutExpired:
+            pass
         return ShardError(f"agent worker {self._names[i]} died (exit "
                           f"{self._procs[i].returncode})")
 

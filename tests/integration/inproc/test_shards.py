@@ -70,6 +70,14 @@ def test_a_dead_worker_fails_the_run_in_one_line(monkeypatch: pytest.MonkeyPatch
     assert len(started) == 2 and all(p.poll() is not None for p in started)
 
 
+def test_a_worker_that_dies_at_its_start_fails_the_run_in_one_line(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(shards, "WORKER_CODE", "import os; os._exit(3)")
+    sc = load_shipped(ROOT / "scenarios" / "cube8.toml")
+    with pytest.raises(ShardError, match=r"^agent worker agents \d+-7 died \(exit 3\)$"):
+        run_inproc(sc, "dcbf", duration=0.2, workers=2)
+
+
 def test_the_gain_report_comes_from_a_worker_when_the_run_holds_no_follower() -> None:
     """The run's own shard is one leader: the first follower's gain report is asked of a
     worker, and it is the report a run in one process gives."""
