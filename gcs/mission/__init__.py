@@ -20,9 +20,6 @@ distributed run: a child's death, a stall, checkpoints), :mod:`.router`,
 :mod:`.step_hooks` (the land-all sender and the formation vehicle, :mod:`gcs.formation`);
 :mod:`.audit` (the commands a run received, for ``metrics.json``);
 :mod:`.live_feed` (each runner's and the dashboard's rows for the live view,
-:mod:`gcs.records.live`); :mod:`.shards` (the agents of an in-process run in several
-processes, ``--workers``); :mod:`.wire_form` (what crosses a wire, rounded as it does).
+:mod:`gcs.records.live`); :mod:`.agents` (an in-process run's agents in this process or
+several, ``--workers``, and what crosses a wire, rounded as it does).
 """
-
-MAX_WORKERS = 64  # processes one in-process run may step its agents in (gcs.mission.agents.shards)
-AUTO_WORKERS = "auto"  # --workers: as many as pay (gcs.mission.agents.shards.workers_for)
