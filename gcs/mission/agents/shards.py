@@ -151,6 +151,14 @@ class LocalAgents:
         """Nothing to end here."""
 
 
+def local_agents(sc: Scenario, method: str, seed: int, form: Formation, lo: int, hi: int,
+                 flat: bool = False) -> LocalAgents:
+    """The agents [lo, hi) of ``sc`` built here, as any process builds them
+    (:func:`~offboard.agent.factory.make_agent`: the same bits in each)."""
+    return LocalAgents([make_agent(sc, a.id, method=method, seed=seed, form=form)
+                        for a in sc.agents[lo:hi]], flat=flat)
+
+
 def shard_bounds(sc: Scenario, workers: int) -> list[tuple[int, int]]:
     """``workers`` runs [lo, hi) of consecutive scenario indices covering every agent, with
     as even a count of followers as they allow (a leader's step costs a fraction of a
@@ -173,8 +181,7 @@ def serve_shard(conn: Connection) -> None:
         sc, method, seed, form, lo, hi, level = conn.recv()
         configure_logging(level)
         with single_thread_blas():
-            shard = LocalAgents([make_agent(sc, a.id, method=method, seed=seed, form=form)
-                                 for a in sc.agents[lo:hi]], flat=True)
+            shard = local_agents(sc, method, seed, form, lo, hi, flat=True)
             conn.send(("ready", shard.initial()))
             with frozen_while():
                 while True:
@@ -236,9 +243,7 @@ class AgentShards:
                 self._names.append(f"agents {lo}-{hi - 1}")
                 self._send((sc, method, seed, form, lo, hi, level), only=len(self._conns) - 1)
             # this process builds its own shard while the workers build theirs
-            self.local = LocalAgents([make_agent(sc, a.id, method=method, seed=seed,
-                                                 form=form) for a in sc.agents[lo0:hi0]],
-                                     flat=True)
+            self.local = local_agents(sc, method, seed, form, lo0, hi0, flat=True)
             ready = [self._answer(i) for i in range(len(self._conns))]
         except BaseException:
             self.close()
@@ -355,6 +360,5 @@ def agent_steppers(sc: Scenario, method: str, seed: int, form: Formation,
         raise ValueError(f"workers: {workers} outside 1..{MAX_WORKERS}")
     bounds = shard_bounds(sc, workers)
     if len(bounds) == 1:
-        return LocalAgents([make_agent(sc, a.id, method=method, seed=seed, form=form)
-                            for a in sc.agents])
+        return local_agents(sc, method, seed, form, 0, sc.n)
     return AgentShards(sc, method, seed, form, bounds)
