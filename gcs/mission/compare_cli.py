@@ -36,6 +36,15 @@ def _gain_lines(sc: Scenario) -> list[str]:
     return ag.gains.lines() if isinstance(ag, FollowerAgent) else []
 
 
+def _note_failed(failed: dict[str, tuple[str, int]], method: str, exc: Exception,
+                 code: int) -> None:
+    """Say a method's failed run in one line on stderr and keep its reason and exit code in
+    ``failed`` (the report marks it; the command exits with the first such code)."""
+    line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    print(f"gcs mission compare: {method}: {line}", file=sys.stderr)
+    failed[method] = (line, code)
+
+
 def _compare_inproc(
     sc: Scenario, args: argparse.Namespace, out: Path, failed: dict[str, tuple[str, int]],
 ) -> Outcome | int:
@@ -57,9 +66,7 @@ def _compare_inproc(
             res = run_inproc(sc, m, seed=args.seed, duration=args.duration, progress=False,
                              workers=workers)
         except ShardError as exc:  # the worker's traceback is in the log already
-            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            print(f"gcs mission compare: {m}: {line}", file=sys.stderr)
-            failed[m] = (line, EXIT_RUN_FAILED)
+            _note_failed(failed, m, exc, EXIT_RUN_FAILED)
             continue
         res.save(out / m, sc)
         metrics[m], series[m], gains = res.metrics, res.series.as_dict(), res.gains
@@ -101,9 +108,8 @@ def _compare_distributed(
                                 port_offset=offset, show_progress=True,
                                 processes=getattr(args, "processes", None))
         except (LaunchError, MissionError) as exc:
-            line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            print(f"gcs mission compare: {m}: {line}", file=sys.stderr)
-            failed[m] = (line, EXIT_USAGE if isinstance(exc, LaunchError) else EXIT_RUN_FAILED)
+            _note_failed(failed, m, exc,
+                         EXIT_USAGE if isinstance(exc, LaunchError) else EXIT_RUN_FAILED)
             continue
         metrics[m] = doc["metrics"]
         with np.load(out / m / "series.npz") as z:
