@@ -109,6 +109,8 @@ def cmd_mission_run(args: argparse.Namespace) -> int:
         if live is not None:
             live.finish(res.document())
     except ShardError as exc:  # a failed worker's traceback is in the log already
+        if live is not None:
+            live.fail(str(exc))
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_RUN_FAILED
     finally:

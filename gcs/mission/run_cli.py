@@ -77,6 +77,8 @@ def cli_run(args: Any, sc: Scenario) -> int:
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except MissionError as exc:
+        if live is not None:
+            live.fail(str(exc))
         print(f"gcs mission run: {exc}", file=sys.stderr)
         return EXIT_RUN_FAILED
     finally:

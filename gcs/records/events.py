@@ -72,6 +72,11 @@ def start_event(doc: Mapping[str, Any], ns0: int) -> Event:
                  f"{doc.get('method')}, seed {doc.get('seed')}")
 
 
+def run_failed_event(why: str, ns: int) -> Event:
+    """A run that stopped at ``ns`` without its document: ``why``, its one-line error."""
+    return Event(ns, ERROR, "run", f"failed: {why}")
+
+
 def document_events(doc: Mapping[str, Any], ns0: int, ns1: int) -> list[Event]:
     """The start and end of the run (at ``ns0`` and ``ns1``) and the events listed in its
     ``metrics.json`` document."""

@@ -37,7 +37,13 @@ from foxglove.websocket import ChannelView, Client, ServerListener
 
 from gcs.records import topics as tp
 from gcs.records.channels import RecordChannels, RecordContext, cdr_messages
-from gcs.records.events import Event, document_events, series_events, start_event
+from gcs.records.events import (
+    Event,
+    document_events,
+    run_failed_event,
+    series_events,
+    start_event,
+)
 from gcs.records.live_flags import DEFAULT_HOST, DEFAULT_PORT, live_endpoint, ws_url
 from gcs.records.scene import BEARING_PERIOD_S, IDENTITY
 from gcs.report.metrics import Series
@@ -185,6 +191,14 @@ class LiveView:
             return
         for ev in document_events(doc, self._first_ns, self._last_ns)[1:]:  # not the start
             self.channels.log_event(ev, self._last_ns)
+
+    def fail(self, why: str) -> None:
+        """The run failed before its end (``why``: its one-line error, e.g. a dead agent
+        worker): an ERROR ``run`` event at the last time published, in place of
+        :meth:`finish`'s verdict, while ``/events`` is watched."""
+        if self._closed or not self.channels.events.has_sinks():
+            return
+        self.channels.log_event(run_failed_event(why, self._last_ns), self._last_ns)
 
     def close(self) -> None:
         """Stop the server (its clients are disconnected); idempotent."""

@@ -211,6 +211,33 @@ def test_a_live_view_in_process_serves_attitudes_and_onsets() -> None:
         view.close()
 
 
+@pytest.mark.slow
+def test_a_failed_run_ends_its_live_view_with_an_error_event() -> None:
+    """A run that stops without its document (a dead agent worker): the view's last event
+    says so, at ERROR, at the last time published, and no verdict follows."""
+    from gcs.records.events import ERROR
+
+    view = LiveView(RecordContext.bare(2), {"scenario": "two", "method": "dcbf", "seed": 1},
+                    port=0)
+    try:
+        client = FoxgloveClient(view.url)
+        client.subscribe([tp.EVENTS])
+        assert wait_for(lambda: client.pump() or view.channels.events.has_sinks(), 30.0)
+        s = empty_series(np.array([0.0, 0.02, 0.04]), 2)
+        s.p[:] = [[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]]
+        view.publish(s)
+        view.fail("agent worker agents 1-1 died (exit -9)")
+        assert wait_for(lambda: client.pump() or len(client.got.get(tp.EVENTS, [])) == 2,
+                        30.0)
+        logs = [(t, m.level, m.name, m.message) for t, m in client.decoded(tp.EVENTS)]
+        assert logs[0][3].startswith("start: scenario two")
+        assert logs[1] == (40_000_000, ERROR, "run",
+                           "failed: agent worker agents 1-1 died (exit -9)")
+        client.close()
+    finally:
+        view.close()
+
+
 def test_a_busy_port_is_one_line_and_exit_2(tmp_path: Path) -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
