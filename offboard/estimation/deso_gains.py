@@ -13,6 +13,7 @@ took 6.4 s for 125 agents, in every daemon at start-up (each prints the report).
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,6 +36,11 @@ ARPACK_NCV = 40  # its Lanczos/Arnoldi basis size
 # fewer; a ring's loops, with clusters of eigenvalues at the top, ran scipy's 20 n restarts
 # without converging, 10-40 s a loop (a 128-agent ring took 256 s to generate)
 ARPACK_MAXITER = 1000
+# the order up to which a loop ARPACK did not settle is solved dense (O(n³) time, 16 n²
+# bytes: about 10 s and 150 MB here). Above it the radius is not computed (NaN) and the
+# check says so: a 2,000-agent grid with 4 leaders has loops of order 17,964 and 35,928,
+# whose dense solves would take hours and 20 GB
+DENSE_FALLBACK_MAX = 3000
 # channels sampled across [λ_min, λ_max] when a large formation has only the ends of its
 # spectrum (swarm_common.scenario.spectra.spectrum): geometric, both ends exact
 CHANNEL_SAMPLES = 512
@@ -62,6 +68,8 @@ class GainReport:
 
     @property
     def ok(self) -> bool:
+        """Every channel Hurwitz and the sampled loop's spectral radius below 1 (a radius
+        that could not be computed, NaN, is not ok)."""
         return bool(self.max_real_pole < 0.0 and self.rho_post_update < 1.0)
 
     def problem(self) -> str | None:
@@ -78,6 +86,12 @@ class GainReport:
             return (f"{keys}: the DESO is unstable on this graph: its slowest channel pole "
                     f"is {self.max_real_pole:.3f} 1/s >= 0 (lambda(observer Laplacian) in "
                     f"[{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}])")
+        if math.isnan(self.rho_post_update):
+            return (f"{keys}: the DESO's sampled loop could not be checked: ARPACK did not "
+                    f"settle its spectral radius, and the loop is too large to solve dense "
+                    f"(lambda(observer Laplacian) in [{self.lambda_ff[0]:.3f}, "
+                    f"{self.lambda_ff[-1]:.3f}]; more leaders or a denser formation.graph "
+                    f"settle it)")
         return (f"{keys}: the DESO is unstable on this graph: its sampled loop has spectral "
                 f"radius {self.rho_post_update:.4f} >= 1 (lambda(observer Laplacian) in "
                 f"[{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; change the gains, "
@@ -96,11 +110,17 @@ class GainReport:
             f"  fastest channel b1*lam_max = {self.fastest_bandwidth:.1f} rad/s; "
             f"dt_sub*b1*lam_max = {self.euler_number:.2f} (< 2 for explicit Euler)",
             f"  sampled loop spectral radius: exact sub-steps post-update "
-            f"{self.rho_post_update:.4f}, "
-            f"one-step stale {self.rho_stale:.4f}; Euler sub-steps {self.rho_euler_post:.4f}; "
-            f"single Euler step + stale {self.rho_single_euler_stale:.4f}",
+            f"{_radius(self.rho_post_update)}, "
+            f"one-step stale {_radius(self.rho_stale)}; Euler sub-steps "
+            f"{_radius(self.rho_euler_post)}; "
+            f"single Euler step + stale {_radius(self.rho_single_euler_stale)}",
             f"  => {'OK' if self.ok else 'UNSTABLE'}",
         ]
+
+
+def _radius(rho: float) -> str:
+    """A spectral radius as the report prints it ("not computed" for NaN)."""
+    return "not computed" if math.isnan(rho) else f"{rho:.4f}"
 
 
 def _network_transition(
@@ -167,9 +187,10 @@ def spectral_radius(m: sparse.csr_matrix) -> float:
     """max |λ| of the square matrix ``m``: every eigenvalue (numpy, dense) up to order
     :data:`DENSE_MAX`; above it the :data:`ARPACK_K` of largest modulus (ARPACK, from a
     fixed start vector: the same answer every run), dense again if ARPACK does not
-    converge within :data:`ARPACK_MAXITER` restarts. Dense eigenvalues cost O(n³): 6.4 s
-    for the four loops of a 125-agent grid (orders 1089 and 2178), against about 0.1 s
-    sparse; on grid64 the two agree to 10 digits (docs/performance.md)."""
+    converge within :data:`ARPACK_MAXITER` restarts and the order is at most
+    :data:`DENSE_FALLBACK_MAX`, else NaN (not computed; logged). Dense eigenvalues cost
+    O(n³): 6.4 s for the four loops of a 125-agent grid (orders 1089 and 2178), against
+    about 0.1 s sparse; on grid64 the two agree to 10 digits (docs/performance.md)."""
     n = m.shape[0]
     if n <= DENSE_MAX:
         return float(np.max(np.abs(np.linalg.eigvals(m.toarray()))))
@@ -178,6 +199,11 @@ def spectral_radius(m: sparse.csr_matrix) -> float:
         ev = eigs(m, k=ARPACK_K, which="LM", v0=v0, ncv=min(n - 1, ARPACK_NCV), tol=0.0,
                   maxiter=min(20 * n, ARPACK_MAXITER), return_eigenvectors=False)
     except ArpackNoConvergence:
+        if n > DENSE_FALLBACK_MAX:
+            log.warning("spectral radius of a loop of order %d: ARPACK did not converge "
+                        "and a dense solve is past order %d: not computed", n,
+                        DENSE_FALLBACK_MAX)
+            return math.nan
         log.debug("spectral radius of order %d: ARPACK did not converge, dense", n)
         return float(np.max(np.abs(np.linalg.eigvals(m.toarray()))))
     return float(np.max(np.abs(ev)))
@@ -192,7 +218,9 @@ def gain_report(
     The channels are the eigenvalues of the observer's Laplacian
     ``L_ff + leader_anchor·blockdiag(m_i I₃)`` (m_i leaders sensed by follower i;
     ``Formation.observer_laplacian``; = L_ff for the paper's observer), or for a large
-    formation the samples of :func:`channels` across the ends of its spectrum.
+    formation the samples of :func:`channels` across the ends of its spectrum. When a
+    channel is not Hurwitz the sampled loops are not computed (their radii NaN): the
+    report fails on the channel alone.
     """
     b1, b2, b3 = (float(x) for x in beta)
     lam = channels(form.observer_eigs(leader_anchor), 3 * len(form.follower_idx))
@@ -205,6 +233,16 @@ def gain_report(
     ]
     max_re = float(max(np.max(p.real) for p in poles))
     la = leader_anchor
+    if max_re >= 0.0:  # a channel is unstable: the report fails whatever the loops give,
+        # and their spectral radii take minutes past a thousand agents: not computed
+        nan = math.nan
+        return GainReport(
+            beta=(b1, b2, b3), dt=dt, substeps=substeps, lambda_ff=lam, margin=margin,
+            max_real_pole=max_re, fastest_bandwidth=b1 * float(lam[-1]),
+            euler_number=dt / substeps * b1 * float(lam[-1]), rho_post_update=nan,
+            rho_stale=nan, rho_euler_post=nan, rho_single_euler_stale=nan,
+            paper_condition=bool(b2 > b1 + b3 / float(lam[0])), kappa=(k2, k3),
+        )
     t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False, leader_anchor=la,
                                  kappa=(k2, k3))
     rho_post = _rho(t0, t1, stale=False)

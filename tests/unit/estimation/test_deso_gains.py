@@ -117,3 +117,50 @@ def test_spectral_radius_bounds_arpack_restarts(monkeypatch):
     dense = float(np.max(np.abs(np.linalg.eigvals(m.toarray()))))
     assert gains.spectral_radius(m) == pytest.approx(dense, rel=1e-10)
     assert seen == [min(20 * 300, gains.ARPACK_MAXITER)] and gains.ARPACK_MAXITER < 20 * 300
+
+
+def test_a_loop_too_large_to_solve_dense_is_not_computed(monkeypatch, caplog):
+    """ARPACK not converging above DENSE_FALLBACK_MAX: NaN and a warning, not a dense solve
+    of hours (a 2,000-agent grid with 4 leaders has loops of order 17,964 and 35,928)."""
+    def no_convergence(*args, **kwargs):
+        raise ArpackNoConvergence("no", np.array([]), np.array([]))
+
+    def dense(*args, **kwargs):
+        raise AssertionError("a dense solve past DENSE_FALLBACK_MAX")
+
+    monkeypatch.setattr(gains, "eigs", no_convergence)
+    monkeypatch.setattr(gains, "DENSE_FALLBACK_MAX", 299)
+    monkeypatch.setattr(gains.np.linalg, "eigvals", dense)
+    m = sparse.diags(np.linspace(-0.5, 0.97, 300), format="csr")
+    with caplog.at_level("WARNING", logger=gains.__name__):
+        assert np.isnan(gains.spectral_radius(m))
+    assert "order 300" in caplog.text and "not computed" in caplog.text
+
+
+def test_a_loop_not_computed_fails_the_check_in_words(monkeypatch):
+    """A report whose sampled loop could not be computed is not ok, and its problem line
+    says that it could not be checked (not "spectral radius nan >= 1")."""
+    sc = load_scenario(GRID27)
+    form = formation_from_scenario(sc)
+    obs = sc.observer
+    monkeypatch.setattr(gains, "spectral_radius", lambda m: float("nan"))
+    rep = gains.gain_report(form, tuple(obs.beta), sc.control_dt, obs.substeps,
+                            obs.leader_anchor, tuple(obs.velocity_gain))
+    assert rep.max_real_pole < 0.0 and not rep.ok
+    why = rep.problem()
+    assert why is not None and "could not be checked" in why and "nan" not in why
+    assert any("not computed" in line for line in rep.lines())
+
+
+def test_an_unstable_channel_skips_the_sampled_loops(monkeypatch):
+    """A channel not Hurwitz fails the report on its own: the loops' radii (minutes on a
+    large graph) are not computed, and the problem names the channel."""
+    form = formation_from_scenario(load_scenario(GRID27))
+
+    def never(m):
+        raise AssertionError("a sampled loop computed for an unstable channel")
+
+    monkeypatch.setattr(gains, "spectral_radius", never)
+    rep = gains.gain_report(form, (1.0, 1.0, 1000.0), 0.02, 4)  # b1 b2 λ < b3: not Hurwitz
+    assert rep.max_real_pole >= 0.0 and not rep.ok and np.isnan(rep.rho_post_update)
+    assert "slowest channel pole" in (rep.problem() or "")
