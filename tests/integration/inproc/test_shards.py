@@ -98,24 +98,8 @@ def test_the_gain_report_comes_from_a_worker_when_the_run_holds_no_follower() ->
 
 def test_the_cli_says_a_dead_worker_in_one_line_and_exits_1(
         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
-    step = AgentShards.step
-
-    def killing(self: AgentShards, k: int, *rest: Any) -> Any:
-        if k == 5:
-            self._procs[0].kill()
-            self._procs[0].wait()
-        return step(self, k, *rest)
-
-    monkeypatch.setattr(AgentShards, "step", killing)
-    rc = gcs_main(["mission", "run", str(ROOT / "scenarios" / "cube8.toml"), "--inproc",
-                   "--duration", "1", "--workers", "2"])
-    last = capsys.readouterr().err.strip().splitlines()[-1]
-    assert rc == 1 and last.startswith("gcs mission run: agent worker agents ")
-    assert last.endswith("died (exit -9)"), last
-
-
-def test_a_dead_worker_is_said_to_the_live_view(monkeypatch: pytest.MonkeyPatch) -> None:
-    """`--foxglove`: the run's one-line error goes to its live view as it stops."""
+    """The one line on stderr, exit 1, and with `--foxglove` the same line said to the
+    live view as the run stops."""
     from gcs.records.live import LiveView
 
     step = AgentShards.step
@@ -131,8 +115,10 @@ def test_a_dead_worker_is_said_to_the_live_view(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(LiveView, "fail", lambda self, why: said.append(why))
     rc = gcs_main(["mission", "run", str(ROOT / "scenarios" / "cube8.toml"), "--inproc",
                    "--duration", "1", "--workers", "2", "--foxglove", "--foxglove-port", "0"])
-    assert rc == 1 and len(said) == 1
-    assert said[0].startswith("agent worker agents ") and said[0].endswith("(exit -9)")
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert rc == 1 and last.startswith("gcs mission run: agent worker agents ")
+    assert last.endswith("died (exit -9)"), last
+    assert said == [last.removeprefix("gcs mission run: ")]
 
 
 def test_compare_reports_a_method_whose_worker_died(
