@@ -232,27 +232,12 @@ def gain_report(
         for x in lam
     ]
     max_re = float(max(np.max(p.real) for p in poles))
-    la = leader_anchor
-    if max_re >= 0.0:  # a channel is unstable: the report fails whatever the loops give,
-        # and their spectral radii take minutes past a thousand agents: not computed
-        nan = math.nan
-        return GainReport(
-            beta=(b1, b2, b3), dt=dt, substeps=substeps, lambda_ff=lam, margin=margin,
-            max_real_pole=max_re, fastest_bandwidth=b1 * float(lam[-1]),
-            euler_number=dt / substeps * b1 * float(lam[-1]), rho_post_update=nan,
-            rho_stale=nan, rho_euler_post=nan, rho_single_euler_stale=nan,
-            paper_condition=bool(b2 > b1 + b3 / float(lam[0])), kappa=(k2, k3),
-        )
-    t0, t1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=False, leader_anchor=la,
-                                 kappa=(k2, k3))
-    rho_post = _rho(t0, t1, stale=False)
-    rho_stale = _rho(t0, t1, stale=True)
-    e0, e1 = _network_transition(form, (b1, b2, b3), dt, substeps, euler=True, leader_anchor=la,
-                                 kappa=(k2, k3))
-    rho_e = _rho(e0, e1, stale=False)
-    s0, s1 = _network_transition(form, (b1, b2, b3), dt, 1, euler=True, leader_anchor=la,
-                                 kappa=(k2, k3))
-    rho_s = _rho(s0, s1, stale=True)
+    # a channel not Hurwitz fails the report whatever the loops give, and their spectral
+    # radii take minutes past a thousand agents: then they are not computed (NaN)
+    rho_post = rho_stale = rho_e = rho_s = math.nan
+    if max_re < 0.0:
+        rho_post, rho_stale, rho_e, rho_s = _loop_radii(form, (b1, b2, b3), dt, substeps,
+                                                        leader_anchor, (k2, k3))
     return GainReport(
         beta=(b1, b2, b3),
         dt=dt,
@@ -269,6 +254,23 @@ def gain_report(
         paper_condition=bool(b2 > b1 + b3 / float(lam[0])),
         kappa=(k2, k3),
     )
+
+
+def _loop_radii(
+    form: Formation, beta: tuple[float, float, float], dt: float, substeps: int,
+    leader_anchor: float, kappa: tuple[float, float],
+) -> tuple[float, float, float, float]:
+    """The spectral radii of :class:`GainReport`'s four sampled loops: exact sub-steps
+    post-update and one-step stale, Euler sub-steps post-update, one Euler step stale."""
+    la = leader_anchor
+    t0, t1 = _network_transition(form, beta, dt, substeps, euler=False, leader_anchor=la,
+                                 kappa=kappa)
+    e0, e1 = _network_transition(form, beta, dt, substeps, euler=True, leader_anchor=la,
+                                 kappa=kappa)
+    s0, s1 = _network_transition(form, beta, dt, 1, euler=True, leader_anchor=la,
+                                 kappa=kappa)
+    return (_rho(t0, t1, stale=False), _rho(t0, t1, stale=True), _rho(e0, e1, stale=False),
+            _rho(s0, s1, stale=True))
 
 
 def channels(lam: np.ndarray, order: int) -> np.ndarray:
