@@ -82,19 +82,17 @@ class GainReport:
         b, k = self.beta, self.kappa
         keys = (f"observer.beta = [{b[0]:g}, {b[1]:g}, {b[2]:g}] (velocity_gain = "
                 f"[{k[0]:g}, {k[1]:g}], substeps = {self.substeps}, dt = {self.dt:g} s)")
+        span = (f"lambda(observer Laplacian) in [{self.lambda_ff[0]:.3f}, "
+                f"{self.lambda_ff[-1]:.3f}]")
         if self.max_real_pole >= 0.0:
             return (f"{keys}: the DESO is unstable on this graph: its slowest channel pole "
-                    f"is {self.max_real_pole:.3f} 1/s >= 0 (lambda(observer Laplacian) in "
-                    f"[{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}])")
+                    f"is {self.max_real_pole:.3f} 1/s >= 0 ({span})")
         if math.isnan(self.rho_post_update):
             return (f"{keys}: the DESO's sampled loop could not be checked: ARPACK did not "
                     f"settle its spectral radius, and the loop is too large to solve dense "
-                    f"(lambda(observer Laplacian) in [{self.lambda_ff[0]:.3f}, "
-                    f"{self.lambda_ff[-1]:.3f}]; more leaders or a denser formation.graph "
-                    f"settle it)")
+                    f"({span}; more leaders or a denser formation.graph settle it)")
         return (f"{keys}: the DESO is unstable on this graph: its sampled loop has spectral "
-                f"radius {self.rho_post_update:.4f} >= 1 (lambda(observer Laplacian) in "
-                f"[{self.lambda_ff[0]:.3f}, {self.lambda_ff[-1]:.3f}]; change the gains, "
+                f"radius {self.rho_post_update:.4f} >= 1 ({span}; change the gains, "
                 f"formation.graph or observer.leader_anchor)")
 
     def lines(self) -> list[str]:
