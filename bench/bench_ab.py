@@ -17,7 +17,7 @@ and a shared machine drifts within minutes. This script makes that ratio.
   base, new, base, new, ... With ``--together`` each round starts both runs at once
   instead: for a single-process benchmark on two cores, each run has a core and both see
   the same moment of a shared machine, which resolved differences that alternated runs
-  could not (docs/performance.md, "Calling the kernels without typing them").
+  could not (docs/performance.md, "Side by side").
 * From each run's output ``--figure`` (a regular expression with one group) takes the last
   match as a float: by default the ``× real time`` figure the stepping benchmarks print
   (``bench_distributed.py``'s "stepping 4.2x real time", ``bench_scaling.py``'s and
