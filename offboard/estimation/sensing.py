@@ -7,6 +7,13 @@ the bearing ``g_ij``, the bearing rate ``ġ_ij = P_ij (v_j − v_i)/d_ij``, the 
 velocity follow: ``p_j − p_i = g_ij d_ij`` and ``v_j − v_i = ġ_ij d_ij + g_ij ḋ_ij``.
 
 Reproducibility: the generator is ``np.random.default_rng([seed, agent_id, 0x5E])``.
+
+Outputs: every sensor of a thread writes its measurements and its draws into one scratch
+per swarm size and kind of draws (:class:`SensorScratch`), not into buffers of its own. A
+follower reads its measurements within its step only, so a swarm's sensors can share them;
+at a thousand agents the N-row outputs of every follower were 115 kB each, and every step
+touched a few scattered rows of each, cold in the cache (docs/performance.md, "Past 255
+agents").
 With ``[sensing] noise_draws = "every_agent"`` (the default) every call draws the same
 count of numbers (N×8 normals and N uniforms) whatever is in range. With ``"in_range"``
 it draws 8 normals and 1 uniform per agent in range, in index order, so the cost of a
@@ -17,6 +24,7 @@ distributed.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +64,48 @@ class Measurements:
         return self.rel_v
 
 
+class SensorScratch:
+    """What a sensor writes in a call, shared by the sensors of a thread that measure ``n``
+    agents with the same kind of draws (:func:`scratch`): the outputs (:class:`Measurements`
+    over all N rows) and the call's draws. For in-range draws also the agents in range of
+    the call (``idx``) and the rows the last call wrote (``prev[:n_prev]``: its agents in
+    range and its own row), which the next call, whichever sensor makes it, resets to an
+    out-of-range row's zeros before it writes its own."""
+
+    def __init__(self, n: int, in_range: bool) -> None:
+        vec, sca = np.zeros((4, n, 3)), np.zeros((2, n))
+        self.out = Measurements(np.zeros(n, dtype=np.bool_), vec[0], vec[1], sca[0], sca[1],
+                                vec[2], vec[3])
+        # the draws, written in place (``out=``: the same numbers as drawing new arrays of
+        # that shape); with in-range draws, room for the agents in range, grown on demand
+        rows = min(n, DRAW_ROWS) if in_range else n
+        self.noise, self.drop = np.empty((rows, 8)), np.empty(rows)
+        self.idx = np.empty(n if in_range else 0, dtype=np.int64)
+        self.prev = np.empty(n if in_range else 0, dtype=np.int64)
+        self.n_prev = 0
+
+    def draw_rows(self, k: int) -> None:
+        """Room for the draws of ``k`` agents in range: at least double, at most N rows
+        (the numbers drawn into the first ``k`` rows do not depend on the room)."""
+        rows = min(len(self.idx), max(k, 2 * len(self.drop)))
+        self.noise, self.drop = np.empty((rows, 8)), np.empty(rows)
+
+
+_THREAD = threading.local()
+
+
+def scratch(n: int, in_range: bool) -> SensorScratch:
+    """This thread's :class:`SensorScratch` for ``n`` agents and the kind of draws (two
+    threads never share one: each steps its own agents)."""
+    table: dict[tuple[int, bool], SensorScratch] | None = getattr(_THREAD, "table", None)
+    if table is None:
+        table = _THREAD.table = {}
+    sh = table.get((n, in_range))
+    if sh is None:
+        sh = table[(n, in_range)] = SensorScratch(n, in_range)
+    return sh
+
+
 class Sensor:
     """Bearing / bearing-rate / range / range-rate sensor of agent ``index``."""
 
@@ -88,21 +138,6 @@ class Sensor:
         self._range = CallSite(range_index)
         self._in_range = CallSite(measure_in_range_into)
         self._every = CallSite(measure_into)
-        # the draws of a call, written in place (``out=``: the same numbers as drawing new
-        # arrays of that shape, without the allocations); read only within the call. With
-        # in-range draws they hold the agents in range only, grown when more are
-        # (_draw_rows): N rows per follower were 73 kB each at a thousand agents
-        rows = min(n, DRAW_ROWS) if self.in_range_only else n
-        self._noise = np.empty((rows, 8))
-        self._drop = np.empty(rows)
-        if self.in_range_only:
-            self._idx = np.empty(n, dtype=np.int64)  # the agents in range, in index order
-            self._prev = np.empty(n, dtype=np.int64)  # ... at the call before
-            self._n_prev = 0
-        # the outputs, kept between calls (measure); C-contiguous (n,3) and (n,) views
-        vec, sca = np.zeros((4, n, 3)), np.zeros((2, n))
-        self._out = Measurements(np.zeros(n, dtype=np.bool_), vec[0], vec[1], sca[0],
-                                 sca[1], vec[2], vec[3])
 
     def measure(self, p: np.ndarray, v: np.ndarray) -> Measurements:
         """Measurements from ground-truth (N,3) ENU positions (m) and velocities (m/s).
@@ -112,46 +147,43 @@ class Sensor:
         validity mask are the compiled
         :func:`offboard.estimation.sensing_kernel.measure_into`.
 
-        The result is the sensor's own, its arrays rewritten in place by the next call, so
-        a caller that keeps them past its step copies them. With ``noise_draws =
+        The result is this thread's :class:`SensorScratch`'s, its arrays rewritten in place
+        by the next call of any sensor of the same size and kind of draws in the thread,
+        so a caller that keeps them past its step copies them. With ``noise_draws =
         "in_range"`` the cost follows the agents in range: the next call rewrites only the
-        rows in range then and at this call
-        (:func:`~offboard.estimation.sensing_kernel.measure_in_range_into`). At a thousand
-        agents a new (N,·) result per call wrote 115 kB per follower and step, most of it
-        zeros.
+        rows in range then and those this call wrote
+        (:func:`~offboard.estimation.sensing_kernel.measure_in_range_into`).
         """
         n = self.n
         p, v = np.asarray(p), np.asarray(v)
         if p.shape != (n, 3) or v.shape != (n, 3):  # the kernel writes n rows, unchecked
             raise ValueError(f"truth of shapes {p.shape} and {v.shape}, expected ({n}, 3)")
         sb, sr, sd, sdd = self._sig
+        sh = scratch(n, self.in_range_only)
+        out = sh.out
         if self.in_range_only:
-            p, v, out = rows3(p), rows3(v), self._out
-            k = self._range.call(p, self.index, self.range, self._idx)
-            if k > len(self._drop):
-                self._draw_rows(k)
-            noise = self.rng.standard_normal(out=self._noise[:k])
-            drop = self.rng.random(out=self._drop[:k])
-            self._n_prev = self._in_range.call(
-                p, v, self.index, noise, drop, self._idx, k, self._prev, self._n_prev,
+            p, v = rows3(p), rows3(v)
+            k = self._range.call(p, self.index, self.range, sh.idx)
+            if k > len(sh.drop):
+                sh.draw_rows(k)
+            noise = self.rng.standard_normal(out=sh.noise[:k])
+            drop = self.rng.random(out=sh.drop[:k])
+            k = self._in_range.call(
+                p, v, self.index, noise, drop, sh.idx, k, sh.prev, sh.n_prev,
                 sb, sr, sd, sdd, self.range, self.dropout, out.valid, out.g, out.g_dot,
                 out.d, out.d_dot, out.rel_p, out.rel_v,
             )
+            # its own row was written too (k < N: the agent is never in its own range)
+            sh.prev[k] = self.index
+            sh.n_prev = k + 1
             return out
-        noise = self.rng.standard_normal(out=self._noise)
-        drop = self.rng.random(out=self._drop)
-        out = self._out  # every row rewritten
+        noise = self.rng.standard_normal(out=sh.noise)
+        drop = self.rng.random(out=sh.drop)
         self._every.call(
             rows3(p), rows3(v), self.index, noise, drop, sb, sr, sd, sdd, self.range,
             self.dropout, out.valid, out.g, out.g_dot, out.d, out.d_dot, out.rel_p, out.rel_v,
         )
         return out
-
-    def _draw_rows(self, k: int) -> None:
-        """Room for the draws of ``k`` agents in range: at least double, at most N rows
-        (the numbers drawn into the first ``k`` rows do not depend on the room)."""
-        rows = min(self.n, max(k, 2 * len(self._drop)))
-        self._noise, self._drop = np.empty((rows, 8)), np.empty(rows)
 
 
 class DropoutHold:

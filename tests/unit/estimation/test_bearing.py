@@ -1,5 +1,6 @@
 """Bearing geometry, Laplacian properties and rigidity (paper §2.1; Departure 3)."""
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -95,7 +96,8 @@ def test_sensing_reproducible_and_exact_without_noise(sc):
     ok = m.valid
     assert np.allclose(m.rel_pos()[ok], (p - p[2])[ok])
     assert np.allclose(m.rel_vel()[ok], (v - v[2])[ok])
-    a = Sensor(2, 3, sc.n, sc.sensing, 10.0, seed=7).measure(p, v)
+    # copied: the sensors of a thread share their outputs (offboard.estimation.sensing)
+    a = copy.deepcopy(Sensor(2, 3, sc.n, sc.sensing, 10.0, seed=7).measure(p, v))
     b = Sensor(2, 3, sc.n, sc.sensing, 10.0, seed=7).measure(p, v)
     assert np.array_equal(a.g, b.g) and np.array_equal(a.d, b.d)
     far = Sensor(2, 3, sc.n, sc.sensing, 0.1, seed=7).measure(p, v)

@@ -14,11 +14,14 @@ The oracles below are the previous numpy implementations of ``Sensor.measure`` a
 
 from __future__ import annotations
 
+import copy
+import threading
+
 import numpy as np
 import pytest
 from reference.close import assert_close
 
-from offboard.estimation.sensing import DropoutHold, Sensor
+from offboard.estimation.sensing import DropoutHold, Measurements, Sensor
 from swarm_common.scenario.model import SensingConfig
 
 
@@ -196,7 +199,8 @@ def test_truth_of_another_shape_is_refused_before_any_draw() -> None:
         with pytest.raises(ValueError, match="expected"):
             sensor.measure(p, v)
     twin = Sensor(1, 2, 5, cfg, 6.0, 3)
-    a, b = sensor.measure(ok, ok), twin.measure(ok, ok)
+    a = copy.deepcopy(sensor.measure(ok, ok))  # the sensors of a thread share outputs
+    b = twin.measure(ok, ok)
     assert np.array_equal(a.rel_p, b.rel_p) and np.array_equal(a.valid, b.valid)
 
 
@@ -243,6 +247,8 @@ def test_in_range_draws_ignore_agents_out_of_range(monkeypatch: pytest.MonkeyPat
     monkeypatch.setattr(sensing, "DRAW_ROWS", 2)
     rng = np.random.default_rng(5)
     for trial in range(100):
+        # a fresh scratch per trial: the room of this trial's draws
+        monkeypatch.setattr(sensing, "_THREAD", threading.local())
         n = int(rng.integers(2, 12))
         i = int(rng.integers(0, n))
         p = rng.normal(0.0, 4.0, (n, 3))
@@ -270,7 +276,8 @@ def test_in_range_draws_ignore_agents_out_of_range(monkeypatch: pytest.MonkeyPat
                 assert np.array_equal(x[ok], y[near][ok]), trial
         in_range = int((np.linalg.norm(p - p[i], axis=1) <= rng_m).sum() - 1)
         # and the draws' room follows the agents in range, not the 200 far ones
-        assert len(big._noise) == len(big._drop) <= max(2, 2 * in_range), trial
+        room = sensing.scratch(n + 200, True)
+        assert len(room.noise) == len(room.drop) <= max(2, 2 * in_range), trial
         after = np.random.default_rng([seed, aid, 0x5E])
         for _ in range(3):
             after.standard_normal((in_range, 8))
@@ -300,46 +307,75 @@ def test_in_range_noise_has_the_configured_spread() -> None:
 
 
 def test_in_range_outputs_kept_between_calls_equal_fresh_ones() -> None:
-    """``noise_draws = "in_range"`` keeps its outputs between calls and rewrites only the
-    rows in range now and at the call before (measure_in_range_into). Over swarms whose
-    agents cross the sensing range every few steps, each call's outputs equal, element
-    for element, those of measure_into written into new arrays from the same draws (the
-    same row code, so bit for bit), rows out of range included: invalid, their true
-    distance, zeros elsewhere."""
+    """``noise_draws = "in_range"`` keeps its outputs between calls, shared by the sensors
+    of a thread, and rewrites only the rows in range now and those the call before wrote
+    (measure_in_range_into). Three sensors of one swarm measure in turn while its agents
+    cross the sensing range every few steps: each call's outputs equal, element for
+    element, those of measure_into written into new arrays from the same draws (the same
+    row code, so bit for bit), rows out of range included: invalid, zeros."""
     from offboard.estimation.sensing_kernel import measure_into
 
     rng = np.random.default_rng(13)
     seen_in, seen_out = 0, 0
     for trial in range(40):
-        n = int(rng.integers(2, 30))
-        i = int(rng.integers(0, n))
+        n = int(rng.integers(3, 30))
         cfg = _in_range(_config(rng, 0.3 * float(rng.integers(0, 2))))
-        rng_m = float(rng.uniform(2.0, 6.0))
-        seed, aid = int(rng.integers(0, 1000)), int(rng.integers(0, 50))
-        sensor = Sensor(i, aid, n, cfg, rng_m, seed)
-        twin = np.random.default_rng([seed, aid, 0x5E])
+        sensors, twins = [], []
+        for i in rng.choice(n, 3, replace=False).tolist():
+            rng_m = float(rng.uniform(2.0, 6.0))
+            seed, aid = int(rng.integers(0, 1000)), int(rng.integers(0, 50))
+            sensors.append(Sensor(i, aid, n, cfg, rng_m, seed))
+            twins.append(np.random.default_rng([seed, aid, 0x5E]))
         p = rng.normal(0.0, 4.0, (n, 3))
         v = rng.normal(0.0, 3.0, (n, 3))
         for step in range(30):
             p = p + 0.3 * v  # agents enter and leave the range
             if step % 7 == 6:
                 v = rng.normal(0.0, 3.0, (n, 3))
-            got = sensor.measure(p, v)
-            d = np.linalg.norm(p - p[i], axis=1)
-            near = (d <= rng_m) & (np.arange(n) != i)
-            k = int(near.sum())
-            # the draws in the rows of the agents in range; zero noise, never dropped, in
-            # the others' (out of range or its own: invalid either way)
-            noise, drop = np.zeros((n, 8)), np.ones(n)
-            noise[near], drop[near] = twin.standard_normal((k, 8)), twin.random(k)
-            ref = [np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
-                   np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3))]
-            measure_into(p, v, i, noise, drop, *sensor._sig, rng_m, cfg.dropout_prob,
-                         *ref)
-            for a, b in zip((got.valid, got.g, got.g_dot, got.d, got.d_dot, got.rel_p,
-                             got.rel_v), ref, strict=True):
-                assert np.array_equal(a, b), (trial, step)
-            seen_in += k
-            seen_out += n - 1 - k
-        assert sensor.rng.random() == twin.random(), trial
+            for sensor, twin in zip(sensors, twins, strict=True):
+                i, rng_m = sensor.index, sensor.range
+                got = sensor.measure(p, v)
+                d = np.linalg.norm(p - p[i], axis=1)
+                near = (d <= rng_m) & (np.arange(n) != i)
+                k = int(near.sum())
+                # the draws in the rows of the agents in range; zero noise, never dropped,
+                # in the others' (out of range or its own: invalid either way)
+                noise, drop = np.zeros((n, 8)), np.ones(n)
+                noise[near], drop[near] = twin.standard_normal((k, 8)), twin.random(k)
+                ref = [np.empty(n, dtype=np.bool_), np.empty((n, 3)), np.empty((n, 3)),
+                       np.empty(n), np.empty(n), np.empty((n, 3)), np.empty((n, 3))]
+                measure_into(p, v, i, noise, drop, *sensor._sig, rng_m, cfg.dropout_prob,
+                             *ref)
+                for a, b in zip((got.valid, got.g, got.g_dot, got.d, got.d_dot, got.rel_p,
+                                 got.rel_v), ref, strict=True):
+                    assert np.array_equal(a, b), (trial, step, i)
+                seen_in += k
+                seen_out += n - 1 - k
+        for sensor, twin in zip(sensors, twins, strict=True):
+            assert sensor.rng.random() == twin.random(), trial
     assert seen_in > 0 and seen_out > 0
+
+
+def test_each_thread_has_its_own_sensor_outputs() -> None:
+    """The sensors of two threads never write each other's outputs: a measurement taken in
+    another thread keeps its values while this thread's sensors of the same swarm measure,
+    and two sensors of one thread return the same arrays (the shared scratch)."""
+    rng = np.random.default_rng(21)
+    for in_range in (False, True):
+        cfg = _config(rng, 0.0)
+        cfg = _in_range(cfg) if in_range else cfg
+        p, v = rng.normal(0.0, 2.0, (6, 3)), rng.normal(0.0, 1.0, (6, 3))
+        got: list[Measurements] = []
+        other = Sensor(0, 1, 6, cfg, 5.0, 3)
+        t = threading.Thread(target=lambda s=other, x=p, y=v, out=got: out.append(
+            s.measure(x, y)))
+        t.start()
+        t.join()
+        kept = copy.deepcopy(got[0])
+        a = Sensor(1, 2, 6, cfg, 5.0, 4).measure(p, v)
+        b = Sensor(2, 3, 6, cfg, 5.0, 5).measure(p + 1.0, v)
+        assert a.rel_p is b.rel_p and got[0].rel_p is not a.rel_p
+        for x, y in zip((got[0].valid, got[0].g, got[0].rel_p, got[0].rel_v),
+                        (kept.valid, kept.g, kept.rel_p, kept.rel_v), strict=True):
+            assert np.array_equal(x, y)
+        assert got[0].valid.any()  # the other thread's sensor saw someone
