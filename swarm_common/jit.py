@@ -22,8 +22,8 @@ array variable reassigned inside a loop (``a = np.concatenate(...)``), an array 
 viewed per iteration (``-(x * y)``, ``g[r]``), and a kernel inlined by numba into a loop
 (``inline="always"``: each inlined array argument gets its own reference) count on every
 iteration; at a thousand agents that was several per cent of a run (docs/performance.md,
-"What a control step costs"). So a loop writes into arrays made before it, and a row computation
-called per row is written out in the loop instead.
+"What a control step costs"). So a loop writes into arrays made before it, and a row
+computation called per row is written out in the loop instead.
 
 A kernel takes and returns numpy arrays and floats only; the classes around it keep the
 state, the validation and the names (docstrings of each kernel give units and equations).

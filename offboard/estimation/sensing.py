@@ -8,18 +8,19 @@ velocity follow: ``p_j − p_i = g_ij d_ij`` and ``v_j − v_i = ġ_ij d_ij + g_
 
 Reproducibility: the generator is ``np.random.default_rng([seed, agent_id, 0x5E])``.
 
-Outputs: every sensor of a thread writes its measurements and its draws into one scratch
-per swarm size and kind of draws (:class:`SensorScratch`), not into buffers of its own. A
-follower reads its measurements within its step only, so a swarm's sensors can share them;
-at a thousand agents the N-row outputs of every follower were 115 kB each, and every step
-touched a few scattered rows of each, cold in the cache (docs/performance.md, "Past 255
-agents").
 With ``[sensing] noise_draws = "every_agent"`` (the default) every call draws the same
 count of numbers (N×8 normals and N uniforms) whatever is in range. With ``"in_range"``
 it draws 8 normals and 1 uniform per agent in range, in index order, so the cost of a
 call follows the number of neighbours, not N (a large swarm). Both depend only on the
 seed and the true states, so runs with the same seed are identical, in process and
 distributed.
+
+Outputs: every sensor of a thread writes its measurements and its draws into one scratch
+per swarm size and kind of draws (:class:`SensorScratch`), not into buffers of its own. A
+follower reads its measurements within its step only, so a swarm's sensors can share them;
+at a thousand agents the N-row outputs of every follower were 115 kB each, and every step
+touched a few scattered rows of each, cold in the cache (docs/performance.md, "Past 255
+agents").
 """
 
 from __future__ import annotations
